@@ -1,0 +1,453 @@
+"""Typed configuration loaded from TOML: vehicle, gains and scenarios.
+
+Every loader validates types, ranges, unknown and missing keys, and raises `ConfigError`
+naming the file, the key and what was expected. Gains are checked against the
+Routh-Hurwitz condition of the paper's eq. (20)-(23): k_p, k_d > 0, k_i >= 0, k_p k_d > k_i.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+Vec3 = tuple[float, float, float]
+
+
+class ConfigError(ValueError):
+    """A configuration file is unreadable, has a wrong type, a missing or unknown key."""
+
+
+# ----------------------------------------------------------------------------------------
+# Small typed readers over a TOML table
+# ----------------------------------------------------------------------------------------
+
+
+class _Table:
+    """A TOML table that remembers where it came from, for error messages."""
+
+    def __init__(self, data: dict[str, Any], source: str, prefix: str = "") -> None:
+        self.data = data
+        self.source = source
+        self.prefix = prefix
+        self.used: set[str] = set()
+
+    def _name(self, key: str) -> str:
+        return f"{self.prefix}{key}"
+
+    def error(self, key: str, expected: str) -> ConfigError:
+        got = self.data.get(key, "<missing>")
+        return ConfigError(f"{self.source}: key '{self._name(key)}': expected {expected}, got {got!r}")
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, default: Any = ...) -> Any:
+        self.used.add(key)
+        if key not in self.data:
+            if default is ...:
+                raise ConfigError(f"{self.source}: missing key '{self._name(key)}'")
+            return default
+        return self.data[key]
+
+    def number(self, key: str, default: Any = ..., *, lo: float | None = None,
+               hi: float | None = None, lo_open: bool = False) -> float:
+        value = self.raw(key, default)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise self.error(key, "a number")
+        value = float(value)
+        bounds = f"[{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
+        if lo_open:
+            bounds = "(" + bounds[1:]
+        if not math.isfinite(value):
+            raise self.error(key, f"a finite number in {bounds}")
+        if lo is not None and (value < lo or (lo_open and value == lo)):
+            raise self.error(key, f"a number in {bounds}")
+        if hi is not None and value > hi:
+            raise self.error(key, f"a number in {bounds}")
+        return value
+
+    def integer(self, key: str, default: Any = ..., *, lo: int | None = None,
+                hi: int | None = None) -> int:
+        value = self.raw(key, default)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(key, "an integer")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise self.error(key, f"an integer in [{lo}, {hi}]")
+        return value
+
+    def boolean(self, key: str, default: Any = ...) -> bool:
+        value = self.raw(key, default)
+        if not isinstance(value, bool):
+            raise self.error(key, "true or false")
+        return value
+
+    def string(self, key: str, default: Any = ..., *, choices: tuple[str, ...] = ()) -> str:
+        value = self.raw(key, default)
+        if not isinstance(value, str):
+            raise self.error(key, "a string")
+        if choices and value not in choices:
+            raise self.error(key, "one of " + ", ".join(repr(c) for c in choices))
+        return value
+
+    def numbers(self, key: str, n: int, default: Any = ..., *, lo: float | None = None,
+                hi: float | None = None, lo_open: bool = False) -> tuple[float, ...]:
+        value = self.raw(key, default)
+        ok = (isinstance(value, list | tuple) and len(value) == n
+              and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value))
+        if not ok:
+            raise self.error(key, f"a list of {n} numbers")
+        out = tuple(float(v) for v in value)
+        for v in out:
+            if (not math.isfinite(v) or (lo is not None and (v < lo or (lo_open and v == lo)))
+                    or (hi is not None and v > hi)):
+                raise self.error(key, f"a list of {n} finite numbers in [{lo}, {hi}]")
+        return out
+
+    def table(self, key: str, default: Any = ...) -> _Table:
+        value = self.raw(key, default)
+        if not isinstance(value, dict):
+            raise self.error(key, "a table")
+        return _Table(value, self.source, f"{self._name(key)}.")
+
+    def tables(self, key: str) -> list[_Table]:
+        value = self.raw(key, [])
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self.error(key, "an array of tables")
+        return [_Table(v, self.source, f"{self._name(key)}[{i}].") for i, v in enumerate(value)]
+
+    def finish(self) -> None:
+        """Refuse keys this loader did not read (typos must not pass silently)."""
+        unknown = sorted(set(self.data) - self.used)
+        if unknown:
+            raise ConfigError(
+                f"{self.source}: unknown key '{self._name(unknown[0])}' "
+                f"(known: {', '.join(sorted(self.used))})")
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+
+
+# ----------------------------------------------------------------------------------------
+# Vehicle (MODEL.md section 1)
+# ----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """Physical parameters of a tilt-rotor multirotor; body frame FLU, origin at the CoM."""
+
+    name: str
+    mass_kg: float
+    inertia_diag_kg_m2: Vec3
+    arm_length_m: float
+    arm_azimuth_rad: tuple[float, ...]
+    arm_elevation_rad: tuple[float, ...]
+    spin: tuple[int, ...]
+    thrust_coeff: float  # c_f, N s^2/rad^2
+    drag_coeff: float  # c_d, N m s^2/rad^2
+    rotor_speed_max_rad_s: float
+    rotor_tau_up_s: float
+    rotor_tau_down_s: float
+    tilt_rate_max_rad_s: float
+    gravity_m_s2: float = 9.81
+
+    @property
+    def n_rotors(self) -> int:
+        return len(self.arm_azimuth_rad)
+
+
+def parse_vehicle(data: dict[str, Any], source: str) -> VehicleConfig:
+    t = _Table(data, source)
+    name = t.string("name")
+    mass = t.number("mass_kg", lo=0.0, lo_open=True)
+    inertia = t.numbers("inertia_diag_kg_m2", 3, lo=0.0, lo_open=True)
+    arm = t.number("arm_length_m", lo=0.0, lo_open=True)
+    n = t.integer("n_rotors", lo=1, hi=16)
+    if t.has("arm_azimuth_deg"):
+        azimuth = tuple(math.radians(v) for v in t.numbers("arm_azimuth_deg", n))
+    else:
+        # The paper's gamma_i = pi/3 i - pi/6 generalised to n arms.
+        azimuth = tuple(2.0 * math.pi * (i + 1) / n - math.pi / n for i in range(n))
+    elevation = t.numbers("arm_elevation_rad", n, lo=-math.pi / 2, hi=math.pi / 2)
+    spin_raw = t.raw("spin")
+    if (not isinstance(spin_raw, list) or len(spin_raw) != n
+            or any(s not in (1, -1) or isinstance(s, bool) for s in spin_raw)):
+        raise t.error("spin", f"a list of {n} values, each +1 or -1")
+    vehicle = VehicleConfig(
+        name=name,
+        mass_kg=mass,
+        inertia_diag_kg_m2=inertia,  # type: ignore[arg-type]
+        arm_length_m=arm,
+        arm_azimuth_rad=azimuth,
+        arm_elevation_rad=elevation,
+        spin=tuple(int(s) for s in spin_raw),
+        thrust_coeff=t.number("thrust_coeff", lo=0.0, lo_open=True),
+        drag_coeff=t.number("drag_coeff", lo=0.0),
+        rotor_speed_max_rad_s=t.number("rotor_speed_max_rad_s", lo=0.0, lo_open=True),
+        rotor_tau_up_s=t.number("rotor_tau_up_s", lo=0.0, lo_open=True),
+        rotor_tau_down_s=t.number("rotor_tau_down_s", lo=0.0, lo_open=True),
+        tilt_rate_max_rad_s=t.number("tilt_rate_max_rad_s", lo=0.0, lo_open=True),
+        gravity_m_s2=t.number("gravity_m_s2", 9.81, lo=0.0),
+    )
+    t.finish()
+    return vehicle
+
+
+def load_vehicle(path: str | Path) -> VehicleConfig:
+    path = Path(path)
+    return parse_vehicle(_read_toml(path), str(path))
+
+
+# ----------------------------------------------------------------------------------------
+# Gains (eq. 30 and eq. 33)
+# ----------------------------------------------------------------------------------------
+
+DAMPING_CHOICES = ("log_rate", "twist")
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Per-part gains of eq. (3): real part (attitude) and dual part (position), per axis.
+
+    `damping` selects D in eq. (16): "log_rate" = 2 k_d . (ln q_e)' (the paper's PID law),
+    "twist" = k_d . xi_e (Wang & Yu's damping, used by the PD baseline of eq. 33).
+    """
+
+    kp_r: Vec3
+    kp_d: Vec3
+    ki_r: Vec3
+    ki_d: Vec3
+    kd_r: Vec3
+    kd_d: Vec3
+    damping: str = "log_rate"
+
+    @property
+    def is_pd(self) -> bool:
+        return not any(self.ki_r) and not any(self.ki_d)
+
+
+GAIN_PARTS = ("kp_r", "kp_d", "ki_r", "ki_d", "kd_r", "kd_d")
+
+
+def check_stability(gains: Gains) -> None:
+    """Routh-Hurwitz for s^3 + k_d s^2 + k_p s + k_i per axis and part (eqs. 20-25)."""
+    axes = "xyz"
+    for part in ("r", "d"):
+        kp = getattr(gains, f"kp_{part}")
+        ki = getattr(gains, f"ki_{part}")
+        kd = getattr(gains, f"kd_{part}")
+        for a in range(3):
+            tag = f"[{axes[a]}]"
+            if not kp[a] > 0.0:
+                raise ConfigError(f"gain kp_{part}{tag} = {kp[a]} violates k_p > 0")
+            if not kd[a] > 0.0:
+                raise ConfigError(f"gain kd_{part}{tag} = {kd[a]} violates k_d > 0")
+            if not ki[a] >= 0.0:
+                raise ConfigError(f"gain ki_{part}{tag} = {ki[a]} violates k_i >= 0")
+            if not kp[a] * kd[a] > ki[a]:
+                raise ConfigError(
+                    f"gain ki_{part}{tag} = {ki[a]} violates k_p k_d > k_i "
+                    f"(k_p k_d = {kp[a] * kd[a]})")
+
+
+def parse_gains(data: dict[str, Any], source: str) -> Gains:
+    t = _Table(data, source)
+    values = {}
+    for key in GAIN_PARTS:
+        default = (0.0, 0.0, 0.0) if key.startswith("ki") else ...
+        values[key] = t.numbers(key, 3, default)
+    gains = Gains(**values, damping=t.string("damping", "log_rate", choices=DAMPING_CHOICES))
+    t.finish()
+    try:
+        check_stability(gains)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+    return gains
+
+
+def load_gains(path: str | Path) -> Gains:
+    path = Path(path)
+    return parse_gains(_read_toml(path), str(path))
+
+
+# ----------------------------------------------------------------------------------------
+# Scenarios (MODEL.md section 5)
+# ----------------------------------------------------------------------------------------
+
+CONTROLLERS = ("pid", "pd")
+TRAJECTORIES = ("case1_figure8", "hover")
+STARTS = ("ground", "hover")
+PROFILE_KINDS = ("pulse", "sine")
+
+
+@dataclass(frozen=True)
+class DisturbanceTerm:
+    """One body-frame (FLU) disturbance term, per axis.
+
+    pulse: amplitude while start_s <= t < end_s; sine: amplitude sin(omega t + phase) for
+    t >= start_s (and t < end_s when end_s is finite).
+    """
+
+    kind: str
+    amplitude: Vec3
+    start_s: float = 0.0
+    end_s: float = math.inf
+    omega_rad_s: float = 0.0
+    phase_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class TrajectoryConfig:
+    kind: str
+    position_enu_m: Vec3 = (0.0, 0.0, 0.0)
+    rise_height_m: float = 5.0
+    rise_end_s: float = 10.0
+    figure_start_s: float = 20.0
+    figure_end_s: float = 140.0
+    amplitude_m: float = 5.0
+    axis_enu: Vec3 = (1.0, 2.0, 3.0)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything one run needs; file paths already resolved and loaded."""
+
+    name: str
+    duration_s: float
+    controller: str
+    vehicle: VehicleConfig
+    gains_pid: Gains
+    gains_pd: Gains
+    control_rate_hz: int
+    physics_rate_hz: int
+    ideal_actuators: bool
+    ground_enabled: bool
+    start: str
+    initial_position_enu_m: Vec3
+    trajectory: TrajectoryConfig
+    force_terms: tuple[DisturbanceTerm, ...] = ()
+    torque_terms: tuple[DisturbanceTerm, ...] = ()
+    seed: int = 0
+    divergence_position_m: float = 10.0
+    source: str = ""
+    files: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def gains(self) -> Gains:
+        return self.gains_pid if self.controller == "pid" else self.gains_pd
+
+
+def _parse_terms(tables: list[_Table]) -> tuple[DisturbanceTerm, ...]:
+    terms = []
+    for t in tables:
+        kind = t.string("kind", choices=PROFILE_KINDS)
+        term = DisturbanceTerm(
+            kind=kind,
+            amplitude=t.numbers("amplitude", 3),  # type: ignore[arg-type]
+            start_s=t.number("start_s", 0.0, lo=0.0),
+            end_s=t.number("end_s", math.inf) if t.has("end_s") else math.inf,
+            omega_rad_s=t.number("omega_rad_s", 0.0) if kind == "sine" else 0.0,
+            phase_rad=t.number("phase_rad", 0.0) if kind == "sine" else 0.0,
+        )
+        if kind == "pulse" and not math.isfinite(term.end_s):
+            raise t.error("end_s", "a finite end time for a pulse")
+        if term.end_s <= term.start_s:
+            raise t.error("end_s", f"a time after start_s = {term.start_s}")
+        t.finish()
+        terms.append(term)
+    return tuple(terms)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Load a scenario and the vehicle and gain files it names (paths relative to it)."""
+    path = Path(path)
+    source = str(path)
+    t = _Table(_read_toml(path), source)
+    base = path.parent
+
+    def rel(key: str, table: _Table) -> Path:
+        return (base / table.string(key)).resolve()
+
+    vehicle_path = rel("vehicle", t)
+    gains_t = t.table("gains")
+    pid_path, pd_path = rel("pid", gains_t), rel("pd", gains_t)
+    gains_t.finish()
+
+    rates = t.table("rates", {})
+    control_hz = rates.integer("control_hz", 500, lo=1, hi=1000)
+    physics_hz = rates.integer("physics_hz", 1000, lo=1, hi=100000)
+    rates.finish()
+    if physics_hz % control_hz:
+        raise ConfigError(f"{source}: key 'rates.physics_hz': expected a multiple of "
+                          f"rates.control_hz = {control_hz}, got {physics_hz}")
+
+    init = t.table("initial")
+    start = init.string("start", choices=STARTS)
+    initial_p = init.numbers("position_enu_m", 3, (0.0, 0.0, 0.0))
+    init.finish()
+
+    traj_t = t.table("trajectory")
+    kind = traj_t.string("kind", choices=TRAJECTORIES)
+    if kind == "hover":
+        traj = TrajectoryConfig(kind=kind, position_enu_m=traj_t.numbers(  # type: ignore[arg-type]
+            "position_enu_m", 3, initial_p))
+    else:
+        traj = TrajectoryConfig(
+            kind=kind,
+            position_enu_m=traj_t.numbers("position_enu_m", 3, initial_p),  # type: ignore[arg-type]
+            rise_height_m=traj_t.number("rise_height_m", 5.0),
+            rise_end_s=traj_t.number("rise_end_s", 10.0, lo=0.0, lo_open=True),
+            figure_start_s=traj_t.number("figure_start_s", 20.0, lo=0.0),
+            figure_end_s=traj_t.number("figure_end_s", 140.0, lo=0.0),
+            amplitude_m=traj_t.number("amplitude_m", 5.0, lo=0.0),
+            axis_enu=traj_t.numbers("axis_enu", 3, (1.0, 2.0, 3.0)),  # type: ignore[arg-type]
+        )
+        if not traj.rise_end_s <= traj.figure_start_s < traj.figure_end_s:
+            raise traj_t.error("figure_end_s", "rise_end_s <= figure_start_s < figure_end_s")
+    traj_t.finish()
+
+    dist = t.table("disturbance", {})
+    force_terms = _parse_terms(dist.tables("force"))
+    torque_terms = _parse_terms(dist.tables("torque"))
+    dist.finish()
+
+    actuators = t.table("actuators", {})
+    ideal = actuators.boolean("ideal", False)
+    actuators.finish()
+
+    scenario = Scenario(
+        name=t.string("name"),
+        duration_s=t.number("duration_s", lo=0.0, lo_open=True),
+        controller=t.string("controller", "pid", choices=CONTROLLERS),
+        vehicle=load_vehicle(vehicle_path),
+        gains_pid=load_gains(pid_path),
+        gains_pd=load_gains(pd_path),
+        control_rate_hz=control_hz,
+        physics_rate_hz=physics_hz,
+        ideal_actuators=ideal,
+        ground_enabled=t.boolean("ground", start == "ground"),
+        start=start,
+        initial_position_enu_m=initial_p,  # type: ignore[arg-type]
+        trajectory=traj,
+        force_terms=force_terms,
+        torque_terms=torque_terms,
+        seed=t.integer("seed", 0, lo=0),
+        divergence_position_m=t.number("divergence_position_m", 10.0, lo=0.0, lo_open=True),
+        source=source,
+        files={"scenario": str(path.resolve()), "vehicle": str(vehicle_path),
+               "gains_pid": str(pid_path), "gains_pd": str(pd_path)},
+    )
+    t.finish()
+    if not scenario.gains_pd.is_pd:
+        raise ConfigError(f"{pd_path}: the PD baseline (eq. 33) must have ki_r = ki_d = 0")
+    return scenario

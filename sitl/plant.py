@@ -1,0 +1,228 @@
+"""Rigid-body plant of a tilt-rotor multirotor with rotor and tilt-servo dynamics.
+
+Independent of the controller on purpose (no dual quaternions, no allocation matrix): the
+world-frame Newton-Euler equations in ENU/FLU with gravity,
+    p' = v,   m v' = R(q) f_b + m g_W,   q' = 1/2 q (0, w),   J w' = tau_b - w x J w,
+integrated by fixed-step RK4 with the quaternion renormalised after each step. The rotor
+wrench is the per-rotor sum F_i = c_f w_i^2 n_i, Q_i = -sigma_i c_d w_i^2 n_i (MODEL.md 2).
+
+Actuators are decoupled from the body, so their state inside a step is known in closed form:
+a first-order rotor lag (time constants up/down) towards a command clamped to [0, w_max], and
+a rate-limited tilt servo. The wrench is evaluated on that exact actuator trajectory at the
+RK4 stage times. `ideal_actuators` makes both follow their commands instantly.
+
+Ground (z = 0): a resting vehicle stays put while the net vertical force does not lift it;
+a vehicle reaching z < 0 stops there (inelastic contact, velocities zeroed).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from common.config import VehicleConfig
+from common.geometry import rotor_frames
+from sitl.disturbance import Disturbance
+
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
+
+
+class PlantState(NamedTuple):
+    time_us: int
+    p_enu_m: Vec3
+    v_enu_m_s: Vec3  # world-frame velocity
+    q_enu_flu: Quat  # rotates FLU vectors into ENU, (w, x, y, z)
+    omega_flu_rad_s: Vec3
+    rotor_speed_rad_s: tuple[float, ...]
+    tilt_rad: tuple[float, ...]
+    landed: bool
+
+
+class ActuatorCommand(NamedTuple):
+    rotor_speed_rad_s: tuple[float, ...]
+    tilt_rad: tuple[float, ...]
+
+
+def rotate(q: Quat, v: Vec3) -> Vec3:
+    """R(q) v via the rotation matrix of q (the controller uses another formula)."""
+    w, x, y, z = q
+    vx, vy, vz = v
+    return ((1 - 2 * (y * y + z * z)) * vx + 2 * (x * y - w * z) * vy + 2 * (x * z + w * y) * vz,
+            2 * (x * y + w * z) * vx + (1 - 2 * (x * x + z * z)) * vy + 2 * (y * z - w * x) * vz,
+            2 * (x * z - w * y) * vx + 2 * (y * z + w * x) * vy + (1 - 2 * (x * x + y * y)) * vz)
+
+
+def rotate_inv(q: Quat, v: Vec3) -> Vec3:
+    return rotate((q[0], -q[1], -q[2], -q[3]), v)
+
+
+class Plant:
+    """Fixed-step simulator; `step` is a pure function of (state, command)."""
+
+    def __init__(self, vehicle: VehicleConfig, *, dt_us: int = 1000,
+                 ideal_actuators: bool = False, ground_enabled: bool = True,
+                 disturbance: Disturbance | None = None) -> None:
+        if dt_us <= 0:
+            raise ValueError("dt_us must be positive")
+        self.vehicle = vehicle
+        self.dt_us = dt_us
+        self.ideal = ideal_actuators
+        self.ground = ground_enabled
+        self.disturbance = disturbance or Disturbance()
+        self.mass = vehicle.mass_kg
+        self.inertia = vehicle.inertia_diag_kg_m2
+        self.g = vehicle.gravity_m_s2
+        self.w_max = vehicle.rotor_speed_max_rad_s
+        self.tau_up = vehicle.rotor_tau_up_s
+        self.tau_down = vehicle.rotor_tau_down_s
+        self.tilt_rate = vehicle.tilt_rate_max_rad_s
+        cf, cd = vehicle.thrust_coeff, vehicle.drag_coeff
+        rotors = []
+        for fr in rotor_frames(vehicle):
+            ev, el, r = fr.e_v_flu, fr.e_l_flu, fr.r_flu_m
+            # force and torque per unit w^2 for thrust along e_v and along e_l
+            fv = tuple(cf * c for c in ev)
+            fl = tuple(cf * c for c in el)
+            tv = _moment(r, fv, fr.spin * cd, ev)
+            tl = _moment(r, fl, fr.spin * cd, el)
+            rotors.append((*fv, *fl, *tv, *tl))
+        self._rotors = tuple(rotors)
+
+    # ------------------------------------------------------------------ actuators
+
+    def actuators_at(self, speed0: tuple[float, ...], tilt0: tuple[float, ...],
+                     cmd: ActuatorCommand, tau_s: float) -> tuple[list[float], list[float]]:
+        """Exact rotor speeds and tilts tau_s after (speed0, tilt0) under a held command."""
+        w_max = self.w_max
+        if self.ideal:
+            return ([max(0.0, c) for c in cmd.rotor_speed_rad_s], list(cmd.tilt_rad))
+        speeds = []
+        for w0, c in zip(speed0, cmd.rotor_speed_rad_s, strict=True):
+            c = 0.0 if c < 0.0 else (w_max if c > w_max else c)
+            tc = self.tau_up if c > w0 else self.tau_down
+            speeds.append(c + (w0 - c) * math.exp(-tau_s / tc))
+        lim = self.tilt_rate * tau_s
+        tilts = []
+        for a0, c in zip(tilt0, cmd.tilt_rad, strict=True):
+            d = c - a0
+            tilts.append(a0 + (lim if d > lim else (-lim if d < -lim else d)))
+        return speeds, tilts
+
+    def rotor_wrench(self, speeds: list[float] | tuple[float, ...],
+                     tilts: list[float] | tuple[float, ...]) -> tuple[Vec3, Vec3]:
+        """Sum over rotors of thrust and torque (arm moment plus drag), in FLU."""
+        fx = fy = fz = tx = ty = tz = 0.0
+        for (fvx, fvy, fvz, flx, fly, flz, tvx, tvy, tvz, tlx, tly, tlz), w, a in zip(
+                self._rotors, speeds, tilts, strict=True):
+            w2 = w * w
+            c = w2 * math.cos(a)
+            s = w2 * math.sin(a)
+            fx += c * fvx + s * flx
+            fy += c * fvy + s * fly
+            fz += c * fvz + s * flz
+            tx += c * tvx + s * tlx
+            ty += c * tvy + s * tly
+            tz += c * tvz + s * tlz
+        return (fx, fy, fz), (tx, ty, tz)
+
+    def total_wrench(self, speeds, tilts, t_s: float) -> tuple[float, ...]:
+        (fx, fy, fz), (tx, ty, tz) = self.rotor_wrench(speeds, tilts)
+        if self.disturbance.active:
+            (dfx, dfy, dfz), (dtx, dty, dtz) = self.disturbance.wrench(t_s)
+            return (fx + dfx, fy + dfy, fz + dfz, tx + dtx, ty + dty, tz + dtz)
+        return (fx, fy, fz, tx, ty, tz)
+
+    # ------------------------------------------------------------------ rigid body
+
+    def derivative(self, x: tuple[float, ...], wrench: tuple[float, ...]) -> tuple[float, ...]:
+        """d/dt of (p, v, q, w) in ENU/FLU under a body wrench (f, tau)."""
+        _, _, _, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz = x
+        fx, fy, fz, tx, ty, tz = wrench
+        inv_m = 1.0 / self.mass
+        ax, ay, az = rotate((qw, qx, qy, qz), (fx * inv_m, fy * inv_m, fz * inv_m))
+        jx, jy, jz = self.inertia
+        return (vx, vy, vz,
+                ax, ay, az - self.g,
+                0.5 * (-qx * wx - qy * wy - qz * wz),
+                0.5 * (qw * wx + qy * wz - qz * wy),
+                0.5 * (qw * wy - qx * wz + qz * wx),
+                0.5 * (qw * wz + qx * wy - qy * wx),
+                (tx - (jz - jy) * wy * wz) / jx,
+                (ty - (jx - jz) * wz * wx) / jy,
+                (tz - (jy - jx) * wx * wy) / jz)
+
+    def step(self, s: PlantState, cmd: ActuatorCommand) -> PlantState:
+        """Advance one step of dt_us with the command held (zero-order hold)."""
+        h = self.dt_us * 1e-6
+        t0 = s.time_us * 1e-6
+        sp_mid, ti_mid = self.actuators_at(s.rotor_speed_rad_s, s.tilt_rad, cmd, 0.5 * h)
+        sp_end, ti_end = self.actuators_at(s.rotor_speed_rad_s, s.tilt_rad, cmd, h)
+        if self.ideal:
+            w0 = w1 = w2 = self.total_wrench(sp_end, ti_end, t0)
+            if self.disturbance.active:
+                w1 = self.total_wrench(sp_end, ti_end, t0 + 0.5 * h)
+                w2 = self.total_wrench(sp_end, ti_end, t0 + h)
+        else:
+            w0 = self.total_wrench(s.rotor_speed_rad_s, s.tilt_rad, t0)
+            w1 = self.total_wrench(sp_mid, ti_mid, t0 + 0.5 * h)
+            w2 = self.total_wrench(sp_end, ti_end, t0 + h)
+
+        x = (*s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu, *s.omega_flu_rad_s)
+        time_us = s.time_us + self.dt_us
+        actuators = (tuple(sp_end), tuple(ti_end))
+
+        if s.landed and self.ground:
+            # Resting: stays unless the net vertical force lifts it off.
+            fz_world = rotate(s.q_enu_flu, w2[:3])[2] - self.mass * self.g
+            if fz_world <= 0.0:
+                return PlantState(time_us, s.p_enu_m, (0.0, 0.0, 0.0), s.q_enu_flu,
+                                  (0.0, 0.0, 0.0), *actuators, True)
+
+        k1 = self.derivative(x, w0)
+        k2 = self.derivative(tuple(a + 0.5 * h * b for a, b in zip(x, k1, strict=True)), w1)
+        k3 = self.derivative(tuple(a + 0.5 * h * b for a, b in zip(x, k2, strict=True)), w1)
+        k4 = self.derivative(tuple(a + h * b for a, b in zip(x, k3, strict=True)), w2)
+        h6 = h / 6.0
+        y = [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4,
+                                                                        strict=True)]
+        qn = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
+        q = (y[6] / qn, y[7] / qn, y[8] / qn, y[9] / qn)
+        p, v, w = (y[0], y[1], y[2]), (y[3], y[4], y[5]), (y[10], y[11], y[12])
+        landed = False
+        if self.ground and p[2] < 0.0:
+            p, v, w, landed = (p[0], p[1], 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), True
+        return PlantState(time_us, p, v, q, w, *actuators, landed)
+
+    # ------------------------------------------------------------------ helpers
+
+    def initial_state(self, p_enu_m: Vec3, *, on_ground: bool,
+                      rotor_speed_rad_s: tuple[float, ...] | None = None,
+                      tilt_rad: tuple[float, ...] | None = None,
+                      q_enu_flu: Quat = (1.0, 0.0, 0.0, 0.0)) -> PlantState:
+        n = self.vehicle.n_rotors
+        return PlantState(0, p_enu_m, (0.0, 0.0, 0.0), q_enu_flu, (0.0, 0.0, 0.0),
+                          tuple(rotor_speed_rad_s or (0.0,) * n), tuple(tilt_rad or (0.0,) * n),
+                          on_ground and self.ground)
+
+    def specific_force_flu(self, s: PlantState) -> Vec3:
+        """What an accelerometer at the CoM reads: (R^T (a - g_W)) = f_b / m."""
+        w = self.total_wrench(s.rotor_speed_rad_s, s.tilt_rad, s.time_us * 1e-6)
+        if s.landed:
+            return rotate_inv(s.q_enu_flu, (0.0, 0.0, self.g))
+        return (w[0] / self.mass, w[1] / self.mass, w[2] / self.mass)
+
+    def energy(self, s: PlantState) -> float:
+        """Kinetic plus potential energy (for conservation tests)."""
+        jx, jy, jz = self.inertia
+        w, v = s.omega_flu_rad_s, s.v_enu_m_s
+        return (0.5 * self.mass * (v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
+                + 0.5 * (jx * w[0] ** 2 + jy * w[1] ** 2 + jz * w[2] ** 2)
+                + self.mass * self.g * s.p_enu_m[2])
+
+
+def _moment(r: Vec3, f: tuple[float, ...], spin_cd: float, e: Vec3) -> tuple[float, ...]:
+    """r x f - sigma c_d e: arm moment of the thrust plus the rotor's drag torque."""
+    return (r[1] * f[2] - r[2] * f[1] - spin_cd * e[0],
+            r[2] * f[0] - r[0] * f[2] - spin_cd * e[1],
+            r[0] * f[1] - r[1] * f[0] - spin_cd * e[2])
