@@ -19,7 +19,7 @@ demo: venv
 	$(VENV)/bin/gcs run config/scenarios/case1_figure8.toml --in-process --out $(OUT)
 
 test: venv
-	$(PY) -m pytest -q -n auto tests 2>/dev/null || $(PY) -m pytest -q tests
+	$(PY) -m pytest -q -n auto tests
 
 test-fast: venv
 	$(PY) -m pytest -q -m "not slow" tests
