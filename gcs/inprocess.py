@@ -19,7 +19,7 @@ from common.config import Scenario
 from fcu.allocation import hover_command
 from fcu.core import FlightCore
 from fcu.tracker import VehicleState
-from fcu.trajectory import make_trajectory
+from fcu.trajectory import Trajectory, make_trajectory
 from gcs.metrics import percentiles_us, tracking_metrics
 from sitl.disturbance import Disturbance
 from sitl.plant import ActuatorCommand, Plant, PlantState, rotate_inv
@@ -68,8 +68,12 @@ def state_for_fcu(s: PlantState) -> VehicleState:
                         s.omega_flu_rad_s)
 
 
-def run_scenario(scenario: Scenario) -> RunResult:
-    """Fly a scenario to its end or to divergence; deterministic for a given scenario."""
+def run_scenario(scenario: Scenario, *, trajectory: Trajectory | None = None,
+                 initial: PlantState | None = None) -> RunResult:
+    """Fly a scenario to its end or to divergence; deterministic for a given scenario.
+
+    `trajectory` and `initial` replace the scenario's reference and start state (tests).
+    """
     vehicle = scenario.vehicle
     physics_dt_us = 1_000_000 // scenario.physics_rate_hz
     control_dt_us = 1_000_000 // scenario.control_rate_hz
@@ -77,9 +81,10 @@ def run_scenario(scenario: Scenario) -> RunResult:
     plant = Plant(vehicle, dt_us=physics_dt_us, ideal_actuators=scenario.ideal_actuators,
                   ground_enabled=scenario.ground_enabled,
                   disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
-    state = initial_plant_state(scenario, plant)
+    state = initial if initial is not None else initial_plant_state(scenario, plant)
     core = FlightCore(vehicle, scenario.gains, scenario.control_rate_hz, state.tilt_rad)
-    trajectory = make_trajectory(scenario.trajectory)
+    if trajectory is None:
+        trajectory = make_trajectory(scenario.trajectory)
     end_us = round(scenario.duration_s * 1e6)
     limit = scenario.divergence_position_m
 
