@@ -39,7 +39,8 @@ class _Table:
 
     def error(self, key: str, expected: str) -> ConfigError:
         got = self.data.get(key, "<missing>")
-        return ConfigError(f"{self.source}: key '{self._name(key)}': expected {expected}, got {got!r}")
+        return ConfigError(
+            f"{self.source}: key '{self._name(key)}': expected {expected}, got {got!r}")
 
     def has(self, key: str) -> bool:
         return key in self.data

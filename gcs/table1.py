@@ -81,7 +81,7 @@ def _run_one(job: tuple[str, str, str, bool, float | None, str]) -> dict[str, An
     from gcs.inprocess import apply_overrides, run_scenario
     from gcs.runio import write_run
 
-    path, scen, ctrl, ideal, duration, out = job
+    path, _scen, ctrl, ideal, duration, out = job
     scenario = apply_overrides(load_scenario(path), controller=ctrl,
                                ideal_actuators=ideal or None, duration_s=duration)
     result = run_scenario(scenario)
