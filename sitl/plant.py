@@ -88,26 +88,41 @@ class Plant:
             tl = _moment(r, fl, fr.spin * cd, el)
             rotors.append((*fv, *fl, *tv, *tl))
         self._rotors = tuple(rotors)
+        h = dt_us * 1e-6
+        self._decay_up, self._decay_down = math.exp(-h / self.tau_up), math.exp(-h / self.tau_down)
+        self._decay_half_up = math.exp(-0.5 * h / self.tau_up)
+        self._decay_half_down = math.exp(-0.5 * h / self.tau_down)
+        self._last_key: tuple | None = None
+        self._last_wrench: tuple[float, ...] = (0.0,) * 6
 
     # ------------------------------------------------------------------ actuators
 
     def actuators_at(self, speed0: tuple[float, ...], tilt0: tuple[float, ...],
                      cmd: ActuatorCommand, tau_s: float) -> tuple[list[float], list[float]]:
         """Exact rotor speeds and tilts tau_s after (speed0, tilt0) under a held command."""
-        w_max = self.w_max
         if self.ideal:
             return ([max(0.0, c) for c in cmd.rotor_speed_rad_s], list(cmd.tilt_rad))
-        speeds = []
-        for w0, c in zip(speed0, cmd.rotor_speed_rad_s, strict=True):
+        decay_up, decay_down = math.exp(-tau_s / self.tau_up), math.exp(-tau_s / self.tau_down)
+        return (self._rotor_lag(speed0, cmd.rotor_speed_rad_s, decay_up, decay_down),
+                self._tilt_servo(tilt0, cmd.tilt_rad, self.tilt_rate * tau_s))
+
+    def _rotor_lag(self, speed0, cmd, decay_up: float, decay_down: float) -> list[float]:
+        """First-order lag towards the command clamped to [0, w_max], exact over the hold."""
+        w_max = self.w_max
+        out = []
+        for w0, c in zip(speed0, cmd, strict=True):
             c = 0.0 if c < 0.0 else (w_max if c > w_max else c)
-            tc = self.tau_up if c > w0 else self.tau_down
-            speeds.append(c + (w0 - c) * math.exp(-tau_s / tc))
-        lim = self.tilt_rate * tau_s
-        tilts = []
-        for a0, c in zip(tilt0, cmd.tilt_rad, strict=True):
+            out.append(c + (w0 - c) * (decay_up if c > w0 else decay_down))
+        return out
+
+    @staticmethod
+    def _tilt_servo(tilt0, cmd, lim: float) -> list[float]:
+        """Rate-limited servo: moves towards the command by at most `lim`."""
+        out = []
+        for a0, c in zip(tilt0, cmd, strict=True):
             d = c - a0
-            tilts.append(a0 + (lim if d > lim else (-lim if d < -lim else d)))
-        return speeds, tilts
+            out.append(a0 + (lim if d > lim else (-lim if d < -lim else d)))
+        return out
 
     def rotor_wrench(self, speeds: list[float] | tuple[float, ...],
                      tilts: list[float] | tuple[float, ...]) -> tuple[Vec3, Vec3]:
@@ -125,13 +140,6 @@ class Plant:
             ty += c * tvy + s * tly
             tz += c * tvz + s * tlz
         return (fx, fy, fz), (tx, ty, tz)
-
-    def total_wrench(self, speeds, tilts, t_s: float) -> tuple[float, ...]:
-        (fx, fy, fz), (tx, ty, tz) = self.rotor_wrench(speeds, tilts)
-        if self.disturbance.active:
-            (dfx, dfy, dfz), (dtx, dty, dtz) = self.disturbance.wrench(t_s)
-            return (fx + dfx, fy + dfy, fz + dfz, tx + dtx, ty + dty, tz + dtz)
-        return (fx, fy, fz, tx, ty, tz)
 
     # ------------------------------------------------------------------ rigid body
 
@@ -156,19 +164,24 @@ class Plant:
         """Advance one step of dt_us with the command held (zero-order hold)."""
         h = self.dt_us * 1e-6
         t0 = s.time_us * 1e-6
-        sp_mid, ti_mid = self.actuators_at(s.rotor_speed_rad_s, s.tilt_rad, cmd, 0.5 * h)
-        sp_end, ti_end = self.actuators_at(s.rotor_speed_rad_s, s.tilt_rad, cmd, h)
         if self.ideal:
-            w0 = w1 = w2 = self.total_wrench(sp_end, ti_end, t0)
-            if self.disturbance.active:
-                w1 = self.total_wrench(sp_end, ti_end, t0 + 0.5 * h)
-                w2 = self.total_wrench(sp_end, ti_end, t0 + h)
+            sp_end, ti_end = self.actuators_at(s.rotor_speed_rad_s, s.tilt_rad, cmd, h)
+            r0 = r1 = r2 = self._cached_rotor_wrench(sp_end, ti_end)
         else:
-            w0 = self.total_wrench(s.rotor_speed_rad_s, s.tilt_rad, t0)
-            w1 = self.total_wrench(sp_mid, ti_mid, t0 + 0.5 * h)
-            w2 = self.total_wrench(sp_end, ti_end, t0 + h)
+            sp_mid = self._rotor_lag(s.rotor_speed_rad_s, cmd.rotor_speed_rad_s,
+                                     self._decay_half_up, self._decay_half_down)
+            sp_end = self._rotor_lag(s.rotor_speed_rad_s, cmd.rotor_speed_rad_s,
+                                     self._decay_up, self._decay_down)
+            ti_mid = self._tilt_servo(s.tilt_rad, cmd.tilt_rad, 0.5 * self.tilt_rate * h)
+            ti_end = self._tilt_servo(s.tilt_rad, cmd.tilt_rad, self.tilt_rate * h)
+            r0 = self._cached_rotor_wrench(s.rotor_speed_rad_s, s.tilt_rad)
+            f1, t1 = self.rotor_wrench(sp_mid, ti_mid)
+            r1 = (*f1, *t1)
+            r2 = self._cached_rotor_wrench(tuple(sp_end), tuple(ti_end))
+        w0 = self._with_disturbance(r0, t0)
+        w1 = self._with_disturbance(r1, t0 + 0.5 * h)
+        w2 = self._with_disturbance(r2, t0 + h)
 
-        x = (*s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu, *s.omega_flu_rad_s)
         time_us = s.time_us + self.dt_us
         actuators = (tuple(sp_end), tuple(ti_end))
 
@@ -179,13 +192,15 @@ class Plant:
                 return PlantState(time_us, s.p_enu_m, (0.0, 0.0, 0.0), s.q_enu_flu,
                                   (0.0, 0.0, 0.0), *actuators, True)
 
+        x = (*s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu, *s.omega_flu_rad_s)
+        hh = 0.5 * h
         k1 = self.derivative(x, w0)
-        k2 = self.derivative(tuple(a + 0.5 * h * b for a, b in zip(x, k1, strict=True)), w1)
-        k3 = self.derivative(tuple(a + 0.5 * h * b for a, b in zip(x, k2, strict=True)), w1)
-        k4 = self.derivative(tuple(a + h * b for a, b in zip(x, k3, strict=True)), w2)
+        k2 = self.derivative([a + hh * b for a, b in zip(x, k1, strict=True)], w1)
+        k3 = self.derivative([a + hh * b for a, b in zip(x, k2, strict=True)], w1)
+        k4 = self.derivative([a + h * b for a, b in zip(x, k3, strict=True)], w2)
         h6 = h / 6.0
-        y = [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4,
-                                                                        strict=True)]
+        y = [a + h6 * (b + 2.0 * (c + d) + e)
+             for a, b, c, d, e in zip(x, k1, k2, k3, k4, strict=True)]
         qn = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
         q = (y[6] / qn, y[7] / qn, y[8] / qn, y[9] / qn)
         p, v, w = (y[0], y[1], y[2]), (y[3], y[4], y[5]), (y[10], y[11], y[12])
@@ -193,6 +208,23 @@ class Plant:
         if self.ground and p[2] < 0.0:
             p, v, w, landed = (p[0], p[1], 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), True
         return PlantState(time_us, p, v, q, w, *actuators, landed)
+
+    def _cached_rotor_wrench(self, speeds: tuple[float, ...],
+                             tilts: tuple[float, ...]) -> tuple[float, ...]:
+        """rotor_wrench memoised on the last actuator state: a step's end is the next start."""
+        key = (speeds, tilts)
+        if key != self._last_key:
+            self._last_key = key
+            f, t = self.rotor_wrench(speeds, tilts)
+            self._last_wrench = (*f, *t)
+        return self._last_wrench
+
+    def _with_disturbance(self, rotor: tuple[float, ...], t_s: float) -> tuple[float, ...]:
+        if not self.disturbance.active:
+            return rotor
+        (dfx, dfy, dfz), (dtx, dty, dtz) = self.disturbance.wrench(t_s)
+        return (rotor[0] + dfx, rotor[1] + dfy, rotor[2] + dfz,
+                rotor[3] + dtx, rotor[4] + dty, rotor[5] + dtz)
 
     # ------------------------------------------------------------------ helpers
 
@@ -207,7 +239,8 @@ class Plant:
 
     def specific_force_flu(self, s: PlantState) -> Vec3:
         """What an accelerometer at the CoM reads: (R^T (a - g_W)) = f_b / m."""
-        w = self.total_wrench(s.rotor_speed_rad_s, s.tilt_rad, s.time_us * 1e-6)
+        f, t = self.rotor_wrench(s.rotor_speed_rad_s, s.tilt_rad)
+        w = self._with_disturbance((*f, *t), s.time_us * 1e-6)
         if s.landed:
             return rotate_inv(s.q_enu_flu, (0.0, 0.0, self.g))
         return (w[0] / self.mass, w[1] / self.mass, w[2] / self.mass)

@@ -1,0 +1,17 @@
+"""`make bench`: every benchmark, one after the other, printing its figures."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+BENCHMARKS = ("bench_step.py", "bench_inprocess.py", "divergence_limit.py")
+
+if __name__ == "__main__":
+    failed = 0
+    for name in BENCHMARKS:
+        print(f"== {name}", flush=True)
+        failed |= subprocess.run([sys.executable, str(HERE / name)], check=False).returncode
+    sys.exit(1 if failed else 0)
