@@ -237,7 +237,7 @@ class ErrorMotion:
         return dq_from_pose(self.q(t), tuple(self.p(t)))
 
     def twist(self, t):
-        a, b, da, db = self.angles(t)
+        _, b, da, db = self.angles(t)
         q2 = axis_angle(self.u2, b)
         w = np.asarray(q_rotate_inv(q2, tuple(da * self.u1))) + db * self.u2
         v = np.asarray(q_rotate_inv(self.q(t), tuple(self.dp(t))))
