@@ -9,7 +9,8 @@ wrench is the per-rotor sum F_i = c_f w_i^2 n_i, Q_i = -sigma_i c_d w_i^2 n_i (M
 Actuators are decoupled from the body, so their state inside a step is known in closed form:
 a first-order rotor lag (time constants up/down) towards a command clamped to [0, w_max], and
 a rate-limited tilt servo. The wrench is evaluated on that exact actuator trajectory at the
-RK4 stage times. `ideal_actuators` makes both follow their commands instantly.
+RK4 stage times. `ideal_actuators` makes both follow their commands instantly (the speed
+limits stay: they are physical).
 
 Ground (z = 0): a resting vehicle stays put while the net vertical force does not lift it;
 a vehicle reaching z < 0 stops there (inelastic contact, velocities zeroed).
@@ -18,6 +19,7 @@ a vehicle reaching z < 0 stops there (inelastic contact, velocities zeroed).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 from common.config import VehicleConfig
@@ -101,7 +103,9 @@ class Plant:
                      cmd: ActuatorCommand, tau_s: float) -> tuple[list[float], list[float]]:
         """Exact rotor speeds and tilts tau_s after (speed0, tilt0) under a held command."""
         if self.ideal:
-            return ([max(0.0, c) for c in cmd.rotor_speed_rad_s], list(cmd.tilt_rad))
+            w_max = self.w_max
+            return ([0.0 if c < 0.0 else (w_max if c > w_max else c)
+                     for c in cmd.rotor_speed_rad_s], list(cmd.tilt_rad))
         decay_up, decay_down = math.exp(-tau_s / self.tau_up), math.exp(-tau_s / self.tau_down)
         return (self._rotor_lag(speed0, cmd.rotor_speed_rad_s, decay_up, decay_down),
                 self._tilt_servo(tilt0, cmd.tilt_rad, self.tilt_rate * tau_s))
@@ -209,10 +213,10 @@ class Plant:
             p, v, w, landed = (p[0], p[1], 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), True
         return PlantState(time_us, p, v, q, w, *actuators, landed)
 
-    def _cached_rotor_wrench(self, speeds: tuple[float, ...],
-                             tilts: tuple[float, ...]) -> tuple[float, ...]:
+    def _cached_rotor_wrench(self, speeds: Sequence[float],
+                             tilts: Sequence[float]) -> tuple[float, ...]:
         """rotor_wrench memoised on the last actuator state: a step's end is the next start."""
-        key = (speeds, tilts)
+        key = (tuple(speeds), tuple(tilts))
         if key != self._last_key:
             self._last_key = key
             f, t = self.rotor_wrench(speeds, tilts)

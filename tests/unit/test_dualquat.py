@@ -125,6 +125,17 @@ def test_dq_mul_keeps_unit_dual_norm(a, b):
 
 
 @SETTINGS
+@given(unit_dual_quats(), st.floats(0.5, 3.0), st.floats(-2.0, 2.0))
+def test_dq_norm_of_non_unit_dual_quaternion(a, scale, lam):
+    """Given s (q_hat + eps lam q), when dq_norm is read, then it is (s, s lam)."""
+    qh, q, p = a
+    b = tuple(scale * c for c in (*q, *(d + lam * r for d, r in zip(qh[4:], q, strict=True))))
+    r, d = dq_norm(b)
+    assert abs(r - scale) <= 1e-12 * scale
+    assert abs(d - scale * lam) <= 1e-12 * scale * (1.0 + np.linalg.norm(p))
+
+
+@SETTINGS
 @given(unit_dual_quats(), unit_dual_quats())
 def test_dq_mul_composes_poses(a, b):
     """Given poses a and b, when their dual quaternions multiply, then the pose composes."""

@@ -1,0 +1,360 @@
+"""SITL plant: rigid body, actuators, ground contact and disturbances (sitl.plant)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.config import DisturbanceTerm, load_scenario, load_vehicle
+from fcu.allocation import hover_command
+from sitl.disturbance import Disturbance
+from sitl.plant import ActuatorCommand, Plant, PlantState
+
+ROOT = Path(__file__).resolve().parents[2]
+ZERO6 = (0.0,) * 6
+
+
+@pytest.fixture(scope="module")
+def vehicle():
+    return load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+
+
+@pytest.fixture(scope="module")
+def hover(vehicle):
+    return hover_command(vehicle)
+
+
+def rot_matrix(q) -> np.ndarray:
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def run(plant: Plant, state: PlantState, cmd: ActuatorCommand, steps: int, check=None):
+    for _ in range(steps):
+        state = plant.step(state, cmd)
+        if check is not None:
+            check(state)
+    return state
+
+
+# ----------------------------------------------------------------------------------------
+# Rigid body
+# ----------------------------------------------------------------------------------------
+
+
+def test_free_fall(vehicle):
+    """Given rotors stopped and no ground, when falling 2 s, then z = z0 - g t^2 / 2."""
+    plant = Plant(vehicle, ground_enabled=False)
+    q0 = (math.cos(0.2), 0.0, math.sin(0.2), 0.0)
+    s = plant.initial_state((1.0, 2.0, 100.0), on_ground=False, q_enu_flu=q0)
+    g = vehicle.gravity_m_s2
+    for _ in range(20):
+        s = run(plant, s, ActuatorCommand(ZERO6, ZERO6), 100)
+        t = s.time_us * 1e-6
+        assert abs(s.p_enu_m[2] - (100.0 - 0.5 * g * t * t)) <= 1e-9
+        assert abs(s.v_enu_m_s[2] + g * t) <= 1e-9
+        assert s.p_enu_m[:2] == (1.0, 2.0)
+        assert np.allclose(s.q_enu_flu, q0, rtol=0.0, atol=1e-15)
+        assert not s.landed
+    assert s.time_us == 2_000_000
+
+
+def test_hover_equilibrium(vehicle, hover):
+    """Given the hover command held and no ground, when 10 s pass, then nothing moves."""
+    speeds, tilts = hover
+    plant = Plant(vehicle, ground_enabled=False)
+    s0 = plant.initial_state((0.0, 0.0, 5.0), on_ground=False, rotor_speed_rad_s=speeds,
+                             tilt_rad=tilts)
+    s = run(plant, s0, ActuatorCommand(speeds, tilts), 10_000)
+    assert s.time_us == 10_000_000
+    assert np.linalg.norm(np.subtract(s.p_enu_m, s0.p_enu_m)) < 1e-9
+    assert np.allclose(s.q_enu_flu, (1.0, 0.0, 0.0, 0.0), rtol=0.0, atol=1e-12)
+    assert np.linalg.norm(s.omega_flu_rad_s) < 1e-12
+
+
+def test_torque_free_rotation_conserves_momentum_and_energy(vehicle):
+    """Given a spin near the intermediate axis, when 10 s pass, then L_world and E hold."""
+    plant = Plant(vehicle, ground_enabled=False)
+    s = plant.initial_state((0.0, 0.0, 0.0), on_ground=False)._replace(
+        omega_flu_rad_s=(0.1, 3.0, 0.1))
+    inertia = np.array(vehicle.inertia_diag_kg_m2)
+
+    def momentum(state):
+        return rot_matrix(state.q_enu_flu) @ (inertia * np.array(state.omega_flu_rad_s))
+
+    def energy(state):
+        return 0.5 * float(np.sum(inertia * np.square(state.omega_flu_rad_s)))
+
+    l0, e0 = momentum(s), energy(s)
+    worst = {"L": 0.0, "E": 0.0, "q": 0.0}
+
+    def check(state):
+        worst["q"] = max(worst["q"], abs(math.sqrt(sum(c * c for c in state.q_enu_flu)) - 1))
+        worst["L"] = max(worst["L"], float(np.linalg.norm(momentum(state) - l0)
+                                           / np.linalg.norm(l0)))
+        worst["E"] = max(worst["E"], abs(energy(state) - e0) / e0)
+
+    s = run(plant, s, ActuatorCommand(ZERO6, ZERO6), 10_000, check)
+    assert worst["q"] <= 1e-12
+    assert worst["L"] <= 1e-8
+    assert worst["E"] <= 1e-8
+    # The body really tumbled (intermediate axis): omega moved far from its start.
+    assert np.linalg.norm(np.subtract(s.omega_flu_rad_s, (0.1, 3.0, 0.1))) > 1.0
+
+
+@pytest.mark.parametrize("ideal", [False, True])
+def test_step_is_pure_function_of_state_and_command(vehicle, hover, ideal):
+    """Given a used plant, when a state is stepped again, then the result equals a fresh one."""
+    speeds, tilts = hover
+    s_a = Plant(vehicle).initial_state((0.0, 0.0, 5.0), on_ground=False,
+                                       rotor_speed_rad_s=speeds, tilt_rad=tilts)
+    s_b = s_a._replace(rotor_speed_rad_s=(500.0,) * 6, tilt_rad=(0.3,) * 6,
+                       omega_flu_rad_s=(0.1, -0.2, 0.3))
+    cmd_a = ActuatorCommand(speeds, tilts)
+    cmd_b = ActuatorCommand((1200.0,) * 6, (-0.5,) * 6)
+    used = Plant(vehicle, ideal_actuators=ideal, ground_enabled=False)
+    sequence = [(s_a, cmd_a), (s_b, cmd_b), (s_a, cmd_b), (s_b, cmd_a), (s_a, cmd_a)]
+    for state, cmd in sequence * 2:
+        fresh = Plant(vehicle, ideal_actuators=ideal, ground_enabled=False).step(state, cmd)
+        assert used.step(state, cmd) == fresh
+
+
+def test_energy_helper_counts_all_terms(vehicle):
+    """Given a state, when energy() is read, then it is kinetic plus potential energy."""
+    plant = Plant(vehicle)
+    s = plant.initial_state((0.0, 0.0, 2.0), on_ground=False)._replace(
+        v_enu_m_s=(1.0, 0.0, 0.0), omega_flu_rad_s=(0.0, 0.0, 1.0))
+    m, g, jz = vehicle.mass_kg, vehicle.gravity_m_s2, vehicle.inertia_diag_kg_m2[2]
+    assert plant.energy(s) == pytest.approx(0.5 * m + 0.5 * jz + 2.0 * m * g, rel=1e-15)
+
+
+# ----------------------------------------------------------------------------------------
+# Actuators
+# ----------------------------------------------------------------------------------------
+
+
+def test_rotor_lag_step_up_uses_tau_up(vehicle):
+    """Given a step up, when tau_up has elapsed, then the rotor is at 63.2 % of the step."""
+    plant = Plant(vehicle, dt_us=500, ground_enabled=False)
+    assert vehicle.rotor_tau_up_s == 0.0125
+    s = plant.initial_state((0.0, 0.0, 0.0), on_ground=False)
+    s = run(plant, s, ActuatorCommand((1000.0,) * 6, ZERO6), 25)  # 12.5 ms
+    for w in s.rotor_speed_rad_s:
+        assert w == pytest.approx(1000.0 * (1.0 - math.exp(-1.0)), rel=1e-12)
+        assert abs(w / 1000.0 - 0.632) < 1e-3
+
+
+def test_rotor_lag_step_down_uses_tau_down(vehicle):
+    """Given a step down, when tau_down has elapsed, then 36.8 % of the step remains."""
+    plant = Plant(vehicle, dt_us=500, ground_enabled=False)
+    s = plant.initial_state((0.0, 0.0, 0.0), on_ground=False, rotor_speed_rad_s=(1000.0,) * 6)
+    half = run(plant, s, ActuatorCommand((200.0,) * 6, ZERO6), 25)  # tau_up: must not be there
+    assert half.rotor_speed_rad_s[0] > 200.0 + 800.0 * math.exp(-1.0) + 50.0
+    s = run(plant, half, ActuatorCommand((200.0,) * 6, ZERO6), 25)  # 25 ms = tau_down
+    for w in s.rotor_speed_rad_s:
+        assert w == pytest.approx(200.0 + 800.0 * math.exp(-1.0), rel=1e-12)
+
+
+def test_actuators_at_matches_closed_form(vehicle):
+    """Given a held command, when actuators_at is asked, then it uses the right lag."""
+    plant = Plant(vehicle)
+    cmd = ActuatorCommand((900.0, 100.0, 500.0, 500.0, 0.0, 1700.0), ZERO6)
+    speeds, _ = plant.actuators_at((500.0,) * 6, ZERO6, cmd, 0.01)
+    up, down = math.exp(-0.01 / vehicle.rotor_tau_up_s), math.exp(-0.01 / vehicle.rotor_tau_down_s)
+    expected = (900 - 400 * up, 100 + 400 * down, 500.0, 500.0, 500 * down, 1700 - 1200 * up)
+    assert np.allclose(speeds, expected, rtol=1e-14, atol=0.0)
+
+
+def test_speed_command_clamped_at_max(vehicle):
+    """Given a command above w_max, when held 1 s, then speeds settle at w_max, never above."""
+    plant = Plant(vehicle, ground_enabled=False)
+    s = plant.initial_state((0.0, 0.0, 0.0), on_ground=False)
+    w_max = vehicle.rotor_speed_max_rad_s
+
+    def check(state):
+        assert max(state.rotor_speed_rad_s) <= w_max
+
+    s = run(plant, s, ActuatorCommand((5000.0,) * 6, ZERO6), 1000, check)
+    assert all(abs(w - w_max) < 1e-6 for w in s.rotor_speed_rad_s)
+    s = run(plant, s, ActuatorCommand((-50.0,) * 6, ZERO6), 1000)
+    assert all(0.0 <= w < 1e-6 for w in s.rotor_speed_rad_s)
+
+
+def test_tilt_rate_limit(vehicle):
+    """Given a tilt step, when it is followed, then the tilt moves at 4 rad/s and stops."""
+    plant = Plant(vehicle, ground_enabled=False)
+    assert vehicle.tilt_rate_max_rad_s == 4.0
+    s = plant.initial_state((0.0, 0.0, 0.0), on_ground=False)
+    cmd = ActuatorCommand(ZERO6, (1.0, -1.0, 0.2, -0.2, 3.0, 0.0))
+    s = run(plant, s, cmd, 100)  # 0.1 s: at most 0.4 rad
+    assert np.allclose(s.tilt_rad, (0.4, -0.4, 0.2, -0.2, 0.4, 0.0), atol=1e-12)
+    s = run(plant, s, cmd, 700)
+    assert np.allclose(s.tilt_rad, cmd.tilt_rad, atol=1e-12)
+
+
+def test_ideal_actuators_follow_instantly(vehicle):
+    """Given ideal actuators, when one step passes, then speeds and tilts equal the command."""
+    plant = Plant(vehicle, ideal_actuators=True, ground_enabled=False)
+    s = plant.initial_state((0.0, 0.0, 0.0), on_ground=False)
+    cmd = ActuatorCommand((100.0, 200.0, 300.0, 400.0, 500.0, 600.0),
+                          (1.0, -2.0, 3.0, 0.5, 0.0, -0.5))
+    s = plant.step(s, cmd)
+    assert s.rotor_speed_rad_s == cmd.rotor_speed_rad_s
+    assert s.tilt_rad == cmd.tilt_rad
+
+
+# ----------------------------------------------------------------------------------------
+# Ground
+# ----------------------------------------------------------------------------------------
+
+
+def test_resting_on_ground_stays(vehicle):
+    """Given a landed vehicle with rotors stopped, when 1 s passes, then it stays at z = 0."""
+    plant = Plant(vehicle)
+    s = plant.initial_state((0.0, 0.0, 0.0), on_ground=True)
+    assert s.landed
+    s = run(plant, s, ActuatorCommand(ZERO6, ZERO6), 1000)
+    assert s.landed and s.p_enu_m == (0.0, 0.0, 0.0) and s.v_enu_m_s == (0.0, 0.0, 0.0)
+
+
+def test_lift_off_with_margin(vehicle, hover):
+    """Given hover speeds plus 5 %, when 1 s passes, then the vehicle lifts off the ground."""
+    speeds, tilts = hover
+    plant = Plant(vehicle, ideal_actuators=True)
+    s = plant.initial_state((0.0, 0.0, 0.0), on_ground=True)
+    s = run(plant, s, ActuatorCommand(tuple(1.05 * w for w in speeds), tilts), 1000)
+    assert not s.landed
+    assert s.p_enu_m[2] > 0.1 and s.v_enu_m_s[2] > 0.0
+
+
+def test_below_hover_speed_stays_on_ground(vehicle, hover):
+    """Given hover speeds minus 5 %, when 1 s passes, then the vehicle stays landed."""
+    speeds, tilts = hover
+    plant = Plant(vehicle, ideal_actuators=True)
+    s = plant.initial_state((0.0, 0.0, 0.0), on_ground=True)
+    s = run(plant, s, ActuatorCommand(tuple(0.95 * w for w in speeds), tilts), 1000)
+    assert s.landed and s.p_enu_m[2] == 0.0
+
+
+def test_drop_lands_on_ground(vehicle):
+    """Given a drop from 1 m, when 1 s passes, then it rests on z = 0 and never below."""
+    plant = Plant(vehicle)
+    s = plant.initial_state((0.0, 0.0, 1.0), on_ground=False)
+    assert not s.landed
+
+    def check(state):
+        assert state.p_enu_m[2] >= 0.0
+
+    s = run(plant, s, ActuatorCommand(ZERO6, ZERO6), 1000, check)
+    assert s.landed
+    assert s.p_enu_m[2] == 0.0
+    assert s.v_enu_m_s == (0.0, 0.0, 0.0) and s.omega_flu_rad_s == (0.0, 0.0, 0.0)
+
+
+# ----------------------------------------------------------------------------------------
+# Disturbances
+# ----------------------------------------------------------------------------------------
+
+
+def test_force_pulse_changes_velocity_by_impulse(vehicle, hover):
+    """Given a hovering vehicle, when a 5 N x pulse acts 2 s, then dv_x = F t / m."""
+    speeds, tilts = hover
+    pulse = DisturbanceTerm("pulse", (5.0, 0.0, 0.0), start_s=1.0002, end_s=3.0002)
+    plant = Plant(vehicle, ideal_actuators=True, ground_enabled=False,
+                  disturbance=Disturbance((pulse,), ()))
+    s = plant.initial_state((0.0, 0.0, 5.0), on_ground=False, rotor_speed_rad_s=speeds,
+                            tilt_rad=tilts)
+    cmd = ActuatorCommand(speeds, tilts)
+    before = run(plant, s, cmd, 1000)  # t = 1 s, pulse not started
+    assert np.linalg.norm(before.v_enu_m_s) < 1e-12
+    after = run(plant, before, cmd, 2500)  # t = 3.5 s, pulse over
+    expected = 5.0 * 2.0 / vehicle.mass_kg
+    assert abs(after.v_enu_m_s[0] - expected) <= 1e-6
+    assert abs(after.v_enu_m_s[1]) <= 1e-9 and abs(after.v_enu_m_s[2]) <= 1e-9
+    assert np.allclose(after.q_enu_flu, (1.0, 0.0, 0.0, 0.0), rtol=0.0, atol=1e-12)
+
+
+def test_sine_force_integrates_exactly(vehicle, hover):
+    """Given a body x sine force while hovering, when 2 s pass, then v_x = A (1 - cos wT) / m w."""
+    speeds, tilts = hover
+    amp, omega = 3.0, 2.0
+    term = DisturbanceTerm("sine", (amp, 0.0, 0.0), omega_rad_s=omega)
+    plant = Plant(vehicle, ideal_actuators=True, ground_enabled=False,
+                  disturbance=Disturbance((term,), ()))
+    s = plant.initial_state((0.0, 0.0, 5.0), on_ground=False, rotor_speed_rad_s=speeds,
+                            tilt_rad=tilts)
+    s = run(plant, s, ActuatorCommand(speeds, tilts), 2000)
+    expected = amp * (1.0 - math.cos(2.0 * omega)) / (vehicle.mass_kg * omega)
+    assert abs(s.v_enu_m_s[0] - expected) <= 1e-9
+
+
+def test_spin_up_lift_matches_rotor_lag(vehicle):
+    """Given rotors spinning up from rest, when 0.1 s pass, then v_z integrates the lag."""
+    plant = Plant(vehicle, dt_us=250, ground_enabled=False)  # RK4 error ~ (h / tau)^4
+    c, tau = 1500.0, vehicle.rotor_tau_up_s
+    s = plant.initial_state((0.0, 0.0, 5.0), on_ground=False)
+    t = 0.1
+    s = run(plant, s, ActuatorCommand((c,) * 6, ZERO6), 400)
+    # f_z = sum c_f w^2 cos(beta_i), w(t) = c (1 - exp(-t / tau)) on every rotor
+    lift = sum(vehicle.thrust_coeff * math.cos(b) for b in vehicle.arm_elevation_rad) * c * c
+    integral = (t - 2.0 * tau * (1.0 - math.exp(-t / tau))
+                + 0.5 * tau * (1.0 - math.exp(-2.0 * t / tau)))
+    expected = lift * integral / vehicle.mass_kg - vehicle.gravity_m_s2 * t
+    assert abs(s.v_enu_m_s[2] - expected) <= 1e-9 * (1.0 + abs(expected))
+    assert np.allclose(s.v_enu_m_s[:2], (0.0, 0.0), atol=1e-12)
+
+
+def test_force_disturbance_is_in_body_frame(vehicle):
+    """Given a yawed vehicle, when a body x force acts, then it accelerates along body x."""
+    yaw = 0.5 * math.pi
+    q = (math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw))
+    term = DisturbanceTerm("pulse", (5.0, 0.0, 0.0), start_s=0.0, end_s=10.0)
+    plant = Plant(vehicle, ideal_actuators=True, ground_enabled=False,
+                  disturbance=Disturbance((term,), ()))
+    s = plant.initial_state((0.0, 0.0, 5.0), on_ground=False, q_enu_flu=q)
+    s = run(plant, s, ActuatorCommand(ZERO6, ZERO6), 1000)
+    v = s.v_enu_m_s
+    assert abs(v[0]) <= 1e-9
+    assert abs(v[1] - 5.0 / vehicle.mass_kg) <= 1e-9  # body x points north (ENU +y)
+
+
+def test_disturbance_sine_and_pulse_profiles():
+    """Given sine and pulse terms, when evaluated, then each term follows its profile."""
+    sine = DisturbanceTerm("sine", (1.0, 2.0, 3.0), start_s=1.0, end_s=10.0,
+                           omega_rad_s=0.5, phase_rad=0.3)
+    pulse = DisturbanceTerm("pulse", (0.0, 0.0, -4.0), start_s=2.0, end_s=3.0)
+    torque = DisturbanceTerm("sine", (0.1, 0.0, 0.0), omega_rad_s=2.0)
+    d = Disturbance((sine, pulse), (torque,))
+    assert d.active and not Disturbance().active
+    assert Disturbance().wrench(5.0) == ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    for t in (0.0, 0.999, 1.0, 1.5, 2.0, 2.999, 3.0, 9.999, 10.0, 20.0):
+        f, tau = d.wrench(t)
+        k = math.sin(0.5 * t + 0.3) if 1.0 <= t < 10.0 else 0.0
+        on = 1.0 if 2.0 <= t < 3.0 else 0.0
+        assert f == pytest.approx((k, 2.0 * k, 3.0 * k - 4.0 * on), abs=1e-15)
+        assert tau == pytest.approx((0.1 * math.sin(2.0 * t), 0.0, 0.0), abs=1e-15)
+
+
+@pytest.mark.parametrize(("name", "force", "torque"), [
+    ("case2_sine", lambda t: 5.0 * math.sin(0.2 * math.pi * t),
+     lambda t: math.sin(0.2 * math.pi * t)),
+    ("case2_irregular", lambda t: math.sin(0.2 * math.pi * t) + math.sin(0.3 * math.pi * t),
+     lambda t: 0.2 * math.sin(0.2 * math.pi * t) + 0.2 * math.sin(0.3 * math.pi * t)),
+    ("case2_impulse", lambda t: 5.0 if 20.0 <= t < 22.0 else 0.0,
+     lambda t: 1.0 if 5.0 <= t < 7.0 else 0.0),
+])
+def test_shipped_disturbance_profiles(name, force, torque):
+    """Given a shipped Case II scenario, when its disturbance is evaluated, then it matches."""
+    sc = load_scenario(ROOT / "config/scenarios" / f"{name}.toml")
+    d = Disturbance(sc.force_terms, sc.torque_terms)
+    for t in np.linspace(0.0, 60.0, 241):
+        f, tau = d.wrench(float(t))
+        assert f == pytest.approx((force(t),) * 3, abs=1e-12)
+        assert tau == pytest.approx((torque(t),) * 3, abs=1e-12)
