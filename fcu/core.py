@@ -19,6 +19,25 @@ class StepResult(NamedTuple):
     allocation: AllocationResult
 
 
+ONBOARD_COLUMNS = (
+    "time_us", "px", "py", "pz", "qw", "qx", "qy", "qz", "vbx", "vby", "vbz", "wx", "wy", "wz",
+    "pdx", "pdy", "pdz", "qdw", "qdx", "qdy", "qdz", "vdx", "vdy", "vdz", "wdx", "wdy", "wdz",
+    "fx", "fy", "fz", "tx", "ty", "tz",
+    *(f"rotor_cmd{i}" for i in range(6)), *(f"tilt_cmd{i}" for i in range(6)),
+    *(f"tilt_raw{i}" for i in range(6)), "saturated", "armed", "step_us")
+
+
+def onboard_row(time_us: int, state: VehicleState, result: StepResult,
+                speed_cmd: tuple[float, ...], tilt_cmd: tuple[float, ...], armed: bool,
+                step_us: float) -> tuple[float, ...]:
+    """One row of the onboard log (ONBOARD_COLUMNS): what the FCU saw, wanted and sent."""
+    ref, out, alloc = result
+    return (time_us, *state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
+            *state.omega_flu_rad_s, *ref.p_enu_m, *ref.q_enu_flu, *ref.v_enu_m_s,
+            *ref.omega_flu_rad_s, *out.force_flu_n, *out.torque_flu_nm, *speed_cmd, *tilt_cmd,
+            *alloc.tilt_raw_rad, float(alloc.saturated), float(armed), step_us)
+
+
 class FlightCore:
     def __init__(self, vehicle: VehicleConfig, gains: Gains, control_rate_hz: int,
                  initial_tilt_rad: tuple[float, ...] | None = None) -> None:

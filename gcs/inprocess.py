@@ -17,28 +17,32 @@ import numpy as np
 
 from common.config import Scenario
 from fcu.allocation import hover_command
-from fcu.core import FlightCore
+from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
 from fcu.tracker import VehicleState
 from fcu.trajectory import Trajectory, make_trajectory
 from gcs.metrics import percentiles_us, tracking_metrics
 from sitl.disturbance import Disturbance
-from sitl.plant import ActuatorCommand, Plant, PlantState, rotate_inv
-
-# Column layout of the logs (one row per control step).
-TRUTH_COLUMNS = ("time_us", "px", "py", "pz", "vx", "vy", "vz", "qw", "qx", "qy", "qz",
-                 "wx", "wy", "wz", *(f"rotor{i}" for i in range(6)),
-                 *(f"tilt{i}" for i in range(6)), "landed")
-ONBOARD_COLUMNS = ("time_us", "pdx", "pdy", "pdz", "qdw", "qdx", "qdy", "qdz",
-                   "fx", "fy", "fz", "tx", "ty", "tz",
-                   *(f"rotor_cmd{i}" for i in range(6)), *(f"tilt_cmd{i}" for i in range(6)),
-                   *(f"tilt_raw{i}" for i in range(6)), "saturated", "step_us")
+from sitl.plant import (
+    TRUTH_COLUMNS,
+    ActuatorCommand,
+    Plant,
+    PlantState,
+    rotate_inv,
+    truth_row,
+)
 
 
 @dataclass
 class RunResult:
     metrics: dict[str, Any]
-    truth: np.ndarray  # rows of TRUTH_COLUMNS
-    onboard: np.ndarray  # rows of ONBOARD_COLUMNS
+    truth: np.ndarray  # rows of sitl.plant.TRUTH_COLUMNS
+    onboard: np.ndarray  # rows of fcu.core.ONBOARD_COLUMNS
+
+    def truth_col(self, *names: str) -> np.ndarray:
+        return self.truth[:, [TRUTH_COLUMNS.index(n) for n in names]]
+
+    def onboard_col(self, *names: str) -> np.ndarray:
+        return self.onboard[:, [ONBOARD_COLUMNS.index(n) for n in names]]
 
 
 def apply_overrides(scenario: Scenario, *, controller: str | None = None,
@@ -95,17 +99,15 @@ def run_scenario(scenario: Scenario, *, trajectory: Trajectory | None = None,
     clock = time.perf_counter
     while state.time_us <= end_us:
         t0 = clock()
+        seen = state_for_fcu(state)
         ref = trajectory.sample(state.time_us * 1e-6)
-        result = core.step(state_for_fcu(state), ref)
+        result = core.step(seen, ref)
         step_us = (clock() - t0) * 1e6
-        alloc, out = result.allocation, result.tracker
+        alloc = result.allocation
         p = state.p_enu_m
-        truth_rows.append((state.time_us, *p, *state.v_enu_m_s, *state.q_enu_flu,
-                           *state.omega_flu_rad_s, *state.rotor_speed_rad_s, *state.tilt_rad,
-                           float(state.landed)))
-        onboard_rows.append((state.time_us, *ref.p_enu_m, *ref.q_enu_flu, *out.force_flu_n,
-                             *out.torque_flu_nm, *alloc.speed_rad_s, *alloc.tilt_rad,
-                             *alloc.tilt_raw_rad, float(alloc.saturated), step_us))
+        truth_rows.append(truth_row(state))
+        onboard_rows.append(onboard_row(state.time_us, seen, result, alloc.speed_rad_s,
+                                        alloc.tilt_rad, True, step_us))
         pd = ref.p_enu_m
         err = math.sqrt((p[0] - pd[0]) ** 2 + (p[1] - pd[1]) ** 2 + (p[2] - pd[2]) ** 2)
         if not math.isfinite(err) or err > limit or not all(
@@ -121,26 +123,48 @@ def run_scenario(scenario: Scenario, *, trajectory: Trajectory | None = None,
 
     truth = np.array(truth_rows, dtype=float)
     onboard = np.array(onboard_rows, dtype=float)
-    metrics = build_metrics(scenario, truth, onboard, status=status, wall_time_s=wall,
-                            transport="in-process", lockstep=True)
+    metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
+                            status=status, wall_time_s=wall, transport="in-process",
+                            lockstep=True)
     return RunResult(metrics, truth, onboard)
 
 
-def build_metrics(scenario: Scenario, truth: np.ndarray, onboard: np.ndarray, *, status: str,
+def build_metrics(scenario: Scenario, truth_columns: tuple[str, ...], truth: np.ndarray,
+                  onboard_columns: tuple[str, ...], onboard: np.ndarray, *, status: str,
                   wall_time_s: float, transport: str, lockstep: bool,
                   deadline_misses: int = 0, mission_completed: bool | None = None
                   ) -> dict[str, Any]:
-    """metrics.json content; figures cover the finite rows only (never inf or NaN)."""
-    p, q = truth[:, 1:4], truth[:, 7:11]
-    p_d, q_d = onboard[:, 1:4], onboard[:, 4:8]
-    finite = np.all(np.isfinite(np.hstack([p, q, p_d, q_d])), axis=1)
-    if not np.all(finite):
-        cut = int(np.argmin(finite))
-        p, q, p_d, q_d = p[:cut], q[:cut], p_d[:cut], q_d[:cut]
+    """metrics.json content (DESIGN.md section 6).
+
+    Joins the plant's truth log with the FCU's onboard log on time_usec; a run diverges at
+    the first joined sample whose position error exceeds the scenario's limit or whose state
+    is not finite, and its figures cover the run up to that instant (never inf or NaN).
+    """
+    def cols(columns, rows, *names):
+        return rows[:, [columns.index(n) for n in names]]
+
+    t_truth = truth[:, truth_columns.index("time_us")].astype(np.int64)
+    t_onb = onboard[:, onboard_columns.index("time_us")].astype(np.int64)
+    common_t, i_truth, i_onb = np.intersect1d(t_truth, t_onb, return_indices=True)
+    truth, onboard = truth[i_truth], onboard[i_onb]
+    p = cols(truth_columns, truth, "px", "py", "pz")
+    q = cols(truth_columns, truth, "qw", "qx", "qy", "qz")
+    p_d = cols(onboard_columns, onboard, "pdx", "pdy", "pdz")
+    q_d = cols(onboard_columns, onboard, "qdw", "qdx", "qdy", "qdz")
+    with np.errstate(invalid="ignore", over="ignore"):
+        bad = ~np.all(np.isfinite(np.hstack([p, q, p_d, q_d])), axis=1)
+        bad |= np.linalg.norm(p - p_d, axis=1) > scenario.divergence_position_m
+    end = len(common_t)
+    if np.any(bad):
+        first = int(np.argmax(bad))
         status = "diverged"
-    sim_time_s = float(truth[-1, 0] * 1e-6) if len(truth) else 0.0
-    steps = onboard[:, -1]
-    metrics: dict[str, Any] = {
+        # Keep the first divergent sample when it is finite: the figures reach that instant.
+        end = first + 1 if np.all(np.isfinite(np.hstack([p[first], q[first], p_d[first],
+                                                          q_d[first]]))) else first
+    sim_time_s = float(common_t[end - 1] * 1e-6) if end else 0.0
+    steps = onboard[:end, onboard_columns.index("step_us")]
+    sat = onboard[:end, onboard_columns.index("saturated")]
+    return {
         "scenario": scenario.name,
         "controller": scenario.controller,
         "lockstep": lockstep,
@@ -152,13 +176,13 @@ def build_metrics(scenario: Scenario, truth: np.ndarray, onboard: np.ndarray, *,
         "physics_rate_hz": scenario.physics_rate_hz,
         "ideal_actuators": scenario.ideal_actuators,
         "damping": scenario.gains.damping,
-        **tracking_metrics(p, q, p_d, q_d),
+        **tracking_metrics(p[:end], q[:end], p_d[:end], q_d[:end]),
         "fcu_step_us": percentiles_us(steps[np.isfinite(steps)]),
         "deadline_misses": deadline_misses,
-        "saturated_steps": int(np.sum(onboard[:, ONBOARD_COLUMNS.index("saturated")] > 0)),
+        "saturated_steps": int(np.sum(sat > 0)),
+        "samples": int(end),
         "mission_completed": (status == "completed") if mission_completed is None
         else mission_completed,
         "status": status,
         "seed": scenario.seed,
     }
-    return metrics

@@ -8,10 +8,14 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from common.binlog import write_log
 from common.config import Scenario
-from gcs.inprocess import ONBOARD_COLUMNS, TRUTH_COLUMNS, RunResult
+from fcu.core import ONBOARD_COLUMNS
+from gcs.inprocess import RunResult
+from sitl.plant import TRUTH_COLUMNS
+
+TRUTH_LOG = "truth_log.bin"
+ONBOARD_LOG = "onboard_log.bin"
 
 
 def _finite(obj: Any) -> Any:
@@ -32,15 +36,11 @@ def write_run(out: Path, scenario: Scenario, result: RunResult) -> None:
     metrics["overrides"] = {"controller": scenario.controller,
                             "ideal_actuators": scenario.ideal_actuators,
                             "duration_s": scenario.duration_s}
+    write_metrics(out, metrics)
+    write_log(out / TRUTH_LOG, TRUTH_COLUMNS, result.truth)
+    write_log(out / ONBOARD_LOG, ONBOARD_COLUMNS, result.onboard)
+
+
+def write_metrics(out: Path, metrics: dict[str, Any]) -> None:
     (out / "metrics.json").write_text(json.dumps(_finite(metrics), indent=2,
                                                  allow_nan=False) + "\n")
-    np.savez_compressed(out / "truth_log.npz", columns=np.array(TRUTH_COLUMNS),
-                        data=result.truth)
-    np.savez_compressed(out / "onboard_log.npz", columns=np.array(ONBOARD_COLUMNS),
-                        data=result.onboard)
-
-
-def read_log(path: Path) -> dict[str, np.ndarray]:
-    """A log as {column: array}."""
-    with np.load(path) as z:
-        return {str(c): z["data"][:, i] for i, c in enumerate(z["columns"])}

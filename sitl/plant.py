@@ -41,6 +41,17 @@ class PlantState(NamedTuple):
     landed: bool
 
 
+TRUTH_COLUMNS = ("time_us", "px", "py", "pz", "vx", "vy", "vz", "qw", "qx", "qy", "qz",
+                 "wx", "wy", "wz", *(f"rotor{i}" for i in range(6)),
+                 *(f"tilt{i}" for i in range(6)), "landed")
+
+
+def truth_row(s: PlantState) -> tuple[float, ...]:
+    """One row of the ground-truth log (ENU/FLU, SI units; TRUTH_COLUMNS)."""
+    return (s.time_us, *s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu, *s.omega_flu_rad_s,
+            *s.rotor_speed_rad_s, *s.tilt_rad, float(s.landed))
+
+
 class ActuatorCommand(NamedTuple):
     rotor_speed_rad_s: tuple[float, ...]
     tilt_rad: tuple[float, ...]

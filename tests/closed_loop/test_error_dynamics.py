@@ -25,9 +25,9 @@ def _start(sc, p_enu, q_enu_flu):
 
 
 def _attitude_error(result):
-    q = result.truth[:, 7:11]
-    q_d = result.onboard[:, 4:8]
-    return result.truth[:, 0] * 1e-6, attitude_error_rad(q, q_d)
+    q = result.truth_col("qw", "qx", "qy", "qz")
+    q_d = result.onboard_col("qdw", "qdx", "qdy", "qdz")
+    return result.truth_col("time_us")[:, 0] * 1e-6, attitude_error_rad(q, q_d)
 
 
 @pytest.mark.parametrize("damping", ["log_rate", "twist"])
@@ -41,10 +41,11 @@ def test_attitude_error_follows_third_order_linear_dynamics(hover_ideal, damping
     axis = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
     q0 = q_exp(tuple(theta0 * axis))
     result = run_scenario(sc, initial=_start(sc, (0.0, 0.0, 0.0), q0))
-    t = result.truth[:, 0] * 1e-6
+    t = result.truth_col("time_us")[:, 0] * 1e-6
     # Signed error about the fixed axis: rotation vector of q_d* q projected on it.
     theta = np.array([np.dot(q_log(q_mul(q_conj(tuple(qd)), tuple(q))), axis)
-                      for q, qd in zip(result.truth[:, 7:11], result.onboard[:, 4:8],
+                      for q, qd in zip(result.truth_col("qw", "qx", "qy", "qz"),
+                                       result.onboard_col("qdw", "qdx", "qdy", "qdz"),
                                        strict=True)])
 
     g = sc.gains_pid
@@ -60,7 +61,7 @@ def test_attitude_error_follows_third_order_linear_dynamics(hover_ideal, damping
     assert abs(theta[-1]) < 0.1 * theta0
     # The position stays put (eq. 21 with p_e = 0) but for the force held in the body frame
     # for one control period while the body turns at up to ~0.5 rad/s.
-    assert np.max(np.linalg.norm(result.truth[:, 1:4], axis=1)) < 1e-3
+    assert np.max(np.linalg.norm(result.truth_col("px", "py", "pz"), axis=1)) < 1e-3
 
 
 def _random_quat(rng):
@@ -86,7 +87,8 @@ def test_convergence_sweep_without_unwinding(hover_ideal, seed):
         runs.append(run_scenario(sc, trajectory=goal, initial=_start(sc, p_start, q_start)))
     a, b = runs
     assert a.metrics["status"] == b.metrics["status"] == "completed"
-    np.testing.assert_allclose(a.truth[:, 1:4], b.truth[:, 1:4], atol=1e-9)
+    np.testing.assert_allclose(a.truth_col("px", "py", "pz"), b.truth_col("px", "py", "pz"),
+                               atol=1e-9)
     _, err = _attitude_error(a)
     # Zero initial rates and a fixed goal: the motion is about a fixed axis and the error
     # never exceeds its start; an unwinding tracker would grow it towards pi first.
@@ -94,7 +96,7 @@ def test_convergence_sweep_without_unwinding(hover_ideal, seed):
     first_small = int(np.argmax(err < 0.05 * err[0])) or len(err)
     assert np.all(np.diff(err[:first_small]) <= 1e-9)
     assert err[-1] < 0.05 * err[0] + 1e-6
-    pos_err = np.linalg.norm(a.truth[:, 1:4] - np.array(p_goal), axis=1)
+    pos_err = np.linalg.norm(a.truth_col("px", "py", "pz") - np.array(p_goal), axis=1)
     assert pos_err[-1] < 0.1 * pos_err[0] + 1e-6
 
 

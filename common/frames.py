@@ -1,0 +1,71 @@
+"""The one conversion between the code's frames (ENU world, FLU body) and the wire's
+(MAVLink local NED, body FRD). Quaternions are (w, x, y, z) everywhere.
+
+x_ned = y_enu, y_ned = x_enu, z_ned = -z_enu; FLU -> FRD flips y and z. The identity
+attitude in ENU/FLU (body x east) is yaw = +90 deg in NED.
+"""
+
+from __future__ import annotations
+
+import math
+
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
+
+_H = math.sqrt(0.5)
+
+
+def enu_to_ned(v: Vec3) -> Vec3:
+    """A world vector (position, velocity, acceleration, force) from ENU to NED."""
+    return (v[1], v[0], -v[2])
+
+
+ned_to_enu = enu_to_ned  # the map is its own inverse
+
+
+def flu_to_frd(v: Vec3) -> Vec3:
+    """A body vector (velocity, rate, force, torque) from FLU to FRD."""
+    return (v[0], -v[1], -v[2])
+
+
+frd_to_flu = flu_to_frd
+
+
+def _mul(a: Quat, b: Quat) -> Quat:
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw)
+
+
+_Q_NED_ENU: Quat = (0.0, _H, _H, 0.0)  # pi about (x + y)/sqrt 2: ENU coordinates -> NED
+_Q_FLU_FRD: Quat = (0.0, 1.0, 0.0, 0.0)  # pi about x
+
+
+def q_enu_flu_to_ned_frd(q: Quat) -> Quat:
+    """q_ned_frd = q_ned_enu q_enu_flu q_flu_frd, sign chosen with w >= 0."""
+    r = _mul(_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
+    return r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
+
+
+def q_ned_frd_to_enu_flu(q: Quat) -> Quat:
+    """Inverse of `q_enu_flu_to_ned_frd` (both fixed rotations are their own inverses up to
+    sign), sign chosen with w >= 0."""
+    r = _mul(_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
+    return r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
+
+
+# Geodetic home: a local tangent plane (flat-earth) approximation around the home point,
+# ample for the few kilometres a SITL flies.
+EARTH_RADIUS_M = 6_378_137.0
+
+
+def ned_to_geodetic(p_ned: Vec3, home_lat_deg: float, home_lon_deg: float,
+                    home_alt_m: float) -> tuple[float, float, float]:
+    """(lat deg, lon deg, alt m AMSL) of a local NED position relative to the home."""
+    lat = home_lat_deg + math.degrees(p_ned[0] / EARTH_RADIUS_M)
+    lon = home_lon_deg + math.degrees(
+        p_ned[1] / (EARTH_RADIUS_M * math.cos(math.radians(home_lat_deg))))
+    return lat, lon, home_alt_m - p_ned[2]

@@ -1,0 +1,148 @@
+"""The simulator link's hot pair of messages, packed and parsed without pymavlink's object
+machinery: ODOMETRY (SITL -> FCU, state) and HIL_ACTUATOR_CONTROLS (FCU -> SITL, command).
+
+Frames are standard MAVLink 2 (magic 0xFD, trailing-zero payload truncation, CRC-16/MCRF4XX
+with the message's CRC_EXTRA); layouts and CRC_EXTRA come from pymavlink's `common` dialect,
+so any MAVLink 2 parser reads what we write and we read any MAVLink 2 sender. Channel map of
+HIL_ACTUATOR_CONTROLS (DESIGN.md section 3): controls[0..5] = rotor speed / w_max (0..1),
+controls[6..11] = tilt angle in rad (continuous after unwrapping, a documented departure
+from the -1..1 convention of this SITL-only message); mode has SAFETY_ARMED when armed;
+flags bit 0 = lockstep.
+"""
+
+from __future__ import annotations
+
+import struct
+from typing import NamedTuple
+
+from common.mavlink import MAV
+
+try:
+    from fastcrc.crc16 import mcrf4xx as _crc
+except ImportError:  # pragma: no cover - pymavlink depends on fastcrc; keep a fallback
+    from pymavlink.generator.mavcrc import x25crc_slow
+
+    def _crc(data: bytes, init: int = 0xFFFF) -> int:
+        c = x25crc_slow()
+        c.crc = init
+        c.accumulate(data)
+        return c.crc
+
+_ODO = MAV.MAVLink_odometry_message
+_HAC = MAV.MAVLink_hil_actuator_controls_message
+ODOMETRY_ID, HIL_ACTUATOR_CONTROLS_ID = _ODO.id, _HAC.id
+_ODO_STRUCT = struct.Struct(_ODO.unpacker.format)
+_HAC_STRUCT = struct.Struct(_HAC.unpacker.format)
+_HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sys, comp, id
+_ZERO_COV = (0.0,) * 21
+_NAN_COV = (float("nan"),) + (0.0,) * 20  # first element NaN: covariance unknown
+LOCKSTEP_FLAG = 1
+MODE_ARMED = MAV.MAV_MODE_FLAG_SAFETY_ARMED
+
+
+class Odometry(NamedTuple):
+    """State on the wire: local NED position, attitude NED->FRD, FRD body velocity and rates."""
+
+    time_usec: int
+    p_ned_m: tuple[float, float, float]
+    q_ned_frd: tuple[float, float, float, float]
+    v_frd_m_s: tuple[float, float, float]
+    omega_frd_rad_s: tuple[float, float, float]
+
+
+class ActuatorControls(NamedTuple):
+    time_usec: int
+    controls: tuple[float, ...]  # 16 floats
+    mode: int
+    flags: int
+
+
+def _frame(msg_id: int, crc_extra: int, payload: bytes, seq: int, sysid: int,
+           compid: int) -> bytes:
+    payload = payload.rstrip(b"\x00") or b"\x00"
+    header = _HEADER.pack(0xFD, len(payload), 0, 0, seq & 0xFF, sysid, compid,
+                          msg_id & 0xFFFF, msg_id >> 16)
+    crc = _crc(bytes([crc_extra]), _crc(payload, _crc(header[1:])))
+    return header + payload + struct.pack("<H", crc)
+
+
+def pack_odometry(o: Odometry, seq: int, sysid: int, compid: int) -> bytes:
+    payload = _ODO_STRUCT.pack(o.time_usec, *o.p_ned_m, *o.q_ned_frd, *o.v_frd_m_s,
+                               *o.omega_frd_rad_s, *_NAN_COV, *_NAN_COV,
+                               MAV.MAV_FRAME_LOCAL_NED, MAV.MAV_FRAME_BODY_FRD, 0,
+                               MAV.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+    return _frame(ODOMETRY_ID, _ODO.crc_extra, payload, seq, sysid, compid)
+
+
+def pack_actuator_controls(a: ActuatorControls, seq: int, sysid: int, compid: int) -> bytes:
+    payload = _HAC_STRUCT.pack(a.time_usec, a.flags, *a.controls, a.mode)
+    return _frame(HIL_ACTUATOR_CONTROLS_ID, _HAC.crc_extra, payload, seq, sysid, compid)
+
+
+class Frame(NamedTuple):
+    msg_id: int
+    sysid: int
+    compid: int
+    payload: bytes  # zero-extended to the message's full length
+    raw: bytes
+
+
+_CRC_EXTRA = {ODOMETRY_ID: (_ODO.crc_extra, _ODO_STRUCT.size),
+              HIL_ACTUATOR_CONTROLS_ID: (_HAC.crc_extra, _HAC_STRUCT.size)}
+
+
+def split_frames(data: bytes) -> tuple[list[Frame], int]:
+    """Valid MAVLink 2 frames of the hot pair in a datagram, and the count of rejected bytes.
+
+    Frames of other messages are returned with an empty payload and their raw bytes so that a
+    general parser can take them; corrupted or truncated frames are skipped (counted).
+    """
+    frames: list[Frame] = []
+    rejected = 0
+    i, n = 0, len(data)
+    while i < n:
+        if data[i] != 0xFD:
+            j = data.find(b"\xfd", i + 1)
+            rejected += (j if j >= 0 else n) - i
+            if j < 0:
+                break
+            i = j
+            continue
+        if n - i < 12:
+            rejected += n - i
+            break
+        length, incompat = data[i + 1], data[i + 2]
+        end = i + 10 + length + 2 + (13 if incompat & 1 else 0)
+        if end > n:
+            rejected += 1
+            i += 1
+            continue
+        msg_id = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
+        raw = data[i:end]
+        known = _CRC_EXTRA.get(msg_id)
+        if known is None:
+            frames.append(Frame(msg_id, data[i + 5], data[i + 6], b"", raw))
+            i = end
+            continue
+        crc_extra, size = known
+        body_end = i + 10 + length
+        crc = _crc(bytes([crc_extra]), _crc(data[i + 1:body_end]))
+        if crc != (data[body_end] | (data[body_end + 1] << 8)) or length > size:
+            rejected += 1
+            i += 1
+            continue
+        payload = data[i + 10:body_end] + bytes(size - length)
+        frames.append(Frame(msg_id, data[i + 5], data[i + 6], payload, raw))
+        i = end
+    return frames, rejected
+
+
+def unpack_odometry(payload: bytes) -> Odometry:
+    v = _ODO_STRUCT.unpack(payload)
+    return Odometry(v[0], (v[1], v[2], v[3]), (v[4], v[5], v[6], v[7]), (v[8], v[9], v[10]),
+                    (v[11], v[12], v[13]))
+
+
+def unpack_actuator_controls(payload: bytes) -> ActuatorControls:
+    v = _HAC_STRUCT.unpack(payload)
+    return ActuatorControls(v[0], tuple(v[2:18]), v[18], v[1])
