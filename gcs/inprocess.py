@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 
 from common.config import Scenario
-from fcu.allocation import hover_command
 from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
 from fcu.tracker import VehicleState
 from fcu.trajectory import Trajectory, make_trajectory
@@ -27,6 +26,7 @@ from sitl.plant import (
     ActuatorCommand,
     Plant,
     PlantState,
+    initial_state,
     rotate_inv,
     truth_row,
 )
@@ -58,14 +58,6 @@ def apply_overrides(scenario: Scenario, *, controller: str | None = None,
     return dataclasses.replace(scenario, **changes)
 
 
-def initial_plant_state(scenario: Scenario, plant: Plant) -> PlantState:
-    if scenario.start == "ground":
-        return plant.initial_state(scenario.initial_position_enu_m, on_ground=True)
-    speeds, tilts = hover_command(scenario.vehicle)
-    return plant.initial_state(scenario.initial_position_enu_m, on_ground=False,
-                               rotor_speed_rad_s=speeds, tilt_rad=tilts)
-
-
 def state_for_fcu(s: PlantState) -> VehicleState:
     """What the FCU sees: pose and body-frame twist (as ODOMETRY carries them)."""
     return VehicleState(s.p_enu_m, s.q_enu_flu, rotate_inv(s.q_enu_flu, s.v_enu_m_s),
@@ -85,7 +77,7 @@ def run_scenario(scenario: Scenario, *, trajectory: Trajectory | None = None,
     plant = Plant(vehicle, dt_us=physics_dt_us, ideal_actuators=scenario.ideal_actuators,
                   ground_enabled=scenario.ground_enabled,
                   disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
-    state = initial if initial is not None else initial_plant_state(scenario, plant)
+    state = initial if initial is not None else initial_state(scenario, plant)
     core = FlightCore(vehicle, scenario.gains, scenario.control_rate_hz, state.tilt_rad)
     if trajectory is None:
         trajectory = make_trajectory(scenario.trajectory)

@@ -76,29 +76,34 @@ def table_markdown(table: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _run_one(job: tuple[str, str, str, bool, float | None, str]) -> dict[str, Any]:
+def _run_one(job: tuple[str, str, bool, float | None, str, bool]) -> dict[str, Any]:
     from common.config import load_scenario
     from gcs.inprocess import apply_overrides, run_scenario
+    from gcs.process_run import run_processes
     from gcs.runio import write_run
 
-    path, _scen, ctrl, ideal, duration, out = job
+    path, ctrl, ideal, duration, out, in_process = job
     scenario = apply_overrides(load_scenario(path), controller=ctrl,
                                ideal_actuators=ideal or None, duration_s=duration)
+    if not in_process:
+        return run_processes(scenario, Path(out))
     result = run_scenario(scenario)
     write_run(Path(out), scenario, result)
     return result.metrics
 
 
 def run_table1(config_dir: Path, out_dir: Path, *, ideal: bool = False,
-               duration_s: float | None = None, workers: int | None = None
-               ) -> dict[str, Any]:
-    """Run the 8 cases in parallel processes; write table1.md and table1.json."""
+               duration_s: float | None = None, workers: int | None = None,
+               in_process: bool = False) -> dict[str, Any]:
+    """Run the 8 cases in parallel (through sitl + fcu processes unless `in_process`);
+    write table1.md and table1.json."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(str(config_dir / f"{scen}.toml"), scen, ctrl, ideal, duration_s,
-             str(out_dir / f"{scen}_{ctrl}")) for _, scen in CASES for ctrl in CONTROLLERS]
+    keys = [(scen, ctrl) for _, scen in CASES for ctrl in CONTROLLERS]
+    jobs = [(str(config_dir / f"{scen}.toml"), ctrl, ideal, duration_s,
+             str(out_dir / f"{scen}_{ctrl}"), in_process) for scen, ctrl in keys]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         metrics = list(pool.map(_run_one, jobs))
-    results = {(job[1], job[2]): m for job, m in zip(jobs, metrics, strict=True)}
+    results = dict(zip(keys, metrics, strict=True))
     table = table_json(results)
     (out_dir / "table1.json").write_text(json.dumps(table, indent=2) + "\n")
     (out_dir / "table1.md").write_text(table_markdown(table))

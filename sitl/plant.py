@@ -22,7 +22,7 @@ import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
-from common.config import VehicleConfig
+from common.config import Scenario, VehicleConfig
 from common.geometry import rotor_frames
 from sitl.disturbance import Disturbance
 
@@ -274,3 +274,21 @@ def _moment(r: Vec3, f: tuple[float, ...], spin_cd: float, e: Vec3) -> tuple[flo
     return (r[1] * f[2] - r[2] * f[1] - spin_cd * e[0],
             r[2] * f[0] - r[0] * f[2] - spin_cd * e[1],
             r[0] * f[1] - r[1] * f[0] - spin_cd * e[2])
+
+
+def hover_speeds_and_tilts(plant: Plant) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Equal rotor speeds at zero tilt that carry the weight (the plant's own solution; the
+    minimum-norm allocation of both presets, MODEL.md section 2)."""
+    n = plant.vehicle.n_rotors
+    (_, _, fz), _ = plant.rotor_wrench([1.0] * n, [0.0] * n)
+    w = math.sqrt(plant.mass * plant.g / fz)
+    return (w,) * n, (0.0,) * n
+
+
+def initial_state(scenario: Scenario, plant: Plant) -> PlantState:
+    """Resting on the ground with rotors stopped, or airborne in hover (MODEL.md 5)."""
+    if scenario.start == "ground":
+        return plant.initial_state(scenario.initial_position_enu_m, on_ground=True)
+    speeds, tilts = hover_speeds_and_tilts(plant)
+    return plant.initial_state(scenario.initial_position_enu_m, on_ground=False,
+                               rotor_speed_rad_s=speeds, tilt_rad=tilts)

@@ -1,0 +1,118 @@
+"""The FCU's parameters (PARAM_* protocol): gains of eq. (3)/(16) and mission settings.
+
+One table with name (at most 16 characters, as MAVLink carries them), default, range, unit
+and description, as PX4's *_params.yaml. Values are float32 (MAV_PARAM_TYPE_REAL32). A set
+that leaves the range, or a gain set that violates the Routh-Hurwitz condition, is refused
+and the old value stays.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import struct
+from dataclasses import dataclass
+
+from common.config import ConfigError, Gains, check_stability
+
+AXES = "XYZ"
+DAMPING_CODES = ("log_rate", "twist")
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    name: str
+    default: float
+    lo: float
+    hi: float
+    unit: str
+    description: str
+
+
+def _f32(x: float) -> float:
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+def _gain_specs() -> list[ParamSpec]:
+    specs = []
+    for key, label in (("kp", "proportional"), ("ki", "integral"), ("kd", "derivative")):
+        for part, what in (("r", "attitude (real part)"), ("d", "position (dual part)")):
+            for i, axis in enumerate(AXES):
+                lo = 0.0
+                specs.append(ParamSpec(f"DQ_{key.upper()}{part.upper()}_{axis}", math.nan, lo,
+                                       1000.0, "1/s^n",
+                                       f"{label} gain, {what}, axis {i + 1} (eq. 3)"))
+    return specs
+
+
+SPECS: tuple[ParamSpec, ...] = (
+    *_gain_specs(),
+    ParamSpec("DQ_DAMPING", 0.0, 0.0, 1.0, "enum",
+              "damping D of eq. (16): 0 = 2 k_d.(ln q_e)', 1 = k_d.xi_e (eq. 33)"),
+    ParamSpec("MIS_TKO_SPD", 1.0, 0.05, 10.0, "m/s", "takeoff climb speed when p2 is 0"),
+    ParamSpec("MIS_CRUISE_SPD", 2.0, 0.05, 20.0, "m/s", "waypoint travel speed"),
+    ParamSpec("MIS_LAND_SPD", 0.5, 0.05, 5.0, "m/s", "landing descent speed"),
+    ParamSpec("GF_MAX_DIST", 1000.0, 1.0, 100000.0, "m",
+              "geofence: farthest mission point from the origin"),
+    ParamSpec("COM_OF_LOSS_T", 1.0, 0.1, 60.0, "s", "offboard setpoint loss timeout (to HOLD)"),
+)
+BY_NAME = {s.name: s for s in SPECS}
+
+
+class ParamError(ValueError):
+    """A parameter set that was refused (unknown name, out of range, unstable gains)."""
+
+
+class ParamStore:
+    """Parameter values, initialised from the gains of the configuration."""
+
+    def __init__(self, gains: Gains) -> None:
+        self.values: dict[str, float] = {}
+        for spec in SPECS:
+            self.values[spec.name] = _f32(spec.default)
+        self._load_gains(gains)
+
+    def _load_gains(self, gains: Gains) -> None:
+        for spec in SPECS:
+            if spec.name.startswith("DQ_K"):
+                key = spec.name[3:5].lower() + "_" + spec.name[5].lower()
+                self.values[spec.name] = _f32(getattr(gains, key)["XYZ".index(spec.name[-1])])
+        self.values["DQ_DAMPING"] = float(DAMPING_CODES.index(gains.damping))
+
+    @property
+    def names(self) -> list[str]:
+        return [s.name for s in SPECS]
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+    def gains(self, values: dict[str, float] | None = None) -> Gains:
+        v = self.values if values is None else values
+        parts = {}
+        for key in ("kp_r", "kp_d", "ki_r", "ki_d", "kd_r", "kd_d"):
+            stem = f"DQ_{key[:2].upper()}{key[3].upper()}_"
+            parts[key] = tuple(v[stem + a] for a in AXES)
+        return Gains(**parts, damping=DAMPING_CODES[round(v["DQ_DAMPING"])])
+
+    def set(self, name: str, value: float) -> float:
+        """Set a parameter; returns the stored (float32) value or raises ParamError."""
+        spec = BY_NAME.get(name)
+        if spec is None:
+            raise ParamError(f"unknown parameter {name}")
+        if not math.isfinite(value) or not spec.lo <= value <= spec.hi:
+            raise ParamError(f"{name} = {value} outside [{spec.lo}, {spec.hi}]")
+        if spec.name == "DQ_DAMPING" and value not in (0.0, 1.0):
+            raise ParamError(f"{name} must be 0 or 1")
+        trial = dict(self.values)
+        trial[name] = _f32(value)
+        if name.startswith("DQ_K"):
+            try:
+                check_stability(self.gains(trial))
+            except ConfigError as exc:
+                raise ParamError(f"refused: {exc}") from None
+        self.values = trial
+        return trial[name]
+
+
+def gains_with(gains: Gains, **changes: object) -> Gains:
+    return dataclasses.replace(gains, **changes)

@@ -1,0 +1,237 @@
+"""Telemetry of the FCU on its GCS links: message builders (ENU/FLU -> NED/FRD at the wire)
+and a wall-clock scheduler whose intervals MAV_CMD_SET_MESSAGE_INTERVAL changes.
+
+Defaults as DESIGN.md section 5: pose 50 Hz, actuators 10 Hz, status 1 Hz.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
+from common.mavlink import MAV
+
+M = MAV
+DEFAULT_INTERVALS_S: dict[int, float] = {
+    M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 0.02,
+    M.MAVLINK_MSG_ID_ATTITUDE: 0.1,
+    M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.02,
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 0.1,
+    M.MAVLINK_MSG_ID_ODOMETRY: 0.1,
+    M.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 0.1,
+    M.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 0.02,
+    M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 0.02,
+    M.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: 0.1,
+    M.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    M.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
+}
+REQUESTABLE = {*DEFAULT_INTERVALS_S, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
+CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                | M.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+                | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT)
+FLIGHT_SW_VERSION = (0 << 24) | (1 << 16) | (0 << 8) | 255  # 0.1.0, release
+
+
+@dataclass
+class Schedule:
+    """Per-message intervals in wall-clock seconds; 0 or less = off."""
+
+    intervals: dict[int, float]
+    due: dict[int, float]
+
+    @classmethod
+    def default(cls) -> Schedule:
+        return cls(dict(DEFAULT_INTERVALS_S), dict.fromkeys(DEFAULT_INTERVALS_S, 0.0))
+
+    def set_interval(self, msg_id: int, interval_us: float) -> bool:
+        """MAV_CMD_SET_MESSAGE_INTERVAL: -1 off, 0 default, > 0 interval in us."""
+        if msg_id not in DEFAULT_INTERVALS_S or not math.isfinite(interval_us):
+            return False
+        if interval_us < 0:
+            self.intervals[msg_id] = -1.0
+        elif interval_us == 0:
+            self.intervals[msg_id] = DEFAULT_INTERVALS_S[msg_id]
+        else:
+            self.intervals[msg_id] = max(interval_us * 1e-6, 0.001)
+        self.due[msg_id] = 0.0
+        return True
+
+    def interval_us(self, msg_id: int) -> float:
+        iv = self.intervals.get(msg_id, -1.0)
+        return -1.0 if iv <= 0 else iv * 1e6
+
+    def pop_due(self, now_s: float) -> list[int]:
+        out = []
+        for msg_id, interval in self.intervals.items():
+            if interval > 0 and now_s >= self.due[msg_id]:
+                # keep the cadence but never burst after a stall
+                self.due[msg_id] = max(self.due[msg_id] + interval, now_s)
+                out.append(msg_id)
+        return out
+
+    def next_due(self) -> float:
+        return min((d for m, d in self.due.items() if self.intervals[m] > 0), default=math.inf)
+
+
+@dataclass(frozen=True)
+class Home:
+    lat_deg: float = 47.397742  # a field near Zurich, as PX4's SITL default
+    lon_deg: float = 8.545594
+    alt_m: float = 488.0
+
+
+def heartbeat(armed: bool, custom_mode: int, active: bool) -> MAV.MAVLink_message:
+    base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (M.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+    base |= M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_AUTO_ENABLED
+    status = M.MAV_STATE_ACTIVE if active else M.MAV_STATE_STANDBY
+    return M.MAVLink_heartbeat_message(M.MAV_TYPE_HEXAROTOR, M.MAV_AUTOPILOT_GENERIC, base,
+                                       custom_mode, status, 3)
+
+
+def autopilot_version(uid: int) -> MAV.MAVLink_message:
+    return M.MAVLink_autopilot_version_message(
+        CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid,
+        [0] * 18)
+
+
+def sys_status(healthy: bool, load_permille: int, drop_rate: int, errors: int
+               ) -> MAV.MAVLink_message:
+    sensors = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+               | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+               | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+               | M.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+               | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
+    return M.MAVLink_sys_status_message(
+        sensors, sensors, sensors if healthy else 0, min(load_permille, 1000), 0, -1, -1,
+        min(drop_rate, 10000), min(errors, 65535), 0, 0, 0, 0, 0, 0, 0)
+
+
+class Builders:
+    """Telemetry messages from the FCU's latest state; `get` maps a message id to a builder."""
+
+    def __init__(self, source: Callable[[], dict], home: Home) -> None:
+        self.source = source
+        self.home = home
+
+    def build(self, msg_id: int) -> MAV.MAVLink_message | list | None:
+        fn = self._table().get(msg_id)
+        return fn(self.source()) if fn else None
+
+    def _table(self) -> dict[int, Callable[[dict], object]]:
+        return {
+            M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: self.attitude_quaternion,
+            M.MAVLINK_MSG_ID_ATTITUDE: self.attitude,
+            M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self.local_position,
+            M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self.global_position,
+            M.MAVLINK_MSG_ID_ODOMETRY: self.odometry,
+            M.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: self.actuators,
+            M.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self.position_target,
+            M.MAVLINK_MSG_ID_ATTITUDE_TARGET: self.attitude_target,
+            M.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: self.errors,
+            M.MAVLINK_MSG_ID_HOME_POSITION: self.home_position,
+            M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self.extended_sys_state,
+        }
+
+    @staticmethod
+    def _ms(src: dict) -> int:
+        return int(src["time_us"] // 1000) & 0xFFFFFFFF
+
+    def attitude_quaternion(self, src: dict):
+        s = src["state"]
+        if s is None:
+            return None
+        q = q_enu_flu_to_ned_frd(s.q_enu_flu)
+        w = flu_to_frd(s.omega_flu_rad_s)
+        return M.MAVLink_attitude_quaternion_message(self._ms(src), *q, *w, [0.0] * 4)
+
+    def attitude(self, src: dict):
+        s = src["state"]
+        if s is None:
+            return None
+        w, x, y, z = q_enu_flu_to_ned_frd(s.q_enu_flu)
+        roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+        pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - x * z))))
+        yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        rates = flu_to_frd(s.omega_flu_rad_s)
+        return M.MAVLink_attitude_message(self._ms(src), roll, pitch, yaw, *rates)
+
+    def local_position(self, src: dict):
+        s = src["state"]
+        if s is None:
+            return None
+        return M.MAVLink_local_position_ned_message(self._ms(src), *enu_to_ned(s.p_enu_m),
+                                                    *enu_to_ned(src["v_enu"]))
+
+    def global_position(self, src: dict):
+        s = src["state"]
+        if s is None:
+            return None
+        p_ned = enu_to_ned(s.p_enu_m)
+        lat, lon, alt = ned_to_geodetic(p_ned, self.home.lat_deg, self.home.lon_deg,
+                                        self.home.alt_m)
+        v = enu_to_ned(src["v_enu"])
+        yaw = self.attitude(src).yaw
+        hdg = round(math.degrees(yaw) % 360.0 * 100) % 36000
+        return M.MAVLink_global_position_int_message(
+            self._ms(src), round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
+            round(-p_ned[2] * 1000), *(max(-32768, min(32767, round(c * 100))) for c in v), hdg)
+
+    def odometry(self, src: dict):
+        s = src["state"]
+        if s is None:
+            return None
+        return M.MAVLink_odometry_message(
+            src["time_us"], M.MAV_FRAME_LOCAL_NED, M.MAV_FRAME_BODY_FRD, *enu_to_ned(s.p_enu_m),
+            q_enu_flu_to_ned_frd(s.q_enu_flu), *flu_to_frd(s.v_flu_m_s),
+            *flu_to_frd(s.omega_flu_rad_s), [math.nan] + [0.0] * 20, [math.nan] + [0.0] * 20,
+            0, M.MAV_ESTIMATOR_TYPE_MOCAP, 100)
+
+    def actuators(self, src: dict):
+        out = src["output"]
+        if out is None:
+            return None
+        values = [*out.speed_rad_s, *out.tilt_rad]
+        return M.MAVLink_actuator_output_status_message(
+            src["time_us"], (1 << len(values)) - 1, values + [0.0] * (32 - len(values)))
+
+    def position_target(self, src: dict):
+        ref = src["ref"]
+        if ref is None:
+            return None
+        return M.MAVLink_position_target_local_ned_message(
+            self._ms(src), M.MAV_FRAME_LOCAL_NED, 0b0000_1100_0000_0000,
+            *enu_to_ned(ref.p_enu_m), *enu_to_ned(ref.v_enu_m_s), *enu_to_ned(ref.a_enu_m_s2),
+            0.0, 0.0)
+
+    def attitude_target(self, src: dict):
+        ref = src["ref"]
+        if ref is None:
+            return None
+        return M.MAVLink_attitude_target_message(
+            self._ms(src), 0b0100_0000, q_enu_flu_to_ned_frd(ref.q_enu_flu),
+            *flu_to_frd(ref.omega_flu_rad_s), 0.0)
+
+    def errors(self, src: dict):
+        errs = src["errors"]
+        if errs is None:
+            return None
+        ms = self._ms(src)
+        return [M.MAVLink_named_value_float_message(ms, b"ERR_POS", errs[0]),
+                M.MAVLink_named_value_float_message(ms, b"ERR_ATT", errs[1])]
+
+    def home_position(self, src: dict):
+        h = self.home
+        return M.MAVLink_home_position_message(
+            round(h.lat_deg * 1e7), round(h.lon_deg * 1e7), round(h.alt_m * 1000), 0.0, 0.0,
+            0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, src["time_us"])
+
+    def extended_sys_state(self, src: dict):
+        landed = (M.MAV_LANDED_STATE_ON_GROUND if src["landed"]
+                  else M.MAV_LANDED_STATE_IN_AIR)
+        return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, landed)

@@ -1,0 +1,102 @@
+"""A ground-station session on one MAVLink link: connect, wait for the vehicle's heartbeat,
+send our own heartbeat from a thread, send commands and wait for their ACKs, log a tlog.
+
+Wall-clock timeouts are fine here: the GCS faces people and links, not the lockstep path.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from pymavlink import mavutil
+
+import common.mavlink  # noqa: F401  (pins MAVLink 2 before mavutil is imported)
+from common.mavlink import GCS_SYSID, MAV, MAV_COMP_ID_MISSIONPLANNER
+
+M = MAV
+
+
+class GcsError(RuntimeError):
+    """A vehicle that does not answer, refuses a command, or a link that fails."""
+
+
+class _TlogFile:
+    """Unbuffered tlog sink: every record mavutil writes lands in the file at once."""
+
+    def __init__(self, path: Path) -> None:
+        self.fh = path.open("wb", buffering=0)
+
+    def write(self, data: bytes) -> None:
+        self.fh.write(data)
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+class Session:
+    def __init__(self, url: str, *, tlog: Path | None = None, system_id: int = GCS_SYSID,
+                 heartbeat_hz: float = 1.0) -> None:
+        self.conn = mavutil.mavlink_connection(url, source_system=system_id,
+                                               source_component=MAV_COMP_ID_MISSIONPLANNER,
+                                               dialect="common", autoreconnect=True)
+        self.tlog = _TlogFile(tlog) if tlog else None
+        if self.tlog is not None:
+            self.conn.logfile = self.tlog
+        self.lock = threading.Lock()
+        self.target_system = 0
+        self.target_component = 0
+        self._stop = threading.Event()
+        self._period = 1.0 / heartbeat_hz
+        self._thread = threading.Thread(target=self._heartbeats, name="gcs-heartbeat",
+                                        daemon=True)
+        self._thread.start()
+
+    def _heartbeats(self) -> None:
+        while not self._stop.is_set():
+            self.send(M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0,
+                                                  0, M.MAV_STATE_ACTIVE, 3))
+            self._stop.wait(self._period)
+
+    def send(self, msg) -> None:
+        with self.lock:
+            self.conn.mav.send(msg)
+
+    def recv(self, types: list[str] | None = None, timeout: float = 1.0):
+        return self.conn.recv_match(type=types, blocking=True, timeout=timeout)
+
+    def wait_vehicle(self, timeout: float = 10.0, system_id: int | None = None) -> None:
+        """Wait for an autopilot's heartbeat; pick its system id (or the one asked for)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            msg = self.recv(["HEARTBEAT"], timeout=max(0.05, deadline - time.monotonic()))
+            if msg is None or msg.autopilot == M.MAV_AUTOPILOT_INVALID:
+                continue
+            if system_id is not None and msg.get_srcSystem() != system_id:
+                continue
+            self.target_system = msg.get_srcSystem()
+            self.target_component = msg.get_srcComponent()
+            return
+        raise GcsError(f"no vehicle heartbeat within {timeout:.0f} s")
+
+    def command(self, command: int, *params: float, timeout: float = 1.0,
+                retries: int = 3) -> int:
+        """COMMAND_LONG with retries (confirmation incremented); returns MAV_RESULT."""
+        p = [*params, *([0.0] * (7 - len(params)))]
+        for confirmation in range(retries + 1):
+            self.send(M.MAVLink_command_long_message(self.target_system, self.target_component,
+                                                     command, confirmation, *p))
+            deadline = time.monotonic() + timeout
+            while time.monotonic() < deadline:
+                ack = self.recv(["COMMAND_ACK"], timeout=max(0.01, deadline - time.monotonic()))
+                if ack is not None and ack.command == command:
+                    return ack.result
+        raise GcsError(f"no COMMAND_ACK for command {command} after {retries + 1} tries")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self.conn.close()
+        if self.tlog is not None:
+            self.tlog.close()

@@ -1,0 +1,268 @@
+"""`sitl`: the plant as a process, serving a simulator link like PX4's simulator interface.
+
+Lockstep (default): the plant sends ODOMETRY (and HIL_SENSOR at its own rate) stamped with
+simulated time and advances one control period only when a HIL_ACTUATOR_CONTROLS answers that
+state (`time_usec` echoed); duplicates and stale answers are ignored, and a state that stays
+unanswered is re-sent after a few milliseconds of wall time, so loss delays but never
+deadlocks. Simulated time therefore stands still until the FCU starts answering (when the
+flight starts). Real time (`--realtime`): physics paced by the monotonic clock, the latest
+command held.
+
+The ground-truth log (one row per state sent) is the run's reference for every metric.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import select
+import signal
+import sys
+import time
+from pathlib import Path
+
+from common.binlog import LogWriter
+from common.config import ConfigError, Scenario, load_scenario
+from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
+from common.links import LinkError, open_link
+from common.mavlink import MAV, encoder, pack
+from common.simlink import (
+    HIL_ACTUATOR_CONTROLS_ID,
+    Odometry,
+    pack_odometry,
+    split_frames,
+    unpack_actuator_controls,
+)
+from sitl.disturbance import Disturbance
+from sitl.plant import (
+    TRUTH_COLUMNS,
+    ActuatorCommand,
+    Plant,
+    PlantState,
+    initial_state,
+    rotate_inv,
+    truth_row,
+)
+
+SITL_COMPONENT = MAV.MAV_COMP_ID_PERIPHERAL
+SEA_LEVEL_HPA = 1013.25
+
+
+class SimulatorServer:
+    """The plant behind a simulator link; I/O only, physics in `Plant`."""
+
+    def __init__(self, scenario: Scenario, link_url: str, *, truth_log: Path | None,
+                 end_time_s: float | None, realtime: bool, control_rate_hz: int,
+                 hil_sensor_hz: float, resend_ms: float, system_id: int,
+                 home_alt_m: float = 0.0) -> None:
+        self.scenario = scenario
+        self.plant = Plant(scenario.vehicle, dt_us=1_000_000 // scenario.physics_rate_hz,
+                           ideal_actuators=scenario.ideal_actuators,
+                           ground_enabled=scenario.ground_enabled,
+                           disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
+        self.state = initial_state(scenario, self.plant)
+        self.control_dt_us = 1_000_000 // control_rate_hz
+        if self.control_dt_us % self.plant.dt_us:
+            raise ConfigError(f"control period {self.control_dt_us} us is not a multiple of "
+                              f"the physics step {self.plant.dt_us} us")
+        self.substeps = self.control_dt_us // self.plant.dt_us
+        self.link = open_link(link_url)
+        self.realtime = realtime
+        self.end_us = None if end_time_s is None else round(end_time_s * 1e6)
+        self.sensor_every = (max(1, round(control_rate_hz / hil_sensor_hz))
+                             if hil_sensor_hz > 0 else 0)
+        self.resend_s = resend_ms * 1e-3
+        self.home_alt_m = home_alt_m
+        self.mav = encoder(system_id, SITL_COMPONENT)
+        self.system_id = system_id
+        self.seq = 0
+        self.log = LogWriter(truth_log, TRUTH_COLUMNS) if truth_log else None
+        n = scenario.vehicle.n_rotors
+        self.command = ActuatorCommand(self.state.rotor_speed_rad_s, self.state.tilt_rad)
+        self._zero_speeds = (0.0,) * n
+        self.steps = 0
+        self.ignored_answers = 0
+        self.rejected_bytes = 0
+        self.resends = 0
+        self.running = True
+        self._last_datagram = b""
+
+    # ------------------------------------------------------------------ messages
+
+    def _datagram(self, s: PlantState) -> bytes:
+        q_ned_frd = q_enu_flu_to_ned_frd(s.q_enu_flu)
+        odo = Odometry(s.time_us, enu_to_ned(s.p_enu_m), q_ned_frd,
+                       flu_to_frd(rotate_inv(s.q_enu_flu, s.v_enu_m_s)),
+                       flu_to_frd(s.omega_flu_rad_s))
+        self.seq = (self.seq + 1) & 0xFF
+        data = pack_odometry(odo, self.seq, self.system_id, SITL_COMPONENT)
+        if self.sensor_every and (s.time_us // self.control_dt_us) % self.sensor_every == 0:
+            data = self._hil_sensor(s) + data
+        return data
+
+    def _hil_sensor(self, s: PlantState) -> bytes:
+        acc = flu_to_frd(self.plant.specific_force_flu(s))
+        gyro = flu_to_frd(s.omega_flu_rad_s)
+        alt = self.home_alt_m + s.p_enu_m[2]
+        pressure = SEA_LEVEL_HPA * (1.0 - 2.25577e-5 * alt) ** 5.25588
+        msg = MAV.MAVLink_hil_sensor_message(
+            s.time_us, *acc, *gyro, 0.0, 0.0, 0.0, pressure, 0.0, alt, 15.0,
+            0x1A3F, 0)  # bits: acc, gyro, abs pressure, pressure altitude, temperature; no mag
+        return pack(self.mav, msg)
+
+    def _send_state(self) -> None:
+        self._last_datagram = self._datagram(self.state)
+        self.link.send(self._last_datagram)
+        if self.log is not None:
+            self.log.write(truth_row(self.state))
+
+    def _command_from(self, controls: tuple[float, ...], mode: int) -> ActuatorCommand:
+        n = self.scenario.vehicle.n_rotors
+        w_max = self.scenario.vehicle.rotor_speed_max_rad_s
+        speeds = tuple(c * w_max if math.isfinite(c) else 0.0 for c in controls[:n])
+        tilts = tuple(c if math.isfinite(c) else self.state.tilt_rad[i]
+                      for i, c in enumerate(controls[n:2 * n]))
+        if not mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED:
+            speeds = self._zero_speeds
+        return ActuatorCommand(speeds, tilts)
+
+    def _advance(self) -> None:
+        for _ in range(self.substeps):
+            self.state = self.plant.step(self.state, self.command)
+        self.steps += 1
+
+    def _answers(self) -> list[tuple[int, tuple[float, ...], int]]:
+        out = []
+        for _peer, data in self.link.recv():
+            frames, rejected = split_frames(data)
+            self.rejected_bytes += rejected
+            for f in frames:
+                if f.msg_id == HIL_ACTUATOR_CONTROLS_ID:
+                    a = unpack_actuator_controls(f.payload)
+                    out.append((a.time_usec, a.controls, a.mode))
+        return out
+
+    # ------------------------------------------------------------------ loops
+
+    def run(self) -> None:
+        try:
+            if self.realtime:
+                self._run_realtime()
+            else:
+                self._run_lockstep()
+        finally:
+            self.close()
+
+    def _at_end(self) -> bool:
+        return self.end_us is not None and self.state.time_us >= self.end_us
+
+    def _run_lockstep(self) -> None:
+        self._send_state()
+        last_progress = time.monotonic()
+        fd = self.link.fileno()
+        while self.running:
+            idle = time.monotonic() - last_progress
+            timeout = self.resend_s if idle < 0.5 else 0.05
+            readable, _, _ = select.select([fd], [], [], timeout)
+            if not readable:
+                if self.running:
+                    self.link.send(self._last_datagram)  # recover a lost state or answer
+                    self.resends += 1
+                continue
+            for time_usec, controls, mode in self._answers():
+                if time_usec != self.state.time_us or self._at_end():
+                    self.ignored_answers += 1  # duplicate, stale, or the run has ended
+                    continue
+                self.command = self._command_from(controls, mode)
+                self._advance()
+                self._send_state()
+                last_progress = time.monotonic()
+
+    def _run_realtime(self) -> None:
+        period = self.plant.dt_us * 1e-6
+        fd = self.link.fileno()
+        start = time.monotonic()
+        self._send_state()
+        physics_steps = 0
+        while self.running and not self._at_end():
+            due = start + (physics_steps + 1) * period
+            while self.running:
+                wait = due - time.monotonic()
+                readable, _, _ = select.select([fd], [], [], max(0.0, wait))
+                if readable:
+                    for _t, controls, mode in self._answers():
+                        self.command = self._command_from(controls, mode)
+                if wait <= 0.0:
+                    break
+            self.state = self.plant.step(self.state, self.command)
+            physics_steps += 1
+            if physics_steps % self.substeps == 0:
+                self.steps += 1
+                self._send_state()
+        while self.running:  # the run has ended: keep the link quiet until told to stop
+            select.select([fd], [], [], 0.1)
+            self._answers()
+
+    def close(self) -> None:
+        if self.log is not None:
+            self.log.close()
+            self.log = None
+        self.link.close()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sitl", description="tilt-rotor plant on a simulator link")
+    p.add_argument("scenario", type=Path, help="scenario TOML (vehicle, start, disturbances)")
+    p.add_argument("--link", default="udpin:127.0.0.1:4560",
+                   help="simulator link URL (default udpin:127.0.0.1:4560)")
+    p.add_argument("--realtime", action="store_true", help="pace by the wall clock")
+    p.add_argument("--truth-log", type=Path, help="write the ground-truth log here")
+    p.add_argument("--end-time", type=float, metavar="S",
+                   help="stop advancing at this simulated time (default: the scenario's)")
+    p.add_argument("--control-rate", type=int, default=None,
+                   help="control periods per second (default: the scenario's)")
+    p.add_argument("--ideal-actuators", action="store_true")
+    p.add_argument("--hil-sensor-hz", type=float, default=100.0,
+                   help="HIL_SENSOR rate in simulated time (0: off)")
+    p.add_argument("--resend-ms", type=float, default=5.0,
+                   help="re-send an unanswered state after this wall time")
+    p.add_argument("--sysid", type=int, default=1)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        scenario = load_scenario(args.scenario)
+        if args.ideal_actuators:
+            import dataclasses
+
+            scenario = dataclasses.replace(scenario, ideal_actuators=True)
+        rate = args.control_rate or scenario.control_rate_hz
+        if not 1 <= rate <= 1000:
+            raise ConfigError(f"--control-rate: expected 1..1000 Hz, got {rate}")
+        end = args.end_time if args.end_time is not None else scenario.duration_s
+        server = SimulatorServer(scenario, args.link, truth_log=args.truth_log,
+                                 end_time_s=end, realtime=args.realtime,
+                                 control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
+                                 resend_ms=args.resend_ms, system_id=args.sysid)
+    except (ConfigError, LinkError) as exc:
+        print(f"sitl: {exc}", file=sys.stderr)
+        return 2
+
+    def stop(_signum, _frame):
+        server.running = False
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    print(f"sitl: serving {scenario.name} on {args.link} "
+          f"({'real time' if args.realtime else 'lockstep'})", flush=True)
+    server.run()
+    print(f"sitl: stopped at t = {server.state.time_us * 1e-6:.3f} s after {server.steps} "
+          f"control periods; {server.resends} re-sends, {server.ignored_answers} answers "
+          f"ignored, {server.rejected_bytes} bytes rejected", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
