@@ -51,6 +51,8 @@ from fcu.vehicle import FORCE_DISARM_MAGIC, Vehicle
 M = MAV
 COMPONENT = M.MAV_COMP_ID_AUTOPILOT1
 DEFAULT_GCS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")
+HOUSEKEEPING_S = 0.002
+SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each state
 
 
 class FlightController:
@@ -88,6 +90,8 @@ class FlightController:
         self.gcs_seen_s = -math.inf
         self.v_enu = (0.0, 0.0, 0.0)
         self.last_mission_current_sent: tuple[int, int] | None = None
+        self.sim_heartbeat_due = 0.0
+        self.last_sim_rx_s = -math.inf
 
     # ------------------------------------------------------------------ sending
 
@@ -106,6 +110,7 @@ class FlightController:
     # ------------------------------------------------------------------ simulator link
 
     def _on_sim_datagram(self, data: bytes) -> None:
+        self.last_sim_rx_s = time.monotonic()
         frames, rejected = split_frames(data)
         self.rejected_bytes += rejected
         for f in frames:
@@ -373,6 +378,10 @@ class FlightController:
 
     def _housekeeping(self, now: float) -> None:
         v = self.vehicle
+        if now >= self.sim_heartbeat_due:
+            # Simulators learn where we are from this, as from PX4's first packets.
+            self.sim.send(pack(self.mav, heartbeat(v.armed, v.mode.custom_mode, v.armed)))
+            self.sim_heartbeat_due = now + 1.0
         v.check_links(now)
         for reply in self.missions.tick(now):
             self.send(reply)
@@ -399,6 +408,7 @@ class FlightController:
     def _loop(self) -> None:
         period_s = self.period_us * 1e-6
         next_tick = time.monotonic()
+        next_housekeeping = next_tick
         fds: dict[int, tuple[str, int, Link]] = {self.sim.fileno(): ("sim", 0, self.sim)}
         for i, link in enumerate(self.gcs):
             fds[link.fileno()] = ("gcs", i, link)
@@ -408,6 +418,8 @@ class FlightController:
             if not self.lockstep:
                 wake = min(wake, next_tick)
             timeout = min(max(0.0, wake - now), 0.05)
+            if self.lockstep and now - self.last_sim_rx_s < SPIN_S:
+                timeout = 0.0  # lockstep: the next state is microseconds away, poll for it
             try:
                 readable, _, _ = select.select(list(fds), [], [], timeout)
             except InterruptedError:
@@ -429,7 +441,11 @@ class FlightController:
                 next_tick += (skipped + 1) * period_s
                 self.time_us = round((now - self.boot_s) * 1e6)
                 self._control_step(self.time_us)
-            self._housekeeping(now)
+            v = self.vehicle
+            if now >= next_housekeeping or v.messages or v.mission_events:
+                # Link-facing work at most every few ms: the lockstep path stays lean.
+                self._housekeeping(now)
+                next_housekeeping = now + HOUSEKEEPING_S
 
     def close(self) -> None:
         if self.log is not None:
@@ -499,6 +515,9 @@ def main(argv: list[str] | None = None) -> int:
     links = ", ".join(args.gcs or DEFAULT_GCS)
     print(f"fcu: system {args.sysid}, simulator {args.sim}, GCS {links} "
           f"({'real time' if args.realtime else 'lockstep'}, {args.rate} Hz)", flush=True)
+    sim_port = getattr(fc.sim, "local_port", None)
+    if sim_port is not None:
+        print(f"fcu: sim port {sim_port}", flush=True)
     fc.run()
     print(f"fcu: stopped after {fc.steps} control steps; {fc.deadline_misses} deadline misses, "
           f"{fc.resent_answers} answers re-sent, {fc.rejected_bytes} bytes rejected", flush=True)

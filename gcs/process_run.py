@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -116,8 +117,12 @@ def _watch(session: Session, children: Children, progress: Progress, end_s: floa
 
 
 def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
-                  wall_timeout_s: float | None = None, report=None) -> dict[str, Any]:
-    """Fly `scenario` through sitl + fcu processes; returns the metrics written to out."""
+                  wall_timeout_s: float | None = None, report=None,
+                  sim_route: Callable[[int], int] | None = None) -> dict[str, Any]:
+    """Fly `scenario` through sitl + fcu processes; returns the metrics written to out.
+
+    `sim_route` maps the simulator's port to the port the FCU sends to (a test proxy).
+    """
     out.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(scenario.source, out / "scenario.toml")
     for name in (TRUTH_LOG, ONBOARD_LOG, "fcu_stats.json", "flight.tlog"):
@@ -129,8 +134,9 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
     sitl_cmd = [py, "-m", "sitl.node", scenario.source, "--link",
                 f"udpin:127.0.0.1:{sim_port}", "--truth-log", str(out / TRUTH_LOG),
                 "--end-time", repr(end_s), "--control-rate", str(scenario.control_rate_hz)]
+    fcu_sim_port = sim_route(sim_port) if sim_route else sim_port
     fcu_cmd = [py, "-m", "fcu.node", "--vehicle", scenario.files["vehicle"], "--gains", gains,
-               "--sim", f"udpout:127.0.0.1:{sim_port}", "--gcs",
+               "--sim", f"udpout:127.0.0.1:{fcu_sim_port}", "--gcs",
                f"udpout:127.0.0.1:{gcs_port}", "--rate", str(scenario.control_rate_hz),
                "--onboard-log", str(out / ONBOARD_LOG), "--stats", str(out / "fcu_stats.json")]
     if realtime:
@@ -151,6 +157,9 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
         children.start("fcu", fcu_cmd)
         try:
             session.wait_vehicle(timeout=15.0)
+            # the FCU reports attitude once it has a state from the simulator
+            if session.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is None:
+                raise GcsError("the vehicle reports no state: is the simulator running?")
         except GcsError:
             children.check()
             raise

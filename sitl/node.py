@@ -46,6 +46,7 @@ from sitl.plant import (
 
 SITL_COMPONENT = MAV.MAV_COMP_ID_PERIPHERAL
 SEA_LEVEL_HPA = 1013.25
+SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each exchange
 
 
 class SimulatorServer:
@@ -160,14 +161,23 @@ class SimulatorServer:
         self._send_state()
         last_progress = time.monotonic()
         fd = self.link.fileno()
+        last_resend = last_progress
         while self.running:
-            idle = time.monotonic() - last_progress
-            timeout = self.resend_s if idle < 0.5 else 0.05
+            now = time.monotonic()
+            idle = now - last_progress
+            if idle < SPIN_S:
+                timeout = 0.0  # the answer is due within microseconds: poll, do not sleep
+            else:
+                timeout = max(0.0, (self.resend_s if idle < 0.5 else 0.05)
+                              - (now - max(last_resend, last_progress)))
             readable, _, _ = select.select([fd], [], [], timeout)
             if not readable:
-                if self.running:
+                now = time.monotonic()
+                if idle >= SPIN_S and now - max(last_resend, last_progress) >= (
+                        self.resend_s if idle < 0.5 else 0.05):
                     self.link.send(self._last_datagram)  # recover a lost state or answer
                     self.resends += 1
+                    last_resend = now
                 continue
             for time_usec, controls, mode in self._answers():
                 if time_usec != self.state.time_us or self._at_end():

@@ -1,0 +1,231 @@
+"""The vehicle side of the MAVLink mission protocol (https://mavlink.io/en/services/mission.html),
+without I/O: pymavlink messages and the time in, messages to send out.
+
+Upload (GCS -> vehicle): MISSION_COUNT, then MISSION_REQUEST_INT for each item in turn,
+re-requested every `item_timeout_s` up to `retries` times (then MISSION_ACK
+OPERATION_CANCELLED); an out-of-sequence or duplicate item re-requests the expected one; after
+the last item the whole mission is validated (`fcu.mission.validate_mission`) and only
+MAV_MISSION_ACCEPTED replaces the stored mission, so a failed upload keeps the old one. A
+final item sent again (the GCS lost our MISSION_ACK) gets the same MISSION_ACK again.
+Download: MISSION_REQUEST_LIST -> MISSION_COUNT, then MISSION_ITEM_INT for each
+MISSION_REQUEST_INT (or legacy MISSION_REQUEST). MISSION_CLEAR_ALL clears. Only
+MAV_MISSION_TYPE_MISSION is supported; the other plan types get MAV_MISSION_UNSUPPORTED.
+
+`version` changes on every accepted change and travels as `opaque_id` in MISSION_COUNT and
+MISSION_ACK when the pymavlink dialect has that field (pymavlink 2.4.50 has not).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from common.mavlink import MAV
+from common.mission_items import LOCAL_SCALE, MissionItem
+from fcu.mission import INT32_MAX, MissionLimits, validate_mission
+
+M = MAV
+MISSION = M.MAV_MISSION_TYPE_MISSION
+Partner = tuple[int, int]  # (system id, component id)
+
+
+@dataclass
+class _Upload:
+    partner: Partner
+    count: int
+    items: list[MissionItem] = field(default_factory=list)
+    requested_s: float = 0.0
+    retries_used: int = 0
+
+    @property
+    def expected(self) -> int:
+        return len(self.items)
+
+
+@dataclass(frozen=True)
+class _Finished:
+    """The last upload's outcome, to answer items the GCS sends again after our ACK."""
+
+    partner: Partner
+    count: int
+    result: int
+
+
+def _msg(cls: type, *args: object, opaque_id: int | None = None) -> MAV.MAVLink_message:
+    """Build a message, adding opaque_id where this dialect version has the field."""
+    if opaque_id is not None and "opaque_id" in cls.fieldnames:  # type: ignore[attr-defined]
+        return cls(*args, opaque_id=opaque_id)
+    return cls(*args)
+
+
+def item_from_message(msg: MAV.MAVLink_message) -> MissionItem:
+    """A MISSION_ITEM_INT (x, y int, 1e-4 m) or legacy MISSION_ITEM (x, y float, m) as a
+    MissionItem. Legacy x, y that are not finite or do not fit int32 become a value outside
+    int32, which validation refuses as INVALID_PARAM5_X / 6_Y."""
+    scale = LOCAL_SCALE if msg.get_type() == "MISSION_ITEM" else 1.0
+    x, y = (round(v * scale) if math.isfinite(v) and abs(v * scale) <= INT32_MAX
+            else INT32_MAX + 1 for v in (msg.x, msg.y))
+    return MissionItem(seq=msg.seq, frame=msg.frame, command=msg.command, current=msg.current,
+                       autocontinue=msg.autocontinue, param1=msg.param1, param2=msg.param2,
+                       param3=msg.param3, param4=msg.param4, x=x, y=y, z=msg.z,
+                       mission_type=getattr(msg, "mission_type", MISSION))
+
+
+def item_message(item: MissionItem, target_system: int, target_component: int,
+                 current: int | None = None) -> MAV.MAVLink_mission_item_int_message:
+    return M.MAVLink_mission_item_int_message(
+        target_system, target_component, item.seq, item.frame, item.command,
+        item.current if current is None else current, item.autocontinue, item.param1,
+        item.param2, item.param3, item.param4, item.x, item.y, item.z, item.mission_type)
+
+
+class MissionServer:
+    """One vehicle's mission store and protocol state (one upload at a time)."""
+
+    def __init__(self, system_id: int, component_id: int, limits: MissionLimits,
+                 item_timeout_s: float = 0.25, retries: int = 5) -> None:
+        self.system_id = system_id
+        self.component_id = component_id
+        self.limits = limits
+        self.item_timeout_s = item_timeout_s
+        self.retries = retries
+        self.mission: tuple[MissionItem, ...] = ()
+        self.version = 0
+        self.current_seq = 0  # sent as current = 1 on download; the owner keeps it up to date
+        self.on_mission_changed: Callable[[tuple[MissionItem, ...]], None] | None = None
+        self.on_set_current: Callable[[int], bool] | None = None
+        self._upload: _Upload | None = None
+        self._finished: _Finished | None = None
+
+    @property
+    def uploading(self) -> bool:
+        return self._upload is not None
+
+    # ------------------------------------------------------------------ replies
+
+    def _ack(self, to: Partner, result: int, mission_type: int = MISSION,
+             opaque: bool = False) -> MAV.MAVLink_message:
+        return _msg(M.MAVLink_mission_ack_message, to[0], to[1], result, mission_type,
+                    opaque_id=self.version if opaque else None)
+
+    def _request(self, up: _Upload, now_s: float) -> MAV.MAVLink_message:
+        up.requested_s = now_s
+        return M.MAVLink_mission_request_int_message(up.partner[0], up.partner[1], up.expected,
+                                                     MISSION)
+
+    def _replace(self, items: tuple[MissionItem, ...]) -> None:
+        self.mission = items
+        self.version = (self.version + 1) & 0xFFFFFFFF or 1
+        self.current_seq = 0
+        if self.on_mission_changed is not None:
+            self.on_mission_changed(items)
+
+    # ------------------------------------------------------------------ input
+
+    def _for_us(self, msg: MAV.MAVLink_message) -> bool:
+        ts = getattr(msg, "target_system", 0)
+        tc = getattr(msg, "target_component", 0)
+        return ts in (0, self.system_id) and tc in (0, self.component_id)
+
+    def handle(self, msg: MAV.MAVLink_message, now_s: float) -> list[MAV.MAVLink_message]:
+        """Messages to send in answer to `msg` received at `now_s` (any clock, seconds)."""
+        kind = msg.get_type()
+        if not kind.startswith("MISSION_") or not self._for_us(msg):
+            return []
+        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        mission_type = getattr(msg, "mission_type", MISSION)
+        if kind == "MISSION_SET_CURRENT":
+            self._set_current(msg.seq)
+            return []
+        if kind == "MISSION_ACK":
+            if self._upload is not None and self._upload.partner == partner:
+                self._upload = None  # the GCS cancelled its upload: the old mission stays
+            return []
+        if kind in ("MISSION_WRITE_PARTIAL_LIST", "MISSION_REQUEST_PARTIAL_LIST"):
+            return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
+        if kind == "MISSION_CLEAR_ALL":
+            if mission_type not in (MISSION, M.MAV_MISSION_TYPE_ALL):
+                return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
+            self._replace(())
+            return [self._ack(partner, M.MAV_MISSION_ACCEPTED, mission_type, opaque=True)]
+        if kind not in ("MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM",
+                        "MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST"):
+            return []
+        if mission_type != MISSION:
+            return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
+        if kind == "MISSION_COUNT":
+            return self._on_count(partner, msg.count, now_s)
+        if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
+            return self._on_item(partner, item_from_message(msg), now_s)
+        if kind == "MISSION_REQUEST_LIST":
+            return [_msg(M.MAVLink_mission_count_message, partner[0], partner[1],
+                         len(self.mission), MISSION, opaque_id=self.version)]
+        # MISSION_REQUEST_INT or MISSION_REQUEST: answered with MISSION_ITEM_INT either way.
+        seq = msg.seq
+        if not 0 <= seq < len(self.mission):
+            return [self._ack(partner, M.MAV_MISSION_INVALID_SEQUENCE)]
+        return [item_message(self.mission[seq], partner[0], partner[1],
+                             current=int(seq == self.current_seq))]
+
+    def _set_current(self, seq: int) -> None:
+        if not 0 <= seq < len(self.mission):
+            return
+        ok = self.on_set_current(seq) if self.on_set_current is not None else True
+        if ok:
+            self.current_seq = seq
+
+    def _on_count(self, partner: Partner, count: int,
+                  now_s: float) -> list[MAV.MAVLink_message]:
+        up = self._upload
+        if up is not None and up.partner != partner:
+            return [self._ack(partner, M.MAV_MISSION_DENIED)]  # busy with another GCS
+        self._upload = None
+        self._finished = None
+        if count > self.limits.max_items:
+            return [self._ack(partner, M.MAV_MISSION_NO_SPACE)]
+        if count == 0:  # the same as clearing
+            self._replace(())
+            self._finished = _Finished(partner, 0, M.MAV_MISSION_ACCEPTED)
+            return [self._ack(partner, M.MAV_MISSION_ACCEPTED, opaque=True)]
+        self._upload = _Upload(partner, count)
+        return [self._request(self._upload, now_s)]
+
+    def _on_item(self, partner: Partner, item: MissionItem,
+                 now_s: float) -> list[MAV.MAVLink_message]:
+        up = self._upload
+        if up is None or up.partner != partner:
+            done = self._finished
+            if up is None and done is not None and done.partner == partner \
+                    and 0 <= item.seq < done.count:
+                # Our final ACK was lost (or this is a late duplicate): the same answer again.
+                return [self._ack(partner, done.result,
+                                  opaque=done.result == M.MAV_MISSION_ACCEPTED)]
+            return []
+        if item.seq != up.expected:
+            return [self._request(up, now_s)]  # out of sequence or duplicate: not an error
+        up.items.append(item._replace(mission_type=MISSION))
+        up.retries_used = 0
+        if up.expected < up.count:
+            return [self._request(up, now_s)]
+        self._upload = None
+        items = tuple(up.items)
+        result, _seq = validate_mission(items, self.limits)
+        if result == M.MAV_MISSION_ACCEPTED:
+            self._replace(items)
+        self._finished = _Finished(partner, up.count, result)
+        return [self._ack(partner, result, opaque=result == M.MAV_MISSION_ACCEPTED)]
+
+    # ------------------------------------------------------------------ time
+
+    def tick(self, now_s: float) -> list[MAV.MAVLink_message]:
+        """Re-requests, or the cancellation of an upload whose items stopped coming."""
+        up = self._upload
+        if up is None or now_s - up.requested_s < self.item_timeout_s:
+            return []
+        if up.retries_used < self.retries:
+            up.retries_used += 1
+            return [self._request(up, now_s)]
+        self._upload = None
+        self._finished = _Finished(up.partner, up.count, M.MAV_MISSION_OPERATION_CANCELLED)
+        return [self._ack(up.partner, M.MAV_MISSION_OPERATION_CANCELLED)]

@@ -1,0 +1,189 @@
+"""The ground-station side of the MAVLink mission protocol over a pymavlink `mavutil`
+connection: upload, download and clear (https://mavlink.io/en/services/mission.html).
+
+Timeouts and retries are the specification's: 1500 ms for the whole-transaction steps
+(MISSION_COUNT, MISSION_REQUEST_LIST, MISSION_CLEAR_ALL), 250 ms per mission item, 5 retries;
+each timeout resends the last message. Messages from other systems, for other systems or
+about other plan types are skipped. Wall-clock time is fine here: the GCS faces links.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+
+import common.mavlink  # noqa: F401  (pins MAVLink 2 before anything imports mavutil)
+from common.mavlink import MAV
+from common.mission_items import LOCAL_SCALE, MissionItem
+
+M = MAV
+MISSION = M.MAV_MISSION_TYPE_MISSION
+TIMEOUT_S = 1.5
+ITEM_TIMEOUT_S = 0.25
+RETRIES = 5
+
+Progress = Callable[[int, int], None]
+
+
+class MissionError(RuntimeError):
+    """A mission transaction that could not be completed (no answer, protocol error)."""
+
+
+def result_name(result: int) -> str:
+    entry = M.enums["MAV_MISSION_RESULT"].get(result)
+    return entry.name if entry is not None else f"MAV_MISSION_RESULT {result}"
+
+
+def _send(conn, msg) -> None:
+    conn.mav.send(msg)
+
+
+def _recv(conn, types: list[str], target_system: int, target_component: int,
+          timeout_s: float):
+    """The next message of `types` from the target about missions, or None on timeout."""
+    deadline = time.monotonic() + timeout_s
+    me = conn.mav.srcSystem
+    while True:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0.0:
+            return None
+        msg = conn.recv_match(type=types, blocking=True, timeout=remaining)
+        if msg is None:
+            continue  # loop to the deadline check
+        if msg.get_srcSystem() != target_system:
+            continue
+        if target_component and msg.get_srcComponent() != target_component:
+            continue
+        if getattr(msg, "target_system", 0) not in (0, me):
+            continue
+        if getattr(msg, "mission_type", MISSION) != MISSION:
+            continue
+        return msg
+
+
+def _item_message(item: MissionItem, target_system: int, target_component: int):
+    return M.MAVLink_mission_item_int_message(
+        target_system, target_component, item.seq, item.frame, item.command, item.current,
+        item.autocontinue, item.param1, item.param2, item.param3, item.param4, item.x, item.y,
+        item.z, MISSION)
+
+
+def _item_from(msg) -> MissionItem:
+    if msg.get_type() == "MISSION_ITEM":  # legacy: local x, y as float metres
+        x, y = round(msg.x * LOCAL_SCALE), round(msg.y * LOCAL_SCALE)
+    else:
+        x, y = msg.x, msg.y
+    return MissionItem(seq=msg.seq, frame=msg.frame, command=msg.command, current=msg.current,
+                       autocontinue=msg.autocontinue, param1=msg.param1, param2=msg.param2,
+                       param3=msg.param3, param4=msg.param4, x=x, y=y, z=msg.z,
+                       mission_type=msg.mission_type)
+
+
+def upload(conn, target_system: int, target_component: int, items: Sequence[MissionItem],
+           progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
+           item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = RETRIES) -> int:
+    """Upload `items` (sent with seq = their index) and return the vehicle's
+    MAV_MISSION_RESULT (MAV_MISSION_ACCEPTED when it took the mission).
+
+    Raises MissionError when the vehicle stops answering (after `retries` resends of the
+    last message) or asks for an item outside the mission.
+    """
+    items = [item._replace(seq=i, mission_type=MISSION) for i, item in enumerate(items)]
+    count = len(items)
+    last = M.MAVLink_mission_count_message(target_system, target_component, count, MISSION)
+    _send(conn, last)
+    wait, attempts, done = timeout_s, 0, -1  # done: highest seq requested so far
+    types = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"]
+    while True:
+        msg = _recv(conn, types, target_system, target_component, wait)
+        if msg is None:
+            attempts += 1
+            if attempts > retries:
+                _send(conn, M.MAVLink_mission_ack_message(
+                    target_system, target_component, M.MAV_MISSION_OPERATION_CANCELLED,
+                    MISSION))
+                if done < 0:
+                    what = f"answer to MISSION_COUNT({count})"
+                elif done == count - 1:
+                    what = f"MISSION_ACK after the last item ({done})"
+                else:
+                    what = f"request for the item after {done}"
+                raise MissionError(
+                    f"mission upload to system {target_system}: no {what} after "
+                    f"{retries + 1} tries ({wait * 1e3:.0f} ms each)")
+            _send(conn, last)
+            continue
+        if msg.get_type() == "MISSION_ACK":
+            if msg.type == M.MAV_MISSION_ACCEPTED and progress is not None:
+                progress(count, count)
+            return msg.type
+        seq = msg.seq
+        if not 0 <= seq < count:
+            _send(conn, M.MAVLink_mission_ack_message(
+                target_system, target_component, M.MAV_MISSION_INVALID_SEQUENCE, MISSION))
+            raise MissionError(f"mission upload to system {target_system}: vehicle asked for "
+                               f"item {seq} of a mission of {count}")
+        if seq > done:  # progress: the vehicle holds items 0..seq-1
+            attempts = 0
+            done = seq
+            if progress is not None:
+                progress(seq, count)
+        last = _item_message(items[seq], target_system, target_component)
+        _send(conn, last)
+        wait = item_timeout_s
+
+
+def download(conn, target_system: int, target_component: int,
+             progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
+             item_timeout_s: float = ITEM_TIMEOUT_S,
+             retries: int = RETRIES) -> list[MissionItem]:
+    """The vehicle's mission. Raises MissionError when it stops answering or refuses."""
+
+    def exchange(request, types: list[str], wait: float, accept, what: str):
+        for _ in range(retries + 1):
+            _send(conn, request)
+            deadline = time.monotonic() + wait
+            while (remaining := deadline - time.monotonic()) > 0.0:
+                msg = _recv(conn, types, target_system, target_component, remaining)
+                if msg is None:
+                    break
+                if msg.get_type() == "MISSION_ACK":
+                    if msg.type == M.MAV_MISSION_ACCEPTED:
+                        continue  # a late ACK of an earlier transaction
+                    raise MissionError(f"mission download from system {target_system}: "
+                                       f"{what} refused: {result_name(msg.type)}")
+                if accept(msg):
+                    return msg
+        raise MissionError(f"mission download from system {target_system}: no answer to "
+                           f"{what} after {retries + 1} tries ({wait * 1e3:.0f} ms each)")
+
+    count_msg = exchange(
+        M.MAVLink_mission_request_list_message(target_system, target_component, MISSION),
+        ["MISSION_COUNT", "MISSION_ACK"], timeout_s, lambda m: True, "MISSION_REQUEST_LIST")
+    count = count_msg.count
+    items: list[MissionItem] = []
+    for seq in range(count):
+        msg = exchange(
+            M.MAVLink_mission_request_int_message(target_system, target_component, seq,
+                                                  MISSION),
+            ["MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK"], item_timeout_s,
+            lambda m, seq=seq: m.seq == seq, f"the request for item {seq} of {count}")
+        items.append(_item_from(msg))
+        if progress is not None:
+            progress(seq + 1, count)
+    _send(conn, M.MAVLink_mission_ack_message(target_system, target_component,
+                                              M.MAV_MISSION_ACCEPTED, MISSION))
+    return items
+
+
+def clear(conn, target_system: int, target_component: int, *, timeout_s: float = TIMEOUT_S,
+          retries: int = RETRIES) -> int:
+    """Clear the vehicle's mission; its MAV_MISSION_RESULT. MissionError if it is silent."""
+    request = M.MAVLink_mission_clear_all_message(target_system, target_component, MISSION)
+    for _ in range(retries + 1):
+        _send(conn, request)
+        msg = _recv(conn, ["MISSION_ACK"], target_system, target_component, timeout_s)
+        if msg is not None:
+            return msg.type
+    raise MissionError(f"mission clear on system {target_system}: no MISSION_ACK after "
+                       f"{retries + 1} tries ({timeout_s * 1e3:.0f} ms each)")

@@ -1,0 +1,165 @@
+"""The FCU as a MAVLink autopilot, seen from pymavlink as a ground station."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from common.mavlink import MAV
+from fcu.modes import Mode
+
+M = MAV
+pytestmark = pytest.mark.timeout(120)
+
+
+def test_heartbeat_identifies_an_autopilot(stack):
+    """HEARTBEAT from component 1, a vehicle type, a real autopilot, disarmed, custom mode."""
+    hb = stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1)
+    assert hb is not None
+    assert hb.type == M.MAV_TYPE_HEXAROTOR
+    assert hb.autopilot != M.MAV_AUTOPILOT_INVALID
+    assert hb.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+    assert not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+    assert hb.custom_mode == Mode.HOLD.custom_mode
+    assert stack.session.target_system == 1
+
+
+def test_autopilot_version_has_the_capabilities_mavsdk_needs(stack):
+    """REQUEST_MESSAGE(AUTOPILOT_VERSION) is ACKed and answered with MISSION_INT etc."""
+    result = stack.session.command(M.MAV_CMD_REQUEST_MESSAGE,
+                                   M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+    assert result == M.MAV_RESULT_ACCEPTED
+    msg = stack.wait_for(["AUTOPILOT_VERSION"])
+    assert msg is not None
+    for cap in (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT, M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT,
+                M.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET,
+                M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED,
+                M.MAV_PROTOCOL_CAPABILITY_MAVLINK2, M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT):
+        assert msg.capabilities & cap
+
+
+def test_every_command_gets_an_ack(stack):
+    """Supported commands are ACCEPTED, unknown ones UNSUPPORTED, bad arguments DENIED."""
+    s = stack.session
+    assert s.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH) == M.MAV_RESULT_UNSUPPORTED
+    assert s.command(M.MAV_CMD_DO_SET_SERVO, 1, 1500) == M.MAV_RESULT_UNSUPPORTED
+    assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0.5) == M.MAV_RESULT_DENIED
+    assert s.command(M.MAV_CMD_MISSION_START) == M.MAV_RESULT_DENIED  # no mission yet
+    assert s.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                     4, 3) == M.MAV_RESULT_ACCEPTED  # AUTO.LOITER = HOLD
+    assert s.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                     6) == M.MAV_RESULT_DENIED  # OFFBOARD without a setpoint stream
+
+
+def _rate(stack, kind: str, seconds: float = 1.5) -> float:
+    t0 = time.monotonic()
+    n = 0
+    while time.monotonic() - t0 < seconds:
+        if stack.session.recv([kind], timeout=0.1) is not None:
+            n += 1
+    return n / seconds
+
+
+def test_message_interval_changes_the_stream(stack):
+    """SET_MESSAGE_INTERVAL: 10 Hz, then off (-1), then back to the default (0)."""
+    s = stack.session
+    assert _rate(stack, "ATTITUDE_QUATERNION") > 30.0  # default 50 Hz
+    msg_id = M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION
+    assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 100_000) == M.MAV_RESULT_ACCEPTED
+    assert 5.0 < _rate(stack, "ATTITUDE_QUATERNION") < 15.0
+    assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, -1) == M.MAV_RESULT_ACCEPTED
+    time.sleep(0.2)
+    assert _rate(stack, "ATTITUDE_QUATERNION", 1.0) == 0.0
+    assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 0) == M.MAV_RESULT_ACCEPTED
+    assert _rate(stack, "ATTITUDE_QUATERNION") > 30.0
+    assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, 99999, 1000) == M.MAV_RESULT_DENIED
+
+
+def _param(stack, name: str):
+    stack.session.send(M.MAVLink_param_request_read_message(
+        stack.session.target_system, stack.session.target_component, name.encode(), -1))
+    return stack.wait_for(["PARAM_VALUE"], lambda m: m.param_id == name)
+
+
+def test_parameters_read_write_and_refuse_unstable_gains(stack):
+    """The gains are parameters; a set that breaks k_p k_d > k_i is refused with a reason."""
+    s = stack.session
+    s.send(M.MAVLink_param_request_list_message(s.target_system, s.target_component))
+    seen = {}
+    deadline = time.monotonic() + 5.0
+    while time.monotonic() < deadline:
+        m = s.recv(["PARAM_VALUE"], timeout=0.2)
+        if m is not None:
+            seen[m.param_id] = m
+            if len(seen) == m.param_count:
+                break
+    assert len(seen) == next(iter(seen.values())).param_count >= 19
+    assert seen["DQ_KPR_X"].param_value == pytest.approx(5.0)
+    assert seen["DQ_KIR_X"].param_value == pytest.approx(0.1)
+    assert all(len(name) <= 16 for name in seen)
+
+    s.send(M.MAVLink_param_set_message(s.target_system, s.target_component, b"DQ_KPR_X", 6.0,
+                                       M.MAV_PARAM_TYPE_REAL32))
+    echo = stack.wait_for(["PARAM_VALUE"], lambda m: m.param_id == "DQ_KPR_X")
+    assert echo.param_value == pytest.approx(6.0)
+    # k_i = 100 > k_p k_d = 60: refused, the old value stays and a STATUSTEXT says why
+    s.send(M.MAVLink_param_set_message(s.target_system, s.target_component, b"DQ_KIR_X", 100.0,
+                                       M.MAV_PARAM_TYPE_REAL32))
+    echo = stack.wait_for(["PARAM_VALUE"], lambda m: m.param_id == "DQ_KIR_X")
+    assert echo.param_value == pytest.approx(0.1)
+    text = stack.wait_for(["STATUSTEXT"], lambda m: "ki_r" in m.text)
+    assert text is not None
+    assert _param(stack, "DQ_KIR_X").param_value == pytest.approx(0.1)
+    s.send(M.MAVLink_param_set_message(s.target_system, s.target_component, b"MIS_LAND_SPD",
+                                       -1.0, M.MAV_PARAM_TYPE_REAL32))
+    echo = stack.wait_for(["PARAM_VALUE"], lambda m: m.param_id == "MIS_LAND_SPD")
+    assert echo.param_value == pytest.approx(0.5)
+
+
+def test_arming_gate_no_rotor_output_when_disarmed(rt_stack):
+    """Disarmed on the ground: actuator outputs are zero and the vehicle stays put; armed in
+    HOLD the rotors carry the vehicle; disarming in the air is refused unless forced."""
+    s = rt_stack.session
+    out = rt_stack.wait_for(["ACTUATOR_OUTPUT_STATUS"], timeout=5.0)
+    assert out is not None and out.actuator[:6] == [0.0] * 6
+    time.sleep(0.5)
+    pos = rt_stack.wait_for(["LOCAL_POSITION_NED"])
+    assert pos.z == pytest.approx(0.0, abs=1e-6)
+    assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
+    hb = rt_stack.wait_for(["HEARTBEAT"], lambda m: m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+    assert hb is not None
+    out = rt_stack.wait_for(["ACTUATOR_OUTPUT_STATUS"], lambda m: min(m.actuator[:6]) > 500)
+    assert out is not None  # hover speeds (~1100 rad/s) to hold the pose
+    assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0) == M.MAV_RESULT_ACCEPTED  # landed
+    out = rt_stack.wait_for(["ACTUATOR_OUTPUT_STATUS"], lambda m: max(m.actuator[:6]) == 0)
+    assert out is not None
+
+
+def test_offboard_stream_loss_falls_back_to_hold(stack):
+    """OFFBOARD needs a setpoint stream; when it stops for more than 1 s, the FCU holds."""
+    s = stack.session
+
+    def setpoint():
+        s.send(M.MAVLink_set_position_target_local_ned_message(
+            0, s.target_system, s.target_component, M.MAV_FRAME_LOCAL_NED,
+            0b0000_1111_1111_1000, 0.5, 0.0, 0.0, 0, 0, 0, 0, 0, 0, 0, 0))
+
+    for _ in range(5):
+        setpoint()
+        time.sleep(0.05)
+    assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
+    assert s.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                     6) == M.MAV_RESULT_ACCEPTED
+    t_end = time.monotonic() + 1.0
+    while time.monotonic() < t_end:
+        setpoint()
+        time.sleep(0.05)
+    hb = stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1)
+    assert hb.custom_mode == Mode.OFFBOARD.custom_mode
+    lost = time.monotonic()
+    text = stack.wait_for(["STATUSTEXT"], lambda m: "offboard" in m.text, timeout=5.0)
+    assert text is not None and time.monotonic() - lost >= 0.9
+    hb = stack.wait_for(["HEARTBEAT"], lambda m: m.custom_mode == Mode.HOLD.custom_mode,
+                        timeout=3.0)
+    assert hb is not None

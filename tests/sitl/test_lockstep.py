@@ -1,0 +1,190 @@
+"""Lockstep runs through the three processes: the same flight as in-process, deterministic,
+unchanged by loss on the simulator link, and a repeated state answered from store."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from common.binlog import read_log
+from common.config import load_scenario
+from common.links import free_port
+from common.mavlink import MAV
+from common.simlink import (
+    HIL_ACTUATOR_CONTROLS_ID,
+    Odometry,
+    pack_odometry,
+    split_frames,
+    unpack_actuator_controls,
+)
+from fcu.trajectory import FigureEight
+from gcs.inprocess import run_scenario
+from gcs.mission_client import upload
+from gcs.process_run import run_processes
+from gcs.scenario_mission import scenario_mission
+
+from ..udp_proxy import Impairment, UdpProxy
+from .conftest import ROOT, SCENARIOS, launch, stop
+
+M = MAV
+CASE1 = SCENARIOS / "case1_figure8.toml"
+
+
+def _gcs_run(out, *extra, timeout=600):
+    return subprocess.run([sys.executable, "-m", "gcs.cli", "run", str(CASE1), "--out",
+                           str(out), *extra], cwd=ROOT, capture_output=True, text=True,
+                          timeout=timeout, check=False)
+
+
+def _within(ours: float, ref: float, floor: float) -> bool:
+    return abs(ours - ref) <= max(0.05 * abs(ref), floor)
+
+
+@pytest.mark.timeout(900)
+def test_case1_through_processes_matches_in_process(tmp_path):
+    """Given `gcs run case1_figure8.toml` (lockstep, UDP), then the mission completes and the
+    errors are within 5 % (or 1 mm / 0.1 mrad) of the in-process run; the FCU's desired
+    trajectory for the uploaded mission equals the in-process Case I trajectory."""
+    out = tmp_path / "run"
+    proc = _gcs_run(out)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["mission_completed"] is True and m["lockstep"] is True
+    assert m["transport"] == "udp" and m["status"] == "completed"
+    assert m["sim_time_s"] == pytest.approx(160.0)
+    ref = run_scenario(load_scenario(CASE1)).metrics
+    for stat in ("max", "mean", "rmse"):
+        assert _within(m["position_error_m"][stat], ref["position_error_m"][stat], 1e-3)
+        assert _within(m["attitude_error_rad"][stat], ref["attitude_error_rad"][stat], 1e-4)
+
+    columns, onboard = read_log(out / "onboard_log.bin")
+    assert len(onboard) == 80001
+    traj = FigureEight(load_scenario(CASE1).trajectory)
+    idx = [columns.index(c) for c in ("pdx", "pdy", "pdz", "qdw", "qdx", "qdy", "qdz",
+                                      "vdx", "vdy", "vdz", "wdx", "wdy", "wdz")]
+    worst = 0.0
+    for row in onboard:
+        r = traj.sample(row[0] * 1e-6)
+        expected = (*r.p_enu_m, *r.q_enu_flu, *r.v_enu_m_s, *r.omega_flu_rad_s)
+        worst = max(worst, float(np.max(np.abs(row[idx] - expected))))
+    assert worst < 1e-9
+    assert (out / "flight.tlog").stat().st_size > 10_000
+
+
+def test_lockstep_runs_are_deterministic(tmp_path):
+    """Two lockstep runs of the same scenario: identical error figures and truth logs."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    for out in (a, b):
+        proc = _gcs_run(out, "--duration", "12")
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+    ma, mb = (json.loads((d / "metrics.json").read_text()) for d in (a, b))
+    for key in ("position_error_m", "attitude_error_rad", "sim_time_s", "samples"):
+        assert ma[key] == mb[key]
+    assert ma["sim_time_s"] == pytest.approx(12.0)
+    assert (a / "truth_log.bin").read_bytes() == (b / "truth_log.bin").read_bytes()
+
+
+def test_loss_on_the_simulator_link_changes_timing_not_results(tmp_path):
+    """5 % of datagrams dropped both ways (and some duplicated): Case I's first 20 s
+    complete without deadlock and give exactly the figures of the loss-free run."""
+    scenario = dataclasses.replace(load_scenario(CASE1), duration_s=20.0)
+    clean = run_processes(scenario, tmp_path / "clean")
+    proxies = []
+
+    def route(port):
+        proxy = UdpProxy(port, Impairment(drop=0.05, duplicate=0.02), seed=7)
+        proxies.append(proxy)
+        return proxy.port
+
+    try:
+        lossy = run_processes(scenario, tmp_path / "lossy", sim_route=route)
+    finally:
+        for p in proxies:
+            p.close()
+    assert proxies[0].counts["dropped"] > 100
+    assert lossy["status"] == "completed" and lossy["sim_time_s"] == pytest.approx(20.0)
+    for key in ("position_error_m", "attitude_error_rad", "samples"):
+        assert lossy[key] == clean[key]
+    assert lossy["fcu"]["resent_answers"] > 0
+    assert (tmp_path / "clean" / "truth_log.bin").read_bytes() == \
+        (tmp_path / "lossy" / "truth_log.bin").read_bytes()
+
+
+def test_repeated_state_gets_the_stored_answer(tmp_path):
+    """A state the FCU has answered is answered again with the same bytes, without a new
+    control step; a stale state is not answered; time stands still until the flight starts."""
+    sim = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sim.bind(("127.0.0.1", 0))
+    sim.settimeout(0.5)
+    stack = launch(tmp_path, sitl=False, sim_port=sim.getsockname()[1])
+    try:
+        s = stack.session
+
+        def state(t_us):
+            odo = Odometry(t_us, (-1.0, 0.0, -2.0), (math.sqrt(0.5), 0, 0, math.sqrt(0.5)),
+                           (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+            sim.sendto(pack_odometry(odo, 0, 1, 200), fcu_addr[0])
+
+        def answer():
+            try:
+                while True:
+                    data, _ = sim.recvfrom(65535)
+                    frames, _ = split_frames(data)
+                    for f in frames:
+                        if f.msg_id == HIL_ACTUATOR_CONTROLS_ID:
+                            return f.raw
+            except TimeoutError:
+                return None
+
+        fcu_addr = [None]
+        sc = load_scenario(SCENARIOS / "case2_impulse.toml")
+        result = upload(s.conn, s.target_system, s.target_component, scenario_mission(sc))
+        assert result == M.MAV_MISSION_ACCEPTED
+        assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
+        assert s.command(M.MAV_CMD_MISSION_START) == M.MAV_RESULT_ACCEPTED
+        # The FCU's simulator link is udpout towards us from an ephemeral port that it
+        # prints at start-up; states go there, answers come back to us.
+        fcu_port = None
+        deadline = time.monotonic() + 5
+        while fcu_port is None and time.monotonic() < deadline:
+            for line in stack.log("fcu").splitlines():
+                if "sim port" in line:
+                    fcu_port = int(line.rsplit(" ", 1)[1])
+            time.sleep(0.05)
+        assert fcu_port is not None, stack.log("fcu")
+        fcu_addr[0] = ("127.0.0.1", fcu_port)
+        state(0)
+        first = answer()
+        assert first is not None
+        state(0)
+        again = answer()
+        assert again == first  # byte for byte, sequence number included
+        state(2000)
+        second = answer()
+        assert second is not None and second != first
+        t = unpack_actuator_controls(split_frames(second)[0][0].payload).time_usec
+        assert t == 2000
+        state(0)  # stale
+        assert answer() is None
+    finally:
+        stack.session.close()
+        stop(stack.procs)
+        sim.close()
+
+
+def test_control_port_argument_is_validated():
+    """A wrong link URL is refused at start-up with a clear message."""
+    proc = subprocess.run([sys.executable, "-m", "fcu.node", "--vehicle",
+                           str(ROOT / "config/vehicles/hexa_tilted.toml"), "--gains",
+                           str(ROOT / "config/gains/pid_eq30.toml"), "--sim",
+                           f"udpx:127.0.0.1:{free_port()}"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=30, check=False)
+    assert proc.returncode == 2 and "udpx" in proc.stderr
