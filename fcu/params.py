@@ -8,7 +8,6 @@ and the old value stays.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import struct
 from dataclasses import dataclass
@@ -100,19 +99,16 @@ class ParamStore:
         if spec is None:
             raise ParamError(f"unknown parameter {name}")
         if not math.isfinite(value) or not spec.lo <= value <= spec.hi:
-            raise ParamError(f"{name} = {value} outside [{spec.lo}, {spec.hi}]")
+            raise ParamError(f"{name} refused: {value:g} not in [{spec.lo:g}, {spec.hi:g}]")
         if spec.name == "DQ_DAMPING" and value not in (0.0, 1.0):
-            raise ParamError(f"{name} must be 0 or 1")
+            raise ParamError(f"{name} refused: must be 0 or 1")
         trial = dict(self.values)
         trial[name] = _f32(value)
         if name.startswith("DQ_K"):
             try:
                 check_stability(self.gains(trial))
             except ConfigError as exc:
-                raise ParamError(f"refused: {exc}") from None
+                condition = str(exc).split("violates ", 1)[-1].split(" (", 1)[0]
+                raise ParamError(f"{name} refused: violates {condition}") from None
         self.values = trial
         return trial[name]
-
-
-def gains_with(gains: Gains, **changes: object) -> Gains:
-    return dataclasses.replace(gains, **changes)

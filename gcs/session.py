@@ -6,6 +6,7 @@ Wall-clock timeouts are fine here: the GCS faces people and links, not the locks
 
 from __future__ import annotations
 
+import struct
 import threading
 import time
 from pathlib import Path
@@ -22,14 +23,21 @@ class GcsError(RuntimeError):
     """A vehicle that does not answer, refuses a command, or a link that fails."""
 
 
-class _TlogFile:
-    """Unbuffered tlog sink: every record mavutil writes lands in the file at once."""
+class Tlog:
+    """A telemetry log as MAVProxy and QGroundControl write it: each message preceded by its
+    wall-clock time in microseconds (big-endian uint64). Unbuffered: every complete record
+    is in the file at once."""
 
     def __init__(self, path: Path) -> None:
         self.fh = path.open("wb", buffering=0)
+        self.lock = threading.Lock()
 
-    def write(self, data: bytes) -> None:
-        self.fh.write(data)
+    def write(self, msg) -> None:
+        if msg.get_type() == "BAD_DATA":
+            return
+        usec = int(time.time() * 1e6) & ~3
+        with self.lock:
+            self.fh.write(struct.pack(">Q", usec) + msg.get_msgbuf())
 
     def close(self) -> None:
         self.fh.close()
@@ -41,9 +49,15 @@ class Session:
         self.conn = mavutil.mavlink_connection(url, source_system=system_id,
                                                source_component=MAV_COMP_ID_MISSIONPLANNER,
                                                dialect="common", autoreconnect=True)
-        self.tlog = _TlogFile(tlog) if tlog else None
+        self.tlog = Tlog(tlog) if tlog else None
         if self.tlog is not None:
-            self.conn.logfile = self.tlog
+            received = self.conn.post_message
+
+            def post_message(msg, _received=received, _log=self.tlog):
+                _log.write(msg)  # every message heard, whatever the caller waits for
+                _received(msg)
+
+            self.conn.post_message = post_message
         self.lock = threading.Lock()
         self.target_system = 0
         self.target_component = 0
@@ -62,6 +76,8 @@ class Session:
     def send(self, msg) -> None:
         with self.lock:
             self.conn.mav.send(msg)
+        if self.tlog is not None:
+            self.tlog.write(msg)
 
     def recv(self, types: list[str] | None = None, timeout: float = 1.0):
         return self.conn.recv_match(type=types, blocking=True, timeout=timeout)

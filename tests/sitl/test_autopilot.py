@@ -106,10 +106,16 @@ def test_parameters_read_write_and_refuse_unstable_gains(stack):
     # k_i = 100 > k_p k_d = 60: refused, the old value stays and a STATUSTEXT says why
     s.send(M.MAVLink_param_set_message(s.target_system, s.target_component, b"DQ_KIR_X", 100.0,
                                        M.MAV_PARAM_TYPE_REAL32))
-    echo = stack.wait_for(["PARAM_VALUE"], lambda m: m.param_id == "DQ_KIR_X")
-    assert echo.param_value == pytest.approx(0.1)
-    text = stack.wait_for(["STATUSTEXT"], lambda m: "ki_r" in m.text)
-    assert text is not None
+    echo = text = None
+    deadline = time.monotonic() + 5.0
+    while (echo is None or text is None) and time.monotonic() < deadline:
+        m = s.recv(["PARAM_VALUE", "STATUSTEXT"], timeout=0.2)
+        if m is not None and m.get_type() == "PARAM_VALUE" and m.param_id == "DQ_KIR_X":
+            echo = m
+        elif m is not None and m.get_type() == "STATUSTEXT" and "DQ_KIR_X" in m.text:
+            text = m
+    assert echo is not None and echo.param_value == pytest.approx(0.1)
+    assert text is not None and "k_p k_d > k_i" in text.text
     assert _param(stack, "DQ_KIR_X").param_value == pytest.approx(0.1)
     s.send(M.MAVLink_param_set_message(s.target_system, s.target_component, b"MIS_LAND_SPD",
                                        -1.0, M.MAV_PARAM_TYPE_REAL32))

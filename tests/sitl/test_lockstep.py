@@ -144,23 +144,23 @@ def test_repeated_state_gets_the_stored_answer(tmp_path):
             except TimeoutError:
                 return None
 
+        # The FCU's simulator link is udpout towards us from an ephemeral port that it
+        # prints at start-up; states go there, answers come back to us.
         fcu_addr = [None]
+        deadline = time.monotonic() + 5
+        while fcu_addr[0] is None and time.monotonic() < deadline:
+            for line in stack.log("fcu").splitlines():
+                if "sim port" in line:
+                    fcu_addr[0] = ("127.0.0.1", int(line.rsplit(" ", 1)[1]))
+            time.sleep(0.05)
+        assert fcu_addr[0] is not None, stack.log("fcu")
+        state(0)
+        assert answer() is None  # disarmed, flight not started: simulated time stands still
         sc = load_scenario(SCENARIOS / "case2_impulse.toml")
         result = upload(s.conn, s.target_system, s.target_component, scenario_mission(sc))
         assert result == M.MAV_MISSION_ACCEPTED
         assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
         assert s.command(M.MAV_CMD_MISSION_START) == M.MAV_RESULT_ACCEPTED
-        # The FCU's simulator link is udpout towards us from an ephemeral port that it
-        # prints at start-up; states go there, answers come back to us.
-        fcu_port = None
-        deadline = time.monotonic() + 5
-        while fcu_port is None and time.monotonic() < deadline:
-            for line in stack.log("fcu").splitlines():
-                if "sim port" in line:
-                    fcu_port = int(line.rsplit(" ", 1)[1])
-            time.sleep(0.05)
-        assert fcu_port is not None, stack.log("fcu")
-        fcu_addr[0] = ("127.0.0.1", fcu_port)
         state(0)
         first = answer()
         assert first is not None
