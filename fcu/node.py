@@ -144,22 +144,26 @@ class FlightController:
             self.vehicle.disarm(force=True, reason=f"{reason}: disarmed")
 
     def _control_step(self, t_us: int) -> None:
+        """Step at the FCU's time t_us; answer and log under the state's own stamp (equal to
+        t_us in lockstep), so that logs join with the simulator's on time_usec."""
         t0 = time.perf_counter()
         out = self.vehicle.step(t_us)
+        stamp = max(self.vehicle.state_time_us, 0)
         step_us = (time.perf_counter() - t0) * 1e6
         n = len(out.speed_rad_s)
         controls = (*(s / self.w_max for s in out.speed_rad_s), *out.tilt_rad,
                     *(0.0,) * (16 - 2 * n))
         self.sim_seq = (self.sim_seq + 1) & 0xFF
         self.answer = pack_actuator_controls(
-            ActuatorControls(t_us, controls, MODE_ARMED if out.armed else 0,
+            ActuatorControls(stamp, controls, MODE_ARMED if out.armed else 0,
                              LOCKSTEP_FLAG if self.lockstep else 0),
             self.sim_seq, self.system_id, COMPONENT)
-        self.answered_us = t_us
+        if self.lockstep:
+            self.answered_us = stamp
         self.sim.send(self.answer)
         self.steps += 1
         if self.log is not None and out.result is not None:
-            self.log.write(onboard_row(t_us, self.vehicle.state, out.result, out.speed_rad_s,
+            self.log.write(onboard_row(stamp, self.vehicle.state, out.result, out.speed_rad_s,
                                        out.tilt_rad, out.armed, step_us))
 
     # ------------------------------------------------------------------ GCS links

@@ -5,10 +5,13 @@ Timeouts and retries are the specification's: 1500 ms for the whole-transaction 
 (MISSION_COUNT, MISSION_REQUEST_LIST, MISSION_CLEAR_ALL), 250 ms per mission item, 5 retries;
 each timeout resends the last message. Messages from other systems, for other systems or
 about other plan types are skipped. Wall-clock time is fine here: the GCS faces links.
+Pass `send=` (e.g. `Session.send`) when another thread sends on the same connection, so
+that sends stay serialised; by default `conn.mav.send` is used.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 
@@ -34,8 +37,12 @@ def result_name(result: int) -> str:
     return entry.name if entry is not None else f"MAV_MISSION_RESULT {result}"
 
 
-def _send(conn, msg) -> None:
-    conn.mav.send(msg)
+Send = Callable[[MAV.MAVLink_message], None]
+
+
+def _sender(conn, send: Send | None) -> Send:
+    """`send` if given (e.g. a session's locked send), else the connection's own."""
+    return send if send is not None else conn.mav.send
 
 
 def _recv(conn, types: list[str], target_system: int, target_component: int,
@@ -70,6 +77,8 @@ def _item_message(item: MissionItem, target_system: int, target_component: int):
 
 def _item_from(msg) -> MissionItem:
     if msg.get_type() == "MISSION_ITEM":  # legacy: local x, y as float metres
+        if not (math.isfinite(msg.x) and math.isfinite(msg.y)):
+            raise MissionError(f"mission download: item {msg.seq} has a non-finite x or y")
         x, y = round(msg.x * LOCAL_SCALE), round(msg.y * LOCAL_SCALE)
     else:
         x, y = msg.x, msg.y
@@ -81,17 +90,19 @@ def _item_from(msg) -> MissionItem:
 
 def upload(conn, target_system: int, target_component: int, items: Sequence[MissionItem],
            progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
-           item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = RETRIES) -> int:
+           item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = RETRIES,
+           send: Send | None = None) -> int:
     """Upload `items` (sent with seq = their index) and return the vehicle's
     MAV_MISSION_RESULT (MAV_MISSION_ACCEPTED when it took the mission).
 
     Raises MissionError when the vehicle stops answering (after `retries` resends of the
     last message) or asks for an item outside the mission.
     """
+    _send = _sender(conn, send)
     items = [item._replace(seq=i, mission_type=MISSION) for i, item in enumerate(items)]
     count = len(items)
     last = M.MAVLink_mission_count_message(target_system, target_component, count, MISSION)
-    _send(conn, last)
+    _send(last)
     wait, attempts, done = timeout_s, 0, -1  # done: highest seq requested so far
     types = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"]
     while True:
@@ -99,7 +110,7 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
         if msg is None:
             attempts += 1
             if attempts > retries:
-                _send(conn, M.MAVLink_mission_ack_message(
+                _send(M.MAVLink_mission_ack_message(
                     target_system, target_component, M.MAV_MISSION_OPERATION_CANCELLED,
                     MISSION))
                 if done < 0:
@@ -111,7 +122,7 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
                 raise MissionError(
                     f"mission upload to system {target_system}: no {what} after "
                     f"{retries + 1} tries ({wait * 1e3:.0f} ms each)")
-            _send(conn, last)
+            _send(last)
             continue
         if msg.get_type() == "MISSION_ACK":
             if msg.type == M.MAV_MISSION_ACCEPTED and progress is not None:
@@ -119,7 +130,7 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
             return msg.type
         seq = msg.seq
         if not 0 <= seq < count:
-            _send(conn, M.MAVLink_mission_ack_message(
+            _send(M.MAVLink_mission_ack_message(
                 target_system, target_component, M.MAV_MISSION_INVALID_SEQUENCE, MISSION))
             raise MissionError(f"mission upload to system {target_system}: vehicle asked for "
                                f"item {seq} of a mission of {count}")
@@ -129,19 +140,20 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
             if progress is not None:
                 progress(seq, count)
         last = _item_message(items[seq], target_system, target_component)
-        _send(conn, last)
+        _send(last)
         wait = item_timeout_s
 
 
 def download(conn, target_system: int, target_component: int,
              progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
              item_timeout_s: float = ITEM_TIMEOUT_S,
-             retries: int = RETRIES) -> list[MissionItem]:
+             retries: int = RETRIES, send: Send | None = None) -> list[MissionItem]:
     """The vehicle's mission. Raises MissionError when it stops answering or refuses."""
+    _send = _sender(conn, send)
 
     def exchange(request, types: list[str], wait: float, accept, what: str):
         for _ in range(retries + 1):
-            _send(conn, request)
+            _send(request)
             deadline = time.monotonic() + wait
             while (remaining := deadline - time.monotonic()) > 0.0:
                 msg = _recv(conn, types, target_system, target_component, remaining)
@@ -171,17 +183,18 @@ def download(conn, target_system: int, target_component: int,
         items.append(_item_from(msg))
         if progress is not None:
             progress(seq + 1, count)
-    _send(conn, M.MAVLink_mission_ack_message(target_system, target_component,
+    _send(M.MAVLink_mission_ack_message(target_system, target_component,
                                               M.MAV_MISSION_ACCEPTED, MISSION))
     return items
 
 
 def clear(conn, target_system: int, target_component: int, *, timeout_s: float = TIMEOUT_S,
-          retries: int = RETRIES) -> int:
+          retries: int = RETRIES, send: Send | None = None) -> int:
     """Clear the vehicle's mission; its MAV_MISSION_RESULT. MissionError if it is silent."""
+    _send = _sender(conn, send)
     request = M.MAVLink_mission_clear_all_message(target_system, target_component, MISSION)
     for _ in range(retries + 1):
-        _send(conn, request)
+        _send(request)
         msg = _recv(conn, ["MISSION_ACK"], target_system, target_component, timeout_s)
         if msg is not None:
             return msg.type

@@ -77,7 +77,7 @@ class Progress:
 def _watch(session: Session, children: Children, progress: Progress, end_s: float,
            total: int, divergence_m: float, wall_timeout_s: float,
            report=None) -> None:
-    """Follow the flight until the simulated end, mission completion or divergence."""
+    """Follow the flight until the vehicle's clock reaches end_s, or divergence."""
     end_ms = round(end_s * 1000)
     deadline = time.monotonic() + wall_timeout_s
     last_check = 0.0
@@ -133,7 +133,9 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
     py = sys.executable
     sitl_cmd = [py, "-m", "sitl.node", scenario.source, "--link",
                 f"udpin:127.0.0.1:{sim_port}", "--truth-log", str(out / TRUTH_LOG),
-                "--end-time", repr(end_s), "--control-rate", str(scenario.control_rate_hz)]
+                "--control-rate", str(scenario.control_rate_hz)]
+    if not realtime:  # lockstep: the simulator itself stops at the end, to the microsecond
+        sitl_cmd += ["--end-time", repr(end_s)]
     fcu_sim_port = sim_route(sim_port) if sim_route else sim_port
     fcu_cmd = [py, "-m", "fcu.node", "--vehicle", scenario.files["vehicle"], "--gains", gains,
                "--sim", f"udpout:127.0.0.1:{fcu_sim_port}", "--gcs",
@@ -166,6 +168,12 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
         result = upload(session.conn, session.target_system, session.target_component, items)
         if result != M.MAV_MISSION_ACCEPTED:
             raise RunError(f"mission upload refused: MAV_MISSION_RESULT {result}")
+        # The flight's clock starts at MISSION_START: 0 in lockstep (simulated time stands
+        # still until then), the FCU's monotonic time in real time.
+        start_ms = 0
+        if realtime:
+            att = session.recv(["ATTITUDE_QUATERNION"], timeout=5.0)
+            start_ms = att.time_boot_ms if att is not None else 0
         for command, params, what in (
                 (M.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), "arming"),
                 (M.MAV_CMD_MISSION_START, (0.0, float(len(items) - 1)), "mission start")):
@@ -173,7 +181,7 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
             if ack != M.MAV_RESULT_ACCEPTED:
                 raise RunError(f"{what} refused: MAV_RESULT {ack}")
         wall0 = time.monotonic()
-        _watch(session, children, progress, end_s, len(items),
+        _watch(session, children, progress, start_ms * 1e-3 + end_s, len(items),
                scenario.divergence_position_m, wall_timeout_s, report)
     except (GcsError, MissionError) as exc:
         raise RunError(str(exc)) from exc

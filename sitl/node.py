@@ -228,7 +228,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--realtime", action="store_true", help="pace by the wall clock")
     p.add_argument("--truth-log", type=Path, help="write the ground-truth log here")
     p.add_argument("--end-time", type=float, metavar="S",
-                   help="stop advancing at this simulated time (default: the scenario's)")
+                   help="stop advancing at this simulated time (default: the scenario's "
+                        "duration in lockstep, never in real time)")
     p.add_argument("--control-rate", type=int, default=None,
                    help="control periods per second (default: the scenario's)")
     p.add_argument("--ideal-actuators", action="store_true")
@@ -251,7 +252,11 @@ def main(argv: list[str] | None = None) -> int:
         rate = args.control_rate or scenario.control_rate_hz
         if not 1 <= rate <= 1000:
             raise ConfigError(f"--control-rate: expected 1..1000 Hz, got {rate}")
-        end = args.end_time if args.end_time is not None else scenario.duration_s
+        end = args.end_time
+        if end is None and not args.realtime:
+            end = scenario.duration_s
+        if end is not None and not (math.isfinite(end) and end > 0):
+            raise ConfigError(f"--end-time: expected a positive number of seconds, got {end}")
         server = SimulatorServer(scenario, args.link, truth_log=args.truth_log,
                                  end_time_s=end, realtime=args.realtime,
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
