@@ -255,7 +255,10 @@ class FlightController:
             first = int(p[0]) if math.isfinite(p[0]) else 0
             result, text = v.mission_start(first)
         elif cmd == M.MAV_CMD_DO_SET_MISSION_CURRENT:
-            result, text = v.set_mission_current(int(p[0]) if math.isfinite(p[0]) else -1)
+            seq = int(p[0]) if math.isfinite(p[0]) else -1
+            result = M.MAV_RESULT_ACCEPTED if self._mission_set_current(seq) \
+                else M.MAV_RESULT_DENIED
+            text = f"no mission item {seq}"
         elif cmd == M.MAV_CMD_NAV_LAND:
             result, text = v.set_mode(Mode.LAND, now) if v.armed else (
                 M.MAV_RESULT_DENIED, "land: not armed")
@@ -333,6 +336,9 @@ class FlightController:
 
     def _mission_set_current(self, seq: int) -> bool:
         result, _ = self.vehicle.set_mission_current(seq)
+        if result == M.MAV_RESULT_ACCEPTED:
+            self.missions.current_seq = seq
+            self._send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # the spec's confirmation
         return result == M.MAV_RESULT_ACCEPTED
 
     def _mission_current_msg(self):
@@ -396,6 +402,7 @@ class FlightController:
             if ev.kind == "reached":
                 self.send(M.MAVLink_mission_item_reached_message(ev.seq))
         if v.mission_events:
+            self.missions.current_seq = v.mission_current
             self._send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # on change
         v.mission_events.clear()
         for msg_id in self.schedule.pop_due(now):
@@ -428,6 +435,8 @@ class FlightController:
                 readable, _, _ = select.select(list(fds), [], [], timeout)
             except InterruptedError:
                 continue
+            if not readable and timeout == 0.0:
+                os.sched_yield()  # polling: let a process that has work run on this core
             for fd in readable:
                 kind, index, link = fds[fd]
                 for peer, data in link.recv():

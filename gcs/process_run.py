@@ -27,6 +27,7 @@ from gcs.scenario_mission import scenario_mission
 from gcs.session import GcsError, Session
 
 M = MAV
+STALL_S = 60.0
 
 
 class RunError(RuntimeError):
@@ -82,6 +83,7 @@ def _watch(session: Session, children: Children, progress: Progress, end_s: floa
     deadline = time.monotonic() + wall_timeout_s
     last_check = 0.0
     reached_end = False
+    last_ms, last_progress = -1, time.monotonic()
     while time.monotonic() < deadline:
         msg = session.recv(["ATTITUDE_QUATERNION", "MISSION_CURRENT", "STATUSTEXT",
                             "NAMED_VALUE_FLOAT", "MISSION_ITEM_REACHED"], timeout=0.2)
@@ -96,6 +98,11 @@ def _watch(session: Session, children: Children, progress: Progress, end_s: floa
         kind = msg.get_type()
         if kind == "ATTITUDE_QUATERNION":
             progress.sim_time_s = msg.time_boot_ms * 1e-3
+            if msg.time_boot_ms != last_ms:
+                last_ms, last_progress = msg.time_boot_ms, now
+            elif now - last_progress > STALL_S:
+                raise RunError(f"the vehicle's clock stopped at {last_ms / 1000:.3f} s for "
+                               f"{STALL_S:.0f} s of wall time")
             if msg.time_boot_ms >= end_ms and not reached_end:
                 reached_end = True
                 deadline = now + 0.3  # let the last mission messages arrive
@@ -146,8 +153,8 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
         fcu_cmd.append("--realtime")
     if scenario.ideal_actuators:
         sitl_cmd.append("--ideal-actuators")
-    if wall_timeout_s is None:
-        wall_timeout_s = 120.0 + (2.0 * end_s if realtime else end_s)
+    if wall_timeout_s is None:  # a generous cap; a stalled run is caught sooner (STALL_S)
+        wall_timeout_s = 120.0 + (2.0 if realtime else 20.0) * end_s
     items = scenario_mission(scenario)
     children = Children(out)
     session = None
@@ -165,7 +172,8 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
         except GcsError:
             children.check()
             raise
-        result = upload(session.conn, session.target_system, session.target_component, items)
+        result = upload(session.conn, session.target_system, session.target_component, items,
+                        send=session.send)
         if result != M.MAV_MISSION_ACCEPTED:
             raise RunError(f"mission upload refused: MAV_MISSION_RESULT {result}")
         # The flight's clock starts at MISSION_START: 0 in lockstep (simulated time stands

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import select
 import signal
 import sys
@@ -171,6 +172,9 @@ class SimulatorServer:
                 timeout = max(0.0, (self.resend_s if idle < 0.5 else 0.05)
                               - (now - max(last_resend, last_progress)))
             readable, _, _ = select.select([fd], [], [], timeout)
+            if not readable and timeout == 0.0:
+                os.sched_yield()  # polling: let a process that has work run on this core
+                continue
             if not readable:
                 now = time.monotonic()
                 if idle >= SPIN_S and now - max(last_resend, last_progress) >= (

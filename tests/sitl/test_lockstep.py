@@ -157,7 +157,8 @@ def test_repeated_state_gets_the_stored_answer(tmp_path):
         state(0)
         assert answer() is None  # disarmed, flight not started: simulated time stands still
         sc = load_scenario(SCENARIOS / "case2_impulse.toml")
-        result = upload(s.conn, s.target_system, s.target_component, scenario_mission(sc))
+        result = upload(s.conn, s.target_system, s.target_component, scenario_mission(sc),
+                        send=s.send)
         assert result == M.MAV_MISSION_ACCEPTED
         assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
         assert s.command(M.MAV_CMD_MISSION_START) == M.MAV_RESULT_ACCEPTED

@@ -33,8 +33,8 @@ def test_upload_download_round_trip_and_atomic_refusal(stack):
     s = stack.session
     t, c = s.target_system, s.target_component
     case1 = scenario_mission(load_scenario(SCENARIOS / "case1_figure8.toml"))
-    assert upload(s.conn, t, c, case1) == M.MAV_MISSION_ACCEPTED
-    back = download(s.conn, t, c)
+    assert upload(s.conn, t, c, case1, send=s.send) == M.MAV_MISSION_ACCEPTED
+    back = download(s.conn, t, c, send=s.send)
     assert _same(back, case1)
 
     # parameters travel as float32: pick values that survive exactly
@@ -46,10 +46,10 @@ def test_upload_download_round_trip_and_atomic_refusal(stack):
     for items, expected in (([keyframe, unsupported.with_seq(1)], M.MAV_MISSION_UNSUPPORTED),
                             ([bad_frame], M.MAV_MISSION_UNSUPPORTED_FRAME),
                             ([bad_param], M.MAV_MISSION_INVALID_PARAM1)):
-        assert upload(s.conn, t, c, items) == expected
-        assert _same(download(s.conn, t, c), case1)
+        assert upload(s.conn, t, c, items, send=s.send) == expected
+        assert _same(download(s.conn, t, c, send=s.send), case1)
 
-    assert upload(s.conn, t, c, [keyframe]) == M.MAV_MISSION_ACCEPTED
-    assert _same(download(s.conn, t, c), [keyframe])
-    assert clear(s.conn, t, c) == M.MAV_MISSION_ACCEPTED
-    assert download(s.conn, t, c) == []
+    assert upload(s.conn, t, c, [keyframe], send=s.send) == M.MAV_MISSION_ACCEPTED
+    assert _same(download(s.conn, t, c, send=s.send), [keyframe])
+    assert clear(s.conn, t, c, send=s.send) == M.MAV_MISSION_ACCEPTED
+    assert download(s.conn, t, c, send=s.send) == []

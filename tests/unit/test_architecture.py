@@ -12,7 +12,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 PURE_MODULES = ("common/config.py", "common/geometry.py", "common/frames.py",
                 "fcu/dualquat.py", "fcu/trajectory.py", "fcu/tracker.py", "fcu/allocation.py",
-                "fcu/core.py", "sitl/plant.py", "sitl/disturbance.py")
+                "fcu/core.py", "fcu/mission.py", "fcu/safety.py", "fcu/modes.py",
+                "sitl/plant.py", "sitl/disturbance.py")
 
 
 def _imports(package: str) -> set[str]:

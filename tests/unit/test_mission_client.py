@@ -1,0 +1,180 @@
+"""Ground-station mission client (gcs/mission_client.py) against a MissionServer behind a
+loopback UDP socket, served by a small loop in a thread; optionally losing replies."""
+
+from __future__ import annotations
+
+import math
+import random
+import select
+import socket
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+import common.mavlink  # noqa: F401  (MAVLink 2 before mavutil)
+from common.config import load_scenario
+from common.mavlink import MAV, encoder, pack, parser
+from common.mission_items import MissionItem, local_xy
+from fcu.mission import MissionLimits
+from fcu.mission_protocol import MissionServer
+from gcs.mission_client import MissionError, clear, download, upload
+from gcs.scenario_mission import scenario_mission
+
+M = MAV
+ROOT = Path(__file__).resolve().parents[2]
+VEHICLE = (1, M.MAV_COMP_ID_AUTOPILOT1)
+NAN = math.nan
+
+
+class UdpVehicle:
+    """A MissionServer on 127.0.0.1:<free port>; drops each reply with probability `drop`
+    (seeded). Ticks the server every 10 ms."""
+
+    def __init__(self, drop: float = 0.0, seed: int = 0,
+                 limits: MissionLimits | None = None) -> None:
+        self.server = MissionServer(*VEHICLE, limits or MissionLimits())
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
+        self.mav = encoder(*VEHICLE)
+        self.parser = parser()
+        self.rng = random.Random(seed)
+        self.drop = drop
+        self.sent = self.dropped = 0
+        self.errors: list[BaseException] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="udp-vehicle", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        peer = None
+        try:
+            while not self._stop.is_set():
+                readable, _, _ = select.select([self.sock], [], [], 0.01)
+                now = time.monotonic()
+                replies = []
+                if readable:
+                    data, peer = self.sock.recvfrom(65535)
+                    for msg in self.parser.parse_buffer(data) or []:
+                        if msg.get_type() != "BAD_DATA":
+                            replies += self.server.handle(msg, now)
+                replies += self.server.tick(now)
+                for reply in replies:
+                    if self.rng.random() < self.drop:
+                        self.dropped += 1
+                        continue
+                    self.sock.sendto(pack(self.mav, reply), peer)
+                    self.sent += 1
+        except BaseException as exc:  # surfaced by close()
+            self.errors.append(exc)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)
+        self.sock.close()
+        assert not self._thread.is_alive()
+        assert not self.errors, self.errors
+
+
+@pytest.fixture
+def vehicle_factory():
+    made: list[tuple[UdpVehicle, object]] = []
+
+    from pymavlink import mavutil  # after common.mavlink has pinned MAVLink 2
+
+    def make(**kwargs):
+        vehicle = UdpVehicle(**kwargs)
+        conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{vehicle.port}",
+                                          source_system=255,
+                                          source_component=M.MAV_COMP_ID_MISSIONPLANNER,
+                                          dialect="common")
+        made.append((vehicle, conn))
+        return vehicle, conn
+
+    yield make
+    for vehicle, conn in made:
+        conn.close()
+        vehicle.close()
+
+
+def same_items(a, b) -> bool:
+    def key(it):
+        return tuple("nan" if isinstance(v, float) and math.isnan(v) else v for v in it)
+    return [key(x) for x in a] == [key(x) for x in b]
+
+
+def case1_and_more() -> list[MissionItem]:
+    items = scenario_mission(load_scenario(ROOT / "config/scenarios/case1_figure8.toml"))
+    extra = [MissionItem(0, M.MAV_FRAME_LOCAL_NED, M.MAV_CMD_NAV_WAYPOINT, 0, 1, 1.0, 0.0, 0.0,
+                         45.0 * k, local_xy(0.5 * k), local_xy(-1.25 * k), -5.0 - 0.25 * k)
+             for k in range(6)]
+    land = MissionItem(0, M.MAV_FRAME_LOCAL_NED, M.MAV_CMD_NAV_LAND, 0, 1, 0.0, 0.0, 0.0, NAN,
+                       0, 0, 0.0)
+    return [it.with_seq(i) for i, it in enumerate([*items, *extra, land])]
+
+
+def test_round_trip_and_clear(vehicle_factory):
+    """Given a vehicle on loopback UDP, when the Case I mission is uploaded, downloaded and
+    cleared, then it is accepted, comes back equal, and is gone after the clear; progress
+    is reported up to (n, n)."""
+    vehicle, conn = vehicle_factory()
+    items = scenario_mission(load_scenario(ROOT / "config/scenarios/case1_figure8.toml"))
+    seen: list[tuple[int, int]] = []
+    result = upload(conn, *VEHICLE, items, progress=lambda d, n: seen.append((d, n)))
+    assert result == M.MAV_MISSION_ACCEPTED
+    assert seen[-1] == (4, 4) and [d for d, _ in seen] == sorted(d for d, _ in seen)
+    assert same_items(vehicle.server.mission, items)
+    got: list[tuple[int, int]] = []
+    assert same_items(download(conn, *VEHICLE, progress=lambda d, n: got.append((d, n))),
+                      items)
+    assert got == [(1, 4), (2, 4), (3, 4), (4, 4)]
+    sent: list[str] = []
+
+    def send(msg) -> None:  # a caller's own (e.g. locked) send is used when given
+        sent.append(msg.get_type())
+        conn.mav.send(msg)
+
+    assert clear(conn, *VEHICLE, send=send) == M.MAV_MISSION_ACCEPTED
+    assert sent == ["MISSION_CLEAR_ALL"]
+    assert vehicle.server.mission == ()
+    assert download(conn, *VEHICLE) == []
+
+
+def test_refused_mission_returns_the_result(vehicle_factory):
+    """Given an invalid item, then upload returns the vehicle's MAV_MISSION_RESULT (no
+    exception) and the vehicle keeps its mission."""
+    vehicle, conn = vehicle_factory()
+    items = case1_and_more()
+    assert upload(conn, *VEHICLE, items) == M.MAV_MISSION_ACCEPTED
+    bad = list(items)
+    bad[3] = bad[3]._replace(z=NAN)
+    assert upload(conn, *VEHICLE, bad) == M.MAV_MISSION_INVALID_PARAM7
+    assert same_items(vehicle.server.mission, items)
+
+
+def test_lossy_link_still_completes(vehicle_factory):
+    """Given a vehicle that drops 30 % of its replies (seeded), then upload and download of
+    an 11-item mission still complete, equal, through the retries of both sides."""
+    vehicle, conn = vehicle_factory(drop=0.3, seed=7)
+    items = case1_and_more()
+    assert upload(conn, *VEHICLE, items) == M.MAV_MISSION_ACCEPTED
+    assert same_items(vehicle.server.mission, items)
+    assert same_items(download(conn, *VEHICLE), items)
+    assert vehicle.dropped > 0
+
+
+def test_silent_vehicle_raises(vehicle_factory):
+    """Given a vehicle whose replies are all lost, then upload, download and clear raise
+    MissionError saying what went unanswered, after the retries."""
+    _vehicle, conn = vehicle_factory(drop=1.0)
+    fast = {"timeout_s": 0.05, "retries": 2}
+    t0 = time.monotonic()
+    with pytest.raises(MissionError, match=r"no answer to MISSION_COUNT\(11\) after 3 tries"):
+        upload(conn, *VEHICLE, case1_and_more(), item_timeout_s=0.02, **fast)
+    with pytest.raises(MissionError, match="no answer to MISSION_REQUEST_LIST after 3 tries"):
+        download(conn, *VEHICLE, item_timeout_s=0.02, **fast)
+    with pytest.raises(MissionError, match="no MISSION_ACK after 3 tries"):
+        clear(conn, *VEHICLE, **fast)
+    assert time.monotonic() - t0 < 2.0
