@@ -64,15 +64,17 @@ def _rate(stack, kind: str, seconds: float = 1.5) -> float:
 def test_message_interval_changes_the_stream(stack):
     """SET_MESSAGE_INTERVAL: 10 Hz, then off (-1), then back to the default (0)."""
     s = stack.session
-    assert _rate(stack, "ATTITUDE_QUATERNION") > 30.0  # default 50 Hz
+    # Rates are wall-clock rates: on a loaded machine compare them with each other.
+    default = _rate(stack, "ATTITUDE_QUATERNION")  # 50 Hz
     msg_id = M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION
     assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 100_000) == M.MAV_RESULT_ACCEPTED
-    assert 5.0 < _rate(stack, "ATTITUDE_QUATERNION") < 15.0
+    slow = _rate(stack, "ATTITUDE_QUATERNION")  # 10 Hz
+    assert 3.0 < slow < 15.0 and default > 2.5 * slow
     assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, -1) == M.MAV_RESULT_ACCEPTED
     time.sleep(0.2)
     assert _rate(stack, "ATTITUDE_QUATERNION", 1.0) == 0.0
     assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 0) == M.MAV_RESULT_ACCEPTED
-    assert _rate(stack, "ATTITUDE_QUATERNION") > 30.0
+    assert _rate(stack, "ATTITUDE_QUATERNION") > 2.5 * slow
     assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, 99999, 1000) == M.MAV_RESULT_DENIED
 
 
