@@ -66,6 +66,15 @@ class Link:
     def fileno(self) -> int:
         raise NotImplementedError
 
+    def filenos(self) -> list[int]:
+        """Every descriptor to wait on (a TCP server also waits on its clients)."""
+        fd = self.fileno()
+        return [fd] if fd >= 0 else []
+
+    @property
+    def is_stream(self) -> bool:
+        return self.url.scheme in ("tcp", "tcpin", "serial")
+
     def recv(self) -> list[tuple[object, bytes]]:
         """Ready (peer, bytes) pairs; empty when nothing is waiting."""
         raise NotImplementedError

@@ -91,11 +91,14 @@ _CRC_EXTRA = {ODOMETRY_ID: (_ODO.crc_extra, _ODO_STRUCT.size),
               HIL_ACTUATOR_CONTROLS_ID: (_HAC.crc_extra, _HAC_STRUCT.size)}
 
 
-def split_frames(data: bytes) -> tuple[list[Frame], int]:
+def split_frames(data: bytes, *, stream: bool = False) -> tuple[list[Frame], int] | tuple[
+        list[Frame], int, bytes]:
     """Valid MAVLink 2 frames of the hot pair in a datagram, and the count of rejected bytes.
 
     Frames of other messages are returned with an empty payload and their raw bytes so that a
-    general parser can take them; corrupted or truncated frames are skipped (counted).
+    general parser can take them; corrupted or truncated frames are skipped (counted). With
+    `stream=True` (TCP, serial) a frame cut at the end is not rejected but returned as the
+    third element, to be prepended to the next chunk.
     """
     frames: list[Frame] = []
     rejected = 0
@@ -108,15 +111,17 @@ def split_frames(data: bytes) -> tuple[list[Frame], int]:
                 break
             i = j
             continue
-        if n - i < 12:
-            rejected += n - i
-            break
-        length, incompat = data[i + 1], data[i + 2]
-        end = i + 10 + length + 2 + (13 if incompat & 1 else 0)
-        if end > n:
+        if n - i < 12 or i + 12 + data[i + 1] + (13 if data[i + 2] & 1 else 0) > n:
+            if stream:
+                return frames, rejected, data[i:]
+            if n - i < 12:
+                rejected += n - i
+                break
             rejected += 1
             i += 1
             continue
+        length, incompat = data[i + 1], data[i + 2]
+        end = i + 10 + length + 2 + (13 if incompat & 1 else 0)
         msg_id = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
         raw = data[i:end]
         known = _CRC_EXTRA.get(msg_id)
@@ -134,7 +139,25 @@ def split_frames(data: bytes) -> tuple[list[Frame], int]:
         payload = data[i + 10:body_end] + bytes(size - length)
         frames.append(Frame(msg_id, data[i + 5], data[i + 6], payload, raw))
         i = end
+    if stream:
+        return frames, rejected, b""
     return frames, rejected
+
+
+class FrameReader:
+    """Per-peer frame splitting: whole datagrams for UDP, a carried tail for streams."""
+
+    def __init__(self, stream: bool) -> None:
+        self.stream = stream
+        self.tails: dict[object, bytes] = {}
+
+    def feed(self, peer: object, data: bytes) -> tuple[list[Frame], int]:
+        if not self.stream:
+            return split_frames(data)  # type: ignore[return-value]
+        frames, rejected, tail = split_frames(self.tails.pop(peer, b"") + data, stream=True)
+        if tail:
+            self.tails[peer] = tail[-512:]
+        return frames, rejected
 
 
 def unpack_odometry(payload: bytes) -> Odometry:

@@ -33,8 +33,8 @@ from common.simlink import (
     MODE_ARMED,
     ODOMETRY_ID,
     ActuatorControls,
+    FrameReader,
     pack_actuator_controls,
-    split_frames,
     unpack_odometry,
 )
 from fcu.core import ONBOARD_COLUMNS, onboard_row
@@ -63,6 +63,7 @@ class FlightController:
         self.system_id = system_id
         self.lockstep = lockstep
         self.sim = open_link(sim_url)
+        self.sim_reader = FrameReader(self.sim.is_stream)
         self.gcs: list[Link] = [open_link(u) for u in gcs_urls]
         self.mav = encoder(system_id, COMPONENT)
         self.parsers: dict[tuple[int, object], MAV.MAVLink] = {}
@@ -109,9 +110,9 @@ class FlightController:
 
     # ------------------------------------------------------------------ simulator link
 
-    def _on_sim_datagram(self, data: bytes) -> None:
+    def _on_sim_datagram(self, peer: object, data: bytes) -> None:
         self.last_sim_rx_s = time.monotonic()
-        frames, rejected = split_frames(data)
+        frames, rejected = self.sim_reader.feed(peer, data)
         self.rejected_bytes += rejected
         for f in frames:
             if f.msg_id != ODOMETRY_ID:
@@ -420,10 +421,9 @@ class FlightController:
         period_s = self.period_us * 1e-6
         next_tick = time.monotonic()
         next_housekeeping = next_tick
-        fds: dict[int, tuple[str, int, Link]] = {self.sim.fileno(): ("sim", 0, self.sim)}
-        for i, link in enumerate(self.gcs):
-            fds[link.fileno()] = ("gcs", i, link)
+        links = [("sim", 0, self.sim), *(("gcs", i, link) for i, link in enumerate(self.gcs))]
         while self.running:
+            fds = {fd: entry for entry in links for fd in entry[2].filenos()}
             now = time.monotonic()
             wake = self.schedule.next_due()
             if not self.lockstep:
@@ -437,11 +437,10 @@ class FlightController:
                 continue
             if not readable and timeout == 0.0:
                 os.sched_yield()  # polling: let a process that has work run on this core
-            for fd in readable:
-                kind, index, link = fds[fd]
+            for kind, index, link in {fds[fd] for fd in readable}:
                 for peer, data in link.recv():
                     if kind == "sim":
-                        self._on_sim_datagram(data)
+                        self._on_sim_datagram(peer, data)
                     else:
                         self._on_gcs_datagram(index, peer, data)
             now = time.monotonic()

@@ -40,6 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="rotors and tilt servos follow their commands instantly")
     run.add_argument("--duration", type=_positive, metavar="S",
                      help="cut the scenario short after S simulated seconds")
+    run.add_argument("--sim-link", choices=("udp", "tcp"), default="udp",
+                     help="transport of the simulator link (default udp)")
     run.add_argument("--out", type=Path, required=True, metavar="DIR")
 
     t1 = sub.add_parser("table1", help="Case I and Case II, PID and PD, beside the paper")
@@ -83,7 +85,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         metrics = result.metrics
     else:
         try:
-            metrics = run_processes(scenario, args.out, realtime=args.realtime)
+            metrics = run_processes(scenario, args.out, realtime=args.realtime,
+                                    transport=args.sim_link)
         except RunError as exc:
             print(f"gcs run: {exc}", file=sys.stderr)
             return 1

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -125,27 +126,33 @@ def _watch(session: Session, children: Children, progress: Progress, end_s: floa
 
 def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
                   wall_timeout_s: float | None = None, report=None,
-                  sim_route: Callable[[int], int] | None = None) -> dict[str, Any]:
+                  sim_route: Callable[[int], int] | None = None,
+                  transport: str = "udp") -> dict[str, Any]:
     """Fly `scenario` through sitl + fcu processes; returns the metrics written to out.
 
-    `sim_route` maps the simulator's port to the port the FCU sends to (a test proxy).
+    `sim_route` maps the simulator's port to the port the FCU sends to (a test proxy);
+    `transport` is the simulator link's, "udp" or "tcp".
     """
+    if transport not in ("udp", "tcp"):
+        raise RunError(f"unknown simulator transport {transport!r} (udp or tcp)")
+    server, client = ("udpin", "udpout") if transport == "udp" else ("tcpin", "tcp")
     out.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(scenario.source, out / "scenario.toml")
     for name in (TRUTH_LOG, ONBOARD_LOG, "fcu_stats.json", "flight.tlog"):
         (out / name).unlink(missing_ok=True)
-    sim_port, gcs_port = free_port(), free_port()
+    sim_port = free_port() if transport == "udp" else free_port(socket.SOCK_STREAM)
+    gcs_port = free_port()
     end_s = scenario.duration_s
     gains = scenario.files["gains_pid" if scenario.controller == "pid" else "gains_pd"]
     py = sys.executable
     sitl_cmd = [py, "-m", "sitl.node", scenario.source, "--link",
-                f"udpin:127.0.0.1:{sim_port}", "--truth-log", str(out / TRUTH_LOG),
+                f"{server}:127.0.0.1:{sim_port}", "--truth-log", str(out / TRUTH_LOG),
                 "--control-rate", str(scenario.control_rate_hz)]
     if not realtime:  # lockstep: the simulator itself stops at the end, to the microsecond
         sitl_cmd += ["--end-time", repr(end_s)]
     fcu_sim_port = sim_route(sim_port) if sim_route else sim_port
     fcu_cmd = [py, "-m", "fcu.node", "--vehicle", scenario.files["vehicle"], "--gains", gains,
-               "--sim", f"udpout:127.0.0.1:{fcu_sim_port}", "--gcs",
+               "--sim", f"{client}:127.0.0.1:{fcu_sim_port}", "--gcs",
                f"udpout:127.0.0.1:{gcs_port}", "--rate", str(scenario.control_rate_hz),
                "--onboard-log", str(out / ONBOARD_LOG), "--stats", str(out / "fcu_stats.json")]
     if realtime:
@@ -203,7 +210,7 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
     truth_cols, truth = read_log(out / TRUTH_LOG)
     onboard_cols, onboard = read_log(out / ONBOARD_LOG)
     metrics = build_metrics(scenario, truth_cols, truth, onboard_cols, onboard,
-                            status="completed", wall_time_s=wall, transport="udp",
+                            status="completed", wall_time_s=wall, transport=transport,
                             lockstep=not realtime,
                             deadline_misses=int(stats.get("deadline_misses", 0)),
                             mission_completed=progress.mission_completed

@@ -29,9 +29,9 @@ from common.links import LinkError, open_link
 from common.mavlink import MAV, encoder, pack
 from common.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
+    FrameReader,
     Odometry,
     pack_odometry,
-    split_frames,
     unpack_actuator_controls,
 )
 from sitl.disturbance import Disturbance
@@ -69,6 +69,7 @@ class SimulatorServer:
                               f"the physics step {self.plant.dt_us} us")
         self.substeps = self.control_dt_us // self.plant.dt_us
         self.link = open_link(link_url)
+        self.reader = FrameReader(self.link.is_stream)
         self.realtime = realtime
         self.end_us = None if end_time_s is None else round(end_time_s * 1e6)
         self.sensor_every = (max(1, round(control_rate_hz / hil_sensor_hz))
@@ -135,8 +136,8 @@ class SimulatorServer:
 
     def _answers(self) -> list[tuple[int, tuple[float, ...], int]]:
         out = []
-        for _peer, data in self.link.recv():
-            frames, rejected = split_frames(data)
+        for peer, data in self.link.recv():
+            frames, rejected = self.reader.feed(peer, data)
             self.rejected_bytes += rejected
             for f in frames:
                 if f.msg_id == HIL_ACTUATOR_CONTROLS_ID:
@@ -161,7 +162,6 @@ class SimulatorServer:
     def _run_lockstep(self) -> None:
         self._send_state()
         last_progress = time.monotonic()
-        fd = self.link.fileno()
         last_resend = last_progress
         while self.running:
             now = time.monotonic()
@@ -171,7 +171,7 @@ class SimulatorServer:
             else:
                 timeout = max(0.0, (self.resend_s if idle < 0.5 else 0.05)
                               - (now - max(last_resend, last_progress)))
-            readable, _, _ = select.select([fd], [], [], timeout)
+            readable, _, _ = select.select(self.link.filenos(), [], [], timeout)
             if not readable and timeout == 0.0:
                 os.sched_yield()  # polling: let a process that has work run on this core
                 continue
@@ -194,7 +194,6 @@ class SimulatorServer:
 
     def _run_realtime(self) -> None:
         period = self.plant.dt_us * 1e-6
-        fd = self.link.fileno()
         start = time.monotonic()
         self._send_state()
         physics_steps = 0
@@ -202,7 +201,7 @@ class SimulatorServer:
             due = start + (physics_steps + 1) * period
             while self.running:
                 wait = due - time.monotonic()
-                readable, _, _ = select.select([fd], [], [], max(0.0, wait))
+                readable, _, _ = select.select(self.link.filenos(), [], [], max(0.0, wait))
                 if readable:
                     for _t, controls, mode in self._answers():
                         self.command = self._command_from(controls, mode)
@@ -214,7 +213,7 @@ class SimulatorServer:
                 self.steps += 1
                 self._send_state()
         while self.running:  # the run has ended: keep the link quiet until told to stop
-            select.select([fd], [], [], 0.1)
+            select.select(self.link.filenos(), [], [], 0.1)
             self._answers()
 
     def close(self) -> None:

@@ -189,3 +189,13 @@ def test_control_port_argument_is_validated():
                            f"udpx:127.0.0.1:{free_port()}"], cwd=ROOT, capture_output=True,
                           text=True, timeout=30, check=False)
     assert proc.returncode == 2 and "udpx" in proc.stderr
+
+
+def test_tcp_simulator_link_flies_the_same_run(tmp_path):
+    """The simulator link over TCP (stream framing) gives the figures of the UDP run."""
+    scenario = dataclasses.replace(load_scenario(CASE1), duration_s=6.0)
+    udp = run_processes(scenario, tmp_path / "udp")
+    tcp = run_processes(scenario, tmp_path / "tcp", transport="tcp")
+    assert tcp["transport"] == "tcp" and tcp["status"] == "completed"
+    for key in ("position_error_m", "attitude_error_rad", "samples", "sim_time_s"):
+        assert tcp[key] == udp[key]
