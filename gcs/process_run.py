@@ -48,6 +48,10 @@ class Children:
                                             stdin=subprocess.DEVNULL)
         log.close()
 
+    def tails(self) -> str:
+        return "\n".join(f"--- {name}.log\n" + (self.out / f"{name}.log").read_text(
+            errors="replace")[-600:] for name in self.procs)
+
     def check(self) -> None:
         for name, proc in self.procs.items():
             code = proc.poll()
@@ -175,7 +179,9 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
             session.wait_vehicle(timeout=15.0)
             # the FCU reports attitude once it has a state from the simulator
             if session.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is None:
-                raise GcsError("the vehicle reports no state: is the simulator running?")
+                children.check()
+                raise GcsError("the vehicle reports no state: is the simulator running?\n"
+                               + children.tails())
         except GcsError:
             children.check()
             raise
