@@ -166,22 +166,18 @@ class SimulatorServer:
         while self.running:
             now = time.monotonic()
             idle = now - last_progress
-            if idle < SPIN_S:
-                timeout = 0.0  # the answer is due within microseconds: poll, do not sleep
-            else:
-                timeout = max(0.0, (self.resend_s if idle < 0.5 else 0.05)
-                              - (now - max(last_resend, last_progress)))
+            spinning = idle < SPIN_S  # the answer is due within microseconds: poll
+            wait = self.resend_s if idle < 0.5 else 0.05
+            since = now - max(last_resend, last_progress)
+            timeout = 0.0 if spinning else max(0.0, wait - since)
             readable, _, _ = select.select(self.link.filenos(), [], [], timeout)
-            if not readable and timeout == 0.0:
-                os.sched_yield()  # polling: let a process that has work run on this core
-                continue
             if not readable:
-                now = time.monotonic()
-                if idle >= SPIN_S and now - max(last_resend, last_progress) >= (
-                        self.resend_s if idle < 0.5 else 0.05):
+                if spinning:
+                    os.sched_yield()  # let a process that has work run on this core
+                elif time.monotonic() - max(last_resend, last_progress) >= wait:
                     self.link.send(self._last_datagram)  # recover a lost state or answer
                     self.resends += 1
-                    last_resend = now
+                    last_resend = time.monotonic()
                 continue
             for time_usec, controls, mode in self._answers():
                 if time_usec != self.state.time_us or self._at_end():
