@@ -64,7 +64,7 @@ class Schedule:
 
     def interval_us(self, msg_id: int) -> float:
         iv = self.intervals.get(msg_id, -1.0)
-        return -1.0 if iv <= 0 else iv * 1e6
+        return -1.0 if iv <= 0 else float(round(iv * 1e6))
 
     def pop_due(self, now_s: float) -> list[int]:
         out = []
