@@ -41,5 +41,7 @@ def parser() -> mavlink.MAVLink:
 
 
 def pack(mav: mavlink.MAVLink, msg: mavlink.MAVLink_message) -> bytes:
-    """Encode a message with `mav`'s identity and sequence number."""
-    return msg.pack(mav)
+    """Encode a message with `mav`'s identity and next sequence number (as MAVLink.send)."""
+    data = msg.pack(mav)
+    mav.seq = (mav.seq + 1) % 256
+    return data

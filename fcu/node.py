@@ -28,6 +28,7 @@ from common.config import ConfigError, load_gains, load_vehicle
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.links import Link, LinkError, open_link
 from common.mavlink import MAV, encoder, pack, parser
+from common.modes import Mode, decode, decode_custom
 from common.simlink import (
     LOCKSTEP_FLAG,
     MODE_ARMED,
@@ -41,7 +42,6 @@ from fcu.core import ONBOARD_COLUMNS, onboard_row
 from fcu.dualquat import q_angle, q_conj, q_mul, q_rotate
 from fcu.mission import MissionLimits
 from fcu.mission_protocol import MissionServer
-from fcu.modes import Mode, decode, decode_custom
 from fcu.params import SPECS, ParamError, ParamStore
 from fcu.telemetry import REQUESTABLE, Builders, Home, Schedule, autopilot_version, heartbeat
 from fcu.telemetry import sys_status as sys_status_msg
@@ -65,7 +65,8 @@ class FlightController:
         self.sim = open_link(sim_url)
         self.sim_reader = FrameReader(self.sim.is_stream)
         self.gcs: list[Link] = [open_link(u) for u in gcs_urls]
-        self.mav = encoder(system_id, COMPONENT)
+        self.mav = encoder(system_id, COMPONENT)  # GCS links: one sequence for all of them
+        self.sim_mav = encoder(system_id, COMPONENT)
         self.parsers: dict[tuple[int, object], MAV.MAVLink] = {}
         self.params = ParamStore(vehicle.gains)
         self.schedule = Schedule.default()
@@ -391,7 +392,7 @@ class FlightController:
         v = self.vehicle
         if now >= self.sim_heartbeat_due:
             # Simulators learn where we are from this, as from PX4's first packets.
-            self.sim.send(pack(self.mav, heartbeat(v.armed, v.mode.custom_mode, v.armed)))
+            self.sim.send(pack(self.sim_mav, heartbeat(v.armed, v.mode.custom_mode, v.armed)))
             self.sim_heartbeat_due = now + 1.0
         v.check_links(now)
         for reply in self.missions.tick(now):

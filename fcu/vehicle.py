@@ -15,10 +15,10 @@ from common.config import Gains, VehicleConfig
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.mavlink import MAV
 from common.mission_items import MissionItem, local_xy
+from common.modes import Mode
 from fcu.core import FlightCore, StepResult
 from fcu.dualquat import Q_IDENTITY, Quat, Vec3, q_exp, q_normalize
 from fcu.mission import MissionEvent, MissionExecutor, MissionLimits
-from fcu.modes import Mode
 from fcu.safety import gate
 from fcu.tracker import Reference, VehicleState
 
@@ -120,6 +120,8 @@ class Vehicle:
         self.core.tracker.reset()
         self.hold = self._current_pose_ref()
         self.say(MAV.MAV_SEVERITY_INFO, "armed")
+        if self.mode == Mode.MISSION and not self.mission_running and not self.mission_done:
+            self._start_mission(resume=True)  # MISSION_START came first: fly it now
         self._maybe_start_flight()
         return ACCEPTED, "armed"
 

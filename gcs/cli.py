@@ -1,30 +1,84 @@
 """`gcs`: the ground-station command line.
 
+Runs and reports:
     gcs run SCENARIO.toml [--in-process | --realtime] [--controller pid|pd]
-            [--ideal-actuators] [--duration S] --out DIR
+            [--ideal-actuators] [--duration S] [--sim-link udp|tcp] --out DIR
     gcs table1 [--in-process] [--ideal-actuators] [--duration S] --out DIR
+    gcs report RUN_DIR
+Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0.1:14550):
+    gcs status | arm | disarm [--force] | mode NAME
+    gcs mission upload FILE | download [FILE] | clear | start
+    gcs param list | get NAME | set NAME VALUE
+    gcs goto X Y Z [--roll D --pitch D --yaw D] [--arm]     (local NED, m and deg)
+    gcs watch
+    gcs log record FILE [--duration S]
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 from common.config import ConfigError, load_scenario
+from common.links import LinkError
 
 DEFAULT_SCENARIOS = Path(__file__).resolve().parent.parent / "config" / "scenarios"
+DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
+
+
+class Progress:
+    """One self-overwriting status line on a terminal; silent when piped."""
+
+    def __init__(self, stream=sys.stderr) -> None:
+        self.stream = stream
+        self.active = stream.isatty()
+        self.t0 = time.monotonic()
+
+    def __call__(self, text: str) -> None:
+        if self.active:
+            self.stream.write(f"\r\033[K{text}")
+            self.stream.flush()
+
+    def done(self) -> None:
+        if self.active:
+            self.stream.write("\r\033[K")
+            self.stream.flush()
 
 
 def _positive(text: str) -> float:
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text}") from None
     if not value > 0.0:
         raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text}")
     return value
 
 
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text}") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="gcs", description=__doc__.split("\n")[0])
+    link = argparse.ArgumentParser(add_help=False)
+    link.add_argument("--connect", default=DEFAULT_CONNECT, metavar="URL",
+                      help=f"link URL: udpin/udpout/tcp/tcpin:HOST:PORT or "
+                           f"serial:DEVICE:BAUD (default {DEFAULT_CONNECT})")
+    link.add_argument("--sysid", type=int, help="the vehicle's system id (default: first heard)")
+    link.add_argument("--wait", type=_positive, default=10.0, metavar="S",
+                      help="how long to wait for the vehicle's heartbeat")
+
+    parser = argparse.ArgumentParser(prog="gcs", description="dqflight ground station",
+                                     formatter_class=argparse.RawDescriptionHelpFormatter,
+                                     epilog=__doc__.split("\n", 2)[2])
     sub = parser.add_subparsers(dest="command", required=True)
 
     run = sub.add_parser("run", help="fly a scenario and write DIR/metrics.json")
@@ -51,9 +105,66 @@ def build_parser() -> argparse.ArgumentParser:
     t1.add_argument("--duration", type=_positive, metavar="S")
     t1.add_argument("--scenarios", type=Path, default=DEFAULT_SCENARIOS, metavar="DIR",
                     help="folder holding the four scenario files")
-    t1.add_argument("--jobs", type=int, default=None, help="parallel processes")
+    t1.add_argument("--jobs", type=int, default=None, help="parallel runs")
     t1.add_argument("--out", type=Path, required=True, metavar="DIR")
+
+    rep = sub.add_parser("report", help="figures and report.md of a run folder")
+    rep.add_argument("run_dir", type=Path)
+
+    sub.add_parser("status", parents=[link], help="identity, mode, position, attitude, health")
+    sub.add_parser("arm", parents=[link], help="arm the vehicle")
+    dis = sub.add_parser("disarm", parents=[link], help="disarm the vehicle")
+    dis.add_argument("--force", action="store_true", help="disarm even in the air")
+    md = sub.add_parser("mode", parents=[link], help="change the flight mode")
+    md.add_argument("name", help="HOLD, MISSION, OFFBOARD or LAND")
+
+    mis = sub.add_parser("mission", help="upload, download, clear, start")
+    msub = mis.add_subparsers(dest="action", required=True)
+    up = msub.add_parser("upload", parents=[link], help="upload a QGC WPL 110 or TOML file")
+    up.add_argument("file", type=Path)
+    down = msub.add_parser("download", parents=[link], help="download (to FILE or stdout)")
+    down.add_argument("file", type=Path, nargs="?")
+    down.add_argument("--format", choices=("wpl", "toml"), default=None,
+                      help="file format (default: by extension, .toml or QGC WPL)")
+    msub.add_parser("clear", parents=[link], help="clear the vehicle's mission")
+    msub.add_parser("start", parents=[link], help="MISSION_START (arm first)")
+
+    par = sub.add_parser("param", help="list, get, set parameters")
+    psub = par.add_subparsers(dest="action", required=True)
+    psub.add_parser("list", parents=[link])
+    pg = psub.add_parser("get", parents=[link])
+    pg.add_argument("name")
+    ps = psub.add_parser("set", parents=[link])
+    ps.add_argument("name")
+    ps.add_argument("value", type=_finite)
+
+    go = sub.add_parser("goto", parents=[link], help="fly to a 6-DoF pose in OFFBOARD")
+    for axis in ("x", "y", "z"):
+        go.add_argument(axis, type=_finite, help=f"{axis} in local NED, m")
+    go.add_argument("--roll", type=_finite, default=0.0, help="deg (Z-Y-X, NED/FRD)")
+    go.add_argument("--pitch", type=_finite, default=0.0, help="deg")
+    go.add_argument("--yaw", type=_finite, default=90.0,
+                    help="deg (default 90: body x east, the level ENU identity)")
+    go.add_argument("--arm", action="store_true", help="arm before switching to OFFBOARD")
+    go.add_argument("--tolerance", type=_positive, default=0.05, help="position, m")
+    go.add_argument("--tolerance-deg", type=_positive, default=1.0, help="attitude, deg")
+    go.add_argument("--timeout", type=_positive, default=60.0, metavar="S")
+    go.add_argument("--hold", type=float, default=0.0, metavar="S",
+                    help="keep streaming the setpoint S s after reaching it")
+
+    wa = sub.add_parser("watch", parents=[link], help="live view; q or Ctrl-C quits")
+    wa.add_argument("--rate", type=_positive, default=5.0, help="refreshes per second")
+    wa.add_argument("--duration", type=_positive, metavar="S", help="quit after S s")
+
+    log = sub.add_parser("log", help="record telemetry")
+    lsub = log.add_subparsers(dest="action", required=True)
+    rec = lsub.add_parser("record", parents=[link], help="record a tlog until Ctrl-C")
+    rec.add_argument("file", type=Path)
+    rec.add_argument("--duration", type=_positive, metavar="S")
     return parser
+
+
+# ------------------------------------------------------------------ runs
 
 
 def _summary(m: dict) -> str:
@@ -79,17 +190,25 @@ def cmd_run(args: argparse.Namespace) -> int:
     scenario = apply_overrides(load_scenario(args.scenario), controller=args.controller,
                                ideal_actuators=True if args.ideal_actuators else None,
                                duration_s=args.duration)
+    progress = Progress()
     if args.in_process:
+        progress(f"{scenario.name}: running {scenario.duration_s:.0f} s in-process ...")
         result = run_scenario(scenario)
         write_run(args.out, scenario, result)
         metrics = result.metrics
     else:
+        def report(p) -> None:
+            elapsed = time.monotonic() - progress.t0
+            progress(f"{scenario.name}: t = {p.sim_time_s:7.2f} / {scenario.duration_s:.0f} s"
+                     f"   {p.sim_time_s / max(elapsed, 1e-3):5.1f}x real time")
         try:
             metrics = run_processes(scenario, args.out, realtime=args.realtime,
-                                    transport=args.sim_link)
+                                    transport=args.sim_link, report=report)
         except RunError as exc:
+            progress.done()
             print(f"gcs run: {exc}", file=sys.stderr)
             return 1
+    progress.done()
     print(_summary(metrics))
     print(f"  wrote {args.out / 'metrics.json'}")
     return 0 if metrics["status"] == "completed" else 1
@@ -98,23 +217,199 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_table1(args: argparse.Namespace) -> int:
     from gcs.table1 import run_table1
 
+    progress = Progress()
+    progress("table1: 8 runs ...")
     table = run_table1(args.scenarios, args.out, ideal=args.ideal_actuators,
                        duration_s=args.duration, workers=args.jobs,
                        in_process=args.in_process)
+    progress.done()
     print((args.out / "table1.md").read_text())
-    print(f"wrote {args.out / 'table1.md'} and {args.out / 'table1.json'}")
+    print(f"wrote {args.out / 'table1.md'}, {args.out / 'table1.json'} and "
+          f"{args.out / 'table1.png'}")
     return 0 if table["rows"] else 1
 
 
+def cmd_report(args: argparse.Namespace) -> int:
+    from gcs.report import make_report
+
+    if not (args.run_dir / "metrics.json").exists():
+        print(f"gcs report: {args.run_dir} has no metrics.json (not a run folder)",
+              file=sys.stderr)
+        return 2
+    for path in make_report(args.run_dir):
+        print(path)
+    return 0
+
+
+# ------------------------------------------------------------------ vehicle commands
+
+
+def _session(args: argparse.Namespace, tlog: Path | None = None):
+    from gcs.session import Session
+
+    session = Session(args.connect, tlog=tlog)
+    try:
+        session.wait_vehicle(timeout=args.wait, system_id=args.sysid)
+    except BaseException:
+        session.close()
+        raise
+    return session
+
+
+def _result(what: str, result: int) -> int:
+    from common.mavlink import MAV
+
+    name = MAV.enums["MAV_RESULT"][result].name if result in MAV.enums["MAV_RESULT"] else result
+    print(f"{what}: {name}")
+    return 0 if result == MAV.MAV_RESULT_ACCEPTED else 1
+
+
+def cmd_vehicle(args: argparse.Namespace) -> int:
+    from gcs import vehicle_link as vl
+
+    session = _session(args)
+    try:
+        if args.command == "status":
+            for key, value in vl.status(session).items():
+                print(f"{key:>18}: {value}")
+            return 0
+        if args.command == "arm":
+            return _result("arm", vl.arm(session, True))
+        if args.command == "disarm":
+            return _result("disarm", vl.arm(session, False, force=args.force))
+        if args.command == "mode":
+            return _result(f"mode {args.name.upper()}", vl.set_mode(session, args.name))
+        if args.command == "mission":
+            return _mission(args, session)
+        if args.command == "param":
+            return _param(args, session)
+        if args.command == "goto":
+            return _goto(args, session)
+        if args.command == "watch":
+            from gcs.watch import watch
+
+            return watch(session, refresh_hz=args.rate, duration=args.duration)
+        raise AssertionError(args.command)
+    finally:
+        session.close()
+
+
+def _mission(args: argparse.Namespace, session) -> int:
+    from common.mavlink import MAV
+    from gcs.mission_client import clear, download, result_name, upload
+    from gcs.mission_files import format_toml, format_wpl, read_mission, write_mission
+
+    t, c, send = session.target_system, session.target_component, session.send
+    progress = Progress()
+
+    def report(done: int, total: int) -> None:
+        progress(f"mission: {done}/{total} items")
+
+    if args.action == "upload":
+        items = read_mission(args.file)
+        result = upload(session.conn, t, c, items, progress=report, send=send)
+        progress.done()
+        print(f"upload of {len(items)} items: {result_name(result)}")
+        return 0 if result == MAV.MAV_MISSION_ACCEPTED else 1
+    if args.action == "download":
+        items = download(session.conn, t, c, progress=report, send=send)
+        progress.done()
+        if args.file is None:
+            print(format_toml(items) if args.format == "toml" else format_wpl(items), end="")
+        else:
+            write_mission(args.file, items, args.format)
+            print(f"downloaded {len(items)} items to {args.file}")
+        return 0
+    if args.action == "clear":
+        result = clear(session.conn, t, c, send=send)
+        print(f"clear: {result_name(result)}")
+        return 0 if result == MAV.MAV_MISSION_ACCEPTED else 1
+    return _result("mission start", session.command(MAV.MAV_CMD_MISSION_START))
+
+
+def _param(args: argparse.Namespace, session) -> int:
+    from gcs import vehicle_link as vl
+
+    if args.action == "list":
+        for name, value in vl.param_list(session).items():
+            print(f"{name:<16} {value:g}")
+        return 0
+    if args.action == "get":
+        print(f"{args.name} = {vl.param_get(session, args.name):g}")
+        return 0
+    value, texts = vl.param_set(session, args.name, args.value)
+    for text in texts:
+        print(f"vehicle: {text}")
+    print(f"{args.name} = {value:g}")
+    import struct
+
+    wanted = struct.unpack("<f", struct.pack("<f", args.value))[0]
+    return 0 if value == wanted else 1
+
+
+def _goto(args: argparse.Namespace, session) -> int:
+    import math
+
+    from gcs import vehicle_link as vl
+
+    target = vl.PoseTarget.from_euler_deg((args.x, args.y, args.z), args.roll, args.pitch,
+                                          args.yaw)
+    progress = Progress()
+
+    def report(errs) -> None:
+        progress(f"goto: position error {errs[0]:.3f} m, attitude error "
+                 f"{math.degrees(errs[1]):.2f} deg")
+
+    dp, da = vl.goto(session, target, arm_first=args.arm, tolerance_m=args.tolerance,
+                     tolerance_rad=math.radians(args.tolerance_deg), timeout=args.timeout,
+                     hold_s=args.hold, report=report)
+    progress.done()
+    print(f"reached: position error {dp:.4f} m, attitude error {math.degrees(da):.3f} deg")
+    return 0
+
+
+def cmd_log(args: argparse.Namespace) -> int:
+    from gcs.vehicle_link import Snapshot, collect
+
+    session = _session(args, tlog=args.file)
+    progress = Progress()
+    snap = Snapshot()
+    try:
+        end = time.monotonic() + (args.duration or float("inf"))
+        while time.monotonic() < end:
+            collect(session, snap, min(0.5, max(0.0, end - time.monotonic())))
+            progress(f"recording {args.file}: {sum(snap.counts.values())} messages")
+    except KeyboardInterrupt:
+        pass
+    finally:
+        session.close()
+        progress.done()
+    print(f"recorded {sum(snap.counts.values())} messages to {args.file}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
+    from gcs.mission_client import MissionError
+    from gcs.mission_files import MissionFileError
+    from gcs.session import GcsError
+
     args = build_parser().parse_args(argv)
     try:
         if args.command == "run":
             return cmd_run(args)
-        return cmd_table1(args)
-    except ConfigError as exc:
-        print(f"gcs: configuration error: {exc}", file=sys.stderr)
+        if args.command == "table1":
+            return cmd_table1(args)
+        if args.command == "report":
+            return cmd_report(args)
+        if args.command == "log":
+            return cmd_log(args)
+        return cmd_vehicle(args)
+    except (ConfigError, LinkError, MissionFileError) as exc:
+        print(f"gcs: {exc}", file=sys.stderr)
         return 2
+    except (GcsError, MissionError) as exc:
+        print(f"gcs {args.command}: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("gcs: interrupted", file=sys.stderr)
         return 130
@@ -123,5 +418,3 @@ def main(argv: list[str] | None = None) -> int:
 if __name__ == "__main__":
     sys.exit(main())
 
-
-__all__ = ["build_parser", "main"]
