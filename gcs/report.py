@@ -632,6 +632,8 @@ def table1_chart(table: dict[str, Any], out_png: Path) -> Path:
                     continue
                 else:
                     val, status = row["ours"][metric]["rmse"], row["status"]
+                    if status == "diverged" and "sim_time_s" in row:
+                        status = f"diverged\nat {row['sim_time_s']:.3g} s"
                 if not (isinstance(val, int | float) and math.isfinite(val) and val > 0):
                     continue
                 values.append(val)
@@ -658,7 +660,7 @@ def table1_chart(table: dict[str, Any], out_png: Path) -> Path:
                      edgecolor=colors[ctrl], label=f"{ctrl.upper()} {src}")
                for ctrl, src in series]
     handles.append(Patch(facecolor="white", edgecolor="red", hatch="///",
-                         label="ours, diverged (figures up to the divergence)"))
-    axes[0].legend(handles=handles, loc="upper left", ncol=3, fontsize=9, framealpha=0.9)
+                         label="ours, diverged\n(RMSE up to the divergence)"))
+    fig.legend(handles=handles, loc="outside lower center", ncol=5, fontsize=9.5)
     fig.suptitle("Table I – RMSE, ours vs the paper (PID and PD)")
     return _save(fig, out_png)

@@ -7,7 +7,7 @@ import time
 import pytest
 
 from common.mavlink import MAV
-from fcu.modes import Mode
+from common.modes import Mode
 
 M = MAV
 pytestmark = pytest.mark.timeout(120)
