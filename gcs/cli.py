@@ -221,7 +221,7 @@ def cmd_table1(args: argparse.Namespace) -> int:
     progress("table1: 8 runs ...")
     table = run_table1(args.scenarios, args.out, ideal=args.ideal_actuators,
                        duration_s=args.duration, workers=args.jobs,
-                       in_process=args.in_process)
+                       in_process=args.in_process, progress=progress)
     progress.done()
     print((args.out / "table1.md").read_text())
     print(f"wrote {args.out / 'table1.md'}, {args.out / 'table1.json'} and "

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
@@ -94,16 +94,22 @@ def _run_one(job: tuple[str, str, bool, float | None, str, bool]) -> dict[str, A
 
 def run_table1(config_dir: Path, out_dir: Path, *, ideal: bool = False,
                duration_s: float | None = None, workers: int | None = None,
-               in_process: bool = False) -> dict[str, Any]:
+               in_process: bool = False, progress=None) -> dict[str, Any]:
     """Run the 8 cases in parallel (through sitl + fcu processes unless `in_process`);
     write table1.md and table1.json."""
     out_dir.mkdir(parents=True, exist_ok=True)
     keys = [(scen, ctrl) for _, scen in CASES for ctrl in CONTROLLERS]
     jobs = [(str(config_dir / f"{scen}.toml"), ctrl, ideal, duration_s,
              str(out_dir / f"{scen}_{ctrl}"), in_process) for scen, ctrl in keys]
+    results: dict[tuple[str, str], dict[str, Any]] = {}
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        metrics = list(pool.map(_run_one, jobs))
-    results = dict(zip(keys, metrics, strict=True))
+        futures = {pool.submit(_run_one, job): key for job, key in zip(jobs, keys, strict=True)}
+        for future in as_completed(futures):
+            results[futures[future]] = future.result()
+            if progress is not None:
+                scen, ctrl = futures[future]
+                progress(f"table1: {len(results)}/{len(jobs)} runs done "
+                         f"(last: {scen} {ctrl.upper()})")
     table = table_json(results)
     (out_dir / "table1.json").write_text(json.dumps(table, indent=2) + "\n")
     (out_dir / "table1.md").write_text(table_markdown(table))
