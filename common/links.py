@@ -9,7 +9,7 @@
 Every link is non-blocking: `recv()` returns the datagrams or stream chunks that are ready,
 `send(data)` never waits, and `fileno()` lets one `select` serve all links. Peers are told
 apart by `peer` keys so that each byte stream gets its own MAVLink parser. Zenoh links
-(`zenoh:...`) are parsed here but served by the Zenoh module of the project when present.
+(`zenoh:PREFIX[@ENDPOINT,...]`) live in `common/zenoh_link.py`.
 """
 
 from __future__ import annotations
@@ -342,9 +342,13 @@ class SerialLink(Link):
         os.close(self.fd)
 
 
-def open_link(url: str | LinkUrl) -> Link:
-    """Open a link from its URL."""
+def open_link(url: str | LinkUrl, *, role: str = "vehicle", system_id: int = 0) -> Link:
+    """Open a link from its URL; `role` and `system_id` choose a Zenoh link's keys."""
     parsed = url if isinstance(url, LinkUrl) else parse_url(url)
+    if parsed.scheme == "zenoh":
+        from common.zenoh_link import ZenohLink  # imported only where Zenoh is used
+
+        return ZenohLink(parsed, role=role, system_id=system_id)
     if parsed.scheme in ("udpin", "udpout"):
         return UdpLink(parsed)
     if parsed.scheme == "tcp":
@@ -353,7 +357,7 @@ def open_link(url: str | LinkUrl) -> Link:
         return TcpServerLink(parsed)
     if parsed.scheme == "serial":
         return SerialLink(parsed)
-    raise LinkError(f"link '{parsed}': zenoh links are not available in this version")
+    raise LinkError(f"link '{parsed}': unknown scheme")
 
 
 def free_port(kind: int = socket.SOCK_DGRAM) -> int:

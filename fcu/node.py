@@ -62,9 +62,10 @@ class FlightController:
         self.vehicle = vehicle
         self.system_id = system_id
         self.lockstep = lockstep
-        self.sim = open_link(sim_url)
+        self.sim = open_link(sim_url, role="sim_client", system_id=system_id)
         self.sim_reader = FrameReader(self.sim.is_stream)
-        self.gcs: list[Link] = [open_link(u) for u in gcs_urls]
+        self.gcs: list[Link] = [open_link(u, role="vehicle", system_id=system_id)
+                                for u in gcs_urls]
         self.mav = encoder(system_id, COMPONENT)  # GCS links: one sequence for all of them
         self.sim_mav = encoder(system_id, COMPONENT)
         self.parsers: dict[tuple[int, object], MAV.MAVLink] = {}

@@ -2,7 +2,9 @@
 
 Runs and reports:
     gcs run SCENARIO.toml [--in-process | --realtime] [--controller pid|pd]
-            [--ideal-actuators] [--duration S] [--sim-link udp|tcp] --out DIR
+            [--ideal-actuators] [--duration S] [--link udp|tcp|zenoh] [--zenoh URL]
+            [--fleet N [--spacing METRES]] --out DIR
+    gcs router [--listen ENDPOINT]
     gcs table1 [--in-process] [--ideal-actuators] [--duration S] --out DIR
     gcs report RUN_DIR
 Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0.1:14550):
@@ -94,8 +96,16 @@ def build_parser() -> argparse.ArgumentParser:
                      help="rotors and tilt servos follow their commands instantly")
     run.add_argument("--duration", type=_positive, metavar="S",
                      help="cut the scenario short after S simulated seconds")
-    run.add_argument("--sim-link", choices=("udp", "tcp"), default="udp",
-                     help="transport of the simulator link (default udp)")
+    run.add_argument("--link", choices=("udp", "tcp", "zenoh"), default="udp",
+                     help="links between the processes: udp (default), tcp (simulator link "
+                          "over TCP) or zenoh (every link over Zenoh)")
+    run.add_argument("--zenoh", default="zenoh:mavlink", metavar="URL",
+                     help="zenoh:PREFIX[@ENDPOINT,...] for --link zenoh (default: prefix "
+                          "mavlink, router tcp/127.0.0.1:7447, started if none runs)")
+    run.add_argument("--fleet", type=int, default=1, metavar="N",
+                     help="fly N vehicles (system ids 1..N) on one fabric")
+    run.add_argument("--spacing", type=_finite, default=0.0, metavar="METRES",
+                     help="fleet: start vehicles this far apart along east")
     run.add_argument("--out", type=Path, required=True, metavar="DIR")
 
     t1 = sub.add_parser("table1", help="Case I and Case II, PID and PD, beside the paper")
@@ -107,6 +117,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="folder holding the four scenario files")
     t1.add_argument("--jobs", type=int, default=None, help="parallel runs")
     t1.add_argument("--out", type=Path, required=True, metavar="DIR")
+
+    rt = sub.add_parser("router", help="a Zenoh router for the machine (or for others)")
+    rt.add_argument("--listen", action="append", metavar="ENDPOINT",
+                    help="endpoint to listen on, repeatable (default tcp/127.0.0.1:7447)")
 
     rep = sub.add_parser("report", help="figures and report.md of a run folder")
     rep.add_argument("run_dir", type=Path)
@@ -201,13 +215,23 @@ def cmd_run(args: argparse.Namespace) -> int:
             elapsed = time.monotonic() - progress.t0
             progress(f"{scenario.name}: t = {p.sim_time_s:7.2f} / {scenario.duration_s:.0f} s"
                      f"   {p.sim_time_s / max(elapsed, 1e-3):5.1f}x real time")
+        if args.fleet < 1:
+            print("gcs run: --fleet needs at least 1 vehicle", file=sys.stderr)
+            return 2
         try:
             metrics = run_processes(scenario, args.out, realtime=args.realtime,
-                                    transport=args.sim_link, report=report)
+                                    transport=args.link, report=report, fleet=args.fleet,
+                                    spacing_m=args.spacing, zenoh_url=args.zenoh)
         except RunError as exc:
             progress.done()
             print(f"gcs run: {exc}", file=sys.stderr)
             return 1
+        if args.fleet > 1:
+            progress.done()
+            for m in metrics["vehicles"].values():
+                print(f"vehicle {m['system_id']}: " + _summary(m))
+            print(f"  wrote {args.out / 'fleet.json'}")
+            return 0 if metrics["all_completed"] else 1
     progress.done()
     print(_summary(metrics))
     print(f"  wrote {args.out / 'metrics.json'}")
@@ -227,6 +251,21 @@ def cmd_table1(args: argparse.Namespace) -> int:
     print(f"wrote {args.out / 'table1.md'}, {args.out / 'table1.json'} and "
           f"{args.out / 'table1.png'}")
     return 0 if table["rows"] else 1
+
+
+def cmd_router(args: argparse.Namespace) -> int:
+    import signal
+    import threading
+
+    from common.zenoh_link import DEFAULT_ROUTER, run_router
+
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    listen = args.listen or [DEFAULT_ROUTER]
+    print(f"gcs router: listening on {', '.join(listen)} (multicast scouting off)", flush=True)
+    run_router(listen, stop)
+    return 0
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -401,6 +440,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_table1(args)
         if args.command == "report":
             return cmd_report(args)
+        if args.command == "router":
+            return cmd_router(args)
         if args.command == "log":
             return cmd_log(args)
         return cmd_vehicle(args)

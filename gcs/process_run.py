@@ -5,12 +5,14 @@ the children, and write metrics.json from the truth and onboard logs (DESIGN.md 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -128,102 +130,231 @@ def _watch(session: Session, children: Children, progress: Progress, end_s: floa
                    f"of wall time (reached {progress.sim_time_s:.2f} s)")
 
 
-def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
-                  wall_timeout_s: float | None = None, report=None,
-                  sim_route: Callable[[int], int] | None = None,
-                  transport: str = "udp") -> dict[str, Any]:
-    """Fly `scenario` through sitl + fcu processes; returns the metrics written to out.
+@dataclass
+class VehiclePlan:
+    """One vehicle of a run: its system id, folder, scenario and link URLs."""
 
-    `sim_route` maps the simulator's port to the port the FCU sends to (a test proxy);
-    `transport` is the simulator link's, "udp" or "tcp".
-    """
-    if transport not in ("udp", "tcp"):
-        raise RunError(f"unknown simulator transport {transport!r} (udp or tcp)")
-    server, client = ("udpin", "udpout") if transport == "udp" else ("tcpin", "tcp")
-    out.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(scenario.source, out / "scenario.toml")
-    for name in (TRUTH_LOG, ONBOARD_LOG, "fcu_stats.json", "flight.tlog"):
-        (out / name).unlink(missing_ok=True)
-    sim_port = free_port() if transport == "udp" else free_port(socket.SOCK_STREAM)
-    gcs_port = free_port()
-    end_s = scenario.duration_s
-    gains = scenario.files["gains_pid" if scenario.controller == "pid" else "gains_pd"]
-    py = sys.executable
-    sitl_cmd = [py, "-m", "sitl.node", scenario.source, "--link",
-                f"{server}:127.0.0.1:{sim_port}", "--truth-log", str(out / TRUTH_LOG),
-                "--control-rate", str(scenario.control_rate_hz)]
-    if not realtime:  # lockstep: the simulator itself stops at the end, to the microsecond
-        sitl_cmd += ["--end-time", repr(end_s)]
-    fcu_sim_port = sim_route(sim_port) if sim_route else sim_port
-    fcu_cmd = [py, "-m", "fcu.node", "--vehicle", scenario.files["vehicle"], "--gains", gains,
-               "--sim", f"{client}:127.0.0.1:{fcu_sim_port}", "--gcs",
-               f"udpout:127.0.0.1:{gcs_port}", "--rate", str(scenario.control_rate_hz),
-               "--onboard-log", str(out / ONBOARD_LOG), "--stats", str(out / "fcu_stats.json")]
-    if realtime:
-        sitl_cmd.append("--realtime")
-        fcu_cmd.append("--realtime")
-    if scenario.ideal_actuators:
-        sitl_cmd.append("--ideal-actuators")
-    if wall_timeout_s is None:  # a generous cap; a stalled run is caught sooner (STALL_S)
-        wall_timeout_s = 120.0 + (2.0 if realtime else 20.0) * end_s
-    items = scenario_mission(scenario)
-    children = Children(out)
-    session = None
-    progress = Progress()
-    wall0 = time.monotonic()
-    try:
-        session = Session(f"udpin:127.0.0.1:{gcs_port}", tlog=out / "flight.tlog")
-        children.start("sitl", sitl_cmd)
-        children.start("fcu", fcu_cmd)
+    sysid: int
+    out: Path
+    scenario: Scenario
+    sim_server: str  # the plant's simulator link
+    sim_client: str  # the FCU's simulator link
+    fcu_gcs: str  # the FCU's GCS link
+    gcs: str  # the ground station's connection
+
+
+def _shifted(scenario: Scenario, dx: float) -> Scenario:
+    """The scenario moved dx metres east (fleets with spacing)."""
+    if dx == 0.0:
+        return scenario
+    x, y, z = scenario.initial_position_enu_m
+    tx, ty, tz = scenario.trajectory.position_enu_m
+    return dataclasses.replace(
+        scenario, initial_position_enu_m=(x + dx, y, z),
+        trajectory=dataclasses.replace(scenario.trajectory, position_enu_m=(tx + dx, ty, tz)))
+
+
+def _plans(scenario: Scenario, out: Path, fleet: int, spacing_m: float, transport: str,
+           zenoh_url: str, sim_route: Callable[[int], int] | None) -> list[VehiclePlan]:
+    plans = []
+    for n in range(1, fleet + 1):
+        folder = out if fleet == 1 else out / f"vehicle{n}"
+        sc = _shifted(scenario, (n - 1) * spacing_m)
+        if transport == "zenoh":
+            plans.append(VehiclePlan(n, folder, sc, zenoh_url, zenoh_url, zenoh_url, zenoh_url))
+            continue
+        server, client = ("udpin", "udpout") if transport == "udp" else ("tcpin", "tcp")
+        sim_port = free_port() if transport == "udp" else free_port(socket.SOCK_STREAM)
+        fcu_port = sim_route(sim_port) if sim_route else sim_port
+        gcs_port = free_port()
+        plans.append(VehiclePlan(n, folder, sc, f"{server}:127.0.0.1:{sim_port}",
+                                 f"{client}:127.0.0.1:{fcu_port}",
+                                 f"udpout:127.0.0.1:{gcs_port}", f"udpin:127.0.0.1:{gcs_port}"))
+    return plans
+
+
+class _Flight:
+    """The children and the ground-station side of one vehicle's run."""
+
+    def __init__(self, plan: VehiclePlan, *, realtime: bool, wall_timeout_s: float,
+                 report=None) -> None:
+        self.plan = plan
+        self.realtime = realtime
+        self.wall_timeout_s = wall_timeout_s
+        self.report = report
+        self.children = Children(plan.out)
+        self.progress = Progress()
+        self.session: Session | None = None
+        self.error: BaseException | None = None
+        self.wall0 = self.wall1 = time.monotonic()
+
+    def start(self) -> None:
+        p, sc, py = self.plan, self.plan.scenario, sys.executable
+        p.out.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(sc.source, p.out / "scenario.toml")
+        for name in (TRUTH_LOG, ONBOARD_LOG, "fcu_stats.json", "flight.tlog"):
+            (p.out / name).unlink(missing_ok=True)
+        gains = sc.files["gains_pid" if sc.controller == "pid" else "gains_pd"]
+        x, y, z = sc.initial_position_enu_m
+        sitl = [py, "-m", "sitl.node", sc.source, "--link", p.sim_server, "--sysid",
+                str(p.sysid), "--truth-log", str(p.out / TRUTH_LOG), "--control-rate",
+                str(sc.control_rate_hz), "--position", f"{x!r},{y!r},{z!r}"]
+        fcu = [py, "-m", "fcu.node", "--vehicle", sc.files["vehicle"], "--gains", gains,
+               "--sim", p.sim_client, "--gcs", p.fcu_gcs, "--sysid", str(p.sysid),
+               "--rate", str(sc.control_rate_hz), "--onboard-log", str(p.out / ONBOARD_LOG),
+               "--stats", str(p.out / "fcu_stats.json")]
+        if not self.realtime:  # lockstep: the simulator itself stops at the end, exactly
+            sitl += ["--end-time", repr(sc.duration_s)]
+        else:
+            sitl.append("--realtime")
+            fcu.append("--realtime")
+        if sc.ideal_actuators:
+            sitl.append("--ideal-actuators")
+        self.session = Session(p.gcs, tlog=p.out / "flight.tlog", vehicle=p.sysid)
+        self.children.start("sitl", sitl)
+        self.children.start("fcu", fcu)
+
+    def fly(self) -> None:
+        """Connect, upload, arm, start, follow to the end (run in a thread per vehicle)."""
         try:
-            session.wait_vehicle(timeout=15.0)
+            self._fly()
+        except BaseException as exc:  # reported by the caller with the vehicle's id
+            self.error = exc
+
+    def _fly(self) -> None:
+        s, sc = self.session, self.plan.scenario
+        assert s is not None
+        try:
+            s.wait_vehicle(timeout=30.0, system_id=self.plan.sysid)
             # the FCU reports attitude once it has a state from the simulator
-            if session.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is None:
-                children.check()
+            if s.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is None:
+                self.children.check()
                 raise GcsError("the vehicle reports no state: is the simulator running?\n"
-                               + children.tails())
+                               + self.children.tails())
         except GcsError:
-            children.check()
+            self.children.check()
             raise
-        result = upload(session.conn, session.target_system, session.target_component, items,
-                        send=session.send)
+        items = scenario_mission(sc)
+        result = upload(s.conn, s.target_system, s.target_component, items, send=s.send)
         if result != M.MAV_MISSION_ACCEPTED:
             raise RunError(f"mission upload refused: MAV_MISSION_RESULT {result}")
         # The flight's clock starts at MISSION_START: 0 in lockstep (simulated time stands
         # still until then), the FCU's monotonic time in real time.
         start_ms = 0
-        if realtime:
-            att = session.recv(["ATTITUDE_QUATERNION"], timeout=5.0)
+        if self.realtime:
+            att = s.recv(["ATTITUDE_QUATERNION"], timeout=5.0)
             start_ms = att.time_boot_ms if att is not None else 0
         for command, params, what in (
                 (M.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), "arming"),
                 (M.MAV_CMD_MISSION_START, (0.0, float(len(items) - 1)), "mission start")):
-            ack = session.command(command, *params)
+            ack = s.command(command, *params)
             if ack != M.MAV_RESULT_ACCEPTED:
                 raise RunError(f"{what} refused: MAV_RESULT {ack}")
-        wall0 = time.monotonic()
-        _watch(session, children, progress, start_ms * 1e-3 + end_s, len(items),
-               scenario.divergence_position_m, wall_timeout_s, report)
-    except (GcsError, MissionError) as exc:
-        raise RunError(str(exc)) from exc
+        self.wall0 = time.monotonic()
+        self.items = len(items)
+        _watch(s, self.children, self.progress, start_ms * 1e-3 + sc.duration_s, len(items),
+               sc.divergence_position_m, self.wall_timeout_s, self.report)
+        self.wall1 = time.monotonic()
+
+    def stop(self) -> None:
+        self.wall1 = max(self.wall1, self.wall0)
+        self.children.stop()
+        if self.session is not None:
+            self.session.close()
+
+    def metrics(self, transport: str) -> dict[str, Any]:
+        out, sc = self.plan.out, self.plan.scenario
+        stats = json.loads((out / "fcu_stats.json").read_text()) \
+            if (out / "fcu_stats.json").exists() else {}
+        truth_cols, truth = read_log(out / TRUTH_LOG)
+        onboard_cols, onboard = read_log(out / ONBOARD_LOG)
+        metrics = build_metrics(sc, truth_cols, truth, onboard_cols, onboard,
+                                status="completed", wall_time_s=self.wall1 - self.wall0,
+                                transport=transport, lockstep=not self.realtime,
+                                deadline_misses=int(stats.get("deadline_misses", 0)),
+                                mission_completed=self.progress.mission_completed
+                                or bool(stats.get("mission_completed")))
+        metrics["system_id"] = self.plan.sysid
+        metrics["start_position_enu_m"] = list(sc.initial_position_enu_m)
+        metrics["fcu"] = stats
+        metrics["overrides"] = {"controller": sc.controller,
+                                "ideal_actuators": sc.ideal_actuators,
+                                "duration_s": sc.duration_s}
+        write_metrics(out, metrics)
+        return metrics
+
+
+def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
+                  wall_timeout_s: float | None = None, report=None,
+                  sim_route: Callable[[int], int] | None = None,
+                  transport: str = "udp", fleet: int = 1, spacing_m: float = 0.0,
+                  zenoh_url: str = "zenoh:mavlink") -> dict[str, Any]:
+    """Fly `scenario` through sitl + fcu processes; returns the metrics written to out.
+
+    `transport` is the links' ("udp", "tcp" for the simulator link with UDP to the GCS, or
+    "zenoh" for both, through the routers of `zenoh_url`, started here when none runs).
+    `sim_route` maps the simulator's port to the port the FCU sends to (a test proxy). A
+    fleet of N flies N vehicles (system ids 1..N, `spacing_m` apart along east) and returns
+    the content of DIR/fleet.json, each vehicle's metrics in DIR/vehicle<N>/.
+    """
+    if transport not in ("udp", "tcp", "zenoh"):
+        raise RunError(f"unknown transport {transport!r} (udp, tcp or zenoh)")
+    if fleet < 1:
+        raise RunError(f"a fleet needs at least one vehicle, got {fleet}")
+    out.mkdir(parents=True, exist_ok=True)
+    if wall_timeout_s is None:  # a generous cap; a stalled run is caught sooner (STALL_S)
+        wall_timeout_s = 120.0 + (2.0 if realtime else 20.0) * scenario.duration_s * fleet
+    router = start_router_if_needed(zenoh_url, out) if transport == "zenoh" else None
+    flights = [_Flight(plan, realtime=realtime, wall_timeout_s=wall_timeout_s,
+                       report=report if fleet == 1 else None)
+               for plan in _plans(scenario, out, fleet, spacing_m, transport, zenoh_url,
+                                  sim_route)]
+    try:
+        for f in flights:
+            f.start()
+        threads = [threading.Thread(target=f.fly, name=f"vehicle{f.plan.sysid}")
+                   for f in flights]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
     finally:
-        wall = time.monotonic() - wall0
-        children.stop()
-        if session is not None:
-            session.close()
-    stats = json.loads((out / "fcu_stats.json").read_text()) \
-        if (out / "fcu_stats.json").exists() else {}
-    truth_cols, truth = read_log(out / TRUTH_LOG)
-    onboard_cols, onboard = read_log(out / ONBOARD_LOG)
-    metrics = build_metrics(scenario, truth_cols, truth, onboard_cols, onboard,
-                            status="completed", wall_time_s=wall, transport=transport,
-                            lockstep=not realtime,
-                            deadline_misses=int(stats.get("deadline_misses", 0)),
-                            mission_completed=progress.mission_completed
-                            or bool(stats.get("mission_completed")))
-    metrics["fcu"] = stats
-    metrics["overrides"] = {"controller": scenario.controller,
-                            "ideal_actuators": scenario.ideal_actuators,
-                            "duration_s": scenario.duration_s}
-    write_metrics(out, metrics)
-    return metrics
+        for f in flights:
+            f.stop()
+        if router is not None:
+            router.stop()
+    for f in flights:
+        if f.error is not None:
+            prefix = f"vehicle {f.plan.sysid}: " if fleet > 1 else ""
+            if isinstance(f.error, GcsError | MissionError | RunError):
+                raise RunError(prefix + str(f.error)) from f.error
+            raise f.error
+    results = [f.metrics(transport) for f in flights]
+    if fleet == 1:
+        return results[0]
+    summary = {"fleet": fleet, "spacing_m": spacing_m, "transport": transport,
+               "scenario": scenario.name,
+               "all_completed": all(m["status"] == "completed" for m in results),
+               "vehicles": {str(m["system_id"]): m for m in results}}
+    (out / "fleet.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def start_router_if_needed(zenoh_url: str, out: Path) -> Children | None:
+    """Start `gcs router` on the first endpoint of `zenoh_url` when nothing listens there."""
+    from common.zenoh_link import parse_zenoh, router_running
+
+    _, endpoints = parse_zenoh(zenoh_url.partition(":")[2])
+    if router_running(endpoints[0]):
+        return None
+    children = Children(out)
+    children.start("router", [sys.executable, "-m", "gcs.cli", "router", "--listen",
+                              endpoints[0]])
+    deadline = time.monotonic() + 10.0
+    while not router_running(endpoints[0]):
+        children.check()
+        if time.monotonic() > deadline:
+            children.stop()
+            raise RunError(f"no Zenoh router came up at {endpoints[0]}")
+        time.sleep(0.05)
+    return children

@@ -230,7 +230,7 @@ def _style(ax, ylabel: str, *, xlabel: bool = False) -> None:
 
 
 def _end_time(data: RunData) -> float:
-    return float(data.t[-1]) if len(data.t) else 1.0
+    return float(data.t[-1]) if len(data.t) and data.t[-1] > 0 else 1.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -268,10 +268,10 @@ def fig3_tilt(data: RunData, path: Path) -> Path:
 
 def _log_axis(ax, values: np.ndarray, decades: float = 4.0) -> str:
     """Log y axis over the top `decades` of the data; returns a note when values fall below."""
-    ax.set_yscale("log", nonpositive="mask")
     pos = values[values > 0]
     if pos.size == 0:
         return ""
+    ax.set_yscale("log", nonpositive="mask")
     top = float(pos.max())
     floor = 10.0 ** math.floor(math.log10(max(float(pos.min()), top * 10.0 ** -decades)))
     ax.set_ylim(floor, 10.0 ** math.ceil(math.log10(top) + 1e-9))
@@ -385,7 +385,7 @@ def fig6_path(data: RunData, path: Path) -> Path:
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_zlim(lo[2] - pad, hi[2] + pad)
-        ax.set_box_aspect(tuple(span + 2 * pad))  # equal scale on all three axes
+        ax.set_box_aspect(tuple(span + 2 * pad), zoom=0.9)  # equal scales, labels inside
     ax.set_xlabel("x east (m)", labelpad=8)
     ax.set_ylabel("y north (m)", labelpad=8)
     ax.set_zlabel("z up (m)", labelpad=8)

@@ -43,12 +43,51 @@ class Tlog:
         self.fh.close()
 
 
+class MavZenoh(mavutil.mavfile):
+    """pymavlink's connection interface over a Zenoh link (ground-station role)."""
+
+    def __init__(self, url: str, source_system: int, source_component: int,
+                 vehicle: int = 0) -> None:
+        from common.links import open_link
+
+        self.link = open_link(url, role="gcs", system_id=vehicle)
+        mavutil.mavfile.__init__(self, self.link.fileno(), url, source_system=source_system,
+                                 source_component=source_component, use_native=False)
+        self._buf = b""
+
+    def recv(self, n=None) -> bytes:
+        if not self._buf:
+            self._buf = b"".join(data for _, data in self.link.recv())
+        data, self._buf = self._buf, b""
+        return data
+
+    def write(self, buf: bytes) -> None:
+        self.link.send(buf)
+
+    def set_target(self, system_id: int) -> None:
+        self.link.set_target(system_id)
+
+    @property
+    def vehicles(self) -> set[int]:
+        return set(self.link.vehicles)
+
+    def close(self) -> None:
+        self.link.close()
+
+
+def connect(url: str, system_id: int = GCS_SYSID, vehicle: int = 0):
+    """A pymavlink connection for any link URL of this project (zenoh: included)."""
+    if url.startswith("zenoh:"):
+        return MavZenoh(url, system_id, MAV_COMP_ID_MISSIONPLANNER, vehicle)
+    return mavutil.mavlink_connection(url, source_system=system_id,
+                                      source_component=MAV_COMP_ID_MISSIONPLANNER,
+                                      dialect="common", autoreconnect=True)
+
+
 class Session:
     def __init__(self, url: str, *, tlog: Path | None = None, system_id: int = GCS_SYSID,
-                 heartbeat_hz: float = 1.0) -> None:
-        self.conn = mavutil.mavlink_connection(url, source_system=system_id,
-                                               source_component=MAV_COMP_ID_MISSIONPLANNER,
-                                               dialect="common", autoreconnect=True)
+                 heartbeat_hz: float = 1.0, vehicle: int = 0) -> None:
+        self.conn = connect(url, system_id, vehicle)
         self.tlog = Tlog(tlog) if tlog else None
         if self.tlog is not None:
             received = self.conn.post_message
@@ -69,6 +108,9 @@ class Session:
 
     def _heartbeats(self) -> None:
         while not self._stop.is_set():
+            if isinstance(self.conn, MavZenoh) and not self.target_system:
+                self._stop.wait(0.1)  # over Zenoh, heartbeats go to a chosen vehicle
+                continue
             self.send(M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0,
                                                   0, M.MAV_STATE_ACTIVE, 3))
             self._stop.wait(self._period)
@@ -93,6 +135,8 @@ class Session:
                 continue
             self.target_system = msg.get_srcSystem()
             self.target_component = msg.get_srcComponent()
+            if isinstance(self.conn, MavZenoh):
+                self.conn.set_target(self.target_system)
             return
         raise GcsError(f"no vehicle heartbeat within {timeout:.0f} s")
 

@@ -113,4 +113,7 @@ def run_table1(config_dir: Path, out_dir: Path, *, ideal: bool = False,
     table = table_json(results)
     (out_dir / "table1.json").write_text(json.dumps(table, indent=2) + "\n")
     (out_dir / "table1.md").write_text(table_markdown(table))
+    from gcs.report import table1_chart  # matplotlib only where a chart is drawn
+
+    table1_chart(table, out_dir / "table1.png")
     return table

@@ -14,6 +14,7 @@ The ground-truth log (one row per state sent) is the run's reference for every m
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import select
@@ -68,7 +69,7 @@ class SimulatorServer:
             raise ConfigError(f"control period {self.control_dt_us} us is not a multiple of "
                               f"the physics step {self.plant.dt_us} us")
         self.substeps = self.control_dt_us // self.plant.dt_us
-        self.link = open_link(link_url)
+        self.link = open_link(link_url, role="sim_server", system_id=system_id)
         self.reader = FrameReader(self.link.is_stream)
         self.realtime = realtime
         self.end_us = None if end_time_s is None else round(end_time_s * 1e6)
@@ -237,6 +238,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resend-ms", type=float, default=5.0,
                    help="re-send an unanswered state after this wall time")
     p.add_argument("--sysid", type=int, default=1)
+    p.add_argument("--position", metavar="X,Y,Z",
+                   help="start position in ENU metres (default: the scenario's)")
     return p
 
 
@@ -245,9 +248,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         scenario = load_scenario(args.scenario)
         if args.ideal_actuators:
-            import dataclasses
-
             scenario = dataclasses.replace(scenario, ideal_actuators=True)
+        if args.position is not None:
+            try:
+                xyz = tuple(float(v) for v in args.position.split(","))
+            except ValueError:
+                xyz = ()
+            if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
+                raise ConfigError(f"--position: expected X,Y,Z in metres, got {args.position}")
+            scenario = dataclasses.replace(scenario, initial_position_enu_m=xyz)
         rate = args.control_rate or scenario.control_rate_hz
         if not 1 <= rate <= 1000:
             raise ConfigError(f"--control-rate: expected 1..1000 Hz, got {rate}")

@@ -1,0 +1,197 @@
+"""MAVLink 2 frames over Zenoh (DESIGN.md section 7): `zenoh:PREFIX[@ENDPOINT,...]`.
+
+Keys: a vehicle publishes on `PREFIX/<sysid>/out`, listens on `PREFIX/<sysid>/in` and holds
+the liveliness token `PREFIX/<sysid>/alive`; ground stations listen on `PREFIX/*/out` (or one
+vehicle's) and publish to the chosen vehicle's `in`. The simulator link uses
+`PREFIX/<sysid>/sim/state` (plant to FCU) and `PREFIX/<sysid>/sim/actuators` (FCU to plant).
+
+Sessions run in client mode and connect to routers (default `tcp/127.0.0.1:7447`); multicast
+scouting is off and nothing listens, so nothing leaves 127.0.0.1 unless an endpoint says so.
+Zenoh's callbacks only append to a deque and poke a pipe: they never block Zenoh's threads,
+and the pipe's read end lets the same `select` loop serve Zenoh and sockets.
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import os
+import socket
+import threading
+from collections.abc import Callable
+
+import zenoh
+
+from common.links import Link, LinkError, LinkUrl
+
+DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+ROLES = ("vehicle", "gcs", "sim_server", "sim_client")
+
+
+def parse_zenoh(rest: str) -> tuple[str, list[str]]:
+    """'PREFIX@EP1,EP2' -> (prefix, endpoints); defaults 'mavlink' and the local router."""
+    prefix, _, endpoints = rest.partition("@")
+    prefix = prefix.strip("/") or "mavlink"
+    if any(c in prefix for c in "*$#?") or "//" in prefix:
+        raise LinkError(f"zenoh prefix '{prefix}': no wildcards or empty chunks")
+    eps = [e for e in endpoints.split(",") if e] or [DEFAULT_ROUTER]
+    for e in eps:
+        if "/" not in e:
+            raise LinkError(f"zenoh endpoint '{e}': expected PROTO/ADDRESS, e.g. {DEFAULT_ROUTER}")
+    return prefix, eps
+
+
+def client_config(endpoints: list[str], mode: str = "client") -> zenoh.Config:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("connect/endpoints", json.dumps(endpoints))
+    conf.insert_json5("listen/endpoints", "[]")
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
+
+
+def router_config(listen: list[str]) -> zenoh.Config:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"router"')
+    conf.insert_json5("listen/endpoints", json.dumps(listen))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
+
+
+def router_running(endpoint: str = DEFAULT_ROUTER, timeout: float = 0.5) -> bool:
+    """Something accepts TCP connections at a tcp/HOST:PORT endpoint."""
+    proto, _, addr = endpoint.partition("/")
+    host, _, port = addr.rpartition(":")
+    if proto != "tcp" or not port.isdigit():
+        return False
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+class ZenohLink(Link):
+    """A Zenoh link in one of the roles of ROLES."""
+
+    def __init__(self, url: LinkUrl, *, role: str, system_id: int = 0,
+                 on_liveliness: Callable[[int, bool], None] | None = None) -> None:
+        if role not in ROLES:
+            raise LinkError(f"zenoh link role {role!r}: expected one of {ROLES}")
+        self.url = url
+        self.prefix, self.endpoints = parse_zenoh(url.device)
+        self.role = role
+        self.system_id = system_id
+        self._queue: collections.deque[tuple[str, bytes]] = collections.deque()
+        self._rfd, self._wfd = os.pipe()
+        os.set_blocking(self._rfd, False)
+        os.set_blocking(self._wfd, False)
+        self._lock = threading.Lock()
+        self.vehicles: set[int] = set()
+        self._on_liveliness = on_liveliness
+        try:
+            self.session = zenoh.open(client_config(self.endpoints))
+        except zenoh.ZError as exc:
+            self.close_fds()
+            raise LinkError(f"link '{url}': cannot open a Zenoh session: {exc}") from None
+        p, n = self.prefix, system_id
+        self._token = None
+        self._pub = None
+        self._live = None
+        if role == "vehicle":
+            self._pub = self.session.declare_publisher(f"{p}/{n}/out", express=True)
+            self._sub = self.session.declare_subscriber(f"{p}/{n}/in", self._on_sample)
+            self._token = self.session.liveliness().declare_token(f"{p}/{n}/alive")
+        elif role == "gcs":
+            self._sub = self.session.declare_subscriber(f"{p}/{n or '*'}/out", self._on_sample)
+            self._live = self.session.liveliness().declare_subscriber(
+                f"{p}/*/alive", self._on_alive, history=True)
+            if n:
+                self.set_target(n)
+        elif role == "sim_server":
+            self._pub = self.session.declare_publisher(f"{p}/{n}/sim/state", express=True)
+            self._sub = self.session.declare_subscriber(f"{p}/{n}/sim/actuators",
+                                                        self._on_sample)
+        else:
+            self._pub = self.session.declare_publisher(f"{p}/{n}/sim/actuators", express=True)
+            self._sub = self.session.declare_subscriber(f"{p}/{n}/sim/state", self._on_sample)
+
+    # Zenoh threads: append and poke, never block.
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        self._queue.append((str(sample.key_expr), sample.payload.to_bytes()))
+        try:
+            os.write(self._wfd, b"\0")
+        except (BlockingIOError, OSError):
+            pass  # the pipe is full or closed: the reader drains the deque anyway
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        chunk = str(sample.key_expr).split("/")[-2]
+        if not chunk.isdigit():
+            return
+        sysid = int(chunk)
+        alive = sample.kind == zenoh.SampleKind.PUT
+        with self._lock:
+            (self.vehicles.add if alive else self.vehicles.discard)(sysid)
+        if self._on_liveliness is not None:
+            self._on_liveliness(sysid, alive)
+        self._on_sample_wakeup()
+
+    def _on_sample_wakeup(self) -> None:
+        try:
+            os.write(self._wfd, b"\0")
+        except (BlockingIOError, OSError):
+            pass
+
+    def set_target(self, system_id: int) -> None:
+        """GCS: send to this vehicle's `in` key from now on."""
+        with self._lock:
+            if self._pub is not None:
+                self._pub.undeclare()
+            self._pub = self.session.declare_publisher(f"{self.prefix}/{system_id}/in",
+                                                       express=True)
+
+    def fileno(self) -> int:
+        return self._rfd
+
+    def recv(self) -> list[tuple[object, bytes]]:
+        try:
+            while os.read(self._rfd, 65536):
+                pass
+        except (BlockingIOError, OSError):
+            pass
+        out: list[tuple[object, bytes]] = []
+        q = self._queue
+        while q:
+            out.append(q.popleft())
+        return out
+
+    def send(self, data: bytes) -> None:
+        pub = self._pub
+        if pub is not None:
+            pub.put(data)
+
+    def close_fds(self) -> None:
+        for fd in (self._rfd, self._wfd):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    def close(self) -> None:
+        for entity in (self._token, self._live, getattr(self, "_sub", None), self._pub):
+            if entity is not None:
+                try:
+                    entity.undeclare()
+                except zenoh.ZError:
+                    pass
+        self.session.close()
+        self.close_fds()
+
+
+def run_router(listen: list[str], stop: threading.Event) -> None:
+    """A Zenoh router for the machine's sessions (and other routers' connections)."""
+    session = zenoh.open(router_config(listen))
+    try:
+        stop.wait()
+    finally:
+        session.close()
