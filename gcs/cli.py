@@ -169,6 +169,9 @@ def build_parser() -> argparse.ArgumentParser:
     wa = sub.add_parser("watch", parents=[link], help="live view; q or Ctrl-C quits")
     wa.add_argument("--rate", type=_positive, default=5.0, help="refreshes per second")
     wa.add_argument("--duration", type=_positive, metavar="S", help="quit after S s")
+    wa.add_argument("--all", action="store_true", help="every vehicle heard, not one")
+    sub.add_parser("vehicles", parents=[link],
+                   help="system ids of the vehicles on the link (Zenoh: from liveliness)")
 
     log = sub.add_parser("log", help="record telemetry")
     lsub = log.add_subparsers(dest="action", required=True)
@@ -286,7 +289,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def _session(args: argparse.Namespace, tlog: Path | None = None):
     from gcs.session import Session
 
-    session = Session(args.connect, tlog=tlog)
+    session = Session(args.connect, tlog=tlog, vehicle=args.sysid or 0)
     try:
         session.wait_vehicle(timeout=args.wait, system_id=args.sysid)
     except BaseException:
@@ -327,7 +330,12 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
         if args.command == "watch":
             from gcs.watch import watch
 
-            return watch(session, refresh_hz=args.rate, duration=args.duration)
+            return watch(session, refresh_hz=args.rate, duration=args.duration,
+                         all_vehicles=args.all)
+        if args.command == "vehicles":
+            for sysid in vl.vehicles(session, args.wait):
+                print(sysid)
+            return 0
         raise AssertionError(args.command)
     finally:
         session.close()

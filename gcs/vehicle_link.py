@@ -130,6 +130,22 @@ def status(session: Session, seconds: float = 1.5) -> dict[str, Any]:
     return out
 
 
+def vehicles(session: Session, seconds: float) -> list[int]:
+    """System ids of the autopilots on the link: Zenoh liveliness tokens where the link has
+    them (vehicles that left are gone), else heartbeats heard within `seconds`."""
+    live = getattr(session.conn, "vehicles", None)
+    if live is not None:
+        time.sleep(min(seconds, 1.0))  # liveliness history arrives at once; let it settle
+        return sorted(session.conn.vehicles)
+    heard: set[int] = set()
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        msg = session.recv(["HEARTBEAT"], timeout=0.2)
+        if msg is not None and msg.autopilot != M.MAV_AUTOPILOT_INVALID:
+            heard.add(msg.get_srcSystem())
+    return sorted(heard)
+
+
 def set_mode(session: Session, name: str) -> int:
     mode = by_name(name)
     if mode is None:

@@ -20,9 +20,10 @@ from gcs.vehicle_link import Snapshot, link_quality, mode_name
 M = MAV
 
 
-def render(session: Session, snap: Snapshot, now: float) -> list[str]:
-    """The view as lines of text (pure: the same lines for the same snapshot)."""
-    lines = [f"system {session.target_system}   ({now - snap.started:5.1f} s)   q: quit"]
+def render(system_id: int, snap: Snapshot, now: float,
+           quality: tuple[float, int, int]) -> list[str]:
+    """The view of one vehicle as lines of text (pure: same input, same lines)."""
+    lines = [f"system {system_id}   ({now - snap.started:5.1f} s)   q: quit"]
     hb = snap.get("HEARTBEAT")
     if hb is None:
         return [*lines, "waiting for HEARTBEAT ..."]
@@ -51,7 +52,7 @@ def render(session: Session, snap: Snapshot, now: float) -> list[str]:
     if out is not None:
         lines.append("rotors rad/s  " + " ".join(f"{v:7.1f}" for v in out.actuator[:6]))
         lines.append("tilts  rad    " + " ".join(f"{v:7.3f}" for v in out.actuator[6:12]))
-    loss, received, lost = link_quality(session)
+    loss, received, lost = quality
     rate = snap.received / max(now - snap.started, 1e-3)
     sim = f"   vehicle clock {t_ms / 1000:8.2f} s" if t_ms is not None else ""
     lines.append(f"link  {rate:6.0f} msg/s   loss {loss:5.2f} %  ({lost} of "
@@ -60,12 +61,19 @@ def render(session: Session, snap: Snapshot, now: float) -> list[str]:
     return lines
 
 
-def _pump(session: Session, snap: Snapshot, seconds: float) -> None:
+def _pump(session: Session, snaps: dict[int, Snapshot], seconds: float,
+          only: int | None) -> None:
+    """Take messages for `seconds`; one snapshot per vehicle (autopilot component)."""
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         msg = session.recv(None, timeout=max(0.0, end - time.monotonic()))
-        if msg is None or msg.get_srcSystem() != session.target_system:
+        if msg is None or msg.get_type() == "BAD_DATA":
             continue
+        sysid = msg.get_srcSystem()
+        if (only is not None and sysid != only) or msg.get_srcComponent() != \
+                session.target_component:
+            continue
+        snap = snaps.setdefault(sysid, Snapshot())
         snap.received += 1
         if msg.get_type() == "NAMED_VALUE_FLOAT":
             snap.messages[msg.name] = msg
@@ -73,16 +81,29 @@ def _pump(session: Session, snap: Snapshot, seconds: float) -> None:
 
 
 def watch(session: Session, refresh_hz: float = 5.0, duration: float | None = None,
-          out: Callable[[str], None] | None = None) -> int:
-    snap = Snapshot()
+          out: Callable[[str], None] | None = None, all_vehicles: bool = False) -> int:
+    """Watch the session's vehicle, or every vehicle heard (`all_vehicles`)."""
+    snaps: dict[int, Snapshot] = {}
+    only = None if all_vehicles else session.target_system
     period = 1.0 / refresh_hz
+
+    def view() -> list[str]:
+        now = time.monotonic()
+        quality = link_quality(session)
+        lines: list[str] = []
+        for sysid in sorted(snaps) or [session.target_system]:
+            if lines:
+                lines.append("")
+            lines += render(sysid, snaps.get(sysid, Snapshot()), now, quality)
+        return lines
+
     end = math.inf if duration is None else time.monotonic() + duration
     if out is not None or not sys.stdout.isatty():
         write = out or (lambda text: print(text, flush=True))
         try:
             while time.monotonic() < end:
-                _pump(session, snap, period)
-                write("\n".join(render(session, snap, time.monotonic())) + "\n")
+                _pump(session, snaps, period, only)
+                write("\n".join(view()) + "\n")
         except KeyboardInterrupt:
             pass
         return 0
@@ -91,10 +112,10 @@ def watch(session: Session, refresh_hz: float = 5.0, duration: float | None = No
         curses.curs_set(0)
         screen.nodelay(True)
         while time.monotonic() < end:
-            _pump(session, snap, period)
+            _pump(session, snaps, period, only)
             screen.erase()
             height, width = screen.getmaxyx()
-            for i, line in enumerate(render(session, snap, time.monotonic())[:height - 1]):
+            for i, line in enumerate(view()[:height - 1]):
                 screen.addnstr(i, 0, line, width - 1)
             screen.refresh()
             key = screen.getch()

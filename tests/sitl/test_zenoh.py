@@ -1,0 +1,158 @@
+"""The Zenoh fabric: the same flights as over UDP, fleets, observers, discovery."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+
+import pytest
+import zenoh
+from pymavlink.dialects.v20 import common as mavlink2
+
+from common.config import load_scenario
+from common.links import free_port
+from common.zenoh_link import client_config, router_running
+from gcs.process_run import run_processes
+
+from .conftest import ROOT, SCENARIOS
+
+CASE1 = SCENARIOS / "case1_figure8.toml"
+pytestmark = pytest.mark.timeout(300)
+
+FIGURES = ("position_error_m", "attitude_error_rad", "samples", "sim_time_s")
+
+
+@pytest.fixture
+def router() -> Iterator[str]:
+    """A `gcs router` of this test's own on a free port; yields its endpoint."""
+    endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    proc = subprocess.Popen([sys.executable, "-m", "gcs.cli", "router", "--listen", endpoint],
+                            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    try:
+        deadline = time.monotonic() + 10
+        while not router_running(endpoint):
+            assert proc.poll() is None and time.monotonic() < deadline, "router did not start"
+            time.sleep(0.05)
+        yield endpoint
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def _short(seconds: float):
+    return dataclasses.replace(load_scenario(CASE1), duration_s=seconds)
+
+
+def test_case1_over_zenoh_equals_udp_exactly(tmp_path, router):
+    """GCS and simulator links both on Zenoh, lockstep: the error figures of the UDP run."""
+    sc = _short(12.0)
+    udp = run_processes(sc, tmp_path / "udp")
+    zen = run_processes(sc, tmp_path / "zenoh", transport="zenoh",
+                        zenoh_url=f"zenoh:t1@{router}")
+    assert zen["transport"] == "zenoh" and zen["lockstep"] and zen["status"] == "completed"
+    for key in FIGURES:
+        assert zen[key] == udp[key]
+    assert (tmp_path / "udp" / "truth_log.bin").read_bytes() == \
+        (tmp_path / "zenoh" / "truth_log.bin").read_bytes()
+
+
+def _observer(router: str, prefix: str, seconds: float, seen: dict) -> None:
+    """A plain Zenoh subscriber decoding MAVLink with pymavlink only."""
+    session = zenoh.open(client_config([router]))
+    parser = mavlink2.MAVLink(None)
+    parser.robust_parsing = True
+
+    def on_sample(sample):
+        for msg in parser.parse_buffer(sample.payload.to_bytes()) or []:
+            key = (str(sample.key_expr), msg.get_type())
+            seen[key] = seen.get(key, 0) + 1
+
+    sub = session.declare_subscriber(f"{prefix}/*/out", on_sample)
+    time.sleep(seconds)
+    sub.undeclare()
+    session.close()
+
+
+def test_fleet_of_four_flies_like_one_with_observers(tmp_path, router):
+    """A fleet of 4 (ids 1..4) completes with each vehicle's figures equal to the single
+    run; an observer joining late and one leaving early change nothing; a plain subscriber
+    decodes HEARTBEAT and ATTITUDE_QUATERNION from every vehicle's out key."""
+    sc = _short(8.0)
+    url = f"zenoh:fleet@{router}"
+    single = run_processes(sc, tmp_path / "single", transport="zenoh", zenoh_url=url)
+    seen_early: dict = {}
+    seen_late: dict = {}
+    early = threading.Thread(target=_observer, args=(router, "fleet", 3.0, seen_early))
+    late = threading.Thread(target=lambda: (time.sleep(4.0),
+                                            _observer(router, "fleet", 4.0, seen_late)))
+    early.start()
+    late.start()
+    fleet = run_processes(sc, tmp_path / "fleet", transport="zenoh", zenoh_url=url, fleet=4)
+    early.join()
+    late.join()
+    assert fleet["all_completed"] and sorted(fleet["vehicles"]) == ["1", "2", "3", "4"]
+    for n in range(1, 5):
+        m = json.loads((tmp_path / "fleet" / f"vehicle{n}" / "metrics.json").read_text())
+        assert m["system_id"] == n
+        for key in FIGURES:
+            assert m[key] == single[key], (n, key)
+    assert json.loads((tmp_path / "fleet" / "fleet.json").read_text())["fleet"] == 4
+    for n in range(1, 5):
+        assert seen_early.get((f"fleet/{n}/out", "HEARTBEAT"), 0) >= 1
+        assert seen_early.get((f"fleet/{n}/out", "ATTITUDE_QUATERNION"), 0) >= 10
+    assert seen_late  # the late observer heard the fleet too
+
+
+def test_fleet_with_spacing_within_a_micrometre(tmp_path, router):
+    """Spread 3 m apart, each vehicle flies its own offset copy of the mission."""
+    sc = _short(6.0)
+    url = f"zenoh:spaced@{router}"
+    single = run_processes(sc, tmp_path / "single", transport="zenoh", zenoh_url=url)
+    fleet = run_processes(sc, tmp_path / "fleet", transport="zenoh", zenoh_url=url, fleet=2,
+                          spacing_m=3.0)
+    assert fleet["all_completed"]
+    two = fleet["vehicles"]["2"]
+    assert two["start_position_enu_m"] == [3.0, 0.0, 0.0]
+    for part in ("position_error_m", "attitude_error_rad"):
+        for stat in ("max", "mean", "rmse"):
+            assert abs(two[part][stat] - single[part][stat]) < 1e-6
+
+
+def test_ground_station_discovers_and_picks_vehicles(tmp_path, router):
+    """`gcs status --connect zenoh:...` finds the vehicles from liveliness and picks one by
+    system id; `gcs watch --all` shows every vehicle."""
+    from .conftest import PID, VEHICLE, start, stop
+
+    url = f"zenoh:disc@{router}"
+    procs = {}
+    for n in (3, 7):
+        procs[f"sitl{n}"] = start(f"sitl{n}", ["sitl.node", str(CASE1), "--link", url,
+                                               "--sysid", str(n)], tmp_path)
+        procs[f"fcu{n}"] = start(f"fcu{n}", ["fcu.node", "--vehicle", str(VEHICLE), "--gains",
+                                             str(PID), "--sim", url, "--gcs", url, "--sysid",
+                                             str(n)], tmp_path)
+    try:
+        def gcs(*args):
+            return subprocess.run([sys.executable, "-m", "gcs.cli", *args, "--connect", url],
+                                  cwd=ROOT, capture_output=True, text=True, timeout=60,
+                                  check=False)
+
+        out = gcs("status", "--sysid", "7")
+        assert out.returncode == 0, out.stderr
+        assert "system: 7" in out.stdout and "MAV_TYPE_HEXAROTOR" in out.stdout
+        vehicles = gcs("vehicles", "--wait", "5")
+        assert vehicles.returncode == 0 and vehicles.stdout.split() == ["3", "7"]
+        watch = gcs("watch", "--all", "--duration", "3")
+        assert watch.returncode == 0
+        assert "system 3" in watch.stdout and "system 7" in watch.stdout
+        stop({k: v for k, v in procs.items() if k.endswith("7")})
+        vehicles = gcs("vehicles", "--wait", "3")
+        assert vehicles.stdout.split() == ["3"]  # vehicle 7 left: its token is gone
+    finally:
+        stop(procs)
