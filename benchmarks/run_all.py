@@ -7,7 +7,8 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-BENCHMARKS = ("bench_step.py", "bench_inprocess.py", "bench_lockstep.py", "divergence_limit.py")
+BENCHMARKS = ("bench_step.py", "bench_inprocess.py", "bench_lockstep.py", "bench_zenoh.py",
+              "divergence_limit.py")
 
 if __name__ == "__main__":
     failed = 0

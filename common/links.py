@@ -71,6 +71,10 @@ class Link:
         fd = self.fileno()
         return [fd] if fd >= 0 else []
 
+    # Worth polling without sleeping when an answer is microseconds away (sockets); a link
+    # fed by another thread (Zenoh) must let that thread take the GIL instead.
+    spin = True
+
     @property
     def is_stream(self) -> bool:
         return self.url.scheme in ("tcp", "tcpin", "serial")

@@ -74,6 +74,8 @@ def router_running(endpoint: str = DEFAULT_ROUTER, timeout: float = 0.5) -> bool
 class ZenohLink(Link):
     """A Zenoh link in one of the roles of ROLES."""
 
+    spin = False  # data arrives from Zenoh's threads: sleep in select, release the GIL
+
     def __init__(self, url: LinkUrl, *, role: str, system_id: int = 0,
                  on_liveliness: Callable[[int, bool], None] | None = None) -> None:
         if role not in ROLES:

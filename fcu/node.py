@@ -431,7 +431,7 @@ class FlightController:
             if not self.lockstep:
                 wake = min(wake, next_tick)
             timeout = min(max(0.0, wake - now), 0.05)
-            if self.lockstep and now - self.last_sim_rx_s < SPIN_S:
+            if self.lockstep and self.sim.spin and now - self.last_sim_rx_s < SPIN_S:
                 timeout = 0.0  # lockstep: the next state is microseconds away, poll for it
             try:
                 readable, _, _ = select.select(list(fds), [], [], timeout)

@@ -167,7 +167,7 @@ class SimulatorServer:
         while self.running:
             now = time.monotonic()
             idle = now - last_progress
-            spinning = idle < SPIN_S  # the answer is due within microseconds: poll
+            spinning = idle < SPIN_S and self.link.spin  # the answer is microseconds away
             wait = self.resend_s if idle < 0.5 else 0.05
             since = now - max(last_resend, last_progress)
             timeout = 0.0 if spinning else max(0.0, wait - since)
