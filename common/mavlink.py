@@ -45,3 +45,32 @@ def pack(mav: mavlink.MAVLink, msg: mavlink.MAVLink_message) -> bytes:
     data = msg.pack(mav)
     mav.seq = (mav.seq + 1) % 256
     return data
+
+
+class SigningKeyError(ValueError):
+    """A signing key file that is missing, unreadable or not 32 bytes."""
+
+
+def read_signing_key(path: str) -> bytes:
+    """A MAVLink 2 signing key: a file holding 64 hexadecimal characters (`gcs keygen`) or
+    exactly 32 raw bytes."""
+    try:
+        raw = open(path, "rb").read()
+    except OSError as exc:
+        raise SigningKeyError(f"signing key {path}: {exc.strerror}") from None
+    text = raw.strip()
+    if len(text) == 64:
+        try:
+            return bytes.fromhex(text.decode("ascii"))
+        except (UnicodeDecodeError, ValueError):
+            pass
+    if len(raw) == 32:
+        return raw
+    raise SigningKeyError(f"signing key {path}: expected 64 hex characters or 32 bytes")
+
+
+def signing_timestamp() -> int:
+    """Now in the signing clock: 10 us units since 2015-01-01 (MAVLink signing spec)."""
+    import time
+
+    return int((max(time.time(), 1420070400) - 1420070400) * 100_000)

@@ -27,7 +27,15 @@ from common.binlog import LogWriter
 from common.config import ConfigError, load_gains, load_vehicle
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.links import Link, LinkError, open_link
-from common.mavlink import MAV, encoder, pack, parser
+from common.mavlink import (
+    MAV,
+    SigningKeyError,
+    encoder,
+    pack,
+    parser,
+    read_signing_key,
+    signing_timestamp,
+)
 from common.modes import Mode, decode, decode_custom
 from common.simlink import (
     LOCKSTEP_FLAG,
@@ -46,7 +54,7 @@ from fcu.params import SPECS, ParamError, ParamStore
 from fcu.telemetry import REQUESTABLE, Builders, Home, Schedule, autopilot_version, heartbeat
 from fcu.telemetry import sys_status as sys_status_msg
 from fcu.tracker import VehicleState
-from fcu.vehicle import FORCE_DISARM_MAGIC, Vehicle
+from fcu.vehicle import FORCE_DISARM_MAGIC, Failsafes, Vehicle
 
 M = MAV
 COMPONENT = M.MAV_COMP_ID_AUTOPILOT1
@@ -58,7 +66,7 @@ SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each state
 class FlightController:
     def __init__(self, vehicle: Vehicle, sim_url: str, gcs_urls: list[str], *, system_id: int,
                  lockstep: bool, home: Home, onboard_log: Path | None,
-                 stats_path: Path | None) -> None:
+                 stats_path: Path | None, signing_key: bytes | None = None) -> None:
         self.vehicle = vehicle
         self.system_id = system_id
         self.lockstep = lockstep
@@ -67,6 +75,13 @@ class FlightController:
         self.gcs: list[Link] = [open_link(u, role="vehicle", system_id=system_id)
                                 for u in gcs_urls]
         self.mav = encoder(system_id, COMPONENT)  # GCS links: one sequence for all of them
+        self.signing_key = signing_key
+        self.signing_rejects = 0
+        self._stream_timestamps: dict = {}  # replay protection shared by every GCS parser
+        if signing_key is not None:
+            self.mav.signing.secret_key = signing_key
+            self.mav.signing.sign_outgoing = True
+            self.mav.signing.timestamp = signing_timestamp()
         self.sim_mav = encoder(system_id, COMPONENT)
         self.parsers: dict[tuple[int, object], MAV.MAVLink] = {}
         self.params = ParamStore(vehicle.gains)
@@ -95,6 +110,7 @@ class FlightController:
         self.last_mission_current_sent: tuple[int, int] | None = None
         self.sim_heartbeat_due = 0.0
         self.last_sim_rx_s = -math.inf
+        self.state_rx = False
 
     # ------------------------------------------------------------------ sending
 
@@ -136,6 +152,7 @@ class FlightController:
             state = VehicleState(ned_to_enu(odo.p_ned_m), q, frd_to_flu(odo.v_frd_m_s),
                                  frd_to_flu(odo.omega_frd_rad_s))
             self.vehicle.on_state(odo.time_usec, state)
+            self.state_rx = True
             self.v_enu = q_rotate(self.vehicle.state.q_enu_flu, state.v_flu_m_s)
             if self.lockstep:
                 self.time_us = odo.time_usec
@@ -176,6 +193,9 @@ class FlightController:
         p = self.parsers.get(key)
         if p is None:
             p = self.parsers[key] = parser()
+            if self.signing_key is not None:
+                p.signing.secret_key = self.signing_key  # unsigned frames are refused
+                p.signing.stream_timestamps = self._stream_timestamps
         try:
             msgs = p.parse_buffer(data) or []
         except Exception:  # pymavlink raises on some malformed input; count and go on
@@ -183,7 +203,10 @@ class FlightController:
             return
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
-                self.rejected_bytes += len(msg.get_msgbuf())
+                if "signature" in str(getattr(msg, "reason", "")):
+                    self.signing_rejects += 1
+                else:
+                    self.rejected_bytes += len(msg.get_msgbuf())
                 continue
             try:
                 self._handle(msg)
@@ -325,6 +348,10 @@ class FlightController:
         v = self.params.values
         self.vehicle.core.tracker.set_gains(self.params.gains())
         self.vehicle.offboard_timeout_s = v["COM_OF_LOSS_T"]
+        self.vehicle.failsafes = Failsafes(
+            gcs_loss_s=v["COM_DL_LOSS_T"], gcs_loss_land_s=v["COM_DL_LAND_T"],
+            state_loss_s=v["COM_STATE_LOSS_T"], saturation_s=v["COM_SAT_T"],
+            saturation_hold=v["COM_SAT_ACT"] == 1.0, divergence_m=v["COM_DIV_POS"])
         limits = MissionLimits(max_distance_m=v["GF_MAX_DIST"],
                                cruise_speed_m_s=v["MIS_CRUISE_SPD"],
                                land_speed_m_s=v["MIS_LAND_SPD"],
@@ -374,12 +401,13 @@ class FlightController:
     def _send_message(self, msg_id: int) -> None:
         v = self.vehicle
         if msg_id == M.MAVLINK_MSG_ID_HEARTBEAT:
-            msg = heartbeat(v.armed, v.mode.custom_mode, v.armed)
+            msg = heartbeat(v.armed, v.mode.custom_mode, v.armed, v.failsafe)
         elif msg_id == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             msg = autopilot_version(self.system_id)
         elif msg_id == M.MAVLINK_MSG_ID_SYS_STATUS:
-            msg = sys_status_msg(v.state is not None, 0, 0,
-                                 self.rejected_bytes + self.ignored_messages)
+            msg = sys_status_msg(v.state is not None and not v.failsafe, 0,
+                                 self.rejected_bytes + self.ignored_messages,
+                                 self.signing_rejects)
         elif msg_id == M.MAVLINK_MSG_ID_MISSION_CURRENT:
             msg = self._mission_current_msg()
             self.last_mission_current_sent = (msg.seq, msg.mission_state)
@@ -391,11 +419,13 @@ class FlightController:
 
     def _housekeeping(self, now: float) -> None:
         v = self.vehicle
+        if self.sim_heartbeat_due == 0.0:
+            self._apply_params()  # the failsafe and mission settings of the parameters
         if now >= self.sim_heartbeat_due:
             # Simulators learn where we are from this, as from PX4's first packets.
             self.sim.send(pack(self.sim_mav, heartbeat(v.armed, v.mode.custom_mode, v.armed)))
             self.sim_heartbeat_due = now + 1.0
-        v.check_links(now)
+        v.check_links(now, self.gcs_seen_s, self.last_sim_rx_s if self.state_rx else now)
         for reply in self.missions.tick(now):
             self.send(reply)
         for severity, text in v.messages:
@@ -467,6 +497,7 @@ class FlightController:
             self.log = None
         if self.stats_path is not None:
             stats = {"steps": self.steps, "deadline_misses": self.deadline_misses,
+                     "signing_rejects": self.signing_rejects,
                      "resent_answers": self.resent_answers,
                      "rejected_bytes": self.rejected_bytes,
                      "ignored_messages": self.ignored_messages,
@@ -502,6 +533,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--home", type=_home, default=Home(), help="LAT,LON,ALT of the origin")
     p.add_argument("--onboard-log", type=Path, help="write the onboard log here")
     p.add_argument("--stats", type=Path, help="write run statistics (JSON) here at exit")
+    p.add_argument("--signing-key", metavar="FILE",
+                   help="MAVLink 2 signing on the GCS links: sign telemetry, refuse unsigned "
+                        "or wrongly signed input (key from `gcs keygen`)")
     return p
 
 
@@ -513,11 +547,12 @@ def main(argv: list[str] | None = None) -> int:
         if not 1 <= args.sysid <= 254:
             raise ConfigError(f"--sysid: expected 1..254, got {args.sysid}")
         vehicle = Vehicle(load_vehicle(args.vehicle), load_gains(args.gains), args.rate)
+        key = read_signing_key(args.signing_key) if args.signing_key else None
         fc = FlightController(vehicle, args.sim, args.gcs or list(DEFAULT_GCS),
                               system_id=args.sysid, lockstep=not args.realtime,
                               home=args.home, onboard_log=args.onboard_log,
-                              stats_path=args.stats)
-    except (ConfigError, LinkError) as exc:
+                              stats_path=args.stats, signing_key=key)
+    except (ConfigError, LinkError, SigningKeyError) as exc:
         print(f"fcu: {exc}", file=sys.stderr)
         return 2
 

@@ -54,6 +54,18 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("GF_MAX_DIST", 1000.0, 1.0, 100000.0, "m",
               "geofence: farthest mission point from the origin"),
     ParamSpec("COM_OF_LOSS_T", 1.0, 0.1, 60.0, "s", "offboard setpoint loss timeout (to HOLD)"),
+    ParamSpec("COM_DL_LOSS_T", 0.0, 0.0, 300.0, "s",
+              "GCS heartbeat loss: HOLD after this long without one (0: off)"),
+    ParamSpec("COM_DL_LAND_T", 0.0, 0.0, 600.0, "s",
+              "after GCS loss: LAND after this long in HOLD (0: never)"),
+    ParamSpec("COM_STATE_LOSS_T", 1.0, 0.05, 60.0, "s",
+              "state input loss: stop commanding motion and disarm after this long"),
+    ParamSpec("COM_SAT_T", 2.0, 0.01, 60.0, "s",
+              "rotor speed saturation for longer than this is reported"),
+    ParamSpec("COM_SAT_ACT", 0.0, 0.0, 1.0, "enum",
+              "on long saturation: 0 = report, 1 = abort the mission to HOLD"),
+    ParamSpec("COM_DIV_POS", 10.0, 0.1, 1000.0, "m",
+              "divergence: tracking error beyond this disarms"),
 )
 BY_NAME = {s.name: s for s in SPECS}
 
@@ -100,8 +112,8 @@ class ParamStore:
             raise ParamError(f"unknown parameter {name}")
         if not math.isfinite(value) or not spec.lo <= value <= spec.hi:
             raise ParamError(f"{name} refused: {value:g} not in [{spec.lo:g}, {spec.hi:g}]")
-        if spec.name == "DQ_DAMPING" and value not in (0.0, 1.0):
-            raise ParamError(f"{name} refused: must be 0 or 1")
+        if spec.unit == "enum" and value != round(value):
+            raise ParamError(f"{name} refused: must be an integer in [{spec.lo:g}, {spec.hi:g}]")
         trial = dict(self.values)
         trial[name] = _f32(value)
         if name.startswith("DQ_K"):

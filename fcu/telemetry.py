@@ -86,10 +86,15 @@ class Home:
     alt_m: float = 488.0
 
 
-def heartbeat(armed: bool, custom_mode: int, active: bool) -> MAV.MAVLink_message:
+def heartbeat(armed: bool, custom_mode: int, active: bool, failsafe: str = ""
+              ) -> MAV.MAVLink_message:
+    """system_status: ACTIVE/STANDBY, CRITICAL while a failsafe is active, EMERGENCY after a
+    divergence (as PX4 reports failsafes)."""
     base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (M.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
     base |= M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_AUTO_ENABLED
     status = M.MAV_STATE_ACTIVE if active else M.MAV_STATE_STANDBY
+    if failsafe:
+        status = M.MAV_STATE_EMERGENCY if failsafe == "diverged" else M.MAV_STATE_CRITICAL
     return M.MAVLink_heartbeat_message(M.MAV_TYPE_HEXAROTOR, M.MAV_AUTOPILOT_GENERIC, base,
                                        custom_mode, status, 3)
 
@@ -100,8 +105,10 @@ def autopilot_version(uid: int) -> MAV.MAVLink_message:
         [0] * 18)
 
 
-def sys_status(healthy: bool, load_permille: int, drop_rate: int, errors: int
+def sys_status(healthy: bool, load_permille: int, rejected: int, signing_rejects: int
                ) -> MAV.MAVLink_message:
+    """Health bits cleared during a failsafe; errors_comm = rejected input (bytes and
+    messages), errors_count1 = frames refused by MAVLink signing."""
     sensors = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
                | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
                | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
@@ -109,7 +116,7 @@ def sys_status(healthy: bool, load_permille: int, drop_rate: int, errors: int
                | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
     return M.MAVLink_sys_status_message(
         sensors, sensors, sensors if healthy else 0, min(load_permille, 1000), 0, -1, -1,
-        min(drop_rate, 10000), min(errors, 65535), 0, 0, 0, 0, 0, 0, 0)
+        0, min(rejected, 65535), min(signing_rejects, 65535), 0, 0, 0, 0, 0, 0)
 
 
 class Builders:

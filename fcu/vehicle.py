@@ -51,12 +51,25 @@ class OffboardSetpoint:
 
 
 @dataclass
+class Failsafes:
+    """Failsafe settings (parameters COM_*); times in seconds, wall clock for links."""
+
+    gcs_loss_s: float = 0.0  # 0: off
+    gcs_loss_land_s: float = 0.0  # 0: hold forever
+    state_loss_s: float = 1.0
+    saturation_s: float = 2.0  # control time
+    saturation_hold: bool = False
+    divergence_m: float = 10.0
+
+
+@dataclass
 class Vehicle:
     config: VehicleConfig
     gains: Gains
     control_rate_hz: int
     limits: MissionLimits = field(default_factory=MissionLimits)
     offboard_timeout_s: float = 1.0
+    failsafes: Failsafes = field(default_factory=Failsafes)
 
     def __post_init__(self) -> None:
         self.core = FlightCore(self.config, self.gains, self.control_rate_hz)
@@ -77,6 +90,10 @@ class Vehicle:
         self.messages: list[tuple[int, str]] = []  # (MAV_SEVERITY, text) to announce
         self.mission_events: list[MissionEvent] = []
         self.land_disarm = False
+        self.failsafe = ""  # the active failsafe, announced and shown in HEARTBEAT
+        self.gcs_lost_since: float | None = None
+        self.saturated_since_us: int | None = None
+        self.saturation_reported = False
 
     # ------------------------------------------------------------------ state
 
@@ -117,6 +134,7 @@ class Vehicle:
         if not all(math.isfinite(x) for x in (*self.state.p_enu_m, *self.state.q_enu_flu)):
             return DENIED, "arming refused: state not finite"
         self.armed = True
+        self.failsafe = ""
         self.core.tracker.reset()
         self.hold = self._current_pose_ref()
         self.say(MAV.MAV_SEVERITY_INFO, "armed")
@@ -130,8 +148,7 @@ class Vehicle:
             return ACCEPTED, "already disarmed"
         if not force and not self.landed:
             return DENIED, "disarm refused: in the air (force with p2 = 21196)"
-        self.armed = False
-        self.flight_started = False
+        self.armed = False  # simulated time keeps running once the flight has started
         self.mission_running = False
         self.say(MAV.MAV_SEVERITY_INFO if not force else MAV.MAV_SEVERITY_WARNING, reason)
         return ACCEPTED, reason
@@ -267,13 +284,42 @@ class Vehicle:
             q = hold.q_enu_flu
         return Reference(p, q, sp.v_enu_m_s, sp.a_enu_m_s2, sp.omega_flu_rad_s, _ZERO)
 
-    def check_links(self, now_s: float) -> None:
-        """Offboard stream loss: leave OFFBOARD for HOLD (wall clock)."""
+    def _enter_hold(self, reason: str, severity: int = MAV.MAV_SEVERITY_WARNING) -> None:
+        self.mode = Mode.HOLD
+        self.hold = self._current_pose_ref()
+        self.mission_running = False
+        self.say(severity, reason)
+
+    def check_links(self, now_s: float, gcs_seen_s: float = math.inf,
+                    state_seen_s: float = math.inf) -> None:
+        """Link failsafes on the wall clock: offboard stream, GCS heartbeat, state input."""
+        fs = self.failsafes
         if self.mode == Mode.OFFBOARD and now_s - self.offboard.received_s > \
                 self.offboard_timeout_s:
-            self.mode = Mode.HOLD
-            self.hold = self._current_pose_ref()
-            self.say(MAV.MAV_SEVERITY_WARNING, "offboard setpoints lost: HOLD")
+            self._enter_hold("offboard setpoints lost: HOLD")
+        if self.armed and now_s - state_seen_s > fs.state_loss_s:
+            self.failsafe = "state input lost"
+            self.disarm(force=True, reason="state input lost: disarmed")
+            self.say(MAV.MAV_SEVERITY_CRITICAL, "failsafe: no state for "
+                     f"{now_s - state_seen_s:.1f} s, motion stopped")
+        if fs.gcs_loss_s > 0.0 and math.isfinite(gcs_seen_s):
+            lost = now_s - gcs_seen_s > fs.gcs_loss_s
+            if lost and self.gcs_lost_since is None:
+                self.gcs_lost_since = now_s
+                self.failsafe = "GCS link lost"
+                if self.armed and self.mode != Mode.LAND:
+                    self._enter_hold("failsafe: GCS link lost: HOLD", MAV.MAV_SEVERITY_CRITICAL)
+                else:
+                    self.say(MAV.MAV_SEVERITY_CRITICAL, "failsafe: GCS link lost")
+            elif lost and fs.gcs_loss_land_s > 0.0 and self.armed and \
+                    self.mode == Mode.HOLD and now_s - self.gcs_lost_since > fs.gcs_loss_land_s:
+                self.set_mode(Mode.LAND, now_s)
+                self.say(MAV.MAV_SEVERITY_CRITICAL, "failsafe: GCS link lost: LAND")
+            elif not lost and self.gcs_lost_since is not None:
+                self.gcs_lost_since = None
+                if self.failsafe == "GCS link lost":
+                    self.failsafe = ""
+                self.say(MAV.MAV_SEVERITY_INFO, "GCS link regained")
 
     # ------------------------------------------------------------------ control
 
@@ -304,6 +350,38 @@ class Vehicle:
             self.hold = self._current_pose_ref()
         return self.hold
 
+    def _check_saturation(self, t_us: int, saturated: bool) -> None:
+        fs = self.failsafes
+        if not saturated:
+            self.saturated_since_us = None
+            self.saturation_reported = False
+            if self.failsafe == "rotor saturation":
+                self.failsafe = ""
+            return
+        if self.saturated_since_us is None:
+            self.saturated_since_us = t_us
+        if not self.saturation_reported and \
+                (t_us - self.saturated_since_us) * 1e-6 > fs.saturation_s:
+            self.saturation_reported = True
+            self.failsafe = "rotor saturation"
+            if fs.saturation_hold and self.mode == Mode.MISSION:
+                self._enter_hold("failsafe: rotors saturated: mission aborted, HOLD",
+                                 MAV.MAV_SEVERITY_CRITICAL)
+            else:
+                self.say(MAV.MAV_SEVERITY_WARNING, f"rotors saturated for over "
+                         f"{fs.saturation_s:g} s")
+
+    def _diverged(self, ref: Reference) -> str:
+        s = self.state
+        assert s is not None
+        values = (*s.p_enu_m, *s.q_enu_flu, *s.v_flu_m_s, *s.omega_flu_rad_s)
+        if not all(math.isfinite(v) for v in values):
+            return "state not finite"
+        err = math.dist(s.p_enu_m, ref.p_enu_m)
+        if err > self.failsafes.divergence_m:
+            return f"tracking error {err:.1f} m"
+        return ""
+
     def step(self, t_us: int) -> Output:
         """One control period at time t_us on the latest state."""
         n = self.config.n_rotors
@@ -317,12 +395,20 @@ class Vehicle:
         self.last_ref = ref
         alloc = result.allocation
         out = gate(True, alloc.speed_rad_s, alloc.tilt_rad, held)
-        if out.fault:
+        diverged = self._diverged(ref)
+        if out.fault or diverged:
             self.armed = False
-            self.flight_started = False
-            self.core.allocator.reset(held)
-            self.say(MAV.MAV_SEVERITY_CRITICAL, f"{out.fault}: disarmed")
-        elif self.land_disarm and self.landed and (
+            self.mission_running = False
+            self.failsafe = "diverged" if diverged else "non-finite command"
+            if out.fault:
+                self.core.allocator.reset(held)
+            else:
+                out = gate(False, (0.0,) * n, out.tilt_rad, held)
+            self.say(MAV.MAV_SEVERITY_EMERGENCY, f"failsafe: {diverged or out.fault}: disarmed")
+            self.last_output = Output(out.speed_rad_s, out.tilt_rad, False, result)
+            return self.last_output
+        self._check_saturation(t_us, alloc.saturated)
+        if self.land_disarm and self.landed and (
                 (self.mode == Mode.LAND and self.land.completed) or self.mode == Mode.HOLD):
             self.land_disarm = False
             self.disarm(reason="landed: disarmed")

@@ -86,8 +86,12 @@ def connect(url: str, system_id: int = GCS_SYSID, vehicle: int = 0):
 
 class Session:
     def __init__(self, url: str, *, tlog: Path | None = None, system_id: int = GCS_SYSID,
-                 heartbeat_hz: float = 1.0, vehicle: int = 0) -> None:
+                 heartbeat_hz: float = 1.0, vehicle: int = 0,
+                 signing_key: bytes | None = None) -> None:
         self.conn = connect(url, system_id, vehicle)
+        if signing_key is not None:  # sign what we send, refuse what is not signed
+            self.conn.setup_signing(signing_key, sign_outgoing=True,
+                                    allow_unsigned_callback=None)
         self.tlog = Tlog(tlog) if tlog else None
         if self.tlog is not None:
             received = self.conn.post_message

@@ -116,7 +116,7 @@ def test_parameters(vehicle):
     listing = vehicle.gcs("param", "list")
     assert listing.returncode == 0
     names = [line.split()[0] for line in listing.stdout.splitlines()]
-    assert len(names) == 24 and "DQ_KPR_X" in names and "COM_OF_LOSS_T" in names
+    assert len(names) == 30 and "DQ_KPR_X" in names and "COM_DIV_POS" in names
     assert vehicle.gcs("param", "get", "DQ_KDD_Z").stdout.strip() == "DQ_KDD_Z = 10"
     ok = vehicle.gcs("param", "set", "MIS_CRUISE_SPD", "3.5")
     assert ok.returncode == 0 and "MIS_CRUISE_SPD = 3.5" in ok.stdout
