@@ -5,6 +5,7 @@ Runs and reports:
             [--ideal-actuators] [--duration S] [--link udp|tcp|zenoh] [--zenoh URL]
             [--fleet N [--spacing METRES]] --out DIR
     gcs router [--listen ENDPOINT]
+    gcs keygen FILE
     gcs table1 [--in-process] [--ideal-actuators] [--duration S] --out DIR
     gcs report RUN_DIR
 Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0.1:14550):
@@ -77,6 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
     link.add_argument("--sysid", type=int, help="the vehicle's system id (default: first heard)")
     link.add_argument("--wait", type=_positive, default=10.0, metavar="S",
                       help="how long to wait for the vehicle's heartbeat")
+    link.add_argument("--signing-key", metavar="FILE",
+                      help="sign with this MAVLink 2 key and refuse unsigned input")
 
     parser = argparse.ArgumentParser(prog="gcs", description="dqflight ground station",
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -106,6 +109,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="fly N vehicles (system ids 1..N) on one fabric")
     run.add_argument("--spacing", type=_finite, default=0.0, metavar="METRES",
                      help="fleet: start vehicles this far apart along east")
+    run.add_argument("--signing-key", metavar="FILE",
+                     help="sign the GCS links of the run with this key (gcs keygen)")
     run.add_argument("--out", type=Path, required=True, metavar="DIR")
 
     t1 = sub.add_parser("table1", help="Case I and Case II, PID and PD, beside the paper")
@@ -121,6 +126,9 @@ def build_parser() -> argparse.ArgumentParser:
     rt = sub.add_parser("router", help="a Zenoh router for the machine (or for others)")
     rt.add_argument("--listen", action="append", metavar="ENDPOINT",
                     help="endpoint to listen on, repeatable (default tcp/127.0.0.1:7447)")
+
+    kg = sub.add_parser("keygen", help="write a new MAVLink 2 signing key (mode 0600)")
+    kg.add_argument("file", type=Path)
 
     rep = sub.add_parser("report", help="figures and report.md of a run folder")
     rep.add_argument("run_dir", type=Path)
@@ -224,7 +232,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         try:
             metrics = run_processes(scenario, args.out, realtime=args.realtime,
                                     transport=args.link, report=report, fleet=args.fleet,
-                                    spacing_m=args.spacing, zenoh_url=args.zenoh)
+                                    spacing_m=args.spacing, zenoh_url=args.zenoh,
+                                    signing_key_file=args.signing_key)
         except RunError as exc:
             progress.done()
             print(f"gcs run: {exc}", file=sys.stderr)
@@ -254,6 +263,20 @@ def cmd_table1(args: argparse.Namespace) -> int:
     print(f"wrote {args.out / 'table1.md'}, {args.out / 'table1.json'} and "
           f"{args.out / 'table1.png'}")
     return 0 if table["rows"] else 1
+
+
+def cmd_keygen(args: argparse.Namespace) -> int:
+    import os
+    import secrets
+
+    if args.file.exists():
+        print(f"gcs keygen: {args.file} exists; not overwriting a key", file=sys.stderr)
+        return 2
+    fd = os.open(args.file, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(secrets.token_hex(32) + "\n")
+    print(f"wrote a 32-byte signing key to {args.file} (keep it out of version control)")
+    return 0
 
 
 def cmd_router(args: argparse.Namespace) -> int:
@@ -287,9 +310,11 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def _session(args: argparse.Namespace, tlog: Path | None = None):
+    from common.mavlink import read_signing_key
     from gcs.session import Session
 
-    session = Session(args.connect, tlog=tlog, vehicle=args.sysid or 0)
+    key = read_signing_key(args.signing_key) if args.signing_key else None
+    session = Session(args.connect, tlog=tlog, vehicle=args.sysid or 0, signing_key=key)
     try:
         session.wait_vehicle(timeout=args.wait, system_id=args.sysid)
     except BaseException:
@@ -436,6 +461,7 @@ def cmd_log(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from common.mavlink import SigningKeyError
     from gcs.mission_client import MissionError
     from gcs.mission_files import MissionFileError
     from gcs.session import GcsError
@@ -450,10 +476,12 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_report(args)
         if args.command == "router":
             return cmd_router(args)
+        if args.command == "keygen":
+            return cmd_keygen(args)
         if args.command == "log":
             return cmd_log(args)
         return cmd_vehicle(args)
-    except (ConfigError, LinkError, MissionFileError) as exc:
+    except (ConfigError, LinkError, MissionFileError, SigningKeyError) as exc:
         print(f"gcs: {exc}", file=sys.stderr)
         return 2
     except (GcsError, MissionError) as exc:
@@ -462,6 +490,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gcs: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `gcs ... | head`: the reader has gone, nothing is lost
+        sys.stdout = None  # type: ignore[assignment]
+        return 0
 
 
 if __name__ == "__main__":

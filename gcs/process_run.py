@@ -22,7 +22,7 @@ from typing import Any
 from common.binlog import read_log
 from common.config import Scenario
 from common.links import free_port
-from common.mavlink import MAV
+from common.mavlink import MAV, read_signing_key
 from gcs.inprocess import build_metrics
 from gcs.mission_client import MissionError, upload
 from gcs.runio import ONBOARD_LOG, TRUTH_LOG, write_metrics
@@ -177,8 +177,9 @@ class _Flight:
     """The children and the ground-station side of one vehicle's run."""
 
     def __init__(self, plan: VehiclePlan, *, realtime: bool, wall_timeout_s: float,
-                 report=None) -> None:
+                 report=None, signing_key_file: str | None = None) -> None:
         self.plan = plan
+        self.signing_key_file = signing_key_file
         self.realtime = realtime
         self.wall_timeout_s = wall_timeout_s
         self.report = report
@@ -210,7 +211,12 @@ class _Flight:
             fcu.append("--realtime")
         if sc.ideal_actuators:
             sitl.append("--ideal-actuators")
-        self.session = Session(p.gcs, tlog=p.out / "flight.tlog", vehicle=p.sysid)
+        key = None
+        if self.signing_key_file:
+            key = read_signing_key(self.signing_key_file)
+            fcu += ["--signing-key", self.signing_key_file]
+        self.session = Session(p.gcs, tlog=p.out / "flight.tlog", vehicle=p.sysid,
+                               signing_key=key)
         self.children.start("sitl", sitl)
         self.children.start("fcu", fcu)
 
@@ -288,7 +294,8 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
                   wall_timeout_s: float | None = None, report=None,
                   sim_route: Callable[[int], int] | None = None,
                   transport: str = "udp", fleet: int = 1, spacing_m: float = 0.0,
-                  zenoh_url: str = "zenoh:mavlink") -> dict[str, Any]:
+                  zenoh_url: str = "zenoh:mavlink",
+                  signing_key_file: str | None = None) -> dict[str, Any]:
     """Fly `scenario` through sitl + fcu processes; returns the metrics written to out.
 
     `transport` is the links' ("udp", "tcp" for the simulator link with UDP to the GCS, or
@@ -306,7 +313,7 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
         wall_timeout_s = 120.0 + (2.0 if realtime else 20.0) * scenario.duration_s * fleet
     router = start_router_if_needed(zenoh_url, out) if transport == "zenoh" else None
     flights = [_Flight(plan, realtime=realtime, wall_timeout_s=wall_timeout_s,
-                       report=report if fleet == 1 else None)
+                       report=report if fleet == 1 else None, signing_key_file=signing_key_file)
                for plan in _plans(scenario, out, fleet, spacing_m, transport, zenoh_url,
                                   sim_route)]
     try:
