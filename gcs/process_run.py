@@ -37,6 +37,17 @@ class RunError(RuntimeError):
     """A run that could not be carried out (a child died, the vehicle refused, a timeout)."""
 
 
+def _stop_with_parent() -> None:
+    """In a child, before exec: SIGTERM when the parent dies (Linux), so that a ground
+    station killed with SIGKILL leaves no simulator or FCU behind."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass  # not Linux: the children stop when their links go quiet only
+
+
 @dataclass
 class Children:
     """The sitl and fcu child processes of one run, each logging to its own file."""
@@ -47,7 +58,8 @@ class Children:
     def start(self, name: str, argv: list[str]) -> None:
         log = (self.out / f"{name}.log").open("wb")
         self.procs[name] = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT,
-                                            stdin=subprocess.DEVNULL)
+                                            stdin=subprocess.DEVNULL,
+                                            preexec_fn=_stop_with_parent)
         log.close()
 
     def tails(self) -> str:

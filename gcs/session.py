@@ -110,13 +110,16 @@ class Session:
                                         daemon=True)
         self._thread.start()
 
+    def heartbeat(self) -> None:
+        self.send(M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0,
+                                              M.MAV_STATE_ACTIVE, 3))
+
     def _heartbeats(self) -> None:
         while not self._stop.is_set():
             if isinstance(self.conn, MavZenoh) and not self.target_system:
                 self._stop.wait(0.1)  # over Zenoh, heartbeats go to a chosen vehicle
                 continue
-            self.send(M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0,
-                                                  0, M.MAV_STATE_ACTIVE, 3))
+            self.heartbeat()
             self._stop.wait(self._period)
 
     def send(self, msg) -> None:
@@ -141,6 +144,7 @@ class Session:
             self.target_component = msg.get_srcComponent()
             if isinstance(self.conn, MavZenoh):
                 self.conn.set_target(self.target_system)
+            self.heartbeat()  # announce ourselves now: a udpin link has only now a peer
             return
         raise GcsError(f"no vehicle heartbeat within {timeout:.0f} s")
 

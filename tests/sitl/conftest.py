@@ -81,6 +81,8 @@ def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = 
                                      "--onboard-log", str(tmp_path / "onboard.bin")],
                              tmp_path)
         session.wait_vehicle(timeout=15.0)
+        if sitl:  # the FCU reports attitude once the simulator's first state has arrived
+            assert session.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is not None
     except BaseException:
         session.close()
         stop(procs)
