@@ -249,3 +249,37 @@ def _mavlogdump():
     from pathlib import Path
 
     return Path(sys.executable).parent / "mavlogdump.py"
+
+
+def test_gcs_run_reports_a_dead_child_and_leaves_none_behind(tmp_path):
+    """When the FCU dies mid-run, `gcs run` says which child died and why, and stops the
+    other one."""
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "gcs.cli", "run",
+                             str(SCENARIOS / "case1_figure8.toml"), "--out", str(out)],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        fcu_pid = None
+        while fcu_pid is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+            listing = subprocess.run(["ps", "-o", "pid=,args=", "-g", str(proc.pid)],
+                                     capture_output=True, text=True, check=False).stdout
+            fcu_pid = next((int(line.split()[0]) for line in listing.splitlines()
+                            if "fcu.node" in line), None)
+        assert fcu_pid is not None
+        time.sleep(1.0)
+        os.kill(fcu_pid, signal.SIGKILL)  # a child of our own ground station
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 1
+        assert "fcu exited with status -9" in err
+        time.sleep(0.5)
+        left = subprocess.run(["ps", "-o", "pid=,args=", "-g", str(proc.pid)],
+                              capture_output=True, text=True, check=False).stdout
+        assert "sitl.node" not in left
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
