@@ -229,7 +229,12 @@ class FlightController:
             self.ignored_messages += 1
             return
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
-            self._command(msg, now)
+            try:
+                self._command(msg, now)
+            except (ValueError, OverflowError, TypeError) as exc:  # e.g. NaN where an int is due
+                self.ignored_messages += 1
+                self._ack(msg, msg.command, M.MAV_RESULT_DENIED)
+                self.say(M.MAV_SEVERITY_WARNING, f"command {msg.command} denied: {exc}")
         elif kind.startswith("MISSION_"):
             for reply in self.missions.handle(msg, now):
                 self.send(reply)

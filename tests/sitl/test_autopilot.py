@@ -184,3 +184,17 @@ def test_offboard_stream_loss_falls_back_to_hold(stack):
     hb = stack.wait_for(["HEARTBEAT"], lambda m: m.custom_mode == Mode.HOLD.custom_mode,
                         timeout=3.0)
     assert hb is not None
+
+
+def test_commands_with_bad_parameters_are_denied_with_a_reason(stack):
+    """NaN, infinities and out-of-range values: DENIED (never silence) and a STATUSTEXT."""
+    s = stack.session
+    nan, inf = float("nan"), float("inf")
+    assert s.command(M.MAV_CMD_DO_SET_MODE, nan, 4, 3) == M.MAV_RESULT_DENIED
+    assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, inf) == M.MAV_RESULT_DENIED
+    assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, nan, 1000) == M.MAV_RESULT_DENIED
+    assert s.command(M.MAV_CMD_DO_SET_MISSION_CURRENT, 1e12) == M.MAV_RESULT_DENIED
+    text = stack.wait_for(["STATUSTEXT"], lambda m: "denied" in m.text or "no mission" in
+                          m.text, 3.0)
+    assert text is not None
+    assert stack.procs["fcu"].poll() is None
