@@ -60,6 +60,7 @@ M = MAV
 COMPONENT = M.MAV_COMP_ID_AUTOPILOT1
 DEFAULT_GCS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")
 HOUSEKEEPING_S = 0.002
+MAX_POSITION_M = 1e6  # a state farther from the origin is refused as invalid
 SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each state
 
 
@@ -135,6 +136,9 @@ class FlightController:
         for f in frames:
             if f.msg_id != ODOMETRY_ID:
                 continue  # HIL_SENSOR and others: for estimators to come
+            if f.sysid != self.system_id:
+                self.ignored_messages += 1  # another vehicle's simulator: not our state
+                continue
             odo = unpack_odometry(f.payload)
             if odo.time_usec == self.answered_us:
                 self.sim.send(self.answer)  # the same answer, nothing stepped again
@@ -144,9 +148,12 @@ class FlightController:
                 self.ignored_messages += 1  # stale
                 continue
             values = (*odo.p_ned_m, *odo.q_ned_frd, *odo.v_frd_m_s, *odo.omega_frd_rad_s)
-            if not all(math.isfinite(v) for v in values):
+            q_norm = math.sqrt(sum(c * c for c in odo.q_ned_frd))
+            if not all(math.isfinite(v) for v in values) or abs(q_norm - 1.0) > 0.01 or \
+                    max(abs(c) for c in odo.p_ned_m) > MAX_POSITION_M:
+                # Not a state a vehicle can be in: refused and counted. A stream of them is
+                # state loss, which the failsafe of COM_STATE_LOSS_T handles.
                 self.ignored_messages += 1
-                self._fault_state("state input not finite")
                 continue
             q = q_ned_frd_to_enu_flu(odo.q_ned_frd)
             state = VehicleState(ned_to_enu(odo.p_ned_m), q, frd_to_flu(odo.v_frd_m_s),
@@ -158,10 +165,6 @@ class FlightController:
                 self.time_us = odo.time_usec
                 if self.vehicle.flight_started:
                     self._control_step(odo.time_usec)
-
-    def _fault_state(self, reason: str) -> None:
-        if self.vehicle.armed:
-            self.vehicle.disarm(force=True, reason=f"{reason}: disarmed")
 
     def _control_step(self, t_us: int) -> None:
         """Step at the FCU's time t_us; answer and log under the state's own stamp (equal to
@@ -298,6 +301,10 @@ class FlightController:
             result = M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_DENIED
         elif cmd == M.MAV_CMD_GET_MESSAGE_INTERVAL:
             msg_id = int(p[0]) if math.isfinite(p[0]) else -1
+            if not 0 <= msg_id <= 0xFFFF:
+                self._ack(msg, cmd, M.MAV_RESULT_DENIED)
+                self.say(M.MAV_SEVERITY_WARNING, f"no message id {p[0]:g}")
+                return
             self._ack(msg, cmd, M.MAV_RESULT_ACCEPTED)
             self.send(M.MAVLink_message_interval_message(
                 msg_id, int(self.schedule.interval_us(msg_id))))

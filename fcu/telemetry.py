@@ -38,6 +38,11 @@ CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILIT
 FLIGHT_SW_VERSION = (0 << 24) | (1 << 16) | (0 << 8) | 255  # 0.1.0, release
 
 
+def _i32(x: float) -> int:
+    """Rounded and clamped to int32, as the wire's integer fields need."""
+    return max(-2**31, min(2**31 - 1, round(x)))
+
+
 @dataclass
 class Schedule:
     """Per-message intervals in wall-clock seconds; 0 or less = off."""
@@ -186,8 +191,8 @@ class Builders:
         yaw = self.attitude(src).yaw
         hdg = round(math.degrees(yaw) % 360.0 * 100) % 36000
         return M.MAVLink_global_position_int_message(
-            self._ms(src), round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
-            round(-p_ned[2] * 1000), *(max(-32768, min(32767, round(c * 100))) for c in v), hdg)
+            self._ms(src), _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000),
+            _i32(-p_ned[2] * 1000), *(max(-32768, min(32767, round(c * 100))) for c in v), hdg)
 
     def odometry(self, src: dict):
         s = src["state"]

@@ -141,7 +141,9 @@ class SimulatorServer:
             frames, rejected = self.reader.feed(peer, data)
             self.rejected_bytes += rejected
             for f in frames:
-                if f.msg_id == HIL_ACTUATOR_CONTROLS_ID:
+                if f.msg_id == HIL_ACTUATOR_CONTROLS_ID and f.sysid != self.system_id:
+                    self.ignored_answers += 1  # another system's FCU: not ours to obey
+                elif f.msg_id == HIL_ACTUATOR_CONTROLS_ID:
                     a = unpack_actuator_controls(f.payload)
                     out.append((a.time_usec, a.controls, a.mode))
         return out
