@@ -111,7 +111,7 @@ class FlightController:
         self.last_mission_current_sent: tuple[int, int] | None = None
         self.sim_heartbeat_due = 0.0
         self.last_sim_rx_s = -math.inf
-        self.state_rx = False
+        self.last_state_s: float | None = None
 
     # ------------------------------------------------------------------ sending
 
@@ -143,6 +143,7 @@ class FlightController:
             if odo.time_usec == self.answered_us:
                 self.sim.send(self.answer)  # the same answer, nothing stepped again
                 self.resent_answers += 1
+                self.last_state_s = self.last_sim_rx_s
                 continue
             if odo.time_usec < self.answered_us:
                 self.ignored_messages += 1  # stale
@@ -159,7 +160,7 @@ class FlightController:
             state = VehicleState(ned_to_enu(odo.p_ned_m), q, frd_to_flu(odo.v_frd_m_s),
                                  frd_to_flu(odo.omega_frd_rad_s))
             self.vehicle.on_state(odo.time_usec, state)
-            self.state_rx = True
+            self.last_state_s = self.last_sim_rx_s  # a valid state of ours: input alive
             self.v_enu = q_rotate(self.vehicle.state.q_enu_flu, state.v_flu_m_s)
             if self.lockstep:
                 self.time_us = odo.time_usec
@@ -437,7 +438,8 @@ class FlightController:
             # Simulators learn where we are from this, as from PX4's first packets.
             self.sim.send(pack(self.sim_mav, heartbeat(v.armed, v.mode.custom_mode, v.armed)))
             self.sim_heartbeat_due = now + 1.0
-        v.check_links(now, self.gcs_seen_s, self.last_sim_rx_s if self.state_rx else now)
+        v.check_links(now, self.gcs_seen_s,
+                      self.last_state_s if self.last_state_s is not None else now)
         for reply in self.missions.tick(now):
             self.send(reply)
         for severity, text in v.messages:
