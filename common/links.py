@@ -1,7 +1,10 @@
 """Link URLs and the byte transports behind them (DESIGN.md section 1).
 
-    udpin:HOST:PORT    bind and answer every peer heard in the last `peer_timeout_s`
-    udpout:HOST:PORT   send to HOST:PORT (replies come back to the same socket)
+    udpin:HOST:PORT    bind and answer every peer heard in the last `peer_timeout_s` (at
+                       most `max_peers` of them: a flood from many ports cannot make every
+                       send a burst of thousands)
+    udpout:HOST:PORT   send to HOST:PORT; only its replies are read (datagrams from any
+                       other address are dropped and counted in `foreign_datagrams`)
     tcp:HOST:PORT      connect to a TCP server (reconnects when the server goes away)
     tcpin:HOST:PORT    listen for TCP clients and serve all of them
     serial:DEVICE:BAUD a serial port in raw mode
@@ -15,12 +18,17 @@ apart by `peer` keys so that each byte stream gets its own MAVLink parser. Zenoh
 from __future__ import annotations
 
 import errno
+import ipaddress
 import os
 import socket
 import time
 from dataclasses import dataclass
 
 SCHEMES = ("udpin", "udpout", "tcp", "tcpin", "serial", "zenoh")
+# At most this many datagrams (or stream chunks) per recv(): under a flood the socket never
+# runs dry, and a caller that reads until it does would never get back to its own work
+# (the FCU's control step). What is left is read on the next call; select() says so.
+RECV_BATCH = 256
 
 
 class LinkError(ValueError):
@@ -94,25 +102,49 @@ class Link:
         return 1
 
 
-class UdpLink(Link):
-    """udpin (bind, answer recent peers) or udpout (send to one address)."""
+def _resolve(url: LinkUrl) -> tuple[str, int]:
+    """HOST:PORT as the IPv4 address datagrams come from; LinkError if HOST is unknown."""
+    try:
+        infos = socket.getaddrinfo(url.host, url.port, socket.AF_INET, socket.SOCK_DGRAM)
+    except (socket.gaierror, UnicodeError) as exc:
+        raise LinkError(f"link '{url}': cannot resolve {url.host}: {exc}") from None
+    host, port = infos[0][4][:2]
+    return host, port
 
-    def __init__(self, url: LinkUrl, peer_timeout_s: float = 5.0) -> None:
+
+def _is_unicast(host: str) -> bool:
+    addr = ipaddress.IPv4Address(host)
+    return not (addr.is_multicast or addr.is_unspecified or addr == _BROADCAST)
+
+
+_BROADCAST = ipaddress.IPv4Address("255.255.255.255")
+
+
+class UdpLink(Link):
+    """udpin (bind, answer recent peers) or udpout (send to one address, read its replies)."""
+
+    def __init__(self, url: LinkUrl, peer_timeout_s: float = 5.0, max_peers: int = 32) -> None:
         self.url = url
+        self.peer_timeout_s = peer_timeout_s
+        self.max_peers = max_peers
+        self._peers: dict[tuple[str, int], float] = {}
+        self.foreign_datagrams = 0  # udpout: datagrams from others than the target, dropped
+        self.unanswered_peers = 0  # udpin: new peers not answered because the table was full
+        target = _resolve(url) if url.scheme == "udpout" else None
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
-        self.peer_timeout_s = peer_timeout_s
-        self._peers: dict[tuple[str, int], float] = {}
         try:
             if url.scheme == "udpin":
                 self.sock.bind((url.host, url.port))
                 self.target: tuple[str, int] | None = None
             else:
                 self.sock.bind(("127.0.0.1" if url.host.startswith("127.") else "", 0))
-                self.target = (url.host, url.port)
+                self.target = target
         except OSError as exc:
             self.sock.close()
             raise LinkError(f"link '{url}': {exc.strerror}") from None
+        # Replies come from the address we send to, unless that is a group or broadcast.
+        self._only = target if target is not None and _is_unicast(target[0]) else None
         self.sock.setblocking(False)
 
     @property
@@ -125,7 +157,7 @@ class UdpLink(Link):
     def recv(self) -> list[tuple[object, bytes]]:
         out: list[tuple[object, bytes]] = []
         now = time.monotonic()
-        while True:
+        for _ in range(RECV_BATCH):
             try:
                 data, addr = self.sock.recvfrom(65535)
             except (BlockingIOError, InterruptedError):
@@ -133,17 +165,34 @@ class UdpLink(Link):
             except ConnectionRefusedError:
                 continue  # ICMP from a peer that went away: nothing to read
             if self.target is None:
-                self._peers[addr] = now
+                self._heard(addr, now)
+            elif self._only is not None and addr[:2] != self._only:
+                self.foreign_datagrams += 1  # not our peer's: nobody else talks on this link
+                continue
             out.append((addr, data))
+        return out
+
+    def _heard(self, addr: tuple[str, int], now: float) -> None:
+        peers = self._peers
+        if addr in peers or len(peers) < self.max_peers:
+            peers[addr] = now
+            return
+        self._expire(now)
+        if len(peers) < self.max_peers:
+            peers[addr] = now
+        else:
+            self.unanswered_peers += 1
+
+    def _expire(self, now: float) -> None:
+        stale = [a for a, t in self._peers.items() if now - t > self.peer_timeout_s]
+        for addr in stale:
+            del self._peers[addr]
 
     def send(self, data: bytes) -> None:
         if self.target is not None:
             self._sendto(data, self.target)
             return
-        now = time.monotonic()
-        stale = [a for a, t in self._peers.items() if now - t > self.peer_timeout_s]
-        for addr in stale:
-            del self._peers[addr]
+        self._expire(time.monotonic())
         for addr in self._peers:
             self._sendto(data, addr)
 
@@ -198,7 +247,7 @@ class TcpClientLink(Link):
             self._connect()
             return []
         out: list[tuple[object, bytes]] = []
-        while True:
+        for _ in range(RECV_BATCH):
             try:
                 data = self.sock.recv(65536)
             except (BlockingIOError, InterruptedError):
@@ -210,6 +259,7 @@ class TcpClientLink(Link):
                 self.sock = None
                 return out
             out.append((self.url.text, data))
+        return out
 
     def send(self, data: bytes) -> None:
         if self.sock is None:
@@ -230,9 +280,9 @@ class TcpClientLink(Link):
 
 
 class TcpServerLink(Link):
-    """tcpin:HOST:PORT: accepts clients and serves all of them."""
+    """tcpin:HOST:PORT: accepts clients (up to `max_clients`) and serves all of them."""
 
-    def __init__(self, url: LinkUrl) -> None:
+    def __init__(self, url: LinkUrl, max_clients: int = 32) -> None:
         self.url = url
         self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -244,6 +294,8 @@ class TcpServerLink(Link):
         self.server.listen(8)
         self.server.setblocking(False)
         self.clients: dict[int, socket.socket] = {}
+        self.max_clients = max_clients
+        self.refused_clients = 0
 
     @property
     def local_port(self) -> int:
@@ -256,17 +308,23 @@ class TcpServerLink(Link):
         return [self.server.fileno(), *self.clients]
 
     def recv(self) -> list[tuple[object, bytes]]:
-        while True:
+        for _ in range(RECV_BATCH):
             try:
                 conn, _ = self.server.accept()
             except (BlockingIOError, InterruptedError):
                 break
+            except OSError:  # e.g. out of descriptors: the client waits in the backlog
+                break
+            if len(self.clients) >= self.max_clients:
+                conn.close()  # a flood of connections must not take every descriptor
+                self.refused_clients += 1
+                continue
             conn.setblocking(False)
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             self.clients[conn.fileno()] = conn
         out: list[tuple[object, bytes]] = []
         for fd, conn in list(self.clients.items()):
-            while True:
+            for _ in range(RECV_BATCH):
                 try:
                     data = conn.recv(65536)
                 except (BlockingIOError, InterruptedError):
@@ -327,7 +385,7 @@ class SerialLink(Link):
 
     def recv(self) -> list[tuple[object, bytes]]:
         out: list[tuple[object, bytes]] = []
-        while True:
+        for _ in range(RECV_BATCH):
             try:
                 data = os.read(self.fd, 4096)
             except (BlockingIOError, InterruptedError):
@@ -335,6 +393,7 @@ class SerialLink(Link):
             if not data:
                 return out
             out.append((self.url.device, data))
+        return out
 
     def send(self, data: bytes) -> None:
         try:

@@ -87,18 +87,32 @@ class Frame(NamedTuple):
     raw: bytes
 
 
-_CRC_EXTRA = {ODOMETRY_ID: (_ODO.crc_extra, _ODO_STRUCT.size),
-              HIL_ACTUATOR_CONTROLS_ID: (_HAC.crc_extra, _HAC_STRUCT.size)}
+_HOT = {ODOMETRY_ID, HIL_ACTUATOR_CONTROLS_ID}
+# Every message of the dialect: (CRC_EXTRA as a byte, full payload length). A frame can be
+# checked only when its message is known: a header naming any other message is rejected
+# (byte by byte, as corruption), so that it cannot swallow the valid frames after it.
+_KNOWN = {msg_id: (bytes([cls.crc_extra]), cls.unpacker.size)
+          for msg_id, cls in MAV.mavlink_map.items()}
+_SIGNED = 0x01  # MAVLINK_IFLAG_SIGNED, the only incompatibility flag defined
+_SIGNATURE_LEN = 13
 
 
 def split_frames(data: bytes, *, stream: bool = False) -> tuple[list[Frame], int] | tuple[
         list[Frame], int, bytes]:
-    """Valid MAVLink 2 frames of the hot pair in a datagram, and the count of rejected bytes.
+    """Valid MAVLink 2 frames of the dialect in a datagram, and the count of rejected bytes.
 
-    Frames of other messages are returned with an empty payload and their raw bytes so that a
-    general parser can take them; corrupted or truncated frames are skipped (counted). With
-    `stream=True` (TCP, serial) a frame cut at the end is not rejected but returned as the
-    third element, to be prepended to the next chunk.
+    Every returned frame has a correct CRC. Frames of the hot pair come with their payload
+    zero-extended to the message's full length; other messages of the dialect with an empty
+    payload and their raw bytes, so that a general parser can take them. Everything else is
+    rejected: bytes before a start marker, headers that name no message of the dialect, a
+    payload longer than the message, unknown incompatibility flags, a wrong CRC and (in a
+    datagram) a frame cut short. After a rejected header the search for a frame resumes at
+    the next byte, so a corrupted header never hides a valid frame behind it. Each byte of
+    `data` is either in a returned frame's `raw` or counted as rejected (or, with
+    `stream=True`, in the tail).
+
+    With `stream=True` (TCP, serial) a plausible frame cut at the end is not rejected but
+    returned as the third element, to be prepended to the next chunk.
     """
     frames: list[Frame] = []
     rejected = 0
@@ -111,33 +125,34 @@ def split_frames(data: bytes, *, stream: bool = False) -> tuple[list[Frame], int
                 break
             i = j
             continue
-        if n - i < 12 or i + 12 + data[i + 1] + (13 if data[i + 2] & 1 else 0) > n:
+        if n - i < 10:  # the header is not complete
             if stream:
                 return frames, rejected, data[i:]
-            if n - i < 12:
-                rejected += n - i
-                break
-            rejected += 1
+            rejected += n - i
+            break
+        length, incompat = data[i + 1], data[i + 2]
+        msg_id = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
+        known = _KNOWN.get(msg_id)
+        if known is None or length > known[1] or incompat & ~_SIGNED:
+            rejected += 1  # not a frame we can check: look for one at the next byte
             i += 1
             continue
-        length, incompat = data[i + 1], data[i + 2]
-        end = i + 10 + length + 2 + (13 if incompat & 1 else 0)
-        msg_id = data[i + 7] | (data[i + 8] << 8) | (data[i + 9] << 16)
-        raw = data[i:end]
-        known = _CRC_EXTRA.get(msg_id)
-        if known is None:
-            frames.append(Frame(msg_id, data[i + 5], data[i + 6], b"", raw))
-            i = end
+        body_end = i + 10 + length
+        end = body_end + 2 + (_SIGNATURE_LEN if incompat & _SIGNED else 0)
+        if end > n:
+            if stream:
+                return frames, rejected, data[i:]
+            rejected += 1
+            i += 1
             continue
         crc_extra, size = known
-        body_end = i + 10 + length
-        crc = _crc(bytes([crc_extra]), _crc(data[i + 1:body_end]))
-        if crc != (data[body_end] | (data[body_end + 1] << 8)) or length > size:
+        crc = _crc(crc_extra, _crc(data[i + 1:body_end]))
+        if crc != (data[body_end] | (data[body_end + 1] << 8)):
             rejected += 1
             i += 1
             continue
-        payload = data[i + 10:body_end] + bytes(size - length)
-        frames.append(Frame(msg_id, data[i + 5], data[i + 6], payload, raw))
+        payload = data[i + 10:body_end] + bytes(size - length) if msg_id in _HOT else b""
+        frames.append(Frame(msg_id, data[i + 5], data[i + 6], payload, data[i:end]))
         i = end
     if stream:
         return frames, rejected, b""

@@ -19,6 +19,7 @@ import math
 import os
 import select
 import signal
+import struct
 import sys
 import time
 from pathlib import Path
@@ -61,6 +62,7 @@ COMPONENT = M.MAV_COMP_ID_AUTOPILOT1
 DEFAULT_GCS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")
 HOUSEKEEPING_S = 0.002
 MAX_POSITION_M = 1e6  # a state farther from the origin is refused as invalid
+MAX_RATE = 1e4  # m/s and rad/s: a state moving faster is refused as invalid
 SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each state
 
 
@@ -151,7 +153,8 @@ class FlightController:
             values = (*odo.p_ned_m, *odo.q_ned_frd, *odo.v_frd_m_s, *odo.omega_frd_rad_s)
             q_norm = math.sqrt(sum(c * c for c in odo.q_ned_frd))
             if not all(math.isfinite(v) for v in values) or abs(q_norm - 1.0) > 0.01 or \
-                    max(abs(c) for c in odo.p_ned_m) > MAX_POSITION_M:
+                    max(abs(c) for c in odo.p_ned_m) > MAX_POSITION_M or \
+                    max(abs(c) for c in (*odo.v_frd_m_s, *odo.omega_frd_rad_s)) > MAX_RATE:
                 # Not a state a vehicle can be in: refused and counted. A stream of them is
                 # state loss, which the failsafe of COM_STATE_LOSS_T handles.
                 self.ignored_messages += 1
@@ -427,8 +430,12 @@ class FlightController:
         else:
             msg = self.builders.build(msg_id)
         for m in msg if isinstance(msg, list) else [msg]:
-            if m is not None:
+            if m is None:
+                continue
+            try:
                 self.send(m)
+            except (struct.error, OverflowError, ValueError):
+                self.ignored_messages += 1  # a value the wire cannot carry: skip, keep flying
 
     def _housekeeping(self, now: float) -> None:
         v = self.vehicle

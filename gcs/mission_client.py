@@ -5,6 +5,16 @@ Timeouts and retries are the specification's: 1500 ms for the whole-transaction 
 (MISSION_COUNT, MISSION_REQUEST_LIST, MISSION_CLEAR_ALL), 250 ms per mission item, 5 retries;
 each timeout resends the last message. Messages from other systems, for other systems or
 about other plan types are skipped. Wall-clock time is fine here: the GCS faces links.
+
+Lossy links duplicate and delay answers, and MAVLink 2 as pymavlink knows it has no
+transaction id (no `opaque_id`), so answers of an earlier transaction can arrive during the
+next one. Each transaction therefore starts by dropping the input already waiting, and what
+keeps coming until no mission answer has come for `settle_s` (50 ms: a link's reordering
+time); an upload takes MAV_MISSION_ACCEPTED only once the vehicle has asked for the last item
+and an item's error only once it has had an item (earlier ones answer an earlier
+transaction); a download that hears a second MISSION_COUNT with another count fails (the
+mission changed, or the first count was stale), never returning a mission of the wrong
+length.
 Pass `send=` (e.g. `Session.send`) when another thread sends on the same connection, so
 that sends stay serialised; by default `conn.mav.send` is used.
 """
@@ -24,6 +34,15 @@ MISSION = M.MAV_MISSION_TYPE_MISSION
 TIMEOUT_S = 1.5
 ITEM_TIMEOUT_S = 0.25
 RETRIES = 5
+SETTLE_S = 0.05  # a transaction starts after this long without a stale mission answer
+_ANSWERS = {"MISSION_ACK", "MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_COUNT",
+            "MISSION_ITEM", "MISSION_ITEM_INT"}
+# Results that refer to items: a vehicle cannot send them before it has had an item.
+_ITEM_RESULTS = {M.MAV_MISSION_UNSUPPORTED_FRAME, M.MAV_MISSION_UNSUPPORTED,
+                 M.MAV_MISSION_INVALID_PARAM1, M.MAV_MISSION_INVALID_PARAM2,
+                 M.MAV_MISSION_INVALID_PARAM3, M.MAV_MISSION_INVALID_PARAM4,
+                 M.MAV_MISSION_INVALID_PARAM5_X, M.MAV_MISSION_INVALID_PARAM6_Y,
+                 M.MAV_MISSION_INVALID_PARAM7, M.MAV_MISSION_INVALID_SEQUENCE}
 
 Progress = Callable[[int, int], None]
 
@@ -43,6 +62,25 @@ Send = Callable[[MAV.MAVLink_message], None]
 def _sender(conn, send: Send | None) -> Send:
     """`send` if given (e.g. a session's locked send), else the connection's own."""
     return send if send is not None else conn.mav.send
+
+
+def _drain(conn, target_system: int, quiet_s: float, limit_s: float = 0.5) -> None:
+    """Drop the input waiting on `conn`, then keep dropping until no mission answer from
+    `target_system` to us has come for `quiet_s` (at most `limit_s`): late duplicates of an
+    earlier transaction's answers, within the link's reordering time, must not be taken for
+    this one's."""
+    me = conn.mav.srcSystem
+    start = time.monotonic()
+    quiet_until = start + quiet_s
+    while (now := time.monotonic()) < quiet_until and now - start < limit_s:
+        msg = conn.recv_match(blocking=quiet_s > 0, timeout=max(0.001, quiet_until - now))
+        if msg is None:
+            if quiet_s <= 0:
+                return
+            continue
+        if msg.get_type() in _ANSWERS and msg.get_srcSystem() == target_system and \
+                getattr(msg, "target_system", 0) in (0, me):
+            quiet_until = time.monotonic() + quiet_s
 
 
 def _recv(conn, types: list[str], target_system: int, target_component: int,
@@ -91,7 +129,7 @@ def _item_from(msg) -> MissionItem:
 def upload(conn, target_system: int, target_component: int, items: Sequence[MissionItem],
            progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
            item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = RETRIES,
-           send: Send | None = None) -> int:
+           send: Send | None = None, settle_s: float = SETTLE_S) -> int:
     """Upload `items` (sent with seq = their index) and return the vehicle's
     MAV_MISSION_RESULT (MAV_MISSION_ACCEPTED when it took the mission).
 
@@ -101,12 +139,15 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
     _send = _sender(conn, send)
     items = [item._replace(seq=i, mission_type=MISSION) for i, item in enumerate(items)]
     count = len(items)
+    _drain(conn, target_system, settle_s)
     last = M.MAVLink_mission_count_message(target_system, target_component, count, MISSION)
     _send(last)
     wait, attempts, done = timeout_s, 0, -1  # done: highest seq requested so far
+    deadline = time.monotonic() + wait
     types = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"]
     while True:
-        msg = _recv(conn, types, target_system, target_component, wait)
+        msg = _recv(conn, types, target_system, target_component,
+                    deadline - time.monotonic())
         if msg is None:
             attempts += 1
             if attempts > retries:
@@ -116,15 +157,21 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
                 if done < 0:
                     what = f"answer to MISSION_COUNT({count})"
                 elif done == count - 1:
-                    what = f"MISSION_ACK after the last item ({done})"
+                    what = (f"MISSION_ACK after the last item ({done}); the vehicle may hold "
+                            "the new mission")
                 else:
                     what = f"request for the item after {done}"
                 raise MissionError(
                     f"mission upload to system {target_system}: no {what} after "
                     f"{retries + 1} tries ({wait * 1e3:.0f} ms each)")
             _send(last)
+            deadline = time.monotonic() + wait
             continue
         if msg.get_type() == "MISSION_ACK":
+            if msg.type == M.MAV_MISSION_ACCEPTED and done < count - 1:
+                continue  # the vehicle has not had every item: an earlier transaction's ACK
+            if msg.type in _ITEM_RESULTS and done < 0:
+                continue  # about an item, before we have sent one: an earlier transaction's
             if msg.type == M.MAV_MISSION_ACCEPTED and progress is not None:
                 progress(count, count)
             return msg.type
@@ -142,14 +189,19 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
         last = _item_message(items[seq], target_system, target_component)
         _send(last)
         wait = item_timeout_s
+        deadline = time.monotonic() + wait
 
 
 def download(conn, target_system: int, target_component: int,
              progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
              item_timeout_s: float = ITEM_TIMEOUT_S,
-             retries: int = RETRIES, send: Send | None = None) -> list[MissionItem]:
-    """The vehicle's mission. Raises MissionError when it stops answering or refuses."""
+             retries: int = RETRIES, send: Send | None = None,
+             settle_s: float = SETTLE_S) -> list[MissionItem]:
+    """The vehicle's mission. Raises MissionError when it stops answering or refuses, or
+    when its mission changes during the download."""
     _send = _sender(conn, send)
+    _drain(conn, target_system, settle_s)
+    counts: list[int] = []
 
     def exchange(request, types: list[str], wait: float, accept, what: str):
         for _ in range(retries + 1):
@@ -164,6 +216,13 @@ def download(conn, target_system: int, target_component: int,
                         continue  # a late ACK of an earlier transaction
                     raise MissionError(f"mission download from system {target_system}: "
                                        f"{what} refused: {result_name(msg.type)}")
+                if msg.get_type() == "MISSION_COUNT" and counts:
+                    if msg.count != counts[0]:
+                        raise MissionError(
+                            f"mission download from system {target_system}: MISSION_COUNT "
+                            f"{counts[0]}, then {msg.count}: the mission changed (or an "
+                            "answer was stale); try again")
+                    continue  # a duplicate of the count we have
                 if accept(msg):
                     return msg
         raise MissionError(f"mission download from system {target_system}: no answer to "
@@ -173,12 +232,14 @@ def download(conn, target_system: int, target_component: int,
         M.MAVLink_mission_request_list_message(target_system, target_component, MISSION),
         ["MISSION_COUNT", "MISSION_ACK"], timeout_s, lambda m: True, "MISSION_REQUEST_LIST")
     count = count_msg.count
+    counts.append(count)
     items: list[MissionItem] = []
     for seq in range(count):
         msg = exchange(
             M.MAVLink_mission_request_int_message(target_system, target_component, seq,
                                                   MISSION),
-            ["MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK"], item_timeout_s,
+            ["MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK", "MISSION_COUNT"],
+            item_timeout_s,
             lambda m, seq=seq: m.seq == seq, f"the request for item {seq} of {count}")
         items.append(_item_from(msg))
         if progress is not None:
@@ -189,9 +250,10 @@ def download(conn, target_system: int, target_component: int,
 
 
 def clear(conn, target_system: int, target_component: int, *, timeout_s: float = TIMEOUT_S,
-          retries: int = RETRIES, send: Send | None = None) -> int:
+          retries: int = RETRIES, send: Send | None = None, settle_s: float = SETTLE_S) -> int:
     """Clear the vehicle's mission; its MAV_MISSION_RESULT. MissionError if it is silent."""
     _send = _sender(conn, send)
+    _drain(conn, target_system, settle_s)
     request = M.MAVLink_mission_clear_all_message(target_system, target_component, MISSION)
     for _ in range(retries + 1):
         _send(request)

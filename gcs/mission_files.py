@@ -11,6 +11,7 @@ the same items.
 from __future__ import annotations
 
 import math
+import struct
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,37 @@ _GLOBAL_FRAMES = {M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRA
 
 class MissionFileError(ValueError):
     """A mission file that cannot be read: names the file, the line or item, and why."""
+
+
+# What MISSION_ITEM_INT can carry: a file whose values do not fit would parse and then fail
+# when the upload packs the message, so such values are refused here, with the place.
+_INT_RANGES = (("seq", 0, 0xFFFF), ("current", 0, 0xFF), ("frame", 0, 0xFF),
+               ("command", 0, 0xFFFF), ("autocontinue", 0, 0xFF),
+               ("x", -2**31, 2**31 - 1), ("y", -2**31, 2**31 - 1))
+_FLOAT32 = struct.Struct("<f")
+
+
+def _fits_float32(v: float) -> bool:
+    try:
+        _FLOAT32.pack(v)
+    except OverflowError:
+        return False
+    return True
+
+
+def _checked(item: MissionItem, where: str) -> MissionItem:
+    """`item` if every field fits its slot of MISSION_ITEM_INT, else MissionFileError."""
+    for name, lo, hi in _INT_RANGES:
+        v = getattr(item, name)
+        if not lo <= v <= hi:
+            what = "x/y out of the int32 range" if name in ("x", "y") else \
+                f"{name} {v} outside {lo}..{hi}"
+            raise MissionFileError(f"{where}: {what}")
+    for name in ("param1", "param2", "param3", "param4", "z"):
+        if not _fits_float32(getattr(item, name)):
+            raise MissionFileError(f"{where}: {name} {getattr(item, name)!r} does not fit a "
+                                   "float32")
+    return item
 
 
 def _scale(frame: int) -> float:
@@ -81,10 +113,9 @@ def parse_wpl(text: str, source: str = "<mission>") -> list[MissionItem]:
             x, y = round(p[4] * s), round(p[5] * s)
         except (OverflowError, ValueError):
             raise MissionFileError(f"{source}: line {n}: x/y not finite") from None
-        if not (-2**31 <= x < 2**31 and -2**31 <= y < 2**31):
-            raise MissionFileError(f"{source}: line {n}: x/y out of the int32 range")
-        items.append(MissionItem(seq, frame, command, current, autocontinue, p[0], p[1], p[2],
-                                 p[3], x, y, p[6]))
+        items.append(_checked(MissionItem(seq, frame, command, current, autocontinue, p[0],
+                                          p[1], p[2], p[3], x, y, p[6]),
+                              f"{source}: line {n}"))
     return items
 
 
@@ -164,14 +195,31 @@ def _floats(t: dict, key: str, n: int, where: str) -> list[float]:
     if not isinstance(v, list) or len(v) != n or not all(
             isinstance(x, int | float) and not isinstance(x, bool) for x in v):
         raise MissionFileError(f"{where}: key '{key}': expected a list of {n} numbers")
-    return [float(x) for x in v]
+    try:
+        return [float(x) for x in v]
+    except OverflowError:  # an integer beyond the float range
+        raise MissionFileError(f"{where}: key '{key}': number out of range") from None
 
 
 def _float(t: dict, key: str, where: str, default: float | None = None) -> float:
     v = t.get(key, default)
     if v is None or isinstance(v, bool) or not isinstance(v, int | float):
         raise MissionFileError(f"{where}: key '{key}': expected a number")
-    return float(v)
+    try:
+        return float(v)
+    except OverflowError:
+        raise MissionFileError(f"{where}: key '{key}': number out of range") from None
+
+
+def _int(t: dict, key: str, where: str, default: int | None = None) -> int:
+    v = t.get(key, default)
+    if v is None or isinstance(v, bool) or not isinstance(v, int):
+        raise MissionFileError(f"{where}: key '{key}': expected an integer")
+    return v
+
+
+_RAW_KEYS = {"type", "command", "frame", "autocontinue", "params", "x", "y", "z"}
+FORMAT = "dqflight-mission-1"
 
 
 def parse_toml(text: str, source: str = "<mission>") -> list[MissionItem]:
@@ -179,19 +227,30 @@ def parse_toml(text: str, source: str = "<mission>") -> list[MissionItem]:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MissionFileError(f"{source}: not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib recurses into nested arrays and tables
+        raise MissionFileError(f"{source}: not valid TOML: nested too deeply") from None
     unknown = set(data) - {"format", "item"}
     if unknown:
         raise MissionFileError(f"{source}: unknown key '{sorted(unknown)[0]}'")
+    if data.get("format", FORMAT) != FORMAT:
+        raise MissionFileError(f"{source}: key 'format': expected \"{FORMAT}\"")
+    tables = data.get("item", [])
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise MissionFileError(f"{source}: key 'item': expected tables [[item]]")
     items = []
-    for seq, t in enumerate(data.get("item", [])):
+    for seq, t in enumerate(tables):
         where = f"{source}: item {seq + 1}"
         kind = t.get("type")
         if kind == "raw":
+            extra = set(t) - _RAW_KEYS
+            if extra:
+                raise MissionFileError(f"{where}: unknown key '{sorted(extra)[0]}' for raw")
             params = _floats(t, "params", 4, where)
-            items.append(MissionItem(seq, int(t.get("frame", M.MAV_FRAME_LOCAL_NED)),
-                                     int(t["command"]), 1 if seq == 0 else 0,
-                                     int(t.get("autocontinue", 1)), *params, int(t["x"]),
-                                     int(t["y"]), _float(t, "z", where)))
+            item = MissionItem(seq, _int(t, "frame", where, M.MAV_FRAME_LOCAL_NED),
+                               _int(t, "command", where), 1 if seq == 0 else 0,
+                               _int(t, "autocontinue", where, 1), *params, _int(t, "x", where),
+                               _int(t, "y", where), _float(t, "z", where))
+            items.append(_checked(item, where))
             continue
         command = next((c for c, k in _KINDS.items() if k == kind), None)
         if command is None:
@@ -214,8 +273,9 @@ def parse_toml(text: str, source: str = "<mission>") -> list[MissionItem]:
             x, y = round(p["x"] * LOCAL_SCALE), round(p["y"] * LOCAL_SCALE)
         except (OverflowError, ValueError):
             raise MissionFileError(f"{where}: position not finite") from None
-        items.append(MissionItem(seq, M.MAV_FRAME_LOCAL_NED, command, 1 if seq == 0 else 0, 1,
-                                 p["p1"], p["p2"], p["p3"], p["p4"], x, y, p["z"]))
+        items.append(_checked(MissionItem(seq, M.MAV_FRAME_LOCAL_NED, command,
+                                          1 if seq == 0 else 0, 1, p["p1"], p["p2"], p["p3"],
+                                          p["p4"], x, y, p["z"]), where))
     return items
 
 
@@ -228,6 +288,9 @@ def read_mission(path: Path) -> list[MissionItem]:
         text = path.read_text()
     except OSError as exc:
         raise MissionFileError(f"{path}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise MissionFileError(f"{path}: not a text file ({exc.reason} at byte "
+                               f"{exc.start})") from None
     items = parse_wpl(text, str(path)) if text.lstrip().startswith("QGC WPL") \
         else parse_toml(text, str(path))
     if not items:

@@ -78,6 +78,21 @@ class UdpProxy:
                 except OSError:
                     pass
 
+    def inject(self, data: bytes, *, to_server: bool = False) -> bool:
+        """Send `data` as if it had come through the link (a corrupting wire, a man in the
+        middle): to the client from the address it talks to, or to the server from the
+        proxy's own. False while the client is not known yet."""
+        try:
+            if to_server:
+                self.back.sendto(data, self.server)
+            elif self.client is not None:
+                self.front.sendto(data, self.client)
+            else:
+                return False
+        except (BlockingIOError, ConnectionRefusedError):
+            return False  # a full buffer drops it, as the link would
+        return True
+
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2.0)
