@@ -207,7 +207,14 @@ class FlightController:
             msgs = p.parse_buffer(data) or []
         except Exception:  # pymavlink raises on some malformed input; count and go on
             self.rejected_bytes += len(data)
-            return
+            msgs = []
+        if not self.gcs[index].is_stream and p.buf_len():
+            # A datagram holds whole frames: a frame cut short must not be completed by the
+            # bytes of the next datagram (pymavlink parses one stream per sender).
+            self.rejected_bytes += p.buf_len()
+            p.buf = bytearray()
+            p.buf_index = 0
+            p.expected_length = M.HEADER_LEN_V1 + 2
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
                 if "signature" in str(getattr(msg, "reason", "")):

@@ -193,3 +193,23 @@ def test_the_simulator_takes_commands_only_from_its_own_system(tmp_path):
     finally:
         stop(procs)
         sock.close()
+
+
+def test_a_frame_cut_short_is_not_completed_by_the_next_datagram(stack, tmp_path):
+    """UDP carries whole frames: MISSION_CLEAR_ALL cut one byte short, then a datagram that
+    starts with the missing byte, must not clear the mission (found by the fuzz campaign:
+    pymavlink parses one byte stream per sender)."""
+    from common.config import load_scenario
+    from common.mavlink import encoder, pack
+    from gcs.mission_client import download, upload
+    from gcs.scenario_mission import scenario_mission
+
+    s = stack.session
+    items = scenario_mission(load_scenario(SCENARIOS / "case1_figure8.toml"))
+    assert upload(s.conn, 1, 1, items, send=s.send) == M.MAV_MISSION_ACCEPTED
+    frame = pack(encoder(255, 190), M.MAVLink_mission_clear_all_message(1, 1, 0))
+    with s.lock:
+        s.conn.write(frame[:-1])
+        s.conn.write(frame[-1:] + b"\x00" * 8)
+    time.sleep(0.5)
+    assert len(download(s.conn, 1, 1, send=s.send)) == len(items)
