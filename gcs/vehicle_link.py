@@ -294,6 +294,8 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
         return False
 
     stream(0.5)  # PX4 and this FCU need a setpoint stream before OFFBOARD is accepted
+    # a vehicle arms only once it knows its state: wait for its position to be reported
+    stream(10.0, until=lambda: snap.get("LOCAL_POSITION_NED") is not None)
     if arm_first and arm(s, True) != M.MAV_RESULT_ACCEPTED:
         raise GcsError("arming refused")
     result = set_mode(s, "OFFBOARD")
