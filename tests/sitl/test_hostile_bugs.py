@@ -1,8 +1,9 @@
 """Bugs found by fuzzing (tests/unit/test_fuzz_parsers.py, benchmarks/fuzz_campaign.py,
 in-process fuzzing of FlightController) in files changed elsewhere (fcu/node.py,
 fcu/vehicle.py, sitl/node.py, fcu/telemetry.py): each test shows one with the smallest input
-that triggers it. The first five failed when written and pass since commits 674bea7 and
-8459807; the last still fails.
+that triggers it. Each failed when written; all pass since commits 674bea7, 8459807,
+1ec21fa (velocity and rate bounds, unsendable telemetry skipped) and 6b5a095 (frames cut at
+a datagram's end dropped).
 
 * A COMMAND_LONG GET_MESSAGE_INTERVAL whose p1 does not fit uint16 killed the FCU
   (fcu/node.py `FlightController._command`: MESSAGE_INTERVAL(int(p1)) -> struct.error, which
@@ -15,11 +16,13 @@ that triggers it. The first five failed when written and pass since commits 674b
   `_on_sim_datagram` never looked at `Frame.sysid`).
 * The simulator took HIL_ACTUATOR_CONTROLS from any system id (sitl/node.py
   `SimulatorServer._answers` never looked at `Frame.sysid`).
-* STILL OPEN: an ODOMETRY with a finite but absurd velocity (3e38 m/s, each component a
-  valid float32) and a 45 degree yaw is accepted; the velocity turned into NED no longer
-  fits a float32 and the next LOCAL_POSITION_NED kills the FCU (fcu/node.py `_housekeeping`
-  -> `_send_message` -> `send` -> pack -> OverflowError: float too large to pack with f
-  format). `_on_sim_datagram` bounds the position (1e6 m) but not the velocity or rates.
+* An ODOMETRY with a finite but absurd velocity (3e38 m/s, each component a valid float32)
+  and a 45 degree yaw was accepted; the velocity turned into NED no longer fits a float32
+  and the next LOCAL_POSITION_NED killed the FCU (fcu/node.py `_housekeeping` ->
+  `_send_message` -> `send` -> pack -> OverflowError: float too large to pack with f format).
+* A frame cut one byte short at the end of a datagram was completed by the first byte of the
+  sender's next datagram (fcu/node.py `_on_gcs_datagram`, one pymavlink stream parser per UDP
+  peer): in the campaign a cut MISSION_CLEAR_ALL so completed cleared the mission in flight.
 """
 
 from __future__ import annotations
