@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: venv
-	$(VENV)/bin/gcs run config/scenarios/case1_figure8.toml --out $(OUT)
+	$(VENV)/bin/gcs run config/scenarios/case1_figure8.toml --out $(OUT) --force
 
 test: venv
 	$(PY) -m pytest -q -n auto tests

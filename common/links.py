@@ -5,7 +5,10 @@
                        send a burst of thousands)
     udpout:HOST:PORT   send to HOST:PORT; only its replies are read (datagrams from any
                        other address are dropped and counted in `foreign_datagrams`)
-    tcp:HOST:PORT      connect to a TCP server (reconnects when the server goes away)
+    tcp:HOST:PORT      connect to a TCP server without blocking: an attempt in progress is
+                       checked on every call, never waited for; attempts at most once per
+                       second, each abandoned after a second without an answer; reconnects
+                       when the server goes away; data sent while not connected is dropped
     tcpin:HOST:PORT    listen for TCP clients and serve all of them
     serial:DEVICE:BAUD a serial port in raw mode
 
@@ -214,37 +217,102 @@ class UdpLink(Link):
 
 
 class TcpClientLink(Link):
-    """tcp:HOST:PORT, reconnecting (at most once per second) when the server goes away."""
+    """tcp:HOST:PORT, connecting and reconnecting without ever blocking the caller.
 
-    def __init__(self, url: LinkUrl) -> None:
+    HOST is resolved once, when the link is opened (no name lookups in the caller's loop).
+    An attempt is a non-blocking `connect`; while it is in progress (`connecting`) every call
+    of `fileno()`, `filenos()`, `recv()` and `send()` checks it with `SO_ERROR` (set once the
+    attempt has failed) and `getpeername()` (ENOTCONN until the handshake is done): two
+    system calls that never wait, without the FD_SETSIZE limit of a `select`. `filenos()`
+    includes the socket while it connects: a refused or failed attempt is readable, so the
+    caller's read-`select` wakes for it at once; a completed one is not readable and is
+    noticed at the caller's next call of any of these (the FCU rebuilds its descriptor list
+    every turn of its loop, at least every 50 ms). An attempt still pending after
+    `connect_timeout_s` is abandoned (an address that drops SYNs), attempts start at most
+    once every `retry_s`, and a connection closed, reset or refused by the server is noticed
+    by `recv()` (end of stream) or `send()` (broken pipe) and retried the same way.
+
+    `send()` never waits: while not connected it drops the data (like a datagram link); when
+    the socket buffer is full it keeps the unsent tail of the last write, so that the peer
+    never sees half a frame followed by another, and drops whole writes until that tail has
+    gone out. Dropped writes are counted in `dropped_sends`, connections made in `connects`.
+    """
+
+    def __init__(
+        self, url: LinkUrl, *, retry_s: float = 1.0, connect_timeout_s: float = 1.0
+    ) -> None:
         self.url = url
-        self.sock: socket.socket | None = None
-        self._next_try = 0.0
-        self._connect()
-
-    def _connect(self) -> None:
-        now = time.monotonic()
-        if self.sock is not None or now < self._next_try:
-            return
-        self._next_try = now + 1.0
-        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self.retry_s = retry_s
+        self.connect_timeout_s = connect_timeout_s
         try:
-            s.settimeout(1.0)
-            s.connect((self.url.host, self.url.port))
-        except OSError:
-            s.close()
+            infos = socket.getaddrinfo(url.host, url.port, socket.AF_INET, socket.SOCK_STREAM)
+        except (socket.gaierror, UnicodeError) as exc:
+            raise LinkError(f"link '{url}': cannot resolve {url.host}: {exc}") from None
+        self.address: tuple[str, int] = infos[0][4][:2]
+        self.sock: socket.socket | None = None
+        self.connecting = False  # self.sock is an attempt in progress, not a connection
+        self._started = 0.0  # when the current attempt began
+        self._next_try = 0.0  # no attempt starts before this (monotonic seconds)
+        self._tail = b""  # unsent end of the last write, sent before anything new
+        self.connects = 0  # connections made (a reconnection counts again)
+        self.dropped_sends = 0
+        self._poll()
+
+    @property
+    def connected(self) -> bool:
+        return self.sock is not None and not self.connecting
+
+    def _poll(self) -> None:
+        """Start an attempt if one is due, or see whether the one in progress is done."""
+        if self.sock is None:
+            now = time.monotonic()
+            if now >= self._next_try:
+                self._start(now)
             return
+        if not self.connecting:
+            return
+        s = self.sock
+        if s.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR):
+            self._drop()  # refused, unreachable, timed out: the next attempt is due later
+            return
+        try:
+            s.getpeername()  # ENOTCONN until the handshake is done
+        except OSError:
+            if time.monotonic() - self._started >= self.connect_timeout_s:
+                self._drop()  # no answer (SYNs dropped): abandon, a new attempt follows
+            return
+        self.connecting = False
+        self.connects += 1
+
+    def _start(self, now: float) -> None:
+        self._next_try = now + self.retry_s
+        self._started = now
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         s.setblocking(False)
-        self.sock = s
+        s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        err = s.connect_ex(self.address)
+        if err == 0:
+            self.sock, self.connecting = s, False
+            self.connects += 1
+        elif err in (errno.EINPROGRESS, errno.EWOULDBLOCK, errno.EALREADY, errno.EINTR):
+            self.sock, self.connecting = s, True
+        else:
+            s.close()  # refused at once (or no route): wait for the next attempt
+
+    def _drop(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+        self.sock = None
+        self.connecting = False
+        self._tail = b""
 
     def fileno(self) -> int:
-        self._connect()
+        self._poll()
         return self.sock.fileno() if self.sock is not None else -1
 
     def recv(self) -> list[tuple[object, bytes]]:
-        if self.sock is None:
-            self._connect()
+        self._poll()
+        if not self.connected:
             return []
         out: list[tuple[object, bytes]] = []
         for _ in range(RECV_BATCH):
@@ -253,30 +321,36 @@ class TcpClientLink(Link):
             except (BlockingIOError, InterruptedError):
                 return out
             except OSError:
-                data = b""
+                data = b""  # reset
             if not data:
-                self.sock.close()
-                self.sock = None
+                self._drop()
                 return out
             out.append((self.url.text, data))
         return out
 
     def send(self, data: bytes) -> None:
-        if self.sock is None:
-            self._connect()
-            if self.sock is None:
-                return
+        self._poll()
+        if not self.connected:
+            self.dropped_sends += 1
+            return
         try:
-            self.sock.sendall(data)
+            if self._tail:
+                sent = self.sock.send(self._tail)
+                self._tail = self._tail[sent:]
+                if self._tail:
+                    self.dropped_sends += 1
+                    return
+            sent = self.sock.send(data)
+            self._tail = data[sent:]
         except (BlockingIOError, InterruptedError):
-            pass
+            self.dropped_sends += 1
         except OSError:
-            self.sock.close()
-            self.sock = None
+            self.dropped_sends += 1
+            self._drop()  # reset or broken pipe: the next attempt is at most retry_s away
 
     def close(self) -> None:
-        if self.sock is not None:
-            self.sock.close()
+        self._drop()
+        self._next_try = float("inf")
 
 
 class TcpServerLink(Link):

@@ -66,17 +66,31 @@ def _frame(msg_id: int, crc_extra: int, payload: bytes, seq: int, sysid: int,
     return header + payload + struct.pack("<H", crc)
 
 
+def _odometry_payload(o: Odometry) -> bytes:
+    return _ODO_STRUCT.pack(o.time_usec, *o.p_ned_m, *o.q_ned_frd, *o.v_frd_m_s,
+                            *o.omega_frd_rad_s, *_NAN_COV, *_NAN_COV,
+                            MAV.MAV_FRAME_LOCAL_NED, MAV.MAV_FRAME_BODY_FRD, 0,
+                            MAV.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+
+
 def pack_odometry(o: Odometry, seq: int, sysid: int, compid: int) -> bytes:
-    payload = _ODO_STRUCT.pack(o.time_usec, *o.p_ned_m, *o.q_ned_frd, *o.v_frd_m_s,
-                               *o.omega_frd_rad_s, *_NAN_COV, *_NAN_COV,
-                               MAV.MAV_FRAME_LOCAL_NED, MAV.MAV_FRAME_BODY_FRD, 0,
-                               MAV.MAV_ESTIMATOR_TYPE_NAIVE, 100)
-    return _frame(ODOMETRY_ID, _ODO.crc_extra, payload, seq, sysid, compid)
+    return _frame(ODOMETRY_ID, _ODO.crc_extra, _odometry_payload(o), seq, sysid, compid)
 
 
 def pack_actuator_controls(a: ActuatorControls, seq: int, sysid: int, compid: int) -> bytes:
     payload = _HAC_STRUCT.pack(a.time_usec, a.flags, *a.controls, a.mode)
     return _frame(HIL_ACTUATOR_CONTROLS_ID, _HAC.crc_extra, payload, seq, sysid, compid)
+
+
+def through_wire_odometry(o: Odometry) -> Odometry:
+    """What the receiver of `o` reads: its floats rounded to float32 (in-process runs)."""
+    return unpack_odometry(_odometry_payload(o))
+
+
+def through_wire_controls(a: ActuatorControls) -> ActuatorControls:
+    """What the receiver of `a` reads: its floats rounded to float32 (in-process runs)."""
+    return unpack_actuator_controls(_HAC_STRUCT.pack(a.time_usec, a.flags, *a.controls,
+                                                     a.mode))
 
 
 class Frame(NamedTuple):

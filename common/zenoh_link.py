@@ -7,8 +7,20 @@ vehicle's) and publish to the chosen vehicle's `in`. The simulator link uses
 
 Sessions run in client mode and connect to routers (default `tcp/127.0.0.1:7447`); multicast
 scouting is off and nothing listens, so nothing leaves 127.0.0.1 unless an endpoint says so.
-Zenoh's callbacks only append to a deque and poke a pipe: they never block Zenoh's threads,
-and the pipe's read end lets the same `select` loop serve Zenoh and sockets.
+Zenoh's callbacks only append to a deque and poke a pipe: they never block Zenoh's threads
+(beyond a lock held for a few list operations), and the pipe's read end lets the same
+`select` loop serve Zenoh and sockets. Bounds, so that a flood can neither grow memory nor
+starve the caller's loop:
+
+- the deque holds at most `max_queue` samples (MAX_QUEUE, 1024, by default); beyond that the
+  OLDEST are dropped (the newest state is worth more than a stale one) and counted in
+  `dropped_samples`;
+- `recv()` returns at most RECV_BATCH (common/links.py) samples per call, oldest first, and
+  leaves the rest for the next call;
+- the pipe is readable exactly when samples are waiting (or a liveliness change is to be
+  reported): a callback writes one byte only when the pipe is empty (so a flood costs no
+  system call per sample and the pipe never fills), and `recv()` empties the pipe only when
+  it has emptied the deque, so the caller's `select` wakes again for what a batch left.
 """
 
 from __future__ import annotations
@@ -22,10 +34,11 @@ from collections.abc import Callable
 
 import zenoh
 
-from common.links import Link, LinkError, LinkUrl
+from common.links import RECV_BATCH, Link, LinkError, LinkUrl
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 ROLES = ("vehicle", "gcs", "sim_server", "sim_client")
+MAX_QUEUE = 1024  # samples waiting for recv(); the oldest are dropped beyond it
 
 
 def parse_zenoh(rest: str) -> tuple[str, list[str]]:
@@ -77,17 +90,25 @@ class ZenohLink(Link):
     spin = False  # data arrives from Zenoh's threads: sleep in select, release the GIL
 
     def __init__(self, url: LinkUrl, *, role: str, system_id: int = 0,
-                 on_liveliness: Callable[[int, bool], None] | None = None) -> None:
+                 on_liveliness: Callable[[int, bool], None] | None = None,
+                 max_queue: int = MAX_QUEUE) -> None:
         if role not in ROLES:
             raise LinkError(f"zenoh link role {role!r}: expected one of {ROLES}")
         self.url = url
         self.prefix, self.endpoints = parse_zenoh(url.device)
         self.role = role
         self.system_id = system_id
-        self._queue: collections.deque[tuple[str, bytes]] = collections.deque()
+        if max_queue < 1:
+            raise LinkError(f"zenoh link: max_queue must be at least 1, got {max_queue}")
+        self.max_queue = max_queue
+        self._queue: collections.deque[tuple[str, bytes]] = collections.deque(maxlen=max_queue)
+        self.dropped_samples = 0  # the oldest samples dropped because the queue was full
         self._rfd, self._wfd = os.pipe()
         os.set_blocking(self._rfd, False)
         os.set_blocking(self._wfd, False)
+        # Guards the queue, the drop count and `_poked` (True: a byte is in the pipe).
+        self._qlock = threading.Lock()
+        self._poked = False
         self._lock = threading.Lock()
         self.vehicles: set[int] = set()
         self._on_liveliness = on_liveliness
@@ -120,11 +141,25 @@ class ZenohLink(Link):
 
     # Zenoh threads: append and poke, never block.
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        self._queue.append((str(sample.key_expr), sample.payload.to_bytes()))
+        item = (str(sample.key_expr), sample.payload.to_bytes())
+        with self._qlock:
+            q = self._queue
+            if len(q) == q.maxlen:
+                self.dropped_samples += 1  # append() drops the oldest
+            q.append(item)
+            if not self._poked:
+                self._poke()
+
+    def _poke(self) -> None:
+        """Make the pipe readable (with `_qlock` held). One byte at most is ever in it, so
+        the write cannot find it full; a closed pipe (after close()) has no reader left."""
         try:
             os.write(self._wfd, b"\0")
-        except (BlockingIOError, OSError):
-            pass  # the pipe is full or closed: the reader drains the deque anyway
+        except BlockingIOError:
+            pass  # full, hence readable: the wakeup is there
+        except OSError:
+            return
+        self._poked = True
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         chunk = str(sample.key_expr).split("/")[-2]
@@ -139,10 +174,9 @@ class ZenohLink(Link):
         self._on_sample_wakeup()
 
     def _on_sample_wakeup(self) -> None:
-        try:
-            os.write(self._wfd, b"\0")
-        except (BlockingIOError, OSError):
-            pass
+        with self._qlock:
+            if not self._poked:
+                self._poke()
 
     def set_target(self, system_id: int) -> None:
         """GCS: send to this vehicle's `in` key from now on."""
@@ -155,16 +189,28 @@ class ZenohLink(Link):
     def fileno(self) -> int:
         return self._rfd
 
+    @property
+    def queued(self) -> int:
+        """Samples waiting for recv()."""
+        return len(self._queue)
+
     def recv(self) -> list[tuple[object, bytes]]:
-        try:
-            while os.read(self._rfd, 65536):
-                pass
-        except (BlockingIOError, OSError):
-            pass
-        out: list[tuple[object, bytes]] = []
-        q = self._queue
-        while q:
-            out.append(q.popleft())
+        """At most RECV_BATCH samples, oldest first. While samples remain the pipe stays
+        readable, so the caller's `select` wakes again for them."""
+        with self._qlock:
+            q = self._queue
+            n = min(len(q), RECV_BATCH)
+            out: list[tuple[object, bytes]] = [q.popleft() for _ in range(n)]
+            if q:
+                if not self._poked:
+                    self._poke()
+            elif self._poked:
+                try:
+                    while os.read(self._rfd, 64):
+                        pass
+                except OSError:
+                    pass  # empty (BlockingIOError) or closed
+                self._poked = False
         return out
 
     def send(self, data: bytes) -> None:
@@ -173,11 +219,15 @@ class ZenohLink(Link):
             pub.put(data)
 
     def close_fds(self) -> None:
-        for fd in (self._rfd, self._wfd):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        with self._qlock:  # a late callback then writes to -1, never to a reused number
+            fds, self._rfd, self._wfd = (self._rfd, self._wfd), -1, -1
+            self._poked = False
+        for fd in fds:
+            if fd >= 0:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
 
     def close(self) -> None:
         for entity in (self._token, self._live, getattr(self, "_sub", None), self._pub):

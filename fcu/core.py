@@ -46,8 +46,10 @@ class FlightCore:
         self.tracker = DualQuaternionTracker(vehicle, gains)
         self.allocator = Allocator(vehicle, initial_tilt_rad)
 
-    def step(self, state: VehicleState, ref: Reference) -> StepResult:
-        """One control period: desired wrench (eq. 16/33) then speeds and tilts (eq. 28-29)."""
-        out = self.tracker.update(state, ref, self.dt_s)
+    def step(self, state: VehicleState, ref: Reference,
+             dt_s: float | None = None) -> StepResult:
+        """One control period of dt_s (default: the nominal period): desired wrench
+        (eq. 16/33), then speeds and tilts (eq. 28-29)."""
+        out = self.tracker.update(state, ref, self.dt_s if dt_s is None else dt_s)
         alloc = self.allocator.allocate(out.force_flu_n, out.torque_flu_nm)
         return StepResult(ref, out, alloc)

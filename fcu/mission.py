@@ -29,6 +29,21 @@ whose duration comes from a speed (not from a parameter) and whose distance is b
 keeps the start position (attitude), so a target equal to the previous item's end up to the
 wire's resolution costs no travel. A requested yaw change makes the move last at least
 angle / turn rate.
+
+Flyable missions (`fcu.feasibility`, when `MissionLimits.vehicle` is given): every planned
+segment's nominal wrench must allocate to rotor speeds within `feasibility.MARGIN` w_max at
+every sample. Items whose duration comes from a speed (NAV_WAYPOINT and NAV_LOITER_TIME
+travel, NAV_TAKEOFF with p2 = 0, NAV_LAND) are STRETCHED: their travel takes the shortest time
+that passes the check whenever distance / speed (or the turn time) is shorter, and the planned
+timeline uses that time, both when a mission is validated and when `MissionExecutor` plans it,
+so the upload check and the flight agree. Items whose duration the user gave (POSE_KEYFRAME p1,
+NAV_TAKEOFF p2 > 0, FIGURE_EIGHT p2) keep it, and a mission with one that fails is REFUSED
+(MAV_MISSION_DENIED) with a reason naming the item, the rotor speed and the limit, and the
+duration that would pass (`check_mission`). Validation plans from the origin at the identity
+attitude (as the geofence does); the executor re-plans from the actual start pose with the same
+stretching rule, never refuses (a user-timed item that no longer fits from there flies as
+given) and keeps the speed-derived time of a move that no duration can make flyable (hovering
+at one of its attitudes already exceeds the margin; validation refuses those).
 """
 
 from __future__ import annotations
@@ -39,11 +54,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import numpy as np
+
+from common.config import VehicleConfig
 from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
 from common.mission_items import MissionItem
-from fcu.dualquat import Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul, q_rotate_inv
+from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul
+from fcu.feasibility import TimeScaling, envelope, figure_instants, move_instants
 from fcu.tracker import Reference
-from fcu.trajectory import quintic
+from fcu.trajectory import FigureInfinity, q_exp_many, quintic, quintic_poly
 
 # MAV_FRAME, MAV_CMD and MAV_MISSION_RESULT values (common.xml).
 MAV_FRAME_LOCAL_NED = 1
@@ -81,7 +100,10 @@ _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 @dataclass(frozen=True)
 class MissionLimits:
-    """What a mission may ask for, and the speeds of the items that have no duration."""
+    """What a mission may ask for, and the speeds of the items that have no duration.
+
+    `vehicle`: the airframe whose rotor speed envelope missions must respect (items stretched
+    or refused, module docstring); None skips that check."""
 
     max_items: int = 500
     max_distance_m: float = 1000.0  # geofence: radius around the origin
@@ -89,6 +111,7 @@ class MissionLimits:
     land_speed_m_s: float = 0.5
     takeoff_speed_m_s: float = 1.0
     turn_rate_deg_s: float = 30.0  # yaw changes of speed-timed items take at least this long
+    vehicle: VehicleConfig | None = None
 
     def __post_init__(self) -> None:
         for name in ("max_distance_m", "cruise_speed_m_s", "land_speed_m_s",
@@ -103,6 +126,14 @@ class MissionLimits:
 class MissionEvent(NamedTuple):
     kind: str  # "current" | "reached" | "completed"
     seq: int
+
+
+class MissionCheck(NamedTuple):
+    """The outcome of validating a mission."""
+
+    result: int  # MAV_MISSION_RESULT
+    seq: int | None  # the offending item, if any
+    reason: str = ""  # why, for a person: set for MAV_MISSION_DENIED, else ""
 
 
 # ----------------------------------------------------------------------------------------
@@ -123,97 +154,122 @@ def _yaw(x: float) -> bool:
     return math.isnan(x) or math.isfinite(x)
 
 
+def _outside(seq: int, reach_m: float, r: float) -> tuple[int, str]:
+    return MAV_MISSION_DENIED, f"item {seq}: beyond the geofence ({reach_m:.0f} m > {r:.0f} m)"
+
+
 def _check_item(item: MissionItem, limits: MissionLimits, pos: list[float],
-                geofence: bool = True) -> int:
-    """MAV_MISSION_RESULT of one item; `pos` (planned NED position) moves to its end."""
+                geofence: bool = True) -> tuple[int, str]:
+    """(MAV_MISSION_RESULT, reason) of one item's parameters and geofence; `pos` (planned NED
+    position) moves to its end."""
     cmd = item.command
     if cmd not in SUPPORTED_COMMANDS:
-        return MAV_MISSION_UNSUPPORTED
+        return MAV_MISSION_UNSUPPORTED, ""
     if item.frame != MAV_FRAME_LOCAL_NED:
-        return MAV_MISSION_UNSUPPORTED_FRAME
+        return MAV_MISSION_UNSUPPORTED_FRAME, ""
     # x, y must fit MISSION_ITEM_INT even where the command ignores them.
     if not (isinstance(item.x, int) and INT32_MIN <= item.x <= INT32_MAX):
-        return MAV_MISSION_INVALID_PARAM5_X
+        return MAV_MISSION_INVALID_PARAM5_X, ""
     if not (isinstance(item.y, int) and INT32_MIN <= item.y <= INT32_MAX):
-        return MAV_MISSION_INVALID_PARAM6_Y
+        return MAV_MISSION_INVALID_PARAM6_Y, ""
     p1, p2, p3, p4, z = item.param1, item.param2, item.param3, item.param4, item.z
     r = limits.max_distance_m if geofence else math.inf
     if cmd == MAV_CMD_NAV_TAKEOFF:
         if not _time(p2):
-            return MAV_MISSION_INVALID_PARAM2
+            return MAV_MISSION_INVALID_PARAM2, ""
         if not _yaw(p4):
-            return MAV_MISSION_INVALID_PARAM4
+            return MAV_MISSION_INVALID_PARAM4, ""
         if not _finite(z):
-            return MAV_MISSION_INVALID_PARAM7
+            return MAV_MISSION_INVALID_PARAM7, ""
         target = [pos[0], pos[1], z]
     elif cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME):
         if not _time(p1):
-            return MAV_MISSION_INVALID_PARAM1
+            return MAV_MISSION_INVALID_PARAM1, ""
         if cmd == MAV_CMD_NAV_WAYPOINT and not _yaw(p4):
-            return MAV_MISSION_INVALID_PARAM4
+            return MAV_MISSION_INVALID_PARAM4, ""
         if not _finite(z):
-            return MAV_MISSION_INVALID_PARAM7
+            return MAV_MISSION_INVALID_PARAM7, ""
         target = [item.x_m, item.y_m, z]
     elif cmd == MAV_CMD_NAV_LAND:
         if not _yaw(p4):
-            return MAV_MISSION_INVALID_PARAM4
+            return MAV_MISSION_INVALID_PARAM4, ""
         pos[2] = 0.0
-        return MAV_MISSION_ACCEPTED
+        return MAV_MISSION_ACCEPTED, ""
     elif cmd == MAV_CMD_POSE_KEYFRAME:
         if not _time(p1, positive=True):
-            return MAV_MISSION_INVALID_PARAM1
+            return MAV_MISSION_INVALID_PARAM1, ""
         for value, code in ((p2, MAV_MISSION_INVALID_PARAM2), (p3, MAV_MISSION_INVALID_PARAM3),
                             (p4, MAV_MISSION_INVALID_PARAM4)):
             if not _finite(value):
-                return code
+                return code, ""
         if not _finite(z):
-            return MAV_MISSION_INVALID_PARAM7
+            return MAV_MISSION_INVALID_PARAM7, ""
         target = [item.x_m, item.y_m, z]
     else:  # MAV_CMD_FIGURE_EIGHT
         if not _time(p1):
-            return MAV_MISSION_INVALID_PARAM1
+            return MAV_MISSION_INVALID_PARAM1, ""
         if not _time(p2, positive=True):
-            return MAV_MISSION_INVALID_PARAM2
+            return MAV_MISSION_INVALID_PARAM2, ""
         if not _finite(p3):
-            return MAV_MISSION_INVALID_PARAM3
+            return MAV_MISSION_INVALID_PARAM3, ""
         if not _finite(p4):
-            return MAV_MISSION_INVALID_PARAM4
+            return MAV_MISSION_INVALID_PARAM4, ""
         if not _finite(z):
-            return MAV_MISSION_INVALID_PARAM7
+            return MAV_MISSION_INVALID_PARAM7, ""
         if p3 == 0.0 and p4 == 0.0 and z == 0.0:
-            return MAV_MISSION_INVALID_PARAM3  # no axis
-        if norm3((pos[0], pos[1], pos[2])) + p1 * FIGURE_EXTENT > r:
-            return MAV_MISSION_DENIED
-        return MAV_MISSION_ACCEPTED  # ends where it started (T = 2 pi)
-    if norm3((target[0], target[1], target[2])) > r:
-        return MAV_MISSION_DENIED
+            return MAV_MISSION_INVALID_PARAM3, ""  # no axis
+        reach = norm3((pos[0], pos[1], pos[2])) + p1 * FIGURE_EXTENT
+        if reach > r:
+            return _outside(item.seq, reach, r)
+        return MAV_MISSION_ACCEPTED, ""  # ends where it started (T = 2 pi)
+    reach = norm3((target[0], target[1], target[2]))
+    if reach > r:
+        return _outside(item.seq, reach, r)
     pos[:] = target
-    return MAV_MISSION_ACCEPTED
+    return MAV_MISSION_ACCEPTED, ""
+
+
+def check_mission(items: Sequence[MissionItem], limits: MissionLimits) -> MissionCheck:
+    """Validate a whole mission: (MAV_MISSION_RESULT, offending seq or None, reason).
+
+    Seqs must be 0..n-1 in order. Only the parameters an item uses are checked. The
+    geofence check follows the planned positions from the origin (the mission's start):
+    takeoff keeps x, y, landing goes to z = 0, the figure returns to its start. With
+    `limits.vehicle`, the mission is also planned from the origin at the identity attitude,
+    speed-timed items stretched, and an item whose given duration the vehicle cannot fly is
+    MAV_MISSION_DENIED with a reason such as "item 3: needs 1903 rad/s > 1445 (85% of 1700):
+    lengthen p1 to 0.87 s" (module docstring). Items are checked in order: the first
+    failing item is reported.
+    """
+    if len(items) > limits.max_items:
+        return MissionCheck(MAV_MISSION_NO_SPACE, None)
+    return _check_items(items, limits, geofence=True, envelope_check=limits.vehicle is not None)
 
 
 def validate_mission(items: Sequence[MissionItem],
                      limits: MissionLimits) -> tuple[int, int | None]:
-    """(MAV_MISSION_RESULT, offending seq or None) of a whole mission.
-
-    Seqs must be 0..n-1 in order. Only the parameters an item uses are checked. The
-    geofence check follows the planned positions from the origin (the mission's start):
-    takeoff keeps x, y, landing goes to z = 0, the figure returns to its start.
-    """
-    if len(items) > limits.max_items:
-        return MAV_MISSION_NO_SPACE, None
-    return _check_items(items, limits, geofence=True)
+    """(MAV_MISSION_RESULT, offending seq or None) of `check_mission`."""
+    check = check_mission(items, limits)
+    return check.result, check.seq
 
 
-def _check_items(items: Sequence[MissionItem], limits: MissionLimits,
-                 geofence: bool) -> tuple[int, int | None]:
+def _check_items(items: Sequence[MissionItem], limits: MissionLimits, geofence: bool,
+                 envelope_check: bool = False) -> MissionCheck:
     pos = [0.0, 0.0, 0.0]
+    t, p, q = 0.0, _ZERO, Q_IDENTITY
     for i, item in enumerate(items):
         if item.seq != i:
-            return MAV_MISSION_INVALID_SEQUENCE, item.seq
-        result = _check_item(item, limits, pos, geofence)
+            return MissionCheck(MAV_MISSION_INVALID_SEQUENCE, item.seq)
+        result, reason = _check_item(item, limits, pos, geofence)
         if result != MAV_MISSION_ACCEPTED:
-            return result, item.seq
-    return MAV_MISSION_ACCEPTED, None
+            return MissionCheck(result, item.seq, reason)
+        if envelope_check:
+            seg = _plan_item(item, t, p, q, limits)
+            reason = _envelope_reason(item, seg, limits)
+            if reason:
+                return MissionCheck(MAV_MISSION_DENIED, item.seq, reason)
+            t, p, q = seg.t1, seg.p_end, seg.q_end
+    return MissionCheck(MAV_MISSION_ACCEPTED, None)
 
 
 # ----------------------------------------------------------------------------------------

@@ -12,7 +12,10 @@ import math
 import struct
 from dataclasses import dataclass
 
-from common.config import ConfigError, Gains, check_stability
+from common.config import ConfigError, Gains, VehicleConfig, check_stability
+from fcu.failsafe import FailsafeSettings
+from fcu.mission import MissionLimits
+from fcu.pipeline import Pipeline
 
 AXES = "XYZ"
 DAMPING_CODES = ("log_rate", "twist")
@@ -124,3 +127,29 @@ class ParamStore:
                 raise ParamError(f"{name} refused: violates {condition}") from None
         self.values = trial
         return trial[name]
+
+
+def failsafe_settings(values: dict[str, float]) -> FailsafeSettings:
+    """The COM_* parameters as the failsafe stage's settings."""
+    return FailsafeSettings(
+        gcs_loss_s=values["COM_DL_LOSS_T"], gcs_loss_land_s=values["COM_DL_LAND_T"],
+        state_loss_s=values["COM_STATE_LOSS_T"], saturation_s=values["COM_SAT_T"],
+        saturation_hold=values["COM_SAT_ACT"] == 1.0, divergence_m=values["COM_DIV_POS"])
+
+
+def mission_limits(values: dict[str, float], vehicle: VehicleConfig | None = None
+                   ) -> MissionLimits:
+    """The MIS_* and GF_* parameters as the mission's limits."""
+    return MissionLimits(max_distance_m=values["GF_MAX_DIST"],
+                         cruise_speed_m_s=values["MIS_CRUISE_SPD"],
+                         land_speed_m_s=values["MIS_LAND_SPD"],
+                         takeoff_speed_m_s=values["MIS_TKO_SPD"])
+
+
+def apply_params(store: ParamStore, pipeline: Pipeline) -> MissionLimits:
+    """Put the parameters in force in the pipeline; returns the mission limits (the mission
+    protocol checks uploads against them too)."""
+    v = store.values
+    limits = mission_limits(v, pipeline.vehicle)
+    pipeline.configure(store.gains(), limits, failsafe_settings(v), v["COM_OF_LOSS_T"])
+    return limits

@@ -9,9 +9,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
 from common.mavlink import MAV
+from fcu.pipeline import StepOutput
+from fcu.tracker import Reference, VehicleState
 
 M = MAV
 DEFAULT_INTERVALS_S: dict[int, float] = {
@@ -36,6 +39,22 @@ CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILIT
                 | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT)
 FLIGHT_SW_VERSION = (0 << 24) | (1 << 16) | (0 << 8) | 255  # 0.1.0, release
+MIN_INTERVAL_S = 0.001  # no stream faster than 1 kHz
+MAX_INTERVAL_US = 2**31 - 1  # MESSAGE_INTERVAL.interval_us is an int32
+LINK_BUDGET_MSG_S = 1000.0  # all streams of one link together (defaults: about 264/s)
+_PER_SEND = {M.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: 2}  # builders that send several messages
+
+
+class Snapshot(NamedTuple):
+    """What telemetry reports, taken once per send from the pipeline (ENU/FLU inside)."""
+
+    time_us: int
+    state: VehicleState | None
+    ref: Reference | None
+    errors: tuple[float, float] | None  # position error m, attitude error rad
+    output: StepOutput | None
+    v_enu_m_s: tuple[float, float, float]
+    landed: bool
 
 
 def _i32(x: float) -> int:
@@ -45,31 +64,51 @@ def _i32(x: float) -> int:
 
 @dataclass
 class Schedule:
-    """Per-message intervals in wall-clock seconds; 0 or less = off."""
+    """One link's streams: per-message intervals in wall-clock seconds (0 or less = off),
+    bounded by the link's budget of messages per second."""
 
     intervals: dict[int, float]
     due: dict[int, float]
+    budget_msg_s: float = LINK_BUDGET_MSG_S
 
     @classmethod
     def default(cls) -> Schedule:
         return cls(dict(DEFAULT_INTERVALS_S), dict.fromkeys(DEFAULT_INTERVALS_S, 0.0))
 
-    def set_interval(self, msg_id: int, interval_us: float) -> bool:
-        """MAV_CMD_SET_MESSAGE_INTERVAL: -1 off, 0 default, > 0 interval in us."""
-        if msg_id not in DEFAULT_INTERVALS_S or not math.isfinite(interval_us):
-            return False
-        if interval_us < 0:
-            self.intervals[msg_id] = -1.0
-        elif interval_us == 0:
-            self.intervals[msg_id] = DEFAULT_INTERVALS_S[msg_id]
-        else:
-            self.intervals[msg_id] = max(interval_us * 1e-6, 0.001)
-        self.due[msg_id] = 0.0
-        return True
+    def rate_msg_s(self, intervals: dict[int, float] | None = None) -> float:
+        """Messages per second of all streams together."""
+        iv = self.intervals if intervals is None else intervals
+        return sum(_PER_SEND.get(m, 1) / t for m, t in iv.items() if t > 0)
 
-    def interval_us(self, msg_id: int) -> float:
-        iv = self.intervals.get(msg_id, -1.0)
-        return -1.0 if iv <= 0 else float(round(iv * 1e6))
+    def set_interval(self, msg_id: int, interval_us: float) -> tuple[bool, str]:
+        """MAV_CMD_SET_MESSAGE_INTERVAL: -1 off, 0 default, > 0 interval in us (at least
+        MIN_INTERVAL_S). Refused, with the reason: unknown streams, values MESSAGE_INTERVAL
+        cannot carry, and a total beyond the link's budget."""
+        if msg_id not in DEFAULT_INTERVALS_S:
+            return False, f"no stream for message {msg_id}"
+        if not math.isfinite(interval_us) or interval_us > MAX_INTERVAL_US or \
+                (interval_us < 0 and interval_us != -1):
+            return False, f"interval {interval_us:g} us not -1, 0 or 1..{MAX_INTERVAL_US}"
+        trial = dict(self.intervals)
+        if interval_us < 0:
+            trial[msg_id] = -1.0
+        elif interval_us == 0:
+            trial[msg_id] = DEFAULT_INTERVALS_S[msg_id]
+        else:
+            trial[msg_id] = max(round(interval_us) * 1e-6, MIN_INTERVAL_S)
+        rate = self.rate_msg_s(trial)
+        if rate > self.budget_msg_s and rate > self.rate_msg_s():
+            return False, f"link budget {self.budget_msg_s:.0f} msg/s (would be {rate:.0f})"
+        self.intervals = trial
+        self.due[msg_id] = 0.0
+        return True, ""
+
+    def interval_us(self, msg_id: int) -> int:
+        """MESSAGE_INTERVAL.interval_us: -1 off, 0 not available, else the interval."""
+        if msg_id not in self.intervals:
+            return 0
+        iv = self.intervals[msg_id]
+        return -1 if iv <= 0 else min(round(iv * 1e6), MAX_INTERVAL_US)
 
     def pop_due(self, now_s: float) -> list[int]:
         out = []
@@ -127,7 +166,7 @@ def sys_status(healthy: bool, load_permille: int, rejected: int, signing_rejects
 class Builders:
     """Telemetry messages from the FCU's latest state; `get` maps a message id to a builder."""
 
-    def __init__(self, source: Callable[[], dict], home: Home) -> None:
+    def __init__(self, source: Callable[[], Snapshot], home: Home) -> None:
         self.source = source
         self.home = home
 
@@ -135,7 +174,7 @@ class Builders:
         fn = self._table().get(msg_id)
         return fn(self.source()) if fn else None
 
-    def _table(self) -> dict[int, Callable[[dict], object]]:
+    def _table(self) -> dict[int, Callable[[Snapshot], object]]:
         return {
             M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: self.attitude_quaternion,
             M.MAVLINK_MSG_ID_ATTITUDE: self.attitude,
@@ -151,19 +190,19 @@ class Builders:
         }
 
     @staticmethod
-    def _ms(src: dict) -> int:
-        return int(src["time_us"] // 1000) & 0xFFFFFFFF
+    def _ms(src: Snapshot) -> int:
+        return int(src.time_us // 1000) & 0xFFFFFFFF
 
-    def attitude_quaternion(self, src: dict):
-        s = src["state"]
+    def attitude_quaternion(self, src: Snapshot):
+        s = src.state
         if s is None:
             return None
         q = q_enu_flu_to_ned_frd(s.q_enu_flu)
         w = flu_to_frd(s.omega_flu_rad_s)
         return M.MAVLink_attitude_quaternion_message(self._ms(src), *q, *w, [0.0] * 4)
 
-    def attitude(self, src: dict):
-        s = src["state"]
+    def attitude(self, src: Snapshot):
+        s = src.state
         if s is None:
             return None
         w, x, y, z = q_enu_flu_to_ned_frd(s.q_enu_flu)
@@ -173,47 +212,47 @@ class Builders:
         rates = flu_to_frd(s.omega_flu_rad_s)
         return M.MAVLink_attitude_message(self._ms(src), roll, pitch, yaw, *rates)
 
-    def local_position(self, src: dict):
-        s = src["state"]
+    def local_position(self, src: Snapshot):
+        s = src.state
         if s is None:
             return None
         return M.MAVLink_local_position_ned_message(self._ms(src), *enu_to_ned(s.p_enu_m),
-                                                    *enu_to_ned(src["v_enu"]))
+                                                    *enu_to_ned(src.v_enu_m_s))
 
-    def global_position(self, src: dict):
-        s = src["state"]
+    def global_position(self, src: Snapshot):
+        s = src.state
         if s is None:
             return None
         p_ned = enu_to_ned(s.p_enu_m)
         lat, lon, alt = ned_to_geodetic(p_ned, self.home.lat_deg, self.home.lon_deg,
                                         self.home.alt_m)
-        v = enu_to_ned(src["v_enu"])
+        v = enu_to_ned(src.v_enu_m_s)
         yaw = self.attitude(src).yaw
         hdg = round(math.degrees(yaw) % 360.0 * 100) % 36000
         return M.MAVLink_global_position_int_message(
             self._ms(src), _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000),
             _i32(-p_ned[2] * 1000), *(max(-32768, min(32767, round(c * 100))) for c in v), hdg)
 
-    def odometry(self, src: dict):
-        s = src["state"]
+    def odometry(self, src: Snapshot):
+        s = src.state
         if s is None:
             return None
         return M.MAVLink_odometry_message(
-            src["time_us"], M.MAV_FRAME_LOCAL_NED, M.MAV_FRAME_BODY_FRD, *enu_to_ned(s.p_enu_m),
+            src.time_us, M.MAV_FRAME_LOCAL_NED, M.MAV_FRAME_BODY_FRD, *enu_to_ned(s.p_enu_m),
             q_enu_flu_to_ned_frd(s.q_enu_flu), *flu_to_frd(s.v_flu_m_s),
             *flu_to_frd(s.omega_flu_rad_s), [math.nan] + [0.0] * 20, [math.nan] + [0.0] * 20,
             0, M.MAV_ESTIMATOR_TYPE_MOCAP, 100)
 
-    def actuators(self, src: dict):
-        out = src["output"]
+    def actuators(self, src: Snapshot):
+        out = src.output
         if out is None:
             return None
         values = [*out.speed_rad_s, *out.tilt_rad]
         return M.MAVLink_actuator_output_status_message(
-            src["time_us"], (1 << len(values)) - 1, values + [0.0] * (32 - len(values)))
+            src.time_us, (1 << len(values)) - 1, values + [0.0] * (32 - len(values)))
 
-    def position_target(self, src: dict):
-        ref = src["ref"]
+    def position_target(self, src: Snapshot):
+        ref = src.ref
         if ref is None:
             return None
         return M.MAVLink_position_target_local_ned_message(
@@ -221,29 +260,29 @@ class Builders:
             *enu_to_ned(ref.p_enu_m), *enu_to_ned(ref.v_enu_m_s), *enu_to_ned(ref.a_enu_m_s2),
             0.0, 0.0)
 
-    def attitude_target(self, src: dict):
-        ref = src["ref"]
+    def attitude_target(self, src: Snapshot):
+        ref = src.ref
         if ref is None:
             return None
         return M.MAVLink_attitude_target_message(
             self._ms(src), 0b0100_0000, q_enu_flu_to_ned_frd(ref.q_enu_flu),
             *flu_to_frd(ref.omega_flu_rad_s), 0.0)
 
-    def errors(self, src: dict):
-        errs = src["errors"]
+    def errors(self, src: Snapshot):
+        errs = src.errors
         if errs is None:
             return None
         ms = self._ms(src)
         return [M.MAVLink_named_value_float_message(ms, b"ERR_POS", errs[0]),
                 M.MAVLink_named_value_float_message(ms, b"ERR_ATT", errs[1])]
 
-    def home_position(self, src: dict):
+    def home_position(self, src: Snapshot):
         h = self.home
         return M.MAVLink_home_position_message(
             round(h.lat_deg * 1e7), round(h.lon_deg * 1e7), round(h.alt_m * 1000), 0.0, 0.0,
-            0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, src["time_us"])
+            0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, src.time_us)
 
-    def extended_sys_state(self, src: dict):
-        landed = (M.MAV_LANDED_STATE_ON_GROUND if src["landed"]
+    def extended_sys_state(self, src: Snapshot):
+        landed = (M.MAV_LANDED_STATE_ON_GROUND if src.landed
                   else M.MAV_LANDED_STATE_IN_AIR)
         return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, landed)

@@ -112,6 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--signing-key", metavar="FILE",
                      help="sign the GCS links of the run with this key (gcs keygen)")
     run.add_argument("--out", type=Path, required=True, metavar="DIR")
+    run.add_argument("--force", action="store_true",
+                     help="empty DIR first if it holds anything (a folder holds one run)")
 
     t1 = sub.add_parser("table1", help="Case I and Case II, PID and PD, beside the paper")
     t1.add_argument("--in-process", action="store_true",
@@ -194,8 +196,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _summary(m: dict) -> str:
     pos, att = m["position_error_m"], m["attitude_error_rad"]
-    return (f"{m['scenario']} [{m['controller']}] {m['status']}: "
-            f"{m['sim_time_s']:.1f} s simulated in {m['wall_time_s']:.1f} s "
+    events = "".join(f"\n  t = {e['t_s']:8.3f} s  {e['text']}" for e in m.get("events", [])
+                     if e.get("kind", "info") != "info" or e["severity"] <= 4)
+    return (f"{m['scenario']} [{m['controller']}] {m['status']}"
+            + (f" ({m['status_reason']})" if m.get("status_reason") else "") + events
+            + f"\n  {m['sim_time_s']:.1f} s simulated in {m['wall_time_s']:.1f} s "
             f"({m['real_time_factor']:.1f}x real time)\n"
             f"  position error  max {pos['max']:.6f} m   mean {pos['mean']:.6f} m   "
             f"rmse {pos['rmse']:.6f} m\n"
@@ -208,17 +213,31 @@ def _summary(m: dict) -> str:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from gcs.inprocess import apply_overrides, run_scenario
+    """Exit 0 when the run completed, 1 for any other status, 2 for bad input."""
+    from gcs.inprocess import InProcessError, apply_overrides, run_scenario
     from gcs.process_run import RunError, run_processes
-    from gcs.runio import write_run
+    from gcs.runio import RunDirError, prepare_run_dir, write_run
 
     scenario = apply_overrides(load_scenario(args.scenario), controller=args.controller,
                                ideal_actuators=True if args.ideal_actuators else None,
                                duration_s=args.duration)
+    if args.fleet < 1:
+        print("gcs run: --fleet needs at least 1 vehicle", file=sys.stderr)
+        return 2
+    try:
+        prepare_run_dir(args.out, args.force)
+    except RunDirError as exc:
+        print(f"gcs run: {exc}", file=sys.stderr)
+        return 2
     progress = Progress()
     if args.in_process:
         progress(f"{scenario.name}: running {scenario.duration_s:.0f} s in-process ...")
-        result = run_scenario(scenario)
+        try:
+            result = run_scenario(scenario)
+        except InProcessError as exc:
+            progress.done()
+            print(f"gcs run: {exc}", file=sys.stderr)
+            return 1
         write_run(args.out, scenario, result)
         metrics = result.metrics
     else:
@@ -226,9 +245,6 @@ def cmd_run(args: argparse.Namespace) -> int:
             elapsed = time.monotonic() - progress.t0
             progress(f"{scenario.name}: t = {p.sim_time_s:7.2f} / {scenario.duration_s:.0f} s"
                      f"   {p.sim_time_s / max(elapsed, 1e-3):5.1f}x real time")
-        if args.fleet < 1:
-            print("gcs run: --fleet needs at least 1 vehicle", file=sys.stderr)
-            return 2
         try:
             metrics = run_processes(scenario, args.out, realtime=args.realtime,
                                     transport=args.link, report=report, fleet=args.fleet,
@@ -241,13 +257,20 @@ def cmd_run(args: argparse.Namespace) -> int:
         if args.fleet > 1:
             progress.done()
             for m in metrics["vehicles"].values():
+                _print_error(m)
                 print(f"vehicle {m['system_id']}: " + _summary(m))
             print(f"  wrote {args.out / 'fleet.json'}")
             return 0 if metrics["all_completed"] else 1
     progress.done()
+    _print_error(metrics)
     print(_summary(metrics))
     print(f"  wrote {args.out / 'metrics.json'}")
     return 0 if metrics["status"] == "completed" else 1
+
+
+def _print_error(m: dict) -> None:
+    if m.get("error"):
+        print(f"gcs run: {m['error']}", file=sys.stderr)
 
 
 def cmd_table1(args: argparse.Namespace) -> int:
@@ -297,9 +320,16 @@ def cmd_router(args: argparse.Namespace) -> int:
 def cmd_report(args: argparse.Namespace) -> int:
     from gcs.report import make_report
 
+    from gcs.runio import RunDirError, check_run_dir
+
     if not (args.run_dir / "metrics.json").exists():
         print(f"gcs report: {args.run_dir} has no metrics.json (not a run folder)",
               file=sys.stderr)
+        return 2
+    try:
+        check_run_dir(args.run_dir)
+    except RunDirError as exc:
+        print(f"gcs report: {exc}", file=sys.stderr)
         return 2
     for path in make_report(args.run_dir):
         print(path)

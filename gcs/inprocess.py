@@ -1,8 +1,14 @@
-"""In-process runner: the FCU core and the plant composed in one process (DESIGN.md 1).
+"""In-process runner: the FCU's pipeline and the plant composed in one process (DESIGN.md 1).
 
-The controller runs at the control rate over the plant's physics rate with a zero-order hold
-on the actuator command; both share one simulated clock in integer microseconds. Returns
-the time series and the metrics of DESIGN.md section 6 (`transport: "in-process"`).
+`run_scenario` flies a scenario exactly as `gcs run` does through processes, with only
+MAVLink and the processes taken away: the same pipeline (commander with the mission executor
+fed with the scenario's mission items, tracker, allocator, supervisor, failsafes) with the
+parameters the FCU process would have, the same sequence (mission accepted, armed, mission
+started at t = 0), and the simulator link's float32 rounding applied to the state and to the
+actuator commands, so both ways give the same status, events and figures.
+
+`fly_reference` is the control law alone (tracker and allocator on a given reference), for
+tests of the closed-loop error dynamics; it is not a flight.
 """
 
 from __future__ import annotations
@@ -16,11 +22,19 @@ from typing import Any
 import numpy as np
 
 from common.config import Scenario
+from common.outcome import Event, diverged
+from common.simlink import through_wire_controls, through_wire_odometry
 from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
+from fcu.mission import validate_mission
+from fcu.params import ParamStore, apply_params
+from fcu.pipeline import Pipeline
+from fcu.sim_bridge import actuator_controls, state_from_odometry
 from fcu.tracker import VehicleState
-from fcu.trajectory import Trajectory, make_trajectory
-from gcs.metrics import percentiles_us, tracking_metrics
+from fcu.trajectory import Trajectory
+from gcs.metrics import build_metrics
+from gcs.scenario_mission import scenario_mission
 from sitl.disturbance import Disturbance
+from sitl.node import command_from_controls, odometry
 from sitl.plant import (
     TRUTH_COLUMNS,
     ActuatorCommand,
@@ -32,11 +46,16 @@ from sitl.plant import (
 )
 
 
+class InProcessError(RuntimeError):
+    """A scenario the vehicle refuses (its mission, arming or the start)."""
+
+
 @dataclass
 class RunResult:
     metrics: dict[str, Any]
     truth: np.ndarray  # rows of sitl.plant.TRUTH_COLUMNS
     onboard: np.ndarray  # rows of fcu.core.ONBOARD_COLUMNS
+    events: list[Event] = dataclasses.field(default_factory=list)
 
     def truth_col(self, *names: str) -> np.ndarray:
         return self.truth[:, [TRUTH_COLUMNS.index(n) for n in names]]
@@ -58,18 +77,32 @@ def apply_overrides(scenario: Scenario, *, controller: str | None = None,
     return dataclasses.replace(scenario, **changes)
 
 
+def scenario_params(scenario: Scenario) -> dict[str, float]:
+    """Parameters a run sets on the FCU beyond its defaults (the same through processes)."""
+    return {"COM_DIV_POS": scenario.divergence_position_m}
+
+
+def fcu_pipeline(scenario: Scenario) -> tuple[Pipeline, ParamStore]:
+    """The pipeline as the FCU process builds it, with the run's parameters in force."""
+    pipeline = Pipeline(scenario.vehicle, scenario.gains, scenario.control_rate_hz)
+    store = ParamStore(scenario.gains)
+    for name, value in scenario_params(scenario).items():
+        store.set(name, value)
+    apply_params(store, pipeline)
+    return pipeline, store
+
+
 def state_for_fcu(s: PlantState) -> VehicleState:
-    """What the FCU sees: pose and body-frame twist (as ODOMETRY carries them)."""
-    return VehicleState(s.p_enu_m, s.q_enu_flu, rotate_inv(s.q_enu_flu, s.v_enu_m_s),
-                        s.omega_flu_rad_s)
+    """What the FCU sees: the state as ODOMETRY carries it, float32 and all."""
+    state = state_from_odometry(through_wire_odometry(odometry(s)))
+    if state is None:
+        raise InProcessError(f"t = {s.time_us * 1e-6:.3f} s: the plant's state is not one "
+                             "the FCU accepts")
+    return state
 
 
-def run_scenario(scenario: Scenario, *, trajectory: Trajectory | None = None,
-                 initial: PlantState | None = None) -> RunResult:
-    """Fly a scenario to its end or to divergence; deterministic for a given scenario.
-
-    `trajectory` and `initial` replace the scenario's reference and start state (tests).
-    """
+def run_scenario(scenario: Scenario, *, initial: PlantState | None = None) -> RunResult:
+    """Fly a scenario's mission to its end; deterministic for a given scenario."""
     vehicle = scenario.vehicle
     physics_dt_us = 1_000_000 // scenario.physics_rate_hz
     control_dt_us = 1_000_000 // scenario.control_rate_hz
@@ -78,103 +111,89 @@ def run_scenario(scenario: Scenario, *, trajectory: Trajectory | None = None,
                   ground_enabled=scenario.ground_enabled,
                   disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
     state = initial if initial is not None else initial_state(scenario, plant)
-    core = FlightCore(vehicle, scenario.gains, scenario.control_rate_hz, state.tilt_rad)
-    if trajectory is None:
-        trajectory = make_trajectory(scenario.trajectory)
-    end_us = round(scenario.duration_s * 1e6)
-    limit = scenario.divergence_position_m
+    pipeline, _ = fcu_pipeline(scenario)
+    cmd = pipeline.commander
+    items = tuple(scenario_mission(scenario))
+    result, seq = validate_mission(items, cmd.limits)[:2]
+    if result != 0:
+        raise InProcessError(f"mission refused: MAV_MISSION_RESULT {result} (item {seq})")
+    cmd.set_mission(items)
+    pipeline.on_state(state.time_us, state_for_fcu(state), state.time_us)
+    for what, (code, text) in (("arming", pipeline.arm()),
+                               ("mission start", cmd.mission_start(0))):
+        if code != 0:
+            raise InProcessError(f"{what} refused: {text}")
 
+    end_us = round(scenario.duration_s * 1e6)
+    dt_s = control_dt_us * 1e-6
     truth_rows: list[tuple[float, ...]] = []
     onboard_rows: list[tuple[float, ...]] = []
-    status = "completed"
-    wall0 = time.perf_counter()
     clock = time.perf_counter
-    while state.time_us <= end_us:
-        t0 = clock()
+    wall0 = clock()
+    while True:
+        t_us = state.time_us
+        truth_rows.append(truth_row(state))
         seen = state_for_fcu(state)
+        pipeline.on_state(t_us, seen, t_us)
+        t0 = clock()
+        out = pipeline.step(t_us, dt_s)
+        step_us = (clock() - t0) * 1e6
+        if out.result is not None:
+            onboard_rows.append(onboard_row(t_us, seen, out.result, out.speed_rad_s,
+                                            out.tilt_rad, out.armed, step_us))
+        if t_us >= end_us:
+            break
+        wire = through_wire_controls(actuator_controls(out, vehicle.rotor_speed_max_rad_s,
+                                                       lockstep=True))
+        command = command_from_controls(wire.controls, wire.mode, vehicle, state)
+        for _ in range(substeps):
+            state = plant.step(state, command)
+    wall = clock() - wall0
+
+    truth = np.array(truth_rows, dtype=float)
+    onboard = np.array(onboard_rows, dtype=float).reshape(-1, len(ONBOARD_COLUMNS))
+    events = list(cmd.events)
+    metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
+                            events=events, wall_time_s=wall, transport="in-process",
+                            lockstep=True, mission_completed=cmd.mission_done)
+    return RunResult(metrics, truth, onboard, events)
+
+
+def fly_reference(scenario: Scenario, trajectory: Trajectory,
+                  initial: PlantState | None = None) -> RunResult:
+    """The control law alone on `trajectory`: tracker and allocator over the plant, every
+    control period, until the scenario's end or divergence (tests of eqs. 18-21)."""
+    vehicle = scenario.vehicle
+    physics_dt_us = 1_000_000 // scenario.physics_rate_hz
+    control_dt_us = 1_000_000 // scenario.control_rate_hz
+    plant = Plant(vehicle, dt_us=physics_dt_us, ideal_actuators=scenario.ideal_actuators,
+                  ground_enabled=scenario.ground_enabled,
+                  disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
+    state = initial if initial is not None else initial_state(scenario, plant)
+    core = FlightCore(vehicle, scenario.gains, scenario.control_rate_hz, state.tilt_rad)
+    end_us = round(scenario.duration_s * 1e6)
+    truth_rows: list[tuple[float, ...]] = []
+    onboard_rows: list[tuple[float, ...]] = []
+    wall0 = time.perf_counter()
+    while state.time_us <= end_us:
+        seen = VehicleState(state.p_enu_m, state.q_enu_flu,
+                            rotate_inv(state.q_enu_flu, state.v_enu_m_s), state.omega_flu_rad_s)
         ref = trajectory.sample(state.time_us * 1e-6)
         result = core.step(seen, ref)
-        step_us = (clock() - t0) * 1e6
         alloc = result.allocation
-        p = state.p_enu_m
         truth_rows.append(truth_row(state))
         onboard_rows.append(onboard_row(state.time_us, seen, result, alloc.speed_rad_s,
-                                        alloc.tilt_rad, True, step_us))
-        pd = ref.p_enu_m
-        err = math.sqrt((p[0] - pd[0]) ** 2 + (p[1] - pd[1]) ** 2 + (p[2] - pd[2]) ** 2)
-        if not math.isfinite(err) or err > limit or not all(
-                math.isfinite(c) for c in (*alloc.speed_rad_s, *alloc.tilt_rad)):
-            status = "diverged"
+                                        alloc.tilt_rad, True, 0.0))
+        finite = all(math.isfinite(c) for c in (*alloc.speed_rad_s, *alloc.tilt_rad))
+        if diverged(math.dist(state.p_enu_m, ref.p_enu_m), finite,
+                    scenario.divergence_position_m) or state.time_us >= end_us:
             break
-        if state.time_us >= end_us:
-            break
-        cmd = ActuatorCommand(alloc.speed_rad_s, alloc.tilt_rad)
-        for _ in range(substeps):
-            state = plant.step(state, cmd)
-    wall = time.perf_counter() - wall0
-
+        command = ActuatorCommand(alloc.speed_rad_s, alloc.tilt_rad)
+        for _ in range(control_dt_us // physics_dt_us):
+            state = plant.step(state, command)
     truth = np.array(truth_rows, dtype=float)
     onboard = np.array(onboard_rows, dtype=float)
     metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
-                            status=status, wall_time_s=wall, transport="in-process",
-                            lockstep=True)
-    return RunResult(metrics, truth, onboard)
-
-
-def build_metrics(scenario: Scenario, truth_columns: tuple[str, ...], truth: np.ndarray,
-                  onboard_columns: tuple[str, ...], onboard: np.ndarray, *, status: str,
-                  wall_time_s: float, transport: str, lockstep: bool,
-                  deadline_misses: int = 0, mission_completed: bool | None = None
-                  ) -> dict[str, Any]:
-    """metrics.json content (DESIGN.md section 6).
-
-    Joins the plant's truth log with the FCU's onboard log on time_usec; a run diverges at
-    the first joined sample whose position error exceeds the scenario's limit or whose state
-    is not finite, and its figures cover the run up to that instant (never inf or NaN).
-    """
-    def cols(columns, rows, *names):
-        return rows[:, [columns.index(n) for n in names]]
-
-    t_truth = truth[:, truth_columns.index("time_us")].astype(np.int64)
-    t_onb = onboard[:, onboard_columns.index("time_us")].astype(np.int64)
-    common_t, i_truth, i_onb = np.intersect1d(t_truth, t_onb, return_indices=True)
-    truth, onboard = truth[i_truth], onboard[i_onb]
-    p = cols(truth_columns, truth, "px", "py", "pz")
-    q = cols(truth_columns, truth, "qw", "qx", "qy", "qz")
-    p_d = cols(onboard_columns, onboard, "pdx", "pdy", "pdz")
-    q_d = cols(onboard_columns, onboard, "qdw", "qdx", "qdy", "qdz")
-    with np.errstate(invalid="ignore", over="ignore"):
-        bad = ~np.all(np.isfinite(np.hstack([p, q, p_d, q_d])), axis=1)
-        bad |= np.linalg.norm(p - p_d, axis=1) > scenario.divergence_position_m
-    end = len(common_t)
-    if np.any(bad):
-        first = int(np.argmax(bad))
-        status = "diverged"
-        # Keep the first divergent sample when it is finite: the figures reach that instant.
-        end = first + 1 if np.all(np.isfinite(np.hstack([p[first], q[first], p_d[first],
-                                                          q_d[first]]))) else first
-    sim_time_s = float(common_t[end - 1] * 1e-6) if end else 0.0
-    steps = onboard[:end, onboard_columns.index("step_us")]
-    sat = onboard[:end, onboard_columns.index("saturated")]
-    return {
-        "scenario": scenario.name,
-        "controller": scenario.controller,
-        "lockstep": lockstep,
-        "transport": transport,
-        "sim_time_s": sim_time_s,
-        "wall_time_s": wall_time_s,
-        "real_time_factor": sim_time_s / wall_time_s if wall_time_s > 0 else 0.0,
-        "control_rate_hz": scenario.control_rate_hz,
-        "physics_rate_hz": scenario.physics_rate_hz,
-        "ideal_actuators": scenario.ideal_actuators,
-        "damping": scenario.gains.damping,
-        **tracking_metrics(p[:end], q[:end], p_d[:end], q_d[:end]),
-        "fcu_step_us": percentiles_us(steps[np.isfinite(steps)]),
-        "deadline_misses": deadline_misses,
-        "saturated_steps": int(np.sum(sat > 0)),
-        "samples": int(end),
-        "mission_completed": (status == "completed") if mission_completed is None
-        else mission_completed,
-        "status": status,
-        "seed": scenario.seed,
-    }
+                            events=[], wall_time_s=time.perf_counter() - wall0,
+                            transport="in-process", lockstep=True, mission_completed=False)
+    return RunResult(metrics, truth, onboard, [])

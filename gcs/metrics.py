@@ -7,11 +7,13 @@ control steps (the desired pose is the one the controller computed for that step
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-STATUSES = ("completed", "diverged", "timeout", "aborted")
+from common.config import Scenario
+from common.outcome import CRASH_SPEED_M_S, Event, classify, diverged_rows, touchdowns
 
 
 def attitude_error_rad(q: np.ndarray, q_d: np.ndarray) -> np.ndarray:
@@ -50,3 +52,96 @@ def rank_key(metrics: dict[str, Any]) -> tuple[int, float]:
     """Sort key: completed runs first, then by position RMSE (diverged ranks below all)."""
     return (0 if metrics.get("status") == "completed" else 1,
             float(metrics["position_error_m"]["rmse"]))
+
+
+def join_logs(truth_columns: Sequence[str], truth: np.ndarray, onboard_columns: Sequence[str],
+              onboard: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The one join of the plant's truth log with the FCU's onboard log: rows of both at the
+    same time_usec (the control steps), as (time_us, truth rows, onboard rows)."""
+    t_truth = truth[:, list(truth_columns).index("time_us")].astype(np.int64)
+    t_onb = onboard[:, list(onboard_columns).index("time_us")].astype(np.int64)
+    common_t, i_truth, i_onb = np.intersect1d(t_truth, t_onb, return_indices=True)
+    return common_t, truth[i_truth], onboard[i_onb]
+
+
+def _cols(columns: Sequence[str], rows: np.ndarray, *names: str) -> np.ndarray:
+    return rows[:, [list(columns).index(n) for n in names]]
+
+
+def crash_time_us(truth_columns: Sequence[str], truth: np.ndarray) -> int | None:
+    """First ground contact faster than CRASH_SPEED_M_S in a truth log (None: none)."""
+    if len(truth) < 2:
+        return None
+    speed = np.linalg.norm(_cols(truth_columns, truth, "vx", "vy", "vz"), axis=1)
+    landed = truth[:, list(truth_columns).index("landed")]
+    t = truth[:, list(truth_columns).index("time_us")]
+    for row, v in touchdowns(landed, speed):
+        if v > CRASH_SPEED_M_S:
+            return int(t[row])
+    return None
+
+
+def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.ndarray,
+                  onboard_columns: Sequence[str], onboard: np.ndarray, *,
+                  events: Sequence[Event], wall_time_s: float, transport: str,
+                  lockstep: bool, deadline_misses: int = 0, mission_completed: bool = False,
+                  stopped: str = "", reached_end: bool | None = None) -> dict[str, Any]:
+    """metrics.json content (DESIGN.md section 6), status included (common.outcome).
+
+    `reached_end`: whether the run reached its end; None reads it from the truth log (the
+    simulator's clock is the flight's in lockstep and in-process). `stopped`: "timeout" or
+    "aborted" when the runner could not finish.
+
+    Errors compare the plant's true pose with the desired pose the FCU computed for the same
+    control step (`join_logs`). A run diverges at the first joined sample that `diverged`
+    flags, and its figures cover the run up to that instant (never inf or NaN).
+    """
+    common_t, truth_j, onboard_j = join_logs(truth_columns, truth, onboard_columns, onboard)
+    p = _cols(truth_columns, truth_j, "px", "py", "pz")
+    q = _cols(truth_columns, truth_j, "qw", "qx", "qy", "qz")
+    p_d = _cols(onboard_columns, onboard_j, "pdx", "pdy", "pdz")
+    q_d = _cols(onboard_columns, onboard_j, "qdw", "qdx", "qdy", "qdz")
+    bad = diverged_rows(p, q, p_d, q_d, scenario.divergence_position_m)
+    end = len(common_t)
+    divergence_t_us = None
+    if np.any(bad):
+        first = int(np.argmax(bad))
+        divergence_t_us = int(common_t[first])
+        # Keep the first divergent sample when it is finite: the figures reach that instant.
+        end = first + 1 if np.all(np.isfinite(np.hstack([p[first], q[first], p_d[first],
+                                                          q_d[first]]))) else first
+    t_truth = truth[:, list(truth_columns).index("time_us")] if len(truth) else np.zeros(0)
+    if reached_end is None:  # lockstep: the simulator's clock is the flight's
+        reached_end = bool(len(t_truth)) and \
+            int(t_truth[-1]) >= round(scenario.duration_s * 1e6)
+    outcome = classify(reached_end=reached_end, events=events,
+                       divergence_t_us=divergence_t_us,
+                       crash_t_us=crash_time_us(truth_columns, truth), stopped=stopped)
+    sim_time_s = float(t_truth[-1] * 1e-6) if len(t_truth) else 0.0
+    steps = onboard_j[:end, list(onboard_columns).index("step_us")]
+    sat = onboard_j[:end, list(onboard_columns).index("saturated")]
+    return {
+        "scenario": scenario.name,
+        "controller": scenario.controller,
+        "lockstep": lockstep,
+        "transport": transport,
+        "sim_time_s": sim_time_s,
+        "wall_time_s": wall_time_s,
+        "real_time_factor": sim_time_s / wall_time_s if wall_time_s > 0 else 0.0,
+        "control_rate_hz": scenario.control_rate_hz,
+        "physics_rate_hz": scenario.physics_rate_hz,
+        "ideal_actuators": scenario.ideal_actuators,
+        "damping": scenario.gains.damping,
+        **tracking_metrics(p[:end], q[:end], p_d[:end], q_d[:end]),
+        "fcu_step_us": percentiles_us(steps[np.isfinite(steps)]),
+        "deadline_misses": deadline_misses,
+        "saturated_steps": int(np.sum(sat > 0)),
+        "samples": int(end),
+        "mission_completed": mission_completed,
+        "status": outcome.status,
+        "status_reason": outcome.reason,
+        "divergence_t_s": None if divergence_t_us is None else divergence_t_us * 1e-6,
+        "failsafe": outcome.failsafe,
+        "events": [e.as_json() for e in events],
+        "seed": scenario.seed,
+    }

@@ -19,15 +19,23 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from common.binlog import read_log
 from common.config import Scenario
 from common.links import free_port
 from common.mavlink import MAV, read_signing_key
-from gcs.inprocess import build_metrics
+from common.outcome import Event
+from common.parent import child_env
+from fcu.core import ONBOARD_COLUMNS
+from gcs.inprocess import scenario_params
+from gcs.metrics import build_metrics
 from gcs.mission_client import MissionError, upload
 from gcs.runio import ONBOARD_LOG, TRUTH_LOG, write_metrics
 from gcs.scenario_mission import scenario_mission
 from gcs.session import GcsError, Session
+from gcs.vehicle_link import param_set
+from sitl.plant import TRUTH_COLUMNS
 
 M = MAV
 STALL_S = 60.0
@@ -35,17 +43,6 @@ STALL_S = 60.0
 
 class RunError(RuntimeError):
     """A run that could not be carried out (a child died, the vehicle refused, a timeout)."""
-
-
-def _stop_with_parent() -> None:
-    """In a child, before exec: SIGTERM when the parent dies (Linux), so that a ground
-    station killed with SIGKILL leaves no simulator or FCU behind."""
-    try:
-        import ctypes
-
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass  # not Linux: the children stop when their links go quiet only
 
 
 @dataclass
@@ -57,9 +54,10 @@ class Children:
 
     def start(self, name: str, argv: list[str]) -> None:
         log = (self.out / f"{name}.log").open("wb")
+        # The child asks for SIGTERM when we die (common.parent): no preexec_fn, which is
+        # unsafe while our threads run.
         self.procs[name] = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT,
-                                            stdin=subprocess.DEVNULL,
-                                            preexec_fn=_stop_with_parent)
+                                            stdin=subprocess.DEVNULL, env=child_env())
         log.close()
 
     def tails(self) -> str:
@@ -90,14 +88,17 @@ class Children:
 class Progress:
     sim_time_s: float = 0.0
     mission_completed: bool = False
-    diverged: bool = False
     messages: list[str] = field(default_factory=list)
 
 
+class RunTimeout(RunError):
+    """The run did not reach its end within its wall-clock allowance."""
+
+
 def _watch(session: Session, children: Children, progress: Progress, end_s: float,
-           total: int, divergence_m: float, wall_timeout_s: float,
-           report=None) -> None:
-    """Follow the flight until the vehicle's clock reaches end_s, or divergence."""
+           total: int, wall_timeout_s: float, report=None) -> None:
+    """Follow the flight until the vehicle's clock reaches end_s (a diverged or crashed
+    vehicle too: the simulator runs to the end, as in-process)."""
     end_ms = round(end_s * 1000)
     deadline = time.monotonic() + wall_timeout_s
     last_check = 0.0
@@ -105,7 +106,7 @@ def _watch(session: Session, children: Children, progress: Progress, end_s: floa
     last_ms, last_progress = -1, time.monotonic()
     while time.monotonic() < deadline:
         msg = session.recv(["ATTITUDE_QUATERNION", "MISSION_CURRENT", "STATUSTEXT",
-                            "NAMED_VALUE_FLOAT", "MISSION_ITEM_REACHED"], timeout=0.2)
+                            "MISSION_ITEM_REACHED"], timeout=0.2)
         now = time.monotonic()
         if now - last_check > 0.5:
             children.check()
@@ -120,7 +121,7 @@ def _watch(session: Session, children: Children, progress: Progress, end_s: floa
             if msg.time_boot_ms != last_ms:
                 last_ms, last_progress = msg.time_boot_ms, now
             elif now - last_progress > STALL_S:
-                raise RunError(f"the vehicle's clock stopped at {last_ms / 1000:.3f} s for "
+                raise RunTimeout(f"the vehicle's clock stopped at {last_ms / 1000:.3f} s for "
                                f"{STALL_S:.0f} s of wall time")
             if msg.time_boot_ms >= end_ms and not reached_end:
                 reached_end = True
@@ -132,13 +133,9 @@ def _watch(session: Session, children: Children, progress: Progress, end_s: floa
             progress.mission_completed = True
         elif kind == "STATUSTEXT":
             progress.messages.append(msg.text)
-        elif kind == "NAMED_VALUE_FLOAT" and msg.name == "ERR_POS" and \
-                msg.value > divergence_m:
-            progress.diverged = True
-            return
     if reached_end:
         return
-    raise RunError(f"the run did not reach t = {end_s} s within {wall_timeout_s:.0f} s "
+    raise RunTimeout(f"the run did not reach t = {end_s} s within {wall_timeout_s:.0f} s "
                    f"of wall time (reached {progress.sim_time_s:.2f} s)")
 
 
@@ -252,6 +249,8 @@ class _Flight:
         except GcsError:
             self.children.check()
             raise
+        for name, value in scenario_params(sc).items():
+            param_set(s, name, value)
         items = scenario_mission(sc)
         result = upload(s.conn, s.target_system, s.target_component, items, send=s.send)
         if result != M.MAV_MISSION_ACCEPTED:
@@ -271,7 +270,7 @@ class _Flight:
         self.wall0 = time.monotonic()
         self.items = len(items)
         _watch(s, self.children, self.progress, start_ms * 1e-3 + sc.duration_s, len(items),
-               sc.divergence_position_m, self.wall_timeout_s, self.report)
+               self.wall_timeout_s, self.report)
         self.wall1 = time.monotonic()
 
     def stop(self) -> None:
@@ -281,25 +280,44 @@ class _Flight:
             self.session.close()
 
     def metrics(self, transport: str) -> dict[str, Any]:
+        """metrics.json of this vehicle's run, written last: also for a run that could not
+        finish (status timeout or aborted, figures over what was flown)."""
         out, sc = self.plan.out, self.plan.scenario
-        stats = json.loads((out / "fcu_stats.json").read_text()) \
-            if (out / "fcu_stats.json").exists() else {}
-        truth_cols, truth = read_log(out / TRUTH_LOG)
-        onboard_cols, onboard = read_log(out / ONBOARD_LOG)
-        metrics = build_metrics(sc, truth_cols, truth, onboard_cols, onboard,
-                                status="completed", wall_time_s=self.wall1 - self.wall0,
+        stats_path = out / "fcu_stats.json"
+        stats = json.loads(stats_path.read_text()) if stats_path.exists() else {}
+        stopped = ""
+        if self.error is not None:
+            stopped = "timeout" if isinstance(self.error, RunTimeout) else "aborted"
+        elif not stats:
+            stopped = "aborted"  # the FCU did not stop cleanly: its events are unknown
+        truth_cols, truth = _read_or_empty(out / TRUTH_LOG, TRUTH_COLUMNS)
+        onboard_cols, onboard = _read_or_empty(out / ONBOARD_LOG, ONBOARD_COLUMNS)
+        events = [Event(round(e["t_s"] * 1e6), int(e["severity"]), str(e["text"]),
+                        str(e.get("kind", "info"))) for e in stats.get("events", [])]
+        metrics = build_metrics(sc, truth_cols, truth, onboard_cols, onboard, events=events,
+                                wall_time_s=max(self.wall1 - self.wall0, 0.0),
                                 transport=transport, lockstep=not self.realtime,
                                 deadline_misses=int(stats.get("deadline_misses", 0)),
                                 mission_completed=self.progress.mission_completed
-                                or bool(stats.get("mission_completed")))
+                                or bool(stats.get("mission_completed")), stopped=stopped,
+                                reached_end=(not stopped) if self.realtime else None)
+        if self.error is not None:
+            metrics["error"] = str(self.error)
         metrics["system_id"] = self.plan.sysid
         metrics["start_position_enu_m"] = list(sc.initial_position_enu_m)
-        metrics["fcu"] = stats
+        metrics["fcu"] = {k: v for k, v in stats.items() if k != "events"}
         metrics["overrides"] = {"controller": sc.controller,
                                 "ideal_actuators": sc.ideal_actuators,
                                 "duration_s": sc.duration_s}
         write_metrics(out, metrics)
         return metrics
+
+
+def _read_or_empty(path: Path, columns: tuple[str, ...]) -> tuple[tuple[str, ...], Any]:
+    try:
+        return read_log(path)
+    except (OSError, ValueError):
+        return columns, np.zeros((0, len(columns)))
 
 
 def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
@@ -343,11 +361,8 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
         if router is not None:
             router.stop()
     for f in flights:
-        if f.error is not None:
-            prefix = f"vehicle {f.plan.sysid}: " if fleet > 1 else ""
-            if isinstance(f.error, GcsError | MissionError | RunError):
-                raise RunError(prefix + str(f.error)) from f.error
-            raise f.error
+        if f.error is not None and not isinstance(f.error, GcsError | MissionError | RunError):
+            raise f.error  # a bug, not something that happened to the vehicle
     results = [f.metrics(transport) for f in flights]
     if fleet == 1:
         return results[0]

@@ -34,6 +34,8 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from common.binlog import read_log
+from gcs.metrics import join_logs
+from gcs.runio import ONBOARD_LOG, TRUTH_LOG, check_run_dir
 from gcs.euler import zyx_events
 from gcs.metrics import attitude_error_rad
 from gcs.table1 import CASES, CONTROLLERS, PAPER, STATS
@@ -112,26 +114,24 @@ class RunData:
         return bool(self.force_terms or self.torque_terms)
 
 
+SEVERITY = {0: "emergency", 1: "alert", 2: "critical", 3: "error", 4: "warning", 5: "notice",
+            6: "info", 7: "debug"}
+
+
 def _cols(columns: tuple[str, ...], rows: np.ndarray, *names: str) -> np.ndarray:
     return rows[:, [columns.index(n) for n in names]]
 
 
 def load_run(run_dir: Path) -> RunData:
     run_dir = Path(run_dir)
-    metrics = json.loads((run_dir / "metrics.json").read_text())
+    metrics = check_run_dir(run_dir)
     scen_path = run_dir / "scenario.toml"
     scenario = tomllib.loads(scen_path.read_text()) if scen_path.exists() else {}
-    tc, truth = read_log(run_dir / "truth_log.bin")
-    oc, onboard = read_log(run_dir / "onboard_log.bin")
-    t_truth = truth[:, tc.index("time_us")]
-    t_onb = onboard[:, oc.index("time_us")]
-    ok_t = np.isfinite(t_truth)
-    truth = truth[ok_t]
-    onboard = onboard[np.isfinite(t_onb)]
-    common_t, i_truth, i_onb = np.intersect1d(truth[:, tc.index("time_us")].astype(np.int64),
-                                              onboard[:, oc.index("time_us")].astype(np.int64),
-                                              return_indices=True)
-    truth, onboard = truth[i_truth], onboard[i_onb]
+    tc, truth = read_log(run_dir / TRUTH_LOG)
+    oc, onboard = read_log(run_dir / ONBOARD_LOG)
+    truth = truth[np.isfinite(truth[:, tc.index("time_us")])]
+    onboard = onboard[np.isfinite(onboard[:, oc.index("time_us")])]
+    common_t, truth, onboard = join_logs(tc, truth, oc, onboard)
     t = common_t * 1e-6
     p = _cols(tc, truth, "px", "py", "pz")
     q = _cols(tc, truth, "qw", "qx", "qy", "qz")
@@ -142,9 +142,9 @@ def load_run(run_dir: Path) -> RunData:
 
     keep = np.all(np.isfinite(np.hstack([p, q, p_d, q_d, tilt_raw, tilt_cmd])), axis=1)
     notes: list[str] = []
-    if metrics.get("status") == "diverged" and "sim_time_s" in metrics:
+    if metrics.get("divergence_t_s") is not None:
         # metrics.json ends a diverged run at its first divergent sample; so do the figures.
-        keep &= t <= float(metrics["sim_time_s"]) + 1e-9
+        keep &= t <= float(metrics["divergence_t_s"]) + 1e-9
     dropped = int(np.sum(~keep))
     if dropped:
         nonfinite = int(np.sum(~np.all(np.isfinite(
@@ -509,7 +509,10 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
         + (f", run cut to {_fmt(m['overrides']['duration_s'])} s" if _cut_short(data)
            else "") + ")",
         f"- controller: {data.controller.upper()}",
-        f"- status: **{data.status}**",
+        f"- status: **{data.status}**"
+        + (f" ({m['status_reason']})" if m.get("status_reason") else "")
+        + (f"; failsafe: {m['failsafe']}" if m.get("failsafe") else ""),
+        f"- mission completed: {str(m.get('mission_completed', '?')).lower()}",
         f"- transport: {m.get('transport', '?')}, lockstep: "
         f"{str(m.get('lockstep', '?')).lower()}",
         f"- simulated time: {_fmt(m.get('sim_time_s'))} s"
@@ -527,8 +530,16 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
                                     ("torque (N m)", data.torque_terms)) for x in terms]
         lines.append("- disturbances (body frame): " + "; ".join(desc))
     lines.append("")
+    events = m.get("events", [])
+    if events:
+        lines += ["## Events", "", "Everything the vehicle said, on the flight clock.", "",
+                  "| t (s) | severity | event |", "|---:|---|---|"]
+        lines += [f"| {e['t_s']:.3f} | {SEVERITY.get(e['severity'], e['severity'])} | "
+                  f"{e['text']} |" for e in events]
+        lines.append("")
     if data.diverged:
-        lines += [f"**The run diverged at t = {_fmt(m.get('sim_time_s'))} s** (position error "
+        lines += [f"**The run diverged at t = {_fmt(m.get('divergence_t_s'))} s** "
+                  "(position error "
                   "beyond the scenario's limit or a non-finite state). The error statistics "
                   "below and the plots cover the run up to that instant only.", ""]
     lines += [f"_{n}_" for n in data.notes]
@@ -632,8 +643,8 @@ def table1_chart(table: dict[str, Any], out_png: Path) -> Path:
                     continue
                 else:
                     val, status = row["ours"][metric]["rmse"], row["status"]
-                    if status == "diverged" and "sim_time_s" in row:
-                        status = f"diverged\nat {row['sim_time_s']:.3g} s"
+                    if status == "diverged" and row.get("divergence_t_s") is not None:
+                        status = f"diverged\nat {row['divergence_t_s']:.3g} s"
                 if not (isinstance(val, int | float) and math.isfinite(val) and val > 0):
                     continue
                 values.append(val)

@@ -1,7 +1,14 @@
-"""The run folder: scenario as run, metrics.json, the plant's truth log, the onboard log."""
+"""The run folder: scenario as run, the plant's truth log, the onboard log, and
+metrics.json, written last.
+
+A folder holds one run: `prepare_run_dir` refuses a folder that is not empty unless told to
+empty it first, and metrics.json records the size and SHA-256 of each log beside it, so a
+report can refuse logs and metrics that do not belong together (`check_run_dir`).
+"""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import shutil
@@ -29,18 +36,72 @@ def _finite(obj: Any) -> Any:
     return obj
 
 
+class RunDirError(ValueError):
+    """A run folder that cannot take this run (not empty, not a folder, inconsistent)."""
+
+
+def prepare_run_dir(out: Path, force: bool) -> None:
+    """Make `out` an empty folder for one run: refused if it holds anything, unless `force`,
+    which empties it first."""
+    if out.exists() and not out.is_dir():
+        raise RunDirError(f"{out} is not a folder")
+    if out.is_dir() and any(out.iterdir()):
+        if not force:
+            raise RunDirError(f"{out} is not empty (a folder holds one run; --force empties "
+                              "it first)")
+        for entry in out.iterdir():
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry)
+            else:
+                entry.unlink()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RunDirError(f"{out}: {exc.strerror}") from None
+
+
 def write_run(out: Path, scenario: Scenario, result: RunResult) -> None:
     out.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(scenario.source, out / "scenario.toml")
+    write_log(out / TRUTH_LOG, TRUTH_COLUMNS, result.truth)
+    write_log(out / ONBOARD_LOG, ONBOARD_COLUMNS, result.onboard)
     metrics = dict(result.metrics)
     metrics["overrides"] = {"controller": scenario.controller,
                             "ideal_actuators": scenario.ideal_actuators,
                             "duration_s": scenario.duration_s}
     write_metrics(out, metrics)
-    write_log(out / TRUTH_LOG, TRUTH_COLUMNS, result.truth)
-    write_log(out / ONBOARD_LOG, ONBOARD_COLUMNS, result.onboard)
+
+
+def _fingerprint(path: Path) -> dict[str, Any]:
+    digest = hashlib.sha256()
+    with path.open("rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    return {"bytes": path.stat().st_size, "sha256": digest.hexdigest()}
 
 
 def write_metrics(out: Path, metrics: dict[str, Any]) -> None:
-    (out / "metrics.json").write_text(json.dumps(_finite(metrics), indent=2,
-                                                 allow_nan=False) + "\n")
+    """metrics.json, last, with the fingerprints of the logs it was computed from."""
+    metrics = dict(metrics)
+    metrics["logs"] = {name: _fingerprint(out / name) for name in (TRUTH_LOG, ONBOARD_LOG)
+                       if (out / name).exists()}
+    tmp = out / "metrics.json.tmp"
+    tmp.write_text(json.dumps(_finite(metrics), indent=2, allow_nan=False) + "\n")
+    tmp.replace(out / "metrics.json")
+
+
+def check_run_dir(run_dir: Path) -> dict[str, Any]:
+    """metrics.json of a run folder whose logs are the ones it was computed from."""
+    try:
+        metrics = json.loads((run_dir / "metrics.json").read_text())
+    except (OSError, ValueError) as exc:
+        raise RunDirError(f"{run_dir}: no readable metrics.json ({exc})") from None
+    for name, expected in metrics.get("logs", {}).items():
+        path = run_dir / name
+        if not path.exists() or _fingerprint(path) != expected:
+            raise RunDirError(f"{run_dir}: {name} is not the log metrics.json was computed "
+                              "from (another run's files?)")
+    if "logs" not in metrics:
+        raise RunDirError(f"{run_dir}: metrics.json names no logs (written by an older "
+                          "version?)")
+    return metrics

@@ -47,6 +47,7 @@ def table_json(results: dict[tuple[str, str], dict[str, Any]]) -> dict[str, Any]
             rows.append({
                 "case": label, "scenario": scen, "controller": ctrl,
                 "status": m["status"], "sim_time_s": m["sim_time_s"],
+                "divergence_t_s": m.get("divergence_t_s"),
                 "ours": {"position_error_m": m["position_error_m"],
                          "attitude_error_rad": m["attitude_error_rad"]},
                 "paper": paper_figures(scen, ctrl),
@@ -80,9 +81,10 @@ def _run_one(job: tuple[str, str, bool, float | None, str, bool]) -> dict[str, A
     from common.config import load_scenario
     from gcs.inprocess import apply_overrides, run_scenario
     from gcs.process_run import run_processes
-    from gcs.runio import write_run
+    from gcs.runio import prepare_run_dir, write_run
 
     path, ctrl, ideal, duration, out, in_process = job
+    prepare_run_dir(Path(out), force=True)  # table1 owns its run folders
     scenario = apply_overrides(load_scenario(path), controller=ctrl,
                                ideal_actuators=ideal or None, duration_s=duration)
     if not in_process:

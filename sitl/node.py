@@ -24,10 +24,11 @@ import time
 from pathlib import Path
 
 from common.binlog import LogWriter
-from common.config import ConfigError, Scenario, load_scenario
+from common.config import ConfigError, Scenario, VehicleConfig, load_scenario
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
 from common.links import LinkError, open_link
 from common.mavlink import MAV, encoder, pack
+from common.parent import stop_with_parent
 from common.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
     FrameReader,
@@ -49,6 +50,28 @@ from sitl.plant import (
 SITL_COMPONENT = MAV.MAV_COMP_ID_PERIPHERAL
 SEA_LEVEL_HPA = 1013.25
 SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each exchange
+
+
+def odometry(s: PlantState) -> Odometry:
+    """The state as ODOMETRY carries it: local NED, NED->FRD attitude, FRD twist."""
+    return Odometry(s.time_us, enu_to_ned(s.p_enu_m), q_enu_flu_to_ned_frd(s.q_enu_flu),
+                    flu_to_frd(rotate_inv(s.q_enu_flu, s.v_enu_m_s)),
+                    flu_to_frd(s.omega_flu_rad_s))
+
+
+def command_from_controls(controls: tuple[float, ...], mode: int, vehicle: VehicleConfig,
+                          state: PlantState) -> ActuatorCommand:
+    """HIL_ACTUATOR_CONTROLS as the plant obeys it: controls[0..n) x w_max rotor speeds
+    (zero unless SAFETY_ARMED), controls[n..2n) tilts; a value that is not finite means
+    zero speed or the current tilt."""
+    n = vehicle.n_rotors
+    w_max = vehicle.rotor_speed_max_rad_s
+    speeds = tuple(c * w_max if math.isfinite(c) else 0.0 for c in controls[:n])
+    tilts = tuple(c if math.isfinite(c) else state.tilt_rad[i]
+                  for i, c in enumerate(controls[n:2 * n]))
+    if not mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED:
+        speeds = (0.0,) * n
+    return ActuatorCommand(speeds, tilts)
 
 
 class SimulatorServer:
@@ -81,9 +104,7 @@ class SimulatorServer:
         self.system_id = system_id
         self.seq = 0
         self.log = LogWriter(truth_log, TRUTH_COLUMNS) if truth_log else None
-        n = scenario.vehicle.n_rotors
         self.command = ActuatorCommand(self.state.rotor_speed_rad_s, self.state.tilt_rad)
-        self._zero_speeds = (0.0,) * n
         self.steps = 0
         self.ignored_answers = 0
         self.rejected_bytes = 0
@@ -94,12 +115,8 @@ class SimulatorServer:
     # ------------------------------------------------------------------ messages
 
     def _datagram(self, s: PlantState) -> bytes:
-        q_ned_frd = q_enu_flu_to_ned_frd(s.q_enu_flu)
-        odo = Odometry(s.time_us, enu_to_ned(s.p_enu_m), q_ned_frd,
-                       flu_to_frd(rotate_inv(s.q_enu_flu, s.v_enu_m_s)),
-                       flu_to_frd(s.omega_flu_rad_s))
         self.seq = (self.seq + 1) & 0xFF
-        data = pack_odometry(odo, self.seq, self.system_id, SITL_COMPONENT)
+        data = pack_odometry(odometry(s), self.seq, self.system_id, SITL_COMPONENT)
         if self.sensor_every and (s.time_us // self.control_dt_us) % self.sensor_every == 0:
             data = self._hil_sensor(s) + data
         return data
@@ -121,14 +138,7 @@ class SimulatorServer:
             self.log.write(truth_row(self.state))
 
     def _command_from(self, controls: tuple[float, ...], mode: int) -> ActuatorCommand:
-        n = self.scenario.vehicle.n_rotors
-        w_max = self.scenario.vehicle.rotor_speed_max_rad_s
-        speeds = tuple(c * w_max if math.isfinite(c) else 0.0 for c in controls[:n])
-        tilts = tuple(c if math.isfinite(c) else self.state.tilt_rad[i]
-                      for i, c in enumerate(controls[n:2 * n]))
-        if not mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED:
-            speeds = self._zero_speeds
-        return ActuatorCommand(speeds, tilts)
+        return command_from_controls(controls, mode, self.scenario.vehicle, self.state)
 
     def _advance(self) -> None:
         for _ in range(self.substeps):
@@ -246,6 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    stop_with_parent()
     args = build_parser().parse_args(argv)
     try:
         scenario = load_scenario(args.scenario)

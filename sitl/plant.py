@@ -8,8 +8,11 @@ wrench is the per-rotor sum F_i = c_f w_i^2 n_i, Q_i = -sigma_i c_d w_i^2 n_i (M
 
 Actuators are decoupled from the body, so their state inside a step is known in closed form:
 a first-order rotor lag (time constants up/down) towards a command clamped to [0, w_max], and
-a rate-limited tilt servo. The wrench is evaluated on that exact actuator trajectory at the
-RK4 stage times. `ideal_actuators` makes both follow their commands instantly (the speed
+a rate-limited tilt servo, tilt(t) = a0 + clamp(c - a0, -rate t, rate t). The wrench is
+evaluated on that exact actuator trajectory at the RK4 stage times. A servo that reaches its
+command inside a step puts a kink in the trajectory at t = |c - a0| / rate; the step is then
+split at every such instant and integrated piecewise, so that no RK4 step straddles a kink and
+the actuator trajectory stays exact. `ideal_actuators` makes both follow their commands instantly (the speed
 limits stay: they are physical).
 
 Ground (z = 0): a resting vehicle stays put while the net vertical force does not lift it;
@@ -131,12 +134,35 @@ class Plant:
         return out
 
     @staticmethod
-    def _tilt_servo(tilt0, cmd, lim: float) -> list[float]:
-        """Rate-limited servo: moves towards the command by at most `lim`."""
+    def _tilt_servo(tilt0: Sequence[float], cmd: Sequence[float], lim: float) -> list[float]:
+        """Rate-limited servo: moves towards the command by at most `lim` (and lands on it
+        exactly, so that a servo at rest has no kink in the next step)."""
         out = []
         for a0, c in zip(tilt0, cmd, strict=True):
             d = c - a0
-            out.append(a0 + (lim if d > lim else (-lim if d < -lim else d)))
+            out.append(a0 + lim if d > lim else (a0 - lim if d < -lim else c))
+        return out
+
+    @staticmethod
+    def _tilt_servo_kinks(tilt0: Sequence[float], cmd: Sequence[float], rate: float, h: float,
+                          kinks: list[float]) -> list[float]:
+        """`_tilt_servo` over a step of h, appending to `kinks` each instant in (0, h) where a
+        servo reaches its command (its trajectory a0 + clamp(c - a0, -rate t, rate t) has a
+        kink there)."""
+        lim = rate * h
+        out = []
+        for a0, c in zip(tilt0, cmd, strict=True):
+            d = c - a0
+            if d > lim:
+                out.append(a0 + lim)
+            elif d < -lim:
+                out.append(a0 - lim)
+            else:
+                out.append(c)
+                if d != 0.0:
+                    t_k = abs(d) / rate
+                    if t_k < h:  # t_k = h (to rounding) is the end of the step, no kink
+                        kinks.append(t_k)
         return out
 
     def rotor_wrench(self, speeds: list[float] | tuple[float, ...],
@@ -158,7 +184,7 @@ class Plant:
 
     # ------------------------------------------------------------------ rigid body
 
-    def derivative(self, x: tuple[float, ...], wrench: tuple[float, ...]) -> tuple[float, ...]:
+    def derivative(self, x: Sequence[float], wrench: Sequence[float]) -> tuple[float, ...]:
         """d/dt of (p, v, q, w) in ENU/FLU under a body wrench (f, tau)."""
         _, _, _, vx, vy, vz, qw, qx, qy, qz, wx, wy, wz = x
         fx, fy, fz, tx, ty, tz = wrench
@@ -176,25 +202,25 @@ class Plant:
                 (tz - (jy - jx) * wx * wy) / jz)
 
     def step(self, s: PlantState, cmd: ActuatorCommand) -> PlantState:
-        """Advance one step of dt_us with the command held (zero-order hold)."""
+        """Advance one step of dt_us with the command held (zero-order hold).
+
+        A tilt servo that reaches its command inside the step has a kink in its trajectory at
+        that instant; the step is then integrated piecewise, one RK4 step per sub-interval
+        between kinks, so that every RK4 step sees a smooth actuator trajectory.
+        """
         h = self.dt_us * 1e-6
         t0 = s.time_us * 1e-6
+        kinks: list[float] = []
         if self.ideal:
             sp_end, ti_end = self.actuators_at(s.rotor_speed_rad_s, s.tilt_rad, cmd, h)
-            r0 = r1 = r2 = self._cached_rotor_wrench(sp_end, ti_end)
+            r0 = r2 = self._cached_rotor_wrench(sp_end, ti_end)
         else:
-            sp_mid = self._rotor_lag(s.rotor_speed_rad_s, cmd.rotor_speed_rad_s,
-                                     self._decay_half_up, self._decay_half_down)
             sp_end = self._rotor_lag(s.rotor_speed_rad_s, cmd.rotor_speed_rad_s,
                                      self._decay_up, self._decay_down)
-            ti_mid = self._tilt_servo(s.tilt_rad, cmd.tilt_rad, 0.5 * self.tilt_rate * h)
-            ti_end = self._tilt_servo(s.tilt_rad, cmd.tilt_rad, self.tilt_rate * h)
+            ti_end = self._tilt_servo_kinks(s.tilt_rad, cmd.tilt_rad, self.tilt_rate, h, kinks)
+            # Start before end: the end of this step is the start of the next (memoised).
             r0 = self._cached_rotor_wrench(s.rotor_speed_rad_s, s.tilt_rad)
-            f1, t1 = self.rotor_wrench(sp_mid, ti_mid)
-            r1 = (*f1, *t1)
-            r2 = self._cached_rotor_wrench(tuple(sp_end), tuple(ti_end))
-        w0 = self._with_disturbance(r0, t0)
-        w1 = self._with_disturbance(r1, t0 + 0.5 * h)
+            r2 = self._cached_rotor_wrench(sp_end, ti_end)
         w2 = self._with_disturbance(r2, t0 + h)
 
         time_us = s.time_us + self.dt_us
@@ -202,20 +228,37 @@ class Plant:
 
         if s.landed and self.ground:
             # Resting: stays unless the net vertical force lifts it off.
-            fz_world = rotate(s.q_enu_flu, w2[:3])[2] - self.mass * self.g
+            fz_world = rotate(s.q_enu_flu, (w2[0], w2[1], w2[2]))[2] - self.mass * self.g
             if fz_world <= 0.0:
                 return PlantState(time_us, s.p_enu_m, (0.0, 0.0, 0.0), s.q_enu_flu,
                                   (0.0, 0.0, 0.0), *actuators, True)
 
-        x = (*s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu, *s.omega_flu_rad_s)
-        hh = 0.5 * h
-        k1 = self.derivative(x, w0)
-        k2 = self.derivative([a + hh * b for a, b in zip(x, k1, strict=True)], w1)
-        k3 = self.derivative([a + hh * b for a, b in zip(x, k2, strict=True)], w1)
-        k4 = self.derivative([a + h * b for a, b in zip(x, k3, strict=True)], w2)
-        h6 = h / 6.0
-        y = [a + h6 * (b + 2.0 * (c + d) + e)
-             for a, b, c, d, e in zip(x, k1, k2, k3, k4, strict=True)]
+        x: list[float] = [*s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu, *s.omega_flu_rad_s]
+        w0 = self._with_disturbance(r0, t0)
+        if not kinks:
+            # The usual case: the actuator trajectory is smooth over the whole step.
+            if self.ideal:
+                r1 = r0
+            else:
+                sp_mid = self._rotor_lag(s.rotor_speed_rad_s, cmd.rotor_speed_rad_s,
+                                         self._decay_half_up, self._decay_half_down)
+                ti_mid = self._tilt_servo(s.tilt_rad, cmd.tilt_rad, 0.5 * self.tilt_rate * h)
+                r1 = self._rotor_wrench6(sp_mid, ti_mid)
+            y = self._rk4(x, h, w0, self._with_disturbance(r1, t0 + 0.5 * h), w2)
+        else:
+            # Piecewise RK4 over [0, k_1], [k_1, k_2], ..., [k_n, h], k_j the kink instants;
+            # the wrench at a sub-interval's end is the next one's start.
+            kinks.sort()
+            y, a, wa = x, 0.0, w0
+            for b in (*kinks, h):
+                if b <= a:
+                    continue  # servos reaching their commands at the same instant
+                m = 0.5 * (a + b)
+                wm = self._with_disturbance(self._wrench_after(s, cmd, m), t0 + m)
+                wb = (w2 if b == h else
+                      self._with_disturbance(self._wrench_after(s, cmd, b), t0 + b))
+                y = self._rk4(y, b - a, wa, wm, wb)
+                a, wa = b, wb
         qn = math.sqrt(y[6] * y[6] + y[7] * y[7] + y[8] * y[8] + y[9] * y[9])
         q = (y[6] / qn, y[7] / qn, y[8] / qn, y[9] / qn)
         p, v, w = (y[0], y[1], y[2]), (y[3], y[4], y[5]), (y[10], y[11], y[12])
@@ -223,6 +266,48 @@ class Plant:
         if self.ground and p[2] < 0.0:
             p, v, w, landed = (p[0], p[1], 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), True
         return PlantState(time_us, p, v, q, w, *actuators, landed)
+
+    def _rk4(self, x: Sequence[float], h: float, wa: tuple[float, ...], wm: tuple[float, ...],
+             wb: tuple[float, ...]) -> list[float]:
+        """One classical RK4 step of length h; wrench at the start, midpoint and end."""
+        derivative = self.derivative
+        hh = 0.5 * h
+        k1 = derivative(x, wa)
+        k2 = derivative(_axpy(x, hh, k1), wm)
+        k3 = derivative(_axpy(x, hh, k2), wm)
+        k4 = derivative(_axpy(x, h, k3), wb)
+        h6 = h / 6.0
+        return [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
+
+    def _wrench_after(self, s: PlantState, cmd: ActuatorCommand,
+                      tau_s: float) -> tuple[float, ...]:
+        """Rotor wrench on the exact actuator trajectory tau_s into the step from s: what
+        `rotor_wrench(*actuators_at(...))` gives, fused into one loop (non-ideal actuators)."""
+        decay_up, decay_down = math.exp(-tau_s / self.tau_up), math.exp(-tau_s / self.tau_down)
+        lim = self.tilt_rate * tau_s
+        w_max = self.w_max
+        fx = fy = fz = tx = ty = tz = 0.0
+        for (fvx, fvy, fvz, flx, fly, flz, tvx, tvy, tvz, tlx, tly, tlz), w0, wc, a0, ac in zip(
+                self._rotors, s.rotor_speed_rad_s, cmd.rotor_speed_rad_s, s.tilt_rad,
+                cmd.tilt_rad, strict=True):
+            wc = 0.0 if wc < 0.0 else (w_max if wc > w_max else wc)
+            w = wc + (w0 - wc) * (decay_up if wc > w0 else decay_down)
+            d = ac - a0
+            a = a0 + lim if d > lim else (a0 - lim if d < -lim else ac)
+            w2 = w * w
+            c = w2 * math.cos(a)
+            sn = w2 * math.sin(a)
+            fx += c * fvx + sn * flx
+            fy += c * fvy + sn * fly
+            fz += c * fvz + sn * flz
+            tx += c * tvx + sn * tlx
+            ty += c * tvy + sn * tly
+            tz += c * tvz + sn * tlz
+        return (fx, fy, fz, tx, ty, tz)
+
+    def _rotor_wrench6(self, speeds: Sequence[float], tilts: Sequence[float]) -> tuple[float, ...]:
+        f, t = self.rotor_wrench(speeds, tilts)
+        return (*f, *t)
 
     def _cached_rotor_wrench(self, speeds: Sequence[float],
                              tilts: Sequence[float]) -> tuple[float, ...]:
@@ -267,6 +352,15 @@ class Plant:
         return (0.5 * self.mass * (v[0] ** 2 + v[1] ** 2 + v[2] ** 2)
                 + 0.5 * (jx * w[0] ** 2 + jy * w[1] ** 2 + jz * w[2] ** 2)
                 + self.mass * self.g * s.p_enu_m[2])
+
+
+def _axpy(x: Sequence[float], h: float, k: Sequence[float]) -> tuple[float, ...]:
+    """x + h k for the 13 rigid-body states (unrolled: three times per RK4 step)."""
+    x0, x1, x2, x3, x4, x5, x6, x7, x8, x9, x10, x11, x12 = x
+    k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12 = k
+    return (x0 + h * k0, x1 + h * k1, x2 + h * k2, x3 + h * k3, x4 + h * k4, x5 + h * k5,
+            x6 + h * k6, x7 + h * k7, x8 + h * k8, x9 + h * k9, x10 + h * k10, x11 + h * k11,
+            x12 + h * k12)
 
 
 def _moment(r: Vec3, f: tuple[float, ...], spin_cd: float, e: Vec3) -> tuple[float, ...]:

@@ -358,3 +358,109 @@ def test_shipped_disturbance_profiles(name, force, torque):
         f, tau = d.wrench(float(t))
         assert f == pytest.approx((force(t),) * 3, abs=1e-12)
         assert tau == pytest.approx((torque(t),) * 3, abs=1e-12)
+
+
+# ----------------------------------------------------------------------------------------
+# Exact actuator trajectory inside a step (tilt servos reaching their command mid-step)
+# ----------------------------------------------------------------------------------------
+
+TILT0 = (0.2, -0.1, 0.5, 0.0, -0.3, 0.1)
+SPEED0 = (1000.0, 1050.0, 980.0, 1010.0, 1020.0, 990.0)
+
+
+def reference_step(plant: Plant, s: PlantState, cmd: ActuatorCommand,
+                   substeps: int = 2000) -> np.ndarray:
+    """(p, v, q, w) one plant step after s, by `substeps` RK4 steps on the exact actuator
+    trajectory (closed form from the step's start) plus the disturbance at absolute time."""
+    h = plant.dt_us * 1e-6
+    t0 = s.time_us * 1e-6
+    hs = h / substeps
+
+    def wrench(tau):
+        speeds, tilts = plant.actuators_at(s.rotor_speed_rad_s, s.tilt_rad, cmd, tau)
+        f, t = plant.rotor_wrench(speeds, tilts)
+        df, dt = plant.disturbance.wrench(t0 + tau)
+        return (f[0] + df[0], f[1] + df[1], f[2] + df[2], t[0] + dt[0], t[1] + dt[1],
+                t[2] + dt[2])
+
+    x = np.array([*s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu, *s.omega_flu_rad_s])
+    for k in range(substeps):
+        a = k * hs
+        wa, wm, wb = wrench(a), wrench(a + 0.5 * hs), wrench(a + hs)
+        k1 = np.array(plant.derivative(tuple(x), wa))
+        k2 = np.array(plant.derivative(tuple(x + 0.5 * hs * k1), wm))
+        k3 = np.array(plant.derivative(tuple(x + 0.5 * hs * k2), wm))
+        k4 = np.array(plant.derivative(tuple(x + hs * k3), wb))
+        x = x + hs / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
+    return x
+
+
+def tumbling_state(speeds=SPEED0, tilts=TILT0) -> PlantState:
+    q = np.array([0.9, 0.2, -0.3, 0.25])
+    q = tuple(float(c) for c in q / np.linalg.norm(q))
+    return PlantState(12_345_000, (1.0, -2.0, 3.0), (0.5, -0.4, 0.3), q, (0.8, -1.1, 0.6),
+                      speeds, tilts, False)
+
+
+def increment_errors(plant: Plant, s: PlantState, cmd: ActuatorCommand) -> dict[str, float]:
+    """Relative error of the step's increment of p, v, q and w against `reference_step`."""
+    s1 = plant.step(s, cmd)
+    x0 = np.array([*s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu, *s.omega_flu_rad_s])
+    x1 = np.array([*s1.p_enu_m, *s1.v_enu_m_s, *s1.q_enu_flu, *s1.omega_flu_rad_s])
+    d_ref = reference_step(plant, s, cmd) - x0
+    d = x1 - x0
+    parts = {"p": slice(0, 3), "v": slice(3, 6), "q": slice(6, 10), "w": slice(10, 13)}
+    return {k: float(np.linalg.norm(d[sl] - d_ref[sl]) / np.linalg.norm(d_ref[sl]))
+            for k, sl in parts.items()}
+
+
+def mid_step_targets(plant: Plant, fractions) -> tuple[float, ...]:
+    """Tilt commands that servo i reaches fractions[i] of the way through the step
+    (a fraction above 1: still moving at the step's end; 0: already there)."""
+    lim = plant.tilt_rate * plant.dt_us * 1e-6
+    signs = (1.0, -1.0, 1.0, 1.0, -1.0, 1.0)
+    return tuple(a + sg * f * lim for a, sg, f in zip(TILT0, signs, fractions, strict=True))
+
+
+def test_servo_reaching_command_mid_step_is_integrated_exactly(vehicle):
+    """Given one servo that reaches its command half-way through a step, when stepped, then
+    the increment matches a 2000-substep integration of the exact actuator trajectory."""
+    plant = Plant(vehicle, ground_enabled=False)
+    cmd = ActuatorCommand((1000.0,) * 6, mid_step_targets(plant, (0.5, 0, 0, 0, 0, 0)))
+    err = increment_errors(plant, tumbling_state(speeds=(1000.0,) * 6), cmd)
+    # A single RK4 step across the kink is off by ~2e-4 in w and ~5e-5 in v.
+    assert max(err.values()) <= 1e-9, err
+
+
+def test_several_servo_kinks_with_moving_rotors_and_disturbance(vehicle):
+    """Given servos reaching their commands at distinct instants (two at the same one), rotors
+    spinning up and down and a time-varying disturbance, when stepped at t = 12.345 s, then the
+    increment matches the reference integration at absolute time."""
+    force = DisturbanceTerm("sine", (2.0, -1.0, 3.0), omega_rad_s=20.0, phase_rad=0.3)
+    torque = DisturbanceTerm("sine", (0.3, 0.2, -0.1), omega_rad_s=15.0)
+    plant = Plant(vehicle, ground_enabled=False, disturbance=Disturbance((force,), (torque,)))
+    cmd = ActuatorCommand((1100.0, 950.0, 980.0, 1200.0, 1020.0, 900.0),
+                          mid_step_targets(plant, (0.3, 0.55, 0.8, 3.0, 0.3, 0.0)))
+    err = increment_errors(plant, tumbling_state(), cmd)
+    assert max(err.values()) <= 1e-9, err
+
+
+def test_step_splits_only_at_kinks(vehicle, monkeypatch):
+    """Given servos reaching their commands inside a step or not, when stepped, then the step
+    takes one RK4 step per smooth piece: 4 derivative calls with no kink, 4 (k + 1) with k."""
+    plant = Plant(vehicle, ground_enabled=False)
+    calls = []
+    derivative = plant.derivative
+    monkeypatch.setattr(plant, "derivative", lambda x, w: calls.append(1) or derivative(x, w))
+    s = tumbling_state()
+    cases = [((0, 0, 0, 0, 0, 0), 0), ((2.0, 5.0, 0, 0, 1.5, 0), 0), ((0.5, 0, 0, 0, 0, 0), 1),
+             ((0.3, 0.3, 0.7, 0, 2.0, 0), 2), ((0.1, 0.2, 0.3, 0.4, 0.5, 0.6), 6)]
+    for fractions, kinks in cases:
+        calls.clear()
+        s1 = plant.step(s, ActuatorCommand(SPEED0, mid_step_targets(plant, fractions)))
+        assert len(calls) == 4 * (kinks + 1), fractions
+    # A servo that has reached its command sits exactly on it: no kink in the next step.
+    assert s1.tilt_rad == mid_step_targets(plant, (0.1, 0.2, 0.3, 0.4, 0.5, 0.6))
+    calls.clear()
+    plant.step(s1, ActuatorCommand(SPEED0, s1.tilt_rad))
+    assert len(calls) == 4

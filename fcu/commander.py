@@ -1,0 +1,386 @@
+"""The commander stage: arming, modes and which reference flies (mission, offboard, hold,
+land), without I/O.
+
+Time comes in as arguments: `t_us` is the flight clock (simulated in lockstep, monotonic in
+real time) for everything that shapes the flight; `now_s` is the wall clock, used only for
+the offboard stream's freshness (DESIGN.md section 2). What the commander says goes into
+`events` (on the flight clock); the process shell turns them into STATUSTEXT.
+
+Landing (LAND mode, or a mission whose last item is NAV_LAND): the descent to the ground
+plane follows its planned profile; then the set-point keeps going down at the land speed
+(at most `TOUCHDOWN_DEPTH_M` below the planned end) so the vehicle reaches the ground
+whatever its tracking error, and the land detector disarms once the vehicle has been still
+for `LANDED_STILL_S` (or rests below `LANDED_ALTITUDE_M`): a landing ends on the ground,
+disarmed, never hovering armed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
+from common.mission_items import MissionItem, local_xy
+from common.modes import Mode
+from common.outcome import CRASH, FAILSAFE, INFO, Event
+from fcu.dualquat import Q_IDENTITY, Quat, Vec3, q_exp
+from fcu.mission import MissionEvent, MissionExecutor, MissionLimits
+from fcu.tracker import Reference, VehicleState
+
+_ZERO: Vec3 = (0.0, 0.0, 0.0)
+# MAVLink numbers (common.xml), written out so that this stage imports no MAVLink library.
+MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED = 0, 2
+SEVERITY_EMERGENCY, SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_INFO = 0, 2, 4, 6
+MAV_FRAME_LOCAL_NED, MAV_CMD_NAV_LAND = 1, 21
+FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM p2 that forces a disarm
+LANDED_ALTITUDE_M = 0.05
+LANDED_SPEED_M_S = 0.2
+LANDED_STILL_S = 0.5
+TOUCHDOWN_DEPTH_M = 1.0
+TOUCHDOWN_BLOCKED_M = 0.1
+
+
+class Touchdown(NamedTuple):
+    """The last phase of a landing: the set-point sinks from (p, q) from t_us on."""
+
+    t_us: int
+    p_enu_m: Vec3
+    q_enu_flu: Quat
+
+
+@dataclass
+class OffboardSetpoint:
+    """The latest offboard targets, converted to ENU/FLU; None = not given."""
+
+    p_enu_m: Vec3 | None = None
+    v_enu_m_s: Vec3 = _ZERO
+    a_enu_m_s2: Vec3 = _ZERO
+    yaw_ned_rad: float | None = None
+    q_enu_flu: Quat | None = None
+    omega_flu_rad_s: Vec3 = _ZERO
+    received_s: float = -math.inf
+
+
+def pose_ref(p: Vec3, q: Quat) -> Reference:
+    return Reference(p, q, _ZERO, _ZERO, _ZERO, _ZERO)
+
+
+def attitude_from_yaw_ned(yaw_ned_rad: float) -> Quat:
+    """Level attitude (ENU/FLU) heading at a NED yaw: ENU yaw = pi/2 - NED yaw."""
+    return q_exp((0.0, 0.0, math.pi / 2 - yaw_ned_rad))
+
+
+class Commander:
+    """Arming, modes, the mission executor, offboard, hold and land references."""
+
+    def __init__(self, limits: MissionLimits, offboard_timeout_s: float = 1.0) -> None:
+        self.limits = limits
+        self.offboard_timeout_s = offboard_timeout_s
+        self.armed = False
+        self.mode = Mode.HOLD
+        self.flight_started = False  # lockstep: simulated time runs once this latches
+        self.mission: tuple[MissionItem, ...] = ()
+        self.mission_current = 0  # the one home of the current mission item
+        self.executor: MissionExecutor | None = None
+        self.mission_running = False
+        self.mission_done = False
+        self.hold: Reference | None = None
+        self.land: MissionExecutor | None = None
+        self.touchdown: Touchdown | None = None
+        self.offboard = OffboardSetpoint()
+        self.state: VehicleState | None = None
+        self.last_ref: Reference | None = None
+        self.clock_us = 0  # the flight clock at the latest input (events are stamped with it)
+        self.events: list[Event] = []
+        self.mission_events: list[MissionEvent] = []
+        self.still_since_us: int | None = None
+
+    # ------------------------------------------------------------------ outputs
+
+    def say(self, severity: int, text: str, kind: str = INFO) -> None:
+        self.events.append(Event(self.clock_us, severity, text[:50], kind))
+
+    @property
+    def landed(self) -> bool:
+        """On the ground: resting low and slow, or still after a touchdown (land detector)."""
+        s = self.state
+        if s is None:
+            return True
+        speed = math.sqrt(sum(v * v for v in s.v_flu_m_s))
+        if s.p_enu_m[2] < LANDED_ALTITUDE_M and speed < LANDED_SPEED_M_S:
+            return True
+        return self.touchdown is not None and self.still_since_us is not None and \
+            (self.clock_us - self.still_since_us) * 1e-6 >= LANDED_STILL_S
+
+    def _current_pose_ref(self) -> Reference:
+        """Where the vehicle should be now: the last desired pose in flight, else the state."""
+        if self.armed and self.last_ref is not None:
+            return pose_ref(self.last_ref.p_enu_m, self.last_ref.q_enu_flu)
+        if self.state is None:
+            return pose_ref(_ZERO, Q_IDENTITY)
+        return pose_ref(self.state.p_enu_m, self.state.q_enu_flu)
+
+    # ------------------------------------------------------------------ commands
+
+    def arm(self) -> tuple[int, str]:
+        if self.armed:
+            return MAV_RESULT_ACCEPTED, "already armed"
+        if self.state is None:
+            return MAV_RESULT_DENIED, "arming refused: no state input"
+        self.armed = True
+        self.hold = self._current_pose_ref()
+        self.touchdown = None
+        self.say(SEVERITY_INFO, "armed")
+        if self.mode == Mode.MISSION and not self.mission_running and not self.mission_done:
+            self._start_mission()  # MISSION_START came first: fly it now
+        self._maybe_start_flight()
+        return MAV_RESULT_ACCEPTED, "armed"
+
+    def disarm(self, force: bool = False, reason: str = "disarmed",
+               record_in_air: bool = True) -> tuple[int, str]:
+        """Disarm; in the air only with `force`, and then recorded as a crash unless the
+        caller records the cause itself (`record_in_air=False`: divergence)."""
+        if not self.armed:
+            return MAV_RESULT_ACCEPTED, "already disarmed"
+        landed = self.landed
+        if not force and not landed:
+            return MAV_RESULT_DENIED, "disarm refused: in the air (force with p2 = 21196)"
+        self.armed = False  # simulated time keeps running once the flight has started
+        self.mission_running = False
+        self.touchdown = None
+        self.land = None
+        self.say(SEVERITY_INFO if not force else SEVERITY_WARNING, reason)
+        if not landed and record_in_air:
+            self.say(SEVERITY_CRITICAL, "disarmed in the air", CRASH)
+        return MAV_RESULT_ACCEPTED, reason
+
+    def set_mode(self, mode: Mode, now_s: float) -> tuple[int, str]:
+        if mode == Mode.MISSION and not self.mission:
+            return MAV_RESULT_DENIED, "no mission"
+        if mode == Mode.OFFBOARD and (
+                self.offboard.received_s + self.offboard_timeout_s < now_s
+                or (self.offboard.p_enu_m is None and self.offboard.q_enu_flu is None)):
+            return MAV_RESULT_DENIED, "offboard refused: no setpoint stream"
+        if mode == Mode.LAND and not self.armed:
+            return MAV_RESULT_DENIED, "land: not armed"
+        previous = self.mode
+        self.mode = mode
+        if mode != Mode.LAND:
+            self.touchdown = None
+            self.land = None
+        if mode == Mode.HOLD:
+            self.hold = self._current_pose_ref()
+            self.mission_running = False
+        elif mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running):
+            self._start_mission()
+        elif mode == Mode.LAND and previous != Mode.LAND:
+            self._start_landing()
+        elif mode == Mode.OFFBOARD:
+            self.mission_running = False
+        self._maybe_start_flight()
+        if previous != mode:
+            self.say(SEVERITY_INFO, f"mode {mode.name}")
+        return MAV_RESULT_ACCEPTED, f"mode {mode.name}"
+
+    def mission_start(self, first: int = 0) -> tuple[int, str]:
+        if not self.mission:
+            return MAV_RESULT_DENIED, "no mission"
+        if not 0 <= first < len(self.mission):
+            return MAV_RESULT_DENIED, f"no mission item {first}"
+        self.mission_current = first
+        self.mission_done = False
+        self.mission_running = False
+        self.mode = Mode.MISSION
+        self.touchdown = None
+        self.land = None
+        self._start_mission()
+        self._maybe_start_flight()
+        self.say(SEVERITY_INFO, "mission started")
+        return MAV_RESULT_ACCEPTED, "mission started"
+
+    def set_mission(self, items: tuple[MissionItem, ...]) -> None:
+        """A new mission (already validated by the mission protocol)."""
+        self.mission = tuple(items)
+        self.mission_current = 0
+        self.mission_done = False
+        self.executor = None
+        if self.mode == Mode.MISSION:
+            self.mode = Mode.HOLD
+            self.hold = self._current_pose_ref()
+            self.mission_running = False
+            self.say(SEVERITY_INFO, "mission replaced: holding")
+
+    def set_mission_current(self, seq: int) -> tuple[int, str]:
+        if not 0 <= seq < len(self.mission):
+            return MAV_RESULT_DENIED, f"no mission item {seq}"
+        self.mission_current = seq
+        self.mission_done = False
+        if self.mode == Mode.MISSION and self.mission_running:
+            self._start_mission()
+        return MAV_RESULT_ACCEPTED, f"mission item {seq}"
+
+    def _maybe_start_flight(self) -> None:
+        if self.armed and self.mode in (Mode.MISSION, Mode.OFFBOARD, Mode.LAND):
+            self.flight_started = True
+
+    def _start_mission(self) -> None:
+        """Plan the mission from the current item, starting now from the desired pose."""
+        if not self.armed or not self.mission:
+            self.mission_running = False
+            return
+        start = self._current_pose_ref()
+        t_s = self.clock_us * 1e-6
+        self.executor = MissionExecutor(self.mission, self.limits)
+        self.executor.set_current(self.mission_current, t_s, start.p_enu_m, start.q_enu_flu)
+        self.mission_running = True
+
+    def _start_landing(self) -> None:
+        start = self._current_pose_ref()
+        land = MissionItem(0, MAV_FRAME_LOCAL_NED, MAV_CMD_NAV_LAND, 1, 1, 0.0, 0.0, 0.0,
+                           math.nan, local_xy(start.p_enu_m[1]), local_xy(start.p_enu_m[0]),
+                           0.0)  # x, y: NED (north, east)
+        self.land = MissionExecutor((land,), self.limits)
+        self.land.start(self.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
+        self.touchdown = None
+
+    # ------------------------------------------------------------------ offboard
+
+    def offboard_position(self, now_s: float, frame: int, type_mask: int, p_ned: Vec3,
+                          v_ned: Vec3, a_ned: Vec3, yaw: float) -> tuple[bool, str]:
+        """SET_POSITION_TARGET_LOCAL_NED (LOCAL_NED only); type_mask bits ignore fields."""
+        if frame != MAV_FRAME_LOCAL_NED:
+            return False, "position target frame must be LOCAL_NED"
+        if not type_mask & 0b111 and not all(math.isfinite(x) for x in p_ned):
+            return False, "position target not finite"
+        sp = self.offboard
+        if not type_mask & 0b111:
+            sp.p_enu_m = ned_to_enu(p_ned)
+        sp.v_enu_m_s = ned_to_enu(v_ned) if not type_mask & 0b111000 and all(
+            map(math.isfinite, v_ned)) else _ZERO
+        sp.a_enu_m_s2 = ned_to_enu(a_ned) if not type_mask & 0b111000000 and all(
+            map(math.isfinite, a_ned)) else _ZERO
+        sp.yaw_ned_rad = yaw if not type_mask & (1 << 10) and math.isfinite(yaw) else None
+        sp.received_s = now_s
+        return True, ""
+
+    def offboard_attitude(self, now_s: float, type_mask: int, q_ned_frd: Quat,
+                          rates_frd: Vec3) -> tuple[bool, str]:
+        """SET_ATTITUDE_TARGET: attitude NED->FRD and body rates; bit 7 ignores attitude."""
+        sp = self.offboard
+        if not type_mask & (1 << 7):
+            n = math.sqrt(sum(c * c for c in q_ned_frd))
+            if not math.isfinite(n) or n < 0.5:
+                return False, "attitude target not a unit quaternion"
+            w, x, y, z = (c / n for c in q_ned_frd)
+            sp.q_enu_flu = q_ned_frd_to_enu_flu((w, x, y, z))
+        rates_ok = all(math.isfinite(x) for x in rates_frd)
+        sp.omega_flu_rad_s = frd_to_flu(rates_frd) if rates_ok and not type_mask & 0b111 \
+            else _ZERO
+        sp.received_s = now_s
+        return True, ""
+
+    def _offboard_ref(self) -> Reference:
+        sp = self.offboard
+        hold = self.hold or self._current_pose_ref()
+        p = sp.p_enu_m if sp.p_enu_m is not None else hold.p_enu_m
+        if sp.q_enu_flu is not None:
+            q = sp.q_enu_flu
+        elif sp.yaw_ned_rad is not None:
+            q = attitude_from_yaw_ned(sp.yaw_ned_rad)
+        else:
+            q = hold.q_enu_flu
+        return Reference(p, q, sp.v_enu_m_s, sp.a_enu_m_s2, sp.omega_flu_rad_s, _ZERO)
+
+    # ------------------------------------------------------------------ failsafe reactions
+
+    def failsafe_hold(self, reason: str) -> None:
+        """A failsafe reaction: stop where the vehicle should be and hold."""
+        self.mode = Mode.HOLD
+        self.hold = self._current_pose_ref()
+        self.mission_running = False
+        self.touchdown = None
+        self.land = None
+        self.say(SEVERITY_CRITICAL, reason, FAILSAFE)
+
+    def failsafe_land(self, reason: str) -> None:
+        if self.mode != Mode.LAND:
+            self.mode = Mode.LAND
+            self._start_landing()
+        self.say(SEVERITY_CRITICAL, reason, FAILSAFE)
+
+    # ------------------------------------------------------------------ references
+
+    def reference(self, t_us: int) -> Reference:
+        """The desired pose, twist and acceleration at t_us (flight clock)."""
+        self.clock_us = t_us
+        t_s = t_us * 1e-6
+        if self.touchdown is not None:
+            return self._touchdown_ref(t_us)
+        if self.mode == Mode.MISSION and self.mission_running and self.executor is not None:
+            return self._mission_ref(t_s)
+        if self.mode == Mode.OFFBOARD:
+            return self._offboard_ref()
+        if self.mode == Mode.LAND and self.land is not None:
+            self.land.update(t_s)
+            ref = self.land.sample(t_s)
+            if self.land.completed:
+                self._begin_touchdown(t_us, ref)
+            return ref
+        if self.hold is None:
+            self.hold = self._current_pose_ref()
+        return self.hold
+
+    def _mission_ref(self, t_s: float) -> Reference:
+        executor = self.executor
+        assert executor is not None
+        events = executor.update(t_s)
+        self.mission_events.extend(events)
+        for ev in events:
+            if ev.kind == "current":
+                self.mission_current = ev.seq
+        ref = executor.sample(t_s)
+        if executor.completed:
+            self.mission_running = False
+            self.mission_done = True
+            self.say(SEVERITY_INFO, "mission complete")
+            last = self.mission[-1].command if self.mission else None
+            if last == MAV_CMD_NAV_LAND:
+                self._begin_touchdown(round(t_s * 1e6), ref)
+            else:
+                self.mode = Mode.HOLD
+                self.hold = pose_ref(ref.p_enu_m, ref.q_enu_flu)
+        return ref
+
+    def _begin_touchdown(self, t_us: int, ref: Reference) -> None:
+        self.touchdown = Touchdown(t_us, ref.p_enu_m, ref.q_enu_flu)
+        self.still_since_us = None
+
+    def _touchdown_ref(self, t_us: int) -> Reference:
+        td = self.touchdown
+        assert td is not None
+        speed = self.limits.land_speed_m_s
+        depth = speed * (t_us - td.t_us) * 1e-6
+        v = (0.0, 0.0, -speed)
+        if depth >= TOUCHDOWN_DEPTH_M:
+            depth, v = TOUCHDOWN_DEPTH_M, _ZERO
+        x, y, z = td.p_enu_m
+        return Reference((x, y, z - depth), td.q_enu_flu, v, _ZERO, _ZERO, _ZERO)
+
+    def land_detector(self, t_us: int) -> bool:
+        """During a touchdown: True once the vehicle is on the ground (then disarm).
+
+        On the ground = still (speed below LANDED_SPEED_M_S) while the set-point lies more
+        than TOUCHDOWN_BLOCKED_M below the vehicle (something holds it up), for
+        LANDED_STILL_S; or resting below LANDED_ALTITUDE_M."""
+        if self.touchdown is None or self.state is None:
+            return False
+        s = self.state
+        speed = math.sqrt(sum(v * v for v in s.v_flu_m_s))
+        ref = self.last_ref
+        blocked = ref is not None and s.p_enu_m[2] - ref.p_enu_m[2] > TOUCHDOWN_BLOCKED_M
+        if speed >= LANDED_SPEED_M_S or not blocked:
+            self.still_since_us = None
+        elif self.still_since_us is None:
+            self.still_since_us = t_us
+        return self.landed

@@ -1,0 +1,90 @@
+"""Failsafe checks, each in one place (parameters COM_*, as PX4's commander names them).
+
+Pure: every check takes its clock as an argument. The flight clock (`t_us`: simulated time
+in lockstep, monotonic time in real time) drives what changes the flight: state input loss,
+saturation, divergence. The wall clock (`now_s`) serves only the links: GCS heartbeat loss
+and the offboard setpoint stream (DESIGN.md section 2). In lockstep a state arrives with
+every control period, so state input loss cannot happen on the flight clock: a simulator
+that stops answering freezes the flight with it and is reported by the process shell.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from common.outcome import DIVERGENCE_M
+
+
+@dataclass(frozen=True)
+class FailsafeSettings:
+    """Failsafe parameters; times in seconds."""
+
+    gcs_loss_s: float = 0.0  # COM_DL_LOSS_T, wall clock; 0: off
+    gcs_loss_land_s: float = 0.0  # COM_DL_LAND_T, wall clock; 0: hold forever
+    state_loss_s: float = 1.0  # COM_STATE_LOSS_T, flight clock
+    saturation_s: float = 2.0  # COM_SAT_T, flight clock
+    saturation_hold: bool = False  # COM_SAT_ACT = 1: abort a mission to HOLD
+    divergence_m: float = DIVERGENCE_M  # COM_DIV_POS
+
+
+def state_lost(t_us: int, state_rx_us: int | None, settings: FailsafeSettings) -> bool:
+    """No valid state for longer than COM_STATE_LOSS_T on the flight clock."""
+    if state_rx_us is None:
+        return False
+    return (t_us - state_rx_us) * 1e-6 > settings.state_loss_s
+
+
+def offboard_lost(now_s: float, received_s: float, timeout_s: float) -> bool:
+    """No offboard setpoint for longer than COM_OF_LOSS_T on the wall clock."""
+    return now_s - received_s > timeout_s
+
+
+class SaturationMonitor:
+    """Rotor speed saturation held longer than COM_SAT_T (flight clock)."""
+
+    def __init__(self) -> None:
+        self.since_us: int | None = None
+        self.reported = False
+
+    def update(self, t_us: int, saturated: bool, settings: FailsafeSettings) -> str:
+        """"start" once the saturation has lasted too long, "clear" when it ends, else ""."""
+        if not saturated:
+            self.since_us = None
+            was = self.reported
+            self.reported = False
+            return "clear" if was else ""
+        if self.since_us is None:
+            self.since_us = t_us
+        if not self.reported and (t_us - self.since_us) * 1e-6 > settings.saturation_s:
+            self.reported = True
+            return "start"
+        return ""
+
+
+class GcsLinkMonitor:
+    """GCS heartbeat loss (wall clock): HOLD after COM_DL_LOSS_T, LAND after COM_DL_LAND_T
+    more, "regained" when heartbeats come back."""
+
+    def __init__(self) -> None:
+        self.lost_since_s: float | None = None
+        self.landing_ordered = False
+
+    def update(self, now_s: float, gcs_seen_s: float, settings: FailsafeSettings) -> str:
+        """"lost", "land", "regained" or ""."""
+        if settings.gcs_loss_s <= 0.0 or not math.isfinite(gcs_seen_s):
+            return ""
+        lost = now_s - gcs_seen_s > settings.gcs_loss_s
+        if lost and self.lost_since_s is None:
+            self.lost_since_s = now_s
+            self.landing_ordered = False
+            return "lost"
+        if lost and not self.landing_ordered and settings.gcs_loss_land_s > 0.0 and \
+                self.lost_since_s is not None and \
+                now_s - self.lost_since_s > settings.gcs_loss_land_s:
+            self.landing_ordered = True
+            return "land"
+        if not lost and self.lost_since_s is not None:
+            self.lost_since_s = None
+            return "regained"
+        return ""

@@ -1,0 +1,202 @@
+"""Can the vehicle fly a planned segment? Rotor speeds of the nominal wrench along its
+reference (pure: no I/O, no MAVLink).
+
+For a reference r(t) (fcu.tracker.Reference: p, q, v, a, omega, omega_dot; ENU / FLU) the
+wrench that makes the vehicle follow it exactly (MODEL.md section 4 with zero tracking error) is
+
+    f_b = m R(q)^T (a - g_W),  g_W = [0, 0, -g];   tau_b = J omega_dot + omega x J omega,
+
+allocated with the pseudo-inverse of eq. (28), Omega = A^+ [f_b; tau_b], each rotor turning at
+w_i = (lat_i^2 + ver_i^2)^(1/4) (MODEL.md section 2). A segment is flyable when
+max_i w_i <= MARGIN w_max at every sample.
+
+MARGIN = 0.85: the feed-forward may use at most 85 % of the rotor speed limit (72 % of the
+thrust), leaving the rest for the feedback that corrects tracking errors, disturbances and the
+rotor lag on top of it. It cannot be much lower: hovering at the worst attitude takes 1215 rad/s
+(71 %) on the tilted preset and 1402 rad/s (82 %) on the planar one, so a lower margin would
+refuse attitudes the vehicle holds.
+
+Time scaling: flying a fixed path (position and attitude as functions of sigma = t / D) in D
+seconds scales velocities and body rates by 1/D and accelerations, omega_dot and omega x J omega
+by 1/D^2, so with u = 1/D^2
+
+    Omega(D) = Omega_0 + u Omega_1   (Omega_0: hover at the path's attitudes),
+
+exactly. Each rotor's w_i^4 = |Omega_0,i + u Omega_1,i|^2 is then a quadratic in u, and the
+shortest duration that keeps every sample inside the margin, for every longer duration too,
+comes in closed form (`TimeScaling.shortest`): no bisection.
+
+Sampling: `MOVE_SAMPLES` evenly spaced instants of a quintic move including both ends, plus the
+instants of its extreme acceleration (s = 0.5 -/+ sqrt(3)/6) and of its top speed (s = 0.5);
+for the figure-infinity, evenly spaced instants with a step of at most `FIGURE_STEP_RAD` of
+attitude (T |n|) and of the path phase 2T (at least `MOVE_SAMPLES`, at most `FIGURE_SAMPLES_MAX`),
+plus its ends (extreme T''), its middle (top T') and the phases T = j pi / 4 where the path's
+coordinates peak.
+
+Which items stretch and which are refused is the mission's business (fcu.mission).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+from typing import Any, NamedTuple, Protocol
+
+import numpy as np
+
+from common.config import VehicleConfig
+from fcu.allocation import allocation_matrix, pseudo_inverse
+from fcu.dualquat import Vec3, cross, q_rotate_inv
+from fcu.tracker import Reference
+
+MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
+MOVE_SAMPLES = 64
+FIGURE_STEP_RAD = 0.05  # error of a sampled peak below 1 - cos(0.025) = 3e-4
+FIGURE_SAMPLES_MAX = 4096
+STRETCH_GUARD = 1e-9  # relative: a stretched duration stays this far above the exact bound
+
+_QUINTIC_PEAKS = (0.5 - math.sqrt(3.0) / 6.0, 0.5, 0.5 + math.sqrt(3.0) / 6.0)
+
+
+class Path(Protocol):
+    """A segment that can be flown in any duration: its reference flown in 1 s."""
+
+    def path(self, sigma: np.ndarray) -> Reference: ...
+
+    def instants(self) -> np.ndarray: ...
+
+
+def move_instants() -> np.ndarray:
+    """Normalised check instants of a quintic move (module docstring)."""
+    return np.concatenate([np.linspace(0.0, 1.0, MOVE_SAMPLES), _QUINTIC_PEAKS])
+
+
+def figure_instants(axis_norm: float, phase_instants: Any) -> np.ndarray:
+    """Normalised check instants of a figure whose attitude turns T |n| (T: 0 .. 2 pi);
+    `phase_instants(T)` maps phases to normalised times."""
+    turns = 2.0 * math.pi * max(2.0, axis_norm)
+    # T' peaks at pi^2 (in 1 s), so evenly spaced instants step T by at most pi^2 / (n - 1).
+    n = int(min(FIGURE_SAMPLES_MAX, max(MOVE_SAMPLES, math.ceil(
+        turns * math.pi / 2.0 / FIGURE_STEP_RAD) + 1)))
+    peaks = phase_instants(np.arange(1, 8) * (math.pi / 4.0))
+    return np.concatenate([np.linspace(0.0, 1.0, n), peaks, [0.5]])
+
+
+def nominal_wrench(vehicle: VehicleConfig, ref: Reference) -> tuple[Vec3, Vec3]:
+    """(f_b, tau_b) that follow `ref` exactly: m R^T (a - g_W), J omega' + omega x J omega.
+
+    Fields may be floats or numpy arrays (many samples at once)."""
+    m, g = vehicle.mass_kg, vehicle.gravity_m_s2
+    ax, ay, az = ref.a_enu_m_s2
+    force = q_rotate_inv(ref.q_enu_flu, (m * ax, m * ay, m * (az + g)))
+    jx, jy, jz = vehicle.inertia_diag_kg_m2
+    w, wd = ref.omega_flu_rad_s, ref.omega_dot_flu_rad_s2
+    gyro = cross(w, (jx * w[0], jy * w[1], jz * w[2]))
+    return force, (jx * wd[0] + gyro[0], jy * wd[1] + gyro[1], jz * wd[2] + gyro[2])
+
+
+def _hover(ref: Reference) -> Reference:
+    """The same poses at rest (the part of a path that does not scale with its duration)."""
+    zero = (0.0, 0.0, 0.0)
+    return ref._replace(v_enu_m_s=zero, a_enu_m_s2=zero, omega_flu_rad_s=zero,
+                        omega_dot_flu_rad_s2=zero)
+
+
+def _speeds(omega_sq: np.ndarray) -> np.ndarray:
+    """Rotor speeds (samples x rotors) from Omega (samples x [lat_1, ver_1, ...])."""
+    lat, ver = omega_sq[:, 0::2], omega_sq[:, 1::2]
+    return np.sqrt(np.sqrt(lat * lat + ver * ver))
+
+
+class Peak(NamedTuple):
+    speed_rad_s: float  # highest rotor speed over the samples
+    index: int  # the sample where it occurs
+
+
+class Envelope:
+    """One vehicle's rotor speed limit for feed-forward wrenches (`margin` w_max)."""
+
+    def __init__(self, vehicle: VehicleConfig, margin: float = MARGIN) -> None:
+        if not 0.0 < margin <= 1.0:
+            raise ValueError(f"margin must be in (0, 1], got {margin}")
+        self.vehicle = vehicle
+        self.margin = margin
+        self.speed_max = vehicle.rotor_speed_max_rad_s
+        self.limit = margin * self.speed_max
+        self.pinv_t = pseudo_inverse(allocation_matrix(vehicle)).T  # 6 x 2n
+
+    def omega_sq(self, ref: Reference) -> np.ndarray:
+        """Omega = A^+ [f_b; tau_b] per sample (samples x 2n); a float reference is 1 sample."""
+        force, torque = nominal_wrench(self.vehicle, ref)
+        parts = np.broadcast_arrays(*(np.asarray(c, float) for c in (*force, *torque)))
+        wrench = np.stack([np.atleast_1d(c) for c in parts], axis=1)
+        return wrench @ self.pinv_t
+
+    def speeds(self, ref: Reference) -> np.ndarray:
+        """Rotor speeds (samples x rotors) of the nominal wrench along `ref`."""
+        return _speeds(self.omega_sq(ref))
+
+    def peak(self, ref: Reference) -> Peak:
+        per_sample = self.speeds(ref).max(axis=1)
+        i = int(np.argmax(per_sample))
+        return Peak(float(per_sample[i]), i)
+
+    def scaling(self, segment: Path) -> TimeScaling:
+        """Rotor speeds along `segment`'s path as a function of the time it is flown in."""
+        unit = segment.path(segment.instants())
+        om0 = self.omega_sq(_hover(unit))
+        return TimeScaling(om0, self.omega_sq(unit) - om0, self.limit)
+
+    def describe(self, speed_rad_s: float) -> str:
+        return (f"needs {speed_rad_s:.0f} rad/s > {self.limit:.0f} "
+                f"({self.margin * 100:.0f}% of {self.speed_max:.0f})")
+
+
+class TimeScaling:
+    """Omega(D) = Omega_0 + Omega_1 / D^2 at a path's sample instants (module docstring)."""
+
+    def __init__(self, om0: np.ndarray, om1: np.ndarray, limit: float) -> None:
+        self.om0, self.om1, self.limit = om0, om1, limit
+
+    def speeds(self, duration: float) -> np.ndarray:
+        u = 1.0 / (duration * duration) if duration > 0.0 else math.inf
+        return _speeds(self.om0 + u * self.om1)
+
+    def peak(self, duration: float) -> Peak:
+        per_sample = self.speeds(duration).max(axis=1)
+        i = int(np.argmax(per_sample))
+        return Peak(float(per_sample[i]), i)
+
+    def fits(self, duration: float) -> bool:
+        return self.peak(duration).speed_rad_s <= self.limit
+
+    def shortest(self) -> float:
+        """The shortest duration D such that the path flown in D or any longer time keeps
+        every sampled rotor speed within the limit (slightly above the exact bound, by
+        `STRETCH_GUARD`); 0 when any duration does, inf when none does (hovering at some
+        attitude of the path already exceeds the limit)."""
+        lat0, ver0 = self.om0[:, 0::2], self.om0[:, 1::2]
+        lat1, ver1 = self.om1[:, 0::2], self.om1[:, 1::2]
+        # w^4 = a u^2 + b u + (c + L^4) with u = 1 / D^2 >= 0.
+        a = lat1 * lat1 + ver1 * ver1
+        b = 2.0 * (lat0 * lat1 + ver0 * ver1)
+        c = lat0 * lat0 + ver0 * ver0 - self.limit ** 4
+        if np.any(c > 0.0):
+            return math.inf
+        # c <= 0: w^4 <= L^4 on [0, u_hi], u_hi the larger root (stable forms, no cancellation).
+        sq = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u_hi = np.where(b < 0.0, (sq - b) / (2.0 * a), (2.0 * c) / (-b - sq))
+        u_hi = np.where(a > 0.0, np.nan_to_num(u_hi, nan=0.0, posinf=math.inf), math.inf)
+        u_max = float(np.min(u_hi))
+        if u_max <= 0.0:
+            return math.inf
+        if math.isinf(u_max):
+            return 0.0
+        return (1.0 + STRETCH_GUARD) / math.sqrt(u_max)
+
+
+@lru_cache(maxsize=16)
+def envelope(vehicle: VehicleConfig, margin: float = MARGIN) -> Envelope:
+    """The (cached) envelope of a vehicle: the pseudo-inverse is computed once."""
+    return Envelope(vehicle, margin)

@@ -1,0 +1,383 @@
+"""The FCU's ground-station side: parse (and check signatures of) what GCS links send,
+dispatch commands, parameters, missions and offboard set-points into the pipeline, and send
+telemetry, each link on its own schedule.
+
+One error boundary for everything a GCS sends: no value of any field of any message ends
+the process or leaves a stream unbounded. Requests are range-checked against what the
+answer can carry, a SET_MESSAGE_INTERVAL changes only the link it came on, and each link's
+streams together stay within its message budget (`fcu.telemetry.LINK_BUDGET_MSG_S`); every
+refusal is explained by STATUSTEXT. An exception that still reaches the boundary is counted
+in `internal_errors` and reported, never raised.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from common.links import Link
+from common.mavlink import MAV, encoder, pack, parser
+from common.modes import Mode, decode, decode_custom
+from common.outcome import Event
+from fcu.commander import FORCE_DISARM_MAGIC
+from fcu.dualquat import q_angle, q_conj, q_mul, q_rotate
+from fcu.mission_protocol import MissionServer
+from fcu.params import SPECS, ParamError, ParamStore
+from fcu.pipeline import Pipeline
+from fcu.telemetry import (
+    REQUESTABLE,
+    Builders,
+    Home,
+    Schedule,
+    Snapshot,
+    autopilot_version,
+    heartbeat,
+    sys_status,
+)
+
+M = MAV
+COMPONENT = M.MAV_COMP_ID_AUTOPILOT1
+STATUSTEXT_LEN = 50
+_ALWAYS_REQUESTABLE = (M.MAVLINK_MSG_ID_MISSION_CURRENT, M.MAVLINK_MSG_ID_HEARTBEAT,
+                       M.MAVLINK_MSG_ID_SYS_STATUS)
+
+
+@dataclass
+class GcsLink:
+    """One ground-station link: its transport, encoder (sequence, signing) and streams."""
+
+    link: Link
+    mav: MAV.MAVLink
+    schedule: Schedule = field(default_factory=Schedule.default)
+
+
+def _as_int(x: float, lo: int, hi: int) -> int | None:
+    """A float parameter as an integer in [lo, hi], or None."""
+    if not math.isfinite(x) or x != round(x) or not lo <= x <= hi:
+        return None
+    return int(x)
+
+
+class GcsServer:
+    def __init__(self, links: list[Link], pipeline: Pipeline, params: ParamStore,
+                 missions: MissionServer, *, system_id: int, home: Home,
+                 signing_key: bytes | None = None,
+                 on_params: Callable[[], None] | None = None) -> None:
+        self.pipeline = pipeline
+        self.params = params
+        self.missions = missions
+        self.system_id = system_id
+        self.signing_key = signing_key
+        self.on_params = on_params
+        self.links = [GcsLink(link, self._encoder(i)) for i, link in enumerate(links)]
+        self.parsers: dict[tuple[int, object], MAV.MAVLink] = {}
+        self._stream_timestamps: dict = {}  # replay protection shared by every parser
+        self.builders = Builders(self.snapshot, home)
+        self.gcs_seen_s = -math.inf
+        self.mission_link = 0  # the link of the latest mission upload (re-requests go there)
+        self.rejected_bytes = 0
+        self.ignored_messages = 0
+        self.signing_rejects = 0
+        self.internal_errors = 0
+        self.unsendable = 0
+        self.time_us = 0  # the FCU's clock, for telemetry stamps
+        self.v_enu_m_s = (0.0, 0.0, 0.0)
+
+    def _encoder(self, index: int) -> MAV.MAVLink:
+        mav = encoder(self.system_id, COMPONENT)
+        if self.signing_key is not None:
+            from common.mavlink import signing_timestamp
+
+            mav.signing.secret_key = self.signing_key
+            mav.signing.sign_outgoing = True
+            mav.signing.link_id = index & 0xFF
+            mav.signing.timestamp = signing_timestamp()
+        return mav
+
+    # ------------------------------------------------------------------ sending
+
+    def send(self, msg: MAV.MAVLink_message, index: int | None = None) -> None:
+        """To one link (`index`) or to all; a message the wire cannot carry is skipped."""
+        targets = self.links if index is None else [self.links[index]]
+        for gl in targets:
+            try:
+                data = pack(gl.mav, msg)
+            except (struct.error, OverflowError, ValueError, TypeError):
+                self.unsendable += 1
+                return
+            gl.link.send(data)
+
+    def say(self, severity: int, text: str) -> None:
+        self.send(M.MAVLink_statustext_message(severity, text.encode()[:STATUSTEXT_LEN], 0, 0))
+
+    def announce(self, events: list[Event]) -> None:
+        for ev in events:
+            self.say(ev.severity, ev.text)
+
+    def _ack(self, index: int, msg: MAV.MAVLink_message, command: int, result: int) -> None:
+        self.send(M.MAVLink_command_ack_message(command, result, 0, 0, msg.get_srcSystem(),
+                                                msg.get_srcComponent()), index)
+
+    # ------------------------------------------------------------------ receiving
+
+    def on_datagram(self, index: int, peer: object, data: bytes, now_s: float) -> None:
+        key = (index, peer)
+        p = self.parsers.get(key)
+        if p is None:
+            p = self.parsers[key] = parser()
+            if self.signing_key is not None:
+                p.signing.secret_key = self.signing_key  # unsigned frames are refused
+                p.signing.stream_timestamps = self._stream_timestamps
+        try:
+            msgs = p.parse_buffer(data) or []
+        except Exception:  # pymavlink raises on some malformed input; count and go on
+            self.rejected_bytes += len(data)
+            msgs = []
+        if not self.links[index].link.is_stream and p.buf_len():
+            # A datagram holds whole frames: a frame cut short must not be completed by the
+            # bytes of the next datagram (pymavlink parses one stream per sender).
+            self.rejected_bytes += p.buf_len()
+            p.buf = bytearray()
+            p.buf_index = 0
+            p.expected_length = M.HEADER_LEN_V1 + 2
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA":
+                if "signature" in str(getattr(msg, "reason", "")):
+                    self.signing_rejects += 1
+                else:
+                    self.rejected_bytes += len(msg.get_msgbuf())
+                continue
+            self.handle(index, msg, now_s)
+
+    def handle(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
+        """The error boundary around one message from link `index`."""
+        try:
+            self._handle(index, msg, now_s)
+        except Exception as exc:  # a bug, not an input error: count, report, keep flying
+            self.internal_errors += 1
+            self.ignored_messages += 1
+            self.say(M.MAV_SEVERITY_ERROR,
+                     f"internal error on {msg.get_type()}: {type(exc).__name__}")
+
+    def _handle(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            if msg.type == M.MAV_TYPE_GCS:
+                self.gcs_seen_s = now_s
+            return
+        target = getattr(msg, "target_system", 0)
+        if target not in (0, self.system_id):
+            self.ignored_messages += 1
+            return
+        cmd = self.pipeline.commander
+        if kind in ("COMMAND_LONG", "COMMAND_INT"):
+            self._command(index, msg, now_s)
+        elif kind.startswith("MISSION_"):
+            self.missions.current_seq = cmd.mission_current
+            if kind == "MISSION_COUNT":
+                self.mission_link = index
+            for reply in self.missions.handle(msg, now_s):
+                self.send(reply, index)
+        elif kind == "PARAM_REQUEST_LIST":
+            for i in range(len(SPECS)):
+                self._send_param(i, index)
+        elif kind == "PARAM_REQUEST_READ":
+            self._param_read(index, msg)
+        elif kind == "PARAM_SET":
+            self._param_set(msg)
+        elif kind == "SET_POSITION_TARGET_LOCAL_NED":
+            ok, why = cmd.offboard_position(
+                now_s, msg.coordinate_frame, msg.type_mask, (msg.x, msg.y, msg.z),
+                (msg.vx, msg.vy, msg.vz), (msg.afx, msg.afy, msg.afz), msg.yaw)
+            if not ok:
+                self.say(M.MAV_SEVERITY_WARNING, why)
+        elif kind == "SET_ATTITUDE_TARGET":
+            ok, why = cmd.offboard_attitude(
+                now_s, msg.type_mask, tuple(msg.q),
+                (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate))
+            if not ok:
+                self.say(M.MAV_SEVERITY_WARNING, why)
+        elif kind == "SET_MODE":
+            mode = decode_custom(msg.custom_mode)
+            if mode is not None:
+                self._announce_result(*cmd.set_mode(mode, now_s))
+
+    def _announce_result(self, result: int, text: str) -> None:
+        if result != M.MAV_RESULT_ACCEPTED and text:
+            self.say(M.MAV_SEVERITY_WARNING, text)
+
+    # ------------------------------------------------------------------ commands
+
+    def _command(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
+        cmd = msg.command
+        p = (msg.param1, msg.param2, msg.param3, msg.param4)
+        pipe = self.pipeline
+        c = pipe.commander
+        result, text = M.MAV_RESULT_ACCEPTED, ""
+        if cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
+            if p[0] == 1.0:
+                result, text = pipe.arm()
+            elif p[0] == 0.0:
+                result, text = c.disarm(force=p[1] == FORCE_DISARM_MAGIC)
+            else:
+                result, text = M.MAV_RESULT_DENIED, "arm: p1 must be 0 or 1"
+        elif cmd == M.MAV_CMD_DO_SET_MODE:
+            base = _as_int(p[0], 0, 255)
+            main = _as_int(p[1], 0, 255)
+            sub = _as_int(p[2], 0, 255) if math.isfinite(p[2]) else 0
+            mode = decode(main, sub or 0) if base is not None and main is not None and \
+                base & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED else None
+            if mode is None:
+                result, text = M.MAV_RESULT_DENIED, "unsupported mode"
+            else:
+                result, text = c.set_mode(mode, now_s)
+        elif cmd == M.MAV_CMD_MISSION_START:
+            first = _as_int(p[0], 0, 0xFFFF) if p[0] != 0 else 0
+            if first is None:
+                result, text = M.MAV_RESULT_DENIED, f"no mission item {p[0]:g}"
+            else:
+                result, text = c.mission_start(first)
+        elif cmd == M.MAV_CMD_DO_SET_MISSION_CURRENT:
+            seq = _as_int(p[0], 0, 0xFFFF)
+            ok = seq is not None and self.set_mission_current(seq)
+            result = M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_DENIED
+            text = f"no mission item {p[0]:g}"
+        elif cmd == M.MAV_CMD_NAV_LAND:
+            result, text = c.set_mode(Mode.LAND, now_s)
+        elif cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
+            msg_id = _as_int(p[0], 0, 0xFFFFFF)
+            if msg_id is None:
+                result, text = M.MAV_RESULT_DENIED, f"no message id {p[0]:g}"
+            else:
+                ok, text = self.links[index].schedule.set_interval(msg_id, p[1])
+                result = M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_DENIED
+        elif cmd == M.MAV_CMD_GET_MESSAGE_INTERVAL:
+            msg_id = _as_int(p[0], 0, 0xFFFF)
+            if msg_id is None:
+                result, text = M.MAV_RESULT_DENIED, f"no message id {p[0]:g}"
+            else:
+                self._ack(index, msg, cmd, M.MAV_RESULT_ACCEPTED)
+                self.send(M.MAVLink_message_interval_message(
+                    msg_id, self.links[index].schedule.interval_us(msg_id)), index)
+                return
+        elif cmd in (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            msg_id = M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if cmd != M.MAV_CMD_REQUEST_MESSAGE \
+                else _as_int(p[0], 0, 0xFFFFFF)
+            if msg_id not in REQUESTABLE and msg_id not in _ALWAYS_REQUESTABLE:
+                self._ack(index, msg, cmd, M.MAV_RESULT_UNSUPPORTED)
+                return
+            self._ack(index, msg, cmd, M.MAV_RESULT_ACCEPTED)
+            self.send_message(msg_id, index)
+            return
+        else:
+            result = M.MAV_RESULT_UNSUPPORTED
+        self._ack(index, msg, cmd, result)
+        if text and result != M.MAV_RESULT_ACCEPTED:
+            self.say(M.MAV_SEVERITY_WARNING, text)
+
+    def set_mission_current(self, seq: int) -> bool:
+        result, _ = self.pipeline.commander.set_mission_current(seq)
+        if result == M.MAV_RESULT_ACCEPTED:
+            self.missions.current_seq = seq
+            self.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # the spec's confirmation
+        return result == M.MAV_RESULT_ACCEPTED
+
+    # ------------------------------------------------------------------ parameters
+
+    def _send_param(self, i: int, index: int | None = None) -> None:
+        name = SPECS[i].name
+        self.send(M.MAVLink_param_value_message(name.encode(), self.params.values[name],
+                                                M.MAV_PARAM_TYPE_REAL32, len(SPECS), i), index)
+
+    @staticmethod
+    def _param_name(msg: MAV.MAVLink_message) -> str:
+        name = msg.param_id if isinstance(msg.param_id, str) else \
+            msg.param_id.decode("ascii", "replace")
+        return name.rstrip("\x00")
+
+    def _param_read(self, index: int, msg: MAV.MAVLink_message) -> None:
+        if msg.param_index >= 0:
+            if msg.param_index < len(SPECS):
+                self._send_param(msg.param_index, index)
+            return
+        name = self._param_name(msg)
+        if name in self.params.values:
+            self._send_param(self.params.index(name), index)
+
+    def _param_set(self, msg: MAV.MAVLink_message) -> None:
+        name = self._param_name(msg)
+        if name not in self.params.values:
+            self.say(M.MAV_SEVERITY_WARNING, f"unknown parameter {name}")
+            return
+        try:
+            self.params.set(name, float(msg.param_value))
+        except ParamError as exc:
+            self.say(M.MAV_SEVERITY_WARNING, str(exc))
+        else:
+            if self.on_params is not None:
+                self.on_params()
+        self._send_param(self.params.index(name))  # the value now in force, to every link
+
+    # ------------------------------------------------------------------ telemetry
+
+    def snapshot(self) -> Snapshot:
+        pipe = self.pipeline
+        c = pipe.commander
+        ref, state = c.last_ref, pipe.state
+        errors = None
+        if state is not None and ref is not None and c.armed:
+            errors = (math.dist(state.p_enu_m, ref.p_enu_m),
+                      q_angle(q_mul(q_conj(ref.q_enu_flu), state.q_enu_flu)))
+        v_enu = q_rotate(state.q_enu_flu, state.v_flu_m_s) if state is not None \
+            else (0.0, 0.0, 0.0)
+        return Snapshot(self.time_us, state, ref, errors, pipe.last_output, v_enu, c.landed)
+
+    def mission_current_msg(self) -> MAV.MAVLink_message:
+        c = self.pipeline.commander
+        total = len(c.mission)
+        if not total:
+            state = M.MISSION_STATE_NO_MISSION
+        elif c.mission_done:
+            state = M.MISSION_STATE_COMPLETE
+        elif c.mission_running:
+            state = M.MISSION_STATE_ACTIVE
+        else:
+            state = M.MISSION_STATE_NOT_STARTED
+        seq = total if c.mission_done else c.mission_current
+        return M.MAVLink_mission_current_message(min(seq, 0xFFFF), min(total, 0xFFFF), state, 0)
+
+    def build(self, msg_id: int) -> list[MAV.MAVLink_message]:
+        pipe = self.pipeline
+        c = pipe.commander
+        if msg_id == M.MAVLINK_MSG_ID_HEARTBEAT:
+            msgs = heartbeat(c.armed, c.mode.custom_mode, c.armed, pipe.failsafe)
+        elif msg_id == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            msgs = autopilot_version(self.system_id)
+        elif msg_id == M.MAVLINK_MSG_ID_SYS_STATUS:
+            msgs = sys_status(pipe.state is not None and not pipe.failsafe, 0,
+                              self.rejected_bytes + self.ignored_messages,
+                              self.signing_rejects)
+        elif msg_id == M.MAVLINK_MSG_ID_MISSION_CURRENT:
+            msgs = self.mission_current_msg()
+        else:
+            msgs = self.builders.build(msg_id)
+        if msgs is None:
+            return []
+        return msgs if isinstance(msgs, list) else [msgs]
+
+    def send_message(self, msg_id: int, index: int | None = None) -> None:
+        for m in self.build(msg_id):
+            self.send(m, index)
+
+    def tick(self, now_s: float) -> None:
+        """Wall-clock work: mission re-requests, each link's due streams."""
+        for reply in self.missions.tick(now_s):
+            self.send(reply, self.mission_link)
+        for i, gl in enumerate(self.links):
+            for msg_id in gl.schedule.pop_due(now_s):
+                self.send_message(msg_id, i)
+
+    def next_due(self) -> float:
+        return min((gl.schedule.next_due() for gl in self.links), default=math.inf)

@@ -1,0 +1,196 @@
+"""The FCU's pipeline, one tick at a time (Crazyflie's stabilizer loop, PX4's modules):
+
+    state input -> commander (reference) -> controller (tracker, eq. 16/33)
+                -> allocator (eq. 28-29) -> supervisor (the one output gate) -> outputs
+
+Pure and I/O-free: the flight clock `t_us` and the period `dt_s` come in as arguments (the
+process shell passes simulated time in lockstep and the measured, clamped period in real
+time); the wall clock `now_s` reaches only `check_links`. The same pipeline runs in the FCU
+process and in the in-process runner, so both fly the same controller with the same modes,
+mission executor, failsafes and events.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from common.config import Gains, VehicleConfig
+from common.modes import Mode
+from common.outcome import DIVERGED, FAILSAFE, Event, diverged
+from fcu.commander import (
+    MAV_RESULT_ACCEPTED,
+    SEVERITY_CRITICAL,
+    SEVERITY_EMERGENCY,
+    SEVERITY_INFO,
+    SEVERITY_WARNING,
+    Commander,
+)
+from fcu.core import FlightCore, StepResult
+from fcu.dualquat import q_normalize
+from fcu.failsafe import (
+    FailsafeSettings,
+    GcsLinkMonitor,
+    SaturationMonitor,
+    offboard_lost,
+    state_lost,
+)
+from fcu.mission import MissionLimits
+from fcu.supervisor import Supervisor
+from fcu.tracker import VehicleState
+
+
+class StepOutput(NamedTuple):
+    """What one tick sends to the actuators, and what the controller computed."""
+
+    t_us: int  # the stamp of the state it answers
+    speed_rad_s: tuple[float, ...]
+    tilt_rad: tuple[float, ...]
+    armed: bool
+    result: StepResult | None  # None when the controller did not run (disarmed)
+
+
+class Pipeline:
+    def __init__(self, vehicle: VehicleConfig, gains: Gains, control_rate_hz: int, *,
+                 limits: MissionLimits | None = None,
+                 failsafes: FailsafeSettings | None = None,
+                 initial_tilt_rad: tuple[float, ...] | None = None) -> None:
+        self.vehicle = vehicle
+        self.period_us = 1_000_000 // control_rate_hz
+        self.core = FlightCore(vehicle, gains, control_rate_hz, initial_tilt_rad)
+        self.commander = Commander(limits or MissionLimits())
+        self.settings = failsafes or FailsafeSettings()
+        self.supervisor = Supervisor(vehicle.n_rotors, vehicle.rotor_speed_max_rad_s,
+                                     initial_tilt_rad)
+        self.saturation = SaturationMonitor()
+        self.gcs_link = GcsLinkMonitor()
+        self.state: VehicleState | None = None
+        self.state_time_us = -1  # the stamp of the latest state
+        self.state_rx_us: int | None = None  # the flight clock when it arrived
+        self.failsafe = ""  # the active failsafe, shown in HEARTBEAT and SYS_STATUS
+        self.last_output: StepOutput | None = None
+        self.steps = 0
+        self.saturated_steps = 0
+
+    # ------------------------------------------------------------------ inputs
+
+    def on_state(self, stamp_us: int, state: VehicleState, rx_us: int) -> None:
+        """A valid state stamped `stamp_us`, received at `rx_us` on the flight clock."""
+        state = state._replace(q_enu_flu=q_normalize(state.q_enu_flu))
+        self.state = state
+        self.state_time_us = stamp_us
+        self.state_rx_us = rx_us
+        self.commander.state = state
+        self.commander.clock_us = rx_us
+
+    def configure(self, gains: Gains, limits: MissionLimits, failsafes: FailsafeSettings,
+                  offboard_timeout_s: float) -> None:
+        """New parameters: gains, mission limits, failsafe settings."""
+        self.core.tracker.set_gains(gains)
+        self.commander.limits = limits
+        self.commander.offboard_timeout_s = offboard_timeout_s
+        self.settings = failsafes
+
+    def arm(self) -> tuple[int, str]:
+        was = self.commander.armed
+        result = self.commander.arm()
+        if result[0] == MAV_RESULT_ACCEPTED and not was:
+            self.core.tracker.reset()
+            self.failsafe = ""
+        return result
+
+    @property
+    def events(self) -> list[Event]:
+        return self.commander.events
+
+    @property
+    def armed(self) -> bool:
+        return self.commander.armed
+
+    @property
+    def flight_started(self) -> bool:
+        return self.commander.flight_started
+
+    # ------------------------------------------------------------------ the tick
+
+    def step(self, t_us: int, dt_s: float | None = None) -> StepOutput:
+        """One control period at t_us (flight clock) on the latest state."""
+        cmd = self.commander
+        cmd.clock_us = t_us
+        self.steps += 1
+        if cmd.armed and state_lost(t_us, self.state_rx_us, self.settings):
+            self.failsafe = "state input lost"
+            cmd.say(SEVERITY_CRITICAL, "failsafe: state input lost", FAILSAFE)
+            cmd.disarm(force=True, reason="state input lost: disarmed")
+        state = self.state
+        if state is None or not cmd.armed:
+            out = self.supervisor.gate(False, self.supervisor.zero, tuple(self.core.allocator.tilt))
+            return self._output(out.speed_rad_s, out.tilt_rad, None)
+        ref = cmd.reference(t_us)
+        cmd.last_ref = ref
+        result = self.core.step(state, ref, dt_s)
+        alloc = result.allocation
+        err = math.dist(state.p_enu_m, ref.p_enu_m)
+        finite = all(math.isfinite(v) for v in (*state.p_enu_m, *state.q_enu_flu,
+                                                *state.v_flu_m_s, *state.omega_flu_rad_s))
+        if diverged(err, finite, self.settings.divergence_m):
+            self.failsafe = "diverged"
+            cmd.say(SEVERITY_EMERGENCY, f"failsafe: diverged ({err:.1f} m)", DIVERGED)
+            cmd.disarm(force=True, reason="diverged: disarmed", record_in_air=False)
+            out = self.supervisor.gate(False, alloc.speed_rad_s, alloc.tilt_rad)
+            return self._output(out.speed_rad_s, out.tilt_rad, result)
+        out = self.supervisor.gate(True, alloc.speed_rad_s, alloc.tilt_rad)
+        if out.fault:
+            self.core.allocator.reset(out.tilt_rad)
+            self.failsafe = "non-finite command"
+            cmd.say(SEVERITY_EMERGENCY, "failsafe: non-finite actuator command", FAILSAFE)
+            cmd.disarm(force=True, reason="non-finite command: disarmed")
+            return self._output(out.speed_rad_s, out.tilt_rad, result)
+        if alloc.saturated:
+            self.saturated_steps += 1
+        self._check_saturation(t_us, alloc.saturated)
+        if cmd.land_detector(t_us):
+            cmd.disarm(reason="landed: disarmed")
+            out = self.supervisor.gate(False, out.speed_rad_s, out.tilt_rad)
+        return self._output(out.speed_rad_s, out.tilt_rad, result)
+
+    def _output(self, speeds: tuple[float, ...], tilts: tuple[float, ...],
+                result: StepResult | None) -> StepOutput:
+        self.last_output = StepOutput(max(self.state_time_us, 0), speeds, tilts,
+                                      self.commander.armed, result)
+        return self.last_output
+
+    def _check_saturation(self, t_us: int, saturated: bool) -> None:
+        change = self.saturation.update(t_us, saturated, self.settings)
+        cmd = self.commander
+        if change == "start":
+            self.failsafe = "rotor saturation"
+            if self.settings.saturation_hold and cmd.mode == Mode.MISSION:
+                cmd.failsafe_hold("failsafe: rotors saturated: mission aborted, HOLD")
+            else:
+                cmd.say(SEVERITY_WARNING,
+                        f"rotors saturated for over {self.settings.saturation_s:g} s")
+        elif change == "clear" and self.failsafe == "rotor saturation":
+            self.failsafe = ""
+
+    # ------------------------------------------------------------------ links (wall clock)
+
+    def check_links(self, now_s: float, gcs_seen_s: float = math.inf) -> None:
+        """Offboard stream and GCS heartbeat, on the wall clock (DESIGN.md section 2)."""
+        cmd = self.commander
+        if cmd.armed and cmd.mode == Mode.OFFBOARD and offboard_lost(
+                now_s, cmd.offboard.received_s, cmd.offboard_timeout_s):
+            cmd.failsafe_hold("failsafe: offboard setpoints lost: HOLD")
+        change = self.gcs_link.update(now_s, gcs_seen_s, self.settings)
+        if change == "lost":
+            self.failsafe = "GCS link lost"
+            if cmd.armed and cmd.mode != Mode.LAND:
+                cmd.failsafe_hold("failsafe: GCS link lost: HOLD")
+            else:
+                cmd.say(SEVERITY_CRITICAL, "failsafe: GCS link lost")
+        elif change == "land" and cmd.armed and cmd.mode == Mode.HOLD:
+            cmd.failsafe_land("failsafe: GCS link lost: LAND")
+        elif change == "regained":
+            if self.failsafe == "GCS link lost":
+                self.failsafe = ""
+            cmd.say(SEVERITY_INFO, "GCS link regained")

@@ -1,0 +1,110 @@
+"""The FCU's simulator link: ODOMETRY in (checked and converted to ENU/FLU), stored answers,
+HIL_ACTUATOR_CONTROLS out (DESIGN.md section 3).
+
+Lockstep: a state already answered (same `time_usec`) gets the stored answer again, without
+stepping anything (so loss changes timing, never results); an older state is stale and
+dropped. A state no vehicle can be in (not finite, not a unit quaternion, absurdly far or
+fast) is refused and counted: a stream of them is state loss for the failsafe.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
+from common.links import Link
+from common.simlink import (
+    LOCKSTEP_FLAG,
+    MODE_ARMED,
+    ODOMETRY_ID,
+    ActuatorControls,
+    FrameReader,
+    Odometry,
+    pack_actuator_controls,
+    unpack_odometry,
+)
+from fcu.pipeline import StepOutput
+from fcu.tracker import VehicleState
+
+MAX_POSITION_M = 1e6  # a state farther from the origin is refused as invalid
+MAX_RATE = 1e4  # m/s and rad/s: a state moving faster is refused as invalid
+CONTROLS = 16  # HIL_ACTUATOR_CONTROLS carries 16 floats
+
+
+class StateSample(NamedTuple):
+    stamp_us: int
+    state: VehicleState
+
+
+def state_from_odometry(odo: Odometry) -> VehicleState | None:
+    """ENU/FLU state of an ODOMETRY, or None when no vehicle can be in it."""
+    values = (*odo.p_ned_m, *odo.q_ned_frd, *odo.v_frd_m_s, *odo.omega_frd_rad_s)
+    if not all(math.isfinite(v) for v in values):
+        return None
+    q_norm = math.sqrt(sum(c * c for c in odo.q_ned_frd))
+    if abs(q_norm - 1.0) > 0.01 or max(abs(c) for c in odo.p_ned_m) > MAX_POSITION_M or \
+            max(abs(c) for c in (*odo.v_frd_m_s, *odo.omega_frd_rad_s)) > MAX_RATE:
+        return None
+    return VehicleState(ned_to_enu(odo.p_ned_m), q_ned_frd_to_enu_flu(odo.q_ned_frd),
+                        frd_to_flu(odo.v_frd_m_s), frd_to_flu(odo.omega_frd_rad_s))
+
+
+def actuator_controls(out: StepOutput, w_max: float, lockstep: bool) -> ActuatorControls:
+    """controls[0..n) = speed / w_max, controls[n..2n) = tilt in rad (DESIGN.md 3)."""
+    speeds = tuple(s / w_max for s in out.speed_rad_s)
+    controls = (*speeds, *out.tilt_rad, *(0.0,) * (CONTROLS - 2 * len(speeds)))
+    return ActuatorControls(out.t_us, controls, MODE_ARMED if out.armed else 0,
+                            LOCKSTEP_FLAG if lockstep else 0)
+
+
+class SimBridge:
+    def __init__(self, link: Link, system_id: int, component_id: int, *, lockstep: bool,
+                 w_max: float) -> None:
+        self.link = link
+        self.system_id = system_id
+        self.component_id = component_id
+        self.lockstep = lockstep
+        self.w_max = w_max
+        self.reader = FrameReader(link.is_stream)
+        self.answered_us = -1
+        self.answer = b""
+        self.seq = 0
+        self.resent_answers = 0
+        self.rejected_bytes = 0
+        self.ignored_messages = 0
+
+    def receive(self, peer: object, data: bytes) -> list[StateSample]:
+        """New valid states of our vehicle in a datagram (duplicates answered here)."""
+        frames, rejected = self.reader.feed(peer, data)
+        self.rejected_bytes += rejected
+        out = []
+        for f in frames:
+            if f.msg_id != ODOMETRY_ID:
+                continue  # HIL_SENSOR and others: for estimators to come
+            if f.sysid != self.system_id:
+                self.ignored_messages += 1  # another vehicle's simulator: not our state
+                continue
+            odo = unpack_odometry(f.payload)
+            if self.lockstep and odo.time_usec == self.answered_us:
+                self.link.send(self.answer)  # the same answer, nothing stepped again
+                self.resent_answers += 1
+                continue
+            if self.lockstep and odo.time_usec < self.answered_us:
+                self.ignored_messages += 1  # stale
+                continue
+            state = state_from_odometry(odo)
+            if state is None:
+                self.ignored_messages += 1
+                continue
+            out.append(StateSample(odo.time_usec, state))
+        return out
+
+    def send(self, out: StepOutput) -> None:
+        """Answer the state stamped out.t_us (and remember the answer in lockstep)."""
+        self.seq = (self.seq + 1) & 0xFF
+        self.answer = pack_actuator_controls(actuator_controls(out, self.w_max, self.lockstep),
+                                             self.seq, self.system_id, self.component_id)
+        if self.lockstep:
+            self.answered_us = out.t_us
+        self.link.send(self.answer)
