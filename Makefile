@@ -20,6 +20,7 @@ demo: venv
 	$(VENV)/bin/gcs run config/scenarios/case1_figure8.toml --out $(OUT) --force
 
 test: venv
+	$(PY) -m mypy
 	$(PY) -m pytest -q -n auto tests
 
 test-fast: venv

@@ -143,6 +143,11 @@ def _read_toml(path: Path) -> dict[str, Any]:
 # ----------------------------------------------------------------------------------------
 
 
+# The truth and onboard logs, the actuator packing of the simulator link (six speeds, six
+# tilts) and the telemetry assume a hexarotor; the geometry code itself is general.
+N_ROTORS = 6
+
+
 @dataclass(frozen=True)
 class VehicleConfig:
     """Physical parameters of a tilt-rotor multirotor; body frame FLU, origin at the CoM."""
@@ -173,7 +178,11 @@ def parse_vehicle(data: dict[str, Any], source: str) -> VehicleConfig:
     mass = t.number("mass_kg", lo=0.0, lo_open=True)
     inertia = t.numbers("inertia_diag_kg_m2", 3, lo=0.0, lo_open=True)
     arm = t.number("arm_length_m", lo=0.0, lo_open=True)
-    n = t.integer("n_rotors", lo=1, hi=16)
+    n = t.integer("n_rotors")
+    if n != N_ROTORS:
+        raise ConfigError(
+            f"{source}: key 'n_rotors': expected {N_ROTORS}, got {n!r}: hexarotor only "
+            f"(the logs and the simulator link carry six rotor speeds and six tilts)")
     if t.has("arm_azimuth_deg"):
         azimuth = tuple(math.radians(v) for v in t.numbers("arm_azimuth_deg", n))
     else:
@@ -263,7 +272,7 @@ def check_stability(gains: Gains) -> None:
 
 def parse_gains(data: dict[str, Any], source: str) -> Gains:
     t = _Table(data, source)
-    values = {}
+    values: dict[str, Any] = {}
     for key in GAIN_PARTS:
         default = (0.0, 0.0, 0.0) if key.startswith("ki") else ...
         values[key] = t.numbers(key, 3, default)

@@ -276,10 +276,19 @@ class TcpClientLink(Link):
             self._drop()  # refused, unreachable, timed out: the next attempt is due later
             return
         try:
-            s.getpeername()  # ENOTCONN until the handshake is done
+            peer = s.getpeername()  # ENOTCONN until the handshake is done
         except OSError:
             if time.monotonic() - self._started >= self.connect_timeout_s:
                 self._drop()  # no answer (SYNs dropped): abandon, a new attempt follows
+            return
+        self._established(peer)
+
+    def _established(self, peer: tuple[str, int]) -> None:
+        if peer == self.sock.getsockname():
+            # Connected to itself: with nothing listening on a local port of the ephemeral
+            # range, a connect can pick that very port as its source (TCP simultaneous open)
+            # and would then read back everything it sends.
+            self._drop()
             return
         self.connecting = False
         self.connects += 1
@@ -287,17 +296,31 @@ class TcpClientLink(Link):
     def _start(self, now: float) -> None:
         self._next_try = now + self.retry_s
         self._started = now
-        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        s.setblocking(False)
-        s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        try:
+            s = self._new_socket()
+        except OSError:
+            return  # e.g. out of descriptors: try again later
         err = s.connect_ex(self.address)
         if err == 0:
-            self.sock, self.connecting = s, False
-            self.connects += 1
+            self.sock, self.connecting = s, True
+            try:
+                self._established(s.getpeername())
+            except OSError:
+                self._drop()
         elif err in (errno.EINPROGRESS, errno.EWOULDBLOCK, errno.EALREADY, errno.EINTR):
             self.sock, self.connecting = s, True
         else:
             s.close()  # refused at once (or no route): wait for the next attempt
+
+    def _new_socket(self) -> socket.socket:
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        try:
+            s.setblocking(False)
+            s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        except OSError:
+            s.close()
+            raise
+        return s
 
     def _drop(self) -> None:
         if self.sock is not None:

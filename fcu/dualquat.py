@@ -160,19 +160,19 @@ def dq_from_pose(q: Quat, p_s: Vec3) -> DualQuat:
 
 def dq_position_world(a: DualQuat) -> Vec3:
     """p_s = 2 d q*."""
-    d = q_mul(a[4:], q_conj(a[:4]))  # type: ignore[arg-type]
+    d = q_mul(a[4:], q_conj(a[:4]))
     return (2.0 * d[1], 2.0 * d[2], 2.0 * d[3])
 
 
 def dq_position_body(a: DualQuat) -> Vec3:
     """p_b = 2 q* d."""
-    d = q_mul(q_conj(a[:4]), a[4:])  # type: ignore[arg-type]
+    d = q_mul(q_conj(a[:4]), a[4:])
     return (2.0 * d[1], 2.0 * d[2], 2.0 * d[3])
 
 
 def dq_to_pose(a: DualQuat) -> tuple[Quat, Vec3]:
     """(q, p_s) of a unit dual quaternion."""
-    return a[:4], dq_position_world(a)  # type: ignore[return-value]
+    return a[:4], dq_position_world(a)
 
 
 def dq_log(a: DualQuat) -> DualVec:
@@ -180,7 +180,7 @@ def dq_log(a: DualQuat) -> DualVec:
 
     Shortest path: a negative scalar part selects -q_hat, which is the same pose.
     """
-    r = q_log(a[:4])  # type: ignore[arg-type]
+    r = q_log(a[:4])
     pb = dq_position_body(a)  # invariant under q_hat -> -q_hat
     return (0.5 * r[0], 0.5 * r[1], 0.5 * r[2], 0.5 * pb[0], 0.5 * pb[1], 0.5 * pb[2])
 
@@ -199,8 +199,8 @@ def dq_ad(a: DualQuat, v: DualVec) -> DualVec:
     With q_hat = q + eps 1/2 p_s q: Ad (w + eps u) = R w + eps (R u + p_s x R w).
     """
     q = a[:4]
-    rw = q_rotate(q, v[:3])  # type: ignore[arg-type]
-    ru = q_rotate(q, v[3:])  # type: ignore[arg-type]
+    rw = q_rotate(q, v[:3])
+    ru = q_rotate(q, v[3:])
     ps = dq_position_world(a)
     c = cross(ps, rw)
     return (rw[0], rw[1], rw[2], ru[0] + c[0], ru[1] + c[1], ru[2] + c[2])
@@ -208,9 +208,9 @@ def dq_ad(a: DualQuat, v: DualVec) -> DualVec:
 
 def dual_cross(a: DualVec, b: DualVec) -> DualVec:
     """a x b = a_r x b_r + eps (a_r x b_d + a_d x b_r)."""
-    r = cross(a[:3], b[:3])  # type: ignore[arg-type]
-    d1 = cross(a[:3], b[3:])  # type: ignore[arg-type]
-    d2 = cross(a[3:], b[:3])  # type: ignore[arg-type]
+    r = cross(a[:3], b[:3])
+    d1 = cross(a[:3], b[3:])
+    d2 = cross(a[3:], b[:3])
     return (r[0], r[1], r[2], d1[0] + d2[0], d1[1] + d2[1], d1[2] + d2[2])
 
 

@@ -66,9 +66,13 @@ class Path(Protocol):
     def instants(self) -> np.ndarray: ...
 
 
+_MOVE_INSTANTS = np.concatenate([np.linspace(0.0, 1.0, MOVE_SAMPLES), _QUINTIC_PEAKS])
+_MOVE_INSTANTS.flags.writeable = False
+
+
 def move_instants() -> np.ndarray:
-    """Normalised check instants of a quintic move (module docstring)."""
-    return np.concatenate([np.linspace(0.0, 1.0, MOVE_SAMPLES), _QUINTIC_PEAKS])
+    """Normalised check instants of a quintic move (module docstring; read-only)."""
+    return _MOVE_INSTANTS
 
 
 def figure_instants(axis_norm: float, phase_instants: Any) -> np.ndarray:
@@ -127,9 +131,13 @@ class Envelope:
 
     def omega_sq(self, ref: Reference) -> np.ndarray:
         """Omega = A^+ [f_b; tau_b] per sample (samples x 2n); a float reference is 1 sample."""
-        force, torque = nominal_wrench(self.vehicle, ref)
-        parts = np.broadcast_arrays(*(np.asarray(c, float) for c in (*force, *torque)))
-        wrench = np.stack([np.atleast_1d(c) for c in parts], axis=1)
+        return self._allocate(*nominal_wrench(self.vehicle, ref))
+
+    def _allocate(self, force: Any, torque: Any) -> np.ndarray:
+        parts = (*force, *torque)
+        wrench = np.empty((max(np.size(c) for c in parts), 6))
+        for k, c in enumerate(parts):
+            wrench[:, k] = c
         return wrench @ self.pinv_t
 
     def speeds(self, ref: Reference) -> np.ndarray:
@@ -144,8 +152,9 @@ class Envelope:
     def scaling(self, segment: Path) -> TimeScaling:
         """Rotor speeds along `segment`'s path as a function of the time it is flown in."""
         unit = segment.path(segment.instants())
-        om0 = self.omega_sq(_hover(unit))
-        return TimeScaling(om0, self.omega_sq(unit) - om0, self.limit)
+        om = self.omega_sq(unit)
+        om0 = np.broadcast_to(self.omega_sq(_hover(unit)), om.shape)  # a fixed attitude: 1 row
+        return TimeScaling(om0, om - om0, self.limit)
 
     def describe(self, speed_rad_s: float) -> str:
         return (f"needs {speed_rad_s:.0f} rad/s > {self.limit:.0f} "
@@ -157,6 +166,7 @@ class TimeScaling:
 
     def __init__(self, om0: np.ndarray, om1: np.ndarray, limit: float) -> None:
         self.om0, self.om1, self.limit = om0, om1, limit
+        self._shortest: float | None = None
 
     def speeds(self, duration: float) -> np.ndarray:
         u = 1.0 / (duration * duration) if duration > 0.0 else math.inf
@@ -175,6 +185,11 @@ class TimeScaling:
         every sampled rotor speed within the limit (slightly above the exact bound, by
         `STRETCH_GUARD`); 0 when any duration does, inf when none does (hovering at some
         attitude of the path already exceeds the limit)."""
+        if self._shortest is None:
+            self._shortest = self._bound()
+        return self._shortest
+
+    def _bound(self) -> float:
         lat0, ver0 = self.om0[:, 0::2], self.om0[:, 1::2]
         lat1, ver1 = self.om1[:, 0::2], self.om1[:, 1::2]
         # w^4 = a u^2 + b u + (c + L^4) with u = 1 / D^2 >= 0.
@@ -183,16 +198,20 @@ class TimeScaling:
         c = lat0 * lat0 + ver0 * ver0 - self.limit ** 4
         if np.any(c > 0.0):
             return math.inf
-        # c <= 0: w^4 <= L^4 on [0, u_hi], u_hi the larger root (stable forms, no cancellation).
+        # c <= 0: w^4 <= L^4 on [0, u_hi], u_hi the larger root, unbounded where nothing
+        # moves (a = 0), in the form without cancellation: (sq - b) / 2a = -2c / (b + sq).
+        bound = a > 0.0
+        if not np.any(bound):
+            return 0.0
+        a, b, c = a[bound], b[bound], c[bound]
         sq = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u_hi = np.where(b < 0.0, (sq - b) / (2.0 * a), (2.0 * c) / (-b - sq))
-        u_hi = np.where(a > 0.0, np.nan_to_num(u_hi, nan=0.0, posinf=math.inf), math.inf)
-        u_max = float(np.min(u_hi))
+        num = np.where(b < 0.0, sq - b, -2.0 * c)
+        den = np.where(b < 0.0, 2.0 * a, b + sq)
+        if np.any(den <= 0.0):  # b = c = 0: at the limit in hover, any motion exceeds it
+            return math.inf
+        u_max = float(np.min(num / den))
         if u_max <= 0.0:
             return math.inf
-        if math.isinf(u_max):
-            return 0.0
         return (1.0 + STRETCH_GUARD) / math.sqrt(u_max)
 
 

@@ -287,16 +287,27 @@ def _hold(p: Vec3, q: Quat) -> Reference:
 
 
 class _Segment:
-    """Base: planned start/end time, start and end pose."""
+    """Base: planned start/end time, start and end pose; `duration` is the part that moves
+    (the rest, if any, holds the end pose)."""
 
     seq: int
     t0: float
     t1: float
+    duration: float
     p_end: Vec3
     q_end: Quat
     end_ref: Reference
+    scaling: TimeScaling | None = None  # set where the envelope has been evaluated
 
     def sample(self, tau: float) -> Reference:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def path(self, sigma: np.ndarray) -> Reference:  # pragma: no cover - overridden
+        """The moving part flown in 1 s, at normalised times sigma (arrays)."""
+        raise NotImplementedError
+
+    def instants(self) -> np.ndarray:  # pragma: no cover - overridden
+        """Normalised times at which the envelope is checked."""
         raise NotImplementedError
 
 
@@ -307,17 +318,17 @@ class _Move(_Segment):
                  travel: float, hold: float) -> None:
         self.seq, self.t0 = seq, t0
         self.p0, self.dp, self.q0, self.phi = p0, dp, q0, phi
-        self.travel = travel
+        self.travel = self.duration = travel
+        self.hold = hold
         self.t1 = t0 + travel + hold
         self.p_end = (p0[0] + dp[0], p0[1] + dp[1], p0[2] + dp[2])
         self.q_end = q0 if phi is None else q_mul(q0, q_exp(phi))
         self.end_ref = _hold(self.p_end, self.q_end)
 
-    def sample(self, tau: float) -> Reference:
-        d = self.travel
-        if tau >= d:
-            return self.end_ref
-        s, ds, dds = quintic(tau / d)
+    def retimed(self, travel: float) -> _Move:
+        return _Move(self.seq, self.t0, self.p0, self.dp, self.q0, self.phi, travel, self.hold)
+
+    def _at(self, s, ds, dds, d: float, many: bool = False) -> Reference:  # type: ignore[no-untyped-def]
         p0, dp = self.p0, self.dp
         p = (p0[0] + s * dp[0], p0[1] + s * dp[1], p0[2] + s * dp[2])
         # Same association as FigureEight's rise: h * s' / T, h * s'' / (T T).
@@ -328,59 +339,53 @@ class _Move(_Segment):
         if phi is None:
             return Reference(p, self.q0, v, a, _ZERO, _ZERO)
         # q = q0 exp(s phi): body rate s' phi (phi commutes with exp(s phi)), derivative s'' phi.
-        q = q_mul(self.q0, q_exp((s * phi[0], s * phi[1], s * phi[2])))
+        rot = (s * phi[0], s * phi[1], s * phi[2])
+        q = q_mul(self.q0, q_exp_many(*rot) if many else q_exp(rot))
         w = (phi[0] * ds / d, phi[1] * ds / d, phi[2] * ds / d)
         wd = (phi[0] * dds / d2, phi[1] * dds / d2, phi[2] * dds / d2)
         return Reference(p, q, v, a, w, wd)
 
+    def sample(self, tau: float) -> Reference:
+        d = self.travel
+        if tau >= d:
+            return self.end_ref
+        return self._at(*quintic(tau / d), d)
+
+    def path(self, sigma: np.ndarray) -> Reference:
+        return self._at(*quintic_poly(sigma), 1.0, many=True)
+
+    def instants(self) -> np.ndarray:
+        return move_instants()
+
+    @property
+    def moves(self) -> bool:
+        return self.travel > 0.0 and (self.phi is not None or any(self.dp))
+
 
 class _Figure(_Segment):
-    """Figure-infinity from (p0, q0): p = p0 + A [sin 2T, sin T, 1 - cos 2T] (ENU),
-    q = exp(T n) q0 with T = pi (1 - cos(pi tau / D)), held at T = 2 pi after D."""
+    """The figure-infinity (`fcu.trajectory.FigureInfinity`) from (p0, q0), t0 on."""
 
     def __init__(self, seq: int, t0: float, p0: Vec3, q0: Quat, amp: float, duration: float,
                  axis_enu: Vec3) -> None:
         self.seq, self.t0 = seq, t0
-        self.p0, self.q0, self.amp, self.duration, self.n = p0, q0, amp, duration, axis_enu
+        self.figure = FigureInfinity(amp, duration, axis_enu, p0, q0)
+        self.duration = duration
         self.t1 = t0 + duration
-        end = self._at(2.0 * math.pi, 0.0, 0.0)
-        self.p_end, self.q_end = end.p_enu_m, end.q_enu_flu
-        self.end_ref = _hold(self.p_end, self.q_end)
+        self.end_ref = self.figure.end
+        self.p_end, self.q_end = self.end_ref.p_enu_m, self.end_ref.q_enu_flu
 
     def phase(self, tau: float) -> tuple[float, float, float]:
-        """T, T', T'' (as FigureEight.phase, with tau = t - t1)."""
-        if tau <= 0.0:
-            return 0.0, 0.0, 0.0
-        if tau >= self.duration:
-            return 2.0 * math.pi, 0.0, 0.0
-        k = math.pi / self.duration
-        x = k * tau
-        return (math.pi * (1.0 - math.cos(x)), math.pi * k * math.sin(x),
-                math.pi * k * k * math.cos(x))
-
-    def _at(self, T: float, dT: float, ddT: float) -> Reference:
-        x0, y0, z0 = self.p0
-        a = self.amp
-        s1, c1, s2, c2 = math.sin(T), math.cos(T), math.sin(2.0 * T), math.cos(2.0 * T)
-        p = (x0 + a * s2, y0 + a * s1, z0 + a * (1.0 - c2))
-        dp_dT = (2.0 * a * c2, a * c1, 2.0 * a * s2)
-        d2p_dT2 = (-4.0 * a * s2, -a * s1, 4.0 * a * c2)
-        v = (dp_dT[0] * dT, dp_dT[1] * dT, dp_dT[2] * dT)
-        acc = (d2p_dT2[0] * dT * dT + dp_dT[0] * ddT,
-               d2p_dT2[1] * dT * dT + dp_dT[1] * ddT,
-               d2p_dT2[2] * dT * dT + dp_dT[2] * ddT)
-        n = self.n
-        q = q_mul(q_exp((T * n[0], T * n[1], T * n[2])), self.q0)
-        # Rotation about a fixed world axis: world rate T' n, body rate R(q)^T T' n, and
-        # R(q)^T n = R(q0)^T n because exp(T n) leaves n fixed.
-        w = q_rotate_inv(self.q0, (dT * n[0], dT * n[1], dT * n[2]))
-        wd = q_rotate_inv(self.q0, (ddT * n[0], ddT * n[1], ddT * n[2]))
-        return Reference(p, q, v, acc, w, wd)
+        return self.figure.phase(tau)
 
     def sample(self, tau: float) -> Reference:
-        if tau >= self.duration:
-            return self.end_ref
-        return self._at(*self.phase(tau))
+        return self.figure.sample(tau)
+
+    def path(self, sigma: np.ndarray) -> Reference:
+        return FigureInfinity(self.figure.amp, 1.0, self.figure.n, self.figure.p0,
+                              self.figure.q0).path(sigma)
+
+    def instants(self) -> np.ndarray:
+        return figure_instants(norm3(self.figure.n), self.figure.phase_instants)
 
 
 def _sub(a: Vec3, b: Vec3) -> Vec3:
@@ -393,6 +398,47 @@ def _turn(q0: Quat, yaw_deg: float) -> Vec3 | None:
         return None
     phi = q_log(q_mul(q_conj(q0), level_attitude(yaw_deg)))
     return phi if norm3(phi) > 0.0 else None
+
+
+def _stretched(seg: _Move, vehicle: VehicleConfig | None) -> _Move:
+    """A speed-timed move, its travel lengthened to the shortest flyable time if it is
+    shorter (`fcu.feasibility.TimeScaling.shortest`); as it is without a vehicle, when it does
+    not move, or when no duration helps."""
+    if vehicle is None or not seg.moves:
+        return seg
+    scaling = envelope(vehicle).scaling(seg)
+    shortest = scaling.shortest()
+    if math.isfinite(shortest) and shortest > seg.travel:
+        seg = seg.retimed(shortest)
+    seg.scaling = scaling
+    return seg
+
+
+# The parameter that gives the duration of user-timed items.
+_TIME_SLOT = {MAV_CMD_POSE_KEYFRAME: "p1", MAV_CMD_FIGURE_EIGHT: "p2", MAV_CMD_NAV_TAKEOFF: "p2"}
+
+
+def _envelope_reason(item: MissionItem, seg: _Segment, limits: MissionLimits) -> str:
+    """'' when the vehicle can fly the planned segment, else why not (for a person)."""
+    if limits.vehicle is None or seg.duration <= 0.0 or (isinstance(seg, _Move)
+                                                          and not seg.moves):
+        return ""
+    env = envelope(limits.vehicle)
+    scaling = seg.scaling if seg.scaling is not None else env.scaling(seg)
+    shortest = scaling.shortest()
+    if seg.duration >= shortest:  # this and any longer duration fit
+        return ""
+    peak = scaling.peak(seg.duration)
+    if peak.speed_rad_s <= env.limit:
+        return ""
+    slot = _TIME_SLOT.get(item.command)
+    if item.command == MAV_CMD_NAV_TAKEOFF and not item.param2 > 0.0:
+        slot = None  # timed by the takeoff speed
+    if slot is None or not math.isfinite(shortest):
+        hint = "no duration helps (attitude)"
+    else:
+        hint = f"lengthen {slot} to {math.ceil(shortest * 100.0) / 100.0:.2f} s"
+    return f"item {item.seq}: {env.describe(peak.speed_rad_s)}: {hint}"
 
 
 def _plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
@@ -413,22 +459,26 @@ def _plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
             travel = max(travel, angle / turn_rate)
         return dp, phi, travel
 
+    def move(dp: Vec3, phi: Vec3 | None, travel: float, hold: float) -> _Move:
+        """A speed-timed move, stretched to what the vehicle can fly."""
+        return _stretched(_Move(item.seq, t0, p0, dp, q0, phi, travel, hold), limits.vehicle)
+
     if cmd == MAV_CMD_NAV_TAKEOFF:
         dp = (0.0, 0.0, -item.z - p0[2])
         phi = _turn(q0, item.param4)
         if item.param2 > 0.0:
             return _Move(item.seq, t0, p0, dp, q0, phi, item.param2, 0.0)
         dp, phi, travel = speed_timed(dp, limits.takeoff_speed_m_s, phi)
-        return _Move(item.seq, t0, p0, dp, q0, phi, travel, 0.0)
+        return move(dp, phi, travel, 0.0)
     if cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME):
         target = ned_to_enu((item.x_m, item.y_m, item.z))
         phi = _turn(q0, item.param4) if cmd == MAV_CMD_NAV_WAYPOINT else None
         dp, phi, travel = speed_timed(_sub(target, p0), limits.cruise_speed_m_s, phi)
-        return _Move(item.seq, t0, p0, dp, q0, phi, travel, item.param1)
+        return move(dp, phi, travel, item.param1)
     if cmd == MAV_CMD_NAV_LAND:
         dp, phi, travel = speed_timed((0.0, 0.0, -p0[2]), limits.land_speed_m_s,
                                       _turn(q0, item.param4))
-        return _Move(item.seq, t0, p0, dp, q0, phi, travel, 0.0)
+        return move(dp, phi, travel, 0.0)
     if cmd == MAV_CMD_POSE_KEYFRAME:
         target = ned_to_enu((item.x_m, item.y_m, item.z))
         q1 = q_ned_frd_to_enu_flu(q_exp((item.param2, item.param3, item.param4)))
@@ -450,9 +500,11 @@ class MissionExecutor:
     """Plans a mission on a fixed timeline and samples its reference.
 
     `start` (or `set_current`) plans every remaining item at once: item k starts at the
-    end time of item k - 1, from its desired end pose. An item is active on [start, end);
-    zero-length items are passed through (their events still come). Before the start the
-    reference holds the start pose, after the end the final pose.
+    end time of item k - 1, from its desired end pose; with `limits.vehicle`, speed-timed
+    items are stretched as in validation (module docstring). An item is active on
+    [start, end), so at a boundary the sample is the next item's at tau = 0 (the right-hand
+    limit); zero-length items are passed through (their events still come). Before the start
+    the reference holds the start pose, after the end the final pose.
     """
 
     def __init__(self, items: Sequence[MissionItem], limits: MissionLimits) -> None:
@@ -462,7 +514,7 @@ class MissionExecutor:
             raise ValueError("empty mission")
         # The geofence and the item count are the uploader's business (the vehicle may have
         # tightened its limits since); what cannot be flown is refused here.
-        result, seq = _check_items(self.items, limits, geofence=False)
+        result, seq, _ = _check_items(self.items, limits, geofence=False)
         if result != MAV_MISSION_ACCEPTED:
             raise ValueError(f"mission item {seq}: not executable (MAV_MISSION_RESULT {result})")
         self._segments: list[_Segment] = []

@@ -96,10 +96,10 @@ class DualQuaternionTracker:
         self.inertia = vehicle.inertia_diag_kg_m2
         self.gravity = vehicle.gravity_m_s2
         self.gains = gains
-        self.integral: DualVec = (0.0,) * 6  # type: ignore[assignment]
+        self.integral: DualVec = (0.0,) * 6
 
     def reset(self) -> None:
-        self.integral = (0.0,) * 6  # type: ignore[assignment]
+        self.integral = (0.0,) * 6
 
     def set_gains(self, gains: Gains) -> None:
         self.gains = gains

@@ -12,8 +12,8 @@ a rate-limited tilt servo, tilt(t) = a0 + clamp(c - a0, -rate t, rate t). The wr
 evaluated on that exact actuator trajectory at the RK4 stage times. A servo that reaches its
 command inside a step puts a kink in the trajectory at t = |c - a0| / rate; the step is then
 split at every such instant and integrated piecewise, so that no RK4 step straddles a kink and
-the actuator trajectory stays exact. `ideal_actuators` makes both follow their commands instantly (the speed
-limits stay: they are physical).
+the actuator trajectory stays exact. `ideal_actuators` makes both follow their commands
+instantly (the speed limits stay: they are physical).
 
 Ground (z = 0): a resting vehicle stays put while the net vertical force does not lift it;
 a vehicle reaching z < 0 stops there (inelastic contact, velocities zeroed).
@@ -108,7 +108,7 @@ class Plant:
         self._decay_up, self._decay_down = math.exp(-h / self.tau_up), math.exp(-h / self.tau_down)
         self._decay_half_up = math.exp(-0.5 * h / self.tau_up)
         self._decay_half_down = math.exp(-0.5 * h / self.tau_down)
-        self._last_key: tuple | None = None
+        self._last_key: tuple[tuple[float, ...], tuple[float, ...]] | None = None
         self._last_wrench: tuple[float, ...] = (0.0,) * 6
 
     # ------------------------------------------------------------------ actuators
@@ -124,7 +124,8 @@ class Plant:
         return (self._rotor_lag(speed0, cmd.rotor_speed_rad_s, decay_up, decay_down),
                 self._tilt_servo(tilt0, cmd.tilt_rad, self.tilt_rate * tau_s))
 
-    def _rotor_lag(self, speed0, cmd, decay_up: float, decay_down: float) -> list[float]:
+    def _rotor_lag(self, speed0: Sequence[float], cmd: Sequence[float], decay_up: float,
+                   decay_down: float) -> list[float]:
         """First-order lag towards the command clamped to [0, w_max], exact over the hold."""
         w_max = self.w_max
         out = []
@@ -165,8 +166,8 @@ class Plant:
                         kinks.append(t_k)
         return out
 
-    def rotor_wrench(self, speeds: list[float] | tuple[float, ...],
-                     tilts: list[float] | tuple[float, ...]) -> tuple[Vec3, Vec3]:
+    def rotor_wrench(self, speeds: Sequence[float],
+                     tilts: Sequence[float]) -> tuple[Vec3, Vec3]:
         """Sum over rotors of thrust and torque (arm moment plus drag), in FLU."""
         fx = fy = fz = tx = ty = tz = 0.0
         for (fvx, fvy, fvz, flx, fly, flz, tvx, tvy, tvz, tlx, tly, tlz), w, a in zip(
@@ -277,7 +278,8 @@ class Plant:
         k3 = derivative(_axpy(x, hh, k2), wm)
         k4 = derivative(_axpy(x, h, k3), wb)
         h6 = h / 6.0
-        return [a + h6 * (b + 2.0 * (c + d) + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
+        return [a + h6 * (b + 2.0 * (c + d) + e)
+                for a, b, c, d, e in zip(x, k1, k2, k3, k4, strict=True)]
 
     def _wrench_after(self, s: PlantState, cmd: ActuatorCommand,
                       tau_s: float) -> tuple[float, ...]:

@@ -182,6 +182,39 @@ def test_vehicle_broken_refused(tree, old, new, needles):
     refused(load_vehicle, path, *needles, str(path))
 
 
+@pytest.mark.parametrize("n", [4, 8, 1, 16, 0, -6, 7])
+def test_vehicle_other_than_hexarotor_refused(tree, n):
+    """Given a vehicle file consistent for n != 6 rotors, when loaded, then it is refused:
+    the logs and the simulator link carry six rotors and six tilts."""
+    path = tree / "vehicles/hexa_tilted.toml"
+    lines = []
+    for line in path.read_text().splitlines():
+        key = line.split("=")[0].strip()
+        if key == "n_rotors":
+            line = f"n_rotors = {n}"
+        elif key == "arm_azimuth_deg":
+            continue  # the default spacing of n arms
+        elif key == "arm_elevation_rad":
+            line = f"arm_elevation_rad = {[0.6154 * (-1) ** i for i in range(max(n, 0))]}"
+        elif key == "spin":
+            line = f"spin = {[(-1) ** i for i in range(max(n, 0))]}"
+        lines.append(line)
+    path.write_text("\n".join(lines) + "\n")
+    msg = refused(load_vehicle, path, "key 'n_rotors'", "expected 6", f"got {n}", "hexarotor",
+                  str(path))
+    assert "six rotor speeds and six tilts" in msg
+
+
+def test_vehicle_hexarotor_with_default_azimuths_loads(tree):
+    """Given n_rotors = 6 without arm_azimuth_deg, when loaded, then gamma_i = pi/3 i - pi/6."""
+    path = edit(tree / "vehicles/hexa_tilted.toml",
+                "arm_azimuth_deg = [30.0, 90.0, 150.0, 210.0, 270.0, 330.0]", "")
+    v = load_vehicle(path)
+    assert v.n_rotors == 6
+    assert v.arm_azimuth_rad == pytest.approx(
+        [math.pi / 3 * i - math.pi / 6 for i in range(1, 7)], abs=1e-15)
+
+
 def test_unreadable_files_refused(tmp_path):
     """Given a missing or non-TOML file, when loaded, then ConfigError names the file."""
     missing = tmp_path / "nope.toml"

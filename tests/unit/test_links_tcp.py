@@ -281,6 +281,28 @@ def test_closed_link_does_not_reconnect():
         server.close()
 
 
+def test_a_connection_to_itself_is_dropped():
+    """With nothing listening on a local port, a connect whose source port happens to be
+    that port connects to itself (TCP simultaneous open) and would read back its own
+    frames; here the source port is forced to make it happen every time."""
+    port = _closed_port()
+
+    class SelfConnecting(TcpClientLink):
+        def _new_socket(self):
+            s = super()._new_socket()
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            s.bind(("127.0.0.1", port))
+            return s
+
+    link = SelfConnecting(parse_url(f"tcp:127.0.0.1:{port}"))
+    try:
+        _loop_until(link, lambda: False, 0.3)
+        link.send(b"echo?")
+        assert link.recv() == [] and not link.connected and link.connects == 0
+    finally:
+        link.close()
+
+
 def test_bad_tcp_urls_are_link_errors():
     with pytest.raises(LinkError):
         open_link("tcp:127.0.0.1:99999")

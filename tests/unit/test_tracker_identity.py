@@ -19,7 +19,6 @@ holds to the finite-difference error.
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +35,7 @@ H = 1e-4  # finite-difference step, s
 SAMPLES = 60  # random states per case
 
 # The shipped Case I figure (120 s) and a ten times faster one: |omega_d| up to ~3.1 rad/s,
-# |v_d| up to ~8 m/s. Sample times stay clear of the kinks of T'' at the figure's ends.
+# |v_d| up to ~9 m/s. Sample times stay clear of the kinks of T'' at the figure's ends.
 FIGURES = {
     "case1": (TrajectoryConfig(kind="case1_figure8"), (20.5, 139.5)),
     "fast": (TrajectoryConfig(kind="case1_figure8", figure_start_s=20.0, figure_end_s=32.0),

@@ -1,0 +1,250 @@
+"""The FCU's ground-station dispatch as one error boundary (fcu/gcs_server.py).
+
+Property: every message type the server handles, with arbitrary field values (NaN, +-inf,
+0, the extremes of each integer type, huge floats), reaches no internal error, and every
+answer packs and parses back. Sequences: what one message sets, the next one reads.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from common.config import load_gains, load_vehicle
+from common.links import Link, LinkUrl
+from common.mavlink import MAV, encoder, pack, parser
+from fcu.gcs_server import COMPONENT, GcsServer
+from fcu.mission_protocol import MissionServer
+from fcu.params import ParamStore, apply_params
+from fcu.pipeline import Pipeline
+from fcu.telemetry import LINK_BUDGET_MSG_S, MAX_INTERVAL_US, Home
+from fcu.tracker import VehicleState
+
+M = MAV
+ROOT = Path(__file__).resolve().parents[2]
+HANDLED = ("HEARTBEAT", "COMMAND_LONG", "COMMAND_INT", "MISSION_COUNT", "MISSION_ITEM_INT",
+           "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_REQUEST_LIST",
+           "MISSION_CLEAR_ALL", "MISSION_ACK", "MISSION_SET_CURRENT",
+           "MISSION_WRITE_PARTIAL_LIST", "MISSION_REQUEST_PARTIAL_LIST",
+           "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
+           "SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET", "SET_MODE")
+COMMANDS = (M.MAV_CMD_COMPONENT_ARM_DISARM, M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_MISSION_START,
+            M.MAV_CMD_DO_SET_MISSION_CURRENT, M.MAV_CMD_NAV_LAND,
+            M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAV_CMD_GET_MESSAGE_INTERVAL,
+            M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 0, 65535)
+
+
+class MemoryLink(Link):
+    """A datagram link that keeps what is sent."""
+
+    def __init__(self) -> None:
+        self.url = LinkUrl("udpin", "127.0.0.1", 0, text="memory")
+        self.sent: list[bytes] = []
+
+    def fileno(self) -> int:
+        return -1
+
+    def recv(self) -> list[tuple[object, bytes]]:
+        return []
+
+    def send(self, data: bytes) -> None:
+        self.sent.append(data)
+
+    def close(self) -> None:
+        pass
+
+
+def make_server(n_links: int = 2) -> tuple[GcsServer, list[MemoryLink]]:
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    gains = load_gains(ROOT / "config/gains/pid_eq30.toml")
+    pipeline = Pipeline(vehicle, gains, 500)
+    store = ParamStore(gains)
+    missions = MissionServer(1, COMPONENT, apply_params(store, pipeline))
+    missions.on_mission_changed = lambda items: pipeline.commander.set_mission(tuple(items))
+    links = [MemoryLink() for _ in range(n_links)]
+    server = GcsServer(list(links), pipeline, store, missions, system_id=1, home=Home(),
+                       on_params=lambda: setattr(missions, "limits",
+                                                 apply_params(store, pipeline)))
+    missions.on_set_current = server.set_mission_current
+    pipeline.on_state(0, VehicleState((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0),
+                                      (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), 0)
+    return server, links
+
+
+def parsed(link: MemoryLink) -> list:
+    """Every frame sent on the link, parsed; a frame that does not parse fails the test."""
+    p = parser()
+    out = []
+    for data in link.sent:
+        msgs = p.parse_buffer(data) or []
+        assert len(msgs) == 1 and msgs[0].get_type() != "BAD_DATA", data
+        out.extend(msgs)
+    link.sent.clear()
+    return out
+
+
+_INT_RANGES = {"int8_t": (-2**7, 2**7 - 1), "uint8_t": (0, 2**8 - 1),
+               "int16_t": (-2**15, 2**15 - 1), "uint16_t": (0, 2**16 - 1),
+               "int32_t": (-2**31, 2**31 - 1), "uint32_t": (0, 2**32 - 1),
+               "int64_t": (-2**63, 2**63 - 1), "uint64_t": (0, 2**64 - 1)}
+_FLOATS = st.one_of(st.sampled_from([0.0, -0.0, math.nan, math.inf, -math.inf, 1e38, -1e38,
+                                     3.4e38, 2**31, 2**31 + 5.0, -1.0, 1.0, 0.5, 1e-45]),
+                    st.floats(width=32, allow_nan=True, allow_infinity=True))
+
+
+def _field(ftype: str, length: int, name: str) -> st.SearchStrategy:
+    if ftype == "char":
+        return st.binary(max_size=length)
+    if ftype in ("float", "double"):
+        one = _FLOATS
+    else:
+        lo, hi = _INT_RANGES[ftype]
+        one = st.one_of(st.sampled_from([lo, hi, 0, 1, lo + 1, hi - 1]), st.integers(lo, hi))
+        if name == "command":
+            one = st.one_of(st.sampled_from(COMMANDS), one)
+        if name in ("target_system",):
+            one = st.sampled_from([0, 1, 2, 255])
+    return st.lists(one, min_size=length, max_size=length) if length else one
+
+
+def message(kind: str) -> st.SearchStrategy:
+    cls = getattr(M, f"MAVLink_{kind.lower()}_message")
+    parts = [_field(t, n, name) for name, t, n in zip(cls.fieldnames, cls.fieldtypes,
+                                                       cls.array_lengths, strict=True)]
+    return st.tuples(*parts).map(lambda values: cls(*values))
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.sampled_from(HANDLED).flatmap(message),
+                          st.integers(0, 1)), min_size=1, max_size=6))
+def test_any_field_values_in_any_sequence(sequence):
+    """Given any sequence of handled messages with any field values, on two links, then no
+    exception reaches the boundary and every answer packs and parses (also telemetry)."""
+    server, links = make_server()
+    for msg, index in sequence:
+        # Round-trip through the wire where the values can travel: what a peer can send.
+        try:
+            data = pack(encoder(255, 190), msg)
+        except Exception:
+            continue  # a value the wire cannot carry never reaches the FCU
+        p = parser()
+        for wire_msg in p.parse_buffer(data) or []:
+            server.handle(index, wire_msg, now_s=1.0)
+        server.tick(2.0)
+        server.tick(3.5)
+    assert server.internal_errors == 0
+    assert server.unsendable == 0
+    for link in links:
+        parsed(link)
+
+
+_IDS = st.sampled_from([float(i) for i in (0, 1, 31, 32, 245, 512, 2**24, -1)])
+_INTERVALS = st.sampled_from([2.0**31 + 5, 2.0**32, 2.0**31 - 1, 1.0, -1.0, 0.0, -2.0, 1e9,
+                              0.4, math.nan])
+_SEQUENCE_COMMANDS = (M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAV_CMD_GET_MESSAGE_INTERVAL) * 3 + \
+    COMMANDS[:9]
+_COMMAND = st.tuples(st.sampled_from(_SEQUENCE_COMMANDS), st.one_of(_IDS, _IDS, _FLOATS),
+                     st.one_of(_INTERVALS, _INTERVALS, _FLOATS), _FLOATS, st.integers(0, 1))
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.lists(_COMMAND, min_size=2, max_size=12))
+def test_command_sequences_on_two_links(sequence):
+    """Given sequences of commands (set then get, request then stream, interval changes on
+    one link while the other listens), then nothing reaches the boundary, every answer
+    packs, and a link that did not turn its own HEARTBEAT off keeps hearing it."""
+    server, links = make_server()
+    silenced = [False, False]
+    for k, (command, p1, p2, p3, index) in enumerate(sequence):
+        _command(server, index, command, p1, p2, p3)
+        if command == M.MAV_CMD_SET_MESSAGE_INTERVAL and p1 == 0.0 and p2 == -1.0:
+            silenced[index] = True
+        elif command == M.MAV_CMD_SET_MESSAGE_INTERVAL and p1 == 0.0 and \
+                p2 in (0.0, 1.0, 0.4, 1e9, 2.0**31 - 1):
+            silenced[index] = False
+        server.tick(10.0 + k)
+    for k in range(3):
+        server.tick(100.0 + 2 * k)
+    assert server.internal_errors == 0 and server.unsendable == 0
+    for index, link in enumerate(links):
+        kinds = [m.get_type() for m in parsed(link)]
+        if not silenced[index]:
+            assert "HEARTBEAT" in kinds
+
+
+def _command(server: GcsServer, index: int, command: int, *params: float) -> None:
+    p = [*params, *(0.0,) * (7 - len(params))]
+    server.handle(index, M.MAVLink_command_long_message(1, 1, command, 0, *p), now_s=1.0)
+
+
+def _acks_and_texts(link: MemoryLink) -> tuple[list[int], list[str]]:
+    msgs = parsed(link)
+    return ([m.result for m in msgs if m.get_type() == "COMMAND_ACK"],
+            [m.text for m in msgs if m.get_type() == "STATUSTEXT"])
+
+
+def test_interval_beyond_int32_is_refused_and_get_answers():
+    """Given SET_MESSAGE_INTERVAL above 2^31-1 us then GET (the sequence that ended the
+    process), then the set is DENIED with a reason and the get answers the interval in force."""
+    server, links = make_server()
+    att = M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION
+    _command(server, 0, M.MAV_CMD_SET_MESSAGE_INTERVAL, att, 2**31 + 100)
+    acks, texts = _acks_and_texts(links[0])
+    assert acks == [M.MAV_RESULT_DENIED] and any("interval" in t for t in texts)
+    _command(server, 0, M.MAV_CMD_GET_MESSAGE_INTERVAL, att)
+    msgs = parsed(links[0])
+    interval = [m for m in msgs if m.get_type() == "MESSAGE_INTERVAL"]
+    assert interval and interval[0].interval_us == 20_000
+    _command(server, 0, M.MAV_CMD_SET_MESSAGE_INTERVAL, att, MAX_INTERVAL_US)
+    _command(server, 0, M.MAV_CMD_GET_MESSAGE_INTERVAL, att)
+    interval = [m for m in parsed(links[0]) if m.get_type() == "MESSAGE_INTERVAL"]
+    assert interval[0].interval_us == MAX_INTERVAL_US
+    assert server.internal_errors == 0
+
+
+def test_a_link_silences_only_itself():
+    """Given link 0 turning HEARTBEAT off, then link 1 keeps its heartbeat and link 0 its
+    other streams."""
+    server, links = make_server()
+    _command(server, 0, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_HEARTBEAT, -1)
+    for link in links:
+        parsed(link)
+    for k in range(1, 6):
+        server.tick(10.0 + k)
+    kinds = [{m.get_type() for m in parsed(link)} for link in links]
+    assert "HEARTBEAT" not in kinds[0] and "SYS_STATUS" in kinds[0]
+    assert "HEARTBEAT" in kinds[1]
+
+
+def test_link_budget_bounds_the_streams():
+    """Given every stream asked at 1 us, then each request is clamped to 1 kHz and refused,
+    with the reason, once the link's total would pass its budget; the total stays bounded."""
+    server, links = make_server()
+    schedule = server.links[0].schedule
+    before = schedule.rate_msg_s()
+    denied = 0
+    for msg_id in list(schedule.intervals):
+        _command(server, 0, M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1)
+        acks, texts = _acks_and_texts(links[0])
+        if acks == [M.MAV_RESULT_DENIED]:
+            denied += 1
+            assert any("budget" in t for t in texts)
+    assert denied > 0
+    assert schedule.rate_msg_s() <= max(LINK_BUDGET_MSG_S, before)
+    assert server.links[1].schedule.rate_msg_s() == pytest.approx(before)  # untouched
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf, 1e30, -2.0, 0.5, 2**31])
+def test_range_checked_command_parameters(value):
+    """Given absurd parameters to every command, then each is answered (ACK) and nothing
+    breaks."""
+    server, links = make_server()
+    for command in COMMANDS:
+        _command(server, 0, command, value, value, value, value, value, value, value)
+        acks, _ = _acks_and_texts(links[0])
+        assert len(acks) == 1, command
+    assert server.internal_errors == 0
