@@ -295,7 +295,7 @@ def load_gains(path: str | Path) -> Gains:
 # ----------------------------------------------------------------------------------------
 
 CONTROLLERS = ("pid", "pd")
-TRAJECTORIES = ("case1_figure8", "hover")
+TRAJECTORIES = ("case1_figure8", "hover", "mission")
 STARTS = ("ground", "hover")
 PROFILE_KINDS = ("pulse", "sine")
 
@@ -326,6 +326,7 @@ class TrajectoryConfig:
     figure_end_s: float = 140.0
     amplitude_m: float = 5.0
     axis_enu: Vec3 = (1.0, 2.0, 3.0)
+    mission_file: str = ""  # kind "mission": a mission file (TOML or QGC WPL), resolved
 
 
 @dataclass(frozen=True)
@@ -411,6 +412,12 @@ def load_scenario(path: str | Path) -> Scenario:
     if kind == "hover":
         traj = TrajectoryConfig(kind=kind, position_enu_m=traj_t.numbers(  # type: ignore[arg-type]
             "position_enu_m", 3, initial_p))
+    elif kind == "mission":
+        mission = rel("mission", traj_t)
+        if not mission.is_file():
+            raise traj_t.error("mission", f"a mission file (not found: {mission})")
+        traj = TrajectoryConfig(kind=kind, position_enu_m=initial_p,  # type: ignore[arg-type]
+                                mission_file=str(mission))
     else:
         traj = TrajectoryConfig(
             kind=kind,

@@ -58,7 +58,7 @@ import numpy as np
 
 from common.config import VehicleConfig
 from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
-from common.mission_items import MissionItem
+from common.mission_items import INT32_MAX, INT32_MIN, MissionItem
 from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul
 from fcu.feasibility import TimeScaling, envelope, figure_instants, move_instants
 from fcu.tracker import Reference
@@ -90,7 +90,6 @@ MAV_MISSION_INVALID_PARAM7 = 12
 MAV_MISSION_INVALID_SEQUENCE = 13
 MAV_MISSION_DENIED = 14
 
-INT32_MIN, INT32_MAX = -(2 ** 31), 2 ** 31 - 1
 FIGURE_EXTENT = math.sqrt(5.0)  # max |[sin 2T, sin T, 1 - cos 2T]|
 POSITION_TOLERANCE_M = 1e-3  # well above the wire's resolution (1e-4 m for x, y; float32 z)
 ANGLE_TOLERANCE_RAD = 1e-4

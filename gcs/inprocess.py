@@ -138,8 +138,8 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None) -> Ru
         t0 = clock()
         out = pipeline.step(t_us, dt_s)
         step_us = (clock() - t0) * 1e6
-        if out.result is not None:
-            onboard_rows.append(onboard_row(t_us, seen, out.result, out.speed_rad_s,
+        if out.result is not None and pipeline.state is not None:
+            onboard_rows.append(onboard_row(t_us, pipeline.state, out.result, out.speed_rad_s,
                                             out.tilt_rad, out.armed, step_us))
         if t_us >= end_us:
             break

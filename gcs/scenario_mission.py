@@ -4,12 +4,14 @@ same reference as `fcu.trajectory.make_trajectory` (Case I: to rounding at every
 
 Case I (MODEL.md section 5): takeoff (the quintic rise), loiter at the top, the
 figure-infinity (command 31001) about the ENU axis n (sent in NED: [1, 2, 3] -> [2, 1, -3]),
-loiter to the end of the run. Hover (Case II): one loiter for the whole run.
+loiter to the end of the run. Hover (Case II): one loiter for the whole run. Mission: the
+items of the scenario's mission file, as `gcs mission upload` would send them.
 """
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 from common.config import Scenario
 from common.frames import enu_to_ned
@@ -28,8 +30,13 @@ def _item(seq: int, command: int, p1: float = 0.0, p2: float = 0.0, p3: float = 
 
 
 def scenario_mission(scenario: Scenario) -> list[MissionItem]:
-    """The mission items of a scenario's trajectory (kinds "case1_figure8" and "hover")."""
+    """The mission items of a scenario's trajectory (kinds "case1_figure8", "hover", and
+    "mission": the items of its mission file)."""
     traj = scenario.trajectory
+    if traj.kind == "mission":
+        from gcs.mission_files import read_mission
+
+        return read_mission(Path(traj.mission_file))
     north, east, down = enu_to_ned(traj.position_enu_m)
     if traj.kind == "hover":
         return [_item(0, M.MAV_CMD_NAV_LOITER_TIME, p1=scenario.duration_s, x_m=north,
