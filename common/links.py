@@ -230,7 +230,8 @@ class TcpClientLink(Link):
     every turn of its loop, at least every 50 ms). An attempt still pending after
     `connect_timeout_s` is abandoned (an address that drops SYNs), attempts start at most
     once every `retry_s`, and a connection closed, reset or refused by the server is noticed
-    by `recv()` (end of stream) or `send()` (broken pipe) and retried the same way.
+    by `recv()` (end of stream) or `send()` (broken pipe) and retried the same way. A
+    connection to itself (possible when nothing listens on a local ephemeral port) is dropped.
 
     `send()` never waits: while not connected it drops the data (like a datagram link); when
     the socket buffer is full it keeps the unsent tail of the last write, so that the peer

@@ -17,17 +17,18 @@ MISSION_ACK when the pymavlink dialect has that field (pymavlink 2.4.50 has not)
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from common.mavlink import MAV
-from common.mission_items import LOCAL_SCALE, MissionItem
-from fcu.mission import INT32_MAX, MissionLimits, validate_mission
+from common.mission_items import MissionItem, item_from_message, item_message
+from fcu.mission import MissionLimits, check_mission
 
 M = MAV
 MISSION = M.MAV_MISSION_TYPE_MISSION
 Partner = tuple[int, int]  # (system id, component id)
+STATUSTEXT_LEN = 50
+__all__ = ["MissionServer", "item_from_message", "item_message", "statustext_chunks"]
 
 
 @dataclass
@@ -50,6 +51,7 @@ class _Finished:
     partner: Partner
     count: int
     result: int
+    notes: tuple[MAV.MAVLink_message, ...] = ()  # STATUSTEXT sent before the ACK
 
 
 def _msg(cls: type, *args: object, opaque_id: int | None = None) -> MAV.MAVLink_message:
@@ -59,25 +61,29 @@ def _msg(cls: type, *args: object, opaque_id: int | None = None) -> MAV.MAVLink_
     return cls(*args)
 
 
-def item_from_message(msg: MAV.MAVLink_message) -> MissionItem:
-    """A MISSION_ITEM_INT (x, y int, 1e-4 m) or legacy MISSION_ITEM (x, y float, m) as a
-    MissionItem. Legacy x, y that are not finite or do not fit int32 become a value outside
-    int32, which validation refuses as INVALID_PARAM5_X / 6_Y."""
-    scale = LOCAL_SCALE if msg.get_type() == "MISSION_ITEM" else 1.0
-    x, y = (round(v * scale) if math.isfinite(v) and abs(v * scale) <= INT32_MAX
-            else INT32_MAX + 1 for v in (msg.x, msg.y))
-    return MissionItem(seq=msg.seq, frame=msg.frame, command=msg.command, current=msg.current,
-                       autocontinue=msg.autocontinue, param1=msg.param1, param2=msg.param2,
-                       param3=msg.param3, param4=msg.param4, x=x, y=y, z=msg.z,
-                       mission_type=getattr(msg, "mission_type", MISSION))
-
-
-def item_message(item: MissionItem, target_system: int, target_component: int,
-                 current: int | None = None) -> MAV.MAVLink_mission_item_int_message:
-    return M.MAVLink_mission_item_int_message(
-        target_system, target_component, item.seq, item.frame, item.command,
-        item.current if current is None else current, item.autocontinue, item.param1,
-        item.param2, item.param3, item.param4, item.x, item.y, item.z, item.mission_type)
+def statustext_chunks(text: str, width: int = STATUSTEXT_LEN) -> list[str]:
+    """`text` in STATUSTEXT chunks: split at word boundaries into pieces of at most
+    width - 1 characters, all but the last padded with spaces to `width` (MAVLink 2: a
+    chunk shorter than 50 characters ends the message)."""
+    pieces: list[str] = []
+    line = ""
+    for word in text.split():
+        while len(word) > width - 1:  # a word longer than a chunk: cut it
+            if line:
+                pieces.append(line)
+                line = ""
+            pieces.append(word[:width - 1])
+            word = word[width - 1:]
+        if not line:
+            line = word
+        elif len(line) + 1 + len(word) <= width - 1:
+            line += " " + word
+        else:
+            pieces.append(line)
+            line = word
+    if line or not pieces:
+        pieces.append(line)
+    return [p.ljust(width) for p in pieces[:-1]] + [pieces[-1]]
 
 
 class MissionServer:
@@ -97,6 +103,7 @@ class MissionServer:
         self.on_set_current: Callable[[int], bool] | None = None
         self._upload: _Upload | None = None
         self._finished: _Finished | None = None
+        self._text_id = 0  # STATUSTEXT id of the last chunked text (1..65535)
 
     @property
     def uploading(self) -> bool:
@@ -113,6 +120,17 @@ class MissionServer:
         up.requested_s = now_s
         return M.MAVLink_mission_request_int_message(up.partner[0], up.partner[1], up.expected,
                                                      MISSION)
+
+    def _statustexts(self, text: str) -> tuple[MAV.MAVLink_message, ...]:
+        """STATUSTEXT (MAV_SEVERITY_WARNING) carrying `text`, chunked when longer than 50."""
+        chunks = statustext_chunks(text)
+        text_id = 0
+        if len(chunks) > 1:
+            self._text_id = self._text_id % 0xFFFF + 1
+            text_id = self._text_id
+        return tuple(M.MAVLink_statustext_message(M.MAV_SEVERITY_WARNING, chunk.encode(),
+                                                  text_id, i)
+                     for i, chunk in enumerate(chunks))
 
     def _replace(self, items: tuple[MissionItem, ...]) -> None:
         self.mission = items
@@ -199,8 +217,8 @@ class MissionServer:
             if up is None and done is not None and done.partner == partner \
                     and 0 <= item.seq < done.count:
                 # Our final ACK was lost (or this is a late duplicate): the same answer again.
-                return [self._ack(partner, done.result,
-                                  opaque=done.result == M.MAV_MISSION_ACCEPTED)]
+                return [*done.notes, self._ack(partner, done.result,
+                                               opaque=done.result == M.MAV_MISSION_ACCEPTED)]
             return []
         if item.seq != up.expected:
             return [self._request(up, now_s)]  # out of sequence or duplicate: not an error
@@ -210,11 +228,12 @@ class MissionServer:
             return [self._request(up, now_s)]
         self._upload = None
         items = tuple(up.items)
-        result, _seq = validate_mission(items, self.limits)
+        result, _seq, reason = check_mission(items, self.limits)
         if result == M.MAV_MISSION_ACCEPTED:
             self._replace(items)
-        self._finished = _Finished(partner, up.count, result)
-        return [self._ack(partner, result, opaque=result == M.MAV_MISSION_ACCEPTED)]
+        notes = self._statustexts(reason) if reason else ()
+        self._finished = _Finished(partner, up.count, result, notes)
+        return [*notes, self._ack(partner, result, opaque=result == M.MAV_MISSION_ACCEPTED)]
 
     # ------------------------------------------------------------------ time
 

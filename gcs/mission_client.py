@@ -17,17 +17,22 @@ mission changed, or the first count was stale), never returning a mission of the
 length.
 Pass `send=` (e.g. `Session.send`) when another thread sends on the same connection, so
 that sends stay serialised; by default `conn.mav.send` is used.
+
+An upload also collects the STATUSTEXT that the vehicle sends while it runs: a vehicle that
+refuses a mission says why just before its MISSION_ACK (e.g. "item 3: needs 1903 rad/s >
+1445 (85% of 1700): lengthen p1 to 0.87 s"). `upload_detailed` returns them with the result;
+chunked texts (MAVLink 2 `id`, `chunk_seq`) are put back together.
 """
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import common.mavlink  # noqa: F401  (pins MAVLink 2 before anything imports mavutil)
 from common.mavlink import MAV
-from common.mission_items import LOCAL_SCALE, MissionItem
+from common.mission_items import MissionItem, item_from_message, item_message
 
 M = MAV
 MISSION = M.MAV_MISSION_TYPE_MISSION
@@ -106,37 +111,103 @@ def _recv(conn, types: list[str], target_system: int, target_component: int,
         return msg
 
 
-def _item_message(item: MissionItem, target_system: int, target_component: int):
-    return M.MAVLink_mission_item_int_message(
-        target_system, target_component, item.seq, item.frame, item.command, item.current,
-        item.autocontinue, item.param1, item.param2, item.param3, item.param4, item.x, item.y,
-        item.z, MISSION)
-
-
 def _item_from(msg) -> MissionItem:
-    if msg.get_type() == "MISSION_ITEM":  # legacy: local x, y as float metres
-        if not (math.isfinite(msg.x) and math.isfinite(msg.y)):
-            raise MissionError(f"mission download: item {msg.seq} has a non-finite x or y")
-        x, y = round(msg.x * LOCAL_SCALE), round(msg.y * LOCAL_SCALE)
-    else:
-        x, y = msg.x, msg.y
-    return MissionItem(seq=msg.seq, frame=msg.frame, command=msg.command, current=msg.current,
-                       autocontinue=msg.autocontinue, param1=msg.param1, param2=msg.param2,
-                       param3=msg.param3, param4=msg.param4, x=x, y=y, z=msg.z,
-                       mission_type=msg.mission_type)
+    item = item_from_message(msg)
+    if not item.xy_fit_int32:  # a legacy MISSION_ITEM with a non-finite or huge x or y
+        raise MissionError(f"mission download: item {msg.seq} has an x or y that is not "
+                           "finite or does not fit MISSION_ITEM_INT")
+    return item
+
+
+STATUSTEXT_LEN = 50
+
+
+class StatusTexts:
+    """STATUSTEXT messages as texts, chunked ones (MAVLink 2 `id` != 0) put back together: a
+    chunk shorter than 50 characters ends its text. Runs of spaces are collapsed (chunks are
+    padded at word boundaries) and a text equal to the previous one is kept once (a vehicle
+    repeats its answer when the MISSION_ACK after it was lost)."""
+
+    def __init__(self) -> None:
+        self._done: list[str] = []
+        self._open: dict[int, dict[int, str]] = {}
+
+    def _emit(self, text: str) -> None:
+        text = " ".join(text.split())
+        if text and (not self._done or self._done[-1] != text):
+            self._done.append(text)
+
+    def add(self, msg) -> None:
+        text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
+        text = text.split("\0", 1)[0]
+        text_id = getattr(msg, "id", 0)
+        if not text_id:
+            self._emit(text)
+            return
+        chunks = self._open.setdefault(text_id, {})
+        chunks[getattr(msg, "chunk_seq", 0)] = text
+        if len(text) < STATUSTEXT_LEN:
+            del self._open[text_id]
+            self._emit("".join(chunks[k] for k in sorted(chunks)))
+
+    @property
+    def texts(self) -> tuple[str, ...]:
+        """The texts so far, unfinished chunked ones included as far as they came."""
+        pending = ["".join(c[k] for k in sorted(c)) for c in self._open.values()]
+        out = StatusTexts()
+        out._done = list(self._done)
+        for text in pending:
+            out._emit(text)
+        return tuple(out._done)
+
+
+class UploadResult(NamedTuple):
+    """The vehicle's answer to an upload: MAV_MISSION_RESULT and what it said meanwhile."""
+
+    result: int
+    notes: tuple[str, ...] = ()  # STATUSTEXT from the vehicle during the upload
+
+    @property
+    def accepted(self) -> bool:
+        return self.result == M.MAV_MISSION_ACCEPTED
+
+    def describe(self) -> str:
+        """e.g. "MAV_MISSION_DENIED: item 3: needs 1903 rad/s > 1445 (85% of 1700): ..." """
+        return ": ".join([result_name(self.result), *self.notes])
 
 
 def upload(conn, target_system: int, target_component: int, items: Sequence[MissionItem],
            progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
            item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = RETRIES,
-           send: Send | None = None, settle_s: float = SETTLE_S) -> int:
+           send: Send | None = None, settle_s: float = SETTLE_S,
+           notes: list[str] | None = None) -> int:
     """Upload `items` (sent with seq = their index) and return the vehicle's
-    MAV_MISSION_RESULT (MAV_MISSION_ACCEPTED when it took the mission).
+    MAV_MISSION_RESULT (MAV_MISSION_ACCEPTED when it took the mission); the texts of the
+    STATUSTEXT it sent meanwhile are appended to `notes` when given (`upload_detailed`).
 
     Raises MissionError when the vehicle stops answering (after `retries` resends of the
     last message) or asks for an item outside the mission.
     """
+    answer = upload_detailed(conn, target_system, target_component, items, progress,
+                             timeout_s=timeout_s, item_timeout_s=item_timeout_s,
+                             retries=retries, send=send, settle_s=settle_s)
+    if notes is not None:
+        notes.extend(answer.notes)
+    return answer.result
+
+
+def upload_detailed(conn, target_system: int, target_component: int,
+                    items: Sequence[MissionItem], progress: Progress | None = None, *,
+                    timeout_s: float = TIMEOUT_S, item_timeout_s: float = ITEM_TIMEOUT_S,
+                    retries: int = RETRIES, send: Send | None = None,
+                    settle_s: float = SETTLE_S) -> UploadResult:
+    """`upload`, returning the result with the STATUSTEXT texts that the target system sent
+    during the upload (a refusal's reason comes just before the MISSION_ACK).
+
+    Raises MissionError as `upload` does.
+    """
     _send = _sender(conn, send)
+    texts = StatusTexts()
     items = [item._replace(seq=i, mission_type=MISSION) for i, item in enumerate(items)]
     count = len(items)
     _drain(conn, target_system, settle_s)
@@ -144,10 +215,13 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
     _send(last)
     wait, attempts, done = timeout_s, 0, -1  # done: highest seq requested so far
     deadline = time.monotonic() + wait
-    types = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"]
+    types = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "STATUSTEXT"]
     while True:
         msg = _recv(conn, types, target_system, target_component,
                     deadline - time.monotonic())
+        if msg is not None and msg.get_type() == "STATUSTEXT":
+            texts.add(msg)
+            continue
         if msg is None:
             attempts += 1
             if attempts > retries:
@@ -174,7 +248,7 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
                 continue  # about an item, before we have sent one: an earlier transaction's
             if msg.type == M.MAV_MISSION_ACCEPTED and progress is not None:
                 progress(count, count)
-            return msg.type
+            return UploadResult(msg.type, texts.texts)
         seq = msg.seq
         if not 0 <= seq < count:
             _send(M.MAVLink_mission_ack_message(
@@ -186,7 +260,7 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
             done = seq
             if progress is not None:
                 progress(seq, count)
-        last = _item_message(items[seq], target_system, target_component)
+        last = item_message(items[seq], target_system, target_component)
         _send(last)
         wait = item_timeout_s
         deadline = time.monotonic() + wait

@@ -3,7 +3,8 @@ read and write) and a readable TOML form for 6-DoF keyframes and the figure-infi
 
 Both map onto `MissionItem` (MISSION_ITEM_INT fields). In QGC WPL, x and y are written as
 floats in the frame's unit (metres in local frames, degrees in global ones); in MissionItem
-local x, y are int32 in 1e-4 m and global ones in 1e-7 deg. Floats are written with Python's
+local x, y are int32 in 1e-4 m and global ones in 1e-7 deg (`common.mission_items.xy_scale`,
+the scaling of the legacy MISSION_ITEM too). Floats are written with Python's
 shortest round-trip representation, so a file written from downloaded items reads back to
 the same items.
 """
@@ -17,14 +18,10 @@ from pathlib import Path
 from typing import Any
 
 from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import LOCAL_SCALE, MissionItem
+from common.mission_items import LOCAL_SCALE, MissionItem, xy_scale
 
 M = MAV
 WPL_HEADER = "QGC WPL 110"
-GLOBAL_SCALE = 1e7
-_GLOBAL_FRAMES = {M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_INT,
-                  M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_FRAME_GLOBAL_TERRAIN_ALT,
-                  M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT}
 
 
 class MissionFileError(ValueError):
@@ -62,10 +59,6 @@ def _checked(item: MissionItem, where: str) -> MissionItem:
     return item
 
 
-def _scale(frame: int) -> float:
-    return GLOBAL_SCALE if frame in _GLOBAL_FRAMES else LOCAL_SCALE
-
-
 def _num(x: float) -> str:
     if math.isnan(x):
         return "nan"
@@ -80,7 +73,7 @@ def _num(x: float) -> str:
 def format_wpl(items: list[MissionItem]) -> str:
     lines = [WPL_HEADER]
     for it in items:
-        s = _scale(it.frame)
+        s = xy_scale(it.frame)
         lines.append("\t".join([str(it.seq), str(it.current), str(it.frame), str(it.command),
                                 *(_num(v) for v in (it.param1, it.param2, it.param3,
                                                     it.param4)),
@@ -108,7 +101,7 @@ def parse_wpl(text: str, source: str = "<mission>") -> list[MissionItem]:
             autocontinue = int(fields[11])
         except ValueError as exc:
             raise MissionFileError(f"{source}: line {n}: {exc}") from None
-        s = _scale(frame)
+        s = xy_scale(frame)
         try:
             x, y = round(p[4] * s), round(p[5] * s)
         except (OverflowError, ValueError):

@@ -54,10 +54,14 @@ class Link:
         self.src = src
         self.now = 0.0
         self.changes: list[tuple[MissionItem, ...]] = []
+        self.texts: list = []  # STATUSTEXT (broadcast), kept apart from the replies
 
     def _out(self, replies):
         decoded = [through_wire(r, VEHICLE) for r in replies]
-        for r in decoded:  # every reply is addressed to us
+        texts = [r for r in decoded if r.get_type() == "STATUSTEXT"]
+        self.texts += texts
+        decoded = [r for r in decoded if r.get_type() != "STATUSTEXT"]
+        for r in decoded:  # every other reply is addressed to us
             assert (r.target_system, r.target_component) == self.src, r
         return decoded
 

@@ -21,7 +21,14 @@ from fcu.dualquat import (
     q_rotate_inv,
 )
 from fcu.tracker import log_rate, reference_twist
-from fcu.trajectory import FigureEight, Hover, make_trajectory
+from fcu.trajectory import (
+    FigureEight,
+    FigureInfinity,
+    Hover,
+    figure_phase,
+    make_trajectory,
+    quintic,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 SETTINGS = settings(max_examples=100, deadline=None)
@@ -158,13 +165,67 @@ def test_starts_at_origin_at_rest(fig8):
     assert ref.omega_flu_rad_s == (0.0, 0.0, 0.0)
 
 
-@pytest.mark.parametrize("t", [10.0, 12.5, 19.0, 20.0, 140.0, 150.0, 160.0])
+@pytest.mark.parametrize("t", [10.0, 12.5, 19.0, 140.0, 150.0, 160.0])
 def test_holds_at_five_metres(fig8, t):
     """Given the hover segments, when sampled, then the reference sits at [0, 0, 5] at rest."""
     ref = fig8.sample(t)
     assert_close(ref.p_enu_m, (0.0, 0.0, 5.0), 1e-12)
     assert_close(ref.v_enu_m_s, (0.0, 0.0, 0.0), 1e-12)
     assert_close(ref.a_enu_m_s2, (0.0, 0.0, 0.0), 1e-12)
+
+
+def fields(ref) -> np.ndarray:
+    return np.concatenate([np.asarray(f, float) for f in ref])
+
+
+@pytest.mark.parametrize("t", [0.0, *KINKS])
+def test_breakpoints_take_the_right_hand_limit(fig8, t):
+    """Given a breakpoint of Case I (rise start and end, figure start and end), when sampled
+    at exactly that instant, then every field equals the sample 1 ns later: the value that
+    holds over the control period starting there."""
+    assert_close(fields(fig8.sample(t)), fields(fig8.sample(t + 1e-9)), 1e-10, 0.0)
+
+
+def test_figure_start_carries_the_feed_forward(fig8):
+    """Given t = 20 s exactly, then T'' = pi k^2 (not 0): the figure's acceleration and body
+    rate derivative are there from the first control period, unlike just before 20 s."""
+    k = math.pi / 120.0
+    assert fig8.phase(20.0) == (0.0, 0.0, math.pi * k * k)
+    at, before = fig8.sample(20.0), fig8.sample(20.0 - 1e-9)
+    n = np.array([1.0, 2.0, 3.0])
+    assert_close(at.omega_dot_flu_rad_s, math.pi * k * k * n, 1e-15)
+    assert_close(at.a_enu_m_s2, (10.0 * math.pi * k * k, 5.0 * math.pi * k * k, 0.0), 1e-15)
+    assert np.max(np.abs(np.subtract(at.omega_dot_flu_rad_s, before.omega_dot_flu_rad_s))) > 2e-3
+    assert at.v_enu_m_s == before.v_enu_m_s == (0.0, 0.0, 0.0)
+
+
+def test_profiles_hold_outside_their_interval():
+    """Given the shared profiles, then they hold before the start and from the end on, and
+    the start sample is the inside formula (right-hand limit)."""
+    assert quintic(-0.1) == (0.0, 0.0, 0.0) and quintic(1.0) == quintic(7.0) == (1.0, 0.0, 0.0)
+    assert quintic(0.0) == (0.0, 0.0, 0.0)
+    assert figure_phase(-1e-12, 10.0) == (0.0, 0.0, 0.0)
+    assert figure_phase(0.0, 10.0) == (0.0, 0.0, math.pi ** 3 / 100.0)
+    assert figure_phase(10.0, 10.0) == figure_phase(11.0, 10.0) == (2.0 * math.pi, 0.0, 0.0)
+
+
+def test_figure_path_many_equals_sample():
+    """Given a figure from a tilted start, when its path (flown in 1 s, arrays) is evaluated,
+    then it equals the scalar samples of the same figure flown in 1 s, field by field."""
+    q0 = q_exp((0.3, -0.5, 0.9))
+    fig = FigureInfinity(2.0, 1.0, (2.0, -1.0, 3.0), (1.0, -2.0, 3.0), q0)
+    sigma = np.linspace(0.0, 0.999, 37)
+    many = fig.path(sigma)
+    for i, s in enumerate(sigma):
+        one = fig.sample(float(s))
+        for f_many, f_one in zip(many, one, strict=True):
+            assert_close([np.broadcast_to(c, sigma.shape)[i] for c in f_many], f_one, 1e-12)
+
+
+def test_case1_uses_the_shared_figure(fig8):
+    """Given Case I, then its figure is the shared FigureInfinity (identity start)."""
+    assert isinstance(fig8.figure, FigureInfinity)
+    assert fig8.figure.q0 is None and fig8.figure.duration == 120.0
 
 
 def test_make_trajectory_dispatch(fig8):

@@ -1,0 +1,122 @@
+"""Honest outcomes: the status of a run from what happened to the vehicle (common/outcome.py)
+and the pipeline's failsafe reactions that feed it (fcu/pipeline.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.config import load_gains, load_vehicle
+from common.outcome import (
+    CRASH,
+    DIVERGED,
+    FAILSAFE,
+    INFO,
+    Event,
+    classify,
+    diverged,
+    diverged_rows,
+    touchdowns,
+)
+from fcu.pipeline import Pipeline
+from fcu.tracker import VehicleState
+
+ROOT = Path(__file__).resolve().parents[2]
+HOVER_STATE = VehicleState((0.0, 0.0, 5.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                           (0.0, 0.0, 0.0))
+
+
+def ev(t_s: float, kind: str, text: str = "x") -> Event:
+    return Event(round(t_s * 1e6), 4, text, kind)
+
+
+@pytest.mark.parametrize(("kwargs", "status"), [
+    ({"reached_end": True, "events": [ev(0, INFO)]}, "completed"),
+    ({"reached_end": True, "events": [ev(3, FAILSAFE, "hold")]}, "failsafe"),
+    ({"reached_end": True, "events": [ev(3, FAILSAFE), ev(3, CRASH)]}, "crashed"),
+    ({"reached_end": True, "events": [ev(3, DIVERGED)], "divergence_t_us": 3_000_000},
+     "diverged"),
+    ({"reached_end": True, "events": [ev(2, CRASH)], "divergence_t_us": 3_000_000},
+     "crashed"),
+    ({"reached_end": True, "events": [], "divergence_t_us": 1, "crash_t_us": 2}, "diverged"),
+    ({"reached_end": True, "events": [], "crash_t_us": 5_000_000}, "crashed"),
+    ({"reached_end": False, "events": [], "stopped": "timeout"}, "timeout"),
+    ({"reached_end": False, "events": [ev(1, FAILSAFE)], "stopped": "aborted"}, "aborted"),
+    ({"reached_end": False, "events": []}, "aborted"),
+])
+def test_status_precedence(kwargs, status):
+    """Given what happened, then exactly one status: divergence or crash first (whichever
+    came first), then a stopped run, then any failsafe reaction, then completed."""
+    kwargs.setdefault("divergence_t_us", None)
+    assert classify(**kwargs).status == status
+
+
+def test_a_failsafe_that_cleared_still_counts():
+    out = classify(reached_end=True, events=[ev(4, FAILSAFE, "failsafe: GCS link lost: HOLD"),
+                                             ev(6, INFO, "GCS link regained")],
+                   divergence_t_us=None)
+    assert out.status == "failsafe" and out.failsafe == "failsafe: GCS link lost: HOLD"
+
+
+def test_one_divergence_rule_scalar_and_rows():
+    assert diverged(10.01, True, 10.0) and not diverged(9.99, True, 10.0)
+    assert diverged(0.0, False, 10.0) and diverged(float("nan"), True, 10.0)
+    p = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 10.5], [np.nan, 0.0, 0.0]])
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (3, 1))
+    assert diverged_rows(p, q, np.zeros((3, 3)), q, 10.0).tolist() == [False, True, True]
+
+
+def test_touchdown_speed_is_the_speed_before_contact():
+    landed = np.array([1, 0, 0, 0, 1, 1, 0, 1], dtype=float)
+    speed = np.array([0, 1.0, 2.0, 3.0, 0.0, 0.0, 0.4, 0.0])
+    assert touchdowns(landed, speed) == [(4, 3.0), (7, 0.4)]
+
+
+def _pipeline() -> Pipeline:
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    return Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500)
+
+
+def test_state_loss_is_judged_on_the_flight_clock():
+    """Given a state received at 0 s, when control steps run at 0.5 s then 1.2 s of the
+    flight clock, then only the second (past COM_STATE_LOSS_T = 1 s) disarms, with a failsafe
+    event and, the vehicle being in the air, a crash event."""
+    pipe = _pipeline()
+    pipe.on_state(0, HOVER_STATE, 0)
+    assert pipe.arm()[0] == 0
+    assert pipe.step(500_000).armed
+    out = pipe.step(1_200_000)
+    assert not out.armed and out.speed_rad_s == (0.0,) * 6
+    kinds = [e.kind for e in pipe.events]
+    assert FAILSAFE in kinds and CRASH in kinds
+    assert classify(reached_end=True, events=pipe.events,
+                    divergence_t_us=None).status == "crashed"
+
+
+def test_lockstep_states_never_age():
+    """Given a state with every control period (lockstep), however long the wall clock
+    stands still between them, then no failsafe: the pipeline has no wall clock."""
+    pipe = _pipeline()
+    pipe.on_state(0, HOVER_STATE, 0)
+    pipe.arm()
+    for k in range(1, 2000):
+        t = k * 2000
+        pipe.on_state(t, HOVER_STATE, t)
+        assert pipe.step(t).armed
+    assert all(e.kind == INFO for e in pipe.events)
+
+
+def test_divergence_disarms_as_divergence_not_crash():
+    pipe = _pipeline()
+    pipe.on_state(0, HOVER_STATE, 0)
+    pipe.arm()
+    pipe.step(0)
+    far = HOVER_STATE._replace(p_enu_m=(11.0, 0.0, 5.0))
+    pipe.on_state(2000, far, 2000)
+    out = pipe.step(2000)
+    assert not out.armed and out.result is not None
+    kinds = [e.kind for e in pipe.events]
+    assert DIVERGED in kinds and CRASH not in kinds
+    assert pipe.failsafe == "diverged"
