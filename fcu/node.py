@@ -127,7 +127,8 @@ class FlightController:
                                                             c.armed)))
             self.sim_heartbeat_due = now + 1.0
         if self.lockstep and pipe.flight_started:
-            silent = now - self.last_sim_rx_s > SIM_SILENT_S
+            silent = now - self.last_sim_rx_s > SIM_SILENT_S and not select.select(
+                self.sim.link.filenos(), [], [], 0)[0]  # not our own stall: nothing waits
             if silent != self.sim_silent:
                 self.sim_silent = silent
                 c.say(M.MAV_SEVERITY_WARNING if silent else M.MAV_SEVERITY_INFO,

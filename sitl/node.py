@@ -6,7 +6,8 @@ state (`time_usec` echoed); duplicates and stale answers are ignored, and a stat
 unanswered is re-sent after a few milliseconds of wall time, so loss delays but never
 deadlocks. Simulated time therefore stands still until the FCU starts answering (when the
 flight starts). Real time (`--realtime`): physics paced by the monotonic clock, the latest
-command held.
+command held; a process stopped or starved for longer than MAX_LAG_S resumes from where it
+stood instead of replaying the missed wall time in a burst.
 
 The ground-truth log (one row per state sent) is the run's reference for every metric.
 """
@@ -50,6 +51,7 @@ from sitl.plant import (
 SITL_COMPONENT = MAV.MAV_COMP_ID_PERIPHERAL
 SEA_LEVEL_HPA = 1013.25
 SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each exchange
+MAX_LAG_S = 0.05  # real time: further behind the wall clock than this, skip ahead
 
 
 def odometry(s: PlantState) -> Odometry:
@@ -109,6 +111,7 @@ class SimulatorServer:
         self.ignored_answers = 0
         self.rejected_bytes = 0
         self.resends = 0
+        self.skipped_s = 0.0  # real time: wall time not simulated (the process was stopped)
         self.running = True
         self._last_datagram = b""
 
@@ -208,6 +211,14 @@ class SimulatorServer:
         physics_steps = 0
         while self.running and not self._at_end():
             due = start + (physics_steps + 1) * period
+            behind = time.monotonic() - due
+            if behind > MAX_LAG_S:
+                # The process was stopped or starved: the world stood still with it. Resume
+                # from now instead of replaying the missed time in a burst (with commands
+                # that arrived after it), which would hide the stall from the records.
+                start += behind
+                due += behind
+                self.skipped_s += behind
             while self.running:
                 wait = due - time.monotonic()
                 readable, _, _ = select.select(self.link.filenos(), [], [], max(0.0, wait))
@@ -296,7 +307,8 @@ def main(argv: list[str] | None = None) -> int:
     server.run()
     print(f"sitl: stopped at t = {server.state.time_us * 1e-6:.3f} s after {server.steps} "
           f"control periods; {server.resends} re-sends, {server.ignored_answers} answers "
-          f"ignored, {server.rejected_bytes} bytes rejected", flush=True)
+          f"ignored, {server.rejected_bytes} bytes rejected, {server.skipped_s:.3f} s of wall "
+          "time skipped", flush=True)
     return 0
 
 

@@ -237,7 +237,7 @@ class Plant:
         x: list[float] = [*s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu, *s.omega_flu_rad_s]
         w0 = self._with_disturbance(r0, t0)
         if not kinks:
-            # The usual case: the actuator trajectory is smooth over the whole step.
+            # No kink inside the step: the actuator trajectory is smooth, one RK4 step.
             if self.ideal:
                 r1 = r0
             else:
@@ -248,7 +248,9 @@ class Plant:
             y = self._rk4(x, h, w0, self._with_disturbance(r1, t0 + 0.5 * h), w2)
         else:
             # Piecewise RK4 over [0, k_1], [k_1, k_2], ..., [k_n, h], k_j the kink instants;
-            # the wrench at a sub-interval's end is the next one's start.
+            # the wrench at a sub-interval's end is the next one's start. In closed loop this
+            # is frequent: a servo that keeps up with its command reaches each new one early
+            # in the first physics step of the control period.
             kinks.sort()
             y, a, wa = x, 0.0, w0
             for b in (*kinks, h):

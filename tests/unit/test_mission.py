@@ -438,3 +438,52 @@ def test_yaw_conversion_round_trip():
         got = q_enu_flu_to_ned_frd(level_attitude(yaw))
         assert q_angle(q_mul(q_conj(got), want)) < 1e-12
         assert q_angle(q_mul(q_conj(q_ned_frd_to_enu_flu(want)), level_attitude(yaw))) < 1e-12
+
+
+# ----------------------------------------------------------------------------------------
+# Breakpoints: the sample at a boundary is the next segment's (right-hand limit)
+# ----------------------------------------------------------------------------------------
+
+BOUNDARIES = [item(0, M.MAV_CMD_NAV_TAKEOFF, p4=NAN, z=-4.0),
+              item(1, MAV_CMD_POSE_KEYFRAME, p1=6.0, p2=0.2, p3=-0.3, p4=1.2, north=2.0,
+                   east=1.0, z=-5.0),
+              item(2, MAV_CMD_FIGURE_EIGHT, p1=1.0, p2=20.0, p3=2.0, p4=1.0, z=-3.0),
+              item(3, M.MAV_CMD_NAV_WAYPOINT, p1=0.0, p4=30.0, north=-1.0, east=3.0, z=-4.0),
+              item(4, M.MAV_CMD_NAV_LOITER_TIME, p1=2.0, north=-1.0, east=3.0, z=-4.0),
+              item(5, M.MAV_CMD_NAV_LAND, p4=NAN)]
+
+
+def fields(ref) -> np.ndarray:
+    return np.concatenate([np.asarray(f, float) for f in ref])
+
+
+def test_segment_boundaries_take_the_next_segment():
+    """Given a mission of every kind, when sampled at exactly each planned boundary (start,
+    item ends, figure start and end), then every field equals the sample 1 ns later: the
+    next item at tau = 0, never the previous item's end."""
+    ex = started(BOUNDARIES, t0=2.0, p=P_START, q=Q_START)
+    times = sorted({t for _seq, t0, t1 in ex.schedule for t in (t0, t1)})
+    assert len(times) == 7
+    for t in times:
+        assert max_abs_diff(fields(ex.sample(t)), fields(ex.sample(t + 1e-9))) < 1e-6, t
+    # At the figure's start the feed-forward is there at once (T'' = pi k^2, not 0), where
+    # the keyframe before it had come to rest.
+    _seq, t_fig, _end = ex.schedule[2]
+    at, before = ex.sample(t_fig), ex.sample(t_fig - 1e-9)
+    assert norm(at.omega_dot_flu_rad_s2) > 0.05 and norm(before.omega_dot_flu_rad_s2) < 1e-6
+    assert norm(at.a_enu_m_s2) > 0.05 and norm(before.a_enu_m_s2) < 1e-6
+
+
+def norm(v) -> float:
+    return float(np.linalg.norm(np.asarray(v, float)))
+
+
+def test_case1_mission_figure_start_has_the_feed_forward():
+    """Given the Case I mission, then at exactly t = 20 s its reference is the figure's
+    right-hand limit, as the trajectory's is."""
+    scenario = load_scenario(CASE1)
+    ex = started(scenario_mission(scenario))
+    got, want = ex.sample(20.0), FigureEight(scenario.trajectory).sample(20.0)
+    assert max_abs_diff(fields(got), fields(want)) < 1e-12
+    k = math.pi / 120.0
+    assert max_abs_diff(got.omega_dot_flu_rad_s2, math.pi * k * k * np.array([1, 2, 3])) < 1e-15

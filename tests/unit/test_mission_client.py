@@ -14,12 +14,20 @@ from pathlib import Path
 import pytest
 
 import common.mavlink  # noqa: F401  (MAVLink 2 before mavutil)
-from common.config import load_scenario
-from common.mavlink import MAV, encoder, pack, parser
+from common.config import load_scenario, load_vehicle
+from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME, encoder, pack, parser
 from common.mission_items import MissionItem, local_xy
-from fcu.mission import MissionLimits
-from fcu.mission_protocol import MissionServer
-from gcs.mission_client import MissionError, clear, download, upload
+from fcu.mission import MissionLimits, check_mission
+from fcu.mission_protocol import MissionServer, statustext_chunks
+from gcs.mission_client import (
+    MissionError,
+    StatusTexts,
+    UploadResult,
+    clear,
+    download,
+    upload,
+    upload_detailed,
+)
 from gcs.scenario_mission import scenario_mission
 
 M = MAV
@@ -178,3 +186,42 @@ def test_silent_vehicle_raises(vehicle_factory):
     with pytest.raises(MissionError, match="no MISSION_ACK after 3 tries"):
         clear(conn, *VEHICLE, **fast)
     assert time.monotonic() - t0 < 2.0
+
+
+def test_refusal_comes_with_the_vehicles_reason(vehicle_factory):
+    """Given a vehicle that knows its airframe and a keyframe too fast for it, then
+    upload_detailed returns DENIED with the vehicle's reason (its chunked STATUSTEXT put
+    back together), upload keeps returning the result and fills `notes`, and an accepted
+    upload has no notes."""
+    vehicle_cfg = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    vehicle, conn = vehicle_factory(limits=MissionLimits(vehicle=vehicle_cfg))
+    takeoff = MissionItem(0, M.MAV_FRAME_LOCAL_NED, M.MAV_CMD_NAV_TAKEOFF, 1, 1, 0.0, 0.0, 0.0,
+                          NAN, 0, 0, -3.0)
+    fast = MissionItem(1, M.MAV_FRAME_LOCAL_NED, MAV_CMD_POSE_KEYFRAME, 0, 1, 0.5, 0.0, 0.0,
+                       0.0, local_xy(2.0), 0, -3.0)
+    reason = check_mission([takeoff, fast], vehicle.server.limits).reason
+    assert reason.startswith("item 1: needs ")
+    answer = upload_detailed(conn, *VEHICLE, [takeoff, fast])
+    assert answer == UploadResult(M.MAV_MISSION_DENIED, (reason,)) and not answer.accepted
+    assert answer.describe() == f"MAV_MISSION_DENIED: {reason}"
+    notes: list[str] = []
+    assert upload(conn, *VEHICLE, [takeoff, fast], notes=notes) == M.MAV_MISSION_DENIED
+    assert notes == [reason]
+    ok = upload_detailed(conn, *VEHICLE, [takeoff, fast._replace(param1=3.0)])
+    assert ok == UploadResult(M.MAV_MISSION_ACCEPTED, ()) and ok.accepted
+    assert vehicle.server.mission[1].param1 == 3.0
+
+
+def test_status_texts_reassemble_chunks():
+    """Given chunked STATUSTEXT (one id, padded chunks, the last shorter) interleaved with a
+    plain one and a repeat, then the texts come back whole, in order, the repeat once."""
+    texts = StatusTexts()
+    parts = statustext_chunks("item 3: needs 1903 rad/s > 1445 (85% of 1700): lengthen p1")
+    msgs = [M.MAVLink_statustext_message(M.MAV_SEVERITY_WARNING, p.encode(), 9, i)
+            for i, p in enumerate(parts)]
+    texts.add(msgs[0])
+    texts.add(M.MAVLink_statustext_message(M.MAV_SEVERITY_INFO, b"armed", 0, 0))
+    for m in (*msgs[1:], *msgs):
+        texts.add(m)
+    assert texts.texts == ("armed",
+                           "item 3: needs 1903 rad/s > 1445 (85% of 1700): lengthen p1")

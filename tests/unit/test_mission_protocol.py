@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from common.config import load_scenario
-from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, encoder, pack, parser
+from common.config import load_scenario, load_vehicle
+from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME, encoder, pack, parser
 from common.mission_items import MissionItem, local_xy
-from fcu.mission import MissionExecutor, MissionLimits
-from fcu.mission_protocol import MissionServer
+from fcu.mission import MissionExecutor, MissionLimits, check_mission
+from fcu.mission_protocol import MissionServer, statustext_chunks
 from gcs.scenario_mission import scenario_mission
 
 M = MAV
@@ -389,3 +389,72 @@ def test_case1_through_the_wire_flies_the_same(server, link):
     for t in (3.0, 15.0, 77.7, 150.0):
         assert a.sample(t) == b.sample(t)
     assert server.mission[2].command == MAV_CMD_FIGURE_EIGHT
+
+
+# ----------------------------------------------------------------------------------------
+# Refusals with a reason: STATUSTEXT just before the MISSION_ACK
+# ----------------------------------------------------------------------------------------
+
+
+def _too_fast_keyframe() -> list[MissionItem]:
+    return [MissionItem(0, M.MAV_FRAME_LOCAL_NED, M.MAV_CMD_NAV_TAKEOFF, 1, 1, 0.0, 0.0, 0.0,
+                        NAN, 0, 0, -3.0),
+            MissionItem(1, M.MAV_FRAME_LOCAL_NED, MAV_CMD_POSE_KEYFRAME, 0, 1, 0.5, 0.0, 0.0,
+                        0.0, local_xy(2.0), 0, -3.0)]
+
+
+def test_refusal_reason_comes_as_statustext_before_the_ack():
+    """Given a vehicle with its airframe and a keyframe it cannot fly in the time given, then
+    the last item is answered with the reason as STATUSTEXT (WARNING, chunks of at most 50
+    characters, one id, chunk_seq 0, 1, ...), then MISSION_ACK DENIED; the old mission
+    stays. The final item sent again gets the same answer again."""
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    server = MissionServer(*VEHICLE, MissionLimits(vehicle=vehicle))
+    link = Link(server)
+    old = case1()
+    assert link.upload(old).type == M.MAV_MISSION_ACCEPTED and link.texts == []
+    items = _too_fast_keyframe()
+    assert kinds(link.count(2)) == [("MISSION_REQUEST_INT", 0)]
+    link.item(items[0])
+    raw = server.handle(through_wire(M.MAVLink_mission_item_int_message(
+        *VEHICLE, 1, items[1].frame, items[1].command, 0, 1, *items[1][5:12], MISSION), GCS),
+        link.now)
+    replies = [through_wire(r, VEHICLE) for r in raw]
+    *texts, ack = replies
+    assert ack.get_type() == "MISSION_ACK" and ack.type == M.MAV_MISSION_DENIED
+    assert len(texts) == 2 and all(t.get_type() == "STATUSTEXT" for t in texts)
+    assert all(t.severity == M.MAV_SEVERITY_WARNING for t in texts)
+    assert [t.chunk_seq for t in texts] == [0, 1] and texts[0].id == texts[1].id != 0
+    assert len(texts[0].text) == 50 and len(texts[1].text) < 50
+    reason = " ".join("".join(t.text for t in texts).split())
+    assert reason == check_mission(items, server.limits).reason
+    assert reason.startswith("item 1: needs ") and "lengthen p1 to" in reason
+    assert same_items(server.mission, old)
+    again = [through_wire(r, VEHICLE) for r in server.handle(through_wire(
+        M.MAVLink_mission_item_int_message(*VEHICLE, 1, items[1].frame, items[1].command, 0,
+                                           1, *items[1][5:12], MISSION), GCS), link.now)]
+    assert [m.get_type() for m in again] == ["STATUSTEXT", "STATUSTEXT", "MISSION_ACK"]
+    assert [m.text for m in again[:2]] == [t.text for t in texts]
+
+
+def test_refusals_without_a_reason_send_no_statustext(server, link):
+    """Given a parameter error, then only the MISSION_ACK answers (the result says it)."""
+    link.upload(waypoints(2, z=NAN))
+    assert link.texts == []
+
+
+@pytest.mark.parametrize("text", [
+    "short",
+    "item 3: needs 1903 rad/s > 1445 (85% of 1700): lengthen p1 to 0.87 s",
+    "word " * 30,
+    "x" * 120,
+])
+def test_statustext_chunks(text):
+    """Given a text, then its chunks are at most 50 characters, all but the last exactly 50
+    and the last shorter (MAVLink 2 reassembly), and they read back as the text."""
+    chunks = statustext_chunks(text)
+    assert all(len(c) == 50 for c in chunks[:-1]) and len(chunks[-1]) < 50
+    joined = " ".join("".join(chunks).split())
+    assert joined.replace(" ", "") == text.replace(" ", "")
+    if " " in text.strip():
+        assert joined == " ".join(text.split())

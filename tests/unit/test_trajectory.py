@@ -183,7 +183,7 @@ def test_breakpoints_take_the_right_hand_limit(fig8, t):
     """Given a breakpoint of Case I (rise start and end, figure start and end), when sampled
     at exactly that instant, then every field equals the sample 1 ns later: the value that
     holds over the control period starting there."""
-    assert_close(fields(fig8.sample(t)), fields(fig8.sample(t + 1e-9)), 1e-10, 0.0)
+    assert_close(fields(fig8.sample(t)), fields(fig8.sample(t + 1e-9)), 1e-8, 0.0)
 
 
 def test_figure_start_carries_the_feed_forward(fig8):
@@ -193,9 +193,9 @@ def test_figure_start_carries_the_feed_forward(fig8):
     assert fig8.phase(20.0) == (0.0, 0.0, math.pi * k * k)
     at, before = fig8.sample(20.0), fig8.sample(20.0 - 1e-9)
     n = np.array([1.0, 2.0, 3.0])
-    assert_close(at.omega_dot_flu_rad_s, math.pi * k * k * n, 1e-15)
+    assert_close(at.omega_dot_flu_rad_s2, math.pi * k * k * n, 1e-15)
     assert_close(at.a_enu_m_s2, (10.0 * math.pi * k * k, 5.0 * math.pi * k * k, 0.0), 1e-15)
-    assert np.max(np.abs(np.subtract(at.omega_dot_flu_rad_s, before.omega_dot_flu_rad_s))) > 2e-3
+    assert np.max(np.abs(np.subtract(at.omega_dot_flu_rad_s2, before.omega_dot_flu_rad_s2))) > 2e-3
     assert at.v_enu_m_s == before.v_enu_m_s == (0.0, 0.0, 0.0)
 
 
