@@ -114,7 +114,7 @@ def _speeds(omega_sq: np.ndarray) -> np.ndarray:
 
 class Peak(NamedTuple):
     speed_rad_s: float  # highest rotor speed over the samples
-    index: int  # the sample where it occurs
+    sample: int  # the index of the sample where it occurs
 
 
 class Envelope:

@@ -52,7 +52,7 @@ import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -327,7 +327,7 @@ class _Move(_Segment):
     def retimed(self, travel: float) -> _Move:
         return _Move(self.seq, self.t0, self.p0, self.dp, self.q0, self.phi, travel, self.hold)
 
-    def _at(self, s, ds, dds, d: float, many: bool = False) -> Reference:  # type: ignore[no-untyped-def]
+    def _at(self, s: Any, ds: Any, dds: Any, d: float, many: bool = False) -> Reference:
         p0, dp = self.p0, self.dp
         p = (p0[0] + s * dp[0], p0[1] + s * dp[1], p0[2] + s * dp[2])
         # Same association as FigureEight's rise: h * s' / T, h * s'' / (T T).

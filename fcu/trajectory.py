@@ -113,7 +113,7 @@ def figure_path(amp: float, T: Any, dT: Any, ddT: Any,
     return off, v, acc
 
 
-def q_exp_many(rx: np.ndarray, ry: np.ndarray, rz: np.ndarray) -> tuple[np.ndarray, ...]:
+def q_exp_many(rx: Any, ry: Any, rz: Any) -> Any:
     """`fcu.dualquat.q_exp` of many rotation vectors at once (components as arrays)."""
     half = 0.5 * np.sqrt(rx * rx + ry * ry + rz * rz)
     k = 0.5 * np.sinc(half / math.pi)  # sin(half) / (2 half), 1/2 at 0
