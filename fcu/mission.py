@@ -23,7 +23,11 @@ Item semantics (positions local NED, metres; yaw in degrees, NED; NaN yaw = keep
   duration p2, attitude turning about the world axis (p3, p4, z) (NED, not normalised).
 
 Travel, climbs and descents follow the minimum-jerk quintic (zero velocity and acceleration
-at both ends); attitudes move along the shortest rotation with the same profile. A move
+at both ends); attitudes move along the shortest rotation with the same profile. The quintic
+and the figure-infinity are those of `fcu.trajectory` (one copy of the maths). An item is
+active on [start, end): at a boundary the reference is the next item's at tau = 0, the
+right-hand limit that holds over the coming control period (at a figure's start, T'' = pi k^2
+at once). A move
 whose duration comes from a speed (not from a parameter) and whose distance is below
 `POSITION_TOLERANCE_M` (or whose turn is below `ANGLE_TOLERANCE_RAD`) is not made: the item
 keeps the start position (attitude), so a target equal to the previous item's end up to the
@@ -433,8 +437,10 @@ def _envelope_reason(item: MissionItem, seg: _Segment, limits: MissionLimits) ->
     slot = _TIME_SLOT.get(item.command)
     if item.command == MAV_CMD_NAV_TAKEOFF and not item.param2 > 0.0:
         slot = None  # timed by the takeoff speed
-    if slot is None or not math.isfinite(shortest):
-        hint = "no duration helps (attitude)"
+    if not math.isfinite(shortest):
+        hint = "attitude too demanding at any speed"
+    elif slot is None:  # cannot happen: speed-timed items are stretched to `shortest`
+        hint = "not flyable"
     else:
         hint = f"lengthen {slot} to {math.ceil(shortest * 100.0) / 100.0:.2f} s"
     return f"item {item.seq}: {env.describe(peak.speed_rad_s)}: {hint}"

@@ -4,9 +4,14 @@ without I/O: pymavlink messages and the time in, messages to send out.
 Upload (GCS -> vehicle): MISSION_COUNT, then MISSION_REQUEST_INT for each item in turn,
 re-requested every `item_timeout_s` up to `retries` times (then MISSION_ACK
 OPERATION_CANCELLED); an out-of-sequence or duplicate item re-requests the expected one; after
-the last item the whole mission is validated (`fcu.mission.validate_mission`) and only
+the last item the whole mission is validated (`fcu.mission.check_mission`) and only
 MAV_MISSION_ACCEPTED replaces the stored mission, so a failed upload keeps the old one. A
-final item sent again (the GCS lost our MISSION_ACK) gets the same MISSION_ACK again.
+refusal that has a reason for a person (MAV_MISSION_DENIED: the geofence, or an item the
+vehicle cannot fly in the time it was given) sends it as STATUSTEXT (MAV_SEVERITY_WARNING)
+just before the MISSION_ACK, in chunks when longer than 50 characters (MAVLink 2's `id` and
+`chunk_seq`; every chunk but the last padded with spaces to 50 at a word boundary, so each
+also reads on its own). A final item sent again (the GCS lost our MISSION_ACK) gets the same
+answer again, STATUSTEXT included.
 Download: MISSION_REQUEST_LIST -> MISSION_COUNT, then MISSION_ITEM_INT for each
 MISSION_REQUEST_INT (or legacy MISSION_REQUEST). MISSION_CLEAR_ALL clears. Only
 MAV_MISSION_TYPE_MISSION is supported; the other plan types get MAV_MISSION_UNSUPPORTED.

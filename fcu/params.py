@@ -54,6 +54,9 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MIS_TKO_SPD", 1.0, 0.05, 10.0, "m/s", "takeoff climb speed when p2 is 0"),
     ParamSpec("MIS_CRUISE_SPD", 2.0, 0.05, 20.0, "m/s", "waypoint travel speed"),
     ParamSpec("MIS_LAND_SPD", 0.5, 0.05, 5.0, "m/s", "landing descent speed"),
+    ParamSpec("MIS_ENV_CHK", 1.0, 0.0, 1.0, "enum",
+              "mission envelope check: 1 = stretch speed-timed legs and refuse timed items "
+              "the rotors cannot fly, 0 = off (accept any profile)"),
     ParamSpec("GF_MAX_DIST", 1000.0, 1.0, 100000.0, "m",
               "geofence: farthest mission point from the origin"),
     ParamSpec("COM_OF_LOSS_T", 1.0, 0.1, 60.0, "s", "offboard setpoint loss timeout (to HOLD)"),
@@ -143,7 +146,8 @@ def mission_limits(values: dict[str, float], vehicle: VehicleConfig | None = Non
     return MissionLimits(max_distance_m=values["GF_MAX_DIST"],
                          cruise_speed_m_s=values["MIS_CRUISE_SPD"],
                          land_speed_m_s=values["MIS_LAND_SPD"],
-                         takeoff_speed_m_s=values["MIS_TKO_SPD"])
+                         takeoff_speed_m_s=values["MIS_TKO_SPD"],
+                         vehicle=vehicle if values["MIS_ENV_CHK"] == 1.0 else None)
 
 
 def apply_params(store: ParamStore, pipeline: Pipeline) -> MissionLimits:

@@ -58,7 +58,7 @@ class Pipeline:
         self.vehicle = vehicle
         self.period_us = 1_000_000 // control_rate_hz
         self.core = FlightCore(vehicle, gains, control_rate_hz, initial_tilt_rad)
-        self.commander = Commander(limits or MissionLimits())
+        self.commander = Commander(limits or MissionLimits(vehicle=vehicle))
         self.settings = failsafes or FailsafeSettings()
         self.supervisor = Supervisor(vehicle.n_rotors, vehicle.rotor_speed_max_rad_s,
                                      initial_tilt_rad)

@@ -319,7 +319,6 @@ def cmd_router(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     from gcs.report import make_report
-
     from gcs.runio import RunDirError, check_run_dir
 
     if not (args.run_dir / "metrics.json").exists():
@@ -398,7 +397,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
 
 def _mission(args: argparse.Namespace, session) -> int:
     from common.mavlink import MAV
-    from gcs.mission_client import clear, download, result_name, upload
+    from gcs.mission_client import clear, download, result_name, upload_detailed
     from gcs.mission_files import format_toml, format_wpl, read_mission, write_mission
 
     t, c, send = session.target_system, session.target_component, session.send
@@ -409,10 +408,13 @@ def _mission(args: argparse.Namespace, session) -> int:
 
     if args.action == "upload":
         items = read_mission(args.file)
-        result = upload(session.conn, t, c, items, progress=report, send=send)
+        answer = upload_detailed(session.conn, t, c, items, progress=report, send=send)
         progress.done()
-        print(f"upload of {len(items)} items: {result_name(result)}")
-        return 0 if result == MAV.MAV_MISSION_ACCEPTED else 1
+        if not answer.accepted:
+            print(f"upload of {len(items)} items refused: {answer.describe()}")
+            return 1
+        print(f"upload of {len(items)} items: {result_name(answer.result)}")
+        return 0
     if args.action == "download":
         items = download(session.conn, t, c, progress=report, send=send)
         progress.done()

@@ -25,7 +25,7 @@ from common.config import Scenario
 from common.outcome import Event, diverged
 from common.simlink import through_wire_controls, through_wire_odometry
 from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
-from fcu.mission import validate_mission
+from fcu.mission import check_mission
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.sim_bridge import actuator_controls, state_from_odometry
@@ -114,9 +114,10 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None) -> Ru
     pipeline, _ = fcu_pipeline(scenario)
     cmd = pipeline.commander
     items = tuple(scenario_mission(scenario))
-    result, seq = validate_mission(items, cmd.limits)[:2]
-    if result != 0:
-        raise InProcessError(f"mission refused: MAV_MISSION_RESULT {result} (item {seq})")
+    check = check_mission(items, cmd.limits)
+    if check.result != 0:
+        raise InProcessError(f"mission refused: MAV_MISSION_RESULT {check.result}: "
+                             f"{check.reason}")
     cmd.set_mission(items)
     pipeline.on_state(state.time_us, state_for_fcu(state), state.time_us)
     for what, (code, text) in (("arming", pipeline.arm()),

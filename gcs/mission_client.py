@@ -132,33 +132,31 @@ class StatusTexts:
         self._done: list[str] = []
         self._open: dict[int, dict[int, str]] = {}
 
-    def _emit(self, text: str) -> None:
+    @staticmethod
+    def _joined(texts: list[str], text: str) -> list[str]:
         text = " ".join(text.split())
-        if text and (not self._done or self._done[-1] != text):
-            self._done.append(text)
+        return [*texts, text] if text and (not texts or texts[-1] != text) else texts
 
     def add(self, msg) -> None:
         text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
         text = text.split("\0", 1)[0]
         text_id = getattr(msg, "id", 0)
         if not text_id:
-            self._emit(text)
+            self._done = self._joined(self._done, text)
             return
         chunks = self._open.setdefault(text_id, {})
         chunks[getattr(msg, "chunk_seq", 0)] = text
         if len(text) < STATUSTEXT_LEN:
             del self._open[text_id]
-            self._emit("".join(chunks[k] for k in sorted(chunks)))
+            self._done = self._joined(self._done, "".join(chunks[k] for k in sorted(chunks)))
 
     @property
     def texts(self) -> tuple[str, ...]:
         """The texts so far, unfinished chunked ones included as far as they came."""
-        pending = ["".join(c[k] for k in sorted(c)) for c in self._open.values()]
-        out = StatusTexts()
-        out._done = list(self._done)
-        for text in pending:
-            out._emit(text)
-        return tuple(out._done)
+        out = self._done
+        for chunks in self._open.values():
+            out = self._joined(out, "".join(chunks[k] for k in sorted(chunks)))
+        return tuple(out)
 
 
 class UploadResult(NamedTuple):

@@ -30,7 +30,7 @@ from common.parent import child_env
 from fcu.core import ONBOARD_COLUMNS
 from gcs.inprocess import scenario_params
 from gcs.metrics import build_metrics
-from gcs.mission_client import MissionError, upload
+from gcs.mission_client import MissionError, upload_detailed
 from gcs.runio import ONBOARD_LOG, TRUTH_LOG, write_metrics
 from gcs.scenario_mission import scenario_mission
 from gcs.session import GcsError, Session
@@ -252,9 +252,10 @@ class _Flight:
         for name, value in scenario_params(sc).items():
             param_set(s, name, value)
         items = scenario_mission(sc)
-        result = upload(s.conn, s.target_system, s.target_component, items, send=s.send)
-        if result != M.MAV_MISSION_ACCEPTED:
-            raise RunError(f"mission upload refused: MAV_MISSION_RESULT {result}")
+        answer = upload_detailed(s.conn, s.target_system, s.target_component, items,
+                                 send=s.send)
+        if not answer.accepted:
+            raise RunError(f"mission upload refused: {answer.describe()}")
         # The flight's clock starts at MISSION_START: 0 in lockstep (simulated time stands
         # still until then), the FCU's monotonic time in real time.
         start_ms = 0

@@ -20,7 +20,6 @@ series are thinned to every bucket's first, minimum and maximum sample, so peaks
 
 from __future__ import annotations
 
-import json
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -34,10 +33,9 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from common.binlog import read_log
-from gcs.metrics import join_logs
-from gcs.runio import ONBOARD_LOG, TRUTH_LOG, check_run_dir
 from gcs.euler import zyx_events
-from gcs.metrics import attitude_error_rad
+from gcs.metrics import attitude_error_rad, join_logs
+from gcs.runio import ONBOARD_LOG, TRUTH_LOG, check_run_dir
 from gcs.table1 import CASES, CONTROLLERS, PAPER, STATS
 
 FIG_DIR = "figures"

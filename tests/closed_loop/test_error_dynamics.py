@@ -12,7 +12,7 @@ from scipy.integrate import solve_ivp
 
 from fcu.dualquat import q_conj, q_exp, q_log, q_mul
 from fcu.trajectory import Hover
-from gcs.inprocess import run_scenario
+from gcs.inprocess import fly_reference, run_scenario
 from gcs.metrics import attitude_error_rad
 from sitl.plant import Plant
 
@@ -40,7 +40,7 @@ def test_attitude_error_follows_third_order_linear_dynamics(hover_ideal, damping
     theta0 = 0.8
     axis = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
     q0 = q_exp(tuple(theta0 * axis))
-    result = run_scenario(sc, initial=_start(sc, (0.0, 0.0, 0.0), q0))
+    result = fly_reference(sc, Hover(sc.trajectory.position_enu_m), _start(sc, (0.0, 0.0, 0.0), q0))
     t = result.truth_col("time_us")[:, 0] * 1e-6
     # Signed error about the fixed axis: rotation vector of q_d* q projected on it.
     theta = np.array([np.dot(q_log(q_mul(q_conj(tuple(qd)), tuple(q))), axis)
@@ -84,7 +84,7 @@ def test_convergence_sweep_without_unwinding(hover_ideal, seed):
     p_goal = tuple(float(x) for x in rng.uniform(-2.0, 2.0, size=3))
     for sign in (1.0, -1.0):
         goal = Hover(p_goal, tuple(sign * c for c in q_goal))
-        runs.append(run_scenario(sc, trajectory=goal, initial=_start(sc, p_start, q_start)))
+        runs.append(fly_reference(sc, goal, _start(sc, p_start, q_start)))
     a, b = runs
     assert a.metrics["status"] == b.metrics["status"] == "completed"
     np.testing.assert_allclose(a.truth_col("px", "py", "pz"), b.truth_col("px", "py", "pz"),
@@ -110,7 +110,7 @@ def test_near_pi_rotates_the_short_way(hover_ideal, theta0):
     q_start = q_mul(q_goal, q_exp(tuple(theta0 * c for c in axis)))
     for sign in (1.0, -1.0):
         goal = Hover((0.0, 0.0, 0.0), tuple(sign * c for c in q_goal))
-        result = run_scenario(sc, trajectory=goal, initial=_start(sc, (0.0, 0.0, 0.0), q_start))
+        result = fly_reference(sc, goal, _start(sc, (0.0, 0.0, 0.0), q_start))
         _, err = _attitude_error(result)
         assert err[0] == pytest.approx(theta0, abs=1e-9)
         assert np.max(err) <= theta0 + 1e-9

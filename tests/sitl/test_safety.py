@@ -97,6 +97,7 @@ def test_state_loss_after_sigkill_of_the_simulator(stack):
 def test_saturation_aborts_the_mission_to_hold(stack):
     """A keyframe 30 m away in 1 s saturates the rotors; with COM_SAT_ACT = 1 the mission is
     aborted to HOLD with a message (divergence limit raised so it does not act first)."""
+    _set(stack, "MIS_ENV_CHK", 0.0)  # accept a profile the rotors cannot fly
     _set(stack, "COM_SAT_T", 0.2)
     _set(stack, "COM_SAT_ACT", 1.0)
     _set(stack, "COM_DIV_POS", 1000.0)
@@ -108,6 +109,7 @@ def test_saturation_aborts_the_mission_to_hold(stack):
 
 def test_divergence_disarms_and_reports(stack):
     """Tracking error beyond COM_DIV_POS: disarm, EMERGENCY, and a message naming it."""
+    _set(stack, "MIS_ENV_CHK", 0.0)  # accept a profile the rotors cannot fly
     _set(stack, "COM_DIV_POS", 0.5)
     _fly_keyframe(stack, 40.0, 1.0)
     text = _texts(stack, "tracking error", 10.0)

@@ -4,6 +4,7 @@ speed envelope, time scaling, stretching of speed-timed items, refusal of user-t
 from __future__ import annotations
 
 import ast
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -253,6 +254,19 @@ def test_user_timed_items_are_refused(bad, slot):
     result, seq, reason = check_mission([*START, bad], MissionLimits(vehicle=TILTED))
     assert (result, seq) == (M.MAV_MISSION_DENIED, 1), reason
     assert f"lengthen {slot} to " in reason
+
+
+def test_attitude_that_cannot_be_held_is_refused():
+    """Given a heavier planar vehicle (hover at identity fits, at 90 deg of roll it does not)
+    and a slow keyframe to that roll, then DENIED: no duration helps."""
+    heavy = dataclasses.replace(PLANAR, mass_kg=6.0)
+    roll = item(1, MAV_CMD_POSE_KEYFRAME, p1=20.0, p2=math.pi / 2, z=-3.0)
+    result, seq, reason = check_mission([*START, roll], MissionLimits(vehicle=heavy))
+    assert (result, seq) == (M.MAV_MISSION_DENIED, 1)
+    assert reason.endswith(": attitude too demanding at any speed"), reason
+    level = roll._replace(param2=0.0, param4=math.pi / 2)  # a yaw: fine
+    assert check_mission([*START, level], MissionLimits(vehicle=heavy)).result == \
+        M.MAV_MISSION_ACCEPTED
 
 
 def test_items_are_checked_in_order():

@@ -1,5 +1,5 @@
 """Mission executor (fcu/mission.py): analytic derivatives, Case I equivalence, events,
-validation, set_current."""
+validation, set_current, right-hand limits at segment boundaries."""
 
 from __future__ import annotations
 
