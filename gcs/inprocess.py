@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 
 from common.config import Scenario
+from common.mavlink import encoder, pack, parser
+from common.mission_items import MissionItem, item_from_message, item_message
 from common.outcome import Event, diverged
 from common.simlink import through_wire_controls, through_wire_odometry
 from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
@@ -92,6 +94,13 @@ def fcu_pipeline(scenario: Scenario) -> tuple[Pipeline, ParamStore]:
     return pipeline, store
 
 
+def through_wire_item(item: MissionItem) -> MissionItem:
+    """A mission item as the FCU receives it in MISSION_ITEM_INT (params and z float32)."""
+    mav = encoder(255, 190)
+    msg = parser().parse_buffer(pack(mav, item_message(item, 1, 1)))[0]
+    return item_from_message(msg)
+
+
 def state_for_fcu(s: PlantState) -> VehicleState:
     """What the FCU sees: the state as ODOMETRY carries it, float32 and all."""
     state = state_from_odometry(through_wire_odometry(odometry(s)))
@@ -113,7 +122,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None) -> Ru
     state = initial if initial is not None else initial_state(scenario, plant)
     pipeline, _ = fcu_pipeline(scenario)
     cmd = pipeline.commander
-    items = tuple(scenario_mission(scenario))
+    items = tuple(through_wire_item(item) for item in scenario_mission(scenario))
     check = check_mission(items, cmd.limits)
     if check.result != 0:
         raise InProcessError(f"mission refused: MAV_MISSION_RESULT {check.result}: "

@@ -528,12 +528,12 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
                                     ("torque (N m)", data.torque_terms)) for x in terms]
         lines.append("- disturbances (body frame): " + "; ".join(desc))
     lines.append("")
-    events = m.get("events", [])
-    if events:
+    run_events = m.get("events", [])
+    if run_events:
         lines += ["## Events", "", "Everything the vehicle said, on the flight clock.", "",
                   "| t (s) | severity | event |", "|---:|---|---|"]
         lines += [f"| {e['t_s']:.3f} | {SEVERITY.get(e['severity'], e['severity'])} | "
-                  f"{e['text']} |" for e in events]
+                  f"{e['text']} |" for e in run_events]
         lines.append("")
     if data.diverged:
         lines += [f"**The run diverged at t = {_fmt(m.get('divergence_t_s'))} s** "

@@ -19,6 +19,7 @@ from common.config import load_scenario
 from common.links import free_port
 from common.mavlink import MAV_CMD_POSE_KEYFRAME
 from common.mission_items import MissionItem, local_xy
+from fcu.params import SPECS
 from gcs.mission_files import format_toml, format_wpl
 from gcs.scenario_mission import scenario_mission
 
@@ -116,7 +117,7 @@ def test_parameters(vehicle):
     listing = vehicle.gcs("param", "list")
     assert listing.returncode == 0
     names = [line.split()[0] for line in listing.stdout.splitlines()]
-    assert len(names) == 30 and "DQ_KPR_X" in names and "COM_DIV_POS" in names
+    assert len(names) == len(SPECS) == 31 and "DQ_KPR_X" in names and "MIS_ENV_CHK" in names
     assert vehicle.gcs("param", "get", "DQ_KDD_Z").stdout.strip() == "DQ_KDD_Z = 10"
     ok = vehicle.gcs("param", "set", "MIS_CRUISE_SPD", "3.5")
     assert ok.returncode == 0 and "MIS_CRUISE_SPD = 3.5" in ok.stdout
