@@ -47,8 +47,9 @@ beside the FCU, so arming, mission starts and offboard act on a live state.
 Probes check the answers from a socket of their own, each after a sync (the FCU has read
 everything sent before): the interval GET reads is the one SET put in force (or the old one
 when refused); a parameter read back is the value set (or the old one) and within its range;
-every requestable id is answered and no other; link 1's streams, all asked at 1 kHz, stay
-within the link budget; HEARTBEAT turned off on link 1 stops there and goes on on link 2;
+every requestable id is answered and no other; with link 1's streams off, some asked at
+1 kHz stay within the link budget, and all go back to their defaults; HEARTBEAT turned off
+on link 1 stops there and goes on on link 2;
 (signed link) a replayed frame is refused, and a frame with a wrong signature cannot lock a
 signed stream out.
 
@@ -65,6 +66,7 @@ kept its mission under the non-destructive attack.
 
     .venv/bin/python benchmarks/fuzz_campaign.py                 # 100,000 inputs per port
     .venv/bin/python benchmarks/fuzz_campaign.py --inputs 20000 --ports gcs,sitl --seed 7
+    .venv/bin/python benchmarks/fuzz_campaign.py --ports gcs --seq-rate 4000 --out DIR
 """
 
 from __future__ import annotations
@@ -1277,8 +1279,9 @@ class Prober:
         return counts
 
     def probe_streams(self) -> None:
-        """Every requestable id answered (ACCEPTED) and no other; then streams asked at
-        1 kHz, and what streams read for a second: within the link's budget."""
+        """Every requestable id answered (ACCEPTED) and no other; then every stream of link
+        1 off, some asked at 1 kHz (the first fills the budget), and what streams read for a
+        second: within the link's budget; then every stream back to its default."""
         bad, missing = [], 0
         for msg_id in (*REQUESTABLE_IDS, *NOT_ANSWERED_IDS):
             self.command(REQUEST, float(msg_id))
@@ -1288,10 +1291,19 @@ class Prober:
                 missing += 1
             elif result != want:
                 bad.append(f"REQUEST_MESSAGE({msg_id}): {result}, expected {want}")
+        for msg_id in STREAM_IDS:  # turning a stream off is always possible
+            self.command(SET_IV, float(msg_id), -1.0)
+            result = self.ack(SET_IV)
+            if result is None:
+                missing += 1
+            elif result != M.MAV_RESULT_ACCEPTED:
+                bad.append(f"SET_MESSAGE_INTERVAL({msg_id}, -1): {result}, expected 0")
         fast = self.rng.sample(STREAM_IDS, self.rng.randint(3, len(STREAM_IDS)))
+        accepted = []
         for msg_id in fast:
-            self.command(SET_IV, float(msg_id), 1.0)  # 1 us: at most 1 kHz, within budget
-            self.ack(SET_IV)
+            self.command(SET_IV, float(msg_id), 1.0)  # 1 us: 1 kHz, if the budget allows
+            if self.ack(SET_IV) == M.MAV_RESULT_ACCEPTED:
+                accepted.append(msg_id)
         self.drain()
         counts = self._count(1.0)
         streams = {i: n for i, n in counts.items() if i in DEFAULT_INTERVALS_S}
@@ -1302,9 +1314,15 @@ class Prober:
         for i, n in streams.items():
             if n > 1000 * 1.15 + 5:
                 bad.append(f"message {i}: {n} in 1 s > 1 kHz")
+        for msg_id in (*accepted, *STREAM_IDS):  # the fast ones off, then all to default
+            self.command(SET_IV, float(msg_id), -1.0 if msg_id in accepted else 0.0)
+            accepted = [i for i in accepted if i != msg_id]
+            result = self.ack(SET_IV)
+            if result is not None and result != M.MAV_RESULT_ACCEPTED:
+                bad.append(f"SET_MESSAGE_INTERVAL({msg_id}) back to its default: {result}")
         ok = False if bad else None if missing else True
-        self._outcome("streams", ok, "; ".join(bad[:4]) + f" ({missing} requests unanswered; "
-                      f"streams at 1 us: {sorted(fast)}, {total} msg/s)")
+        self._outcome("streams", ok, "; ".join(bad[:4]) + f" ({missing} commands unanswered; "
+                      f"asked at 1 us: {fast}, {total} stream msg/s)")
 
     def probe_heartbeat_off(self) -> None:
         """HEARTBEAT off on link 1: none there for 2.5 s while link 2 keeps its own; then
@@ -1392,7 +1410,7 @@ class SequenceCampaign:
         self.in_sequences = 0
         self.sent = 0
         self.not_sent = 0
-        self.seconds = 0.0
+        self.seconds = 0.0  # sending, probes between inputs excluded
         self.probe_seconds = 0.0
         flight.listener.on_text = self._on_text
 
@@ -1436,7 +1454,7 @@ class SequenceCampaign:
             ahead = paced_sent / self.rate - (time.monotonic() - paced_from)
             if ahead > 0.002:
                 time.sleep(ahead)
-        self.seconds = time.monotonic() - t0
+        self.seconds = time.monotonic() - t0 - self.probe_seconds
         if fcu.poll() is None:  # one probe of each kind after the last input
             for kind in ("set_get", "param", "streams", "heartbeat_off"):
                 self._probe(kind)
@@ -1824,13 +1842,14 @@ def report_port(r: dict) -> bool:
     s = r["sequences"]
     if s is not None:
         print(f"   sequence campaign: {s['inputs']} inputs in {s['seconds']:.1f} s "
-              f"({s['probe_seconds']:.1f} s of it probing), {s['in_sequences']} of them in "
+              f"({s['inputs'] / max(s['seconds'], 1e-9):.0f}/s; probes took "
+              f"{s['probe_seconds']:.1f} s more), {s['in_sequences']} of them in "
               f"{sum(s['sequences'].values())} sequences "
               f"({_fmt(dict(sorted(s['sequences'].items())))})")
         print(f"   inputs by category: {_fmt(dict(sorted(s['by_category'].items())))}"
               + (f"; not sent (our socket buffer full): {s['not_sent']}" if s["not_sent"]
                  else ""))
-        print(f"   probes: {s['probes']}; link 1 streams with all asked at 1 kHz: max "
+        print(f"   probes: {s['probes']}; link 1 streams asked at 1 kHz: max "
               f"{s['link1_stream_msg_s_max']} msg/s (budget {LINK_BUDGET_MSG_S:.0f})")
         for line in s["probe_failures"][:12]:
             print(f"     {line}")

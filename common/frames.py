@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import math
 
-Vec3 = tuple[float, float, float]
-Quat = tuple[float, float, float, float]
+from common.quaternion import Quat, Vec3, q_mul
 
 _H = math.sqrt(0.5)
 
@@ -31,29 +30,20 @@ def flu_to_frd(v: Vec3) -> Vec3:
 frd_to_flu = flu_to_frd
 
 
-def _mul(a: Quat, b: Quat) -> Quat:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw)
-
-
 _Q_NED_ENU: Quat = (0.0, _H, _H, 0.0)  # pi about (x + y)/sqrt 2: ENU coordinates -> NED
 _Q_FLU_FRD: Quat = (0.0, 1.0, 0.0, 0.0)  # pi about x
 
 
 def q_enu_flu_to_ned_frd(q: Quat) -> Quat:
     """q_ned_frd = q_ned_enu q_enu_flu q_flu_frd, sign chosen with w >= 0."""
-    r = _mul(_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
+    r = q_mul(q_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
     return r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
 
 
 def q_ned_frd_to_enu_flu(q: Quat) -> Quat:
     """Inverse of `q_enu_flu_to_ned_frd` (both fixed rotations are their own inverses up to
     sign), sign chosen with w >= 0."""
-    r = _mul(_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
+    r = q_mul(q_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
     return r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
 
 

@@ -112,7 +112,7 @@ def _resolve(url: LinkUrl) -> tuple[str, int]:
     except (socket.gaierror, UnicodeError) as exc:
         raise LinkError(f"link '{url}': cannot resolve {url.host}: {exc}") from None
     host, port = infos[0][4][:2]
-    return host, port
+    return str(host), int(port)
 
 
 def _is_unicast(host: str) -> bool:
@@ -249,7 +249,7 @@ class TcpClientLink(Link):
             infos = socket.getaddrinfo(url.host, url.port, socket.AF_INET, socket.SOCK_STREAM)
         except (socket.gaierror, UnicodeError) as exc:
             raise LinkError(f"link '{url}': cannot resolve {url.host}: {exc}") from None
-        self.address: tuple[str, int] = infos[0][4][:2]
+        self.address: tuple[str, int] = (str(infos[0][4][0]), int(infos[0][4][1]))
         self.sock: socket.socket | None = None
         self.connecting = False  # self.sock is an attempt in progress, not a connection
         self._started = 0.0  # when the current attempt began
@@ -285,6 +285,7 @@ class TcpClientLink(Link):
         self._established(peer)
 
     def _established(self, peer: tuple[str, int]) -> None:
+        assert self.sock is not None
         if peer == self.sock.getsockname():
             # Connected to itself: with nothing listening on a local port of the ephemeral
             # range, a connect can pick that very port as its source (TCP simultaneous open)
@@ -339,6 +340,7 @@ class TcpClientLink(Link):
         if not self.connected:
             return []
         out: list[tuple[object, bytes]] = []
+        assert self.sock is not None  # connected
         for _ in range(RECV_BATCH):
             try:
                 data = self.sock.recv(65536)
@@ -357,6 +359,7 @@ class TcpClientLink(Link):
         if not self.connected:
             self.dropped_sends += 1
             return
+        assert self.sock is not None  # connected
         try:
             if self._tail:
                 sent = self.sock.send(self._tail)

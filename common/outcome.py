@@ -53,7 +53,7 @@ def diverged_rows(p: np.ndarray, q: np.ndarray, p_d: np.ndarray, q_d: np.ndarray
     with np.errstate(invalid="ignore", over="ignore"):
         finite = np.all(np.isfinite(np.hstack([p, q, p_d, q_d])), axis=1)
         err = np.linalg.norm(p - p_d, axis=1)
-        return ~finite | ~np.isfinite(err) | (err > limit_m)
+        return np.asarray(~finite | ~np.isfinite(err) | (err > limit_m))
 
 
 def touchdowns(landed: np.ndarray, speed_m_s: np.ndarray) -> list[tuple[int, float]]:

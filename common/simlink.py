@@ -22,7 +22,7 @@ try:
 except ImportError:  # pragma: no cover - pymavlink depends on fastcrc; keep a fallback
     from pymavlink.generator.mavcrc import x25crc_slow
 
-    def _crc(data: bytes, init: int = 0xFFFF) -> int:
+    def _crc(data: bytes, init: int = 0xFFFF) -> int:  # type: ignore[misc]
         c = x25crc_slow()
         c.crc = init
         c.accumulate(data)
@@ -183,7 +183,8 @@ class FrameReader:
     def feed(self, peer: object, data: bytes) -> tuple[list[Frame], int]:
         if not self.stream:
             return split_frames(data)  # type: ignore[return-value]
-        frames, rejected, tail = split_frames(self.tails.pop(peer, b"") + data, stream=True)
+        frames, rejected, tail = split_frames(  # type: ignore[misc]
+            self.tails.pop(peer, b"") + data, stream=True)
         if tail:
             self.tails[peer] = tail[-512:]
         return frames, rejected

@@ -1,4 +1,5 @@
-"""Unit quaternions and unit dual quaternions as plain float tuples (paper Section II-A).
+"""Unit dual quaternions as plain float tuples (paper Section II-A), on the quaternions of
+`common.quaternion` (re-exported here for the flight core).
 
 Conventions: Hamilton product, scalar first (w, x, y, z). A pose is the unit dual quaternion
 q_hat = q + eps d with d = 1/2 q p_b = 1/2 p_s q (eq. 1), q rotating body vectors into the
@@ -13,110 +14,25 @@ from __future__ import annotations
 
 import math
 
-Vec3 = tuple[float, float, float]
-Quat = tuple[float, float, float, float]
+from common.quaternion import Q_IDENTITY as Q_IDENTITY
+from common.quaternion import Quat as Quat
+from common.quaternion import Vec3 as Vec3
+from common.quaternion import cross as cross
+from common.quaternion import norm3 as norm3
+from common.quaternion import q_angle as q_angle
+from common.quaternion import q_conj as q_conj
+from common.quaternion import q_exp as q_exp
+from common.quaternion import q_log as q_log
+from common.quaternion import q_mul as q_mul
+from common.quaternion import q_norm as q_norm
+from common.quaternion import q_normalize as q_normalize
+from common.quaternion import q_rotate as q_rotate
+from common.quaternion import q_rotate_inv as q_rotate_inv
+
 DualQuat = tuple[float, float, float, float, float, float, float, float]
 DualVec = tuple[float, float, float, float, float, float]
 
-Q_IDENTITY: Quat = (1.0, 0.0, 0.0, 0.0)
 DQ_IDENTITY: DualQuat = (1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-
-_SMALL_ANGLE = 1e-6
-
-
-# ----------------------------------------------------------------------------------------
-# Vectors
-# ----------------------------------------------------------------------------------------
-
-
-def cross(a: Vec3, b: Vec3) -> Vec3:
-    ax, ay, az = a
-    bx, by, bz = b
-    return (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
-
-
-def norm3(a: Vec3) -> float:
-    return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-
-
-# ----------------------------------------------------------------------------------------
-# Quaternions
-# ----------------------------------------------------------------------------------------
-
-
-def q_mul(a: Quat, b: Quat) -> Quat:
-    """Hamilton product a b."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw)
-
-
-def q_conj(q: Quat) -> Quat:
-    return (q[0], -q[1], -q[2], -q[3])
-
-
-def q_norm(q: Quat) -> float:
-    return math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-
-
-def q_normalize(q: Quat) -> Quat:
-    n = q_norm(q)
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
-
-
-def q_rotate(q: Quat, v: Vec3) -> Vec3:
-    """R(q) v for a unit quaternion (body to world when q = q_wb)."""
-    w, x, y, z = q
-    vx, vy, vz = v
-    # t = 2 (q_vec x v); v' = v + w t + q_vec x t
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    return (vx + w * tx + y * tz - z * ty,
-            vy + w * ty + z * tx - x * tz,
-            vz + w * tz + x * ty - y * tx)
-
-
-def q_rotate_inv(q: Quat, v: Vec3) -> Vec3:
-    """R(q)^T v (world to body when q = q_wb)."""
-    return q_rotate((q[0], -q[1], -q[2], -q[3]), v)
-
-
-def q_exp(rotvec: Vec3) -> Quat:
-    """Unit quaternion of the rotation vector `rotvec` (angle |rotvec| about its axis)."""
-    rx, ry, rz = rotvec
-    half = 0.5 * math.sqrt(rx * rx + ry * ry + rz * rz)
-    if half < _SMALL_ANGLE:
-        k = 0.5 * (1.0 - half * half / 6.0)  # sin(half)/(2 half) by its series
-    else:
-        k = 0.5 * math.sin(half) / half
-    return (math.cos(half), k * rx, k * ry, k * rz)
-
-
-def q_log(q: Quat) -> Vec3:
-    """Rotation vector theta n of a unit quaternion, theta in [0, pi] (shortest path).
-
-    q and -q give the same result except at theta = pi exactly, where n and -n are equal
-    rotations.
-    """
-    w, x, y, z = q
-    if w < 0.0:
-        w, x, y, z = -w, -x, -y, -z
-    s = math.sqrt(x * x + y * y + z * z)
-    if s < _SMALL_ANGLE * 1e-3:
-        k = 2.0 / w  # 2 atan2(s, w) / s, limit as s -> 0 (w ~ 1)
-    else:
-        k = 2.0 * math.atan2(s, w) / s
-    return (k * x, k * y, k * z)
-
-
-def q_angle(q: Quat) -> float:
-    """Rotation angle of q in [0, pi], robust near 0 and pi."""
-    s = math.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return 2.0 * math.atan2(s, abs(q[0]))
 
 
 # ----------------------------------------------------------------------------------------

@@ -109,7 +109,7 @@ def _hover(ref: Reference) -> Reference:
 def _speeds(omega_sq: np.ndarray) -> np.ndarray:
     """Rotor speeds (samples x rotors) from Omega (samples x [lat_1, ver_1, ...])."""
     lat, ver = omega_sq[:, 0::2], omega_sq[:, 1::2]
-    return np.sqrt(np.sqrt(lat * lat + ver * ver))
+    return np.asarray(np.sqrt(np.sqrt(lat * lat + ver * ver)))
 
 
 class Peak(NamedTuple):
@@ -138,7 +138,7 @@ class Envelope:
         wrench = np.empty((max(np.size(c) for c in parts), 6))
         for k, c in enumerate(parts):
             wrench[:, k] = c
-        return wrench @ self.pinv_t
+        return np.asarray(wrench @ self.pinv_t)
 
     def speeds(self, ref: Reference) -> np.ndarray:
         """Rotor speeds (samples x rotors) of the nominal wrench along `ref`."""

@@ -265,7 +265,8 @@ class GcsServer:
         elif cmd in (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             msg_id = M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if cmd != M.MAV_CMD_REQUEST_MESSAGE \
                 else _as_int(p[0], 0, 0xFFFFFF)
-            if msg_id not in REQUESTABLE and msg_id not in _ALWAYS_REQUESTABLE:
+            if msg_id is None or (msg_id not in REQUESTABLE
+                                  and msg_id not in _ALWAYS_REQUESTABLE):
                 self._ack(index, msg, cmd, M.MAV_RESULT_UNSUPPORTED)
                 return
             self._ack(index, msg, cmd, M.MAV_RESULT_ACCEPTED)

@@ -105,11 +105,12 @@ class ParamStore:
 
     def gains(self, values: dict[str, float] | None = None) -> Gains:
         v = self.values if values is None else values
-        parts = {}
-        for key in ("kp_r", "kp_d", "ki_r", "ki_d", "kd_r", "kd_d"):
+        def axes(key: str) -> tuple[float, float, float]:
             stem = f"DQ_{key[:2].upper()}{key[3].upper()}_"
-            parts[key] = tuple(v[stem + a] for a in AXES)
-        return Gains(**parts, damping=DAMPING_CODES[round(v["DQ_DAMPING"])])
+            return (v[stem + "X"], v[stem + "Y"], v[stem + "Z"])
+
+        return Gains(axes("kp_r"), axes("kp_d"), axes("ki_r"), axes("ki_d"), axes("kd_r"),
+                     axes("kd_d"), damping=DAMPING_CODES[round(v["DQ_DAMPING"])])
 
     def set(self, name: str, value: float) -> float:
         """Set a parameter; returns the stored (float32) value or raises ParamError."""

@@ -14,16 +14,12 @@ import numpy as np
 
 from common.config import Scenario
 from common.outcome import CRASH_SPEED_M_S, Event, classify, diverged_rows, touchdowns
+from common.quaternion import angle_between_rows
 
 
 def attitude_error_rad(q: np.ndarray, q_d: np.ndarray) -> np.ndarray:
     """Angle of q_d* q for rows of (w, x, y, z) quaternions, in [0, pi]."""
-    dot = np.abs(np.sum(q * q_d, axis=1))  # |scalar part of q_d* q|
-    # vector part of q_d* q
-    w1, v1 = q_d[:, 0], -q_d[:, 1:]
-    w2, v2 = q[:, 0], q[:, 1:]
-    vec = w1[:, None] * v2 + w2[:, None] * v1 + np.cross(v1, v2)
-    return 2.0 * np.arctan2(np.linalg.norm(vec, axis=1), dot)
+    return angle_between_rows(q, q_d)
 
 
 def error_stats(err: np.ndarray) -> dict[str, float]:

@@ -241,7 +241,8 @@ def parse_toml(text: str, source: str = "<mission>") -> list[MissionItem]:
             params = _floats(t, "params", 4, where)
             item = MissionItem(seq, _int(t, "frame", where, M.MAV_FRAME_LOCAL_NED),
                                _int(t, "command", where), 1 if seq == 0 else 0,
-                               _int(t, "autocontinue", where, 1), *params, _int(t, "x", where),
+                               _int(t, "autocontinue", where, 1), params[0], params[1],
+                               params[2], params[3], _int(t, "x", where),
                                _int(t, "y", where), _float(t, "z", where))
             items.append(_checked(item, where))
             continue

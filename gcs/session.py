@@ -49,8 +49,11 @@ class MavZenoh(mavutil.mavfile):
     def __init__(self, url: str, source_system: int, source_component: int,
                  vehicle: int = 0) -> None:
         from common.links import open_link
+        from common.zenoh_link import ZenohLink
 
-        self.link = open_link(url, role="gcs", system_id=vehicle)
+        link = open_link(url, role="gcs", system_id=vehicle)
+        assert isinstance(link, ZenohLink)
+        self.link = link
         mavutil.mavfile.__init__(self, self.link.fileno(), url, source_system=source_system,
                                  source_component=source_component, use_native=False)
         self._buf = b""

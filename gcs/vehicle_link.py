@@ -12,7 +12,7 @@ from typing import Any
 
 from common.mavlink import MAV
 from common.modes import Mode, by_name, decode_custom
-from fcu.dualquat import q_angle, q_conj, q_exp, q_mul
+from common.quaternion import q_angle, q_conj, q_exp, q_mul
 from gcs.session import GcsError, Session
 
 M = MAV

@@ -14,7 +14,7 @@ PURE_MODULES = ("common/config.py", "common/geometry.py", "common/frames.py",
                 "fcu/dualquat.py", "fcu/trajectory.py", "fcu/tracker.py", "fcu/allocation.py",
                 "fcu/core.py", "fcu/mission.py", "fcu/supervisor.py", "common/modes.py",
                 "fcu/commander.py", "fcu/failsafe.py", "fcu/pipeline.py", "common/outcome.py",
-                "fcu/feasibility.py",
+                "fcu/feasibility.py", "common/quaternion.py",
                 "sitl/plant.py", "sitl/disturbance.py")
 
 

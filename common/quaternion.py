@@ -1,0 +1,127 @@
+"""Unit quaternions as plain float tuples: the one quaternion module of the project, shared
+by the flight core (`fcu.dualquat` builds dual quaternions on it), the frame conversion
+(`common.frames`) and the ground station. The plant (`sitl.plant`) keeps its own rotation
+on purpose: an independent plant is what makes closed-loop tests mean something.
+
+Conventions: Hamilton product, scalar first (w, x, y, z); q rotates body vectors into the
+world frame. Scalar code on tuples: these run in the 500 Hz control step, where many small
+numpy calls would cost more than the arithmetic. `angle_between_rows` is the vectorised
+attitude error for logs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
+
+Q_IDENTITY: Quat = (1.0, 0.0, 0.0, 0.0)
+
+_SMALL_ANGLE = 1e-6
+
+
+# ----------------------------------------------------------------------------------------
+# Vectors
+# ----------------------------------------------------------------------------------------
+
+
+def cross(a: Vec3, b: Vec3) -> Vec3:
+    ax, ay, az = a
+    bx, by, bz = b
+    return (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
+
+
+def norm3(a: Vec3) -> float:
+    return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+
+
+# ----------------------------------------------------------------------------------------
+# Quaternions
+# ----------------------------------------------------------------------------------------
+
+
+def q_mul(a: Quat, b: Quat) -> Quat:
+    """Hamilton product a b."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw)
+
+
+def q_conj(q: Quat) -> Quat:
+    return (q[0], -q[1], -q[2], -q[3])
+
+
+def q_norm(q: Quat) -> float:
+    return math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+
+
+def q_normalize(q: Quat) -> Quat:
+    n = q_norm(q)
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+def q_rotate(q: Quat, v: Vec3) -> Vec3:
+    """R(q) v for a unit quaternion (body to world when q = q_wb)."""
+    w, x, y, z = q
+    vx, vy, vz = v
+    # t = 2 (q_vec x v); v' = v + w t + q_vec x t
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (vx + w * tx + y * tz - z * ty,
+            vy + w * ty + z * tx - x * tz,
+            vz + w * tz + x * ty - y * tx)
+
+
+def q_rotate_inv(q: Quat, v: Vec3) -> Vec3:
+    """R(q)^T v (world to body when q = q_wb)."""
+    return q_rotate((q[0], -q[1], -q[2], -q[3]), v)
+
+
+def q_exp(rotvec: Vec3) -> Quat:
+    """Unit quaternion of the rotation vector `rotvec` (angle |rotvec| about its axis)."""
+    rx, ry, rz = rotvec
+    half = 0.5 * math.sqrt(rx * rx + ry * ry + rz * rz)
+    if half < _SMALL_ANGLE:
+        k = 0.5 * (1.0 - half * half / 6.0)  # sin(half)/(2 half) by its series
+    else:
+        k = 0.5 * math.sin(half) / half
+    return (math.cos(half), k * rx, k * ry, k * rz)
+
+
+def q_log(q: Quat) -> Vec3:
+    """Rotation vector theta n of a unit quaternion, theta in [0, pi] (shortest path).
+
+    q and -q give the same result except at theta = pi exactly, where n and -n are equal
+    rotations.
+    """
+    w, x, y, z = q
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    s = math.sqrt(x * x + y * y + z * z)
+    if s < _SMALL_ANGLE * 1e-3:
+        k = 2.0 / w  # 2 atan2(s, w) / s, limit as s -> 0 (w ~ 1)
+    else:
+        k = 2.0 * math.atan2(s, w) / s
+    return (k * x, k * y, k * z)
+
+
+def q_angle(q: Quat) -> float:
+    """Rotation angle of q in [0, pi], robust near 0 and pi."""
+    s = math.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return 2.0 * math.atan2(s, abs(q[0]))
+
+
+def angle_between_rows(q: np.ndarray, q_d: np.ndarray) -> np.ndarray:
+    """Angle of q_d* q for rows of (w, x, y, z) quaternions, in [0, pi]."""
+    dot = np.abs(np.sum(q * q_d, axis=1))  # |scalar part of q_d* q|
+    w1, v1 = q_d[:, 0], -q_d[:, 1:]
+    w2, v2 = q[:, 0], q[:, 1:]
+    vec = w1[:, None] * v2 + w2[:, None] * v1 + np.cross(v1, v2)
+    return np.asarray(2.0 * np.arctan2(np.linalg.norm(vec, axis=1), dot))
