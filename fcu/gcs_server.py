@@ -77,6 +77,7 @@ class GcsServer:
         self.builders = Builders(self.snapshot, home)
         self.gcs_seen_s = -math.inf
         self.mission_link = 0  # the link of the latest mission upload (re-requests go there)
+        missions.current = lambda: pipeline.commander.mission_current
         self.rejected_bytes = 0
         self.ignored_messages = 0
         self.signing_rejects = 0
@@ -175,7 +176,6 @@ class GcsServer:
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
             self._command(index, msg, now_s)
         elif kind.startswith("MISSION_"):
-            self.missions.current_seq = cmd.mission_current
             if kind == "MISSION_COUNT":
                 self.mission_link = index
             for reply in self.missions.handle(msg, now_s):
@@ -281,7 +281,6 @@ class GcsServer:
     def set_mission_current(self, seq: int) -> bool:
         result, _ = self.pipeline.commander.set_mission_current(seq)
         if result == M.MAV_RESULT_ACCEPTED:
-            self.missions.current_seq = seq
             self.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # the spec's confirmation
         return result == M.MAV_RESULT_ACCEPTED
 

@@ -103,7 +103,10 @@ class MissionServer:
         self.retries = retries
         self.mission: tuple[MissionItem, ...] = ()
         self.version = 0
-        self.current_seq = 0  # sent as current = 1 on download; the owner keeps it up to date
+        self._current_seq = 0
+        # The current item lives with whoever flies the mission (the FCU's commander): it is
+        # asked through `current` when set; a server on its own keeps its own.
+        self.current: Callable[[], int] | None = None
         self.on_mission_changed: Callable[[tuple[MissionItem, ...]], None] | None = None
         self.on_set_current: Callable[[int], bool] | None = None
         self._upload: _Upload | None = None
@@ -137,10 +140,15 @@ class MissionServer:
                                                   text_id, i)
                      for i, chunk in enumerate(chunks))
 
+    @property
+    def current_seq(self) -> int:
+        """The current item, sent as current = 1 on download."""
+        return self.current() if self.current is not None else self._current_seq
+
     def _replace(self, items: tuple[MissionItem, ...]) -> None:
         self.mission = items
         self.version = (self.version + 1) & 0xFFFFFFFF or 1
-        self.current_seq = 0
+        self._current_seq = 0
         if self.on_mission_changed is not None:
             self.on_mission_changed(items)
 
@@ -196,7 +204,7 @@ class MissionServer:
             return
         ok = self.on_set_current(seq) if self.on_set_current is not None else True
         if ok:
-            self.current_seq = seq
+            self._current_seq = seq
 
     def _on_count(self, partner: Partner, count: int,
                   now_s: float) -> list[MAV.MAVLink_message]:

@@ -98,6 +98,26 @@ def test_mission_files_round_trip_through_the_vehicle(vehicle, tmp_path, fmt):
     assert vehicle.gcs("mission", "download", "--format", "wpl").stdout == "QGC WPL 110\n"
 
 
+def test_mission_the_vehicle_cannot_fly_is_refused_with_the_reason(vehicle, tmp_path):
+    """A keyframe 2 m away in 0.5 s (about 46 m/s^2 at its peak) is refused at upload, and
+    `gcs mission upload` shows the vehicle's reason (the item and the rotor limit); 2 m legs
+    at the cruise speed are accepted (the vehicle stretches them)."""
+    src = tmp_path / "fast.toml"
+    src.write_text('format = "dqflight-mission-1"\n[[item]]\ntype = "keyframe"\n'
+                   "time_s = 0.5\nposition_ned_m = [2.0, 0.0, -3.0]\n"
+                   "rotvec_ned_frd_rad = [0.0, 0.0, 1.5707963267948966]\n")
+    up = vehicle.gcs("mission", "upload", str(src))
+    assert up.returncode == 1, up.stdout + up.stderr
+    assert "MAV_MISSION_DENIED" in up.stdout and "item 0" in up.stdout, up.stdout
+    assert "rad/s" in up.stdout and "lengthen p1" in up.stdout, up.stdout
+    legs = tmp_path / "legs.toml"
+    legs.write_text('format = "dqflight-mission-1"\n' + "".join(
+        f'[[item]]\ntype = "waypoint"\nposition_ned_m = [{x}, 0.0, -3.0]\nhold_s = 0.0\n'
+        "yaw_deg = nan\n" for x in (2.0, 4.0, 6.0)))
+    ok = vehicle.gcs("mission", "upload", str(legs))
+    assert ok.returncode == 0 and "MAV_MISSION_ACCEPTED" in ok.stdout, ok.stdout
+
+
 def test_mission_start_flies_the_mission(vehicle, tmp_path):
     """mission start then arm (or arm then start) runs the mission."""
     src = tmp_path / "case1.toml"
