@@ -134,15 +134,3 @@ def gain_dot(k_r: Vec3, k_d: Vec3, v: DualVec) -> DualVec:
     """k_hat . v_hat = K_r v_r + eps K_d v_d with diagonal K_r, K_d (eq. 3)."""
     return (k_r[0] * v[0], k_r[1] * v[1], k_r[2] * v[2],
             k_d[0] * v[3], k_d[1] * v[4], k_d[2] * v[5])
-
-
-def dv_add(a: DualVec, b: DualVec) -> DualVec:
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3], a[4] + b[4], a[5] + b[5])
-
-
-def dv_sub(a: DualVec, b: DualVec) -> DualVec:
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2], a[3] - b[3], a[4] - b[4], a[5] - b[5])
-
-
-def dv_scale(k: float, a: DualVec) -> DualVec:
-    return (k * a[0], k * a[1], k * a[2], k * a[3], k * a[4], k * a[5])

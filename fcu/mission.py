@@ -529,7 +529,6 @@ class MissionExecutor:
         self._announced = 0
         self._reached = 0
         self._completed = False
-        self._first = 0
         self.current_seq = 0
 
     # ------------------------------------------------------------------ planning
@@ -556,7 +555,6 @@ class MissionExecutor:
         self._announced = 0
         self._reached = 0
         self._completed = False
-        self._first = seq
         self.current_seq = seq
 
     @property
