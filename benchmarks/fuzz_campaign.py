@@ -72,6 +72,7 @@ kept its mission under the non-destructive attack.
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import itertools
 import json
@@ -451,17 +452,18 @@ class GcsSequences:
 
     def _frame(self, msgid: int, payload: bytes, sender: tuple[int, int]) -> bytes:
         """A MAVLink 2 frame with a valid CRC (and signature) around any payload."""
-        signed = self.key is not None and self.rng.random() < 0.95
+        key = self.key
+        signed = key is not None and self.rng.random() < 0.95
         header = struct.pack("<BBBBBBBHB", 0xFD, len(payload), 1 if signed else 0, 0,
                              self.rng.getrandbits(8), *sender, msgid & 0xFFFF, msgid >> 16)
         crc = M.x25crc(header[1:])
         crc.accumulate(payload)
         crc.accumulate(bytes([M.mavlink_map[msgid].crc_extra]))
         frame = header + payload + struct.pack("<H", crc.crc)
-        if signed:
+        if key is not None and signed:
             self._raw_ts += 1
             stamp = struct.pack("<BQ", RAW_LINK_ID, self._raw_ts)[:7]
-            frame += stamp + hashlib.sha256(self.key + frame + stamp).digest()[:6]
+            frame += stamp + hashlib.sha256(key + frame + stamp).digest()[:6]
         return frame
 
     def _sender(self) -> tuple[int, int]:
@@ -520,7 +522,7 @@ class GcsSequences:
             if ftype in ("float", "double"):
                 one = self._float
             else:
-                one = lambda ftype=ftype: self._int(ftype)  # noqa: E731
+                one = functools.partial(self._int, ftype)
             if name == "target_system" and r.random() < 0.85:
                 value: object = r.choice((1, 1, 1, 0))
             elif name == "target_component" and r.random() < 0.8:
@@ -1261,9 +1263,9 @@ class Prober:
         values = [None if m is None else m.param_value for m in (m0, m1, m2)]
         what = f"PARAM_SET({spec.name}, {wire!r}) then PARAM_REQUEST_READ: {values[0]!r} " \
                f"-> {values[1]!r}, read {values[2]!r} (range [{spec.lo:g}, {spec.hi:g}])"
-        if None in values:
+        if m0 is None or m1 is None or m2 is None:
             return self._outcome("param", None, what)
-        v0, v1, v2 = values
+        v0, v1, v2 = (float(m.param_value) for m in (m0, m1, m2))
         requested_ok = math.isfinite(wire) and spec.lo <= wire <= spec.hi and \
             (spec.unit != "enum" or wire == round(wire))
         ok = v1 == v2 and math.isfinite(v2) and spec.lo <= v2 <= spec.hi and \
@@ -1404,7 +1406,8 @@ class SequenceCampaign:
         self.prober = Prober(flight.gcs_port, flight.listener, flight.signing_key, seed)
         self.rng = random.Random(seed + 2)
         self.ring: deque = deque(maxlen=self.RING)
-        self.errors: list[tuple[float, str, list]] = []
+        self.errors: list[tuple[float, str, list]] = []  # the first ones, with inputs
+        self.error_texts: Counter = Counter()  # every one seen
         self.counts: Counter = Counter()
         self.sequences: Counter = Counter()
         self.in_sequences = 0
@@ -1415,7 +1418,10 @@ class SequenceCampaign:
         flight.listener.on_text = self._on_text
 
     def _on_text(self, t: float, text: str) -> None:
-        if "internal error" in text and len(self.errors) < 20:
+        if "internal error" not in text:
+            return
+        self.error_texts[text] += 1
+        if len(self.errors) < 20:
             self.errors.append((t, text, list(self.ring.copy())))
 
     def _probe(self, kind: str | None = None) -> None:
@@ -1461,18 +1467,24 @@ class SequenceCampaign:
             if self.flight.signing_key is not None:
                 self._probe("signing")
 
-    def report_errors(self, out: Path) -> list[str]:
-        """The internal errors seen, each with the inputs sent in the 2 s before it (all
-        of the ring in a file beside the flight's logs)."""
-        lines = []
+    def report_errors(self, out: Path, detailed: int = 3) -> list[str]:
+        """The internal errors seen on the listening link, by text; the first `detailed`
+        with the inputs sent just before them (the first 20 with the last RING inputs in
+        files beside the flight's logs)."""
+        if not self.error_texts:
+            return []
+        lines = [f"{sum(self.error_texts.values())} STATUSTEXT 'internal error' on the "
+                 f"listening link: " + _fmt(dict(self.error_texts.most_common()))]
         for k, (t, text, ring) in enumerate(self.errors):
             path = out / f"internal_error_{k}.txt"
             with path.open("w") as fh:
                 fh.write(f"{text}\n")
                 for ts, category, data in ring:
                     fh.write(f"{ts - t:+.4f} s {category}: {data.hex()} {describe(data)}\n")
+            if k >= detailed:
+                continue
             recent = [(ts, c, d) for ts, c, d in ring if t - 2.0 <= ts <= t][-8:]
-            lines.append(f"'{text}' ({path}); last inputs before it:")
+            lines.append(f"#{k} '{text}' ({path}); last inputs before it:")
             lines += [f"      {ts - t:+.3f} s {c}: {describe(d)[:300]}" for ts, c, d in recent]
         return lines
 
@@ -1733,6 +1745,7 @@ def run_port(port: str | None, out: Path, inputs: int, rate: float, seed: int,
         crashed = flight.crashed()
         if target == "gcs" and inputs > 0 and not crashed:
             flight.pause_telemetry()  # link 1 is about to be reconfigured at will
+            assert attack is not None
             campaign = SequenceCampaign(flight, attack, seed, seq_rate, probe_every)
             campaign.run(inputs)
             time.sleep(2.0)  # the answers and streams after the last input
@@ -1853,8 +1866,8 @@ def report_port(r: dict) -> bool:
               f"{s['link1_stream_msg_s_max']} msg/s (budget {LINK_BUDGET_MSG_S:.0f})")
         for line in s["probe_failures"][:12]:
             print(f"     {line}")
-        for line in s["internal_errors"][:60]:
-            print(f"   internal error: {line}" if line.startswith("'") else line)
+        for line in s["internal_errors"]:
+            print(line if line.startswith("      ") else f"   internal errors: {line}")
     li = r["listen"]
     print(f"   listening link: {li['heartbeats']} heartbeats in {li['seconds']:.0f} s, longest "
           f"gap {li['gap_max_s']:.2f} s (at +{li['gap_at_s']:.0f} s); {li['msg_s']:.0f} msg/s "

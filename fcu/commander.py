@@ -21,10 +21,10 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
-from common.mission_items import MissionItem, local_xy
+from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE, INFO, Event
-from fcu.dualquat import Q_IDENTITY, Quat, Vec3, q_exp
+from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3, q_exp
 from fcu.mission import MissionEvent, MissionExecutor, MissionLimits
 from fcu.tracker import Reference, VehicleState
 
@@ -39,6 +39,10 @@ LANDED_SPEED_M_S = 0.2
 LANDED_STILL_S = 0.5
 TOUCHDOWN_DEPTH_M = 1.0
 TOUCHDOWN_BLOCKED_M = 0.1
+# Offboard targets beyond these are refused (no vehicle of this class flies them).
+MAX_OFFBOARD_SPEED_M_S = 50.0
+MAX_OFFBOARD_ACC_M_S2 = 50.0
+MAX_OFFBOARD_RATE_RAD_S = 50.0
 
 
 class Touchdown(NamedTuple):
@@ -128,6 +132,7 @@ class Commander:
             return MAV_RESULT_ACCEPTED, "already armed"
         if self.state is None:
             return MAV_RESULT_DENIED, "arming refused: no state input"
+        self.last_ref = None  # hold where the vehicle is, not where an old reference was
         self.armed = True
         self.hold = self._current_pose_ref()
         self.touchdown = None
@@ -237,9 +242,9 @@ class Commander:
 
     def _start_landing(self) -> None:
         start = self._current_pose_ref()
+        # NAV_LAND descends vertically from where it starts: x, y are not used.
         land = MissionItem(0, MAV_FRAME_LOCAL_NED, MAV_CMD_NAV_LAND, 1, 1, 0.0, 0.0, 0.0,
-                           math.nan, local_xy(start.p_enu_m[1]), local_xy(start.p_enu_m[0]),
-                           0.0)  # x, y: NED (north, east)
+                           math.nan, 0, 0, 0.0)
         self.land = MissionExecutor((land,), self.limits)
         self.land.start(self.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
         self.touchdown = None
@@ -253,6 +258,14 @@ class Commander:
             return False, "position target frame must be LOCAL_NED"
         if not type_mask & 0b111 and not all(math.isfinite(x) for x in p_ned):
             return False, "position target not finite"
+        if not type_mask & 0b111 and norm3(p_ned) > self.limits.max_distance_m:
+            return False, "position target beyond GF_MAX_DIST"
+        for mask, vec, limit, what in ((0b111000, v_ned, MAX_OFFBOARD_SPEED_M_S, "velocity"),
+                                       (0b111000000, a_ned, MAX_OFFBOARD_ACC_M_S2,
+                                        "acceleration")):
+            if not type_mask & mask and all(map(math.isfinite, vec)) and \
+                    norm3(vec) > limit:
+                return False, f"{what} target above {limit:g}"
         sp = self.offboard
         if not type_mask & 0b111:
             sp.p_enu_m = ned_to_enu(p_ned)
@@ -274,7 +287,8 @@ class Commander:
                 return False, "attitude target not a unit quaternion"
             w, x, y, z = (c / n for c in q_ned_frd)
             sp.q_enu_flu = q_ned_frd_to_enu_flu((w, x, y, z))
-        rates_ok = all(math.isfinite(x) for x in rates_frd)
+        rates_ok = all(math.isfinite(x) for x in rates_frd) and \
+            norm3(rates_frd) <= MAX_OFFBOARD_RATE_RAD_S
         sp.omega_flu_rad_s = frd_to_flu(rates_frd) if rates_ok and not type_mask & 0b111 \
             else _ZERO
         sp.received_s = now_s

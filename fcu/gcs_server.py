@@ -18,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from common.links import Link
-from common.mavlink import MAV, encoder, pack, parser
+from common.mavlink import MAV, encoder, pack, parser, signed_parser
 from common.modes import Mode, decode, decode_custom
 from common.outcome import Event
 from fcu.commander import FORCE_DISARM_MAGIC
@@ -40,6 +40,8 @@ from fcu.telemetry import (
 M = MAV
 COMPONENT = M.MAV_COMP_ID_AUTOPILOT1
 STATUSTEXT_LEN = 50
+STATUSTEXT_BURST = 20.0
+STATUSTEXT_RATE = 10.0  # per second and link
 _ALWAYS_REQUESTABLE = (M.MAVLINK_MSG_ID_MISSION_CURRENT, M.MAVLINK_MSG_ID_HEARTBEAT,
                        M.MAVLINK_MSG_ID_SYS_STATUS)
 
@@ -51,6 +53,8 @@ class GcsLink:
     link: Link
     mav: MAV.MAVLink
     schedule: Schedule = field(default_factory=Schedule.default)
+    text_tokens: float = 20.0  # STATUSTEXT budget (see GcsServer.say)
+    text_refill_s: float = 0.0
 
 
 def _as_int(x: float, lo: int, hi: int) -> int | None:
@@ -83,6 +87,8 @@ class GcsServer:
         self.signing_rejects = 0
         self.internal_errors = 0
         self.unsendable = 0
+        self.texts_dropped = 0
+        self.now_s = 0.0  # the wall clock at the latest input or tick
         self.time_us = 0  # the FCU's clock, for telemetry stamps
         self.v_enu_m_s = (0.0, 0.0, 0.0)
 
@@ -110,8 +116,21 @@ class GcsServer:
                 return
             gl.link.send(data)
 
-    def say(self, severity: int, text: str) -> None:
-        self.send(M.MAVLink_statustext_message(severity, text.encode()[:STATUSTEXT_LEN], 0, 0))
+    def say(self, severity: int, text: str, index: int | None = None) -> None:
+        """STATUSTEXT to one link (an answer to what it sent) or to all (the vehicle's own
+        news); each link takes at most STATUSTEXT_BURST in a row, refilled at
+        STATUSTEXT_RATE per second, so a peer cannot turn its refusals into a flood."""
+        msg = M.MAVLink_statustext_message(severity, text.encode()[:STATUSTEXT_LEN], 0, 0)
+        for i in (range(len(self.links)) if index is None else (index,)):
+            gl = self.links[i]
+            gl.text_tokens = min(STATUSTEXT_BURST, gl.text_tokens + STATUSTEXT_RATE * max(
+                0.0, self.now_s - gl.text_refill_s))
+            gl.text_refill_s = self.now_s
+            if gl.text_tokens < 1.0:
+                self.texts_dropped += 1
+                continue
+            gl.text_tokens -= 1.0
+            self.send(msg, i)
 
     def announce(self, events: list[Event]) -> None:
         for ev in events:
@@ -127,10 +146,8 @@ class GcsServer:
         key = (index, peer)
         p = self.parsers.get(key)
         if p is None:
-            p = self.parsers[key] = parser()
-            if self.signing_key is not None:
-                p.signing.secret_key = self.signing_key  # unsigned frames are refused
-                p.signing.stream_timestamps = self._stream_timestamps
+            p = self.parsers[key] = parser() if self.signing_key is None else \
+                signed_parser(self.signing_key, self._stream_timestamps)
         try:
             msgs = p.parse_buffer(data) or []
         except Exception:  # pymavlink raises on some malformed input; count and go on
@@ -154,13 +171,14 @@ class GcsServer:
 
     def handle(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
         """The error boundary around one message from link `index`."""
+        self.now_s = max(self.now_s, now_s)
         try:
             self._handle(index, msg, now_s)
         except Exception as exc:  # a bug, not an input error: count, report, keep flying
             self.internal_errors += 1
             self.ignored_messages += 1
             self.say(M.MAV_SEVERITY_ERROR,
-                     f"internal error on {msg.get_type()}: {type(exc).__name__}")
+                     f"internal error on {msg.get_type()}: {type(exc).__name__}", index)
 
     def _handle(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
         kind = msg.get_type()
@@ -186,27 +204,25 @@ class GcsServer:
         elif kind == "PARAM_REQUEST_READ":
             self._param_read(index, msg)
         elif kind == "PARAM_SET":
-            self._param_set(msg)
+            self._param_set(index, msg)
         elif kind == "SET_POSITION_TARGET_LOCAL_NED":
             ok, why = cmd.offboard_position(
                 now_s, msg.coordinate_frame, msg.type_mask, (msg.x, msg.y, msg.z),
                 (msg.vx, msg.vy, msg.vz), (msg.afx, msg.afy, msg.afz), msg.yaw)
             if not ok:
-                self.say(M.MAV_SEVERITY_WARNING, why)
+                self.say(M.MAV_SEVERITY_WARNING, why, index)
         elif kind == "SET_ATTITUDE_TARGET":
             ok, why = cmd.offboard_attitude(
                 now_s, msg.type_mask, tuple(msg.q),
                 (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate))
             if not ok:
-                self.say(M.MAV_SEVERITY_WARNING, why)
+                self.say(M.MAV_SEVERITY_WARNING, why, index)
         elif kind == "SET_MODE":
             mode = decode_custom(msg.custom_mode)
             if mode is not None:
-                self._announce_result(*cmd.set_mode(mode, now_s))
-
-    def _announce_result(self, result: int, text: str) -> None:
-        if result != M.MAV_RESULT_ACCEPTED and text:
-            self.say(M.MAV_SEVERITY_WARNING, text)
+                result, text = cmd.set_mode(mode, now_s)
+                if result != M.MAV_RESULT_ACCEPTED and text:
+                    self.say(M.MAV_SEVERITY_WARNING, text, index)
 
     # ------------------------------------------------------------------ commands
 
@@ -276,7 +292,7 @@ class GcsServer:
             result = M.MAV_RESULT_UNSUPPORTED
         self._ack(index, msg, cmd, result)
         if text and result != M.MAV_RESULT_ACCEPTED:
-            self.say(M.MAV_SEVERITY_WARNING, text)
+            self.say(M.MAV_SEVERITY_WARNING, text, index)
 
     def set_mission_current(self, seq: int) -> bool:
         result, _ = self.pipeline.commander.set_mission_current(seq)
@@ -306,15 +322,15 @@ class GcsServer:
         if name in self.params.values:
             self._send_param(self.params.index(name), index)
 
-    def _param_set(self, msg: MAV.MAVLink_message) -> None:
+    def _param_set(self, index: int, msg: MAV.MAVLink_message) -> None:
         name = self._param_name(msg)
         if name not in self.params.values:
-            self.say(M.MAV_SEVERITY_WARNING, f"unknown parameter {name}")
+            self.say(M.MAV_SEVERITY_WARNING, f"unknown parameter {name}", index)
             return
         try:
             self.params.set(name, float(msg.param_value))
         except ParamError as exc:
-            self.say(M.MAV_SEVERITY_WARNING, str(exc))
+            self.say(M.MAV_SEVERITY_WARNING, str(exc), index)
         else:
             if self.on_params is not None:
                 self.on_params()
@@ -373,6 +389,7 @@ class GcsServer:
 
     def tick(self, now_s: float) -> None:
         """Wall-clock work: mission re-requests, each link's due streams."""
+        self.now_s = max(self.now_s, now_s)
         for reply in self.missions.tick(now_s):
             self.send(reply, self.mission_link)
         for i, gl in enumerate(self.links):

@@ -113,8 +113,10 @@ def _field(ftype: str, length: int, name: str) -> st.SearchStrategy:
 
 def message(kind: str) -> st.SearchStrategy:
     cls = getattr(M, f"MAVLink_{kind.lower()}_message")
-    parts = [_field(t, n, name) for name, t, n in zip(cls.fieldnames, cls.fieldtypes,
-                                                       cls.array_lengths, strict=True)]
+    # fieldnames and fieldtypes are in declaration order, array_lengths in wire order
+    lengths = dict(zip(cls.ordered_fieldnames, cls.array_lengths, strict=True))
+    parts = [_field(t, lengths[name], name) for name, t in zip(cls.fieldnames,
+                                                                cls.fieldtypes, strict=True)]
     return st.tuples(*parts).map(lambda values: cls(*values))
 
 
@@ -126,11 +128,8 @@ def test_any_field_values_in_any_sequence(sequence):
     exception reaches the boundary and every answer packs and parses (also telemetry)."""
     server, links = make_server()
     for msg, index in sequence:
-        # Round-trip through the wire where the values can travel: what a peer can send.
-        try:
-            data = pack(encoder(255, 190), msg)
-        except Exception:
-            continue  # a value the wire cannot carry never reaches the FCU
+        # Round-trip through the wire: what a peer can send.
+        data = pack(encoder(255, 190), msg)
         p = parser()
         for wire_msg in p.parse_buffer(data) or []:
             server.handle(index, wire_msg, now_s=1.0)
@@ -248,3 +247,66 @@ def test_range_checked_command_parameters(value):
         acks, _ = _acks_and_texts(links[0])
         assert len(acks) == 1, command
     assert server.internal_errors == 0
+
+
+def test_land_after_a_far_offboard_target_and_a_rearm():
+    """Given an offboard target far away (refused beyond the geofence; a near one flown),
+    a divergence disarm and a re-arm, when LAND is commanded by every route, then it is
+    accepted and nothing reaches the boundary (the fuzz campaign's ValueError)."""
+    server, links = make_server()
+    pipe = server.pipeline
+    far = M.MAVLink_set_position_target_local_ned_message(0, 1, 1, M.MAV_FRAME_LOCAL_NED, 0,
+                                                           1e6, 0.0, 0.0, 0, 0, 0, 0, 0, 0,
+                                                           0, 0)
+    _command(server, 0, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    server.handle(0, far, now_s=1.0)
+    _, texts = _acks_and_texts(links[0])
+    assert any("GF_MAX_DIST" in t for t in texts)
+    near = far.__class__(0, 1, 1, M.MAV_FRAME_LOCAL_NED, 0, 20.0, 0.0, 0.0, 0, 0, 0, 0, 0,
+                         0, 0, 0)
+    server.handle(0, near, now_s=1.0)
+    _command(server, 0, M.MAV_CMD_DO_SET_MODE, 1, 6, 0)
+    assert pipe.commander.mode.name == "OFFBOARD"
+    pipe.step(2000)  # 20 m from the target: diverged, disarmed
+    assert not pipe.armed
+    _command(server, 0, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    assert pipe.commander.hold is not None and pipe.commander.hold.p_enu_m == (0.0, 0.0, 0.0)
+    parsed(links[0])
+    for route in ((M.MAV_CMD_NAV_LAND,), (M.MAV_CMD_DO_SET_MODE, 1, 4, 6)):
+        _command(server, 0, *route)
+        acks, _ = _acks_and_texts(links[0])
+        assert acks == [M.MAV_RESULT_ACCEPTED]
+    assert server.internal_errors == 0 and pipe.commander.land is not None
+
+
+def test_a_forged_frame_does_not_lock_a_signed_stream_out():
+    """Given a signed link, when a frame signed with another key and a timestamp far ahead
+    arrives on a sender's stream, then it is refused and the sender's next validly signed
+    frames are still accepted; a replay is refused."""
+    from common.mavlink import signed_parser
+
+    key, stolen = bytes(range(32)), bytes(32)
+    stamps: dict = {}
+    fcu_parser = signed_parser(key, stamps)
+
+    def frame(signing_key: bytes, timestamp: int) -> bytes:
+        mav = encoder(255, 190)
+        mav.signing.secret_key = signing_key
+        mav.signing.sign_outgoing = True
+        mav.signing.link_id = 0
+        mav.signing.timestamp = timestamp
+        return pack(mav, M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))
+
+    def accepted(data: bytes) -> bool:
+        msgs = fcu_parser.parse_buffer(data) or []
+        return any(m.get_type() == "HEARTBEAT" for m in msgs)
+
+    from common.mavlink import signing_timestamp
+
+    now = signing_timestamp()
+    first = frame(key, now)
+    assert accepted(first)
+    assert not accepted(first)  # replay
+    assert not accepted(frame(stolen, now + 10**12))  # forged, far ahead
+    assert accepted(frame(key, now + 10))  # the real sender goes on
+    assert not accepted(frame(key, now - 6000 * 1000 * 2 - 10**9)[:-1])  # truncated, old
