@@ -39,7 +39,7 @@ CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILIT
                 | M.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                 | M.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | M.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT)
 FLIGHT_SW_VERSION = (0 << 24) | (1 << 16) | (0 << 8) | 255  # 0.1.0, release
-MIN_INTERVAL_S = 0.001  # no stream faster than 1 kHz
+MIN_INTERVAL_S = 0.002  # no stream faster than 500 Hz (the loop serves links every 2 ms)
 MAX_INTERVAL_US = 2**31 - 1  # MESSAGE_INTERVAL.interval_us is an int32
 LINK_BUDGET_MSG_S = 1000.0  # all streams of one link together (defaults: about 264/s)
 _PER_SEND = {M.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: 2}  # builders that send several messages

@@ -220,7 +220,7 @@ def test_a_link_silences_only_itself():
 
 
 def test_link_budget_bounds_the_streams():
-    """Given every stream asked at 1 us, then each request is clamped to 1 kHz and refused,
+    """Given every stream asked at 1 us, then each request is clamped to 500 Hz and refused,
     with the reason, once the link's total would pass its budget; the total stays bounded."""
     server, links = make_server()
     schedule = server.links[0].schedule
