@@ -115,6 +115,7 @@ from fcu.telemetry import (  # noqa: E402
     DEFAULT_INTERVALS_S,
     LINK_BUDGET_MSG_S,
     MAX_INTERVAL_US,
+    MIN_INTERVAL_S,
     REQUESTABLE,
 )
 from gcs.mission_client import upload  # noqa: E402
@@ -1236,7 +1237,7 @@ class Prober:
             ok, expect = result == M.MAV_RESULT_DENIED and g1 == g0, f"DENIED and {g0}"
         elif result == M.MAV_RESULT_ACCEPTED:
             want = -1 if wire < 0 else round(DEFAULT_INTERVALS_S[msg_id] * 1e6) \
-                if wire == 0 else max(round(wire), 1000)
+                if wire == 0 else max(round(wire), round(MIN_INTERVAL_S * 1e6))
             ok, expect = g1 == want, f"{want}"
         else:  # refused within the range: the link's budget; nothing may change
             ok, expect = result == M.MAV_RESULT_DENIED and g1 == g0, f"{g0} (budget)"

@@ -196,6 +196,7 @@ class _Flight:
         self.progress = Progress()
         self.session: Session | None = None
         self.error: BaseException | None = None
+        self.interrupted = False
         self.wall0 = self.wall1 = time.monotonic()
 
     def start(self) -> None:
@@ -287,6 +288,8 @@ class _Flight:
         stats_path = out / "fcu_stats.json"
         stats = json.loads(stats_path.read_text()) if stats_path.exists() else {}
         stopped = ""
+        if self.interrupted:
+            self.error = RunError("interrupted (Ctrl-C)")
         if self.error is not None:
             stopped = "timeout" if isinstance(self.error, RunTimeout) else "aborted"
         elif not stats:
@@ -347,18 +350,24 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
                        report=report if fleet == 1 else None, signing_key_file=signing_key_file)
                for plan in _plans(scenario, out, fleet, spacing_m, transport, zenoh_url,
                                   sim_route)]
+    threads: list[threading.Thread] = []
     try:
         for f in flights:
             f.start()
-        threads = [threading.Thread(target=f.fly, name=f"vehicle{f.plan.sysid}")
+        threads = [threading.Thread(target=f.fly, name=f"vehicle{f.plan.sysid}", daemon=True)
                    for f in flights]
         for t in threads:
             t.start()
         for t in threads:
             t.join()
+    except KeyboardInterrupt:  # Ctrl-C: the run is aborted, and its folder says so
+        for f in flights:
+            f.interrupted = True
     finally:
         for f in flights:
             f.stop()
+        for t in threads:
+            t.join(timeout=10.0)
         if router is not None:
             router.stop()
     for f in flights:
