@@ -109,6 +109,7 @@ from common.simlink import (  # noqa: E402
     pack_actuator_controls,
     pack_odometry,
 )
+from fcu.gcs_server import HANDLED  # noqa: E402
 from fcu.mission import SUPPORTED_COMMANDS as MISSION_COMMANDS  # noqa: E402
 from fcu.params import SPECS as PARAM_SPECS  # noqa: E402
 from fcu.telemetry import (  # noqa: E402
@@ -310,12 +311,6 @@ def blast(traffic: Traffic, send: Callable[[bytes, str], None], n: int, rate: fl
 # Inputs the FCU obeys: sequences and any field values (the GCS ports' second campaign)
 # ----------------------------------------------------------------------------------------
 
-HANDLED = ("HEARTBEAT", "COMMAND_LONG", "COMMAND_INT", "MISSION_COUNT", "MISSION_ITEM_INT",
-           "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_REQUEST_LIST",
-           "MISSION_CLEAR_ALL", "MISSION_ACK", "MISSION_SET_CURRENT",
-           "MISSION_WRITE_PARTIAL_LIST", "MISSION_REQUEST_PARTIAL_LIST",
-           "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
-           "SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET", "SET_MODE")
 _CLASSES = {kind: getattr(M, f"MAVLink_{kind.lower()}_message") for kind in HANDLED}
 # pymavlink lists array_lengths in wire order (ordered_fieldnames), not in argument order
 _ARRAY_LENGTHS = {kind: dict(zip(cls.ordered_fieldnames, cls.array_lengths, strict=True))

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from common.config import load_gains, load_vehicle
 from common.links import Link, LinkUrl
 from common.mavlink import MAV, encoder, pack, parser
-from fcu.gcs_server import COMPONENT, GcsServer
+from fcu.gcs_server import COMPONENT, HANDLED, GcsServer
 from fcu.mission_protocol import MissionServer
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
@@ -26,12 +26,6 @@ from fcu.tracker import VehicleState
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]
-HANDLED = ("HEARTBEAT", "COMMAND_LONG", "COMMAND_INT", "MISSION_COUNT", "MISSION_ITEM_INT",
-           "MISSION_ITEM", "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_REQUEST_LIST",
-           "MISSION_CLEAR_ALL", "MISSION_ACK", "MISSION_SET_CURRENT",
-           "MISSION_WRITE_PARTIAL_LIST", "MISSION_REQUEST_PARTIAL_LIST",
-           "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
-           "SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET", "SET_MODE")
 COMMANDS = (M.MAV_CMD_COMPONENT_ARM_DISARM, M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_MISSION_START,
             M.MAV_CMD_DO_SET_MISSION_CURRENT, M.MAV_CMD_NAV_LAND,
             M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAV_CMD_GET_MESSAGE_INTERVAL,
