@@ -21,7 +21,7 @@ demo: venv
 
 test: venv
 	$(PY) -m mypy
-	$(PY) -m pytest -q -n auto tests
+	$(PY) -m pytest -q -n auto --dist loadgroup tests
 
 test-fast: venv
 	$(PY) -m pytest -q -m "not slow" tests

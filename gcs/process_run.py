@@ -276,7 +276,8 @@ class _Flight:
         self.wall1 = time.monotonic()
 
     def stop(self) -> None:
-        self.wall1 = max(self.wall1, self.wall0)
+        if self.wall1 <= self.wall0:  # stopped before the end: the flight lasted until now
+            self.wall1 = time.monotonic()
         self.children.stop()
         if self.session is not None:
             self.session.close()
@@ -288,10 +289,10 @@ class _Flight:
         stats_path = out / "fcu_stats.json"
         stats = json.loads(stats_path.read_text()) if stats_path.exists() else {}
         stopped = ""
-        if self.interrupted:
-            self.error = RunError("interrupted (Ctrl-C)")
-        if self.error is not None:
-            stopped = "timeout" if isinstance(self.error, RunTimeout) else "aborted"
+        # Read once: a flight thread that outlived the stop may still set self.error.
+        error = RunError("interrupted (Ctrl-C)") if self.interrupted else self.error
+        if error is not None:
+            stopped = "timeout" if isinstance(error, RunTimeout) else "aborted"
         elif not stats:
             stopped = "aborted"  # the FCU did not stop cleanly: its events are unknown
         truth_cols, truth = _read_or_empty(out / TRUTH_LOG, TRUTH_COLUMNS)
@@ -305,8 +306,8 @@ class _Flight:
                                 mission_completed=self.progress.mission_completed
                                 or bool(stats.get("mission_completed")), stopped=stopped,
                                 reached_end=(not stopped) if self.realtime else None)
-        if self.error is not None:
-            metrics["error"] = str(self.error)
+        if error is not None:
+            metrics["error"] = str(error)
         metrics["system_id"] = self.plan.sysid
         metrics["start_position_enu_m"] = list(sc.initial_position_enu_m)
         metrics["fcu"] = {k: v for k, v in stats.items() if k != "events"}
