@@ -37,6 +37,7 @@ FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM p2 that forces a di
 LANDED_ALTITUDE_M = 0.05
 LANDED_SPEED_M_S = 0.2
 LANDED_STILL_S = 0.5
+LANDED_LIFT_RATIO = 0.9
 TOUCHDOWN_DEPTH_M = 1.0
 TOUCHDOWN_BLOCKED_M = 0.1
 # Offboard targets beyond these are refused (no vehicle of this class flies them).
@@ -381,19 +382,21 @@ class Commander:
         x, y, z = td.p_enu_m
         return Reference((x, y, z - depth), td.q_enu_flu, v, _ZERO, _ZERO, _ZERO)
 
-    def land_detector(self, t_us: int) -> bool:
+    def land_detector(self, t_us: int, lift_n: float, weight_n: float) -> bool:
         """During a touchdown: True once the vehicle is on the ground (then disarm).
 
-        On the ground = still (speed below LANDED_SPEED_M_S) while the set-point lies more
-        than TOUCHDOWN_BLOCKED_M below the vehicle (something holds it up), for
-        LANDED_STILL_S; or resting below LANDED_ALTITUDE_M."""
+        As PX4's land detector: on the ground = still (speed below LANDED_SPEED_M_S), held up
+        (the set-point more than TOUCHDOWN_BLOCKED_M below the vehicle) and with little lift
+        (the commanded force along the world's up below LANDED_LIFT_RATIO of the weight:
+        something else carries the rest), for LANDED_STILL_S; or resting below
+        LANDED_ALTITUDE_M. A vehicle still in the air needs its whole weight in lift."""
         if self.touchdown is None or self.state is None:
             return False
         s = self.state
         speed = math.sqrt(sum(v * v for v in s.v_flu_m_s))
         ref = self.last_ref
         blocked = ref is not None and s.p_enu_m[2] - ref.p_enu_m[2] > TOUCHDOWN_BLOCKED_M
-        if speed >= LANDED_SPEED_M_S or not blocked:
+        if speed >= LANDED_SPEED_M_S or not blocked or lift_n > LANDED_LIFT_RATIO * weight_n:
             self.still_since_us = None
         elif self.still_since_us is None:
             self.still_since_us = t_us

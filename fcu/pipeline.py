@@ -27,7 +27,7 @@ from fcu.commander import (
     Commander,
 )
 from fcu.core import FlightCore, StepResult
-from fcu.dualquat import q_normalize
+from fcu.dualquat import q_normalize, q_rotate
 from fcu.failsafe import (
     FailsafeSettings,
     GcsLinkMonitor,
@@ -57,6 +57,7 @@ class Pipeline:
                  initial_tilt_rad: tuple[float, ...] | None = None) -> None:
         self.vehicle = vehicle
         self.period_us = 1_000_000 // control_rate_hz
+        self.weight_n = vehicle.mass_kg * vehicle.gravity_m_s2
         self.core = FlightCore(vehicle, gains, control_rate_hz, initial_tilt_rad)
         self.commander = Commander(limits or MissionLimits(vehicle=vehicle))
         self.settings = failsafes or FailsafeSettings()
@@ -149,7 +150,8 @@ class Pipeline:
         if alloc.saturated:
             self.saturated_steps += 1
         self._check_saturation(t_us, alloc.saturated)
-        if cmd.land_detector(t_us):
+        lift_n = q_rotate(state.q_enu_flu, result.tracker.force_flu_n)[2]
+        if cmd.land_detector(t_us, lift_n, self.weight_n):
             cmd.disarm(reason="landed: disarmed")
             out = self.supervisor.gate(False, out.speed_rad_s, out.tilt_rad)
         return self._output(out.speed_rad_s, out.tilt_rad, result)
