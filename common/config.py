@@ -459,7 +459,8 @@ def load_scenario(path: str | Path) -> Scenario:
         force_terms=force_terms,
         torque_terms=torque_terms,
         seed=t.integer("seed", 0, lo=0),
-        divergence_position_m=t.number("divergence_position_m", 10.0, lo=0.0, lo_open=True),
+        # the range of the FCU's parameter COM_DIV_POS, which a run sets from this key
+        divergence_position_m=t.number("divergence_position_m", 10.0, lo=0.1, hi=1000.0),
         source=source,
         files={"scenario": str(path.resolve()), "vehicle": str(vehicle_path),
                "gains_pid": str(pid_path), "gains_pd": str(pd_path)},

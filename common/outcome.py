@@ -76,13 +76,17 @@ def classify(*, reached_end: bool, events: Iterable[Event], divergence_t_us: int
              crash_t_us: int | None = None, stopped: str = "") -> Outcome:
     """The status of a run from what happened to the vehicle.
 
-    `divergence_t_us`: first instant of divergence by `diverged` (None: never);
+    `divergence_t_us`: first instant of divergence by `diverged` in the logs (None: never);
+    the FCU's own divergence events count too (the earlier wins);
     `crash_t_us`: first ground contact faster than CRASH_SPEED_M_S (None: never);
     `stopped`: "timeout" or "aborted" when the runner could not finish the run.
     A disarm in the air caused by the divergence rule counts as divergence, not as a crash.
     """
     events = list(events)
     in_air = [e.t_us for e in events if e.kind == CRASH]
+    flagged = [e.t_us for e in events if e.kind == DIVERGED]  # the FCU's own judgement
+    divergence_t_us = min([t for t in (divergence_t_us, *flagged) if t is not None],
+                          default=None)
     crash = min([t for t in (crash_t_us, *in_air) if t is not None], default=None)
     reactions = [e for e in events if e.kind == FAILSAFE]
     first = reactions[0].text if reactions else ""

@@ -35,8 +35,9 @@ SEVERITY_EMERGENCY, SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_INFO = 0, 2, 4
 MAV_FRAME_LOCAL_NED, MAV_CMD_NAV_LAND = 1, 21
 FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM p2 that forces a disarm
 LANDED_ALTITUDE_M = 0.05
+TAKEOFF_ALTITUDE_M = 0.1
 LANDED_SPEED_M_S = 0.2
-LANDED_STILL_S = 0.5
+LANDED_STILL_S = 0.3
 LANDED_LIFT_RATIO = 0.9
 TOUCHDOWN_DEPTH_M = 1.0
 TOUCHDOWN_BLOCKED_M = 0.1
@@ -100,6 +101,7 @@ class Commander:
         self.events: list[Event] = []
         self.mission_events: list[MissionEvent] = []
         self.still_since_us: int | None = None
+        self.on_ground = True  # the landed state (`update_landed`)
 
     # ------------------------------------------------------------------ outputs
 
@@ -108,15 +110,24 @@ class Commander:
 
     @property
     def landed(self) -> bool:
-        """On the ground: resting low and slow, or still after a touchdown (land detector)."""
+        """On the ground, as the landed state machine (`update_landed`) last concluded."""
+        return self.on_ground
+
+    def update_landed(self) -> None:
+        """The landed state at each new state (PX4's land detector, simplified): a disarmed
+        vehicle at rest at ground level is on the ground; an armed one leaves it when it
+        rises or moves, and comes back to it only through `land_detector` (a touchdown with
+        the vehicle still, held up and lifting little), never from its altitude alone: with
+        no ground below (Case II) a hover at z = 0 is not a landing."""
         s = self.state
         if s is None:
-            return True
+            return
         speed = math.sqrt(sum(v * v for v in s.v_flu_m_s))
-        if s.p_enu_m[2] < LANDED_ALTITUDE_M and speed < LANDED_SPEED_M_S:
-            return True
-        return self.touchdown is not None and self.still_since_us is not None and \
-            (self.clock_us - self.still_since_us) * 1e-6 >= LANDED_STILL_S
+        if not self.armed:
+            self.on_ground = s.p_enu_m[2] < LANDED_ALTITUDE_M and speed < LANDED_SPEED_M_S
+        elif self.on_ground and (s.p_enu_m[2] > TAKEOFF_ALTITUDE_M or
+                                 speed > LANDED_SPEED_M_S):
+            self.on_ground = False
 
     def _current_pose_ref(self) -> Reference:
         """Where the vehicle should be now: the last desired pose in flight, else the state."""
@@ -309,6 +320,15 @@ class Commander:
 
     # ------------------------------------------------------------------ failsafe reactions
 
+    @property
+    def landing(self) -> bool:
+        """Landing: LAND mode, a touchdown, or a mission flying its NAV_LAND item."""
+        if self.mode == Mode.LAND or self.touchdown is not None:
+            return True
+        return self.mode == Mode.MISSION and self.mission_running and \
+            0 <= self.mission_current < len(self.mission) and \
+            self.mission[self.mission_current].command == MAV_CMD_NAV_LAND
+
     def failsafe_hold(self, reason: str) -> None:
         """A failsafe reaction: stop where the vehicle should be and hold."""
         self.mode = Mode.HOLD
@@ -370,6 +390,7 @@ class Commander:
     def _begin_touchdown(self, t_us: int, ref: Reference) -> None:
         self.touchdown = Touchdown(t_us, ref.p_enu_m, ref.q_enu_flu)
         self.still_since_us = None
+        self.on_ground = False  # from here on only the land detector's evidence counts
 
     def _touchdown_ref(self, t_us: int) -> Reference:
         td = self.touchdown
@@ -386,18 +407,23 @@ class Commander:
         """During a touchdown: True once the vehicle is on the ground (then disarm).
 
         As PX4's land detector: on the ground = still (speed below LANDED_SPEED_M_S), held up
-        (the set-point more than TOUCHDOWN_BLOCKED_M below the vehicle) and with little lift
+        (at the ground plane's height, or the set-point more than TOUCHDOWN_BLOCKED_M below
+        the vehicle) and with little lift
         (the commanded force along the world's up below LANDED_LIFT_RATIO of the weight:
-        something else carries the rest), for LANDED_STILL_S; or resting below
-        LANDED_ALTITUDE_M. A vehicle still in the air needs its whole weight in lift."""
+        something else carries the rest), for LANDED_STILL_S. A vehicle still in the air
+        needs its whole weight in lift."""
         if self.touchdown is None or self.state is None:
             return False
         s = self.state
         speed = math.sqrt(sum(v * v for v in s.v_flu_m_s))
         ref = self.last_ref
-        blocked = ref is not None and s.p_enu_m[2] - ref.p_enu_m[2] > TOUCHDOWN_BLOCKED_M
+        blocked = s.p_enu_m[2] < LANDED_ALTITUDE_M or (
+            ref is not None and s.p_enu_m[2] - ref.p_enu_m[2] > TOUCHDOWN_BLOCKED_M)
         if speed >= LANDED_SPEED_M_S or not blocked or lift_n > LANDED_LIFT_RATIO * weight_n:
             self.still_since_us = None
         elif self.still_since_us is None:
             self.still_since_us = t_us
-        return self.landed
+        if self.still_since_us is not None and \
+                (t_us - self.still_since_us) * 1e-6 >= LANDED_STILL_S:
+            self.on_ground = True
+        return self.on_ground

@@ -40,6 +40,7 @@ from fcu.telemetry import (
 M = MAV
 COMPONENT = M.MAV_COMP_ID_AUTOPILOT1
 STATUSTEXT_LEN = 50
+MAX_PARSERS = 64  # one per (link, peer); peers cycling source ports cannot grow it
 STATUSTEXT_BURST = 20.0
 STATUSTEXT_RATE = 10.0  # per second and link
 # Every message type a ground station can send that the server acts on (the rest are
@@ -124,11 +125,12 @@ class GcsServer:
                 return
             gl.link.send(data)
 
-    def say(self, severity: int, text: str, index: int | None = None) -> None:
+    def say(self, severity: int, text: str | bytes, index: int | None = None) -> None:
         """STATUSTEXT to one link (an answer to what it sent) or to all (the vehicle's own
         news); each link takes at most STATUSTEXT_BURST in a row, refilled at
         STATUSTEXT_RATE per second, so a peer cannot turn its refusals into a flood."""
-        msg = M.MAVLink_statustext_message(severity, text.encode()[:STATUSTEXT_LEN], 0, 0)
+        raw = text.encode() if isinstance(text, str) else text
+        msg = M.MAVLink_statustext_message(severity, raw[:STATUSTEXT_LEN], 0, 0)
         for i in (range(len(self.links)) if index is None else (index,)):
             gl = self.links[i]
             gl.text_tokens = min(STATUSTEXT_BURST, gl.text_tokens + STATUSTEXT_RATE * max(
@@ -152,10 +154,13 @@ class GcsServer:
 
     def on_datagram(self, index: int, peer: object, data: bytes, now_s: float) -> None:
         key = (index, peer)
-        p = self.parsers.get(key)
+        p = self.parsers.pop(key, None)
         if p is None:
-            p = self.parsers[key] = parser() if self.signing_key is None else \
+            if len(self.parsers) >= MAX_PARSERS:  # the least recently heard peer goes
+                del self.parsers[next(iter(self.parsers))]
+            p = parser() if self.signing_key is None else \
                 signed_parser(self.signing_key, self._stream_timestamps)
+        self.parsers[key] = p  # most recently heard last
         try:
             msgs = p.parse_buffer(data) or []
         except Exception:  # pymavlink raises on some malformed input; count and go on
@@ -202,9 +207,12 @@ class GcsServer:
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
             self._command(index, msg, now_s)
         elif kind.startswith("MISSION_"):
-            if kind == "MISSION_COUNT":
-                self.mission_link = index
             for reply in self.missions.handle(msg, now_s):
+                if reply.get_type() == "STATUSTEXT":
+                    self.say(reply.severity, reply.text, index)  # within the link's budget
+                    continue
+                if reply.get_type() == "MISSION_REQUEST_INT" and kind == "MISSION_COUNT":
+                    self.mission_link = index  # an upload began: its re-requests go here
                 self.send(reply, index)
         elif kind == "PARAM_REQUEST_LIST":
             for i in range(len(SPECS)):

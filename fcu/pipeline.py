@@ -83,6 +83,7 @@ class Pipeline:
         self.state_rx_us = rx_us
         self.commander.state = state
         self.commander.clock_us = rx_us
+        self.commander.update_landed()
 
     def configure(self, gains: Gains, limits: MissionLimits, failsafes: FailsafeSettings,
                   offboard_timeout_s: float) -> None:
@@ -97,6 +98,7 @@ class Pipeline:
         result = self.commander.arm()
         if result[0] == MAV_RESULT_ACCEPTED and not was:
             self.core.tracker.reset()
+            self.saturation = SaturationMonitor()
             self.failsafe = ""
         return result
 
@@ -167,7 +169,8 @@ class Pipeline:
         cmd = self.commander
         if change == "start":
             self.failsafe = "rotor saturation"
-            if self.settings.saturation_hold and cmd.mode == Mode.MISSION:
+            if self.settings.saturation_hold and cmd.mode == Mode.MISSION and \
+                    not cmd.landing:
                 cmd.failsafe_hold("failsafe: rotors saturated: mission aborted, HOLD")
             else:
                 cmd.say(SEVERITY_WARNING,
@@ -186,7 +189,7 @@ class Pipeline:
         change = self.gcs_link.update(now_s, gcs_seen_s, self.settings)
         if change == "lost":
             self.failsafe = "GCS link lost"
-            if cmd.armed and cmd.mode != Mode.LAND:
+            if cmd.armed and not cmd.landing:
                 cmd.failsafe_hold("failsafe: GCS link lost: HOLD")
             else:
                 cmd.say(SEVERITY_CRITICAL, "failsafe: GCS link lost")

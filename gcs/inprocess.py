@@ -28,7 +28,7 @@ from common.outcome import Event, diverged
 from common.simlink import through_wire_controls, through_wire_odometry
 from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
 from fcu.mission import check_mission
-from fcu.params import ParamStore, apply_params
+from fcu.params import ParamError, ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.sim_bridge import actuator_controls, state_from_odometry
 from fcu.tracker import VehicleState
@@ -89,7 +89,10 @@ def fcu_pipeline(scenario: Scenario) -> tuple[Pipeline, ParamStore]:
     pipeline = Pipeline(scenario.vehicle, scenario.gains, scenario.control_rate_hz)
     store = ParamStore(scenario.gains)
     for name, value in scenario_params(scenario).items():
-        store.set(name, value)
+        try:
+            store.set(name, value)
+        except ParamError as exc:
+            raise InProcessError(f"the vehicle refused a parameter: {exc}") from None
     apply_params(store, pipeline)
     return pipeline, store
 

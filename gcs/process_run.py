@@ -251,7 +251,10 @@ class _Flight:
             self.children.check()
             raise
         for name, value in scenario_params(sc).items():
-            param_set(s, name, value)
+            now, texts = param_set(s, name, value)
+            if now != value:
+                raise RunError(f"the vehicle refused {name} = {value:g} (kept {now:g}): "
+                               + "; ".join(texts))
         items = scenario_mission(sc)
         answer = upload_detailed(s.conn, s.target_system, s.target_component, items,
                                  send=s.send)

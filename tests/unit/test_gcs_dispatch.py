@@ -304,3 +304,46 @@ def test_a_forged_frame_does_not_lock_a_signed_stream_out():
     assert not accepted(frame(stolen, now + 10**12))  # forged, far ahead
     assert accepted(frame(key, now + 10))  # the real sender goes on
     assert not accepted(frame(key, now - 6000 * 1000 * 2 - 10**9)[:-1])  # truncated, old
+
+
+def test_mission_replies_go_to_the_uploading_link_and_notes_are_bounded():
+    """Given an upload from link 0 and a second uploader on link 1 refused as busy, then the
+    re-requests of the first upload go to link 0 only; and refusal notes replayed for
+    duplicate items stay within the link's STATUSTEXT budget."""
+    server, links = make_server()
+
+    def sent_by(sysid: int, msg):
+        return parser().parse_buffer(pack(encoder(sysid, 190), msg))[0]
+
+    server.handle(0, sent_by(255, M.MAVLink_mission_count_message(1, 1, 3, 0)), now_s=1.0)
+    server.handle(1, sent_by(254, M.MAVLink_mission_count_message(1, 1, 2, 0)), now_s=1.0)
+    answer = [m for m in parsed(links[1]) if m.get_type() == "MISSION_ACK"]
+    assert answer and answer[0].type == M.MAV_MISSION_DENIED  # busy with link 0's upload
+    parsed(links[0])
+    server.tick(1.5)
+    assert not [m for m in parsed(links[1]) if m.get_type() == "MISSION_REQUEST_INT"]
+    assert any(m.get_type() == "MISSION_REQUEST_INT" for m in parsed(links[0]))
+    # A refused upload (a keyframe the rotors cannot fly), then its last item 200 times.
+    server2, links2 = make_server()
+    fast = M.MAVLink_mission_item_int_message(1, 1, 0, M.MAV_FRAME_LOCAL_NED, 31000, 0, 1,
+                                              0.2, 0.0, 0.0, 0.0, 50000, 0, -3.0, 0)
+    server2.handle(0, M.MAVLink_mission_count_message(1, 1, 1, 0), now_s=2.0)
+    for k in range(201):
+        server2.handle(0, fast, now_s=2.0 + k * 0.001)
+    msgs = parsed(links2[0])
+    acks = [m.type for m in msgs if m.get_type() == "MISSION_ACK"]
+    texts = [m for m in msgs if m.get_type() == "STATUSTEXT"]
+    assert acks and set(acks) == {M.MAV_MISSION_DENIED}
+    assert 1 <= len(texts) <= 20 + 10 * 0.2 + 1 and server2.texts_dropped > 0  # burst + rate
+
+
+def test_parsers_are_bounded_whatever_the_peers():
+    """Given datagrams from 5,000 peers (source ports cycling), then at most MAX_PARSERS
+    parsers are kept."""
+    from fcu.gcs_server import MAX_PARSERS
+
+    server, _ = make_server()
+    hb = pack(encoder(255, 190), M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))
+    for port in range(5000):
+        server.on_datagram(0, ("127.0.0.1", 20000 + port), hb, now_s=1.0)
+    assert len(server.parsers) <= MAX_PARSERS and server.internal_errors == 0

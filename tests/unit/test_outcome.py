@@ -42,6 +42,8 @@ def ev(t_s: float, kind: str, text: str = "x") -> Event:
     ({"reached_end": True, "events": [ev(2, CRASH)], "divergence_t_us": 3_000_000},
      "crashed"),
     ({"reached_end": True, "events": [], "divergence_t_us": 1, "crash_t_us": 2}, "diverged"),
+    ({"reached_end": True, "events": [ev(3, DIVERGED), ev(4, FAILSAFE)]}, "diverged"),
+    ({"reached_end": True, "events": [ev(3, DIVERGED)], "crash_t_us": 3_500_000}, "diverged"),
     ({"reached_end": True, "events": [], "crash_t_us": 5_000_000}, "crashed"),
     ({"reached_end": False, "events": [], "stopped": "timeout"}, "timeout"),
     ({"reached_end": False, "events": [ev(1, FAILSAFE)], "stopped": "aborted"}, "aborted"),
