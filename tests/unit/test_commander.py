@@ -8,7 +8,14 @@ from pathlib import Path
 
 from common.config import load_gains, load_vehicle
 from common.modes import Mode
-from fcu.commander import LANDED_STILL_S, TOUCHDOWN_DEPTH_M
+from common.outcome import CRASH
+from fcu.commander import (
+    LANDED_STILL_S,
+    MAV_RESULT_DENIED,
+    TOUCHDOWN_DEPTH_M,
+    pose_ref,
+)
+from fcu.failsafe import FailsafeSettings
 from fcu.mission import MissionLimits
 from fcu.pipeline import Pipeline
 from fcu.tracker import VehicleState
@@ -82,3 +89,52 @@ def test_land_detector_needs_the_vehicle_held_up():
     assert start + LANDED_STILL_S * 1e6 <= t <= start + LANDED_STILL_S * 1e6 + 4000
     texts = [e.text for e in pipe.events]
     assert "landed: disarmed" in texts and "disarmed in the air" not in texts
+
+
+def test_a_set_point_just_below_is_not_support():
+    """Given the touchdown phase and a still vehicle with zero lift, when the set-point is
+    only 5 cm below it (less than TOUCHDOWN_BLOCKED_M) and the vehicle is above ground level,
+    then the land detector does not call it landed."""
+    pipe = _landing_pipeline(0.3)
+    start = _to_touchdown(pipe, 0.3)
+    c = pipe.commander
+    c.last_ref = pose_ref((1.0, 2.0, 0.25), c.touchdown.q_enu_flu)
+    for t in range(start, start + 1_000_000, 2000):
+        assert not c.land_detector(t, 0.0, pipe.weight_n)
+    assert not c.landed
+
+
+def test_an_armed_vehicle_leaves_the_ground_when_it_rises_or_moves():
+    """Given a vehicle on the ground, armed, when a state 0.5 m up arrives (or one at ground
+    level climbing at 0.5 m/s), then it is not landed: a plain disarm is refused and a forced
+    one is recorded as a disarm in the air."""
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    for z, vz in ((0.5, 0.0), (0.02, 0.5)):
+        pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500)
+        pipe.on_state(0, _state(0.0), 0)
+        assert pipe.commander.landed
+        pipe.arm()
+        pipe.on_state(2000, _state(z, vz), 2000)
+        assert not pipe.commander.landed
+        assert pipe.commander.disarm()[0] == MAV_RESULT_DENIED
+        pipe.commander.disarm(force=True)
+        assert any(e.kind == CRASH for e in pipe.events)
+
+
+def test_saturation_is_monitored_in_the_step():
+    """Given an offboard target 30 m away (the rotors saturate) and COM_SAT_T = 0.2 s, when
+    the pipeline steps for 0.5 s, then the saturation is counted and reported."""
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
+                    failsafes=FailsafeSettings(saturation_s=0.2, divergence_m=1000.0))
+    pipe.on_state(0, _state(5.0), 0)
+    pipe.arm()
+    c = pipe.commander
+    assert c.offboard_position(0.0, 1, 0, (30.0, 0.0, -5.0), (0.0, 0.0, 0.0),
+                               (0.0, 0.0, 0.0), 0.0)[0]
+    assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
+    for t in range(0, 500_000, 2000):
+        pipe.on_state(t, _state(5.0), t)
+        pipe.step(t, 0.002)
+    assert pipe.saturated_steps > 100 and pipe.failsafe == "rotor saturation"
+    assert any(e.text.startswith("rotors saturated") for e in pipe.events)

@@ -347,3 +347,15 @@ def test_parsers_are_bounded_whatever_the_peers():
     for port in range(5000):
         server.on_datagram(0, ("127.0.0.1", 20000 + port), hb, now_s=1.0)
     assert len(server.parsers) <= MAX_PARSERS and server.internal_errors == 0
+
+
+def test_a_refusal_answers_only_the_link_that_asked():
+    """Given two links, when link 0's request is refused, then the ACK and the reason go to
+    link 0 only: link 1 hears nothing of it."""
+    server, links = make_server()
+    parsed(links[0]), parsed(links[1])
+    _command(server, 0, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+             2**31 + 100)
+    acks, texts = _acks_and_texts(links[0])
+    assert acks == [M.MAV_RESULT_DENIED] and texts
+    assert _acks_and_texts(links[1]) == ([], [])
