@@ -24,9 +24,9 @@ from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE, INFO, Event
-from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3, q_exp
-from fcu.mission import MissionEvent, MissionExecutor, MissionLimits
-from fcu.tracker import Reference, VehicleState
+from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3
+from fcu.mission import MissionEvent, MissionExecutor, MissionLimits, level_attitude
+from fcu.tracker import Reference, VehicleState, pose_ref
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 # MAVLink numbers (common.xml), written out so that this stage imports no MAVLink library.
@@ -66,15 +66,6 @@ class OffboardSetpoint:
     q_enu_flu: Quat | None = None
     omega_flu_rad_s: Vec3 = _ZERO
     received_s: float = -math.inf
-
-
-def pose_ref(p: Vec3, q: Quat) -> Reference:
-    return Reference(p, q, _ZERO, _ZERO, _ZERO, _ZERO)
-
-
-def attitude_from_yaw_ned(yaw_ned_rad: float) -> Quat:
-    """Level attitude (ENU/FLU) heading at a NED yaw: ENU yaw = pi/2 - NED yaw."""
-    return q_exp((0.0, 0.0, math.pi / 2 - yaw_ned_rad))
 
 
 class Commander:
@@ -313,7 +304,7 @@ class Commander:
         if sp.q_enu_flu is not None:
             q = sp.q_enu_flu
         elif sp.yaw_ned_rad is not None:
-            q = attitude_from_yaw_ned(sp.yaw_ned_rad)
+            q = level_attitude(math.degrees(sp.yaw_ned_rad))
         else:
             q = hold.q_enu_flu
         return Reference(p, q, sp.v_enu_m_s, sp.a_enu_m_s2, sp.omega_flu_rad_s, _ZERO)

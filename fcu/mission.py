@@ -65,7 +65,7 @@ from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
 from common.mission_items import INT32_MAX, INT32_MIN, MissionItem
 from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul
 from fcu.feasibility import TimeScaling, envelope, figure_instants, move_instants
-from fcu.tracker import Reference
+from fcu.tracker import Reference, pose_ref
 from fcu.trajectory import FigureInfinity, q_exp_many, quintic, quintic_poly
 
 # MAV_FRAME, MAV_CMD and MAV_MISSION_RESULT values (common.xml).
@@ -285,10 +285,6 @@ def level_attitude(yaw_ned_deg: float) -> Quat:
     return q_ned_frd_to_enu_flu(q_exp((0.0, 0.0, math.radians(yaw_ned_deg))))
 
 
-def _hold(p: Vec3, q: Quat) -> Reference:
-    return Reference(p, q, _ZERO, _ZERO, _ZERO, _ZERO)
-
-
 class _Segment:
     """Base: planned start/end time, start and end pose; `duration` is the part that moves
     (the rest, if any, holds the end pose)."""
@@ -326,7 +322,7 @@ class _Move(_Segment):
         self.t1 = t0 + travel + hold
         self.p_end = (p0[0] + dp[0], p0[1] + dp[1], p0[2] + dp[2])
         self.q_end = q0 if phi is None else q_mul(q0, q_exp(phi))
-        self.end_ref = _hold(self.p_end, self.q_end)
+        self.end_ref = pose_ref(self.p_end, self.q_end)
 
     def retimed(self, travel: float) -> _Move:
         return _Move(self.seq, self.t0, self.p0, self.dp, self.q0, self.phi, travel, self.hold)
@@ -542,7 +538,7 @@ class MissionExecutor:
         if not 0 <= seq < len(self.items):
             raise ValueError(f"no mission item {seq} (mission has {len(self.items)})")
         p, q = tuple(p_enu_m), tuple(q_enu_flu)
-        self._start_ref = _hold(p, q)  # type: ignore[arg-type]
+        self._start_ref = pose_ref(p, q)  # type: ignore[arg-type]
         self._t_start = t_s
         segments: list[_Segment] = []
         t = t_s

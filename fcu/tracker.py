@@ -46,6 +46,12 @@ class Reference(NamedTuple):
     omega_dot_flu_rad_s2: Vec3
 
 
+def pose_ref(p_enu_m: Vec3, q_enu_flu: Quat) -> Reference:
+    """A pose held still: zero velocity, acceleration and rates."""
+    zero = (0.0, 0.0, 0.0)
+    return Reference(p_enu_m, q_enu_flu, zero, zero, zero, zero)
+
+
 class TrackerOutput(NamedTuple):
     force_flu_n: Vec3
     torque_flu_nm: Vec3

@@ -60,7 +60,8 @@ def join_logs(truth_columns: Sequence[str], truth: np.ndarray, onboard_columns: 
     return common_t, truth[i_truth], onboard[i_onb]
 
 
-def _cols(columns: Sequence[str], rows: np.ndarray, *names: str) -> np.ndarray:
+def log_columns(columns: Sequence[str], rows: np.ndarray, *names: str) -> np.ndarray:
+    """The named columns of a log's rows."""
     return rows[:, [list(columns).index(n) for n in names]]
 
 
@@ -68,7 +69,7 @@ def crash_time_us(truth_columns: Sequence[str], truth: np.ndarray) -> int | None
     """First ground contact faster than CRASH_SPEED_M_S in a truth log (None: none)."""
     if len(truth) < 2:
         return None
-    speed = np.linalg.norm(_cols(truth_columns, truth, "vx", "vy", "vz"), axis=1)
+    speed = np.linalg.norm(log_columns(truth_columns, truth, "vx", "vy", "vz"), axis=1)
     landed = truth[:, list(truth_columns).index("landed")]
     t = truth[:, list(truth_columns).index("time_us")]
     for row, v in touchdowns(landed, speed):
@@ -93,10 +94,10 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
     flags, and its figures cover the run up to that instant (never inf or NaN).
     """
     common_t, truth_j, onboard_j = join_logs(truth_columns, truth, onboard_columns, onboard)
-    p = _cols(truth_columns, truth_j, "px", "py", "pz")
-    q = _cols(truth_columns, truth_j, "qw", "qx", "qy", "qz")
-    p_d = _cols(onboard_columns, onboard_j, "pdx", "pdy", "pdz")
-    q_d = _cols(onboard_columns, onboard_j, "qdw", "qdx", "qdy", "qdz")
+    p = log_columns(truth_columns, truth_j, "px", "py", "pz")
+    q = log_columns(truth_columns, truth_j, "qw", "qx", "qy", "qz")
+    p_d = log_columns(onboard_columns, onboard_j, "pdx", "pdy", "pdz")
+    q_d = log_columns(onboard_columns, onboard_j, "qdw", "qdx", "qdy", "qdz")
     bad = diverged_rows(p, q, p_d, q_d, scenario.divergence_position_m)
     end = len(common_t)
     divergence_t_us = None

@@ -34,7 +34,7 @@ from matplotlib.patches import Patch
 
 from common.binlog import read_log
 from gcs.euler import zyx_events
-from gcs.metrics import attitude_error_rad, join_logs
+from gcs.metrics import attitude_error_rad, join_logs, log_columns
 from gcs.runio import ONBOARD_LOG, TRUTH_LOG, check_run_dir
 from gcs.table1 import CASES, CONTROLLERS, PAPER, STATS
 
@@ -116,10 +116,6 @@ SEVERITY = {0: "emergency", 1: "alert", 2: "critical", 3: "error", 4: "warning",
             6: "info", 7: "debug"}
 
 
-def _cols(columns: tuple[str, ...], rows: np.ndarray, *names: str) -> np.ndarray:
-    return rows[:, [columns.index(n) for n in names]]
-
-
 def load_run(run_dir: Path) -> RunData:
     run_dir = Path(run_dir)
     metrics = check_run_dir(run_dir)
@@ -131,12 +127,12 @@ def load_run(run_dir: Path) -> RunData:
     onboard = onboard[np.isfinite(onboard[:, oc.index("time_us")])]
     common_t, truth, onboard = join_logs(tc, truth, oc, onboard)
     t = common_t * 1e-6
-    p = _cols(tc, truth, "px", "py", "pz")
-    q = _cols(tc, truth, "qw", "qx", "qy", "qz")
-    p_d = _cols(oc, onboard, "pdx", "pdy", "pdz")
-    q_d = _cols(oc, onboard, "qdw", "qdx", "qdy", "qdz")
-    tilt_raw = _cols(oc, onboard, *(f"tilt_raw{i}" for i in range(6)))
-    tilt_cmd = _cols(oc, onboard, *(f"tilt_cmd{i}" for i in range(6)))
+    p = log_columns(tc, truth, "px", "py", "pz")
+    q = log_columns(tc, truth, "qw", "qx", "qy", "qz")
+    p_d = log_columns(oc, onboard, "pdx", "pdy", "pdz")
+    q_d = log_columns(oc, onboard, "qdw", "qdx", "qdy", "qdz")
+    tilt_raw = log_columns(oc, onboard, *(f"tilt_raw{i}" for i in range(6)))
+    tilt_cmd = log_columns(oc, onboard, *(f"tilt_cmd{i}" for i in range(6)))
 
     keep = np.all(np.isfinite(np.hstack([p, q, p_d, q_d, tilt_raw, tilt_cmd])), axis=1)
     notes: list[str] = []

@@ -285,29 +285,10 @@ class Plant:
 
     def _wrench_after(self, s: PlantState, cmd: ActuatorCommand,
                       tau_s: float) -> tuple[float, ...]:
-        """Rotor wrench on the exact actuator trajectory tau_s into the step from s: what
-        `rotor_wrench(*actuators_at(...))` gives, fused into one loop (non-ideal actuators)."""
-        decay_up, decay_down = math.exp(-tau_s / self.tau_up), math.exp(-tau_s / self.tau_down)
-        lim = self.tilt_rate * tau_s
-        w_max = self.w_max
-        fx = fy = fz = tx = ty = tz = 0.0
-        for (fvx, fvy, fvz, flx, fly, flz, tvx, tvy, tvz, tlx, tly, tlz), w0, wc, a0, ac in zip(
-                self._rotors, s.rotor_speed_rad_s, cmd.rotor_speed_rad_s, s.tilt_rad,
-                cmd.tilt_rad, strict=True):
-            wc = 0.0 if wc < 0.0 else (w_max if wc > w_max else wc)
-            w = wc + (w0 - wc) * (decay_up if wc > w0 else decay_down)
-            d = ac - a0
-            a = a0 + lim if d > lim else (a0 - lim if d < -lim else ac)
-            w2 = w * w
-            c = w2 * math.cos(a)
-            sn = w2 * math.sin(a)
-            fx += c * fvx + sn * flx
-            fy += c * fvy + sn * fly
-            fz += c * fvz + sn * flz
-            tx += c * tvx + sn * tlx
-            ty += c * tvy + sn * tly
-            tz += c * tvz + sn * tlz
-        return (fx, fy, fz, tx, ty, tz)
+        """Rotor wrench on the exact actuator trajectory tau_s into the step from s."""
+        f, t = self.rotor_wrench(*self.actuators_at(s.rotor_speed_rad_s, s.tilt_rad, cmd,
+                                                    tau_s))
+        return (*f, *t)
 
     def _rotor_wrench6(self, speeds: Sequence[float], tilts: Sequence[float]) -> tuple[float, ...]:
         f, t = self.rotor_wrench(speeds, tilts)
