@@ -24,7 +24,10 @@ ONBOARD_COLUMNS = (
     "pdx", "pdy", "pdz", "qdw", "qdx", "qdy", "qdz", "vdx", "vdy", "vdz", "wdx", "wdy", "wdz",
     "fx", "fy", "fz", "tx", "ty", "tz",
     *(f"rotor_cmd{i}" for i in range(6)), *(f"tilt_cmd{i}" for i in range(6)),
-    *(f"tilt_raw{i}" for i in range(6)), "saturated", "armed", "step_us")
+    *(f"tilt_raw{i}" for i in range(6)), "saturated", "armed", "step_us",
+    # ln q_hat_e = 1/2 (theta_e n_e + eps p_e) (eq. 16) and the twist error xi_e (eq. 11)
+    "lnqe_rx", "lnqe_ry", "lnqe_rz", "lnqe_dx", "lnqe_dy", "lnqe_dz",
+    "xie_rx", "xie_ry", "xie_rz", "xie_dx", "xie_dy", "xie_dz")
 
 
 def onboard_row(time_us: int, state: VehicleState, result: StepResult,
@@ -35,7 +38,8 @@ def onboard_row(time_us: int, state: VehicleState, result: StepResult,
     return (time_us, *state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
             *state.omega_flu_rad_s, *ref.p_enu_m, *ref.q_enu_flu, *ref.v_enu_m_s,
             *ref.omega_flu_rad_s, *out.force_flu_n, *out.torque_flu_nm, *speed_cmd, *tilt_cmd,
-            *alloc.tilt_raw_rad, float(alloc.saturated), float(armed), step_us)
+            *alloc.tilt_raw_rad, float(alloc.saturated), float(armed), step_us,
+            *out.log_error, *out.twist_error)
 
 
 class FlightCore:

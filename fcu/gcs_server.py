@@ -99,6 +99,9 @@ class GcsServer:
         self.texts_dropped = 0
         self.now_s = 0.0  # the wall clock at the latest input or tick
         self.time_us = 0  # the FCU's clock, for telemetry stamps
+        # Told of every STATUSTEXT the vehicle says on its own account or in answer (not
+        # the pipeline's events, which `announce` sends): the onboard log records them.
+        self.on_text: Callable[[int, str], None] | None = None
         self.v_enu_m_s = (0.0, 0.0, 0.0)
 
     def _encoder(self, index: int) -> MAV.MAVLink:
@@ -130,6 +133,11 @@ class GcsServer:
         news); each link takes at most STATUSTEXT_BURST in a row, refilled at
         STATUSTEXT_RATE per second, so a peer cannot turn its refusals into a flood."""
         raw = text.encode() if isinstance(text, str) else text
+        if self.on_text is not None:
+            self.on_text(severity, raw[:STATUSTEXT_LEN].decode(errors="replace"))
+        self._text(severity, raw, index)
+
+    def _text(self, severity: int, raw: bytes, index: int | None) -> None:
         msg = M.MAVLink_statustext_message(severity, raw[:STATUSTEXT_LEN], 0, 0)
         for i in (range(len(self.links)) if index is None else (index,)):
             gl = self.links[i]
@@ -144,7 +152,7 @@ class GcsServer:
 
     def announce(self, events: list[Event]) -> None:
         for ev in events:
-            self.say(ev.severity, ev.text)
+            self._text(ev.severity, ev.text.encode(), None)
 
     def _ack(self, index: int, msg: MAV.MAVLink_message, command: int, result: int) -> None:
         self.send(M.MAVLink_command_ack_message(command, result, 0, 0, msg.get_srcSystem(),

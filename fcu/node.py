@@ -26,15 +26,14 @@ import sys
 import time
 from pathlib import Path
 
-from common.binlog import LogWriter
 from common.config import ConfigError, load_gains, load_vehicle
 from common.links import LinkError, open_link
 from common.mavlink import MAV, SigningKeyError, encoder, pack, read_signing_key
 from common.outcome import Event
 from common.parent import stop_with_parent
-from fcu.core import ONBOARD_COLUMNS, onboard_row
 from fcu.gcs_server import COMPONENT, GcsServer
 from fcu.mission_protocol import MissionServer
+from fcu.onboard_log import OnboardLog
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.sim_bridge import SimBridge
@@ -73,7 +72,10 @@ class FlightController:
                                 on_params=self._apply_params)
         self.missions.on_set_current = self.server.set_mission_current
         self.sim_mav = encoder(system_id, COMPONENT)
-        self.log = LogWriter(onboard_log, ONBOARD_COLUMNS) if onboard_log else None
+        self.log = OnboardLog(onboard_log, pipeline, self.params.values, system_id=system_id,
+                              home=(home.lat_deg, home.lon_deg, home.alt_m)) \
+            if onboard_log else None
+        self.server.on_text = self._log_text
         self.stats_path = stats_path
         self.period_us = pipeline.period_us
         self.running = True
@@ -87,10 +89,16 @@ class FlightController:
         self.sim_silent = False
         self._apply_params()
 
+    def _log_text(self, severity: int, text: str) -> None:
+        if self.log is not None:
+            self.log.text(self.time_us, severity, text)
+
     # ------------------------------------------------------------------ parameters
 
     def _apply_params(self) -> None:
         self.missions.limits = apply_params(self.params, self.pipeline)
+        if self.log is not None:
+            self.log.set_params(self.params.values)
 
     # ------------------------------------------------------------------ simulator link
 
@@ -112,9 +120,9 @@ class FlightController:
         step_us = (time.perf_counter() - t0) * 1e6
         self.sim.send(out)
         self.steps += 1
-        if self.log is not None and out.result is not None and self.pipeline.state is not None:
-            self.log.write(onboard_row(out.t_us, self.pipeline.state, out.result,
-                                       out.speed_rad_s, out.tilt_rad, out.armed, step_us))
+        if self.log is not None:
+            self.log.step(out, step_us, t_us)
+            self.log.flush()
 
     # ------------------------------------------------------------------ housekeeping
 
@@ -138,6 +146,8 @@ class FlightController:
         if c.events:
             self.server.announce(c.events)
             self.events.extend(c.events)
+            if self.log is not None:
+                self.log.events(c.events)
             c.events.clear()
         if c.mission_events:
             for ev in c.mission_events:
@@ -146,6 +156,8 @@ class FlightController:
             self.server.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # on change
             c.mission_events.clear()
         self.server.tick(now)
+        if self.log is not None:
+            self.log.flush()  # logged strings and parameter changes
 
     # ------------------------------------------------------------------ loop
 
@@ -218,6 +230,8 @@ class FlightController:
     def close(self) -> None:
         c = self.pipeline.commander
         self.events.extend(c.events)
+        if self.log is not None:
+            self.log.events(c.events)
         c.events.clear()
         if self.log is not None:
             self.log.close()
@@ -251,7 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--realtime", action="store_true", help="run on the monotonic clock")
     p.add_argument("--sysid", type=int, default=1, help="MAVLink system id (1..254)")
     p.add_argument("--home", type=_home, default=Home(), help="LAT,LON,ALT of the origin")
-    p.add_argument("--onboard-log", type=Path, help="write the onboard log here")
+    p.add_argument("--onboard-log", type=Path,
+                   help="write the onboard log (ULog) here, e.g. onboard.ulg")
     p.add_argument("--stats", type=Path,
                    help="write run statistics and events (JSON) here at exit")
     p.add_argument("--signing-key", metavar="FILE",

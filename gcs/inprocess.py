@@ -28,6 +28,7 @@ from common.outcome import Event, diverged
 from common.simlink import through_wire_controls, through_wire_odometry
 from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
 from fcu.mission import check_mission
+from fcu.onboard_log import OnboardLog
 from fcu.params import ParamError, ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.sim_bridge import actuator_controls, state_from_odometry
@@ -46,6 +47,7 @@ from sitl.plant import (
     rotate_inv,
     truth_row,
 )
+from sitl.truth_log import TruthLog
 
 
 class InProcessError(RuntimeError):
@@ -58,6 +60,8 @@ class RunResult:
     truth: np.ndarray  # rows of sitl.plant.TRUTH_COLUMNS
     onboard: np.ndarray  # rows of fcu.core.ONBOARD_COLUMNS
     events: list[Event] = dataclasses.field(default_factory=list)
+    truth_ulog: bytes | None = None  # truth.ulg as the simulator writes it
+    onboard_ulog: bytes | None = None  # onboard.ulg as the FCU writes it
 
     def truth_col(self, *names: str) -> np.ndarray:
         return self.truth[:, [TRUTH_COLUMNS.index(n) for n in names]]
@@ -113,8 +117,10 @@ def state_for_fcu(s: PlantState) -> VehicleState:
     return state
 
 
-def run_scenario(scenario: Scenario, *, initial: PlantState | None = None) -> RunResult:
-    """Fly a scenario's mission to its end; deterministic for a given scenario."""
+def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
+                 logs: bool = True) -> RunResult:
+    """Fly a scenario's mission to its end; deterministic for a given scenario. With `logs`,
+    the result carries truth.ulg and onboard.ulg as the two processes would write them."""
     vehicle = scenario.vehicle
     physics_dt_us = 1_000_000 // scenario.physics_rate_hz
     control_dt_us = 1_000_000 // scenario.control_rate_hz
@@ -123,8 +129,11 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None) -> Ru
                   ground_enabled=scenario.ground_enabled,
                   disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
     state = initial if initial is not None else initial_state(scenario, plant)
-    pipeline, _ = fcu_pipeline(scenario)
+    pipeline, store = fcu_pipeline(scenario)
     cmd = pipeline.commander
+    truth_buf, onboard_buf = bytearray(), bytearray()
+    truth_log = TruthLog(truth_buf, scenario.name) if logs else None
+    onboard_log = OnboardLog(onboard_buf, pipeline, store.values) if logs else None
     items = tuple(through_wire_item(item) for item in scenario_mission(scenario))
     check = check_mission(items, cmd.limits)
     if check.result != 0:
@@ -142,10 +151,13 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None) -> Ru
     truth_rows: list[tuple[float, ...]] = []
     onboard_rows: list[tuple[float, ...]] = []
     clock = time.perf_counter
+    logged_events = 0
     wall0 = clock()
     while True:
         t_us = state.time_us
         truth_rows.append(truth_row(state))
+        if truth_log is not None:
+            truth_log.record(state)
         seen = state_for_fcu(state)
         pipeline.on_state(t_us, seen, t_us)
         t0 = clock()
@@ -154,6 +166,11 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None) -> Ru
         if out.result is not None and pipeline.state is not None:
             onboard_rows.append(onboard_row(t_us, pipeline.state, out.result, out.speed_rad_s,
                                             out.tilt_rad, out.armed, step_us))
+        if onboard_log is not None:
+            onboard_log.step(out, step_us, t_us)
+            if cmd.events and len(cmd.events) > logged_events:
+                onboard_log.events(cmd.events[logged_events:])
+                logged_events = len(cmd.events)
         if t_us >= end_us:
             break
         wire = through_wire_controls(actuator_controls(out, vehicle.rotor_speed_max_rad_s,
@@ -163,13 +180,18 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None) -> Ru
             state = plant.step(state, command)
     wall = clock() - wall0
 
+    if truth_log is not None and onboard_log is not None:
+        onboard_log.events(cmd.events[logged_events:])
+        truth_log.close()
+        onboard_log.close()
     truth = np.array(truth_rows, dtype=float)
     onboard = np.array(onboard_rows, dtype=float).reshape(-1, len(ONBOARD_COLUMNS))
     events = list(cmd.events)
     metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
                             events=events, wall_time_s=wall, transport="in-process",
                             lockstep=True, mission_completed=cmd.mission_done)
-    return RunResult(metrics, truth, onboard, events)
+    return RunResult(metrics, truth, onboard, events,
+                     bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None)
 
 
 def fly_reference(scenario: Scenario, trajectory: Trajectory,

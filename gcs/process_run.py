@@ -21,17 +21,17 @@ from typing import Any
 
 import numpy as np
 
-from common.binlog import read_log
 from common.config import Scenario
 from common.links import free_port
 from common.mavlink import MAV, read_signing_key
 from common.outcome import Event
 from common.parent import child_env
+from common.ulog import ULogError, read_topic
 from fcu.core import ONBOARD_COLUMNS
 from gcs.inprocess import scenario_params
 from gcs.metrics import build_metrics
 from gcs.mission_client import MissionError, upload_detailed
-from gcs.runio import ONBOARD_LOG, TRUTH_LOG, write_metrics
+from gcs.runio import ONBOARD_LOG, ONBOARD_TOPIC, TRUTH_LOG, TRUTH_TOPIC, write_metrics
 from gcs.scenario_mission import scenario_mission
 from gcs.session import GcsError, Session
 from gcs.vehicle_link import param_set
@@ -298,8 +298,9 @@ class _Flight:
             stopped = "timeout" if isinstance(error, RunTimeout) else "aborted"
         elif not stats:
             stopped = "aborted"  # the FCU did not stop cleanly: its events are unknown
-        truth_cols, truth = _read_or_empty(out / TRUTH_LOG, TRUTH_COLUMNS)
-        onboard_cols, onboard = _read_or_empty(out / ONBOARD_LOG, ONBOARD_COLUMNS)
+        truth_cols, truth = _read_or_empty(out / TRUTH_LOG, TRUTH_TOPIC, TRUTH_COLUMNS)
+        onboard_cols, onboard = _read_or_empty(out / ONBOARD_LOG, ONBOARD_TOPIC,
+                                               ONBOARD_COLUMNS)
         events = [Event(round(e["t_s"] * 1e6), int(e["severity"]), str(e["text"]),
                         str(e.get("kind", "info"))) for e in stats.get("events", [])]
         metrics = build_metrics(sc, truth_cols, truth, onboard_cols, onboard, events=events,
@@ -321,10 +322,13 @@ class _Flight:
         return metrics
 
 
-def _read_or_empty(path: Path, columns: tuple[str, ...]) -> tuple[tuple[str, ...], Any]:
+def _read_or_empty(path: Path, topic: str, columns: tuple[str, ...]
+                   ) -> tuple[tuple[str, ...], Any]:
+    """A log's float64 topic; none when the process never wrote the log (it did not start).
+    """
     try:
-        return read_log(path)
-    except (OSError, ValueError):
+        return read_topic(path, topic)
+    except ULogError:
         return columns, np.zeros((0, len(columns)))
 
 

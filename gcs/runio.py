@@ -1,5 +1,5 @@
-"""The run folder: scenario as run, the plant's truth log, the onboard log, and
-metrics.json, written last.
+"""The run folder: scenario as run, the plant's truth log (truth.ulg), the onboard log
+(onboard.ulg), and metrics.json, written last.
 
 A folder holds one run: `prepare_run_dir` refuses a folder that is not empty unless told to
 empty it first, and metrics.json records the size and SHA-256 of each log beside it, so a
@@ -15,14 +15,16 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from common.binlog import write_log
-from common.config import Scenario
-from fcu.core import ONBOARD_COLUMNS
-from gcs.inprocess import RunResult
-from sitl.plant import TRUTH_COLUMNS
+import numpy as np
 
-TRUTH_LOG = "truth_log.bin"
-ONBOARD_LOG = "onboard_log.bin"
+from common.config import Scenario
+from common.ulog import ULogError, read_topic
+from gcs.inprocess import RunResult
+
+TRUTH_LOG = "truth.ulg"  # written by the simulator (sitl.truth_log)
+ONBOARD_LOG = "onboard.ulg"  # written by the FCU (fcu.onboard_log)
+TRUTH_TOPIC = "dq_truth"
+ONBOARD_TOPIC = "dq_onboard"
 
 
 def _finite(obj: Any) -> Any:
@@ -63,8 +65,10 @@ def prepare_run_dir(out: Path, force: bool) -> None:
 def write_run(out: Path, scenario: Scenario, result: RunResult) -> None:
     out.mkdir(parents=True, exist_ok=True)
     shutil.copyfile(scenario.source, out / "scenario.toml")
-    write_log(out / TRUTH_LOG, TRUTH_COLUMNS, result.truth)
-    write_log(out / ONBOARD_LOG, ONBOARD_COLUMNS, result.onboard)
+    if result.truth_ulog is None or result.onboard_ulog is None:
+        raise ValueError("a run written to a folder must be flown with its logs")
+    (out / TRUTH_LOG).write_bytes(result.truth_ulog)
+    (out / ONBOARD_LOG).write_bytes(result.onboard_ulog)
     metrics = dict(result.metrics)
     metrics["overrides"] = {"controller": scenario.controller,
                             "ideal_actuators": scenario.ideal_actuators,
@@ -105,3 +109,15 @@ def check_run_dir(run_dir: Path) -> dict[str, Any]:
         raise RunDirError(f"{run_dir}: metrics.json names no logs (written by an older "
                           "version?)")
     return metrics
+
+
+def read_run_logs(run_dir: Path) -> tuple[tuple[str, ...], np.ndarray, tuple[str, ...],
+                                          np.ndarray]:
+    """(truth columns, truth rows, onboard columns, onboard rows) of a run folder: the float64
+    topics `dq_truth` and `dq_onboard` of its ULogs, as the metrics read them."""
+    try:
+        tc, truth = read_topic(run_dir / TRUTH_LOG, TRUTH_TOPIC)
+        oc, onboard = read_topic(run_dir / ONBOARD_LOG, ONBOARD_TOPIC)
+    except ULogError as exc:
+        raise RunDirError(str(exc)) from None
+    return tc, truth, oc, onboard

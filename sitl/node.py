@@ -24,7 +24,6 @@ import sys
 import time
 from pathlib import Path
 
-from common.binlog import LogWriter
 from common.config import ConfigError, Scenario, VehicleConfig, load_scenario
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
 from common.links import LinkError, open_link
@@ -39,14 +38,13 @@ from common.simlink import (
 )
 from sitl.disturbance import Disturbance
 from sitl.plant import (
-    TRUTH_COLUMNS,
     ActuatorCommand,
     Plant,
     PlantState,
     initial_state,
     rotate_inv,
-    truth_row,
 )
+from sitl.truth_log import TruthLog
 
 SITL_COMPONENT = MAV.MAV_COMP_ID_PERIPHERAL
 SEA_LEVEL_HPA = 1013.25
@@ -105,7 +103,7 @@ class SimulatorServer:
         self.mav = encoder(system_id, SITL_COMPONENT)
         self.system_id = system_id
         self.seq = 0
-        self.log = LogWriter(truth_log, TRUTH_COLUMNS) if truth_log else None
+        self.log = TruthLog(truth_log, scenario.name) if truth_log else None
         self.command = ActuatorCommand(self.state.rotor_speed_rad_s, self.state.tilt_rad)
         self.steps = 0
         self.ignored_answers = 0
@@ -138,7 +136,8 @@ class SimulatorServer:
         self._last_datagram = self._datagram(self.state)
         self.link.send(self._last_datagram)
         if self.log is not None:
-            self.log.write(truth_row(self.state))
+            self.log.record(self.state)
+            self.log.flush()
 
     def _command_from(self, controls: tuple[float, ...], mode: int) -> ActuatorCommand:
         return command_from_controls(controls, mode, self.scenario.vehicle, self.state)
@@ -219,6 +218,9 @@ class SimulatorServer:
                 start += behind
                 due += behind
                 self.skipped_s += behind
+                if self.log is not None:
+                    self.log.text(self.state.time_us, MAV.MAV_SEVERITY_WARNING,
+                                  f"simulator stalled {behind:.3f} s: resumed from here")
             while self.running:
                 wait = due - time.monotonic()
                 readable, _, _ = select.select(self.link.filenos(), [], [], max(0.0, wait))
@@ -249,7 +251,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--link", default="udpin:127.0.0.1:4560",
                    help="simulator link URL (default udpin:127.0.0.1:4560)")
     p.add_argument("--realtime", action="store_true", help="pace by the wall clock")
-    p.add_argument("--truth-log", type=Path, help="write the ground-truth log here")
+    p.add_argument("--truth-log", type=Path,
+                   help="write the ground-truth log (ULog) here, e.g. truth.ulg")
     p.add_argument("--end-time", type=float, metavar="S",
                    help="stop advancing at this simulated time (default: the scenario's "
                         "duration in lockstep, never in real time)")

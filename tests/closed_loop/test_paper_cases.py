@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from common.binlog import read_log
+from common.ulog import read_topic
 from gcs.inprocess import run_scenario
 from gcs.metrics import rank_key
 from gcs.table1 import PAPER
@@ -75,9 +75,9 @@ def test_gcs_run_writes_metrics_for_a_completed_run(tmp_path):
     assert m["status"] == "completed" and m["transport"] == "in-process" and m["lockstep"]
     assert m["sim_time_s"] == pytest.approx(3.0)
     assert m["control_rate_hz"] == 500 and m["physics_rate_hz"] == 1000
-    columns, truth = read_log(out / "truth_log.bin")
+    columns, truth = read_topic(out / "truth.ulg", "dq_truth")
     assert columns[0] == "time_us" and truth[-1, 0] == 3_000_000
-    columns, onboard = read_log(out / "onboard_log.bin")
+    columns, onboard = read_topic(out / "onboard.ulg", "dq_onboard")
     assert len(onboard) == len(truth) == 1501 and "tilt_raw5" in columns
     assert (out / "scenario.toml").read_text() == (SCENARIOS / "case1_figure8.toml").read_text()
 

@@ -73,12 +73,12 @@ def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = 
         if sitl:
             procs["sitl"] = start("sitl", ["sitl.node", str(SCENARIOS / f"{scenario}.toml"),
                                            "--link", f"udpin:127.0.0.1:{sim_port}", *rt,
-                                           "--truth-log", str(tmp_path / "truth.bin")],
+                                           "--truth-log", str(tmp_path / "truth.ulg")],
                                   tmp_path)
         procs["fcu"] = start("fcu", ["fcu.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
                                      "--sim", f"udpout:127.0.0.1:{sim_port}", "--gcs",
                                      f"udpout:127.0.0.1:{gcs_port}", *rt, *fcu_args,
-                                     "--onboard-log", str(tmp_path / "onboard.bin")],
+                                     "--onboard-log", str(tmp_path / "onboard.ulg")],
                              tmp_path)
         session.wait_vehicle(timeout=15.0)
         if sitl:  # the FCU reports attitude once the simulator's first state has arrived

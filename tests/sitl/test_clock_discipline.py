@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import struct
 import subprocess
 import sys
 import time
@@ -22,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.binlog import HEADER, MAGIC, read_log
+from common.ulog import read_topic, tail_record
 
 from .conftest import ROOT, SCENARIOS
 
@@ -41,35 +40,19 @@ RUN_WAIT_S = 240.0  # wall-clock allowance of one `gcs run` on a loaded machine
 # ---------------------------------------------------------------------------- helpers
 
 
-def _tail(path: Path) -> tuple[tuple[str, ...], np.ndarray] | None:
-    """(columns, last complete row) of a log that may still be written, None before its
-    first row. Reads the header and one row, not the whole file (cheap enough to poll)."""
-    try:
-        with path.open("rb") as fh:
-            head = fh.read(HEADER)
-            if len(head) < HEADER or not head.startswith(MAGIC):
-                return None
-            columns = tuple(json.loads(head[len(MAGIC):head.index(b"\n")])["columns"])
-            (count,) = struct.unpack_from("<Q", head, HEADER - 8)
-            if count == 0:
-                return None
-            width = 8 * len(columns)
-            fh.seek(HEADER + (count - 1) * width)
-            raw = fh.read(width)
-    except (OSError, ValueError):
-        return None
-    if len(raw) < width:
-        return None
-    return columns, np.frombuffer(raw, dtype="<f8").copy()
+def _tail(path: Path) -> tuple[tuple[str, ...], tuple[float, ...]] | None:
+    """(columns, last complete record) of a truth log that may still be written, None before
+    its first record (cheap enough to poll)."""
+    return tail_record(path, "dq_truth")
 
 
 def _sim_time_s(out: Path) -> float | None:
-    tail = _tail(out / "truth_log.bin")
+    tail = _tail(out / "truth.ulg")
     return None if tail is None else float(tail[1][0]) * 1e-6
 
 
 def _height_m(out: Path) -> float | None:
-    tail = _tail(out / "truth_log.bin")
+    tail = _tail(out / "truth.ulg")
     return None if tail is None else float(tail[1][tail[0].index("pz")])
 
 
@@ -280,8 +263,8 @@ def quiet(tmp_path_factory) -> Iterator[Reference]:
     m = run.metrics()
     assert code == 0 and m["status"] == "completed", _summary(m) + "\n" + run.output()
     assert m["sim_time_s"] == pytest.approx(DURATION_S)
-    yield Reference(out, run.wall_s, read_log(out / "truth_log.bin"),
-                    read_log(out / "onboard_log.bin"))
+    yield Reference(out, run.wall_s, read_topic(out / "truth.ulg", "dq_truth"),
+                    read_topic(out / "onboard.ulg", "dq_onboard"))
 
 
 @pytest.mark.slow
@@ -332,10 +315,10 @@ def test_lockstep_run_is_unchanged_by_starvation(quiet, tmp_path, starvation):
     assert m["status"] == "completed", _summary(m)
     assert m["sim_time_s"] == pytest.approx(DURATION_S), _summary(m)
 
-    truth = read_log(out / "truth_log.bin")
-    onboard = read_log(out / "onboard_log.bin")
-    diff = "\n".join(d for d in (_differences("truth_log.bin", quiet.truth, truth),
-                                 _differences("onboard_log.bin", quiet.onboard, onboard,
+    truth = read_topic(out / "truth.ulg", "dq_truth")
+    onboard = read_topic(out / "onboard.ulg", "dq_onboard")
+    diff = "\n".join(d for d in (_differences("truth.ulg", quiet.truth, truth),
+                                 _differences("onboard.ulg", quiet.onboard, onboard,
                                               skip=("step_us",))) if d)
     assert not diff, f"the {starvation} run differs from the quiet run:\n{diff}"
     # and the same through np.array_equal, column by column

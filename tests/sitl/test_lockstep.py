@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from common.binlog import read_log
+from common.ulog import read_topic
 from common.config import load_scenario
 from common.links import free_port
 from common.mavlink import MAV
@@ -65,7 +65,7 @@ def test_case1_through_processes_matches_in_process(tmp_path):
         assert _within(m["position_error_m"][stat], ref["position_error_m"][stat], 1e-3)
         assert _within(m["attitude_error_rad"][stat], ref["attitude_error_rad"][stat], 1e-4)
 
-    columns, onboard = read_log(out / "onboard_log.bin")
+    columns, onboard = read_topic(out / "onboard.ulg", "dq_onboard")
     assert len(onboard) == 80001
     traj = FigureEight(load_scenario(CASE1).trajectory)
     idx = [columns.index(c) for c in ("pdx", "pdy", "pdz", "qdw", "qdx", "qdy", "qdz",
@@ -89,7 +89,7 @@ def test_lockstep_runs_are_deterministic(tmp_path):
     for key in ("position_error_m", "attitude_error_rad", "sim_time_s", "samples"):
         assert ma[key] == mb[key]
     assert ma["sim_time_s"] == pytest.approx(12.0)
-    assert (a / "truth_log.bin").read_bytes() == (b / "truth_log.bin").read_bytes()
+    assert (a / "truth.ulg").read_bytes() == (b / "truth.ulg").read_bytes()
 
 
 def test_loss_on_the_simulator_link_changes_timing_not_results(tmp_path):
@@ -114,8 +114,8 @@ def test_loss_on_the_simulator_link_changes_timing_not_results(tmp_path):
     for key in ("position_error_m", "attitude_error_rad", "samples"):
         assert lossy[key] == clean[key]
     assert lossy["fcu"]["resent_answers"] > 0
-    assert (tmp_path / "clean" / "truth_log.bin").read_bytes() == \
-        (tmp_path / "lossy" / "truth_log.bin").read_bytes()
+    assert (tmp_path / "clean" / "truth.ulg").read_bytes() == \
+        (tmp_path / "lossy" / "truth.ulg").read_bytes()
 
 
 def test_repeated_state_gets_the_stored_answer(tmp_path):

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from common.binlog import read_log
+from common.ulog import read_topic
 from common.config import load_scenario
 from gcs.process_run import run_processes
 
@@ -51,11 +51,11 @@ def test_ten_percent_loss_with_duplication_and_reordering_gives_the_same_flight(
     for key in ("position_error_m", "attitude_error_rad", "samples", "sim_time_s"):
         assert lossy[key] == clean[key], key
     assert lossy["fcu"]["resent_answers"] > 0
-    assert (tmp_path / "clean" / "truth_log.bin").read_bytes() == \
-        (tmp_path / "lossy" / "truth_log.bin").read_bytes()
+    assert (tmp_path / "clean" / "truth.ulg").read_bytes() == \
+        (tmp_path / "lossy" / "truth.ulg").read_bytes()
     # the FCU's log: every row, every column but the measured step time
-    columns, clean_rows = read_log(tmp_path / "clean" / "onboard_log.bin")
-    _, lossy_rows = read_log(tmp_path / "lossy" / "onboard_log.bin")
+    columns, clean_rows = read_topic(tmp_path / "clean" / "onboard.ulg", "dq_onboard")
+    _, lossy_rows = read_topic(tmp_path / "lossy" / "onboard.ulg", "dq_onboard")
     keep = [i for i, c in enumerate(columns) if c != "step_us"]
     assert clean_rows.shape == lossy_rows.shape and len(clean_rows) == 15001
     assert np.array_equal(clean_rows[:, keep], lossy_rows[:, keep])

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.binlog import read_log
+from common.ulog import read_topic
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "config" / "scenarios"
@@ -51,9 +51,9 @@ def test_in_process_equals_processes(tmp_path, scenario, duration):
         for stat in ("max", "mean", "rmse"):
             assert ip[key][stat] == pytest.approx(pr[key][stat], rel=1e-9, abs=1e-12), key
     assert ip["samples"] == pr["samples"] and ip["saturated_steps"] == pr["saturated_steps"]
-    for name in ("truth_log.bin", "onboard_log.bin"):
-        cols, a = read_log(tmp_path / "ip" / name)
-        _, b = read_log(tmp_path / "pr" / name)
+    for name, topic in (("truth.ulg", "dq_truth"), ("onboard.ulg", "dq_onboard")):
+        cols, a = read_topic(tmp_path / "ip" / name, topic)
+        _, b = read_topic(tmp_path / "pr" / name, topic)
         keep = [i for i, c in enumerate(cols) if c != "step_us"]
         assert a.shape == b.shape, name
         assert np.array_equal(a[:, keep], b[:, keep]), name

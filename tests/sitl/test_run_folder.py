@@ -39,9 +39,9 @@ def test_one_run_per_folder(tmp_path):
     other = tmp_path / "other"
     assert _gcs("run", str(CASE1), "--in-process", "--duration", "3", "--out",
                 str(other)).returncode == 0
-    shutil.copyfile(other / "truth_log.bin", out / "truth_log.bin")
+    shutil.copyfile(other / "truth.ulg", out / "truth.ulg")
     report = _gcs("report", str(out))
-    assert report.returncode == 2 and "truth_log.bin" in report.stderr
+    assert report.returncode == 2 and "truth.ulg" in report.stderr
     onto_file = _gcs("run", str(CASE1), "--in-process", "--out", str(out / "notes"),
                      "--duration", "1")
     assert onto_file.returncode == 0  # a new folder inside is fine
@@ -61,7 +61,7 @@ def test_ctrl_c_leaves_an_aborted_run(tmp_path):
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 60.0
-        while time.monotonic() < deadline and not (out / "onboard_log.bin").exists():
+        while time.monotonic() < deadline and not (out / "onboard.ulg").exists():
             time.sleep(0.1)
         time.sleep(2.0)
         proc.send_signal(signal.SIGINT)

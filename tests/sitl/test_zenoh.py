@@ -58,8 +58,8 @@ def test_case1_over_zenoh_equals_udp_exactly(tmp_path, router):
     assert zen["transport"] == "zenoh" and zen["lockstep"] and zen["status"] == "completed"
     for key in FIGURES:
         assert zen[key] == udp[key]
-    assert (tmp_path / "udp" / "truth_log.bin").read_bytes() == \
-        (tmp_path / "zenoh" / "truth_log.bin").read_bytes()
+    assert (tmp_path / "udp" / "truth.ulg").read_bytes() == \
+        (tmp_path / "zenoh" / "truth.ulg").read_bytes()
 
 
 def _observer(router: str, prefix: str, seconds: float, seen: dict) -> None:

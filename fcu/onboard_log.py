@@ -1,0 +1,193 @@
+"""The FCU's onboard log (`onboard.ulg`): what the flight controller saw, wanted and sent.
+
+Topics (ULog, read with pyulog); PX4's layouts are in `common.px4_topics`:
+
+- `dq_onboard`, every control step in flight: ONBOARD_COLUMNS in float64, ENU/FLU (state,
+  desired pose and twist, wrench, commands, raw and unwrapped tilts, dual-quaternion errors,
+  step time); every metric of the controller's side is computed from it.
+- At PX4_HZ (NED/FRD, float32): vehicle_local_position, vehicle_attitude,
+  vehicle_angular_velocity (the state the controller used); in flight trajectory_setpoint,
+  vehicle_local_position_setpoint, vehicle_attitude_setpoint, vehicle_rates_setpoint (the
+  reference); actuator_motors (speed / limit), actuator_servos (tilt wrapped to [-pi, pi),
+  divided by pi), control_allocator_status (rotors at their limits).
+- At STATUS_HZ and at every change: vehicle_status, failsafe_flags, mission_result.
+
+Parameters are in the definitions (their values when the log opened) and as changes in the
+data; everything the vehicle says (events and STATUSTEXT) is a logged string at its flight
+time. The same logger runs in the FCU process and in the in-process runner.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+from common import px4_topics as px4
+from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
+from common.modes import Mode
+from common.outcome import Event
+from common.quaternion import q_rotate
+from common.ulog import Topic, ULogWriter
+from fcu.core import ONBOARD_COLUMNS, onboard_row
+from fcu.failsafe import state_lost
+from fcu.pipeline import Pipeline, StepOutput
+
+DQ_ONBOARD = Topic("dq_onboard", (("uint64_t", "timestamp"),
+                                  *(("double", c) for c in ONBOARD_COLUMNS[1:])))
+ONBOARD_TOPICS = (
+    DQ_ONBOARD, px4.VEHICLE_LOCAL_POSITION, px4.VEHICLE_ATTITUDE, px4.VEHICLE_ANGULAR_VELOCITY,
+    px4.TRAJECTORY_SETPOINT, px4.VEHICLE_LOCAL_POSITION_SETPOINT,
+    px4.VEHICLE_ATTITUDE_SETPOINT, px4.VEHICLE_RATES_SETPOINT, px4.ACTUATOR_MOTORS,
+    px4.ACTUATOR_SERVOS, px4.CONTROL_ALLOCATOR_STATUS, px4.VEHICLE_STATUS,
+    px4.FAILSAFE_FLAGS, px4.MISSION_RESULT)
+PX4_HZ = 50
+STATUS_HZ = 2
+MAV_TYPE_HEXAROTOR = 13
+NAV_STATE = {Mode.HOLD: px4.NAVIGATION_STATE_AUTO_LOITER,
+             Mode.MISSION: px4.NAVIGATION_STATE_AUTO_MISSION,
+             Mode.OFFBOARD: px4.NAVIGATION_STATE_OFFBOARD,
+             Mode.LAND: px4.NAVIGATION_STATE_AUTO_LAND}
+CRITICAL_FAILSAFES = ("diverged", "non-finite command")
+_NAN = math.nan
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class OnboardLog:
+    """Append-only onboard log of a pipeline; `step` after each control step, `flush` after
+    it (the process) or whenever convenient (in-process)."""
+
+    def __init__(self, sink: str | Path | bytearray, pipeline: Pipeline,
+                 params: Mapping[str, float], *, system_id: int = 1,
+                 home: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        self.pipeline = pipeline
+        self.system_id = system_id
+        self.w_max = pipeline.vehicle.rotor_speed_max_rad_s
+        self.ref_origin = (0, *home)  # ref_timestamp, ref_lat, ref_lon, ref_alt
+        self.params = dict(params)
+        self.writer = ULogWriter(sink, ONBOARD_TOPICS, info={
+            "sys_name": "dqflight", "ver_hw": "SITL", "ver_sw": "0.1.0",
+            "sys_mcu": "python", "sys_toolchain": "CPython"}, params=self.params)
+        self.px4_period_us = 1_000_000 // PX4_HZ
+        self.status_period_us = 1_000_000 // STATUS_HZ
+        self.next_px4_us = 0
+        self.next_status_us = 0
+        self.last_status: tuple[object, ...] = ()
+        self.armed_time_us = 0
+        self.takeoff_time_us = 0
+        self.nav_state_since_us = 0
+        self.last_nav_state = -1
+        self.seq_reached = -1
+
+    # ------------------------------------------------------------------ records
+
+    def step(self, out: StepOutput, step_us: float, t_us: int) -> None:
+        """Queue the records of one control step at flight time t_us."""
+        pipe = self.pipeline
+        state = pipe.state
+        w = self.writer
+        if out.result is not None and state is not None:
+            row = onboard_row(out.t_us, state, out.result, out.speed_rad_s, out.tilt_rad,
+                              out.armed, step_us)
+            w.add("dq_onboard", (out.t_us, *row[1:]))
+        if t_us >= self.next_px4_us:
+            self.next_px4_us = (t_us // self.px4_period_us + 1) * self.px4_period_us
+            self._px4(out, t_us)
+        self._status(t_us)
+
+    def _px4(self, out: StepOutput, t_us: int) -> None:
+        pipe = self.pipeline
+        state = pipe.state
+        w = self.writer
+        stamp = out.t_us
+        if state is not None:
+            valid = not state_lost(t_us, pipe.state_rx_us, pipe.settings)
+            v_enu = q_rotate(state.q_enu_flu, state.v_flu_m_s)
+            w.add("vehicle_local_position", px4.local_position_record(
+                t_us, stamp, state.p_enu_m, v_enu, state.q_enu_flu, valid, self.ref_origin))
+            w.add("vehicle_attitude", px4.attitude_record(t_us, stamp, state.q_enu_flu))
+            w.add("vehicle_angular_velocity",
+                  px4.angular_velocity_record(t_us, stamp, state.omega_flu_rad_s))
+        if out.result is not None:
+            ref = out.result.reference
+            q_d = q_enu_flu_to_ned_frd(ref.q_enu_flu)
+            yaw = px4.yaw_ned(q_d)
+            yawspeed = -q_rotate(ref.q_enu_flu, ref.omega_flu_rad_s)[2]  # NED z is down
+            p, v, a = enu_to_ned(ref.p_enu_m), enu_to_ned(ref.v_enu_m_s), \
+                enu_to_ned(ref.a_enu_m_s2)
+            w.add("trajectory_setpoint", (t_us, *p, *v, *a, _NAN, _NAN, _NAN, yaw, yawspeed))
+            w.add("vehicle_local_position_setpoint", (t_us, *p, *v, *a, yaw, yawspeed))
+            w.add("vehicle_attitude_setpoint", (t_us, yawspeed, *q_d, False))
+            w.add("vehicle_rates_setpoint", (t_us, *flu_to_frd(ref.omega_flu_rad_s), False))
+        n = len(out.speed_rad_s)
+        motors = [s / self.w_max for s in out.speed_rad_s] + [_NAN] * (12 - n)
+        servos = [_wrap(a) / math.pi for a in out.tilt_rad] + [_NAN] * (8 - n)
+        w.add("actuator_motors", (t_us, stamp, 0, *motors))
+        w.add("actuator_servos", (t_us, stamp, *servos))
+        saturation = [px4.ACTUATOR_SATURATION_UPPER if s >= self.w_max else
+                      px4.ACTUATOR_SATURATION_LOWER if s <= 0.0 and out.armed else 0
+                      for s in out.speed_rad_s] + [0] * (16 - n)
+        achieved = out.result is None or not out.result.allocation.saturated
+        w.add("control_allocator_status", (t_us, achieved, achieved, *saturation, 0))
+
+    def _status(self, t_us: int) -> None:
+        pipe = self.pipeline
+        cmd = pipe.commander
+        nav_state = NAV_STATE[cmd.mode]
+        if nav_state != self.last_nav_state:
+            self.last_nav_state = nav_state
+            self.nav_state_since_us = t_us
+        if cmd.armed and not self.armed_time_us:
+            self.armed_time_us = max(t_us, 1)
+        elif not cmd.armed:
+            self.armed_time_us = 0
+        if cmd.armed and not cmd.landed and not self.takeoff_time_us:
+            self.takeoff_time_us = max(t_us, 1)
+        elif not cmd.armed:
+            self.takeoff_time_us = 0
+        for ev in cmd.mission_events:
+            if ev.kind == "reached":
+                self.seq_reached = max(self.seq_reached, ev.seq)
+        lost = pipe.state is not None and state_lost(t_us, pipe.state_rx_us, pipe.settings)
+        key = (cmd.armed, nav_state, pipe.failsafe, lost, bool(cmd.mission),
+               cmd.mission_current, self.seq_reached, cmd.mission_done, self.takeoff_time_us)
+        if key == self.last_status and t_us < self.next_status_us:
+            return
+        self.last_status = key
+        self.next_status_us = (t_us // self.status_period_us + 1) * self.status_period_us
+        w = self.writer
+        gcs_lost = pipe.failsafe == "GCS link lost"
+        w.add("vehicle_status", (
+            t_us, self.armed_time_us, self.takeoff_time_us,
+            px4.ARMING_STATE_ARMED if cmd.armed else px4.ARMING_STATE_DISARMED,
+            self.nav_state_since_us, nav_state, nav_state, px4.HIL_STATE_ON,
+            px4.VEHICLE_TYPE_ROTARY_WING, bool(pipe.failsafe), False, gcs_lost,
+            MAV_TYPE_HEXAROTOR, self.system_id, 1))
+        w.add("failsafe_flags", (t_us, lost, lost, lost, lost, lost, not cmd.mission, gcs_lost,
+                                 pipe.failsafe in CRITICAL_FAILSAFES))
+        w.add("mission_result", (t_us, self.seq_reached, cmd.mission_current,
+                                 len(cmd.mission), bool(cmd.mission), cmd.mission_done))
+
+    def events(self, events: list[Event]) -> None:
+        for ev in events:
+            self.writer.log(ev.t_us, ev.severity, ev.text)
+
+    def text(self, t_us: int, severity: int, text: str) -> None:
+        """A STATUSTEXT the vehicle sent that is not one of the pipeline's events."""
+        self.writer.log(t_us, severity, text)
+
+    def set_params(self, values: Mapping[str, float]) -> None:
+        """Log the parameters that changed since the last call."""
+        for name, value in values.items():
+            if self.params.get(name) != value:
+                self.params[name] = value
+                self.writer.param(name, value)
+
+    def flush(self) -> None:
+        self.writer.flush()
+
+    def close(self) -> None:
+        self.writer.close()

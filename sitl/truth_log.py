@@ -1,0 +1,56 @@
+"""The simulator's ground-truth log (`truth.ulg`): what the vehicle really did.
+
+Topics (ULog, read with pyulog):
+
+- `dq_truth`, one record per state sent to the FCU (the control rate): TRUTH_COLUMNS in
+  float64, ENU/FLU, SI units; every metric is computed from it.
+- `vehicle_local_position_groundtruth`, `vehicle_attitude_groundtruth`,
+  `vehicle_angular_velocity_groundtruth` as PX4 SITL logs them (float32, NED/FRD), at
+  GROUNDTRUTH_HZ.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from common import px4_topics as px4
+from common.ulog import Topic, ULogWriter
+from sitl.plant import TRUTH_COLUMNS, PlantState, truth_row
+
+DQ_TRUTH = Topic("dq_truth", (("uint64_t", "timestamp"),
+                              *(("double", c) for c in TRUTH_COLUMNS[1:])))
+TRUTH_TOPICS = (DQ_TRUTH, px4.VEHICLE_LOCAL_POSITION_GROUNDTRUTH,
+                px4.VEHICLE_ATTITUDE_GROUNDTRUTH, px4.VEHICLE_ANGULAR_VELOCITY_GROUNDTRUTH)
+GROUNDTRUTH_HZ = 100
+
+
+class TruthLog:
+    """Append-only truth log; `record` queues one state, `flush` writes what is queued."""
+
+    def __init__(self, sink: str | Path | bytearray, scenario_name: str) -> None:
+        self.writer = ULogWriter(sink, TRUTH_TOPICS, info={
+            "sys_name": "dqflight sitl", "ver_hw": "SITL", "sim_scenario": scenario_name})
+        self.period_us = 1_000_000 // GROUNDTRUTH_HZ
+        self.next_gt_us = 0
+
+    def record(self, s: PlantState) -> None:
+        w = self.writer
+        t = s.time_us
+        row = truth_row(s)
+        w.add("dq_truth", (t, *row[1:]))
+        if t >= self.next_gt_us:
+            self.next_gt_us = (t // self.period_us + 1) * self.period_us
+            w.add(px4.VEHICLE_LOCAL_POSITION_GROUNDTRUTH.name, px4.local_position_record(
+                t, t, s.p_enu_m, s.v_enu_m_s, s.q_enu_flu, True, (0, 0.0, 0.0, 0.0)))
+            w.add(px4.VEHICLE_ATTITUDE_GROUNDTRUTH.name, px4.attitude_record(t, t, s.q_enu_flu))
+            w.add(px4.VEHICLE_ANGULAR_VELOCITY_GROUNDTRUTH.name,
+                  px4.angular_velocity_record(t, t, s.omega_flu_rad_s))
+
+    def text(self, t_us: int, severity: int, text: str) -> None:
+        self.writer.log(t_us, severity, text)
+
+    def flush(self) -> None:
+        self.writer.flush()
+
+    def close(self) -> None:
+        self.writer.close()
