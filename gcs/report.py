@@ -1,6 +1,7 @@
-"""Run reports: the paper's figures and a one-page report.md for a run folder.
+"""Run reports: the paper's figures and a one-page report.md for a run folder or for a
+folder written by `gcs table1 --out DIR`.
 
-`make_report(run_dir)` reads metrics.json, scenario.toml and the two binary logs written by
+`make_report(run_dir)` reads metrics.json, scenario.toml and the two ULogs written by
 `gcs run ... --out DIR` (in-process or through processes) and writes `DIR/figures/*.png`
 and `DIR/report.md`:
 
@@ -8,9 +9,31 @@ and `DIR/report.md`:
 - fig4_tracking.png: (a) quaternion actual vs desired with the instants where a Z-Y-X Euler
   description of the desired attitude is singular or jumps, (b) attitude error angle,
   (c) position actual vs desired, (d) position error norm and per-axis errors.
+- fig5_pd_tracking_errors.png (Case I runs with the PD controller only): the paper's Fig. 5,
+  "tracking errors for the PD controller": (a) attitude error angle and (b) position error,
+  drawn as Fig. 4 (b) and (d). It comes in addition to Fig. 4, which every run gets (the
+  paper draws Fig. 4 for PID only, but a PD run's quaternion and position traces are worth
+  having too); a PID Case I run has no Fig. 5 (its errors are Fig. 4 (b) and (d)).
 - fig6_path_3d.png: desired vs flown path in 3D.
-- fig7_8_disturbance.png (runs with [[disturbance.*]] tables only): position and attitude
-  error with the pulse intervals shaded and the applied body-frame force and torque.
+- fig7_8_disturbance.png (runs with [[disturbance.*]] tables only): one run's position and
+  attitude error with the pulse intervals shaded and the applied body-frame force and torque.
+
+`make_table1_report(dir)` does the above for each of the 8 run folders of a table1 folder
+(`<scenario>_<controller>`, e.g. `case2_impulse_pd`) and writes, in the table1 folder itself:
+
+- table1.png: the Table I chart (`table1_chart`), redrawn from the run folders.
+- fig5_pd_tracking_errors.png: Fig. 5 from `case1_figure8_pd`, with the PID run's errors
+  (`case1_figure8_pid`, Fig. 4) in grey for comparison, as the paper's text compares them.
+- fig7_disturbance_pid.png and fig8_disturbance_pd.png: the paper's Figs. 7 (PID) and 8
+  (PD), drawn from the three Case II runs of that controller: one row per disturbance
+  (impulse, sinusoidal ("regular" in Table I), irregular) and three columns lettered down
+  the columns, as the paper's text reads them ("Figs. 7 (a) and (d)" are both the impulse
+  row): attitude error angle (a-c), position error (d-f) and the applied disturbance (g-i);
+  pulse intervals are shaded on the whole row. A diverged run is drawn up to its divergence
+  (`divergence_t_s`), marked by a red dotted line and named in its row's titles; a missing
+  run leaves its row empty and says so.
+- report.md: Table I (ours beside the paper), every run's status, why, and its events, links
+  to every figure, and the run folders that are missing or could not be read.
 
 `table1_chart(table, png)` draws `gcs.table1.table_json` output as grouped bars.
 
@@ -20,8 +43,10 @@ series are thinned to every bucket's first, minimum and maximum sample, so peaks
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,18 +57,29 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from common.binlog import read_log
 from gcs.euler import zyx_events
 from gcs.metrics import attitude_error_rad, join_logs, log_columns
-from gcs.runio import ONBOARD_LOG, TRUTH_LOG, check_run_dir
-from gcs.table1 import CASES, CONTROLLERS, PAPER, STATS
+from gcs.runio import check_run_dir, read_run_logs
+from gcs.table1 import CASES, CONTROLLERS, PAPER, STATS, table_json, table_markdown
 
 FIG_DIR = "figures"
 FIG3 = "fig3_tilt_unwrapping.png"
 FIG4 = "fig4_tracking.png"
+FIG5 = "fig5_pd_tracking_errors.png"
 FIG6 = "fig6_path_3d.png"
+FIG7 = "fig7_disturbance_pid.png"
+FIG8 = "fig8_disturbance_pd.png"
 FIG78 = "fig7_8_disturbance.png"
 REPORT = "report.md"
+TABLE1_JSON = "table1.json"  # what makes a folder a table1 folder
+TABLE1_PNG = "table1.png"
+
+CASE1 = "case1_figure8"
+# The rows of Figs. 7 and 8, in the paper's order: (scenario, what the row shows).
+CASE2_ROWS = (("case2_impulse", "impulse disturbance"),
+              ("case2_sine", "sinusoidal (regular) disturbance"),
+              ("case2_irregular", "irregular disturbance"))
+FIG78_BY_CONTROLLER = {"pid": (7, FIG7), "pd": (8, FIG8)}  # figure number, file
 
 DPI = 150
 WIDTH_IN = 11.0  # 1650 px at DPI
@@ -121,8 +157,7 @@ def load_run(run_dir: Path) -> RunData:
     metrics = check_run_dir(run_dir)
     scen_path = run_dir / "scenario.toml"
     scenario = tomllib.loads(scen_path.read_text()) if scen_path.exists() else {}
-    tc, truth = read_log(run_dir / TRUTH_LOG)
-    oc, onboard = read_log(run_dir / ONBOARD_LOG)
+    tc, truth, oc, onboard = read_run_logs(run_dir)
     truth = truth[np.isfinite(truth[:, tc.index("time_us")])]
     onboard = onboard[np.isfinite(onboard[:, oc.index("time_us")])]
     common_t, truth, onboard = join_logs(tc, truth, oc, onboard)
@@ -227,6 +262,37 @@ def _end_time(data: RunData) -> float:
     return float(data.t[-1]) if len(data.t) and data.t[-1] > 0 else 1.0
 
 
+def _rmse(x: np.ndarray) -> float:
+    return math.sqrt(float(np.mean(x ** 2))) if x.size else 0.0
+
+
+def _stats_text(x: np.ndarray, unit: str) -> str:
+    return f"max {np.max(x, initial=0):.3g} {unit}, RMSE {_rmse(x):.3g} {unit}"
+
+
+def _plot_attitude_error(ax, data: RunData, *, color: str = "tab:purple", lw: float = 1.1,
+                         label: str = "∠(q_d* q)") -> np.ndarray:
+    """The attitude error angle of q_d* q over time (thinned); returns the whole series."""
+    att = attitude_error_rad(data.q, data.q_d)
+    ta, ya = _thin(data.t, att)
+    ax.plot(ta, ya, color=color, lw=lw, label=label)
+    return att
+
+
+def _plot_position_error(ax, data: RunData) -> np.ndarray:
+    """Per-axis position errors and their norm over time (thinned); returns the norm."""
+    err = data.p - data.p_d
+    norm = np.linalg.norm(err, axis=1)
+    idx = thin_indices(np.column_stack([norm, err]))
+    t = data.t
+    for k, name in enumerate("xyz"):
+        ax.plot(t[idx], err[idx, k], color=AXIS_COLORS[k], lw=0.9,
+                label=f"e_{name} = {name} − {name}_d")
+    ax.plot(t[idx], norm[idx], color="k", lw=1.4, label="|p − p_d|")
+    ax.axhline(0.0, color="k", lw=0.6, alpha=0.5)
+    return norm
+
+
 # ---------------------------------------------------------------------------------------------
 # Figures
 # ---------------------------------------------------------------------------------------------
@@ -312,13 +378,9 @@ def fig4_tracking(data: RunData, events: list[tuple[float, str]], path: Path) ->
     _style(ax_q, "component (–)")
 
     # (b) attitude error angle, log scale.
-    att = attitude_error_rad(data.q, data.q_d)
-    ta, ya = _thin(t, att)
-    ax_att.plot(ta, ya, color="tab:purple", lw=1.1, label="∠(q_d* q)")
+    att = _plot_attitude_error(ax_att, data)
     note = _log_axis(ax_att, att)
-    ax_att.set_title(f"(b) attitude error angle: max {np.max(att, initial=0):.3g} rad, "
-                     f"RMSE {math.sqrt(float(np.mean(att ** 2))) if att.size else 0:.3g} rad"
-                     + note)
+    ax_att.set_title(f"(b) attitude error angle: {_stats_text(att, 'rad')}" + note)
     _legend_right(ax_att)
     _style(ax_att, "error angle (rad)")
 
@@ -336,23 +398,56 @@ def fig4_tracking(data: RunData, events: list[tuple[float, str]], path: Path) ->
     _style(ax_p, "position (m)")
 
     # (d) position error norm and per axis.
-    err = data.p - data.p_d
-    norm = np.linalg.norm(err, axis=1)
-    idx = thin_indices(np.column_stack([norm, err]))
-    for k, name in enumerate("xyz"):
-        ax_ep.plot(t[idx], err[idx, k], color=AXIS_COLORS[k], lw=0.9,
-                   label=f"e_{name} = {name} − {name}_d")
-    ax_ep.plot(t[idx], norm[idx], color="k", lw=1.4, label="|p − p_d|")
-    ax_ep.axhline(0.0, color="k", lw=0.6, alpha=0.5)
+    norm = _plot_position_error(ax_ep, data)
     _legend_right(ax_ep)
-    ax_ep.set_title(f"(d) position error: max {np.max(norm, initial=0):.3g} m, "
-                    f"RMSE {math.sqrt(float(np.mean(norm ** 2))) if norm.size else 0:.3g} m")
+    ax_ep.set_title(f"(d) position error: {_stats_text(norm, 'm')}")
     _style(ax_ep, "error (m)", xlabel=True)
 
     for ax in (ax_att, ax_p, ax_ep):
         _mark_end(ax, data)
     fig.suptitle(f"Fig. 4 – attitude and position tracking: {data.title}")
     return _save(fig, path)
+
+
+def is_case1_pd(data: RunData) -> bool:
+    """A Case I run (by scenario or trajectory) flown with the PD controller: Fig. 5's run."""
+    kind = data.scenario.get("trajectory", {}).get("kind")
+    return data.controller == "pd" and CASE1 in (data.name, kind)
+
+
+def fig5_figure(data: RunData, reference: RunData | None = None) -> Figure:
+    """Fig. 5: Case I tracking errors of the PD controller, as Fig. 4 (b) and (d): (a) the
+    attitude error angle (log scale), (b) the position error per axis and its norm. A
+    `reference` run (the PID run of the same case) is drawn in grey for comparison."""
+    fig = _new_figure(8.0)
+    ax_att, ax_ep = fig.subplots(2, 1, sharex=True)
+    ctrl = data.controller.upper()
+    att = _plot_attitude_error(ax_att, data, label=f"∠(q_d* q), {ctrl}")
+    values = [att]
+    if reference is not None and len(reference.t):
+        ref = reference.controller.upper()
+        values.append(_plot_attitude_error(ax_att, reference, color="0.55", lw=0.9,
+                                           label=f"∠(q_d* q), {ref}\n(Fig. 4), for comparison"))
+    note = _log_axis(ax_att, np.concatenate(values))
+    ax_att.set_title(f"(a) attitude error angle: {_stats_text(att, 'rad')}" + note)
+    _style(ax_att, "error angle (rad)")
+
+    norm = _plot_position_error(ax_ep, data)
+    if reference is not None and len(reference.t):
+        tr, nr = _thin(reference.t, np.linalg.norm(reference.p - reference.p_d, axis=1))
+        ax_ep.plot(tr, nr, color="0.55", lw=1.2, ls="--",
+                   label=f"|p − p_d|, {reference.controller.upper()}\n(Fig. 4), for comparison")
+    ax_ep.set_title(f"(b) position error: {_stats_text(norm, 'm')}")
+    _style(ax_ep, "error (m)", xlabel=True)
+    for ax in (ax_att, ax_ep):
+        _mark_end(ax, data, label=ax is ax_att)
+        _legend_right(ax)
+    fig.suptitle(f"Fig. 5 – Case I, tracking errors of the {ctrl} controller: {data.title}")
+    return fig
+
+
+def fig5_errors(data: RunData, path: Path, reference: RunData | None = None) -> Path:
+    return _save(fig5_figure(data, reference), path)
 
 
 def fig6_path(data: RunData, path: Path) -> Path:
@@ -414,8 +509,10 @@ def _pulse_intervals(terms: list[dict[str, Any]]) -> list[tuple[float, float]]:
             if x.get("kind") == "pulse" and "end_s" in x]
 
 
-def _plot_vec(ax, t: np.ndarray, v: np.ndarray, unit: str, sym: str) -> None:
-    """x, y, z components; identical components share one line and one legend entry."""
+def _plot_vec(ax, t: np.ndarray, v: np.ndarray, unit: str, sym: str, *, color: str = "k",
+              ls: str = "-") -> None:
+    """x, y, z components; identical components share one line (in `color`) and one legend
+    entry."""
     idx = thin_indices(v)
     drawn: list[int] = []
     for k in range(3):
@@ -424,9 +521,32 @@ def _plot_vec(ax, t: np.ndarray, v: np.ndarray, unit: str, sym: str) -> None:
             continue
         group = [n for j, n in enumerate("xyz") if np.allclose(v[:, k], v[:, j])]
         label = " = ".join(f"{sym}_{n}" for n in group) + f" ({unit})"
-        ax.plot(t[idx], v[idx, k], color=AXIS_COLORS[k] if len(group) == 1 else "k",
-                lw=1.2, label=label)
+        ax.plot(t[idx], v[idx, k], color=AXIS_COLORS[k] if len(group) == 1 else color,
+                lw=1.2, ls=ls, label=label)
         drawn.append(k)
+
+
+def _profiles(data: RunData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, force, torque) of the run's disturbances on a regular grid, so pulses' edges are
+    exact, cut at the run's end."""
+    tg = np.linspace(0.0, _end_time(data), 4001)
+    return tg, disturbance_profile(data.force_terms, tg), \
+        disturbance_profile(data.torque_terms, tg)
+
+
+def _shade_pulses(axes: Sequence[Any], data: RunData, *, named: Any = None,
+                  intervals_in_label: bool = True) -> None:
+    """Pulse intervals shaded on every axis of `axes` (up to the run's end); legend entries
+    only on `named`."""
+    end = _end_time(data)
+    shades = [(iv, "tab:orange", "force pulse") for iv in _pulse_intervals(data.force_terms)]
+    shades += [(iv, "tab:cyan", "torque pulse") for iv in _pulse_intervals(data.torque_terms)]
+    for ax in axes:
+        for (a, b), color, label in shades:
+            if a < end:
+                text = f"{label}\n{a:g}–{b:g} s" if intervals_in_label else label
+                ax.axvspan(a, min(b, end), color=color, alpha=0.22, lw=0, zorder=0,
+                           label=text if ax is named else None)
 
 
 def fig78_disturbance(data: RunData, path: Path) -> Path:
@@ -434,26 +554,13 @@ def fig78_disturbance(data: RunData, path: Path) -> Path:
     fig = _new_figure(11.0)
     ax_p, ax_a, ax_f, ax_m = fig.subplots(4, 1, sharex=True,
                                           gridspec_kw={"height_ratios": [1.3, 1.3, 1, 1]})
-    t = data.t
-    end = _end_time(data)
-    # Profiles on a regular grid so pulses' edges are exact, cut at the run's end.
-    tg = np.linspace(0.0, end, 4001)
-    force = disturbance_profile(data.force_terms, tg)
-    torque = disturbance_profile(data.torque_terms, tg)
+    tg, force, torque = _profiles(data)
 
-    err = data.p - data.p_d
-    norm = np.linalg.norm(err, axis=1)
-    idx = thin_indices(np.column_stack([norm, err]))
-    for k, name in enumerate("xyz"):
-        ax_p.plot(t[idx], err[idx, k], color=AXIS_COLORS[k], lw=0.9, label=f"e_{name}")
-    ax_p.plot(t[idx], norm[idx], color="k", lw=1.4, label="|p − p_d|")
-    ax_p.axhline(0.0, color="k", lw=0.6, alpha=0.5)
+    _plot_position_error(ax_p, data)
     ax_p.set_title("(a) position error")
     _style(ax_p, "error (m)")
 
-    att = attitude_error_rad(data.q, data.q_d)
-    ta, ya = _thin(t, att)
-    ax_a.plot(ta, ya, color="tab:purple", lw=1.1, label="∠(q_d* q)")
+    _plot_attitude_error(ax_a, data)
     ax_a.set_title("(b) attitude error angle")
     _style(ax_a, "error angle (rad)")
 
@@ -464,18 +571,95 @@ def fig78_disturbance(data: RunData, path: Path) -> Path:
     ax_m.set_title("(d) applied torque disturbance, body frame (FLU)")
     _style(ax_m, "torque (N m)", xlabel=True)
 
-    shades = [(iv, "tab:orange", "force pulse") for iv in _pulse_intervals(data.force_terms)]
-    shades += [(iv, "tab:cyan", "torque pulse") for iv in _pulse_intervals(data.torque_terms)]
+    _shade_pulses((ax_p, ax_a, ax_f, ax_m), data, named=ax_p)
     for ax in (ax_p, ax_a, ax_f, ax_m):
-        for (a, b), color, label in shades:
-            if a < end:  # pulse intervals shaded on every panel, named once
-                ax.axvspan(a, min(b, end), color=color, alpha=0.22, lw=0, zorder=0,
-                           label=f"{label}\n{a:g}–{b:g} s" if ax is ax_p else None)
         _mark_end(ax, data, label=ax is ax_p)
         _legend_right(ax)
     kinds = sorted({x.get("kind", "?") for x in data.force_terms + data.torque_terms})
     fig.suptitle(f"Fig. 7/8 – response to {' + '.join(kinds)} disturbances: {data.title}")
     return _save(fig, path)
+
+
+def fig7_8_figure(runs: Sequence[RunData | None], controller: str) -> Figure:
+    """The paper's Fig. 7 (`controller` "pid") or Fig. 8 ("pd"): Case II, one row per run of
+    `runs`, given in the order of CASE2_ROWS (impulse, sinusoidal, irregular; None: missing),
+    columns attitude error angle (a-c), position error (d-f), applied disturbance (g-i).
+
+    Each row has its own time axis, from 0 to its run's end; a diverged run ends at its
+    divergence (`load_run` cuts it there), marked by a red dotted line and named in red in
+    the row's titles. Pulse intervals are shaded across the row."""
+    number = FIG78_BY_CONTROLLER[controller][0]
+    rows = len(CASE2_ROWS)
+    if len(runs) != rows:
+        raise ValueError(f"Fig. {number} takes {rows} runs (None for a missing one)")
+    fig = _new_figure(13.0)
+    axes = fig.subplots(rows, 3, sharex="row")
+    ylabels = ("error angle (rad)", "error (m)", "F (N), τ (N m)")
+    diverged_any = False
+    for r, ((scen, label), data) in enumerate(zip(CASE2_ROWS, runs, strict=True)):
+        heads = [f"({'abcdefghi'[c * rows + r]}) {label}" for c in range(3)]
+        if data is None:
+            for ax, head in zip(axes[r], heads, strict=True):
+                ax.set_title(f"{head}\nno run: {scen}_{controller} is missing", fontsize=9.5,
+                             color="red")
+                ax.text(0.5, 0.5, "no run", transform=ax.transAxes, ha="center",
+                        va="center", color="red", fontsize=12)
+                ax.set_xticks([])
+                ax.set_yticks([])
+            continue
+        if data.name != scen:
+            raise ValueError(f"Fig. {number}, row {r + 1} ({label}) takes a {scen} run, "
+                             f"not {data.name}")
+        ax_a, ax_p, ax_d = axes[r]
+        att = _plot_attitude_error(ax_a, data)
+        norm = _plot_position_error(ax_p, data)
+        tg, force, torque = _profiles(data)
+        _plot_vec(ax_d, tg, force, "N", "F", color="darkorange")
+        _plot_vec(ax_d, tg, torque, "N m", "τ", color="teal", ls="--")
+        ax_d.axhline(0.0, color="k", lw=0.6, alpha=0.5)
+        _shade_pulses(axes[r], data, named=ax_a, intervals_in_label=False)
+        pulses = _pulse_intervals(data.force_terms) + _pulse_intervals(data.torque_terms)
+        texts = [f"attitude error: {_stats_text(att, 'rad')}",
+                 f"position error: {_stats_text(norm, 'm')}",
+                 "disturbance applied" + (
+                     "" if pulses else f" from t = {_disturbance_start(data):g} s")
+                 + " (body FLU)"]
+        diverged = data.diverged and len(data.t) > 0
+        diverged_any |= diverged
+        for c, ax in enumerate(axes[r]):
+            title = f"{heads[c]}\n{texts[c]}"
+            if diverged:
+                title += f"\nDIVERGED at t = {_end_time(data):.2f} s (the run ends there)"
+            elif data.status not in ("completed", "unknown"):
+                title += f"\n{data.status}"
+            ax.set_title(title, fontsize=9.5, color="red" if diverged else "black")
+            _mark_end(ax, data)
+            _style(ax, ylabels[c], xlabel=r == rows - 1)
+    handles: dict[str, Any] = {}
+    for ax in axes.ravel():
+        for handle, text in zip(*ax.get_legend_handles_labels(), strict=True):
+            handles.setdefault(text, handle)
+    if diverged_any:
+        handles["divergence (the run ends there)"] = Line2D([], [], color="red", lw=1.6,
+                                                            ls=":")
+    if handles:
+        fig.legend(list(handles.values()), list(handles), loc="outside lower center", ncol=5,
+                   fontsize=9)
+    name = "the PID tracker (eq. 16)" if controller == "pid" else \
+        "the PD controller (eq. 33)"
+    fig.suptitle(f"Fig. {number} – Case II, robustness to disturbance: tracking errors of "
+                 f"{name}")
+    return fig
+
+
+def _disturbance_start(data: RunData) -> float:
+    starts = [float(x.get("start_s", 0.0)) for x in data.force_terms + data.torque_terms]
+    return min(starts, default=0.0)
+
+
+def fig7_8_case2(runs: Sequence[RunData | None], controller: str, path: Path) -> Path:
+    """Fig. 7 (PID) or Fig. 8 (PD) from the three Case II runs, written to `path`."""
+    return _save(fig7_8_figure(runs, controller), path)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -576,31 +760,262 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
         lines.append("None: a Z-Y-X description of the desired attitude stays regular and "
                      "continuous over this run.")
     lines += ["", "## Figures", ""]
-    captions = {FIG3: "Fig. 3: tilt angles before and after unwrapping",
-                FIG4: "Fig. 4: attitude and position tracking",
-                FIG6: "Fig. 6: 3D path, desired vs flown",
-                FIG78: "Fig. 7/8: response to the disturbances"}
     for fig in figures:
         rel = f"{FIG_DIR}/{fig.name}"
-        cap = captions.get(fig.name, fig.stem)
+        cap = CAPTIONS.get(fig.name, fig.stem)
         lines.append(f"- [{cap}]({rel})")
     return "\n".join(lines).rstrip() + "\n"
 
 
-def make_report(run_dir: Path) -> list[Path]:
-    """Write run_dir/figures/*.png and run_dir/report.md; return their paths."""
-    run_dir = Path(run_dir)
-    data = load_run(run_dir)
-    out = run_dir / FIG_DIR
+CAPTIONS = {FIG3: "Fig. 3: tilt angles before and after unwrapping",
+            FIG4: "Fig. 4: attitude and position tracking",
+            FIG5: "Fig. 5: Case I, tracking errors of the PD controller",
+            FIG6: "Fig. 6: 3D path, desired vs flown",
+            FIG7: "Fig. 7: Case II, robustness to disturbance, PID (impulse, sinusoidal, "
+                  "irregular)",
+            FIG8: "Fig. 8: Case II, robustness to disturbance, PD (impulse, sinusoidal, "
+                  "irregular)",
+            FIG78: "Fig. 7/8: response to the disturbances",
+            TABLE1_PNG: "Table I: RMSE, ours vs the paper"}
+
+
+def write_run_report(data: RunData) -> list[Path]:
+    """Write the figures and report.md of a loaded run folder; return their paths."""
+    out = data.run_dir / FIG_DIR
     out.mkdir(parents=True, exist_ok=True)
     events = zyx_events(data.t, data.q_d) if len(data.t) > 1 else []
-    figures = [fig3_tilt(data, out / FIG3), fig4_tracking(data, events, out / FIG4),
-               fig6_path(data, out / FIG6)]
+    figures = [fig3_tilt(data, out / FIG3), fig4_tracking(data, events, out / FIG4)]
+    if is_case1_pd(data):
+        figures.append(fig5_errors(data, out / FIG5))
+    figures.append(fig6_path(data, out / FIG6))
     if data.disturbed:
         figures.append(fig78_disturbance(data, out / FIG78))
-    report = run_dir / REPORT
+    report = data.run_dir / REPORT
     report.write_text(_report_md(data, events, figures))
     return [*figures, report]
+
+
+def make_report(run_dir: Path) -> list[Path]:
+    """Write run_dir/figures/*.png and run_dir/report.md; return their paths."""
+    return write_run_report(load_run(Path(run_dir)))
+
+
+# ---------------------------------------------------------------------------------------------
+# A table1 folder: every run's report, Table I, Figs. 5, 7 and 8
+# ---------------------------------------------------------------------------------------------
+
+def is_table1_dir(path: Path) -> bool:
+    """A folder written by `gcs table1 --out DIR` (it holds table1.json)."""
+    return (Path(path) / TABLE1_JSON).is_file()
+
+
+def table1_run_name(scenario: str, controller: str) -> str:
+    """The run folder of a case and controller in a table1 folder (`gcs.table1.run_table1`)."""
+    return f"{scenario}_{controller}"
+
+
+@dataclass
+class Table1Report:
+    """What `make_table1_report` wrote, and what it could not report (one line each, naming
+    the run folder)."""
+
+    written: list[Path]
+    problems: list[str]
+
+
+def _md_cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def _events_summary(events: list[dict[str, Any]], limit: int = 4) -> str:
+    """One line: how many events, by severity, and the notable ones (warnings and worse,
+    failsafes, divergence), else the first few."""
+    if not events:
+        return "none"
+    counts: dict[str, int] = {}
+    for e in events:
+        level = e.get("severity")
+        sev = SEVERITY.get(level, str(level)) if isinstance(level, int) else str(level)
+        counts[sev] = counts.get(sev, 0) + 1
+    notable = [e for e in events if e.get("kind", "info") != "info"
+               or (isinstance(e.get("severity"), int) and e["severity"] <= 4)]
+    shown = (notable or events)[:limit]
+    parts = [f"{e.get('text', '?')} ({_fmt(e.get('t_s'))} s)" for e in shown]
+    rest = len(notable or events) - len(shown)
+    return (f"{len(events)} ({', '.join(f'{n} {s}' for s, n in counts.items())}): "
+            + "; ".join(parts) + (f"; … {rest} more" if rest > 0 else ""))
+
+
+def _status_text(m: dict[str, Any]) -> str:
+    text = f"**{m.get('status', 'unknown')}**"
+    if m.get("status") == "diverged" and m.get("divergence_t_s") is not None:
+        text += f" at {_fmt(m['divergence_t_s'])} s"
+    return text
+
+
+def _table1_md(table_dir: Path, table: dict[str, Any], runs: dict[tuple[str, str], RunData],
+               run_figures: dict[tuple[str, str], list[Path]], figures: list[Path],
+               problems: dict[tuple[str, str], str], other_problems: list[str],
+               notes: list[str], from_json: list[tuple[str, str]]) -> str:
+    n_runs = len(CASES) * len(CONTROLLERS)
+    lines = [f"# Table I report: {table_dir.name}", "",
+             f"{len(runs)} of {n_runs} runs reported"
+             + (f"; {len(problems)} missing or unreadable: "
+                + ", ".join(f"`{table1_run_name(*k)}`" for k in problems) if problems else "")
+             + "."]
+    cut = sorted({_fmt(d.metrics.get("overrides", {}).get("duration_s"))
+                  for d in runs.values() if _cut_short(d)})
+    if cut:
+        lines += ["", f"Runs cut short (to {', '.join(cut)} s of the scenarios' durations): "
+                  "the paper's figures are for the full scenarios."]
+    lines += [""]
+    if problems or other_problems:
+        lines += ["## Missing or unreadable", ""]
+        lines += [f"- {_md_cell(p)}" for p in [*problems.values(), *other_problems]]
+        lines.append("")
+    lines += [f"_{n}_" for n in notes]
+    if notes:
+        lines.append("")
+
+    table_md = table_markdown(table).replace("# Table I", "## Table I", 1)
+    lines += [table_md.rstrip(), ""]
+    if from_json:
+        lines += ["Rows of run folders that are missing or unreadable are those of "
+                  f"{TABLE1_JSON}: " + ", ".join(f"`{table1_run_name(*k)}`" for k in from_json)
+                  + ".", ""]
+    if (table_dir / TABLE1_PNG).exists():
+        lines += [f"![{CAPTIONS[TABLE1_PNG]}]({TABLE1_PNG})", ""]
+
+    lines += ["## Runs", "", "Status, why, and what the vehicle said (events on the flight "
+              "clock, from each run's metrics.json).", "",
+              "| case | controller | run folder | status | why | events |",
+              "|---|---|---|---|---|---|"]
+    for label, scen in CASES:
+        for ctrl in CONTROLLERS:
+            key = (scen, ctrl)
+            name = table1_run_name(scen, ctrl)
+            if key in runs:
+                m = runs[key].metrics
+                why = str(m.get("status_reason") or "")
+                if m.get("failsafe"):
+                    why += f"; failsafe: {m['failsafe']}"
+                lines.append(f"| {label} | {ctrl.upper()} | [{name}]({name}/{REPORT}) | "
+                             f"{_status_text(m)} | {_md_cell(why) or '—'} | "
+                             f"{_md_cell(_events_summary(list(m.get('events', []))))} |")
+            else:
+                lines.append(f"| {label} | {ctrl.upper()} | `{name}` | **not reported** | "
+                             f"{_md_cell(problems.get(key, 'missing'))} | — |")
+    lines.append("")
+
+    lines += ["## Figures", ""]
+    for fig in figures:
+        lines.append(f"- [{CAPTIONS.get(fig.name, fig.stem)}]({fig.name})")
+    drawn = {f.name for f in figures}
+    for name, source in ((FIG5, f"`{table1_run_name(CASE1, 'pd')}`"),
+                         *((f, f"any `case2_*_{c}`") for c, (_, f) in
+                           FIG78_BY_CONTROLLER.items())):
+        if name not in drawn:
+            lines.append(f"- {CAPTIONS[name].split(':')[0]}: not drawn (no run: {source} "
+                         "is missing or unreadable)")
+    lines += ["", "Each run's own figures and report:", ""]
+    for label, scen in CASES:
+        for ctrl in CONTROLLERS:
+            key = (scen, ctrl)
+            if key not in run_figures:
+                continue
+            name = table1_run_name(scen, ctrl)
+            links = [f"[{CAPTIONS.get(p.name, p.stem).split(':')[0]}]"
+                     f"({name}/{FIG_DIR}/{p.name})" for p in run_figures[key]]
+            lines.append(f"- `{name}` (Case {label}, {ctrl.upper()}): " + ", ".join(links)
+                         + f", [report]({name}/{REPORT})")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _valid_row(row: Any) -> bool:
+    try:
+        return all(isinstance(row[side][metric][stat], int | float)
+                   for side in ("ours", "paper")
+                   for metric in ("position_error_m", "attitude_error_rad") for stat in STATS) \
+            and isinstance(row["status"], str) and isinstance(row["case"], str)
+    except (KeyError, TypeError):
+        return False
+
+
+def make_table1_report(table_dir: Path, *,
+                       warn: Callable[[str], None] | None = None) -> Table1Report:
+    """Report a table1 folder: each run folder's figures and report.md (as `make_report`),
+    and in `table_dir` table1.png, Figs. 5, 7 and 8 and report.md. A run folder that is
+    missing or cannot be read is named in `problems` (and passed to `warn` as it is found)
+    and the rest is reported all the same."""
+    table_dir = Path(table_dir)
+    written: list[Path] = []
+    problems: dict[tuple[str, str], str] = {}
+    other: list[str] = []
+    notes: list[str] = []
+
+    def note(problem: str) -> None:
+        if warn is not None:
+            warn(problem)
+
+    try:
+        saved = json.loads((table_dir / TABLE1_JSON).read_text())
+        saved_rows = {(r["scenario"], r["controller"]): r for r in saved["rows"]
+                      if _valid_row(r)}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        other.append(f"{table_dir / TABLE1_JSON}: not readable ({exc}); the table is made "
+                     "from the run folders")
+        note(other[-1])
+        saved_rows = {}
+
+    runs: dict[tuple[str, str], RunData] = {}
+    run_figures: dict[tuple[str, str], list[Path]] = {}
+    for _, scen in CASES:
+        for ctrl in CONTROLLERS:
+            run_dir = table_dir / table1_run_name(scen, ctrl)
+            if not run_dir.is_dir():
+                problems[(scen, ctrl)] = f"{run_dir}: run folder missing"
+                note(problems[(scen, ctrl)])
+                continue
+            try:
+                data = load_run(run_dir)
+                row = table_json({(scen, ctrl): data.metrics})["rows"]
+            except Exception as exc:  # any reading failure: name it, report the rest
+                problems[(scen, ctrl)] = f"{run_dir}: could not be read " \
+                                         f"({type(exc).__name__}: {exc})"
+                note(problems[(scen, ctrl)])
+                continue
+            runs[(scen, ctrl)] = data
+            paths = write_run_report(data)
+            run_figures[(scen, ctrl)] = paths[:-1]
+            written += paths
+            old = saved_rows.get((scen, ctrl))
+            if old is not None and row and (old.get("status") != row[0]["status"] or old.get(
+                    "ours") != row[0]["ours"]):
+                notes.append(f"{run_dir.name}: its metrics.json differs from the row of "
+                             f"{TABLE1_JSON} (status {old.get('status')} there, "
+                             f"{row[0]['status']} here); the table shows the run folder's.")
+
+    # The table: the run folders' metrics, and table1.json's rows for the runs not read.
+    from_json = [k for k in problems if k in saved_rows]
+    table = table_json({k: d.metrics for k, d in runs.items()})
+    order = {(scen, ctrl): i for i, (scen, ctrl) in
+             enumerate((s, c) for _, s in CASES for c in CONTROLLERS)}
+    table["rows"] = sorted([*table["rows"], *(saved_rows[k] for k in from_json)],
+                           key=lambda r: order[(r["scenario"], r["controller"])])
+    figures = [table1_chart(table, table_dir / TABLE1_PNG)]
+
+    pd1 = runs.get((CASE1, "pd"))
+    if pd1 is not None:
+        figures.append(fig5_errors(pd1, table_dir / FIG5, reference=runs.get((CASE1, "pid"))))
+    for ctrl, (_, name) in FIG78_BY_CONTROLLER.items():
+        row_runs = [runs.get((scen, ctrl)) for scen, _ in CASE2_ROWS]
+        if any(r is not None for r in row_runs):
+            figures.append(fig7_8_case2(row_runs, ctrl, table_dir / name))
+    report = table_dir / REPORT
+    report.write_text(_table1_md(table_dir, table, runs, run_figures, figures, problems,
+                                 other, notes, from_json))
+    written += [*figures, report]
+    return Table1Report(written, [*problems.values(), *other])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -14,7 +14,6 @@ import time
 import numpy as np
 import pytest
 
-from common.ulog import read_topic
 from common.config import load_scenario
 from common.links import free_port
 from common.mavlink import MAV
@@ -25,6 +24,7 @@ from common.simlink import (
     split_frames,
     unpack_actuator_controls,
 )
+from common.ulog import read_topic
 from fcu.trajectory import FigureEight
 from gcs.inprocess import run_scenario
 from gcs.mission_client import upload

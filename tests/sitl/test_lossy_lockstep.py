@@ -9,8 +9,8 @@ import time
 import numpy as np
 import pytest
 
-from common.ulog import read_topic
 from common.config import load_scenario
+from common.ulog import read_topic
 from gcs.process_run import run_processes
 
 from ..udp_proxy import Impairment, UdpProxy

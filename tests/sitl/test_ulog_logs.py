@@ -1,0 +1,214 @@
+"""The run folder's ULogs as a PX4 user opens them: pyulog reads truth.ulg and onboard.ulg of
+runs through processes and in-process, with PX4's topics, fields, frames and rates; the
+metrics computed from them are the run's (and the figures from before the logs became
+ULog); after SIGKILL of `sitl` or `fcu` every complete record is readable."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.config import load_scenario
+from common.ulog import open_ulog, read_topic, tail_record
+from gcs.inprocess import apply_overrides, run_scenario
+from gcs.metrics import build_metrics
+from gcs.runio import read_run_logs
+
+from .conftest import ROOT, SCENARIOS, launch, stop
+from .test_safety import _fly_keyframe
+
+CASE1 = SCENARIOS / "case1_figure8.toml"
+DURATION_S = 6.0
+CONTROL_HZ = 500
+
+# topic -> (expected rate in Hz, fields that must be there)
+TRUTH_TOPICS = {
+    "dq_truth": (CONTROL_HZ, ("px", "py", "pz", "vx", "qw", "qz", "wx", "rotor0", "tilt5",
+                              "landed")),
+    "vehicle_local_position_groundtruth": (100, ("x", "y", "z", "vx", "vy", "vz", "heading")),
+    "vehicle_attitude_groundtruth": (100, ("q[0]", "q[1]", "q[2]", "q[3]")),
+    "vehicle_angular_velocity_groundtruth": (100, ("xyz[0]", "xyz[1]", "xyz[2]")),
+}
+ONBOARD_TOPICS = {
+    "dq_onboard": (CONTROL_HZ, ("pdx", "qdw", "fx", "tz", "rotor_cmd0", "tilt_cmd5",
+                                "tilt_raw5", "lnqe_rx", "lnqe_dz", "xie_dz", "step_us")),
+    "vehicle_local_position": (50, ("x", "y", "z", "vx", "vy", "vz", "heading", "xy_valid")),
+    "vehicle_attitude": (50, ("q[0]", "q[3]")),
+    "vehicle_angular_velocity": (50, ("xyz[0]", "xyz[2]")),
+    "trajectory_setpoint": (50, ("position[0]", "velocity[2]", "acceleration[1]", "yaw")),
+    "vehicle_local_position_setpoint": (50, ("x", "y", "z", "vx", "yaw")),
+    "vehicle_attitude_setpoint": (50, ("q_d[0]", "q_d[3]")),
+    "vehicle_rates_setpoint": (50, ("roll", "pitch", "yaw")),
+    "actuator_motors": (50, ("control[0]", "control[5]")),
+    "actuator_servos": (50, ("control[0]", "control[5]")),
+    "control_allocator_status": (50, ("torque_setpoint_achieved", "actuator_saturation[0]")),
+    "vehicle_status": (2, ("arming_state", "nav_state", "failsafe")),
+    "failsafe_flags": (2, ("local_position_invalid", "gcs_connection_lost")),
+    "mission_result": (2, ("seq_current", "seq_total", "finished")),
+}
+
+
+def _gcs_run(out: Path, *extra: str) -> dict:
+    proc = subprocess.run([sys.executable, "-m", "gcs.cli", "run", str(CASE1), "--out",
+                           str(out), "--duration", f"{DURATION_S:g}", *extra], cwd=ROOT,
+                          capture_output=True, text=True, timeout=240, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return json.loads((out / "metrics.json").read_text())
+
+
+@pytest.fixture(scope="module", params=["processes", "in-process"])
+def run_dir(request, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ulog") / request.param
+    _gcs_run(out, *(("--in-process",) if request.param == "in-process" else ()))
+    return out
+
+
+def _rate_hz(timestamps: np.ndarray) -> float:
+    return (len(timestamps) - 1) / ((timestamps[-1] - timestamps[0]) * 1e-6)
+
+
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("log, topics", [("truth.ulg", TRUTH_TOPICS),
+                                         ("onboard.ulg", ONBOARD_TOPICS)])
+def test_pyulog_opens_the_logs_with_px4_topics_at_their_rates(run_dir, log, topics):
+    u = open_ulog(run_dir / log)
+    assert not u.file_corruption
+    assert u.msg_info_dict["ver_hw"] == "SITL"
+    for name, (rate, fields) in topics.items():
+        d = u.get_dataset(name)
+        assert set(fields) <= set(d.data), (name, set(fields) - set(d.data))
+        ts = d.data["timestamp"]
+        assert np.all(np.diff(ts.astype(np.int64)) > 0), name
+        if name in ("vehicle_status", "failsafe_flags", "mission_result"):
+            assert _rate_hz(ts) >= rate, name  # at least STATUS_HZ, more at changes
+        else:
+            assert _rate_hz(ts) == pytest.approx(rate, rel=0.02), name
+        if name.startswith("dq_"):
+            assert all(d.data[f].dtype == np.float64 for f in fields)
+        elif "q[0]" in fields or "x" in fields:
+            assert d.data[fields[0]].dtype == np.float32  # PX4's float32
+
+
+@pytest.mark.timeout(300)
+def test_px4_topics_are_ned_frd_views_of_the_float64_log(run_dir):
+    """vehicle_local_position and vehicle_attitude are the dq_onboard state in NED/FRD;
+    the ground truth topics are dq_truth's."""
+    u = open_ulog(run_dir / "onboard.ulg")
+    dq = u.get_dataset("dq_onboard").data
+    lp = u.get_dataset("vehicle_local_position").data
+    att = u.get_dataset("vehicle_attitude").data
+    row = {int(t): i for i, t in enumerate(dq["timestamp"])}
+    checked = 0
+    for k, stamp in enumerate(lp["timestamp_sample"]):
+        i = row.get(int(stamp))
+        if i is None:
+            continue
+        checked += 1
+        assert lp["x"][k] == pytest.approx(dq["py"][i], abs=1e-5)
+        assert lp["y"][k] == pytest.approx(dq["px"][i], abs=1e-5)
+        assert lp["z"][k] == pytest.approx(-dq["pz"][i], abs=1e-5)
+        q_enu = np.array([dq[c][i] for c in ("qw", "qx", "qy", "qz")])
+        q_ned = np.array([att[f"q[{j}]"][k] for j in range(4)])
+        # FRD->NED = (ENU->NED) q_enu_flu (FRD->FLU): check on a vector
+        h = math.sqrt(0.5)
+        expected = _mul(_mul((0.0, h, h, 0.0), q_enu), (0.0, 1.0, 0.0, 0.0))
+        assert abs(abs(np.dot(expected, q_ned)) - 1.0) < 1e-6
+    assert checked > 100
+    truth = open_ulog(run_dir / "truth.ulg")
+    dq_t = truth.get_dataset("dq_truth").data
+    gt = truth.get_dataset("vehicle_local_position_groundtruth").data
+    i = int(np.searchsorted(dq_t["timestamp"], gt["timestamp"][-1]))
+    assert gt["z"][-1] == pytest.approx(-dq_t["pz"][i], abs=1e-5)
+    assert dq_t["pz"][i] > 1.0  # the vehicle is rising: z up in ENU, down in NED
+
+
+def _mul(a, b):
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw])
+
+
+@pytest.mark.timeout(300)
+def test_parameters_and_messages_are_in_the_onboard_log(run_dir):
+    u = open_ulog(run_dir / "onboard.ulg")
+    params = u.initial_parameters
+    assert params["DQ_KPR_X"] == 5.0 and "COM_DIV_POS" in params
+    texts = [m.message for m in u.logged_messages]
+    assert "armed" in texts and "mission started" in texts
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert texts == [e["text"] for e in metrics["events"]]
+
+
+@pytest.mark.timeout(300)
+def test_metrics_from_the_ulogs_are_the_runs(run_dir):
+    """The metrics recomputed from the ULogs equal metrics.json to the last bit."""
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    scenario = apply_overrides(load_scenario(CASE1), duration_s=DURATION_S)
+    tc, truth, oc, onboard = read_run_logs(run_dir)
+    again = build_metrics(scenario, tc, truth, oc, onboard, events=[], wall_time_s=0.0,
+                          transport="", lockstep=True, mission_completed=False)
+    for key in ("position_error_m", "attitude_error_rad", "samples", "sim_time_s"):
+        assert again[key] == metrics[key], key
+
+
+@pytest.mark.timeout(300)
+def test_in_process_figures_equal_those_before_the_ulog_logs():
+    """Case I PID, 30 s and Case II impulse PD, 10 s: the figures the code gave before the
+    logs became ULog (DQLOG2), to the last digit printed by json."""
+    before = {
+        ("case1_figure8", "pid", 30.0): (
+            "completed", (0.0005762165154075127, 0.00016885389368404222, 0.00022987696078111494),
+            (7.354488780460163e-06, 8.798853578212958e-07, 1.7560225417177468e-06)),
+        ("case2_impulse", "pd", 10.0): (
+            "diverged", (10.012295975459937, 0.6164682279603267, 1.9031565363138072),
+            (3.140123842243127, 0.683696030505569, 1.2536696253479802)),
+    }
+    for (name, ctrl, duration), (status, pos, att) in before.items():
+        scenario = apply_overrides(load_scenario(SCENARIOS / f"{name}.toml"), controller=ctrl,
+                                   duration_s=duration)
+        m = run_scenario(scenario, logs=False).metrics
+        assert m["status"] == status
+        assert tuple(m["position_error_m"][k] for k in ("max", "mean", "rmse")) == pos
+        assert tuple(m["attitude_error_rad"][k] for k in ("max", "mean", "rmse")) == att
+
+
+def _contiguous(path: Path, topic: str, period_us: int) -> int:
+    """Rows of `topic` in a log whose writer was killed: all readable, no gap, the last one
+    the file's last complete record."""
+    u = open_ulog(path)
+    assert not u.file_corruption
+    _, rows = read_topic(path, topic)
+    assert len(rows) > 100
+    assert np.all(np.diff(rows[:, 0]) == period_us)
+    tail = tail_record(path, topic)
+    assert tail is not None and tail[1][0] == rows[-1, 0]
+    assert np.array_equal(np.array(tail[1][1:]), rows[-1, 1:], equal_nan=True)
+    return len(rows)
+
+
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize("victim", ["sitl", "fcu"])
+def test_every_complete_record_survives_sigkill(tmp_path, victim):
+    """SIGKILL of `sitl` or `fcu` mid-flight: pyulog reads its log to the last complete
+    record, rows contiguous at the control period."""
+    stack = launch(tmp_path)
+    try:
+        _fly_keyframe(stack, 0.5, 5.0)
+        time.sleep(1.5)
+        stack.procs[victim].send_signal(signal.SIGKILL)
+        stack.procs[victim].wait(timeout=10)
+    finally:
+        stack.session.close()
+        stop(stack.procs)
+    log, topic = ("truth.ulg", "dq_truth") if victim == "sitl" else ("onboard.ulg",
+                                                                      "dq_onboard")
+    _contiguous(tmp_path / log, topic, 1_000_000 // CONTROL_HZ)
