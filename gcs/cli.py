@@ -7,13 +7,14 @@ Runs and reports:
     gcs router [--listen ENDPOINT]
     gcs keygen FILE
     gcs table1 [--in-process] [--ideal-actuators] [--duration S] --out DIR
-    gcs report RUN_DIR
+    gcs report RUN_DIR | TABLE1_DIR
 Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0.1:14550):
     gcs status | arm | disarm [--force] | mode NAME
     gcs mission upload FILE | download [FILE] | clear | start
     gcs param list | get NAME | set NAME VALUE
     gcs goto X Y Z [--roll D --pitch D --yaw D] [--arm]     (local NED, m and deg)
     gcs watch
+    gcs view [--port 8765] [--mcap FILE] | view RUN_DIR [--speed X]   (Foxglove WebSocket)
     gcs log record FILE [--duration S]
 """
 
@@ -132,7 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
     kg = sub.add_parser("keygen", help="write a new MAVLink 2 signing key (mode 0600)")
     kg.add_argument("file", type=Path)
 
-    rep = sub.add_parser("report", help="figures and report.md of a run folder")
+    rep = sub.add_parser("report", help="figures and report.md of a run folder, or of a "
+                         "gcs table1 folder and all its runs")
     rep.add_argument("run_dir", type=Path)
 
     sub.add_parser("status", parents=[link], help="identity, mode, position, attitude, health")
@@ -182,6 +184,19 @@ def build_parser() -> argparse.ArgumentParser:
     wa.add_argument("--all", action="store_true", help="every vehicle heard, not one")
     sub.add_parser("vehicles", parents=[link],
                    help="system ids of the vehicles on the link (Zenoh: from liveliness)")
+
+    vw = sub.add_parser("view", parents=[link],
+                        help="live 3D view over the Foxglove WebSocket protocol (127.0.0.1)")
+    vw.add_argument("run_dir", type=Path, nargs="?", metavar="RUN_DIR",
+                    help="replay this run folder's ULog logs instead of a live vehicle")
+    vw.add_argument("--port", type=int, default=8765,
+                    help="WebSocket port on 127.0.0.1 (0: any free port; default 8765)")
+    vw.add_argument("--mcap", type=Path, metavar="FILE",
+                    help="also record the channels to this new MCAP file")
+    vw.add_argument("--speed", type=float, default=1.0, metavar="X",
+                    help="replay at X times real time (0: as fast as possible, then exit)")
+    vw.add_argument("--vehicle", type=Path, metavar="FILE",
+                    help="vehicle TOML for the airframe (default: the run's, or hexa_tilted)")
 
     log = sub.add_parser("log", help="record telemetry")
     lsub = log.add_subparsers(dest="action", required=True)
@@ -318,12 +333,26 @@ def cmd_router(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from gcs.report import make_report
+    """A run folder (metrics.json) or a table1 folder (table1.json). Exit status: 0 when
+    everything was reported, 1 when a table1 folder's run folder is missing or could not be
+    read (the rest is reported), 2 for a path that is neither kind of folder."""
+    from gcs.report import TABLE1_JSON, is_table1_dir, make_report, make_table1_report
     from gcs.runio import RunDirError, check_run_dir
 
+    if is_table1_dir(args.run_dir):
+        def warn(problem: str) -> None:
+            print(f"gcs report: {problem}", file=sys.stderr)
+
+        result = make_table1_report(args.run_dir, warn=warn)
+        for path in result.written:
+            print(path)
+        if result.problems:
+            print(f"gcs report: {len(result.problems)} problem(s); everything else in "
+                  f"{args.run_dir} was reported", file=sys.stderr)
+        return 1 if result.problems else 0
     if not (args.run_dir / "metrics.json").exists():
-        print(f"gcs report: {args.run_dir} has no metrics.json (not a run folder)",
-              file=sys.stderr)
+        print(f"gcs report: {args.run_dir} has neither metrics.json (a run folder) nor "
+              f"{TABLE1_JSON} (a table1 folder)", file=sys.stderr)
         return 2
     try:
         check_run_dir(args.run_dir)
@@ -393,6 +422,29 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
         raise AssertionError(args.command)
     finally:
         session.close()
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    """Exit 0 on Ctrl-C, SIGTERM or the end of a replay, 1 without a vehicle, 2 for bad
+    input (run folder, port, MCAP path)."""
+    from common.mavlink import read_signing_key
+    from gcs.view import ViewError, view_live, view_replay
+
+    try:
+        if not 0 <= args.port <= 65535:
+            raise ViewError(f"--port must be 0..65535, got {args.port}")
+        if args.run_dir is not None:
+            if args.connect != DEFAULT_CONNECT:
+                raise ViewError("give RUN_DIR or --connect, not both")
+            return view_replay(args.run_dir, port=args.port, mcap=args.mcap, speed=args.speed,
+                               vehicle_file=args.vehicle)
+        key = read_signing_key(args.signing_key) if args.signing_key else None
+        return view_live(args.connect, port=args.port, mcap=args.mcap,
+                         vehicle_file=args.vehicle, system_id=args.sysid, wait_s=args.wait,
+                         signing_key=key)
+    except ViewError as exc:
+        print(f"gcs view: {exc}", file=sys.stderr)
+        return 2
 
 
 def _mission(args: argparse.Namespace, session) -> int:
@@ -512,6 +564,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_keygen(args)
         if args.command == "log":
             return cmd_log(args)
+        if args.command == "view":
+            return cmd_view(args)
         return cmd_vehicle(args)
     except (ConfigError, LinkError, MissionFileError, SigningKeyError) as exc:
         print(f"gcs: {exc}", file=sys.stderr)
