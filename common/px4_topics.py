@@ -77,7 +77,7 @@ VEHICLE_STATUS = Topic("vehicle_status", (
     ("bool", "failsafe_and_user_took_over"), ("bool", "gcs_connection_lost"),
     ("uint8_t", "system_type"), ("uint8_t", "system_id"), ("uint8_t", "component_id")))
 ARMING_STATE_DISARMED, ARMING_STATE_ARMED = 1, 2
-HIL_STATE_ON = 1
+HIL_STATE_OFF = 0  # SITL, not hardware in the loop (PX4's SYS_HITL = 0)
 VEHICLE_TYPE_ROTARY_WING = 1
 # nav_state values (vehicle_status.msg)
 NAVIGATION_STATE_POSCTL = 2
@@ -110,12 +110,16 @@ def yaw_ned(q_ned_frd: Quat) -> float:
 
 
 def local_position_record(t_us: int, stamp_us: int, p_enu_m: Vec3, v_enu_m_s: Vec3,
-                          q_enu_flu: Quat, valid: bool, ref: tuple[int, float, float, float]
+                          q_enu_flu: Quat, valid: bool,
+                          ref: tuple[int, float, float, float] | None
                           ) -> tuple[float | int | bool, ...]:
     """vehicle_local_position[_groundtruth]: NED position, velocity and heading; `ref` is
-    (ref_timestamp, ref_lat, ref_lon, ref_alt) of the local frame's origin."""
+    (ref_timestamp, ref_lat, ref_lon, ref_alt) of the local frame's origin, None when the
+    origin has no global position (xy_global and z_global false)."""
+    origin = ref is not None
     return (t_us, stamp_us, valid, valid, valid, valid, *enu_to_ned(p_enu_m),
-            *enu_to_ned(v_enu_m_s), yaw_ned(q_enu_flu_to_ned_frd(q_enu_flu)), True, True, *ref)
+            *enu_to_ned(v_enu_m_s), yaw_ned(q_enu_flu_to_ned_frd(q_enu_flu)), origin, origin,
+            *(ref if ref is not None else (0, 0.0, 0.0, 0.0)))
 
 
 def attitude_record(t_us: int, stamp_us: int, q_enu_flu: Quat
@@ -130,5 +134,67 @@ def angular_velocity_record(t_us: int, stamp_us: int, omega_flu_rad_s: Vec3
     return (t_us, stamp_us, *flu_to_frd(omega_flu_rad_s))
 
 
-def velocity_enu(q_enu_flu: Quat, v_flu_m_s: Vec3) -> Vec3:
-    return q_rotate(q_enu_flu, v_flu_m_s)
+def _yawspeed(q_enu_flu: Quat, omega_flu_rad_s: Vec3) -> float:
+    """Rate about NED z (down) of a body turning at omega_flu_rad_s."""
+    return -q_rotate(q_enu_flu, omega_flu_rad_s)[2]
+
+
+_NAN = math.nan
+
+
+def trajectory_setpoint_record(t_us: int, p_enu_m: Vec3, v_enu_m_s: Vec3, a_enu_m_s2: Vec3,
+                               q_enu_flu: Quat, omega_flu_rad_s: Vec3
+                               ) -> tuple[float | int, ...]:
+    """trajectory_setpoint: NED position, velocity, acceleration (jerk NaN: not set), yaw and
+    yaw rate of the reference."""
+    return (t_us, *enu_to_ned(p_enu_m), *enu_to_ned(v_enu_m_s), *enu_to_ned(a_enu_m_s2),
+            _NAN, _NAN, _NAN, yaw_ned(q_enu_flu_to_ned_frd(q_enu_flu)),
+            _yawspeed(q_enu_flu, omega_flu_rad_s))
+
+
+def local_position_setpoint_record(t_us: int, p_enu_m: Vec3, v_enu_m_s: Vec3,
+                                   a_enu_m_s2: Vec3, q_enu_flu: Quat, omega_flu_rad_s: Vec3
+                                   ) -> tuple[float | int, ...]:
+    """vehicle_local_position_setpoint: the same reference, PX4's older layout."""
+    return (t_us, *enu_to_ned(p_enu_m), *enu_to_ned(v_enu_m_s), *enu_to_ned(a_enu_m_s2),
+            yaw_ned(q_enu_flu_to_ned_frd(q_enu_flu)), _yawspeed(q_enu_flu, omega_flu_rad_s))
+
+
+def attitude_setpoint_record(t_us: int, q_enu_flu: Quat, omega_flu_rad_s: Vec3
+                             ) -> tuple[float | int | bool, ...]:
+    """vehicle_attitude_setpoint: the desired attitude FRD->NED and its yaw rate."""
+    return (t_us, _yawspeed(q_enu_flu, omega_flu_rad_s), *q_enu_flu_to_ned_frd(q_enu_flu),
+            False)
+
+
+def rates_setpoint_record(t_us: int, omega_flu_rad_s: Vec3) -> tuple[float | int | bool, ...]:
+    """vehicle_rates_setpoint: the desired body rate in FRD."""
+    return (t_us, *flu_to_frd(omega_flu_rad_s), False)
+
+
+def actuator_motors_record(t_us: int, stamp_us: int, speed_rad_s: tuple[float, ...],
+                           speed_max_rad_s: float, armed: bool) -> tuple[float | int, ...]:
+    """actuator_motors: speed / limit in [0, 1] per rotor; NaN (stopped, PX4's disarmed
+    value) when disarmed and for the unused outputs."""
+    n = len(speed_rad_s)
+    motors = [s / speed_max_rad_s if armed else _NAN for s in speed_rad_s]
+    return (t_us, stamp_us, 0, *motors, *[_NAN] * (12 - n))
+
+
+def actuator_servos_record(t_us: int, stamp_us: int, tilt_rad: tuple[float, ...]
+                           ) -> tuple[float | int, ...]:
+    """actuator_servos: each tilt wrapped to [-pi, pi) and divided by pi, in [-1, 1); NaN for
+    the unused outputs. The unwrapped angle is in dq_onboard."""
+    servos = [((a + math.pi) % (2.0 * math.pi) - math.pi) / math.pi for a in tilt_rad]
+    return (t_us, stamp_us, *servos, *[_NAN] * (8 - len(tilt_rad)))
+
+
+def control_allocator_status_record(t_us: int, speed_rad_s: tuple[float, ...],
+                                    speed_max_rad_s: float, armed: bool, saturated: bool
+                                    ) -> tuple[float | int | bool, ...]:
+    """control_allocator_status: whether the wrench was achieved, and which rotors sit at
+    their upper (full speed) or lower (stopped while armed) limit."""
+    flags = [ACTUATOR_SATURATION_UPPER if s >= speed_max_rad_s else
+             ACTUATOR_SATURATION_LOWER if s <= 0.0 and armed else 0 for s in speed_rad_s]
+    achieved = not saturated
+    return (t_us, achieved, achieved, *flags, *[0] * (16 - len(speed_rad_s)), 0)

@@ -20,7 +20,7 @@ import struct
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -56,7 +56,7 @@ class Topic:
             if f[0] not in _CODES:
                 raise ValueError(f"topic {self.name}: unknown type {f[0]}")
             count = f[2] if len(f) == 3 else 1  # type: ignore[misc]
-            codes.append(f"{count}{_CODES[f[0]]}" if count != 1 else _CODES[f[0]])
+            codes.append(_code(f[0], count))
         object.__setattr__(self, "_struct", struct.Struct("<" + "".join(codes)))
 
     @property
@@ -74,8 +74,16 @@ class Topic:
 
     @property
     def width(self) -> int:
-        """Number of values a record takes (arrays flattened)."""
-        return sum(f[2] if len(f) == 3 else 1 for f in self.fields)  # type: ignore[misc]
+        """Number of values a record takes (arrays flattened; a char[n] is one bytes)."""
+        return sum(f[2] if len(f) == 3 and f[0] != "char" else 1  # type: ignore[misc]
+                   for f in self.fields)
+
+
+def _code(type_name: str, count: int) -> str:
+    """struct code of a field: char[n] is one bytes value, other arrays n values."""
+    if type_name == "char":
+        return f"{count}s"
+    return f"{count}{_CODES[type_name]}" if count != 1 else _CODES[type_name]
 
 
 def _message(kind: bytes, payload: bytes) -> bytes:
@@ -114,19 +122,36 @@ def logging_message(t_us: int, severity: int, text: str) -> bytes:
     return _message(b"L", struct.pack("<BQ", level, t_us) + raw)
 
 
-def _file_sink(path: Path) -> tuple[Callable[[bytes], None], Callable[[], None]]:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+class _FileSink:
+    """A log file written with os.write: what the kernel took survives the process."""
 
-    def write(data: bytes) -> None:
+    def __init__(self, path: Path) -> None:
+        try:
+            self.fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        except OSError as exc:
+            raise ULogError(f"{path}: {exc.strerror}") from None
+        self.size = 0  # bytes of complete records
+
+    def write(self, data: bytes) -> None:
         view = memoryview(data)
-        while view:
-            view = view[os.write(fd, view):]
+        try:
+            while view:
+                view = view[os.write(self.fd, view):]
+        except OSError:
+            # Cut a torn record off, so the file stays readable to its last complete one.
+            try:
+                os.ftruncate(self.fd, self.size)
+            except OSError:
+                pass
+            raise
+        self.size += len(data)
 
-    def close() -> None:
-        os.fsync(fd)
-        os.close(fd)
-
-    return write, close
+    def close(self) -> None:
+        try:
+            os.fsync(self.fd)
+        except OSError:
+            pass
+        os.close(self.fd)
 
 
 class ULogWriter:
@@ -146,7 +171,9 @@ class ULogWriter:
             self.path: Path | None = None
         else:
             self.path = Path(sink)
-            self._write, self._close = _file_sink(self.path)
+            file = _FileSink(self.path)
+            self._write, self._close = file.write, file.close
+        self.failed = ""  # why writing stopped (a full disk, an I/O error); "" while it works
         self._pending: list[bytes] = []
         self._ids: dict[str, tuple[int, struct.Struct]] = {}
         header = MAGIC + bytes([VERSION]) + struct.pack("<Q", start_us)
@@ -164,7 +191,11 @@ class ULogWriter:
                 f"<HBH{t._struct.format[1:]}"))
             if payload > MAX_PAYLOAD:
                 raise ValueError(f"topic {t.name}: records of {payload} bytes")
-        self._write(b"".join(parts))
+        try:
+            self._write(b"".join(parts))
+        except OSError as exc:
+            self._close()
+            raise ULogError(f"{self.path}: {exc.strerror}") from None
         self._closed = False
 
     def add(self, topic: str, values: Iterable[Any]) -> None:
@@ -181,10 +212,19 @@ class ULogWriter:
         self._pending.append(parameter_message(name, value))
 
     def flush(self) -> None:
-        if self._pending:
-            data = b"".join(self._pending)
-            self._pending.clear()
+        """Hand the queued records to the kernel in one write. A write that fails (a full
+        disk, an I/O error) stops the log where its last complete record ends and sets
+        `failed`; the caller keeps flying and says so."""
+        if not self._pending:
+            return
+        data = b"".join(self._pending)
+        self._pending.clear()
+        if self.failed:
+            return
+        try:
             self._write(data)
+        except OSError as exc:
+            self.failed = exc.strerror or type(exc).__name__
 
     def close(self) -> None:
         if self._closed:
@@ -211,9 +251,9 @@ def open_ulog(path: str | Path, topics: Sequence[str] | None = None) -> Any:
         return ULog(str(path), list(topics) if topics is not None else None)
     except OSError as exc:
         raise ULogError(f"{path}: {exc.strerror}") from None
-    except (struct.error, ValueError, IndexError, KeyError) as exc:
-        if isinstance(exc, ULogError):
-            raise
+    except ULogError:
+        raise
+    except Exception as exc:  # pyulog raises its own and builtin exceptions on bad files
         raise ULogError(f"{path}: unreadable ULog ({type(exc).__name__}: {exc})") from None
 
 
@@ -241,62 +281,96 @@ def read_topic(path: str | Path, name: str) -> tuple[tuple[str, ...], np.ndarray
     return topic_rows(open_ulog(path, [name]), name)
 
 
-def _definitions(head: bytes, name: str) -> tuple[int, struct.Struct, tuple[str, ...]] | None:
-    """(msg_id, record struct, column names) of topic `name` from a log's first bytes."""
+_KINDS = frozenset(b"ABCDFILMOPQS")
+
+
+class _Layout(NamedTuple):
+    msg_ids: dict[str, int]  # topic -> msg_id
+    sizes: dict[int, int]  # msg_id -> payload size of its data messages
+    records: dict[str, tuple[struct.Struct, tuple[str, ...]]]  # topic -> struct, columns
+
+
+def _layout(head: bytes) -> _Layout:
+    """Formats and subscriptions declared in a log's first bytes (this writer declares
+    every subscription when it opens the log)."""
     formats: dict[str, str] = {}
+    layout = _Layout({}, {}, {})
     pos = len(MAGIC) + 1 + 8
     while pos + 3 <= len(head):
         size, kind = _HEADER.unpack_from(head, pos)
         body = head[pos + 3:pos + 3 + size]
         if len(body) < size:
-            return None
+            break
         if kind == ord("F"):
-            text = body.decode(errors="replace")
-            fmt_name, _, fields = text.partition(":")
+            fmt_name, _, fields = body.decode(errors="replace").partition(":")
             formats[fmt_name] = fields
-        elif kind == ord("A") and body[3:].decode(errors="replace") == name:
+        elif kind == ord("A"):
+            name = body[3:].decode(errors="replace")
             (msg_id,) = struct.unpack_from("<H", body, 1)
             codes, cols = [], []
             for f in filter(None, formats.get(name, "").split(";")):
                 kind_name, fname = f.split(" ")
                 base, _, count = kind_name.partition("[")
                 n = int(count[:-1]) if count else 1
-                codes.append(f"{n}{_CODES[base]}")
-                cols += [f"{fname}[{i}]" for i in range(n)] if count else [fname]
-            return msg_id, struct.Struct("<" + "".join(codes)), tuple(
-                "time_us" if c == "timestamp" else c for c in cols)
+                codes.append(_code(base, n))
+                cols += ([f"{fname}[{i}]" for i in range(n)] if count and base != "char"
+                         else [fname])
+            record = struct.Struct("<" + "".join(codes))
+            layout.msg_ids[name] = msg_id
+            layout.sizes[msg_id] = 2 + record.size
+            layout.records[name] = (record, tuple(
+                "time_us" if c == "timestamp" else c for c in cols))
         pos += 3 + size
-    return None
+    return layout
+
+
+def _chain_to_end(data: bytes, pos: int, sizes: dict[int, int]) -> bool:
+    """Whether messages from `pos` follow one another to the end of `data`: known types,
+    data messages of a declared topic and of its size (the last one may be torn)."""
+    while pos + 3 <= len(data):
+        size, kind = _HEADER.unpack_from(data, pos)
+        if kind not in _KINDS:
+            return False
+        if kind == ord("D") and pos + 5 <= len(data):
+            (msg_id,) = struct.unpack_from("<H", data, pos + 3)
+            if sizes.get(msg_id) != size:
+                return False
+        pos += 3 + size
+    return True
 
 
 def tail_record(path: str | Path, name: str, window: int = 1 << 16
-                ) -> tuple[tuple[str, ...], tuple[float, ...]] | None:
+                ) -> tuple[tuple[str, ...], tuple[float | bytes, ...]] | None:
     """(columns, values) of the last complete record of topic `name` in a log that may still
-    be being written; None before its first record. Reads the definitions and the file's
-    last `window` bytes only (cheap enough to poll)."""
+    be being written; None before its first record. Reads the definitions and the end of
+    the file, from `window` bytes back, further back until a record is found (cheap enough
+    to poll). A candidate counts only if the messages after it chain to the end of the file,
+    so a byte pattern inside another record's payload is not taken for a record."""
     try:
         with Path(path).open("rb") as fh:
             head = fh.read(1 << 16)
             if not head.startswith(MAGIC):
                 return None
-            found = _definitions(head, name)
-            if found is None:
+            layout = _layout(head)
+            if name not in layout.msg_ids:
                 return None
-            msg_id, record, cols = found
+            msg_id = layout.msg_ids[name]
+            record, cols = layout.records[name]
             end = fh.seek(0, os.SEEK_END)
-            fh.seek(max(0, end - window))
-            data = fh.read()
+            marker = _HEADER.pack(2 + record.size, ord("D")) + struct.pack("<H", msg_id)
+            while True:
+                start = max(0, end - window)
+                fh.seek(start)
+                data = fh.read(end - start)
+                stop = len(data)
+                while (pos := data.rfind(marker, 0, stop)) >= 0:
+                    after = pos + 5 + record.size
+                    if after <= len(data) and _chain_to_end(data, after, layout.sizes):
+                        return cols, tuple(v if isinstance(v, bytes) else float(v)
+                                           for v in record.unpack_from(data, pos + 5))
+                    stop = pos + len(marker) - 1
+                if start == 0:
+                    return None
+                window *= 4
     except OSError:
         return None
-    marker = _HEADER.pack(2 + record.size, ord("D")) + struct.pack("<H", msg_id)
-    stop = len(data)
-    while True:
-        pos = data.rfind(marker, 0, stop)
-        if pos < 0:
-            return None
-        after = pos + 5 + record.size
-        # a complete record, followed by the end, a header still being written, or a header
-        if after <= len(data) and (after + 3 > len(data) or data[after + 2:after + 3] in
-                                   (b"D", b"L", b"P", b"A", b"O", b"S", b"C")):
-            return cols, tuple(float(v) for v in record.unpack_from(data, pos + 5))
-        stop = pos + len(marker) - 1

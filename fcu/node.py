@@ -31,6 +31,7 @@ from common.links import LinkError, open_link
 from common.mavlink import MAV, SigningKeyError, encoder, pack, read_signing_key
 from common.outcome import Event
 from common.parent import stop_with_parent
+from common.ulog import ULogError
 from fcu.gcs_server import COMPONENT, GcsServer
 from fcu.mission_protocol import MissionServer
 from fcu.onboard_log import OnboardLog
@@ -73,7 +74,7 @@ class FlightController:
         self.missions.on_set_current = self.server.set_mission_current
         self.sim_mav = encoder(system_id, COMPONENT)
         self.log = OnboardLog(onboard_log, pipeline, self.params.values, system_id=system_id,
-                              home=(home.lat_deg, home.lon_deg, home.alt_m)) \
+                              home=home) \
             if onboard_log else None
         self.server.on_text = self._log_text
         self.stats_path = stats_path
@@ -88,6 +89,19 @@ class FlightController:
         self.last_sim_rx_s = time.monotonic()
         self.sim_silent = False
         self._apply_params()
+
+    def _flush_log(self) -> None:
+        """Write the queued records; a log that cannot be written any more (full disk, I/O
+        error) is said once and closed, and the vehicle flies on."""
+        log = self.log
+        if log is None:
+            return
+        log.flush()
+        if log.failed:
+            self.log = None
+            log.close()
+            self.pipeline.commander.say(M.MAV_SEVERITY_WARNING,
+                                        f"onboard log stopped: {log.failed}")
 
     def _log_text(self, severity: int, text: str) -> None:
         if self.log is not None:
@@ -122,7 +136,7 @@ class FlightController:
         self.steps += 1
         if self.log is not None:
             self.log.step(out, step_us, t_us)
-            self.log.flush()
+            self._flush_log()
 
     # ------------------------------------------------------------------ housekeeping
 
@@ -156,8 +170,7 @@ class FlightController:
             self.server.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # on change
             c.mission_events.clear()
         self.server.tick(now)
-        if self.log is not None:
-            self.log.flush()  # logged strings and parameter changes
+        self._flush_log()  # logged strings and parameter changes
 
     # ------------------------------------------------------------------ loop
 
@@ -289,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
                               system_id=args.sysid, lockstep=not args.realtime,
                               home=args.home, onboard_log=args.onboard_log,
                               stats_path=args.stats, signing_key=key)
-    except (ConfigError, LinkError, SigningKeyError) as exc:
+    except (ConfigError, LinkError, SigningKeyError, ULogError) as exc:
         print(f"fcu: {exc}", file=sys.stderr)
         return 2
 

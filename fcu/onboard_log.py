@@ -19,12 +19,10 @@ time. The same logger runs in the FCU process and in the in-process runner.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 
 from common import px4_topics as px4
-from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
 from common.modes import Mode
 from common.outcome import Event
 from common.quaternion import q_rotate
@@ -32,6 +30,7 @@ from common.ulog import Topic, ULogWriter
 from fcu.core import ONBOARD_COLUMNS, onboard_row
 from fcu.failsafe import state_lost
 from fcu.pipeline import Pipeline, StepOutput
+from fcu.telemetry import Home
 
 DQ_ONBOARD = Topic("dq_onboard", (("uint64_t", "timestamp"),
                                   *(("double", c) for c in ONBOARD_COLUMNS[1:])))
@@ -49,24 +48,19 @@ NAV_STATE = {Mode.HOLD: px4.NAVIGATION_STATE_AUTO_LOITER,
              Mode.OFFBOARD: px4.NAVIGATION_STATE_OFFBOARD,
              Mode.LAND: px4.NAVIGATION_STATE_AUTO_LAND}
 CRITICAL_FAILSAFES = ("diverged", "non-finite command")
-_NAN = math.nan
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
 class OnboardLog:
     """Append-only onboard log of a pipeline; `step` after each control step, `flush` after
     it (the process) or whenever convenient (in-process)."""
 
     def __init__(self, sink: str | Path | bytearray, pipeline: Pipeline,
                  params: Mapping[str, float], *, system_id: int = 1,
-                 home: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+                 home: Home | None = None) -> None:
         self.pipeline = pipeline
         self.system_id = system_id
         self.w_max = pipeline.vehicle.rotor_speed_max_rad_s
-        self.ref_origin = (0, *home)  # ref_timestamp, ref_lat, ref_lon, ref_alt
+        # ref_timestamp, ref_lat, ref_lon, ref_alt of the local frame's origin (the home)
+        home = home or Home()  # the FCU's default home
+        self.ref_origin = (0, home.lat_deg, home.lon_deg, home.alt_m)
         self.params = dict(params)
         self.writer = ULogWriter(sink, ONBOARD_TOPICS, info={
             "sys_name": "dqflight", "ver_hw": "SITL", "ver_sw": "0.1.0",
@@ -112,26 +106,20 @@ class OnboardLog:
             w.add("vehicle_angular_velocity",
                   px4.angular_velocity_record(t_us, stamp, state.omega_flu_rad_s))
         if out.result is not None:
-            ref = out.result.reference
-            q_d = q_enu_flu_to_ned_frd(ref.q_enu_flu)
-            yaw = px4.yaw_ned(q_d)
-            yawspeed = -q_rotate(ref.q_enu_flu, ref.omega_flu_rad_s)[2]  # NED z is down
-            p, v, a = enu_to_ned(ref.p_enu_m), enu_to_ned(ref.v_enu_m_s), \
-                enu_to_ned(ref.a_enu_m_s2)
-            w.add("trajectory_setpoint", (t_us, *p, *v, *a, _NAN, _NAN, _NAN, yaw, yawspeed))
-            w.add("vehicle_local_position_setpoint", (t_us, *p, *v, *a, yaw, yawspeed))
-            w.add("vehicle_attitude_setpoint", (t_us, yawspeed, *q_d, False))
-            w.add("vehicle_rates_setpoint", (t_us, *flu_to_frd(ref.omega_flu_rad_s), False))
-        n = len(out.speed_rad_s)
-        motors = [s / self.w_max for s in out.speed_rad_s] + [_NAN] * (12 - n)
-        servos = [_wrap(a) / math.pi for a in out.tilt_rad] + [_NAN] * (8 - n)
-        w.add("actuator_motors", (t_us, stamp, 0, *motors))
-        w.add("actuator_servos", (t_us, stamp, *servos))
-        saturation = [px4.ACTUATOR_SATURATION_UPPER if s >= self.w_max else
-                      px4.ACTUATOR_SATURATION_LOWER if s <= 0.0 and out.armed else 0
-                      for s in out.speed_rad_s] + [0] * (16 - n)
-        achieved = out.result is None or not out.result.allocation.saturated
-        w.add("control_allocator_status", (t_us, achieved, achieved, *saturation, 0))
+            r = out.result.reference
+            motion = (r.p_enu_m, r.v_enu_m_s, r.a_enu_m_s2, r.q_enu_flu, r.omega_flu_rad_s)
+            w.add("trajectory_setpoint", px4.trajectory_setpoint_record(t_us, *motion))
+            w.add("vehicle_local_position_setpoint",
+                  px4.local_position_setpoint_record(t_us, *motion))
+            w.add("vehicle_attitude_setpoint",
+                  px4.attitude_setpoint_record(t_us, r.q_enu_flu, r.omega_flu_rad_s))
+            w.add("vehicle_rates_setpoint", px4.rates_setpoint_record(t_us, r.omega_flu_rad_s))
+        w.add("actuator_motors", px4.actuator_motors_record(t_us, stamp, out.speed_rad_s,
+                                                            self.w_max, out.armed))
+        w.add("actuator_servos", px4.actuator_servos_record(t_us, stamp, out.tilt_rad))
+        saturated = out.result is not None and out.result.allocation.saturated
+        w.add("control_allocator_status", px4.control_allocator_status_record(
+            t_us, out.speed_rad_s, self.w_max, out.armed, saturated))
 
     def _status(self, t_us: int) -> None:
         pipe = self.pipeline
@@ -163,7 +151,7 @@ class OnboardLog:
         w.add("vehicle_status", (
             t_us, self.armed_time_us, self.takeoff_time_us,
             px4.ARMING_STATE_ARMED if cmd.armed else px4.ARMING_STATE_DISARMED,
-            self.nav_state_since_us, nav_state, nav_state, px4.HIL_STATE_ON,
+            self.nav_state_since_us, nav_state, nav_state, px4.HIL_STATE_OFF,
             px4.VEHICLE_TYPE_ROTARY_WING, bool(pipe.failsafe), False, gcs_lost,
             MAV_TYPE_HEXAROTOR, self.system_id, 1))
         w.add("failsafe_flags", (t_us, lost, lost, lost, lost, lost, not cmd.mission, gcs_lost,
@@ -188,6 +176,11 @@ class OnboardLog:
 
     def flush(self) -> None:
         self.writer.flush()
+
+    @property
+    def failed(self) -> str:
+        """Why the log stopped (a full disk, an I/O error), "" while it is written."""
+        return self.writer.failed
 
     def close(self) -> None:
         self.writer.close()

@@ -36,6 +36,7 @@ from common.simlink import (
     pack_odometry,
     unpack_actuator_controls,
 )
+from common.ulog import ULogError
 from sitl.disturbance import Disturbance
 from sitl.plant import (
     ActuatorCommand,
@@ -138,6 +139,11 @@ class SimulatorServer:
         if self.log is not None:
             self.log.record(self.state)
             self.log.flush()
+            if self.log.failed:  # a full disk, an I/O error: the log ends, the world goes on
+                print(f"sitl: truth log stopped at t = {self.state.time_us * 1e-6:.3f} s: "
+                      f"{self.log.failed}", file=sys.stderr, flush=True)
+                self.log.close()
+                self.log = None
 
     def _command_from(self, controls: tuple[float, ...], mode: int) -> ActuatorCommand:
         return command_from_controls(controls, mode, self.scenario.vehicle, self.state)
@@ -296,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
                                  end_time_s=end, realtime=args.realtime,
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
                                  resend_ms=args.resend_ms, system_id=args.sysid)
-    except (ConfigError, LinkError) as exc:
+    except (ConfigError, LinkError, ULogError) as exc:
         print(f"sitl: {exc}", file=sys.stderr)
         return 2
 

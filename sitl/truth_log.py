@@ -41,7 +41,7 @@ class TruthLog:
         if t >= self.next_gt_us:
             self.next_gt_us = (t // self.period_us + 1) * self.period_us
             w.add(px4.VEHICLE_LOCAL_POSITION_GROUNDTRUTH.name, px4.local_position_record(
-                t, t, s.p_enu_m, s.v_enu_m_s, s.q_enu_flu, True, (0, 0.0, 0.0, 0.0)))
+                t, t, s.p_enu_m, s.v_enu_m_s, s.q_enu_flu, True, None))
             w.add(px4.VEHICLE_ATTITUDE_GROUNDTRUTH.name, px4.attitude_record(t, t, s.q_enu_flu))
             w.add(px4.VEHICLE_ANGULAR_VELOCITY_GROUNDTRUTH.name,
                   px4.angular_velocity_record(t, t, s.omega_flu_rad_s))
@@ -51,6 +51,10 @@ class TruthLog:
 
     def flush(self) -> None:
         self.writer.flush()
+
+    @property
+    def failed(self) -> str:
+        return self.writer.failed
 
     def close(self) -> None:
         self.writer.close()

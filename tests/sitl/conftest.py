@@ -6,7 +6,7 @@ from __future__ import annotations
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,10 +41,12 @@ class Stack:
         return None
 
 
-def start(name: str, argv: list[str], logs: Path) -> subprocess.Popen:
+def start(name: str, argv: list[str], logs: Path,
+          preexec_fn: Callable[[], None] | None = None) -> subprocess.Popen:
     fh = (logs / f"{name}.log").open("wb")
     proc = subprocess.Popen([sys.executable, "-m", *argv], cwd=ROOT, stdout=fh,
-                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                            preexec_fn=preexec_fn)
     fh.close()
     return proc
 
@@ -62,8 +64,8 @@ def stop(procs: dict[str, subprocess.Popen]) -> None:
 
 
 def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = False,
-           sitl: bool = True, sim_port: int | None = None, fcu_args: tuple[str, ...] = ()
-           ) -> Stack:
+           sitl: bool = True, sim_port: int | None = None, fcu_args: tuple[str, ...] = (),
+           fcu_preexec: Callable[[], None] | None = None) -> Stack:
     sim_port = sim_port or free_port()
     gcs_port = free_port()
     procs: dict[str, subprocess.Popen] = {}
@@ -79,7 +81,7 @@ def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = 
                                      "--sim", f"udpout:127.0.0.1:{sim_port}", "--gcs",
                                      f"udpout:127.0.0.1:{gcs_port}", *rt, *fcu_args,
                                      "--onboard-log", str(tmp_path / "onboard.ulg")],
-                             tmp_path)
+                             tmp_path, fcu_preexec)
         session.wait_vehicle(timeout=15.0)
         if sitl:  # the FCU reports attitude once the simulator's first state has arrived
             assert session.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is not None

@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 from pymavlink import mavutil
 
@@ -76,6 +77,34 @@ def test_gcs_link_loss_holds_then_lands(stack):
     s.send(M.MAVLink_heartbeat_message(M.MAV_TYPE_GCS, M.MAV_AUTOPILOT_INVALID, 0, 0, 0, 3))
     text = _texts(stack, "GCS link regained", 3.0)
     assert text is not None
+    _onboard_log_tells_the_same_story(stack.logs / "onboard.ulg", len(mission))
+
+
+def _onboard_log_tells_the_same_story(path, mission_items: int) -> None:
+    """The FCU's onboard.ulg, read while it runs: the parameters set over MAVLink, armed in
+    MISSION, then HOLD and LAND with the GCS link lost, as PX4's topics say them."""
+    from common import px4_topics as px4
+    from common.ulog import open_ulog
+
+    u = open_ulog(path)
+    changed = {name: value for _, name, value in u.changed_parameters}
+    assert changed == {"COM_DL_LOSS_T": 1.0, "COM_DL_LAND_T": 1.5}
+    status = u.get_dataset("vehicle_status").data
+    arming, nav = list(status["arming_state"]), list(status["nav_state"])
+    assert px4.ARMING_STATE_ARMED in arming
+    lost = np.flatnonzero(status["gcs_connection_lost"])
+    assert len(lost) and all(status["failsafe"][lost])
+    seen = [n for i, n in enumerate(nav) if i == 0 or n != nav[i - 1]]
+    assert seen[-3:] == [px4.NAVIGATION_STATE_AUTO_MISSION, px4.NAVIGATION_STATE_AUTO_LOITER,
+                         px4.NAVIGATION_STATE_AUTO_LAND]
+    assert nav[lost[0]] == px4.NAVIGATION_STATE_AUTO_LOITER
+    flags = u.get_dataset("failsafe_flags").data
+    assert flags["gcs_connection_lost"].any() and not flags["local_position_invalid"].any()
+    assert not flags["auto_mission_missing"][-1]
+    result = u.get_dataset("mission_result").data
+    assert result["seq_total"][-1] == mission_items and result["valid"][-1]
+    texts = [m.message for m in u.logged_messages]
+    assert "failsafe: GCS link lost: HOLD" in texts and "failsafe: GCS link lost: LAND" in texts
 
 
 def _kill_simulator_in_flight(stack, expect: str, within_s: float):

@@ -122,6 +122,20 @@ def test_px4_topics_are_ned_frd_views_of_the_float64_log(run_dir):
         expected = _mul(_mul((0.0, h, h, 0.0), q_enu), (0.0, 1.0, 0.0, 0.0))
         assert abs(abs(np.dot(expected, q_ned)) - 1.0) < 1e-6
     assert checked > 100
+    # the reference and the outputs, at the control steps they were logged at
+    sp = u.get_dataset("trajectory_setpoint").data
+    motors = u.get_dataset("actuator_motors").data
+    servos = u.get_dataset("actuator_servos").data
+    for k, t in enumerate(sp["timestamp"]):
+        i = row[int(t)]
+        assert [sp[f"position[{j}]"][k] for j in range(3)] == pytest.approx(
+            [dq["pdy"][i], dq["pdx"][i], -dq["pdz"][i]], abs=1e-5)
+        assert [sp[f"velocity[{j}]"][k] for j in range(3)] == pytest.approx(
+            [dq["vdy"][i], dq["vdx"][i], -dq["vdz"][i]], abs=1e-5)
+        assert motors["control[0]"][k] == pytest.approx(dq["rotor_cmd0"][i] / 1700.0, abs=1e-6)
+        wrapped = (dq["tilt_cmd3"][i] + math.pi) % (2 * math.pi) - math.pi
+        assert servos["control[3]"][k] == pytest.approx(wrapped / math.pi, abs=1e-6)
+    assert max(abs(v) for v in sp["velocity[2]"]) > 0.5  # the rise: a reference that moves
     truth = open_ulog(run_dir / "truth.ulg")
     dq_t = truth.get_dataset("dq_truth").data
     gt = truth.get_dataset("vehicle_local_position_groundtruth").data
@@ -135,6 +149,29 @@ def _mul(a, b):
     bw, bx, by, bz = b
     return np.array([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
                      aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw])
+
+
+@pytest.mark.timeout(300)
+def test_status_topics_say_what_the_vehicle_did(run_dir):
+    """Armed in MISSION (PX4's arming_state and nav_state), SITL not HITL, the mission's
+    items and progress, no failsafe, the local frame's origin at the FCU's home."""
+    from common import px4_topics as px4
+    from fcu.telemetry import Home
+
+    u = open_ulog(run_dir / "onboard.ulg")
+    status = u.get_dataset("vehicle_status").data
+    assert set(status["arming_state"]) == {px4.ARMING_STATE_ARMED}
+    assert set(status["nav_state"]) == {px4.NAVIGATION_STATE_AUTO_MISSION}
+    assert not status["failsafe"].any() and not status["hil_state"].any()
+    assert status["takeoff_time"][-1] > 0 and status["armed_time"][-1] > 0
+    flags = u.get_dataset("failsafe_flags").data
+    assert not any(flags[f].any() for f in flags if f != "timestamp")
+    result = u.get_dataset("mission_result").data
+    assert result["valid"].all() and result["seq_total"][-1] >= 2
+    lp = u.get_dataset("vehicle_local_position").data
+    home = Home()
+    assert lp["ref_lat"][-1] == home.lat_deg and lp["ref_lon"][-1] == home.lon_deg
+    assert lp["xy_global"].all() and lp["xy_valid"].all()
 
 
 @pytest.mark.timeout(300)
@@ -212,3 +249,59 @@ def test_every_complete_record_survives_sigkill(tmp_path, victim):
     log, topic = ("truth.ulg", "dq_truth") if victim == "sitl" else ("onboard.ulg",
                                                                       "dq_onboard")
     _contiguous(tmp_path / log, topic, 1_000_000 // CONTROL_HZ)
+
+
+LOG_LIMIT_BYTES = 400_000
+
+
+def _limit_file_size() -> None:
+    """In the child: files it writes stop at LOG_LIMIT_BYTES (EFBIG, as a full disk would
+    refuse them; CPython ignores SIGXFSZ)."""
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_FSIZE, (LOG_LIMIT_BYTES, LOG_LIMIT_BYTES))
+
+
+@pytest.mark.timeout(180)
+def test_a_full_disk_ends_the_log_not_the_flight(tmp_path):
+    """The FCU's onboard log hits a full disk in flight: the FCU says so once, flies on
+    (armed, answering the simulator), and the log reads to its last complete record."""
+    from common.mavlink import MAV
+
+    stack = launch(tmp_path, fcu_preexec=_limit_file_size)
+    try:
+        _fly_keyframe(stack, 0.5, 5.0)
+        text = stack.wait_for(["STATUSTEXT"], lambda m: "onboard log stopped" in m.text, 20.0)
+        assert text is not None and text.severity == MAV.MAV_SEVERITY_WARNING
+        assert "too large" in text.text
+        first = stack.wait_for(["LOCAL_POSITION_NED"])
+        time.sleep(1.0)
+        later = stack.wait_for(["LOCAL_POSITION_NED"], lambda m: m.time_boot_ms >
+                               first.time_boot_ms + 500, 10.0)
+        assert later is not None  # simulated time goes on: the FCU still answers
+        hb = stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1)
+        assert hb is not None and hb.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED
+        assert stack.procs["fcu"].poll() is None
+    finally:
+        stack.session.close()
+        stop(stack.procs)
+    path = tmp_path / "onboard.ulg"
+    assert path.stat().st_size <= LOG_LIMIT_BYTES
+    _contiguous(path, "dq_onboard", 1_000_000 // CONTROL_HZ)
+
+
+def test_an_unwritable_log_is_a_clear_error(tmp_path):
+    """`fcu --onboard-log` and `sitl --truth-log` into a missing folder or onto a full
+    device: one line naming the file, exit 2, no traceback."""
+    cases = [
+        ["fcu.node", "--vehicle", str(ROOT / "config/vehicles/hexa_tilted.toml"), "--gains",
+         str(ROOT / "config/gains/pid_eq30.toml"), "--sim", "udpout:127.0.0.1:9", "--gcs",
+         "udpout:127.0.0.1:9", "--onboard-log"],
+        ["sitl.node", str(CASE1), "--link", "udpin:127.0.0.1:0", "--truth-log"],
+    ]
+    for argv in cases:
+        for target in (tmp_path / "missing" / "x.ulg", Path("/dev/full")):
+            proc = subprocess.run([sys.executable, "-m", *argv, str(target)], cwd=ROOT,
+                                  capture_output=True, text=True, timeout=60, check=False)
+            assert proc.returncode == 2, proc.stderr
+            assert str(target) in proc.stderr and "Traceback" not in proc.stderr

@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from common import px4_topics as px4
 from common.ulog import Topic, ULogError, ULogWriter, open_ulog, read_topic, tail_record
@@ -155,3 +156,148 @@ def test_bad_files_and_topics_are_clear_errors(tmp_path):
         Topic("bad", (("double", "x"),))
     with pytest.raises(ValueError, match="unknown type"):
         Topic("bad", (("uint64_t", "timestamp"), ("float32", "x")))
+
+
+# ------------------------------------------------------------------------ record builders
+
+def _rot(q_wxyz):
+    w, x, y, z = q_wxyz
+    return Rotation.from_quat([x, y, z, w])
+
+
+NED_FROM_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+FRD_FROM_FLU = np.diag([1.0, -1.0, -1.0])
+
+
+def _random_motion(rng):
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    return (tuple(rng.normal(size=3) * 5), tuple(rng.normal(size=3)), tuple(rng.normal(size=3)),
+            tuple(q), tuple(rng.normal(size=3)))
+
+
+def test_setpoint_records_against_an_independent_rotation_library():
+    """Setpoints in NED/FRD from ENU/FLU values, checked with scipy's rotations: position,
+    velocity, acceleration, the attitude (FRD -> NED), yaw, yaw rate about NED down and the
+    body rate in FRD."""
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        p, v, a, q, w = _random_motion(rng)
+        r_enu_flu = _rot(q)
+        r_ned_frd = Rotation.from_matrix(NED_FROM_ENU @ r_enu_flu.as_matrix() @ FRD_FROM_FLU)
+        yaw = r_ned_frd.as_euler("ZYX")[0]
+        yawspeed = (NED_FROM_ENU @ r_enu_flu.apply(w))[2]
+        ts = px4.trajectory_setpoint_record(7, p, v, a, q, w)
+        assert ts[1:4] == pytest.approx(NED_FROM_ENU @ p)
+        assert ts[4:7] == pytest.approx(NED_FROM_ENU @ v)
+        assert ts[7:10] == pytest.approx(NED_FROM_ENU @ a)
+        assert all(math.isnan(j) for j in ts[10:13])
+        assert math.cos(ts[13] - yaw) == pytest.approx(1.0) and ts[14] == pytest.approx(yawspeed)
+        lps = px4.local_position_setpoint_record(7, p, v, a, q, w)
+        assert lps[1:10] == pytest.approx(ts[1:10]) and lps[10:] == pytest.approx(ts[13:])
+        att = px4.attitude_setpoint_record(7, q, w)
+        x, y, z, s = r_ned_frd.as_quat()
+        assert abs(abs(np.dot(att[2:6], (s, x, y, z))) - 1.0) < 1e-12
+        assert att[1] == pytest.approx(yawspeed)
+        rates = px4.rates_setpoint_record(7, w)
+        assert rates[1:4] == pytest.approx(FRD_FROM_FLU @ w)
+
+
+def test_actuator_records_follow_px4_ranges():
+    """Motors: speed / limit in [0, 1], NaN when disarmed and unused; servos: the tilt wrapped
+    into [-pi, pi) over pi; saturation: upper at the limit, lower when stopped while armed."""
+    speeds = (0.0, 850.0, 1700.0, 1800.0, 10.0, 1699.0)
+    m = px4.actuator_motors_record(5, 4, speeds, 1700.0, True)
+    assert m[3:9] == pytest.approx((0.0, 0.5, 1.0, 1800 / 1700, 10 / 1700, 1699 / 1700))
+    assert all(math.isnan(c) for c in m[9:])
+    assert all(math.isnan(c) for c in px4.actuator_motors_record(5, 4, speeds, 1700.0,
+                                                                  False)[3:])
+    tilts = (0.0, math.pi / 2, -math.pi / 2, 3 * math.pi / 2, -7.0, 2 * math.pi + 0.1)
+    s = px4.actuator_servos_record(5, 4, tilts)
+    assert s[2:8] == pytest.approx((0.0, 0.5, -0.5, -0.5, (-7.0 + 2 * math.pi) / math.pi,
+                                    0.1 / math.pi))
+    assert all(math.isnan(c) for c in s[8:])
+    c = px4.control_allocator_status_record(5, speeds, 1700.0, True, True)
+    assert c[1:3] == (False, False)
+    assert c[3:9] == (px4.ACTUATOR_SATURATION_LOWER, 0, px4.ACTUATOR_SATURATION_UPPER,
+                      px4.ACTUATOR_SATURATION_UPPER, 0, 0)
+    assert px4.control_allocator_status_record(5, speeds, 1700.0, False, False)[1:4] == (
+        True, True, 0)
+
+
+# ------------------------------------------------------------------------ tail_record
+
+def test_tail_record_finds_the_last_complete_record_of_a_rare_topic(tmp_path):
+    """A topic written once behind more than the first window of other records, and a file
+    cut at every byte of its end: tail_record agrees with pyulog."""
+    path = tmp_path / "a.ulg"
+    w = ULogWriter(path, [POSE, RATE])
+    w.add("rate", (1, 1.0))
+    for i in range(5000):  # 5000 x 36 bytes: beyond the first 64 KiB window
+        w.add("pose", (i, float(i), 1.0, 0.0, 0.0, 0.0, 1, True))
+    w.close()
+    assert tail_record(path, "rate") == (("time_us", "w"), (1.0, 1.0))
+    raw = path.read_bytes()
+    for cut in range(len(raw) - 80, len(raw) + 1):
+        (tmp_path / "cut.ulg").write_bytes(raw[:cut])
+        _, rows = read_topic(tmp_path / "cut.ulg", "pose")
+        tail = tail_record(tmp_path / "cut.ulg", "pose")
+        assert tail is not None and tail[1][:2] == tuple(rows[-1, :2])
+
+
+def test_tail_record_is_not_fooled_by_a_record_inside_another_payload(tmp_path):
+    """A float64 payload that holds the bytes of a `rate` message is not a `rate` record."""
+    import struct
+
+    big = Topic("big", (("uint64_t", "timestamp"), ("double", "v", 8)))
+    path = tmp_path / "fake.ulg"
+    w = ULogWriter(path, [RATE, big])
+    w.add("rate", (5, 2.0))
+    fake = struct.pack("<HBH", 18, ord("D"), 0) + struct.pack("<Qd", 999_999, -42.0)
+    payload = np.frombuffer(fake + bytes(64 - len(fake)), dtype="<f8")
+    w.add("big", (6, *payload))
+    w.close()
+    _, rows = read_topic(path, "rate")
+    assert rows.tolist() == [[5.0, 2.0]]
+    assert tail_record(path, "rate") == (("time_us", "w"), (5.0, 2.0))
+
+
+# ------------------------------------------------------------------------ a failing disk
+
+FULL_DISK = """
+import resource, signal, sys
+from common.ulog import Topic, ULogWriter
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
+t = Topic("row", (("uint64_t", "timestamp"), ("double", "a"), ("double", "b")))
+w = ULogWriter(sys.argv[1], [t])
+for i in range(20_000):
+    for _ in range(3):
+        w.add("row", (i, 2.0 * i, -i))
+    w.flush()
+    if w.failed:
+        break
+w.add("row", (i + 1, 0.0, 0.0))
+w.flush()  # after a failure: dropped, never appended after a torn record
+w.close()
+print(w.failed, i)
+"""
+
+
+def test_a_write_that_fails_stops_the_log_at_its_last_complete_record(tmp_path):
+    """A full disk (here the file size limit) in the middle of a flush: the writer says why,
+    cuts the torn record off and writes nothing more; pyulog reads every complete record."""
+    path = tmp_path / "full.ulg"
+    out = subprocess.run([sys.executable, "-c", FULL_DISK, str(path)], capture_output=True,
+                         text=True, cwd=os.getcwd(), timeout=60, check=True).stdout.split()
+    assert out[0] == "File" and "large" in out  # "File too large"
+    u = open_ulog(path)
+    assert not u.file_corruption
+    rows = u.get_dataset("row").data
+    n = len(rows["timestamp"])
+    assert 3000 < n and path.stat().st_size <= 100_000
+    assert np.array_equal(rows["a"], 2.0 * (np.arange(n) // 3))
+    empty = tmp_path / "empty.ulg"
+    ULogWriter(empty, [Topic("row", (("uint64_t", "timestamp"), ("double", "a"),
+                                     ("double", "b")))]).close()
+    assert path.stat().st_size == empty.stat().st_size + 29 * n  # no torn record left
