@@ -8,6 +8,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 BENCHMARKS = ("bench_step.py", "bench_inprocess.py", "bench_lockstep.py", "bench_zenoh.py",
+              "bench_logs.py",
               "divergence_limit.py", "mission_envelope.py")
 
 if __name__ == "__main__":
