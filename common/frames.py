@@ -59,3 +59,15 @@ def ned_to_geodetic(p_ned: Vec3, home_lat_deg: float, home_lon_deg: float,
     lon = home_lon_deg + math.degrees(
         p_ned[1] / (EARTH_RADIUS_M * math.cos(math.radians(home_lat_deg))))
     return lat, lon, home_alt_m - p_ned[2]
+
+
+def geodetic_to_ned(lat_deg: float, lon_deg: float, alt_m: float, home_lat_deg: float,
+                    home_lon_deg: float, home_alt_m: float) -> Vec3:
+    """The local NED position (m) of a geodetic point (lat deg, lon deg, alt m AMSL) relative
+    to the home: the exact inverse of `ned_to_geodetic` (the same tangent plane), so a
+    position taken there and back agrees to float rounding (nanometres at the kilometres a
+    SITL flies; tests/unit/test_frames.py)."""
+    north = math.radians(lat_deg - home_lat_deg) * EARTH_RADIUS_M
+    east = math.radians(lon_deg - home_lon_deg) * (
+        EARTH_RADIUS_M * math.cos(math.radians(home_lat_deg)))
+    return north, east, home_alt_m - alt_m

@@ -1,4 +1,5 @@
-"""Link URLs and the byte transports behind them (DESIGN.md section 1).
+"""Link URLs and the byte transports behind them (DESIGN.md section 1): the one link layer
+of `fcu`, `sitl` and `gcs`.
 
     udpin:HOST:PORT    bind and answer every peer heard in the last `peer_timeout_s` (at
                        most `max_peers` of them: a flood from many ports cannot make every
@@ -10,12 +11,25 @@
                        second, each abandoned after a second without an answer; reconnects
                        when the server goes away; data sent while not connected is dropped
     tcpin:HOST:PORT    listen for TCP clients and serve all of them
-    serial:DEVICE:BAUD a serial port in raw mode
+    serial:DEVICE:BAUD a serial port (pyserial) in raw mode, 8N1, no flow control
+    zenoh:PREFIX[@ENDPOINT,...]   Zenoh pub/sub (`common/zenoh_link.py`)
+
+MAVSDK's and pymavlink's spellings are accepted too and mean the same links: `udpin://`,
+`udpout://`, `udp://HOST:PORT` and `udp:HOST:PORT` (listen, as MAVSDK's old form and
+pymavlink's), `tcp://` and `tcpout://` (client), `tcpin://`, `serial://DEVICE:BAUD`
+(`serial:///dev/ttyUSB0:57600`). An empty HOST on a listening link (`udp://:14540`) means
+every interface, as in MAVSDK; everywhere else HOST is required. PORT is 1..65535; 0 (any
+free port, which the link's `local_port` then tells) only on a listening link (udpin, tcpin).
+
+Errors are `LinkError`s with a one-line message: a URL that does not parse, a port out of
+range, a device that does not exist, a port another process holds (never shared: no
+SO_REUSEPORT, and UDP ports without SO_REUSEADDR) are bad input (`exit_code` 2); a peer that
+is not there (`LinkUnavailable`: a refused TCP connect, for callers that wait for one; a Zenoh
+router that cannot be reached) is a runtime failure (`exit_code` 1).
 
 Every link is non-blocking: `recv()` returns the datagrams or stream chunks that are ready,
 `send(data)` never waits, and `fileno()` lets one `select` serve all links. Peers are told
-apart by `peer` keys so that each byte stream gets its own MAVLink parser. Zenoh links
-(`zenoh:PREFIX[@ENDPOINT,...]`) live in `common/zenoh_link.py`.
+apart by `peer` keys so that each byte stream gets its own MAVLink parser.
 """
 
 from __future__ import annotations
@@ -24,19 +38,34 @@ import errno
 import ipaddress
 import os
 import random
+import select
 import socket
 import time
 from dataclasses import dataclass
 
 SCHEMES = ("udpin", "udpout", "tcp", "tcpin", "serial", "zenoh")
+# Other spellings (MAVSDK, pymavlink) -> the scheme they mean.
+ALIASES = {"udp": "udpin", "tcpout": "tcp"}
+LISTENING = ("udpin", "tcpin")
 # At most this many datagrams (or stream chunks) per recv(): under a flood the socket never
 # runs dry, and a caller that reads until it does would never get back to its own work
 # (the FCU's control step). What is left is read on the next call; select() says so.
 RECV_BATCH = 256
+FORMS = ("udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT, tcpin:HOST:PORT, "
+         "serial:DEVICE:BAUD, zenoh:PREFIX[@ENDPOINT] (or MAVSDK's udpin://, udpout://, "
+         "udp://, tcp://, tcpin://, serial://)")
 
 
 class LinkError(ValueError):
-    """A link URL that cannot be parsed or opened."""
+    """A link URL that cannot be parsed or opened: bad input, exit status 2."""
+
+    exit_code = 2
+
+
+class LinkUnavailable(LinkError):
+    """The other end is not there (a refused TCP connect): a runtime failure, exit status 1."""
+
+    exit_code = 1
 
 
 @dataclass(frozen=True)
@@ -51,23 +80,80 @@ class LinkUrl:
     def __str__(self) -> str:
         return self.text
 
+    @property
+    def canonical(self) -> str:
+        """The URL in this project's own spelling (`udp://:14540` -> `udpin:0.0.0.0:14540`)."""
+        if self.scheme == "zenoh":
+            return f"zenoh:{self.device}"
+        if self.scheme == "serial":
+            return f"serial:{self.device}:{self.baud}"
+        return f"{self.scheme}:{self.host}:{self.port}"
+
 
 def parse_url(text: str) -> LinkUrl:
-    """Parse a link URL; raises LinkError naming what is wrong."""
-    scheme, sep, rest = text.partition(":")
+    """Parse a link URL (any spelling above); raises LinkError naming what is wrong.
+
+    Only the text is checked here (no name lookups, no file system): opening the link
+    checks that the host resolves, the port is free, the device exists."""
+    given, sep, rest = text.partition(":")
+    name = given.lower()
+    scheme = ALIASES.get(name, name)
     if not sep or scheme not in SCHEMES:
-        raise LinkError(f"link '{text}': expected one of {', '.join(s + ':' for s in SCHEMES)}")
+        what = f"unknown link type '{given}'" if sep and given else "not a link URL"
+        raise LinkError(f"link '{text}': {what}; expected {FORMS}")
+    if rest.startswith("//"):
+        rest = rest[2:]  # MAVSDK's scheme://...; serial:///dev/x keeps its leading /
     if scheme == "zenoh":
+        from common.zenoh_link import parse_zenoh  # imported only where Zenoh is used
+
+        try:
+            parse_zenoh(rest)
+        except LinkError as exc:
+            raise LinkError(f"link '{text}': {exc}") from None
         return LinkUrl(scheme, device=rest or "mavlink", text=text)
     if scheme == "serial":
-        device, _, baud = rest.rpartition(":")
-        if not device or not baud.isdigit():
-            raise LinkError(f"link '{text}': expected serial:DEVICE:BAUD")
+        device, colon, baud = rest.rpartition(":")
+        if not colon or not device or not baud.isdigit() or baud.startswith("0"):
+            raise LinkError(f"link '{text}': expected serial:DEVICE:BAUD, e.g. "
+                            "serial:/dev/ttyUSB0:57600")
+        if not 50 <= int(baud) <= 20_000_000:
+            raise LinkError(f"link '{text}': baud rate {baud} out of range (50..20000000)")
         return LinkUrl(scheme, device=device, baud=int(baud), text=text)
-    host, _, port = rest.rpartition(":")
-    if not host or not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise LinkError(f"link '{text}': expected {scheme}:HOST:PORT with PORT in 0..65535")
-    return LinkUrl(scheme, host=host, port=int(port), text=text)
+    host, colon, port = rest.rpartition(":")
+    if not colon or not port:
+        raise LinkError(f"link '{text}': no port; expected {given}:HOST:PORT")
+    if not port.isascii() or not port.isdigit():
+        raise LinkError(f"link '{text}': port '{port}' is not a number")
+    number = int(port)
+    listening = scheme in LISTENING
+    if not 1 <= number <= 65535 and not (number == 0 and listening):
+        allowed = "1..65535, or 0 for any free port" if listening else "1..65535"
+        raise LinkError(f"link '{text}': port {port} out of range ({allowed})")
+    if host.startswith("[") or ":" in host:
+        raise LinkError(f"link '{text}': IPv6 addresses are not supported; use an IPv4 "
+                        "address or a host name")
+    if not host:
+        if not listening:
+            raise LinkError(f"link '{text}': no host; expected {given}:HOST:PORT")
+        host = "0.0.0.0"  # MAVSDK's udp://:14540: every interface
+    if any(c.isspace() or c in "/@?#" for c in host):
+        raise LinkError(f"link '{text}': '{host}' is not a host name or IPv4 address")
+    return LinkUrl(scheme, host=host, port=number, text=text)
+
+
+def _bind_error(url: LinkUrl, exc: OSError) -> LinkError:
+    """One line for a bind or listen that failed."""
+    where = f"{url.host}:{url.port}"
+    if isinstance(exc, socket.gaierror):
+        return LinkError(f"link '{url}': cannot resolve {url.host}: {exc.strerror}")
+    if exc.errno == errno.EADDRINUSE:
+        return LinkError(f"link '{url}': {where} is in use by another process")
+    if exc.errno == errno.EACCES:
+        return LinkError(f"link '{url}': no permission to use {where} (ports below 1024 "
+                         "need privileges)")
+    if exc.errno == errno.EADDRNOTAVAIL:
+        return LinkError(f"link '{url}': {url.host} is not an address of this machine")
+    return LinkError(f"link '{url}': {exc.strerror or exc}")
 
 
 class Link:
@@ -135,6 +221,9 @@ class UdpLink(Link):
         self.foreign_datagrams = 0  # udpout: datagrams from others than the target, dropped
         self.unanswered_peers = 0  # udpin: new peers not answered because the table was full
         target = _resolve(url) if url.scheme == "udpout" else None
+        # Never SO_REUSEADDR or SO_REUSEPORT: on Linux either lets a second process bind a
+        # udpin port and silently take half of its datagrams (pymavlink sets SO_REUSEADDR);
+        # here the second one is told the port is in use.
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
         try:
@@ -146,7 +235,7 @@ class UdpLink(Link):
                 self.target = target
         except OSError as exc:
             self.sock.close()
-            raise LinkError(f"link '{url}': {exc.strerror}") from None
+            raise _bind_error(url, exc) from None
         # Replies come from the address we send to, unless that is a group or broadcast.
         self._only = target if target is not None and _is_unicast(target[0]) else None
         self.sock.setblocking(False)
@@ -258,6 +347,7 @@ class TcpClientLink(Link):
         self._tail = b""  # unsent end of the last write, sent before anything new
         self.connects = 0  # connections made (a reconnection counts again)
         self.dropped_sends = 0
+        self.last_error = 0  # errno of the last attempt that failed (0: none yet, or connected)
         self._poll()
 
     @property
@@ -274,13 +364,16 @@ class TcpClientLink(Link):
         if not self.connecting:
             return
         s = self.sock
-        if s.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR):
+        err = s.getsockopt(socket.SOL_SOCKET, socket.SO_ERROR)
+        if err:
+            self.last_error = err
             self._drop()  # refused, unreachable, timed out: the next attempt is due later
             return
         try:
             peer = s.getpeername()  # ENOTCONN until the handshake is done
         except OSError:
             if time.monotonic() - self._started >= self.connect_timeout_s:
+                self.last_error = errno.ETIMEDOUT
                 self._drop()  # no answer (SYNs dropped): abandon, a new attempt follows
             return
         self._established(peer)
@@ -291,10 +384,12 @@ class TcpClientLink(Link):
             # Connected to itself: with nothing listening on a local port of the ephemeral
             # range, a connect can pick that very port as its source (TCP simultaneous open)
             # and would then read back everything it sends.
+            self.last_error = errno.ECONNREFUSED
             self._drop()
             return
         self.connecting = False
         self.connects += 1
+        self.last_error = 0
 
     def _start(self, now: float) -> None:
         self._next_try = now + self.retry_s
@@ -313,6 +408,7 @@ class TcpClientLink(Link):
         elif err in (errno.EINPROGRESS, errno.EWOULDBLOCK, errno.EALREADY, errno.EINTR):
             self.sock, self.connecting = s, True
         else:
+            self.last_error = err
             s.close()  # refused at once (or no route): wait for the next attempt
 
     def _new_socket(self) -> socket.socket:
@@ -335,6 +431,31 @@ class TcpClientLink(Link):
     def fileno(self) -> int:
         self._poll()
         return self.sock.fileno() if self.sock is not None else -1
+
+    def wait_connected(self, timeout_s: float) -> None:
+        """Block until connected (for a caller with nothing to do before, e.g. `gcs`);
+        LinkUnavailable at the first failed attempt (refused, unreachable) or after
+        `timeout_s`. Reconnection later stays automatic."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self._poll()
+            if self.connected:
+                return
+            if self.sock is None and self.last_error:
+                break
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self.last_error = self.last_error or errno.ETIMEDOUT
+                break
+            if self.sock is not None:
+                select.select([self.sock], [self.sock], [], min(left, 0.05))
+            else:
+                time.sleep(min(left, 0.05))
+        why = os.strerror(self.last_error).lower()
+        if self.last_error == errno.ECONNREFUSED:
+            why = "connection refused (nothing listens there)"
+        raise LinkUnavailable(f"link '{self.url}': cannot connect to "
+                              f"{self.address[0]}:{self.address[1]}: {why}")
 
     def recv(self) -> list[tuple[object, bytes]]:
         self._poll()
@@ -387,13 +508,16 @@ class TcpServerLink(Link):
     def __init__(self, url: LinkUrl, max_clients: int = 32) -> None:
         self.url = url
         self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        # SO_REUSEADDR only lets a restarted server take its port back from connections in
+        # TIME_WAIT; on Linux it never shares a port another socket listens on (that would
+        # take SO_REUSEPORT, never set here).
         self.server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             self.server.bind((url.host, url.port))
+            self.server.listen(8)
         except OSError as exc:
             self.server.close()
-            raise LinkError(f"link '{url}': {exc.strerror}") from None
-        self.server.listen(8)
+            raise _bind_error(url, exc) from None
         self.server.setblocking(False)
         self.clients: dict[int, socket.socket] = {}
         self.max_clients = max_clients
@@ -461,36 +585,87 @@ class TcpServerLink(Link):
 
 
 class SerialLink(Link):
-    """serial:DEVICE:BAUD in raw mode (8N1, no flow control)."""
+    """serial:DEVICE:BAUD through pyserial: raw, 8N1, no flow control, never waiting.
 
-    def __init__(self, url: LinkUrl) -> None:
-        import termios
-        import tty
+    The device is opened exclusively (a second process is told it is in use, not given half
+    the bytes). A device that goes away (a USB adapter pulled, the other end of a pty
+    closed) is closed and reopened at most once per `retry_s`; meanwhile nothing is read and
+    writes are dropped (counted in `dropped_sends`). A write the driver takes only in part
+    keeps its unsent tail, sent before anything new, so that no frame is cut."""
 
+    def __init__(self, url: LinkUrl, retry_s: float = 1.0) -> None:
         self.url = url
+        self.retry_s = retry_s
+        self._next_try = 0.0
+        self._tail = b""
+        self.dropped_sends = 0
+        self.reopens = 0
+        self.port = self._open()
+
+    def _open(self):  # -> serial.Serial
+        import stat
+
+        serial = _pyserial()
+        url, device = self.url, self.url.device
         try:
-            self.fd = os.open(url.device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+            mode = os.stat(device).st_mode
+        except FileNotFoundError:
+            raise LinkError(f"link '{url}': no such device {device}") from None
         except OSError as exc:
-            raise LinkError(f"link '{url}': {exc.strerror}") from None
-        speed = getattr(termios, f"B{url.baud}", None)
-        if speed is None:
-            os.close(self.fd)
-            raise LinkError(f"link '{url}': unsupported baud rate {url.baud}")
-        if os.isatty(self.fd):
-            tty.setraw(self.fd)
-            attrs = termios.tcgetattr(self.fd)
-            attrs[4] = attrs[5] = speed
-            termios.tcsetattr(self.fd, termios.TCSANOW, attrs)
+            raise LinkError(f"link '{url}': {device}: {exc.strerror}") from None
+        if not stat.S_ISCHR(mode):
+            raise LinkError(f"link '{url}': {device} is not a serial device")
+        try:
+            port = serial.Serial(device, url.baud, timeout=0, write_timeout=0, exclusive=True)
+        except (serial.SerialException, OSError) as exc:
+            code = getattr(exc, "errno", None)
+            if code in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EBUSY):
+                why = f"{device} is in use by another process"
+            elif code == errno.EACCES:
+                why = f"no permission to open {device} (on Linux: the dialout group)"
+            elif code == errno.ENOENT:
+                why = f"no such device {device}"
+            else:
+                why = f"cannot open {device}: {_first_line(exc)}"
+            raise LinkError(f"link '{url}': {why}") from None
+        except ValueError as exc:  # a baud rate the driver refuses
+            raise LinkError(f"link '{url}': {exc}") from None
+        return port
+
+    def _lost(self) -> None:
+        if self.port is not None:
+            try:
+                self.port.close()
+            except (OSError, ValueError):
+                pass
+        self.port = None
+        self._tail = b""
+        self._next_try = time.monotonic() + self.retry_s
+
+    def _reopen(self) -> None:
+        if self.port is None and time.monotonic() >= self._next_try:
+            self._next_try = time.monotonic() + self.retry_s
+            try:
+                self.port = self._open()
+                self.reopens += 1
+            except LinkError:
+                pass
 
     def fileno(self) -> int:
-        return self.fd
+        self._reopen()
+        return self.port.fileno() if self.port is not None else -1
 
     def recv(self) -> list[tuple[object, bytes]]:
+        serial = _pyserial()
+        self._reopen()
         out: list[tuple[object, bytes]] = []
+        if self.port is None:
+            return out
         for _ in range(RECV_BATCH):
             try:
-                data = os.read(self.fd, 4096)
-            except (BlockingIOError, InterruptedError):
+                data = self.port.read(4096)
+            except (serial.SerialException, OSError):
+                self._lost()  # readable without data: the device has gone
                 return out
             if not data:
                 return out
@@ -498,13 +673,40 @@ class SerialLink(Link):
         return out
 
     def send(self, data: bytes) -> None:
+        serial = _pyserial()
+        self._reopen()
+        if self.port is None:
+            self.dropped_sends += 1
+            return
         try:
-            os.write(self.fd, data)
-        except (BlockingIOError, InterruptedError):
-            pass
+            if self._tail:
+                self._tail = self._tail[self.port.write(self._tail) or 0:]
+                if self._tail:
+                    self.dropped_sends += 1
+                    return
+            self._tail = data[self.port.write(data) or 0:]
+        except serial.SerialTimeoutException:
+            self.dropped_sends += 1
+        except (serial.SerialException, OSError):
+            self.dropped_sends += 1
+            self._lost()
 
     def close(self) -> None:
-        os.close(self.fd)
+        if self.port is not None:
+            self.port.close()
+            self.port = None
+        self._next_try = float("inf")
+
+
+def _pyserial():
+    """pyserial, imported where a serial link is used."""
+    import serial  # type: ignore[import-untyped]
+
+    return serial
+
+
+def _first_line(exc: BaseException) -> str:
+    return (str(exc).splitlines() or [type(exc).__name__])[0]
 
 
 def open_link(url: str | LinkUrl, *, role: str = "vehicle", system_id: int = 0) -> Link:

@@ -5,12 +5,19 @@ x and y of MISSION_ITEM_INT are int32: metres x 1e4 in local frames, degrees x 1
 ones (MAVLink's common.xml); the legacy MISSION_ITEM carries them as floats in metres or
 degrees. pymavlink is imported only by `item_message`, so that the flight code can use
 `MissionItem` without a MAVLink library.
+
+Global frames and the local one meet at the home position (`HomePosition`, as HOME_POSITION
+publishes it): `to_local` and `to_global` convert the items whose slots hold a position
+(`common.frames.geodetic_to_ned` / `ned_to_geodetic`, one tangent plane), so the vehicle and
+the ground station convert alike.
 """
 
 from __future__ import annotations
 
 import math
 from typing import Any, NamedTuple
+
+from common.frames import geodetic_to_ned, ned_to_geodetic
 
 LOCAL_SCALE = 1e4  # MISSION_ITEM_INT x, y in local frames: metres x 1e4
 GLOBAL_SCALE = 1e7  # MISSION_ITEM_INT x, y in global frames: degrees x 1e7
@@ -19,6 +26,22 @@ MAV_MISSION_TYPE_MISSION = 0
 # MAV_FRAME_GLOBAL, _GLOBAL_RELATIVE_ALT, _GLOBAL_INT, _GLOBAL_RELATIVE_ALT_INT,
 # _GLOBAL_TERRAIN_ALT, _GLOBAL_TERRAIN_ALT_INT (common.xml; checked against pymavlink).
 GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})
+MAV_FRAME_GLOBAL, MAV_FRAME_LOCAL_NED, MAV_FRAME_GLOBAL_RELATIVE_ALT = 0, 1, 3
+MAV_FRAME_GLOBAL_INT, MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 5, 6
+# Global frames that a home position converts: altitude AMSL, altitude above home (the
+# non-INT ones as MAVProxy sends them in MISSION_ITEM_INT, x and y in 1e-7 deg all the same).
+# The terrain frames are not among them: the vehicle knows no terrain.
+AMSL_FRAMES = frozenset({MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_INT})
+RELATIVE_ALT_FRAMES = frozenset({MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                                 MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
+GEO_FRAMES = AMSL_FRAMES | RELATIVE_ALT_FRAMES
+# The commands of fcu.mission and what their x, y, z hold (README, section Missions):
+# NAV_WAYPOINT, NAV_LOITER_TIME and the pose keyframe fly to x, y, z; NAV_TAKEOFF climbs to
+# z and NAV_LAND ignores it (an altitude all the same); the figure-infinity's z is an axis
+# component. x, y of takeoff, land and the figure are unused.
+XY_COMMANDS = frozenset({16, 19, 31000})
+Z_ALTITUDE_COMMANDS = frozenset({16, 19, 21, 22, 31000})
+POSITION_COMMANDS = Z_ALTITUDE_COMMANDS | {31001}
 
 
 class MissionItem(NamedTuple):
@@ -92,3 +115,74 @@ def item_message(item: MissionItem, target_system: int, target_component: int,
         target_system, target_component, item.seq, item.frame, item.command,
         item.current if current is None else current, item.autocontinue, item.param1,
         item.param2, item.param3, item.param4, item.x, item.y, item.z, item.mission_type)
+
+
+# ------------------------------------------------------------------ frames
+
+
+class HomePosition(NamedTuple):
+    """The origin of the local frame: latitude, longitude (deg) and altitude AMSL (m)."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+
+    @classmethod
+    def published(cls, lat_deg: float, lon_deg: float, alt_m: float) -> HomePosition:
+        """The home as HOME_POSITION carries it (1e-7 deg, mm): what ground stations see, so
+        that the vehicle converts global items through the same numbers they do."""
+        return cls(round(lat_deg * GLOBAL_SCALE) / GLOBAL_SCALE,
+                   round(lon_deg * GLOBAL_SCALE) / GLOBAL_SCALE, round(alt_m * 1000.0) / 1000.0)
+
+    @classmethod
+    def from_message(cls, msg: Any) -> HomePosition:
+        """From a HOME_POSITION message."""
+        return cls(msg.latitude / GLOBAL_SCALE, msg.longitude / GLOBAL_SCALE,
+                   msg.altitude / 1000.0)
+
+
+def local_ned(item: MissionItem, home: HomePosition) -> tuple[float, float, float]:
+    """(north, east, down) in metres of a GEO_FRAMES item's x, y, z relative to `home`
+    (down = -z above home in the relative-altitude frames, home alt - z in AMSL ones)."""
+    base_alt = 0.0 if item.frame in RELATIVE_ALT_FRAMES else home.alt_m
+    return geodetic_to_ned(item.x / GLOBAL_SCALE, item.y / GLOBAL_SCALE, item.z, home.lat_deg,
+                           home.lon_deg, base_alt)
+
+
+def to_local(item: MissionItem, home: HomePosition) -> MissionItem:
+    """`item` in MAV_FRAME_LOCAL_NED when it is in one of GEO_FRAMES with a command of
+    POSITION_COMMANDS, else unchanged. x, y unused by the command become 0; a position too
+    far from home for MISSION_ITEM_INT's local int32 (214 km) keeps an x or y outside it,
+    which validation refuses."""
+    if item.frame not in GEO_FRAMES or item.command not in POSITION_COMMANDS:
+        return item
+    north, east, down = local_ned(item, home)
+    x = y = 0
+    if item.command in XY_COMMANDS:
+        x, y = _local_int(north), _local_int(east)
+    z = down if item.command in Z_ALTITUDE_COMMANDS else item.z
+    return item._replace(frame=MAV_FRAME_LOCAL_NED, x=x, y=y, z=z)
+
+
+def _local_int(metres: float) -> int:
+    return round(metres * LOCAL_SCALE) if math.isfinite(metres) and \
+        abs(metres * LOCAL_SCALE) <= INT32_MAX else INT32_MAX + 1
+
+
+def to_global(item: MissionItem, home: HomePosition,
+              frame: int = MAV_FRAME_GLOBAL_RELATIVE_ALT) -> MissionItem:
+    """`item` in `frame` (one of GEO_FRAMES) when it is a MAV_FRAME_LOCAL_NED item with a
+    command of POSITION_COMMANDS, else unchanged: x, y the latitude and longitude of its
+    north, east (1e-7 deg, rounded), z the altitude above home or AMSL (the figure's z, an
+    axis component, stays). Unused x, y convert as positions too (the origin for 0, 0), so
+    a reader sees the item where it starts."""
+    if frame not in GEO_FRAMES:
+        raise ValueError(f"frame {frame} is not a global frame with an altitude")
+    if item.frame != MAV_FRAME_LOCAL_NED or item.command not in POSITION_COMMANDS:
+        return item
+    base_alt = 0.0 if frame in RELATIVE_ALT_FRAMES else home.alt_m
+    lat, lon, alt = ned_to_geodetic((item.x_m, item.y_m, item.z), home.lat_deg,
+                                    home.lon_deg, base_alt)
+    z = alt if item.command in Z_ALTITUDE_COMMANDS else item.z
+    return item._replace(frame=frame, x=round(lat * GLOBAL_SCALE),
+                         y=round(lon * GLOBAL_SCALE), z=z)

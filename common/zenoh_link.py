@@ -34,7 +34,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from common.links import RECV_BATCH, Link, LinkError, LinkUrl
+from common.links import RECV_BATCH, Link, LinkError, LinkUnavailable, LinkUrl
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 ROLES = ("vehicle", "gcs", "sim_server", "sim_client")
@@ -116,7 +116,8 @@ class ZenohLink(Link):
             self.session = zenoh.open(client_config(self.endpoints))
         except zenoh.ZError as exc:
             self.close_fds()
-            raise LinkError(f"link '{url}': cannot open a Zenoh session: {exc}") from None
+            why = (str(exc).splitlines() or ["?"])[0].split("  at ")[0].rstrip()
+            raise LinkUnavailable(f"link '{url}': cannot open a Zenoh session: {why}") from None
         p, n = self.prefix, system_id
         self._token = None
         self._pub = None

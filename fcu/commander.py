@@ -1,5 +1,5 @@
 """The commander stage: arming, modes and which reference flies (mission, offboard, hold,
-land), without I/O.
+land, takeoff, return, position control), without I/O.
 
 Time comes in as arguments: `t_us` is the flight clock (simulated in lockstep, monotonic in
 real time) for everything that shapes the flight; `now_s` is the wall clock, used only for
@@ -12,19 +12,30 @@ plane follows its planned profile; then the set-point keeps going down at the la
 whatever its tracking error, and the land detector disarms once the vehicle has been still
 for `LANDED_STILL_S` (or rests below `LANDED_ALTITUDE_M`): a landing ends on the ground,
 disarmed, never hovering armed.
+
+TAKEOFF climbs `FlightSettings.takeoff_alt_m` (MIS_TAKEOFF_ALT) straight up from where the
+vehicle should be, then holds (HOLD). RTL climbs to `rtl_return_alt_m` (RTL_RETURN_ALT)
+above home if it is lower, flies to home's north and east at `rtl_cruise_m_s` (MPC_XY_CRUISE)
+and lands there as LAND does. Both are planned as missions (NAV_TAKEOFF, NAV_WAYPOINT,
+NAV_LAND items) by the mission executor, so their legs are quintic profiles stretched until
+the vehicle can fly them (`fcu.mission`, `fcu.feasibility`). Home is the origin of the local
+frame (HOME_POSITION). POSCTL moves the set-point as MANUAL_CONTROL's sticks say
+(`fcu.manual`); the stream's freshness is checked on the wall clock like the offboard one.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE, INFO, Event
+from fcu import manual
 from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3
+from fcu.manual import ManualSetpoint, StickSettings
 from fcu.mission import MissionEvent, MissionExecutor, MissionLimits, level_attitude
 from fcu.tracker import Reference, VehicleState, pose_ref
 
@@ -33,6 +44,7 @@ _ZERO: Vec3 = (0.0, 0.0, 0.0)
 MAV_RESULT_ACCEPTED, MAV_RESULT_DENIED = 0, 2
 SEVERITY_EMERGENCY, SEVERITY_CRITICAL, SEVERITY_WARNING, SEVERITY_INFO = 0, 2, 4, 6
 MAV_FRAME_LOCAL_NED, MAV_CMD_NAV_LAND = 1, 21
+MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_TAKEOFF = 16, 22
 FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM p2 that forces a disarm
 LANDED_ALTITUDE_M = 0.05
 TAKEOFF_ALTITUDE_M = 0.1
@@ -45,6 +57,17 @@ TOUCHDOWN_BLOCKED_M = 0.1
 MAX_OFFBOARD_SPEED_M_S = 50.0
 MAX_OFFBOARD_ACC_M_S2 = 50.0
 MAX_OFFBOARD_RATE_RAD_S = 50.0
+
+
+@dataclass(frozen=True)
+class FlightSettings:
+    """The automatic modes' and POSCTL's parameters (PX4's names)."""
+
+    takeoff_alt_m: float = 2.5  # MIS_TAKEOFF_ALT: TAKEOFF climbs this much
+    rtl_return_alt_m: float = 10.0  # RTL_RETURN_ALT: RTL climbs to this height above home
+    rtl_cruise_m_s: float = 5.0  # MPC_XY_CRUISE: RTL's travel speed
+    manual_timeout_s: float = 0.5  # COM_RC_LOSS_T: POSCTL without MANUAL_CONTROL -> HOLD
+    sticks: StickSettings = field(default_factory=StickSettings)
 
 
 class Touchdown(NamedTuple):
@@ -71,9 +94,11 @@ class OffboardSetpoint:
 class Commander:
     """Arming, modes, the mission executor, offboard, hold and land references."""
 
-    def __init__(self, limits: MissionLimits, offboard_timeout_s: float = 1.0) -> None:
+    def __init__(self, limits: MissionLimits, offboard_timeout_s: float = 1.0,
+                 flight: FlightSettings | None = None) -> None:
         self.limits = limits
         self.offboard_timeout_s = offboard_timeout_s
+        self.flight = flight or FlightSettings()
         self.armed = False
         self.mode = Mode.HOLD
         self.flight_started = False  # lockstep: simulated time runs once this latches
@@ -84,8 +109,13 @@ class Commander:
         self.mission_done = False
         self.hold: Reference | None = None
         self.land: MissionExecutor | None = None
+        self.auto: MissionExecutor | None = None  # TAKEOFF's or RTL's plan
         self.touchdown: Touchdown | None = None
         self.offboard = OffboardSetpoint()
+        self.sticks = manual.CENTRED  # the latest MANUAL_CONTROL
+        self.sticks_received_s = -math.inf  # wall clock; -inf: never
+        self.manual_sp: ManualSetpoint | None = None  # POSCTL's set-point (None: from here)
+        self.manual_limits: StickSettings = self.flight.sticks  # fitted to the vehicle
         self.state: VehicleState | None = None
         self.last_ref: Reference | None = None
         self.clock_us = 0  # the flight clock at the latest input (events are stamped with it)
@@ -139,6 +169,7 @@ class Commander:
         self.armed = True
         self.hold = self._current_pose_ref()
         self.touchdown = None
+        self.manual_sp = None  # POSCTL starts from where the vehicle is
         self.say(SEVERITY_INFO, "armed")
         if self.mode == Mode.MISSION and not self.mission_running and not self.mission_done:
             self._start_mission()  # MISSION_START came first: fly it now
@@ -158,6 +189,7 @@ class Commander:
         self.mission_running = False
         self.touchdown = None
         self.land = None
+        self.auto = None
         self.say(SEVERITY_INFO if not force else SEVERITY_WARNING, reason)
         if not landed and record_in_air:
             self.say(SEVERITY_CRITICAL, "disarmed in the air", CRASH)
@@ -172,11 +204,30 @@ class Commander:
             return MAV_RESULT_DENIED, "offboard refused: no setpoint stream"
         if mode == Mode.LAND and not self.armed:
             return MAV_RESULT_DENIED, "land: not armed"
+        if mode in (Mode.TAKEOFF, Mode.RTL) and not self.armed:
+            return MAV_RESULT_DENIED, f"{mode.name.lower()}: not armed"
+        if mode == Mode.POSCTL and not self.manual_fresh(now_s):
+            return MAV_RESULT_DENIED, "POSCTL refused: no MANUAL_CONTROL"
         previous = self.mode
+        idle = self.auto is None and self.touchdown is None  # e.g. landed, disarmed, re-armed
+        if mode == Mode.TAKEOFF and (previous != Mode.TAKEOFF or idle):
+            refused = self._start_takeoff(self.flight.takeoff_alt_m)
+            if refused:
+                return MAV_RESULT_DENIED, refused
+        elif mode == Mode.RTL and (previous != Mode.RTL or idle):
+            refused = self._start_rtl()
+            if refused:
+                return MAV_RESULT_DENIED, refused
         self.mode = mode
-        if mode != Mode.LAND:
-            self.touchdown = None
+        if mode != Mode.LAND and not (mode == Mode.RTL and previous == Mode.RTL):
+            self.touchdown = None  # RTL touches down only at the end of its own plan
             self.land = None
+        if mode not in (Mode.TAKEOFF, Mode.RTL):
+            self.auto = None
+        if mode in (Mode.TAKEOFF, Mode.RTL, Mode.POSCTL):
+            self.mission_running = False
+        if mode == Mode.POSCTL and previous != Mode.POSCTL:
+            self.manual_sp = None
         if mode == Mode.HOLD:
             self.hold = self._current_pose_ref()
             self.mission_running = False
@@ -191,6 +242,67 @@ class Commander:
             self.say(SEVERITY_INFO, f"mode {mode.name}")
         return MAV_RESULT_ACCEPTED, f"mode {mode.name}"
 
+    def takeoff(self, target_up_m: float | None = None) -> tuple[int, str]:
+        """MAV_CMD_NAV_TAKEOFF: TAKEOFF, climbing straight up to `target_up_m` above home
+        (None: MIS_TAKEOFF_ALT above where the vehicle should be), then HOLD. As PX4 does, a
+        target less than MIS_TAKEOFF_ALT above the vehicle is raised to that, with a
+        warning."""
+        if not self.armed:
+            return MAV_RESULT_DENIED, "takeoff: not armed"
+        climb = self.flight.takeoff_alt_m
+        if target_up_m is not None:
+            wanted = target_up_m - self._current_pose_ref().p_enu_m[2]
+            if not math.isfinite(wanted):
+                return MAV_RESULT_DENIED, "takeoff: altitude not finite"
+            if wanted < climb:
+                self.say(SEVERITY_WARNING, f"takeoff: using the minimum climb {climb:.1f} m")
+            climb = max(climb, wanted)
+        refused = self._start_takeoff(climb)
+        if refused:
+            return MAV_RESULT_DENIED, refused
+        previous = self.mode
+        self.mode = Mode.TAKEOFF
+        self.touchdown = None
+        self.land = None
+        self.mission_running = False
+        self._maybe_start_flight()
+        if previous != Mode.TAKEOFF:
+            self.say(SEVERITY_INFO, f"mode {Mode.TAKEOFF.name}")
+        return MAV_RESULT_ACCEPTED, f"takeoff: climbing {climb:.1f} m"
+
+    def _start_takeoff(self, climb_m: float) -> str:
+        """Plan TAKEOFF's climb (one NAV_TAKEOFF item); a reason if refused, else ""."""
+        start = self._current_pose_ref()
+        z_ned = -(start.p_enu_m[2] + climb_m)
+        x, y = start.p_enu_m[1], start.p_enu_m[0]
+        if norm3((x, y, z_ned)) > self.limits.max_distance_m:
+            return "takeoff: beyond GF_MAX_DIST"
+        item = MissionItem(0, MAV_FRAME_LOCAL_NED, MAV_CMD_NAV_TAKEOFF, 1, 1, 0.0, 0.0, 0.0,
+                           math.nan, 0, 0, z_ned)
+        self.auto = MissionExecutor((item,), self.limits)
+        self.auto.start(self.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
+        return ""
+
+    def _start_rtl(self) -> str:
+        """Plan RTL (module docstring): climb to RTL_RETURN_ALT if lower, travel home at
+        MPC_XY_CRUISE, land; a reason if refused, else ""."""
+        start = self._current_pose_ref()
+        z_ned = min(-start.p_enu_m[2], -self.flight.rtl_return_alt_m)
+        if abs(z_ned) > self.limits.max_distance_m:
+            return "RTL: return altitude beyond GF_MAX_DIST"
+        items = (
+            MissionItem(0, MAV_FRAME_LOCAL_NED, MAV_CMD_NAV_TAKEOFF, 1, 1, 0.0, 0.0, 0.0,
+                        math.nan, 0, 0, z_ned),
+            MissionItem(1, MAV_FRAME_LOCAL_NED, MAV_CMD_NAV_WAYPOINT, 0, 1, 0.0, 0.0, 0.0,
+                        math.nan, 0, 0, z_ned),
+            MissionItem(2, MAV_FRAME_LOCAL_NED, MAV_CMD_NAV_LAND, 0, 1, 0.0, 0.0, 0.0,
+                        math.nan, 0, 0, 0.0))
+        limits = replace(self.limits, cruise_speed_m_s=self.flight.rtl_cruise_m_s)
+        self.auto = MissionExecutor(items, limits)
+        self.auto.start(self.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
+        self.say(SEVERITY_INFO, f"RTL: return at {-z_ned:.1f} m, then land")
+        return ""
+
     def mission_start(self, first: int = 0) -> tuple[int, str]:
         if not self.mission:
             return MAV_RESULT_DENIED, "no mission"
@@ -202,6 +314,7 @@ class Commander:
         self.mode = Mode.MISSION
         self.touchdown = None
         self.land = None
+        self.auto = None
         self._start_mission()
         self._maybe_start_flight()
         self.say(SEVERITY_INFO, "mission started")
@@ -229,7 +342,8 @@ class Commander:
         return MAV_RESULT_ACCEPTED, f"mission item {seq}"
 
     def _maybe_start_flight(self) -> None:
-        if self.armed and self.mode in (Mode.MISSION, Mode.OFFBOARD, Mode.LAND):
+        if self.armed and self.mode in (Mode.MISSION, Mode.OFFBOARD, Mode.LAND, Mode.TAKEOFF,
+                                        Mode.RTL, Mode.POSCTL):
             self.flight_started = True
 
     def _start_mission(self) -> None:
@@ -297,6 +411,29 @@ class Commander:
         sp.received_s = now_s
         return True, ""
 
+    # ------------------------------------------------------------------ manual control
+
+    def manual_input(self, now_s: float, x: int, y: int, z: int, r: int) -> None:
+        """MANUAL_CONTROL (x, y, r -1000..1000; z 0..1000, 500 at the centre)."""
+        self.sticks = manual.sticks_from_manual_control(x, y, z, r)
+        self.sticks_received_s = now_s
+
+    def manual_fresh(self, now_s: float) -> bool:
+        """MANUAL_CONTROL heard within COM_RC_LOSS_T (wall clock)."""
+        return now_s - self.sticks_received_s <= self.flight.manual_timeout_s
+
+    def _manual_ref(self, t_us: int) -> Reference:
+        sp = self.manual_sp
+        if sp is None:
+            start = self._current_pose_ref()
+            sp = manual.start(t_us, start.p_enu_m, start.q_enu_flu)
+            self.manual_limits = manual.fit_envelope(self.flight.sticks, self.limits.vehicle,
+                                                     start.q_enu_flu)
+        p_vehicle = self.state.p_enu_m if self.state is not None else None
+        self.manual_sp, ref = manual.advance(sp, t_us, self.sticks, self.manual_limits,
+                                             p_vehicle)
+        return ref
+
     def _offboard_ref(self) -> Reference:
         sp = self.offboard
         hold = self.hold or self._current_pose_ref()
@@ -313,8 +450,9 @@ class Commander:
 
     @property
     def landing(self) -> bool:
-        """Landing: LAND mode, a touchdown, or a mission flying its NAV_LAND item."""
-        if self.mode == Mode.LAND or self.touchdown is not None:
+        """Landing or returning: LAND or RTL mode, a touchdown, or a mission flying its
+        NAV_LAND item (a GCS link loss does not interrupt these)."""
+        if self.mode in (Mode.LAND, Mode.RTL) or self.touchdown is not None:
             return True
         return self.mode == Mode.MISSION and self.mission_running and \
             0 <= self.mission_current < len(self.mission) and \
@@ -327,11 +465,13 @@ class Commander:
         self.mission_running = False
         self.touchdown = None
         self.land = None
+        self.auto = None
         self.say(SEVERITY_CRITICAL, reason, FAILSAFE)
 
     def failsafe_land(self, reason: str) -> None:
         if self.mode != Mode.LAND:
             self.mode = Mode.LAND
+            self.auto = None
             self._start_landing()
         self.say(SEVERITY_CRITICAL, reason, FAILSAFE)
 
@@ -353,6 +493,10 @@ class Commander:
             if self.land.completed:
                 self._begin_touchdown(t_us, ref)
             return ref
+        if self.mode in (Mode.TAKEOFF, Mode.RTL) and self.auto is not None:
+            return self._auto_ref(t_us)
+        if self.mode == Mode.POSCTL:
+            return self._manual_ref(t_us)
         if self.hold is None:
             self.hold = self._current_pose_ref()
         return self.hold
@@ -376,6 +520,23 @@ class Commander:
             else:
                 self.mode = Mode.HOLD
                 self.hold = pose_ref(ref.p_enu_m, ref.q_enu_flu)
+        return ref
+
+    def _auto_ref(self, t_us: int) -> Reference:
+        """TAKEOFF's or RTL's plan; at its end TAKEOFF holds, RTL touches down."""
+        auto = self.auto
+        assert auto is not None
+        t_s = t_us * 1e-6
+        auto.update(t_s)
+        ref = auto.sample(t_s)
+        if auto.completed:
+            self.auto = None
+            if self.mode == Mode.RTL:
+                self._begin_touchdown(t_us, ref)
+            else:
+                self.mode = Mode.HOLD
+                self.hold = pose_ref(ref.p_enu_m, ref.q_enu_flu)
+                self.say(SEVERITY_INFO, "takeoff complete: mode HOLD")
         return ref
 
     def _begin_touchdown(self, t_us: int, ref: Reference) -> None:

@@ -2,10 +2,11 @@
 
 Pure: every check takes its clock as an argument. The flight clock (`t_us`: simulated time
 in lockstep, monotonic time in real time) drives what changes the flight: state input loss,
-saturation, divergence. The wall clock (`now_s`) serves only the links: GCS heartbeat loss
-and the offboard setpoint stream (DESIGN.md section 2). In lockstep a state arrives with
-every control period, so state input loss cannot happen on the flight clock: a simulator
-that stops answering freezes the flight with it and is reported by the process shell.
+saturation, divergence. The wall clock (`now_s`) serves only the links: GCS heartbeat loss,
+the offboard setpoint stream and MANUAL_CONTROL (DESIGN.md section 2). In lockstep a state
+arrives with every control period, so state input loss cannot happen on the flight clock:
+a simulator that stops answering freezes the flight with it and is reported by the process
+shell.
 """
 
 from __future__ import annotations
@@ -37,6 +38,12 @@ def state_lost(t_us: int, state_rx_us: int | None, settings: FailsafeSettings) -
 
 def offboard_lost(now_s: float, received_s: float, timeout_s: float) -> bool:
     """No offboard setpoint for longer than COM_OF_LOSS_T on the wall clock."""
+    return now_s - received_s > timeout_s
+
+
+def manual_control_lost(now_s: float, received_s: float, timeout_s: float) -> bool:
+    """No MANUAL_CONTROL for longer than COM_RC_LOSS_T on the wall clock (PX4's RC loss; the
+    reaction here is HOLD, PX4's NAV_RCL_ACT = 1)."""
     return now_s - received_s > timeout_s
 
 

@@ -50,9 +50,13 @@ HANDLED = ("HEARTBEAT", "COMMAND_LONG", "COMMAND_INT", "MISSION_COUNT", "MISSION
            "MISSION_CLEAR_ALL", "MISSION_ACK", "MISSION_SET_CURRENT",
            "MISSION_WRITE_PARTIAL_LIST", "MISSION_REQUEST_PARTIAL_LIST",
            "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
-           "SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET", "SET_MODE")
+           "SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET", "SET_MODE",
+           "MANUAL_CONTROL")
 _ALWAYS_REQUESTABLE = (M.MAVLINK_MSG_ID_MISSION_CURRENT, M.MAVLINK_MSG_ID_HEARTBEAT,
                        M.MAVLINK_MSG_ID_SYS_STATUS)
+# NAV_TAKEOFF's altitude: COMMAND_LONG p7 is AMSL (as PX4 reads it); COMMAND_INT's z by frame
+_AMSL_FRAMES = (M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_INT)
+_RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 
 
 @dataclass
@@ -87,6 +91,7 @@ class GcsServer:
         self.links = [GcsLink(link, self._encoder(i)) for i, link in enumerate(links)]
         self.parsers: dict[tuple[int, object], MAV.MAVLink] = {}
         self._stream_timestamps: dict = {}  # replay protection shared by every parser
+        self.home = home
         self.builders = Builders(self.snapshot, home)
         self.gcs_seen_s = -math.inf
         self.mission_link = 0  # the link of the latest mission upload (re-requests go there)
@@ -103,6 +108,7 @@ class GcsServer:
         # the pipeline's events, which `announce` sends): the onboard log records them.
         self.on_text: Callable[[int, str], None] | None = None
         self.v_enu_m_s = (0.0, 0.0, 0.0)
+        self.announced: tuple[bool, int] | None = None  # (armed, custom_mode) last sent
 
     def _encoder(self, index: int) -> MAV.MAVLink:
         mav = encoder(self.system_id, COMPONENT)
@@ -207,6 +213,12 @@ class GcsServer:
             if msg.type == M.MAV_TYPE_GCS:
                 self.gcs_seen_s = now_s
             return
+        if kind == "MANUAL_CONTROL":  # its target field is `target`
+            if msg.target not in (0, self.system_id):
+                self.ignored_messages += 1
+                return
+            self.pipeline.commander.manual_input(now_s, msg.x, msg.y, msg.z, msg.r)
+            return
         target = getattr(msg, "target_system", 0)
         if target not in (0, self.system_id):
             self.ignored_messages += 1
@@ -286,6 +298,10 @@ class GcsServer:
             text = f"no mission item {p[0]:g}"
         elif cmd == M.MAV_CMD_NAV_LAND:
             result, text = c.set_mode(Mode.LAND, now_s)
+        elif cmd == M.MAV_CMD_NAV_TAKEOFF:
+            result, text = self._takeoff(msg)
+        elif cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            result, text = c.set_mode(Mode.RTL, now_s)
         elif cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
             msg_id = _as_int(p[0], 0, 0xFFFFFF)
             if msg_id is None:
@@ -318,6 +334,25 @@ class GcsServer:
         if text and result != M.MAV_RESULT_ACCEPTED:
             self.say(M.MAV_SEVERITY_WARNING, text, index)
 
+    def _takeoff(self, msg: MAV.MAVLink_message) -> tuple[int, str]:
+        """MAV_CMD_NAV_TAKEOFF: altitude NaN (MAVSDK's, QGC's) -> MIS_TAKEOFF_ALT above the
+        vehicle; else the altitude AMSL (COMMAND_LONG p7, as PX4; COMMAND_INT z in a global
+        frame) or above home (COMMAND_INT z in a relative-altitude frame)."""
+        c = self.pipeline.commander
+        if msg.get_type() == "COMMAND_INT":
+            alt, frame = msg.z, msg.frame
+        else:
+            alt, frame = msg.param7, M.MAV_FRAME_GLOBAL
+        if math.isnan(alt):
+            return c.takeoff()
+        if not math.isfinite(alt):
+            return M.MAV_RESULT_DENIED, "takeoff: altitude not finite"
+        if frame in _AMSL_FRAMES:
+            return c.takeoff(alt - self.home.alt_m)
+        if frame in _RELATIVE_FRAMES:
+            return c.takeoff(alt)
+        return M.MAV_RESULT_DENIED, f"takeoff: frame {frame} not supported"
+
     def set_mission_current(self, seq: int) -> bool:
         result, _ = self.pipeline.commander.set_mission_current(seq)
         if result == M.MAV_RESULT_ACCEPTED:
@@ -347,18 +382,31 @@ class GcsServer:
             self._send_param(self.params.index(name), index)
 
     def _param_set(self, index: int, msg: MAV.MAVLink_message) -> None:
+        """A set in force is echoed (PARAM_VALUE) to every link. A refusal answers the link
+        that asked: PARAM_ERROR first (MAVSDK reports its error code: DOES_NOT_EXIST,
+        VALUE_OUT_OF_RANGE, instead of a timeout), a STATUSTEXT with the reason, and for a
+        known parameter the unchanged value (PARAM_VALUE, what older clients wait for)."""
         name = self._param_name(msg)
+        raw_id = msg.param_id.encode() if isinstance(msg.param_id, str) else msg.param_id
         if name not in self.params.values:
+            self.send(M.MAVLink_param_error_message(
+                msg.get_srcSystem(), msg.get_srcComponent(), raw_id[:16], -1,
+                M.MAV_PARAM_ERROR_DOES_NOT_EXIST), index)
             self.say(M.MAV_SEVERITY_WARNING, f"unknown parameter {name}", index)
             return
+        i = self.params.index(name)
         try:
             self.params.set(name, float(msg.param_value))
         except ParamError as exc:
+            self.send(M.MAVLink_param_error_message(
+                msg.get_srcSystem(), msg.get_srcComponent(), name.encode(), i,
+                M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE), index)
             self.say(M.MAV_SEVERITY_WARNING, str(exc), index)
-        else:
-            if self.on_params is not None:
-                self.on_params()
-        self._send_param(self.params.index(name))  # the value now in force, to every link
+            self._send_param(i, index)  # the unchanged value
+            return
+        if self.on_params is not None:
+            self.on_params()
+        self._send_param(i)  # the value now in force, to every link
 
     # ------------------------------------------------------------------ telemetry
 
@@ -396,9 +444,13 @@ class GcsServer:
         elif msg_id == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             msgs = autopilot_version(self.system_id)
         elif msg_id == M.MAVLINK_MSG_ID_SYS_STATUS:
-            msgs = sys_status(pipe.state is not None and not pipe.failsafe, 0,
-                              self.rejected_bytes + self.ignored_messages,
-                              self.signing_rejects)
+            state_ok = pipe.state is not None and pipe.failsafe != "state input lost"
+            heard = c.sticks_received_s > -math.inf
+            msgs = sys_status(state_ok=state_ok, control_ok=state_ok and not pipe.failsafe,
+                              prearm_ok=state_ok, load_permille=0,
+                              manual_control=c.manual_fresh(self.now_s) if heard else None,
+                              rejected=self.rejected_bytes + self.ignored_messages,
+                              signing_rejects=self.signing_rejects)
         elif msg_id == M.MAVLINK_MSG_ID_MISSION_CURRENT:
             msgs = self.mission_current_msg()
         else:
@@ -412,10 +464,20 @@ class GcsServer:
             self.send(m, index)
 
     def tick(self, now_s: float) -> None:
-        """Wall-clock work: mission re-requests, each link's due streams."""
+        """Wall-clock work: mission re-requests, each link's due streams; a HEARTBEAT at once
+        when the mode or the arming state changes (on the links that have the stream on)."""
         self.now_s = max(self.now_s, now_s)
         for reply in self.missions.tick(now_s):
             self.send(reply, self.mission_link)
+        c = self.pipeline.commander
+        now = (c.armed, c.mode.custom_mode)
+        if now != self.announced:
+            hb_id = M.MAVLINK_MSG_ID_HEARTBEAT
+            for gl in self.links:
+                interval = gl.schedule.intervals.get(hb_id, 0.0)
+                if self.announced is not None and interval > 0:
+                    gl.schedule.due[hb_id] = now_s  # due now, then on its cadence again
+            self.announced = now
         for i, gl in enumerate(self.links):
             for msg_id in gl.schedule.pop_due(now_s):
                 self.send_message(msg_id, i)

@@ -1,10 +1,12 @@
 """Mission validation and execution without I/O: mission items in, a timed `Reference` out.
 
-Items travel as MAVLink local NED / body FRD (`common.mission_items.MissionItem`); inside,
-everything is world ENU / body FLU. Every item starts where the previous item's *desired*
-pose ended (never the measured pose), and has fixed start and end times planned when the
-mission starts, so the timeline is exact and a mission that re-creates a trajectory
-(Case I, see `gcs.scenario_mission`) gives the trajectory's reference to rounding.
+Items travel as MAVLink local NED / body FRD (`common.mission_items.MissionItem`), or in a
+global frame that the vehicle's home position converts to local NED (`check_mission`,
+`localize`); inside, everything is world ENU / body FLU. Every item starts where the
+previous item's *desired* pose ended (never the measured pose), and has fixed start and end
+times planned when the mission starts, so the timeline is exact and a mission that
+re-creates a trajectory (Case I, see `gcs.scenario_mission`) gives the trajectory's
+reference to rounding.
 
 Time comes in as arguments (seconds); nothing here reads a clock. The MAVLink numbers used
 below are those of common.xml, written out so that this module imports no MAVLink library
@@ -62,7 +64,16 @@ import numpy as np
 
 from common.config import VehicleConfig
 from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
-from common.mission_items import INT32_MAX, INT32_MIN, MissionItem
+from common.mission_items import (
+    GEO_FRAMES,
+    INT32_MAX,
+    INT32_MIN,
+    XY_COMMANDS,
+    HomePosition,
+    MissionItem,
+    local_ned,
+    to_local,
+)
 from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul
 from fcu.feasibility import TimeScaling, envelope, figure_instants, move_instants
 from fcu.tracker import Reference, pose_ref
@@ -95,6 +106,9 @@ MAV_MISSION_INVALID_SEQUENCE = 13
 MAV_MISSION_DENIED = 14
 
 FIGURE_EXTENT = math.sqrt(5.0)  # max |[sin 2T, sin T, 1 - cos 2T]|
+# MAVProxy's `wp load` scales local x, y by 1e7 instead of 1e4: 1 m in a file arrives as
+# 1000 m. A local item this far out and beyond the geofence is refused with that hint.
+SCALED_LOCAL_M = 1000.0
 POSITION_TOLERANCE_M = 1e-3  # well above the wire's resolution (1e-4 m for x, y; float32 z)
 ANGLE_TOLERANCE_RAD = 1e-4
 
@@ -159,6 +173,15 @@ def _yaw(x: float) -> bool:
 
 def _outside(seq: int, reach_m: float, r: float) -> tuple[int, str]:
     return MAV_MISSION_DENIED, f"item {seq}: beyond the geofence ({reach_m:.0f} m > {r:.0f} m)"
+
+
+def _scaled(item: MissionItem, r: float) -> tuple[int, str]:
+    """A local item whose x, y lie beyond the geofence and at least SCALED_LOCAL_M away:
+    most likely a local-frame WPL file loaded by MAVProxy, which scales x and y by 1e7 in
+    every frame (1.5 m arrives as 15,000,000, read as 1500 m), where local frames take 1e4."""
+    return MAV_MISSION_DENIED, (
+        f"item {item.seq}: x {item.x_m:.0f} m, y {item.y_m:.0f} m, beyond the geofence "
+        f"({r:.0f} m): a local WPL file scaled by 1e7 (MAVProxy)? use a global frame")
 
 
 def _check_item(item: MissionItem, limits: MissionLimits, pos: list[float],
@@ -227,13 +250,55 @@ def _check_item(item: MissionItem, limits: MissionLimits, pos: list[float],
         return MAV_MISSION_ACCEPTED, ""  # ends where it started (T = 2 pi)
     reach = norm3((target[0], target[1], target[2]))
     if reach > r:
+        if item.command in XY_COMMANDS and \
+                math.hypot(item.x_m, item.y_m) > max(r, SCALED_LOCAL_M):
+            return _scaled(item, r)
         return _outside(item.seq, reach, r)
     pos[:] = target
     return MAV_MISSION_ACCEPTED, ""
 
 
-def check_mission(items: Sequence[MissionItem], limits: MissionLimits) -> MissionCheck:
+def _localized(item: MissionItem, home: HomePosition | None,
+               limits: MissionLimits) -> tuple[MissionItem, int, str]:
+    """(the item in the local frame, MAV_MISSION_RESULT, reason): a GEO_FRAMES item with a
+    supported command converted through `home` (none: MAV_MISSION_UNSUPPORTED_FRAME), its
+    latitude and longitude checked first; any other item as it is."""
+    if item.frame not in GEO_FRAMES or item.command not in SUPPORTED_COMMANDS:
+        return item, MAV_MISSION_ACCEPTED, ""
+    if home is None:
+        return item, MAV_MISSION_UNSUPPORTED_FRAME, ""
+    if not (isinstance(item.x, int) and -900_000_000 <= item.x <= 900_000_000):
+        return item, MAV_MISSION_INVALID_PARAM5_X, ""
+    if not (isinstance(item.y, int) and -1_800_000_000 <= item.y <= 1_800_000_000):
+        return item, MAV_MISSION_INVALID_PARAM6_Y, ""
+    local = to_local(item, home)
+    if item.command in XY_COMMANDS and not local.xy_fit_int32:  # farther than 214 km
+        north, east, _ = local_ned(item, home)
+        result, reason = _outside(item.seq, math.hypot(north, east), limits.max_distance_m)
+        return item, result, reason
+    return local, MAV_MISSION_ACCEPTED, ""
+
+
+def localize(items: Sequence[MissionItem],
+             home: HomePosition | None) -> tuple[MissionItem, ...]:
+    """The items as the executor flies them: global-frame items converted to the local frame
+    through `home` (`common.mission_items.to_local`); for a mission `check_mission` accepted
+    with the same home."""
+    if home is None:
+        return tuple(items)
+    return tuple(to_local(it, home) if it.command in SUPPORTED_COMMANDS else it
+                 for it in items)
+
+
+def check_mission(items: Sequence[MissionItem], limits: MissionLimits,
+                  home: HomePosition | None = None) -> MissionCheck:
     """Validate a whole mission: (MAV_MISSION_RESULT, offending seq or None, reason).
+
+    Items in MAV_FRAME_LOCAL_NED, or, with `home`, in a global frame with an altitude
+    (common.mission_items.GEO_FRAMES: AMSL or above home, INT or not), checked as their
+    local equivalents (`localize`); other frames are MAV_MISSION_UNSUPPORTED_FRAME. A local
+    item whose x, y lie beyond the geofence and SCALED_LOCAL_M or more away is refused with a
+    reason naming MAVProxy's 1e7 scaling of local WPL files (its likeliest cause).
 
     Seqs must be 0..n-1 in order. Only the parameters an item uses are checked. The
     geofence check follows the planned positions from the origin (the mission's start):
@@ -246,23 +311,28 @@ def check_mission(items: Sequence[MissionItem], limits: MissionLimits) -> Missio
     """
     if len(items) > limits.max_items:
         return MissionCheck(MAV_MISSION_NO_SPACE, None)
-    return _check_items(items, limits, geofence=True, envelope_check=limits.vehicle is not None)
+    return _check_items(items, limits, geofence=True, envelope_check=limits.vehicle is not None,
+                        home=home)
 
 
-def validate_mission(items: Sequence[MissionItem],
-                     limits: MissionLimits) -> tuple[int, int | None]:
+def validate_mission(items: Sequence[MissionItem], limits: MissionLimits,
+                     home: HomePosition | None = None) -> tuple[int, int | None]:
     """(MAV_MISSION_RESULT, offending seq or None) of `check_mission`."""
-    check = check_mission(items, limits)
+    check = check_mission(items, limits, home)
     return check.result, check.seq
 
 
 def _check_items(items: Sequence[MissionItem], limits: MissionLimits, geofence: bool,
-                 envelope_check: bool = False) -> MissionCheck:
+                 envelope_check: bool = False,
+                 home: HomePosition | None = None) -> MissionCheck:
     pos = [0.0, 0.0, 0.0]
     t, p, q = 0.0, _ZERO, Q_IDENTITY
     for i, item in enumerate(items):
         if item.seq != i:
             return MissionCheck(MAV_MISSION_INVALID_SEQUENCE, item.seq)
+        item, result, reason = _localized(item, home, limits)
+        if result != MAV_MISSION_ACCEPTED:
+            return MissionCheck(result, item.seq, reason)
         result, reason = _check_item(item, limits, pos, geofence)
         if result != MAV_MISSION_ACCEPTED:
             return MissionCheck(result, item.seq, reason)

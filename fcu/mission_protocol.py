@@ -16,6 +16,13 @@ Download: MISSION_REQUEST_LIST -> MISSION_COUNT, then MISSION_ITEM_INT for each
 MISSION_REQUEST_INT (or legacy MISSION_REQUEST). MISSION_CLEAR_ALL clears. Only
 MAV_MISSION_TYPE_MISSION is supported; the other plan types get MAV_MISSION_UNSUPPORTED.
 
+Frames: with a `home` (the FCU's, as HOME_POSITION publishes it), items in a global frame
+with an altitude (GLOBAL / GLOBAL_INT: AMSL, GLOBAL_RELATIVE_ALT / _INT: above home) are
+accepted and flown as their local NED equivalents (`fcu.mission.localize`); the server keeps
+every item as it was uploaded, frame and coordinates, so a download returns the upload and
+`on_mission_changed` gets the local items. A local item beyond the geofence is refused with
+a STATUSTEXT that names MAVProxy's 1e7 scaling of local WPL files.
+
 `version` changes on every accepted change and travels as `opaque_id` in MISSION_COUNT and
 MISSION_ACK when the pymavlink dialect has that field (pymavlink 2.4.50 has not).
 """
@@ -26,8 +33,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from common.mavlink import MAV
-from common.mission_items import MissionItem, item_from_message, item_message
-from fcu.mission import MissionLimits, check_mission
+from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
+from fcu.mission import MissionLimits, check_mission, localize
 
 M = MAV
 MISSION = M.MAV_MISSION_TYPE_MISSION
@@ -95,13 +102,16 @@ class MissionServer:
     """One vehicle's mission store and protocol state (one upload at a time)."""
 
     def __init__(self, system_id: int, component_id: int, limits: MissionLimits,
-                 item_timeout_s: float = 0.25, retries: int = 5) -> None:
+                 item_timeout_s: float = 0.25, retries: int = 5,
+                 home: HomePosition | None = None) -> None:
         self.system_id = system_id
         self.component_id = component_id
         self.limits = limits
+        self.home = home  # converts global-frame items; None: only local ones are accepted
         self.item_timeout_s = item_timeout_s
         self.retries = retries
-        self.mission: tuple[MissionItem, ...] = ()
+        self.mission: tuple[MissionItem, ...] = ()  # as uploaded (downloads return these)
+        self.local_mission: tuple[MissionItem, ...] = ()  # as flown: local NED
         self.version = 0
         self._current_seq = 0
         # The current item lives with whoever flies the mission (the FCU's commander): it is
@@ -147,10 +157,11 @@ class MissionServer:
 
     def _replace(self, items: tuple[MissionItem, ...]) -> None:
         self.mission = items
+        self.local_mission = localize(items, self.home)
         self.version = (self.version + 1) & 0xFFFFFFFF or 1
         self._current_seq = 0
         if self.on_mission_changed is not None:
-            self.on_mission_changed(items)
+            self.on_mission_changed(self.local_mission)
 
     # ------------------------------------------------------------------ input
 
@@ -241,7 +252,7 @@ class MissionServer:
             return [self._request(up, now_s)]
         self._upload = None
         items = tuple(up.items)
-        result, _seq, reason = check_mission(items, self.limits)
+        result, _seq, reason = check_mission(items, self.limits, self.home)
         if result == M.MAV_MISSION_ACCEPTED:
             self._replace(items)
         notes = self._statustexts(reason) if reason else ()

@@ -7,8 +7,9 @@ writes the onboard log.
 
 Clocks (DESIGN.md section 2). Lockstep: each new ODOMETRY is one control period at its own
 stamp, answered with HIL_ACTUATOR_CONTROLS; before the flight starts (armed and MISSION,
-OFFBOARD or LAND) states are not answered, so simulated time stands still. A simulator
-that stops answering is reported ("simulator not responding"), never a reason to disarm.
+OFFBOARD, LAND, TAKEOFF, RTL or POSCTL) states are not answered, so simulated time stands
+still. A simulator that stops answering is reported ("simulator not responding"), never a
+reason to disarm.
 Real time: a fixed-rate loop on the monotonic clock, integrating with the measured period
 (clamped to `MAX_DT_PERIODS` periods). Heartbeat, telemetry, mission re-requests and link
 timeouts run on the monotonic wall clock in both.
@@ -26,9 +27,11 @@ import sys
 import time
 from pathlib import Path
 
+from common.cliargs import OneLineParser, check_output_path
 from common.config import ConfigError, load_gains, load_vehicle
-from common.links import LinkError, open_link
+from common.links import LinkError, open_link, parse_url
 from common.mavlink import MAV, SigningKeyError, encoder, pack, read_signing_key
+from common.mission_items import HomePosition
 from common.outcome import Event
 from common.parent import stop_with_parent
 from common.ulog import ULogError
@@ -57,7 +60,9 @@ class FlightController:
         self.lockstep = lockstep
         vehicle = pipeline.vehicle
         self.params = ParamStore(pipeline.core.tracker.gains)
-        self.missions = MissionServer(system_id, COMPONENT, pipeline.commander.limits)
+        self.missions = MissionServer(system_id, COMPONENT, pipeline.commander.limits,
+                                      home=HomePosition.published(home.lat_deg, home.lon_deg,
+                                                                  home.alt_m))
         self.missions.on_mission_changed = lambda items: pipeline.commander.set_mission(
             tuple(items))
         sim = open_link(sim_url, role="sim_client", system_id=system_id)
@@ -268,7 +273,7 @@ def _home(text: str) -> Home:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="fcu", description="dual-quaternion flight controller")
+    p = OneLineParser(prog="fcu", description="dual-quaternion flight controller")
     p.add_argument("--vehicle", type=Path, required=True, help="vehicle TOML")
     p.add_argument("--gains", type=Path, required=True, help="gains TOML (PID or PD)")
     p.add_argument("--sim", default="udpout:127.0.0.1:4560", help="simulator link URL")
@@ -292,6 +297,10 @@ def main(argv: list[str] | None = None) -> int:
     stop_with_parent()
     args = build_parser().parse_args(argv)
     try:
+        for url in (args.sim, *(args.gcs or ())):  # every URL, before anything is opened
+            parse_url(url)
+        for option, path in (("--onboard-log", args.onboard_log), ("--stats", args.stats)):
+            check_output_path(option, path)
         if not 1 <= args.rate <= 1000:
             raise ConfigError(f"--rate: expected 1..1000 Hz, got {args.rate}")
         if not 1 <= args.sysid <= 254:
@@ -302,8 +311,14 @@ def main(argv: list[str] | None = None) -> int:
                               system_id=args.sysid, lockstep=not args.realtime,
                               home=args.home, onboard_log=args.onboard_log,
                               stats_path=args.stats, signing_key=key)
-    except (ConfigError, LinkError, SigningKeyError, ULogError) as exc:
+    except LinkError as exc:  # 2: bad URL, busy port, missing device; 1: peer not there
         print(f"fcu: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except (ConfigError, SigningKeyError, ULogError) as exc:
+        print(f"fcu: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file that cannot be written: one line
+        print(f"fcu: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
 
     def stop(_signum, _frame):

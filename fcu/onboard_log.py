@@ -46,7 +46,10 @@ MAV_TYPE_HEXAROTOR = 13
 NAV_STATE = {Mode.HOLD: px4.NAVIGATION_STATE_AUTO_LOITER,
              Mode.MISSION: px4.NAVIGATION_STATE_AUTO_MISSION,
              Mode.OFFBOARD: px4.NAVIGATION_STATE_OFFBOARD,
-             Mode.LAND: px4.NAVIGATION_STATE_AUTO_LAND}
+             Mode.LAND: px4.NAVIGATION_STATE_AUTO_LAND,
+             Mode.TAKEOFF: px4.NAVIGATION_STATE_AUTO_TAKEOFF,
+             Mode.RTL: px4.NAVIGATION_STATE_AUTO_RTL,
+             Mode.POSCTL: px4.NAVIGATION_STATE_POSCTL}
 CRITICAL_FAILSAFES = ("diverged", "non-finite command")
 class OnboardLog:
     """Append-only onboard log of a pipeline; `step` after each control step, `flush` after

@@ -13,7 +13,9 @@ import struct
 from dataclasses import dataclass
 
 from common.config import ConfigError, Gains, VehicleConfig, check_stability
+from fcu.commander import FlightSettings
 from fcu.failsafe import FailsafeSettings
+from fcu.manual import StickSettings
 from fcu.mission import MissionLimits
 from fcu.pipeline import Pipeline
 
@@ -72,6 +74,22 @@ SPECS: tuple[ParamSpec, ...] = (
               "on long saturation: 0 = report, 1 = abort the mission to HOLD"),
     ParamSpec("COM_DIV_POS", 10.0, 0.1, 1000.0, "m",
               "divergence: tracking error beyond this disarms"),
+    ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.1, 100.0, "m",
+              "TAKEOFF (MAV_CMD_NAV_TAKEOFF without altitude) climbs this much, then holds"),
+    ParamSpec("RTL_RETURN_ALT", 10.0, 0.0, 150.0, "m",
+              "RTL climbs to this height above home if lower, flies home, lands"),
+    ParamSpec("MPC_XY_CRUISE", 5.0, 0.1, 20.0, "m/s", "RTL travel speed (distance / time)"),
+    ParamSpec("COM_RC_LOSS_T", 0.5, 0.1, 35.0, "s",
+              "POSCTL: MANUAL_CONTROL loss timeout (to HOLD)"),
+    ParamSpec("MPC_VEL_MANUAL", 5.0, 0.1, 20.0, "m/s",
+              "POSCTL: horizontal speed at full stick"),
+    ParamSpec("MPC_Z_VEL_MAX_UP", 3.0, 0.1, 8.0, "m/s", "POSCTL: climb speed at full stick"),
+    ParamSpec("MPC_Z_VEL_MAX_DN", 1.5, 0.1, 4.0, "m/s", "POSCTL: descent speed at full stick"),
+    ParamSpec("MPC_ACC_HOR", 3.0, 0.5, 15.0, "m/s^2", "POSCTL: horizontal acceleration limit"),
+    ParamSpec("MPC_ACC_UP_MAX", 3.0, 0.5, 15.0, "m/s^2", "POSCTL: upward acceleration limit"),
+    ParamSpec("MPC_ACC_DOWN_MAX", 3.0, 0.5, 15.0, "m/s^2",
+              "POSCTL: downward acceleration limit"),
+    ParamSpec("MPC_MAN_Y_MAX", 90.0, 0.0, 400.0, "deg/s", "POSCTL: yaw rate at full stick"),
 )
 BY_NAME = {s.name: s for s in SPECS}
 
@@ -151,10 +169,25 @@ def mission_limits(values: dict[str, float], vehicle: VehicleConfig | None = Non
                          vehicle=vehicle if values["MIS_ENV_CHK"] == 1.0 else None)
 
 
+def flight_settings(values: dict[str, float]) -> FlightSettings:
+    """The automatic modes' (MIS_TAKEOFF_ALT, RTL_*, MPC_XY_CRUISE) and POSCTL's (MPC_*,
+    COM_RC_LOSS_T) parameters."""
+    sticks = StickSettings(
+        speed_xy_m_s=values["MPC_VEL_MANUAL"], speed_up_m_s=values["MPC_Z_VEL_MAX_UP"],
+        speed_down_m_s=values["MPC_Z_VEL_MAX_DN"], acc_xy_m_s2=values["MPC_ACC_HOR"],
+        acc_up_m_s2=values["MPC_ACC_UP_MAX"], acc_down_m_s2=values["MPC_ACC_DOWN_MAX"],
+        yaw_rate_deg_s=values["MPC_MAN_Y_MAX"])
+    return FlightSettings(takeoff_alt_m=values["MIS_TAKEOFF_ALT"],
+                          rtl_return_alt_m=values["RTL_RETURN_ALT"],
+                          rtl_cruise_m_s=values["MPC_XY_CRUISE"],
+                          manual_timeout_s=values["COM_RC_LOSS_T"], sticks=sticks)
+
+
 def apply_params(store: ParamStore, pipeline: Pipeline) -> MissionLimits:
     """Put the parameters in force in the pipeline; returns the mission limits (the mission
     protocol checks uploads against them too)."""
     v = store.values
     limits = mission_limits(v, pipeline.vehicle)
-    pipeline.configure(store.gains(), limits, failsafe_settings(v), v["COM_OF_LOSS_T"])
+    pipeline.configure(store.gains(), limits, failsafe_settings(v), v["COM_OF_LOSS_T"],
+                       flight_settings(v))
     return limits

@@ -25,6 +25,7 @@ from fcu.commander import (
     SEVERITY_INFO,
     SEVERITY_WARNING,
     Commander,
+    FlightSettings,
 )
 from fcu.core import FlightCore, StepResult
 from fcu.dualquat import q_normalize, q_rotate
@@ -32,6 +33,7 @@ from fcu.failsafe import (
     FailsafeSettings,
     GcsLinkMonitor,
     SaturationMonitor,
+    manual_control_lost,
     offboard_lost,
     state_lost,
 )
@@ -86,11 +88,16 @@ class Pipeline:
         self.commander.update_landed()
 
     def configure(self, gains: Gains, limits: MissionLimits, failsafes: FailsafeSettings,
-                  offboard_timeout_s: float) -> None:
-        """New parameters: gains, mission limits, failsafe settings."""
+                  offboard_timeout_s: float, flight: FlightSettings | None = None) -> None:
+        """New parameters: gains, mission limits, failsafe settings, the automatic modes' and
+        POSCTL's settings."""
         self.core.tracker.set_gains(gains)
         self.commander.limits = limits
         self.commander.offboard_timeout_s = offboard_timeout_s
+        if flight is not None:
+            if flight.sticks != self.commander.flight.sticks:
+                self.commander.manual_sp = None  # re-fit the new limits from here
+            self.commander.flight = flight
         self.settings = failsafes
 
     def arm(self) -> tuple[int, str]:
@@ -181,11 +188,15 @@ class Pipeline:
     # ------------------------------------------------------------------ links (wall clock)
 
     def check_links(self, now_s: float, gcs_seen_s: float = math.inf) -> None:
-        """Offboard stream and GCS heartbeat, on the wall clock (DESIGN.md section 2)."""
+        """Offboard and MANUAL_CONTROL streams and GCS heartbeat, on the wall clock (DESIGN.md
+        section 2)."""
         cmd = self.commander
         if cmd.armed and cmd.mode == Mode.OFFBOARD and offboard_lost(
                 now_s, cmd.offboard.received_s, cmd.offboard_timeout_s):
             cmd.failsafe_hold("failsafe: offboard setpoints lost: HOLD")
+        if cmd.armed and cmd.mode == Mode.POSCTL and manual_control_lost(
+                now_s, cmd.sticks_received_s, cmd.flight.manual_timeout_s):
+            cmd.failsafe_hold("failsafe: manual control lost: HOLD")
         change = self.gcs_link.update(now_s, gcs_seen_s, self.settings)
         if change == "lost":
             self.failsafe = "GCS link lost"

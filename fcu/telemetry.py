@@ -13,6 +13,7 @@ from typing import NamedTuple
 
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
 from common.mavlink import MAV
+from common.modes import MAIN_POSCTL
 from fcu.pipeline import StepOutput
 from fcu.tracker import Reference, VehicleState
 
@@ -132,14 +133,21 @@ class Home:
 
 def heartbeat(armed: bool, custom_mode: int, active: bool, failsafe: str = ""
               ) -> MAV.MAVLink_message:
-    """system_status: ACTIVE/STANDBY, CRITICAL while a failsafe is active, EMERGENCY after a
+    """As PX4 sends it: MAV_AUTOPILOT_PX4 with PX4's custom mode (`common.modes`), so that
+    pymavlink/MAVProxy, QGroundControl and MAVSDK name the modes and set them by name; base
+    mode flags as PX4 sets them (MANUAL_INPUT in POSCTL, AUTO and GUIDED otherwise).
+    system_status: ACTIVE/STANDBY, CRITICAL while a failsafe is active, EMERGENCY after a
     divergence (as PX4 reports failsafes)."""
-    base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (M.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
-    base |= M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_AUTO_ENABLED
+    base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
+    base |= M.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0
+    if (custom_mode >> 16) & 0xFF == MAIN_POSCTL:
+        base |= M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+    else:
+        base |= M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_AUTO_ENABLED
     status = M.MAV_STATE_ACTIVE if active else M.MAV_STATE_STANDBY
     if failsafe:
         status = M.MAV_STATE_EMERGENCY if failsafe == "diverged" else M.MAV_STATE_CRITICAL
-    return M.MAVLink_heartbeat_message(M.MAV_TYPE_HEXAROTOR, M.MAV_AUTOPILOT_GENERIC, base,
+    return M.MAVLink_heartbeat_message(M.MAV_TYPE_HEXAROTOR, M.MAV_AUTOPILOT_PX4, base,
                                        custom_mode, status, 3)
 
 
@@ -149,17 +157,47 @@ def autopilot_version(uid: int) -> MAV.MAVLink_message:
         [0] * 18)
 
 
-def sys_status(healthy: bool, load_permille: int, rejected: int, signing_rejects: int
-               ) -> MAV.MAVLink_message:
-    """Health bits cleared during a failsafe; errors_comm = rejected input (bytes and
-    messages), errors_count1 = frames refused by MAVLink signing."""
-    sensors = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+# What the simulated vehicle has (SYS_STATUS `present`): the plant's IMU and barometer
+# (HIL_SENSOR: gyro, accelerometer, absolute pressure; no magnetometer, no GNSS), and the
+# external pose the FCU flies on (ODOMETRY, as from motion capture: VISION_POSITION, and the
+# attitude estimate AHRS); the controllers, the rotor outputs, the pre-arm check.
+STATE_SENSORS = (M.MAV_SYS_STATUS_SENSOR_3D_GYRO | M.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+                 | M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+                 | M.MAV_SYS_STATUS_SENSOR_VISION_POSITION | M.MAV_SYS_STATUS_AHRS)
+CONTROLLERS = (M.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
                | M.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-               | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+               | M.MAV_SYS_STATUS_SENSOR_YAW_POSITION
                | M.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+               | M.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
                | M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
+NO_BATTERY = (65535, -1, -1)  # voltage_battery (UINT16_MAX), current_battery, remaining: not
+# measured (MAVLink's values for "unknown"); no BATTERY_STATUS is sent: no battery is simulated
+
+
+def sys_status(*, state_ok: bool, control_ok: bool, prearm_ok: bool,
+               manual_control: bool | None, load_permille: int, rejected: int,
+               signing_rejects: int) -> MAV.MAVLink_message:
+    """Sensor bits that tell the truth: `present` what the simulated vehicle has (above),
+    `enabled` the same, `health` what works now: the state sensors while the state input
+    arrives (`state_ok`), the controllers unless a failsafe is active (`control_ok`),
+    PREARM_CHECK when arming would be accepted (`prearm_ok`; MAVSDK's is_armable),
+    RC_RECEIVER present once MANUAL_CONTROL has been heard (`manual_control` not None) and
+    healthy while it is fresh. Absent sensors are not healthy, except GEOFENCE, whose health
+    bit ground stations read as "no breach" (MAVProxy prints "fence breach" when it is
+    clear): no fence is monitored here, so none is breached. errors_comm = rejected input
+    (bytes and messages), errors_count1 = frames refused by MAVLink signing. Battery: not
+    measured (NO_BATTERY)."""
+    present = STATE_SENSORS | CONTROLLERS | M.MAV_SYS_STATUS_PREARM_CHECK
+    health = M.MAV_SYS_STATUS_GEOFENCE
+    health |= STATE_SENSORS if state_ok else 0
+    health |= CONTROLLERS if control_ok else 0
+    health |= M.MAV_SYS_STATUS_PREARM_CHECK if prearm_ok else 0
+    if manual_control is not None:
+        present |= M.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+        health |= M.MAV_SYS_STATUS_SENSOR_RC_RECEIVER if manual_control else 0
+    voltage, current, remaining = NO_BATTERY
     return M.MAVLink_sys_status_message(
-        sensors, sensors, sensors if healthy else 0, min(load_permille, 1000), 0, -1, -1,
+        present, present, health, min(load_permille, 1000), voltage, current, remaining,
         0, min(rejected, 65535), min(signing_rejects, 65535), 0, 0, 0, 0, 0, 0)
 
 

@@ -9,9 +9,10 @@ Runs and reports:
     gcs table1 [--in-process] [--ideal-actuators] [--duration S] --out DIR
     gcs report RUN_DIR | TABLE1_DIR
 Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0.1:14550):
-    gcs status | arm | disarm [--force] | mode NAME
-    gcs mission upload FILE | download [FILE] | clear | start
-    gcs param list | get NAME | set NAME VALUE
+    gcs status [--json] | arm | disarm [--force] | mode NAME
+    gcs mission upload FILE | download [FILE] [--frame global|local] | clear | start
+            (FILE: .plan QGC plan, .waypoints/.txt QGC WPL 110, .toml; or --format)
+    gcs param list | get NAME | set NAME VALUE | save FILE | load FILE   (QGC .params)
     gcs goto X Y Z [--roll D --pitch D --yaw D] [--arm]     (local NED, m and deg)
     gcs watch
     gcs view [--port 8765] [--mcap FILE] | view RUN_DIR [--speed X]   (Foxglove WebSocket)
@@ -25,8 +26,9 @@ import sys
 import time
 from pathlib import Path
 
+from common.cliargs import OneLineParser
 from common.config import ConfigError, load_scenario
-from common.links import LinkError
+from common.links import LinkError, parse_url
 
 DEFAULT_SCENARIOS = Path(__file__).resolve().parent.parent / "config" / "scenarios"
 DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
@@ -51,6 +53,10 @@ class Progress:
             self.stream.flush()
 
 
+class InputError(ValueError):
+    """Bad input found before anything is opened: one line, exit status 2."""
+
+
 def _positive(text: str) -> float:
     try:
         value = float(text)
@@ -72,17 +78,18 @@ def _finite(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    link = argparse.ArgumentParser(add_help=False)
+    link = OneLineParser(add_help=False)
     link.add_argument("--connect", default=DEFAULT_CONNECT, metavar="URL",
-                      help=f"link URL: udpin/udpout/tcp/tcpin:HOST:PORT or "
-                           f"serial:DEVICE:BAUD (default {DEFAULT_CONNECT})")
+                      help=f"link URL: udpin/udpout/tcp/tcpin:HOST:PORT, serial:DEVICE:BAUD, "
+                           f"zenoh:PREFIX[@ENDPOINT], or MAVSDK's udpin://, udp://, tcp://, "
+                           f"serial:// forms (default {DEFAULT_CONNECT})")
     link.add_argument("--sysid", type=int, help="the vehicle's system id (default: first heard)")
     link.add_argument("--wait", type=_positive, default=10.0, metavar="S",
                       help="how long to wait for the vehicle's heartbeat")
     link.add_argument("--signing-key", metavar="FILE",
                       help="sign with this MAVLink 2 key and refuse unsigned input")
 
-    parser = argparse.ArgumentParser(prog="gcs", description="dqflight ground station",
+    parser = OneLineParser(prog="gcs", description="dqflight ground station",
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=__doc__.split("\n", 2)[2])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -137,21 +144,33 @@ def build_parser() -> argparse.ArgumentParser:
                          "gcs table1 folder and all its runs")
     rep.add_argument("run_dir", type=Path)
 
-    sub.add_parser("status", parents=[link], help="identity, mode, position, attitude, health")
+    st = sub.add_parser("status", parents=[link],
+                        help="identity, mode, position, attitude, health")
+    st.add_argument("--json", action="store_true", help="print one JSON document")
     sub.add_parser("arm", parents=[link], help="arm the vehicle")
     dis = sub.add_parser("disarm", parents=[link], help="disarm the vehicle")
     dis.add_argument("--force", action="store_true", help="disarm even in the air")
     md = sub.add_parser("mode", parents=[link], help="change the flight mode")
-    md.add_argument("name", help="HOLD, MISSION, OFFBOARD or LAND")
+    md.add_argument("name", help="HOLD (LOITER), MISSION, TAKEOFF, LAND, RTL, POSCTL or "
+                                 "OFFBOARD (PX4's names)")
 
     mis = sub.add_parser("mission", help="upload, download, clear, start")
     msub = mis.add_subparsers(dest="action", required=True)
-    up = msub.add_parser("upload", parents=[link], help="upload a QGC WPL 110 or TOML file")
+    up = msub.add_parser("upload", parents=[link],
+                         help="upload a QGC .plan, QGC WPL 110 or TOML file")
     up.add_argument("file", type=Path)
+    up.add_argument("--format", choices=("plan", "wpl", "toml"), default=None,
+                    help="file format (default: by extension .plan, .waypoints, .toml; "
+                         "else by content)")
     down = msub.add_parser("download", parents=[link], help="download (to FILE or stdout)")
     down.add_argument("file", type=Path, nargs="?")
-    down.add_argument("--format", choices=("wpl", "toml"), default=None,
-                      help="file format (default: by extension, .toml or QGC WPL)")
+    down.add_argument("--format", choices=("plan", "wpl", "toml"), default=None,
+                      help="file format (default: by extension .plan, .toml, else QGC WPL)")
+    down.add_argument("--frame", choices=("global", "local"), default=None,
+                      help="write positions in MAV_FRAME_GLOBAL_RELATIVE_ALT (lat, lon deg, "
+                           "alt above home: what MAVProxy's wp load and QGC take) or "
+                           "MAV_FRAME_LOCAL_NED, through the vehicle's home (default: as "
+                           "uploaded; global for .plan)")
     msub.add_parser("clear", parents=[link], help="clear the vehicle's mission")
     msub.add_parser("start", parents=[link], help="MISSION_START (arm first)")
 
@@ -163,6 +182,12 @@ def build_parser() -> argparse.ArgumentParser:
     ps = psub.add_parser("set", parents=[link])
     ps.add_argument("name")
     ps.add_argument("value", type=_finite)
+    psave = psub.add_parser("save", parents=[link],
+                            help="write every parameter to FILE (QGC .params)")
+    psave.add_argument("file", type=Path)
+    pload = psub.add_parser("load", parents=[link],
+                            help="set every parameter of FILE (QGC .params)")
+    pload.add_argument("file", type=Path)
 
     go = sub.add_parser("goto", parents=[link], help="fly to a 6-DoF pose in OFFBOARD")
     for axis in ("x", "y", "z"):
@@ -310,7 +335,13 @@ def cmd_keygen(args: argparse.Namespace) -> int:
     if args.file.exists():
         print(f"gcs keygen: {args.file} exists; not overwriting a key", file=sys.stderr)
         return 2
-    fd = os.open(args.file, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    try:
+        fd = os.open(args.file, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except OSError as exc:
+        where = "its folder does not exist" if isinstance(exc, FileNotFoundError) \
+            else exc.strerror
+        print(f"gcs keygen: cannot write {args.file}: {where}", file=sys.stderr)
+        return 2
     with os.fdopen(fd, "w") as fh:
         fh.write(secrets.token_hex(32) + "\n")
     print(f"wrote a 32-byte signing key to {args.file} (keep it out of version control)")
@@ -323,13 +354,52 @@ def cmd_router(args: argparse.Namespace) -> int:
 
     from common.zenoh_link import DEFAULT_ROUTER, run_router
 
+    listen = args.listen or [DEFAULT_ROUTER]
+    for endpoint in listen:
+        problem = _endpoint_problem(endpoint)
+        if problem:
+            print(f"gcs router: {problem}", file=sys.stderr)
+            return 2
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    listen = args.listen or [DEFAULT_ROUTER]
     print(f"gcs router: listening on {', '.join(listen)} (multicast scouting off)", flush=True)
-    run_router(listen, stop)
+    try:
+        run_router(listen, stop)
+    except Exception as exc:  # zenoh reports a listener it cannot open as a plain error
+        print(f"gcs router: cannot listen on {', '.join(listen)}: "
+              f"{(str(exc).splitlines() or [type(exc).__name__])[0]}", file=sys.stderr)
+        return 2
     return 0
+
+
+def _endpoint_problem(endpoint: str) -> str:
+    """Why a router cannot listen on a Zenoh endpoint ('' if it can, as far as a test
+    bind tells): tcp/HOST:PORT and udp/HOST:PORT are checked, other protocols left to
+    Zenoh."""
+    import errno
+    import socket
+
+    proto, slash, addr = endpoint.partition("/")
+    host, colon, port = addr.rpartition(":")
+    if not slash or not colon or not port.isdigit() or not host:
+        return f"endpoint '{endpoint}': expected PROTO/HOST:PORT, e.g. tcp/127.0.0.1:7447"
+    if not 1 <= int(port) <= 65535:
+        return f"endpoint '{endpoint}': port {port} out of range (1..65535)"
+    kind = {"tcp": socket.SOCK_STREAM, "udp": socket.SOCK_DGRAM}.get(proto)
+    if kind is None:
+        return ""
+    family = socket.AF_INET6 if host.startswith("[") else socket.AF_INET
+    with socket.socket(family, kind) as s:
+        if kind == socket.SOCK_STREAM:  # ignore connections in TIME_WAIT, as Zenoh does
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host.strip("[]"), int(port)))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                return f"{host}:{port} is in use by another process"
+            return f"cannot listen on {endpoint}: {exc.strerror or exc}"
+    return ""
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -381,29 +451,42 @@ def _session(args: argparse.Namespace, tlog: Path | None = None):
     return session
 
 
-def _result(what: str, result: int) -> int:
+def _result(what: str, result: int, session=None) -> int:
+    """The vehicle's answer; a refusal with the reason it gave (its STATUSTEXT)."""
     from common.mavlink import MAV
 
-    name = MAV.enums["MAV_RESULT"][result].name if result in MAV.enums["MAV_RESULT"] else result
-    print(f"{what}: {name}")
-    return 0 if result == MAV.MAV_RESULT_ACCEPTED else 1
+    if result == MAV.MAV_RESULT_ACCEPTED:
+        print(f"{what}: MAV_RESULT_ACCEPTED")
+        return 0
+    if session is not None:
+        print(f"{what} refused: {session.describe(result)}")
+    else:
+        enum = MAV.enums["MAV_RESULT"]
+        print(f"{what} refused: {enum[result].name if result in enum else result}")
+    return 1
 
 
 def cmd_vehicle(args: argparse.Namespace) -> int:
     from gcs import vehicle_link as vl
 
+    _read_files(args)  # a bad file is refused before any network wait
     session = _session(args)
     try:
         if args.command == "status":
-            for key, value in vl.status(session).items():
-                print(f"{key:>18}: {value}")
+            if args.json:
+                import json
+
+                print(json.dumps(vl.status(session), allow_nan=False))
+            else:
+                print("\n".join(vl.format_status(vl.status(session))))
             return 0
         if args.command == "arm":
-            return _result("arm", vl.arm(session, True))
+            return _result("arm", vl.arm(session, True), session)
         if args.command == "disarm":
-            return _result("disarm", vl.arm(session, False, force=args.force))
+            return _result("disarm", vl.arm(session, False, force=args.force), session)
         if args.command == "mode":
-            return _result(f"mode {args.name.upper()}", vl.set_mode(session, args.name))
+            return _result(f"mode {args.name.upper()}", vl.set_mode(session, args.name),
+                           session)
         if args.command == "mission":
             return _mission(args, session)
         if args.command == "param":
@@ -447,10 +530,31 @@ def cmd_view(args: argparse.Namespace) -> int:
         return 2
 
 
+def _read_files(args: argparse.Namespace) -> None:
+    """Read the file a mission or param command takes, before any network wait: a bad one
+    raises MissionFileError or InputError (one line, exit status 2); the contents go to
+    args.items / args.params. Files to be written must have a folder to go to."""
+    from gcs.mission_files import file_format, read_mission
+    from gcs.param_files import ParamFileError, read_params
+
+    if args.command == "mission" and args.action == "upload":
+        args.items = read_mission(args.file, args.format)
+    elif args.command == "mission" and args.action == "download" and args.file is not None:
+        file_format(args.file, args.format)
+        _writable_file(args.file, "mission file")
+    elif args.command == "param" and args.action == "save":
+        _writable_file(args.file, "parameter file")
+    elif args.command == "param" and args.action == "load":
+        try:
+            args.params = read_params(args.file)
+        except ParamFileError as exc:
+            raise InputError(str(exc)) from None
+
+
 def _mission(args: argparse.Namespace, session) -> int:
     from common.mavlink import MAV
-    from gcs.mission_client import clear, download, result_name, upload_detailed
-    from gcs.mission_files import format_toml, format_wpl, read_mission, write_mission
+    from gcs.mission_client import clear, download, home_position, result_name, upload_detailed
+    from gcs.mission_files import file_format, format_mission, to_frame
 
     t, c, send = session.target_system, session.target_component, session.send
     progress = Progress()
@@ -459,7 +563,7 @@ def _mission(args: argparse.Namespace, session) -> int:
         progress(f"mission: {done}/{total} items")
 
     if args.action == "upload":
-        items = read_mission(args.file)
+        items = args.items
         answer = upload_detailed(session.conn, t, c, items, progress=report, send=send)
         progress.done()
         if not answer.accepted:
@@ -470,21 +574,33 @@ def _mission(args: argparse.Namespace, session) -> int:
     if args.action == "download":
         items = download(session.conn, t, c, progress=report, send=send)
         progress.done()
+        fmt = file_format(args.file, args.format)
+        frame = args.frame or ("global" if fmt == "plan" else None)  # QGC plans globally
+        home = home_position(session.conn, t, c, send=send) if frame is not None else None
+        if frame is not None and home is None:
+            if args.frame is not None or any(it.frame == MAV.MAV_FRAME_LOCAL_NED
+                                             for it in items):
+                print(f"gcs mission: --frame {frame}: the vehicle sent no HOME_POSITION",
+                      file=sys.stderr)
+                return 1
+            frame = None  # a plan of global items needs no conversion
+        text = format_mission(to_frame(items, frame, home), fmt, home)
         if args.file is None:
-            print(format_toml(items) if args.format == "toml" else format_wpl(items), end="")
+            print(text, end="")
         else:
-            write_mission(args.file, items, args.format)
+            args.file.write_text(text)
             print(f"downloaded {len(items)} items to {args.file}")
         return 0
     if args.action == "clear":
         result = clear(session.conn, t, c, send=send)
         print(f"clear: {result_name(result)}")
         return 0 if result == MAV.MAV_MISSION_ACCEPTED else 1
-    return _result("mission start", session.command(MAV.MAV_CMD_MISSION_START))
+    return _result("mission start", session.command(MAV.MAV_CMD_MISSION_START), session)
 
 
 def _param(args: argparse.Namespace, session) -> int:
     from gcs import vehicle_link as vl
+    from gcs.param_files import float32
 
     if args.action == "list":
         for name, value in vl.param_list(session).items():
@@ -493,14 +609,83 @@ def _param(args: argparse.Namespace, session) -> int:
     if args.action == "get":
         print(f"{args.name} = {vl.param_get(session, args.name):g}")
         return 0
+    if args.action == "save":
+        return _param_save(args, session)
+    if args.action == "load":
+        return _param_load(args, session)
     value, texts = vl.param_set(session, args.name, args.value)
     for text in texts:
         print(f"vehicle: {text}")
     print(f"{args.name} = {value:g}")
-    import struct
+    return 0 if value == float32(args.value) else 1
 
-    wanted = struct.unpack("<f", struct.pack("<f", args.value))[0]
-    return 0 if value == wanted else 1
+
+def _param_save(args: argparse.Namespace, session) -> int:
+    from common.mavlink import MAV
+    from gcs import vehicle_link as vl
+    from gcs.param_files import ParamEntry, format_params
+    from gcs.session import GcsError
+
+    values = vl.param_list(session)
+    t, c = session.target_system, session.target_component
+    beat = session.conn.messages.get("HEARTBEAT")
+    stack = vehicle = version = git = ""
+    if beat is not None and beat.get_srcSystem() == t:
+        stack = {MAV.MAV_AUTOPILOT_PX4: "PX4 Pro", MAV.MAV_AUTOPILOT_ARDUPILOTMEGA: "ArduPilot"
+                 }.get(beat.autopilot, "MAVLink Generic")
+        vehicle = "Multi-Rotor" if beat.type in (
+            MAV.MAV_TYPE_QUADROTOR, MAV.MAV_TYPE_HEXAROTOR, MAV.MAV_TYPE_OCTOROTOR,
+            MAV.MAV_TYPE_TRICOPTER, MAV.MAV_TYPE_COAXIAL) else \
+            MAV.enums["MAV_TYPE"][beat.type].name.removeprefix("MAV_TYPE_").title() \
+            if beat.type in MAV.enums["MAV_TYPE"] else ""
+    ver = session.conn.messages.get("AUTOPILOT_VERSION")
+    if ver is None:  # the header's version line; best effort
+        try:
+            session.command(MAV.MAV_CMD_REQUEST_MESSAGE, MAV.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+                            timeout=0.5, retries=1)
+            ver = session.conn.messages.get("AUTOPILOT_VERSION") or \
+                session.recv(["AUTOPILOT_VERSION"], timeout=0.5)
+        except GcsError:
+            ver = None
+    if ver is not None and ver.get_srcSystem() == t:
+        sw = ver.flight_sw_version
+        kind = {0: "dev", 64: "alpha", 128: "beta", 192: "rc", 255: ""}.get(sw & 0xFF, "")
+        version = f"{sw >> 24 & 0xFF}.{sw >> 16 & 0xFF}.{sw >> 8 & 0xFF} {kind}".rstrip()
+        git = bytes(ver.flight_custom_version).hex()
+    entries = [ParamEntry(t, c, name, value) for name, value in sorted(values.items())]
+    args.file.write_text(format_params(entries, system_id=t, stack=stack, vehicle=vehicle,
+                                       version=version, git_revision=git))
+    print(f"saved {len(entries)} parameters to {args.file}")
+    return 0
+
+
+def _param_load(args: argparse.Namespace, session) -> int:
+    from gcs import vehicle_link as vl
+    from gcs.param_files import float32
+    from gcs.session import GcsError
+
+    t, c = session.target_system, session.target_component
+    refused = 0
+    entries = [e for e in args.params if e.component_id in (c, 0)]
+    others = len(args.params) - len(entries)
+    if others:
+        print(f"skipped {others} parameters of other components than {c}")
+    if any(e.system_id != t for e in entries):
+        print(f"note: the file holds parameters of another vehicle; loading into system {t}")
+    for e in entries:
+        try:
+            value, texts = vl.param_set(session, e.name, e.value)
+        except GcsError:
+            print(f"{e.name}: not answered (unknown to the vehicle?)")
+            refused += 1
+            continue
+        if value != float32(e.value):
+            said = "; ".join(" ".join(str(x).split()) for x in texts)
+            print(f"{e.name} = {e.value:g}: " +
+                  (f"vehicle: {said}" if said else f"not taken (the vehicle keeps {value:g})"))
+            refused += 1
+    print(f"loaded {len(entries) - refused} of {len(entries)} parameters from {args.file}")
+    return 0 if refused == 0 else 1
 
 
 def _goto(args: argparse.Namespace, session) -> int:
@@ -544,7 +729,38 @@ def cmd_log(args: argparse.Namespace) -> int:
     return 0
 
 
+def _writable_file(path: Path, what: str) -> None:
+    """A file about to be written: its folder must exist and it must not be a folder."""
+    if path.is_dir():
+        raise InputError(f"{what} {path} is a folder, not a file")
+    parent = path.parent
+    if not parent.is_dir():
+        raise InputError(f"{what} {path}: folder {parent} does not exist"
+                         if not parent.exists() else f"{what} {path}: {parent} is not a folder")
+
+
+def check_input(args: argparse.Namespace) -> None:
+    """Everything that can be checked before a link is opened or a vehicle waited for;
+    InputError, LinkError or SigningKeyError (all exit status 2). Mission and parameter
+    files are read by `_read_files`, before any network wait too."""
+    if getattr(args, "connect", None) is not None:
+        parse_url(args.connect)
+    if getattr(args, "signing_key", None):
+        from common.mavlink import read_signing_key
+
+        read_signing_key(args.signing_key)
+    if args.command == "mode":
+        from common.modes import by_name, names
+
+        if by_name(args.name) is None:
+            raise InputError(f"unknown mode {args.name} (one of {', '.join(names())})")
+    elif args.command == "log":
+        _writable_file(args.file, "log file")
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Exit status: 0 done, 1 the vehicle refused or did not answer (or a link failed at
+    run time), 2 bad input (arguments, URLs, files, busy ports), 130 interrupted."""
     from common.mavlink import SigningKeyError
     from gcs.mission_client import MissionError
     from gcs.mission_files import MissionFileError
@@ -552,6 +768,7 @@ def main(argv: list[str] | None = None) -> int:
 
     args = build_parser().parse_args(argv)
     try:
+        check_input(args)
         if args.command == "run":
             return cmd_run(args)
         if args.command == "table1":
@@ -567,8 +784,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "view":
             return cmd_view(args)
         return cmd_vehicle(args)
-    except (ConfigError, LinkError, MissionFileError, SigningKeyError) as exc:
-        print(f"gcs: {exc}", file=sys.stderr)
+    except LinkError as exc:
+        print(f"gcs {args.command}: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except (ConfigError, InputError, MissionFileError, SigningKeyError) as exc:
+        print(f"gcs {args.command}: {exc}", file=sys.stderr)
         return 2
     except (GcsError, MissionError) as exc:
         print(f"gcs {args.command}: {exc}", file=sys.stderr)
@@ -579,6 +799,12 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `gcs ... | head`: the reader has gone, nothing is lost
         sys.stdout = None  # type: ignore[assignment]
         return 0
+    except OSError as exc:  # the file system (or the machine) said no: one line
+        if exc.filename is not None:
+            print(f"gcs {args.command}: {exc.filename}: {exc.strerror}", file=sys.stderr)
+            return 2
+        print(f"gcs {args.command}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

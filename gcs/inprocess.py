@@ -23,15 +23,16 @@ import numpy as np
 
 from common.config import Scenario
 from common.mavlink import encoder, pack, parser
-from common.mission_items import MissionItem, item_from_message, item_message
+from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
 from common.outcome import Event, diverged
 from common.simlink import through_wire_controls, through_wire_odometry
 from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
-from fcu.mission import check_mission
+from fcu.mission import check_mission, localize
 from fcu.onboard_log import OnboardLog
 from fcu.params import ParamError, ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.sim_bridge import actuator_controls, state_from_odometry
+from fcu.telemetry import Home
 from fcu.tracker import VehicleState
 from fcu.trajectory import Trajectory
 from gcs.metrics import build_metrics
@@ -101,6 +102,13 @@ def fcu_pipeline(scenario: Scenario) -> tuple[Pipeline, ParamStore]:
     return pipeline, store
 
 
+def fcu_home() -> HomePosition:
+    """The home the FCU process converts global-frame items through (its default --home,
+    as HOME_POSITION publishes it)."""
+    home = Home()
+    return HomePosition.published(home.lat_deg, home.lon_deg, home.alt_m)
+
+
 def through_wire_item(item: MissionItem) -> MissionItem:
     """A mission item as the FCU receives it in MISSION_ITEM_INT (params and z float32)."""
     mav = encoder(255, 190)
@@ -135,11 +143,12 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
     truth_log = TruthLog(truth_buf, scenario.name) if logs else None
     onboard_log = OnboardLog(onboard_buf, pipeline, store.values) if logs else None
     items = tuple(through_wire_item(item) for item in scenario_mission(scenario))
-    check = check_mission(items, cmd.limits)
+    home = fcu_home()
+    check = check_mission(items, cmd.limits, home)
     if check.result != 0:
         raise InProcessError(f"mission refused: MAV_MISSION_RESULT {check.result}: "
                              f"{check.reason}")
-    cmd.set_mission(items)
+    cmd.set_mission(localize(items, home))
     pipeline.on_state(state.time_us, state_for_fcu(state), state.time_us)
     for what, (code, text) in (("arming", pipeline.arm()),
                                ("mission start", cmd.mission_start(0))):

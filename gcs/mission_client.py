@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 import common.mavlink  # noqa: F401  (pins MAVLink 2 before anything imports mavutil)
 from common.mavlink import MAV
-from common.mission_items import MissionItem, item_from_message, item_message
+from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
 
 M = MAV
 MISSION = M.MAV_MISSION_TYPE_MISSION
@@ -334,3 +334,25 @@ def clear(conn, target_system: int, target_component: int, *, timeout_s: float =
             return msg.type
     raise MissionError(f"mission clear on system {target_system}: no MISSION_ACK after "
                        f"{retries + 1} tries ({timeout_s * 1e3:.0f} ms each)")
+
+
+def home_position(conn, target_system: int, target_component: int, *,
+                  timeout_s: float = 1.0, retries: int = 2,
+                  send: Send | None = None) -> HomePosition | None:
+    """The vehicle's home (HOME_POSITION: the origin that global mission items are converted
+    through): the last one heard, else asked for with MAV_CMD_REQUEST_MESSAGE (and waited
+    for `timeout_s` per try, the vehicle's periodic one counting too); None if none came."""
+    last = getattr(conn, "messages", {}).get("HOME_POSITION")
+    if last is not None and last.get_srcSystem() == target_system:
+        return HomePosition.from_message(last)
+    _send = _sender(conn, send)
+    for confirmation in range(retries + 1):
+        _send(M.MAVLink_command_long_message(
+            target_system, target_component, M.MAV_CMD_REQUEST_MESSAGE, confirmation,
+            M.MAVLINK_MSG_ID_HOME_POSITION, 0, 0, 0, 0, 0, 0))
+        deadline = time.monotonic() + timeout_s
+        while (remaining := deadline - time.monotonic()) > 0.0:
+            msg = conn.recv_match(type="HOME_POSITION", blocking=True, timeout=remaining)
+            if msg is not None and msg.get_srcSystem() == target_system:
+                return HomePosition.from_message(msg)
+    return None

@@ -1,27 +1,55 @@
-"""Mission files: the QGroundControl plain-text format (`QGC WPL 110`, which MAVProxy and QGC
-read and write) and a readable TOML form for 6-DoF keyframes and the figure-infinity.
+"""Mission files: the plain-text `QGC WPL 110` (MAVProxy's `wp load` / `wp save`; QGC reads
+it), QGroundControl's JSON `.plan`, and a readable TOML form for 6-DoF keyframes and the
+figure-infinity.
 
-Both map onto `MissionItem` (MISSION_ITEM_INT fields). In QGC WPL, x and y are written as
-floats in the frame's unit (metres in local frames, degrees in global ones); in MissionItem
-local x, y are int32 in 1e-4 m and global ones in 1e-7 deg (`common.mission_items.xy_scale`,
-the scaling of the legacy MISSION_ITEM too). Floats are written with Python's
-shortest round-trip representation, so a file written from downloaded items reads back to
-the same items.
+All map onto `MissionItem` (MISSION_ITEM_INT fields). In QGC WPL and `.plan`, x and y are
+written as floats in the frame's unit (metres in local frames, degrees in global ones); in
+MissionItem local x, y are int32 in 1e-4 m and global ones in 1e-7 deg
+(`common.mission_items.xy_scale`, the scaling of the legacy MISSION_ITEM too). Floats are
+written with Python's shortest round-trip representation, so a file written from downloaded
+items reads back to the same items.
+
+Latitudes and longitudes are written a quarter of MISSION_ITEM_INT's 1e-7 deg step away from
+zero from the item's integer (47.3977421 as 47.397742125): MAVProxy (`int(x * 1e7)`) and QGC
+(an implicit double-to-int conversion) truncate when they upload, and a value written exactly
+on the step reads back one step short about one time in sixteen (1.1 cm north); from a
+quarter step, truncation and rounding both give the item's integer, and a file read here
+(rounding) gives the same items. The written position is within 3 mm of the item's.
+
+MAVProxy scales x and y by 1e7 in every frame, local ones included (where MAVLink takes
+1e4): a local-frame WPL file does not survive `wp load`. Write missions for MAVProxy in a
+global frame (`gcs mission download --frame global`, `to_frame`).
 """
 
 from __future__ import annotations
 
+import json
 import math
 import struct
 import tomllib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import LOCAL_SCALE, MissionItem, xy_scale
+from common.mission_items import (
+    GEO_FRAMES,
+    GLOBAL_SCALE,
+    LOCAL_SCALE,
+    HomePosition,
+    MissionItem,
+    to_global,
+    to_local,
+    xy_scale,
+)
 
 M = MAV
 WPL_HEADER = "QGC WPL 110"
+FORMATS = ("plan", "wpl", "toml")
+# File formats by extension; others (.txt among them) are read by their content and
+# written as WPL.
+EXTENSIONS = {".plan": "plan", ".waypoints": "wpl", ".toml": "toml"}
+KNOWN_FRAMES = frozenset(v for v in M.enums["MAV_FRAME"] if v != M.MAV_FRAME_ENUM_END)
 
 
 class MissionFileError(ValueError):
@@ -45,7 +73,10 @@ def _fits_float32(v: float) -> bool:
 
 
 def _checked(item: MissionItem, where: str) -> MissionItem:
-    """`item` if every field fits its slot of MISSION_ITEM_INT, else MissionFileError."""
+    """`item` if every field fits its slot of MISSION_ITEM_INT and its frame is one of
+    MAVLink's, else MissionFileError."""
+    if 0 <= item.frame <= 0xFF and item.frame not in KNOWN_FRAMES:
+        raise MissionFileError(f"{where}: unknown frame {item.frame} (not a MAV_FRAME)")
     for name, lo, hi in _INT_RANGES:
         v = getattr(item, name)
         if not lo <= v <= hi:
@@ -67,18 +98,31 @@ def _num(x: float) -> str:
     return repr(float(x))
 
 
+def _xy_unit(frame: int, v: int) -> float:
+    """MISSION_ITEM_INT's x or y in the frame's unit, as the files write it: metres, or
+    degrees a quarter step away from zero (module docstring)."""
+    scale = xy_scale(frame)
+    if scale == GLOBAL_SCALE and v:
+        return (v + (0.25 if v > 0 else -0.25)) / scale
+    return v / scale
+
+
+def _xy_int(frame: int, v: float) -> int:
+    """The inverse of `_xy_unit` (rounding); OverflowError or ValueError when not finite."""
+    return round(v * xy_scale(frame))
+
+
 # ------------------------------------------------------------------ QGC WPL 110
 
 
-def format_wpl(items: list[MissionItem]) -> str:
+def format_wpl(items: Sequence[MissionItem]) -> str:
     lines = [WPL_HEADER]
     for it in items:
-        s = xy_scale(it.frame)
         lines.append("\t".join([str(it.seq), str(it.current), str(it.frame), str(it.command),
                                 *(_num(v) for v in (it.param1, it.param2, it.param3,
                                                     it.param4)),
-                                _num(it.x / s), _num(it.y / s), _num(it.z),
-                                str(it.autocontinue)]))
+                                _num(_xy_unit(it.frame, it.x)), _num(_xy_unit(it.frame, it.y)),
+                                _num(it.z), str(it.autocontinue)]))
     return "\n".join(lines) + "\n"
 
 
@@ -101,9 +145,8 @@ def parse_wpl(text: str, source: str = "<mission>") -> list[MissionItem]:
             autocontinue = int(fields[11])
         except ValueError as exc:
             raise MissionFileError(f"{source}: line {n}: {exc}") from None
-        s = xy_scale(frame)
         try:
-            x, y = round(p[4] * s), round(p[5] * s)
+            x, y = _xy_int(frame, p[4]), _xy_int(frame, p[5])
         except (OverflowError, ValueError):
             raise MissionFileError(f"{source}: line {n}: x/y not finite") from None
         items.append(_checked(MissionItem(seq, frame, command, current, autocontinue, p[0],
@@ -172,7 +215,7 @@ def _item_table(it: MissionItem) -> dict[str, Any]:
             "z": it.z}
 
 
-def format_toml(items: list[MissionItem]) -> str:
+def format_toml(items: Sequence[MissionItem]) -> str:
     out = ["# Mission: local NED (metres), times in seconds, yaw in degrees (nan: keep the",
            "# attitude). Item types and their MAVLink slots: README, section Missions.",
            'format = "dqflight-mission-1"', ""]
@@ -273,11 +316,232 @@ def parse_toml(text: str, source: str = "<mission>") -> list[MissionItem]:
     return items
 
 
+# ------------------------------------------------------------------ QGroundControl .plan
+
+PLAN_FILE_TYPE = "Plan"
+PLAN_VERSION = 1
+PLAN_MISSION_VERSION = 2
+MAV_AUTOPILOT_PX4 = 12
+MAV_TYPE_HEXAROTOR = 13
+MAV_CMD_DO_JUMP = 177
+QGC_CRUISE_SPEED = 15.0  # QGC's default (fixed-wing cruise; a multirotor flies hoverSpeed)
+# QGroundControlQmlGlobal::AltMode, as QGC writes it beside items with a coordinate
+ALT_MODE_RELATIVE, ALT_MODE_ABSOLUTE = 1, 2
+
+
+def _json_num(v: float) -> float | None:
+    """A float for JSON: NaN as null (QGC's JsonHelper), no infinities (not JSON)."""
+    if math.isnan(v):
+        return None
+    if math.isinf(v):
+        raise MissionFileError(f"{v} cannot be written to a .plan (JSON has no infinity)")
+    return v
+
+
+def format_plan(items: Sequence[MissionItem], home: HomePosition | None = None, *,
+                hover_speed_m_s: float = 2.0, vehicle_type: int = MAV_TYPE_HEXAROTOR) -> str:
+    """A QGroundControl plan (JSON, `fileType` "Plan", version 1) with `items` as SimpleItems
+    (`params` p1-p4, x, y, z; doJumpId = seq + 1, DO_JUMP's p1 a doJumpId),
+    `plannedHomePosition` the vehicle's home (else the first global item, else zeros),
+    `firmwareType` 12 (PX4: the vehicle speaks PX4's modes), no geofence, no rally points.
+    Keys sorted and 4-space indents, as QGC writes it."""
+    out: list[dict[str, Any]] = []
+    for it in items:
+        p1 = it.param1
+        if it.command == MAV_CMD_DO_JUMP and 0 <= p1 < len(items) and p1 == int(p1):
+            p1 = p1 + 1.0  # a seq -> the target's doJumpId
+        entry: dict[str, Any] = {
+            "autoContinue": bool(it.autocontinue), "command": it.command, "doJumpId": it.seq + 1,
+            "frame": it.frame, "type": "SimpleItem",
+            "params": [_json_num(v) for v in (p1, it.param2, it.param3, it.param4,
+                                              _xy_unit(it.frame, it.x),
+                                              _xy_unit(it.frame, it.y), it.z)]}
+        if it.frame in GEO_FRAMES:
+            entry["AMSLAltAboveTerrain"] = None
+            entry["Altitude"] = _json_num(it.z)
+            entry["AltitudeMode"] = ALT_MODE_ABSOLUTE if it.frame in (
+                M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_INT) else ALT_MODE_RELATIVE
+        out.append(entry)
+    if home is not None:
+        planned = [home.lat_deg, home.lon_deg, home.alt_m]
+    else:
+        first = next((it for it in items if it.frame in GEO_FRAMES), None)
+        planned = [0.0, 0.0, 0.0] if first is None else \
+            [first.x / GLOBAL_SCALE, first.y / GLOBAL_SCALE, 0.0]
+    doc = {
+        "fileType": PLAN_FILE_TYPE,
+        "geoFence": {"circles": [], "polygons": [], "version": 2},
+        "groundStation": "dqflight",
+        "mission": {"cruiseSpeed": QGC_CRUISE_SPEED, "firmwareType": MAV_AUTOPILOT_PX4,
+                    "globalPlanAltitudeMode": ALT_MODE_RELATIVE,
+                    "hoverSpeed": hover_speed_m_s, "items": out,
+                    "plannedHomePosition": planned, "vehicleType": vehicle_type,
+                    "version": PLAN_MISSION_VERSION},
+        "rallyPoints": {"points": [], "version": 2},
+        "version": PLAN_VERSION,
+    }
+    return json.dumps(doc, indent=4, sort_keys=True, allow_nan=False) + "\n"
+
+
+def _no_constant(name: str) -> float:
+    raise MissionFileError(f"{name} is not JSON (QGC writes NaN as null)")
+
+
+def _plan_key(obj: dict[str, Any], key: str, kind: type, where: str, what: str) -> Any:
+    """obj[key] of type `kind` (int: an integral JSON number, as QGC reads it)."""
+    v = obj.get(key)
+    if kind is int and isinstance(v, float) and v.is_integer():
+        v = int(v)
+    if v is None or not isinstance(v, kind) or (isinstance(v, bool) and kind is not bool):
+        raise MissionFileError(f"{where}: key '{key}': expected {what}")
+    return v
+
+
+def _plan_param(v: Any, where: str, n: int) -> float:
+    if v is None:
+        return math.nan  # QGC's null
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise MissionFileError(f"{where}: params[{n}]: expected a number or null")
+    try:
+        return float(v)
+    except OverflowError:
+        raise MissionFileError(f"{where}: params[{n}]: number out of range") from None
+
+
+def parse_plan(text: str, source: str = "<mission>") -> list[MissionItem]:
+    """The mission of a QGroundControl plan (version 1, mission version 2; SimpleItems only:
+    QGC's complex items, such as surveys, are refused). null parameters are NaN; geofence
+    and rally points are ignored."""
+    try:
+        doc = json.loads(text, parse_constant=_no_constant)
+    except MissionFileError as exc:
+        raise MissionFileError(f"{source}: {exc}") from None
+    except (json.JSONDecodeError, RecursionError) as exc:
+        raise MissionFileError(f"{source}: not valid JSON: {exc}") from None
+    if not isinstance(doc, dict):
+        raise MissionFileError(f"{source}: expected a JSON object (a QGC plan)")
+    if doc.get("fileType") != PLAN_FILE_TYPE:
+        raise MissionFileError(f"{source}: key 'fileType': expected \"{PLAN_FILE_TYPE}\", got "
+                               f"{doc.get('fileType')!r}")
+    if doc.get("version") != PLAN_VERSION:
+        raise MissionFileError(f"{source}: key 'version': only plan version {PLAN_VERSION} is "
+                               f"supported, got {doc.get('version')!r}")
+    mission = _plan_key(doc, "mission", dict, source, "an object")
+    where = f"{source}: mission"
+    if mission.get("version") != PLAN_MISSION_VERSION:
+        raise MissionFileError(f"{where}: key 'version': only mission version "
+                               f"{PLAN_MISSION_VERSION} is supported")
+    entries = _plan_key(mission, "items", list, where, "a list")
+    home = mission.get("plannedHomePosition")
+    if home is not None and not (isinstance(home, list) and len(home) == 3 and all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in home)):
+        raise MissionFileError(f"{where}: key 'plannedHomePosition': expected [lat, lon, alt]")
+    items: list[MissionItem] = []
+    jump_ids: dict[int, int] = {}
+    for seq, entry in enumerate(entries):
+        where = f"{source}: item {seq + 1}"
+        if not isinstance(entry, dict):
+            raise MissionFileError(f"{where}: expected an object")
+        kind = entry.get("type")
+        if kind != "SimpleItem":
+            what = f" ({entry.get('complexItemType')})" if kind == "ComplexItem" else ""
+            raise MissionFileError(f"{where}: key 'type': only SimpleItem is supported, got "
+                                   f"{kind!r}{what}")
+        command = _plan_key(entry, "command", int, where, "an integer")
+        frame = _plan_key(entry, "frame", int, where, "an integer")
+        auto = _plan_key(entry, "autoContinue", bool, where, "true or false")
+        params = _plan_key(entry, "params", list, where, "a list of 7 numbers or null")
+        if len(params) != 7:
+            raise MissionFileError(f"{where}: key 'params': expected 7 values, got "
+                                   f"{len(params)}")
+        p = [_plan_param(v, where, n) for n, v in enumerate(params)]
+        jump_id = entry.get("doJumpId", seq + 1)
+        if isinstance(jump_id, int) and not isinstance(jump_id, bool):
+            jump_ids.setdefault(jump_id, seq)
+        try:
+            x, y = _xy_int(frame, p[4]), _xy_int(frame, p[5])
+        except (OverflowError, ValueError):
+            raise MissionFileError(f"{where}: x/y (params[4], params[5]) not finite") from None
+        mode, alt = entry.get("AltitudeMode"), entry.get("Altitude")
+        if mode in (ALT_MODE_RELATIVE, ALT_MODE_ABSOLUTE) and isinstance(alt, int | float) \
+                and not isinstance(alt, bool) and float(alt) != p[6]:
+            raise MissionFileError(f"{where}: 'Altitude' {alt} differs from params[6] {p[6]}")
+        items.append(_checked(MissionItem(seq, frame, command, int(seq == 0), int(auto), p[0],
+                                          p[1], p[2], p[3], x, y, p[6]), where))
+    for i, it in enumerate(items):  # DO_JUMP: QGC's p1 is the target's doJumpId
+        if it.command == MAV_CMD_DO_JUMP and math.isfinite(it.param1):
+            target = jump_ids.get(int(it.param1)) if it.param1.is_integer() else None
+            if target is None:
+                raise MissionFileError(f"{source}: item {i + 1}: DO_JUMP to doJumpId "
+                                       f"{it.param1:g}, which no item has")
+            items[i] = it._replace(param1=float(target))
+    return items
+
+
+# ------------------------------------------------------------------ frames
+
+
+def to_frame(items: Sequence[MissionItem], frame: str | None,
+             home: HomePosition | None) -> list[MissionItem]:
+    """The items with their positions in "global" (MAV_FRAME_GLOBAL_RELATIVE_ALT: lat, lon
+    in degrees, altitude above home) or "local" (MAV_FRAME_LOCAL_NED) frames, through the
+    vehicle's home (`common.mission_items.to_global` / `to_local`); None: as they are.
+    Items whose command has no position semantics here keep their frame."""
+    if frame is None:
+        return list(items)
+    if home is None:
+        raise MissionFileError(f"--frame {frame} needs the vehicle's home position")
+    if frame == "global":
+        return [to_global(it, home) for it in items]
+    if frame == "local":
+        return [to_local(it, home) for it in items]
+    raise ValueError(f"unknown frame choice {frame!r}")
+
+
 # ------------------------------------------------------------------ files
 
 
-def read_mission(path: Path) -> list[MissionItem]:
-    """A mission file, by content: `QGC WPL` header or TOML."""
+def file_format(path: Path | None, fmt: str | None = None, text: str | None = None) -> str:
+    """The format of a mission file: `fmt` if given, else by extension (`EXTENSIONS`), else
+    by content when `text` is given (a JSON object: plan; `QGC WPL`: wpl; else toml), else
+    wpl (`.txt`, as MAVProxy names them)."""
+    if fmt is not None:
+        if fmt not in FORMATS:
+            raise MissionFileError(f"unknown mission file format {fmt!r} (plan, wpl, toml)")
+        return fmt
+    by_ext = EXTENSIONS.get(path.suffix.lower()) if path is not None else None
+    if by_ext is not None:
+        return by_ext
+    if text is not None:
+        head = text.lstrip()
+        if head.startswith("{"):
+            return "plan"
+        return "wpl" if head.startswith("QGC WPL") else "toml"
+    return "wpl"
+
+
+def parse_mission(text: str, fmt: str, source: str = "<mission>") -> list[MissionItem]:
+    """Items of a mission text in `fmt` (plan, wpl or toml)."""
+    if fmt == "plan":
+        return parse_plan(text, source)
+    if fmt == "wpl":
+        return parse_wpl(text, source)
+    return parse_toml(text, source)
+
+
+def format_mission(items: Sequence[MissionItem], fmt: str,
+                   home: HomePosition | None = None) -> str:
+    """A mission text in `fmt` (plan, wpl or toml); `home` is the plan's planned home."""
+    if fmt == "plan":
+        return format_plan(items, home)
+    if fmt == "wpl":
+        return format_wpl(items)
+    return format_toml(items)
+
+
+def read_mission(path: Path, fmt: str | None = None) -> list[MissionItem]:
+    """A mission file: `fmt` (plan, wpl, toml), else by extension (.plan, .waypoints,
+    .toml), else by content (a JSON object, a `QGC WPL` header, or TOML)."""
     try:
         text = path.read_text()
     except OSError as exc:
@@ -285,14 +549,13 @@ def read_mission(path: Path) -> list[MissionItem]:
     except UnicodeDecodeError as exc:
         raise MissionFileError(f"{path}: not a text file ({exc.reason} at byte "
                                f"{exc.start})") from None
-    items = parse_wpl(text, str(path)) if text.lstrip().startswith("QGC WPL") \
-        else parse_toml(text, str(path))
+    items = parse_mission(text, file_format(path, fmt, text), str(path))
     if not items:
         raise MissionFileError(f"{path}: no mission items (use `gcs mission clear` to clear)")
     return items
 
 
-def write_mission(path: Path, items: list[MissionItem], fmt: str | None = None) -> None:
-    """`fmt` "toml" or "wpl"; by default `.toml` files get the TOML form, others QGC WPL."""
-    toml = fmt == "toml" or (fmt is None and path.suffix == ".toml")
-    path.write_text(format_toml(items) if toml else format_wpl(items))
+def write_mission(path: Path, items: Sequence[MissionItem], fmt: str | None = None,
+                  home: HomePosition | None = None) -> None:
+    """`fmt` plan, wpl or toml; by default by extension (.plan, .toml, others QGC WPL)."""
+    path.write_text(format_mission(items, file_format(path, fmt), home))

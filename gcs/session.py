@@ -1,11 +1,18 @@
 """A ground-station session on one MAVLink link: connect, wait for the vehicle's heartbeat,
 send our own heartbeat from a thread, send commands and wait for their ACKs, log a tlog.
 
+The link is one of `common.links` (the same URLs and transports as `fcu` and `sitl`);
+`LinkFile` gives it pymavlink's connection interface (`recv_match`, `mav.send`, packet
+loss), which the mission client and the tools built on pymavlink expect. pymavlink itself
+only encodes and decodes (`common.mavlink`).
+
 Wall-clock timeouts are fine here: the GCS faces people and links, not the lockstep path.
 """
 
 from __future__ import annotations
 
+import collections
+import select
 import struct
 import threading
 import time
@@ -14,9 +21,13 @@ from pathlib import Path
 from pymavlink import mavutil
 
 import common.mavlink  # noqa: F401  (pins MAVLink 2 before mavutil is imported)
+from common.links import Link, LinkUrl, TcpClientLink, open_link, parse_url
 from common.mavlink import GCS_SYSID, MAV, MAV_COMP_ID_MISSIONPLANNER
 
 M = MAV
+TCP_CONNECT_S = 3.0  # a tcp: link that has not connected by then is reported, exit 1
+REFUSAL_TEXT_S = 0.3  # after a refusal, how long to listen for the STATUSTEXT saying why
+MAX_PARSERS = 64  # one parser per peer (byte stream); the oldest goes beyond this
 
 
 class GcsError(RuntimeError):
@@ -43,48 +54,108 @@ class Tlog:
         self.fh.close()
 
 
-class MavZenoh(mavutil.mavfile):
-    """pymavlink's connection interface over a Zenoh link (ground-station role)."""
+class LinkFile(mavutil.mavfile):
+    """pymavlink's connection interface over a `common.links.Link`: each peer (a TCP
+    client, a UDP sender) has its own parser, so that streams never mix; sends and reads
+    are serialised (the heartbeat thread sends while the caller reads)."""
 
-    def __init__(self, url: str, source_system: int, source_component: int,
-                 vehicle: int = 0) -> None:
-        from common.links import open_link
-        from common.zenoh_link import ZenohLink
-
-        link = open_link(url, role="gcs", system_id=vehicle)
-        assert isinstance(link, ZenohLink)
+    def __init__(self, link: Link, source_system: int, source_component: int) -> None:
         self.link = link
-        mavutil.mavfile.__init__(self, self.link.fileno(), url, source_system=source_system,
+        self._io = threading.Lock()
+        self._queue: collections.deque = collections.deque()
+        self._parsers: dict[object, MAV.MAVLink] = {}
+        fd = link.fileno()
+        mavutil.mavfile.__init__(self, fd if fd >= 0 else None, str(link.url),
+                                 source_system=source_system,
                                  source_component=source_component, use_native=False)
-        self._buf = b""
+        # this project's dialect (MAVLink 2, common), whatever mavutil's default is
+        self.mav = MAV.MAVLink(self, srcSystem=source_system, srcComponent=source_component,
+                               use_native=False)
+        self.mav.robust_parsing = True
+
+    def _parser(self, peer: object) -> MAV.MAVLink:
+        parser = self._parsers.get(peer)
+        if parser is None:
+            if len(self._parsers) >= MAX_PARSERS:
+                del self._parsers[next(iter(self._parsers))]
+            parser = MAV.MAVLink(None, srcSystem=0, srcComponent=0, use_native=False)
+            parser.robust_parsing = True
+            parser.signing = self.mav.signing  # one key and replay record for the link
+            self._parsers[peer] = parser
+        return parser
+
+    def _fill(self) -> None:
+        with self._io:
+            chunks = self.link.recv()
+        for peer, data in chunks:
+            msgs = self._parser(peer).parse_buffer(data)
+            if msgs:
+                self._queue.extend(msgs)
+
+    def recv_msg(self):
+        self.pre_message()
+        if not self._queue:
+            self._fill()
+        if not self._queue:
+            return None
+        msg = self._queue.popleft()
+        self.post_message(msg)
+        return msg
 
     def recv(self, n=None) -> bytes:
-        if not self._buf:
-            self._buf = b"".join(data for _, data in self.link.recv())
-        data, self._buf = self._buf, b""
-        return data
+        raise NotImplementedError("LinkFile decodes per peer: use recv_msg/recv_match")
+
+    def select(self, timeout: float) -> bool:
+        if self._queue:
+            return True
+        with self._io:
+            fds = self.link.filenos()
+        if not fds:
+            time.sleep(min(timeout, 0.05))
+            return False
+        try:
+            return bool(select.select(fds, [], [], timeout)[0])
+        except (OSError, ValueError):  # a descriptor closed meanwhile (reconnection)
+            return False
 
     def write(self, buf: bytes) -> None:
-        self.link.send(buf)
-
-    def set_target(self, system_id: int) -> None:
-        self.link.set_target(system_id)
+        with self._io:
+            self.link.send(bytes(buf))
 
     @property
-    def vehicles(self) -> set[int]:
-        return set(self.link.vehicles)
+    def needs_target(self) -> bool:
+        """Zenoh: heartbeats and commands go to one chosen vehicle's key."""
+        return hasattr(self.link, "set_target")
+
+    def set_target(self, system_id: int) -> None:
+        if self.needs_target:
+            self.link.set_target(system_id)  # type: ignore[attr-defined]
+
+    @property
+    def vehicles(self) -> set[int] | None:
+        """The vehicles alive on the link where it knows (Zenoh liveliness), else None."""
+        live = getattr(self.link, "vehicles", None)
+        return None if live is None else set(live)
 
     def close(self) -> None:
-        self.link.close()
+        with self._io:
+            self.link.close()
 
 
-def connect(url: str, system_id: int = GCS_SYSID, vehicle: int = 0):
-    """A pymavlink connection for any link URL of this project (zenoh: included)."""
-    if url.startswith("zenoh:"):
-        return MavZenoh(url, system_id, MAV_COMP_ID_MISSIONPLANNER, vehicle)
-    return mavutil.mavlink_connection(url, source_system=system_id,
-                                      source_component=MAV_COMP_ID_MISSIONPLANNER,
-                                      dialect="common", autoreconnect=True)
+def connect(url: str | LinkUrl, system_id: int = GCS_SYSID, vehicle: int = 0) -> LinkFile:
+    """A pymavlink-style connection over any link URL of this project (common.links).
+
+    Raises LinkError for a URL, device or port that cannot be used (exit status 2) and
+    LinkUnavailable for a tcp: server that refuses or does not answer (exit status 1)."""
+    parsed = url if isinstance(url, LinkUrl) else parse_url(url)
+    link = open_link(parsed, role="gcs", system_id=vehicle)
+    if isinstance(link, TcpClientLink):
+        try:
+            link.wait_connected(TCP_CONNECT_S)
+        except BaseException:
+            link.close()
+            raise
+    return LinkFile(link, system_id, MAV_COMP_ID_MISSIONPLANNER)
 
 
 class Session:
@@ -95,7 +166,11 @@ class Session:
         if signing_key is not None:  # sign what we send, refuse what is not signed
             self.conn.setup_signing(signing_key, sign_outgoing=True,
                                     allow_unsigned_callback=None)
-        self.tlog = Tlog(tlog) if tlog else None
+        try:
+            self.tlog = Tlog(tlog) if tlog else None
+        except OSError:
+            self.conn.close()
+            raise
         if self.tlog is not None:
             received = self.conn.post_message
 
@@ -107,6 +182,9 @@ class Session:
         self.lock = threading.Lock()
         self.target_system = 0
         self.target_component = 0
+        self.last_texts: list[str] = []  # STATUSTEXTs that came with the last command's ACK
+        self.heartbeat_msg = None  # the vehicle heartbeat that wait_vehicle took
+        self.heartbeat_at = 0.0  # and when (monotonic seconds)
         self._stop = threading.Event()
         self._period = 1.0 / heartbeat_hz
         self._thread = threading.Thread(target=self._heartbeats, name="gcs-heartbeat",
@@ -119,7 +197,7 @@ class Session:
 
     def _heartbeats(self) -> None:
         while not self._stop.is_set():
-            if isinstance(self.conn, MavZenoh) and not self.target_system:
+            if self.conn.needs_target and not self.target_system:
                 self._stop.wait(0.1)  # over Zenoh, heartbeats go to a chosen vehicle
                 continue
             self.heartbeat()
@@ -145,25 +223,52 @@ class Session:
                 continue
             self.target_system = msg.get_srcSystem()
             self.target_component = msg.get_srcComponent()
-            if isinstance(self.conn, MavZenoh):
-                self.conn.set_target(self.target_system)
+            self.heartbeat_msg, self.heartbeat_at = msg, time.monotonic()
+            self.conn.set_target(self.target_system)
             self.heartbeat()  # announce ourselves now: a udpin link has only now a peer
             return
         raise GcsError(f"no vehicle heartbeat within {timeout:.0f} s")
 
     def command(self, command: int, *params: float, timeout: float = 1.0,
                 retries: int = 3) -> int:
-        """COMMAND_LONG with retries (confirmation incremented); returns MAV_RESULT."""
+        """COMMAND_LONG with retries (confirmation incremented); returns MAV_RESULT.
+
+        The STATUSTEXTs the target sends meanwhile, and after a refusal until
+        REFUSAL_TEXT_S passes without one, are kept in `last_texts`: a refusal's reason
+        (`describe`)."""
         p = [*params, *([0.0] * (7 - len(params)))]
+        self.last_texts = []
         for confirmation in range(retries + 1):
             self.send(M.MAVLink_command_long_message(self.target_system, self.target_component,
                                                      command, confirmation, *p))
             deadline = time.monotonic() + timeout
             while time.monotonic() < deadline:
-                ack = self.recv(["COMMAND_ACK"], timeout=max(0.01, deadline - time.monotonic()))
-                if ack is not None and ack.command == command:
-                    return ack.result
+                msg = self.recv(["COMMAND_ACK", "STATUSTEXT"],
+                                timeout=max(0.01, deadline - time.monotonic()))
+                if msg is None or msg.get_srcSystem() != self.target_system:
+                    continue
+                if msg.get_type() == "STATUSTEXT":
+                    self.last_texts.append(msg.text)
+                elif msg.command == command:
+                    if msg.result not in (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_IN_PROGRESS):
+                        self._texts_after(REFUSAL_TEXT_S)
+                    return msg.result
         raise GcsError(f"no COMMAND_ACK for command {command} after {retries + 1} tries")
+
+    def _texts_after(self, quiet_s: float) -> None:
+        """Collect the target's STATUSTEXTs until none has come for `quiet_s`."""
+        end = time.monotonic() + quiet_s
+        while (left := end - time.monotonic()) > 0:
+            msg = self.recv(["STATUSTEXT"], timeout=left)
+            if msg is not None and msg.get_srcSystem() == self.target_system:
+                self.last_texts.append(msg.text)
+                end = time.monotonic() + quiet_s
+
+    def describe(self, result: int) -> str:
+        """'MAV_RESULT_DENIED: <the vehicle's reason>' for the last command's answer."""
+        enum = M.enums["MAV_RESULT"]
+        name = enum[result].name if result in enum else f"MAV_RESULT {result}"
+        return ": ".join([name, *dict.fromkeys(t for t in self.last_texts if t)])
 
     def close(self) -> None:
         self._stop.set()

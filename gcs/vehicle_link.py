@@ -6,24 +6,26 @@ offboard pose setpoints, recording.
 from __future__ import annotations
 
 import math
+import struct
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
 from common.mavlink import MAV
-from common.modes import Mode, by_name, decode_custom
+from common.modes import by_name, decode_custom, names
 from common.quaternion import q_angle, q_conj, q_exp, q_mul
 from gcs.session import GcsError, Session
 
 M = MAV
-MODE_NAMES = tuple(m.name for m in Mode)
+MODE_NAMES = tuple(names())  # PX4's: HOLD (LOITER), MISSION, OFFBOARD, LAND, TAKEOFF, RTL, ...
 _LANDED = {M.MAV_LANDED_STATE_ON_GROUND: "on ground", M.MAV_LANDED_STATE_IN_AIR: "in air",
            M.MAV_LANDED_STATE_TAKEOFF: "taking off", M.MAV_LANDED_STATE_LANDING: "landing",
            M.MAV_LANDED_STATE_UNDEFINED: "undefined"}
 
 
 def mode_name(custom_mode: int, autopilot: int) -> str:
-    """Our modes (PX4 encoding) by name; otherwise the raw custom mode."""
+    """The modes of common.modes by name (PX4's encoding, also under MAV_AUTOPILOT_GENERIC
+    as this FCU said before); otherwise the raw custom mode."""
     if autopilot in (M.MAV_AUTOPILOT_GENERIC, M.MAV_AUTOPILOT_PX4):
         mode = decode_custom(custom_mode)
         if mode is not None:
@@ -33,28 +35,46 @@ def mode_name(custom_mode: int, autopilot: int) -> str:
     return f"custom {custom_mode}"
 
 
+def landed_name(state: int) -> str:
+    """EXTENDED_SYS_STATE.landed_state in words."""
+    return _LANDED.get(state, f"landed state {state}")
+
+
 @dataclass
 class Snapshot:
-    """The latest of each message type from the vehicle, and link statistics."""
+    """The latest of each message type from the vehicle, when each was heard (monotonic
+    seconds), the last status texts (and the last failsafe text: severity CRITICAL or
+    worse), and link statistics."""
 
     messages: dict[str, Any] = field(default_factory=dict)
     counts: dict[str, int] = field(default_factory=dict)
+    heard: dict[str, float] = field(default_factory=dict)
     received: int = 0
     lost: int = 0
     started: float = field(default_factory=time.monotonic)
     texts: list[str] = field(default_factory=list)
+    failsafe_text: str = ""
+    rate_samples: list[tuple[float, int]] = field(default_factory=list)  # (when, received)
 
-    def update(self, msg) -> None:
+    def update(self, msg, now: float | None = None) -> None:
         kind = msg.get_type()
         if kind == "BAD_DATA":
             return
         if kind == "STATUSTEXT":
             self.texts = [*self.texts[-9:], msg.text]
+            if msg.severity <= M.MAV_SEVERITY_CRITICAL:
+                self.failsafe_text = msg.text
         self.messages[kind] = msg
         self.counts[kind] = self.counts.get(kind, 0) + 1
+        self.heard[kind] = time.monotonic() if now is None else now
 
     def get(self, kind: str):
         return self.messages.get(kind)
+
+    def age(self, kind: str, now: float) -> float | None:
+        """Seconds since the last message of this type, None if never heard."""
+        t = self.heard.get(kind)
+        return None if t is None else now - t
 
 
 def link_quality(session: Session) -> tuple[float, int, int]:
@@ -94,18 +114,20 @@ def status(session: Session, seconds: float = 1.5) -> dict[str, Any]:
                                if av.capabilities & bit and bit]
     pos = snap.get("LOCAL_POSITION_NED")
     if pos is not None:
-        out["position_ned_m"] = [pos.x, pos.y, pos.z]
-        out["velocity_ned_m_s"] = [pos.vx, pos.vy, pos.vz]
+        out["position_ned_m"] = [_f32(pos.x), _f32(pos.y), _f32(pos.z)]
+        out["velocity_ned_m_s"] = [_f32(pos.vx), _f32(pos.vy), _f32(pos.vz)]
     att = snap.get("ATTITUDE_QUATERNION")
     if att is not None:
-        out["q_ned_frd"] = [att.q1, att.q2, att.q3, att.q4]
+        out["q_ned_frd"] = [_f32(q) for q in (att.q1, att.q2, att.q3, att.q4)]
     eul = snap.get("ATTITUDE")
     if eul is not None:
-        out["roll_pitch_yaw_deg"] = [math.degrees(a) for a in (eul.roll, eul.pitch, eul.yaw)]
+        out["roll_pitch_yaw_deg"] = [_round(math.degrees(a), 3)
+                                     for a in (eul.roll, eul.pitch, eul.yaw)]
     gp = snap.get("GLOBAL_POSITION_INT")
     if gp is not None:
-        out["global"] = {"lat_deg": gp.lat * 1e-7, "lon_deg": gp.lon * 1e-7,
-                         "alt_m": gp.alt * 1e-3, "relative_alt_m": gp.relative_alt * 1e-3}
+        out["global"] = {"lat_deg": round(gp.lat * 1e-7, 7), "lon_deg": round(gp.lon * 1e-7, 7),
+                         "alt_m": round(gp.alt * 1e-3, 3),
+                         "relative_alt_m": round(gp.relative_alt * 1e-3, 3)}
     ss = snap.get("SYS_STATUS")
     if ss is not None:
         present = ss.onboard_control_sensors_present
@@ -117,7 +139,7 @@ def status(session: Session, seconds: float = 1.5) -> dict[str, Any]:
         out["link_errors"] = ss.errors_comm
     ext = snap.get("EXTENDED_SYS_STATE")
     if ext is not None:
-        out["landed"] = _LANDED.get(ext.landed_state, str(ext.landed_state))
+        out["landed"] = landed_name(ext.landed_state)
     mc = snap.get("MISSION_CURRENT")
     if mc is not None:
         out["mission"] = {"current": mc.seq, "total": mc.total,
@@ -130,13 +152,69 @@ def status(session: Session, seconds: float = 1.5) -> dict[str, Any]:
     return out
 
 
+def _f32(value: float) -> float | None:
+    """A float32 field as the shortest decimal that is the same float32 (0.1, not
+    0.10000000149011612); None for a value JSON cannot carry."""
+    if not math.isfinite(value):
+        return None
+    for digits in range(1, 10):
+        short = float(f"{value:.{digits}g}")
+        if struct.unpack("<f", struct.pack("<f", short))[0] == value:
+            return short + 0.0  # no -0.0
+    return value
+
+
+def _round(value: float, digits: int) -> float | None:
+    return round(value, digits) + 0.0 if math.isfinite(value) else None
+
+
+def _numbers(values, fmt: str) -> str:
+    return ", ".join("nan" if v is None else format(v + 0.0, fmt) for v in values)
+
+
+def format_status(status: dict[str, Any]) -> list[str]:
+    """`status()` for people: one `key: value` line each, values with units and sensible
+    digits (millimetres, hundredths of a degree), no Python notation."""
+    units = {"position_ned_m": (".3f", "m"), "velocity_ned_m_s": (".3f", "m/s"),
+             "q_ned_frd": (".4f", ""), "roll_pitch_yaw_deg": (".2f", "deg")}
+    lines = []
+    for key, value in status.items():
+        if key == "system":
+            text = f"{value} (component {status.get('component', '?')})"
+        elif key == "component":
+            continue
+        elif key == "armed":
+            text = "yes" if value else "no"
+        elif key in units:
+            fmt, unit = units[key]
+            text = _numbers(value, fmt) + (f" {unit}" if unit else "")
+        elif key == "global":
+            text = (f"lat {value['lat_deg']:.7f}, lon {value['lon_deg']:.7f} deg, "
+                    f"alt {value['alt_m']:.2f} m (relative {value['relative_alt_m']:.2f} m)")
+        elif key == "mission":
+            text = (f"item {value['current']} of {value['total']}, {value['state']}"
+                    if value["total"] else f"none, {value['state']}")
+        elif key == "link":
+            text = (f"{value['loss_percent']:.2f} % lost ({value['lost']} of "
+                    f"{value['received'] + value['lost']} messages)")
+        elif key == "capabilities":
+            text = ", ".join(value)
+        elif key == "messages":
+            lines += [f"{'message':>18}: {t}" for t in value]
+            continue
+        else:
+            text = str(value)
+        lines.append(f"{key:>18}: {text}")
+    return lines
+
+
 def vehicles(session: Session, seconds: float) -> list[int]:
     """System ids of the autopilots on the link: Zenoh liveliness tokens where the link has
     them (vehicles that left are gone), else heartbeats heard within `seconds`."""
     live = getattr(session.conn, "vehicles", None)
     if live is not None:
         time.sleep(min(seconds, 1.0))  # liveliness history arrives at once; let it settle
-        return sorted(session.conn.vehicles)
+        return sorted(session.conn.vehicles or ())
     heard: set[int] = set()
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
@@ -147,6 +225,7 @@ def vehicles(session: Session, seconds: float) -> list[int]:
 
 
 def set_mode(session: Session, name: str) -> int:
+    """DO_SET_MODE by name (PX4's names and their aliases, `common.modes.by_name`)."""
     mode = by_name(name)
     if mode is None:
         raise GcsError(f"unknown mode {name!r}: expected one of {', '.join(MODE_NAMES)}")
@@ -296,11 +375,11 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
     stream(0.5)  # PX4 and this FCU need a setpoint stream before OFFBOARD is accepted
     # a vehicle arms only once it knows its state: wait for its position to be reported
     stream(10.0, until=lambda: snap.get("LOCAL_POSITION_NED") is not None)
-    if arm_first and arm(s, True) != M.MAV_RESULT_ACCEPTED:
-        raise GcsError("arming refused")
+    if arm_first and (result := arm(s, True)) != M.MAV_RESULT_ACCEPTED:
+        raise GcsError(f"arming refused: {s.describe(result)}")
     result = set_mode(s, "OFFBOARD")
     if result != M.MAV_RESULT_ACCEPTED:
-        raise GcsError(f"OFFBOARD refused (MAV_RESULT {result})")
+        raise GcsError(f"OFFBOARD refused: {s.describe(result)}")
 
     def reached() -> bool:
         errs = pose_errors(snap, target)
@@ -310,6 +389,8 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
 
     if not stream(timeout, reached):
         errs = pose_errors(snap, target)
-        raise GcsError(f"pose not reached within {timeout:.0f} s (errors {errs})")
+        where = "no position heard" if errs is None else \
+            f"position error {errs[0]:.3f} m, attitude error {math.degrees(errs[1]):.2f} deg"
+        raise GcsError(f"pose not reached within {timeout:g} s ({where})")
     stream(hold_s)
     return pose_errors(snap, target)  # type: ignore[return-value]

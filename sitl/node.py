@@ -24,9 +24,10 @@ import sys
 import time
 from pathlib import Path
 
+from common.cliargs import OneLineParser, check_output_path
 from common.config import ConfigError, Scenario, VehicleConfig, load_scenario
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
-from common.links import LinkError, open_link
+from common.links import LinkError, open_link, parse_url
 from common.mavlink import MAV, encoder, pack
 from common.parent import stop_with_parent
 from common.simlink import (
@@ -252,7 +253,7 @@ class SimulatorServer:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="sitl", description="tilt-rotor plant on a simulator link")
+    p = OneLineParser(prog="sitl", description="tilt-rotor plant on a simulator link")
     p.add_argument("scenario", type=Path, help="scenario TOML (vehicle, start, disturbances)")
     p.add_argument("--link", default="udpin:127.0.0.1:4560",
                    help="simulator link URL (default udpin:127.0.0.1:4560)")
@@ -279,6 +280,8 @@ def main(argv: list[str] | None = None) -> int:
     stop_with_parent()
     args = build_parser().parse_args(argv)
     try:
+        parse_url(args.link)  # before anything is opened
+        check_output_path("--truth-log", args.truth_log)
         scenario = load_scenario(args.scenario)
         if args.ideal_actuators:
             scenario = dataclasses.replace(scenario, ideal_actuators=True)
@@ -302,8 +305,14 @@ def main(argv: list[str] | None = None) -> int:
                                  end_time_s=end, realtime=args.realtime,
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
                                  resend_ms=args.resend_ms, system_id=args.sysid)
-    except (ConfigError, LinkError, ULogError) as exc:
+    except LinkError as exc:  # 2: bad URL, busy port, missing device; 1: peer not there
         print(f"sitl: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except (ConfigError, ULogError) as exc:
+        print(f"sitl: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file that cannot be written: one line
+        print(f"sitl: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
 
     def stop(_signum, _frame):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 
 import pytest
+from pymavlink import mavutil
 
 from common.mavlink import MAV
 from common.modes import Mode
@@ -14,15 +15,35 @@ pytestmark = pytest.mark.timeout(120)
 
 
 def test_heartbeat_identifies_an_autopilot(stack):
-    """HEARTBEAT from component 1, a vehicle type, a real autopilot, disarmed, custom mode."""
+    """HEARTBEAT from component 1, a vehicle type, PX4 as the autopilot (so that pymavlink,
+    MAVProxy, QGC and MAVSDK read its custom mode by PX4's names), disarmed, AUTO.LOITER."""
     hb = stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1)
     assert hb is not None
     assert hb.type == M.MAV_TYPE_HEXAROTOR
-    assert hb.autopilot != M.MAV_AUTOPILOT_INVALID
+    assert hb.autopilot == M.MAV_AUTOPILOT_PX4
     assert hb.base_mode & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
     assert not hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
     assert hb.custom_mode == Mode.HOLD.custom_mode
+    assert mavutil.mode_string_v10(hb) == "LOITER"
     assert stack.session.target_system == 1
+
+
+def test_sys_status_bits_are_truthful(stack):
+    """SYS_STATUS: the simulated sensors present and healthy (gyro, accelerometer,
+    barometer, external pose), no magnetometer, GNSS, RC or fence; pre-arm passes with a
+    state; geofence health set (no breach to report); battery not measured."""
+    ss = stack.wait_for(["SYS_STATUS"])
+    assert ss is not None
+    present, health = ss.onboard_control_sensors_present, ss.onboard_control_sensors_health
+    for bit in (M.MAV_SYS_STATUS_SENSOR_3D_GYRO, M.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
+                M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
+                M.MAV_SYS_STATUS_SENSOR_VISION_POSITION, M.MAV_SYS_STATUS_PREARM_CHECK):
+        assert present & bit and health & bit
+    for bit in (M.MAV_SYS_STATUS_SENSOR_3D_MAG, M.MAV_SYS_STATUS_SENSOR_GPS,
+                M.MAV_SYS_STATUS_SENSOR_RC_RECEIVER, M.MAV_SYS_STATUS_GEOFENCE):
+        assert not present & bit
+    assert health & M.MAV_SYS_STATUS_GEOFENCE
+    assert (ss.voltage_battery, ss.current_battery, ss.battery_remaining) == (65535, -1, -1)
 
 
 def test_autopilot_version_has_the_capabilities_mavsdk_needs(stack):
@@ -42,7 +63,9 @@ def test_autopilot_version_has_the_capabilities_mavsdk_needs(stack):
 def test_every_command_gets_an_ack(stack):
     """Supported commands are ACCEPTED, unknown ones UNSUPPORTED, bad arguments DENIED."""
     s = stack.session
-    assert s.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH) == M.MAV_RESULT_UNSUPPORTED
+    assert s.command(M.MAV_CMD_NAV_RETURN_TO_LAUNCH) == M.MAV_RESULT_DENIED  # not armed
+    assert s.command(M.MAV_CMD_NAV_TAKEOFF) == M.MAV_RESULT_DENIED  # not armed
+    assert s.command(M.MAV_CMD_DO_FENCE_ENABLE, 1) == M.MAV_RESULT_UNSUPPORTED
     assert s.command(M.MAV_CMD_DO_SET_SERVO, 1, 1500) == M.MAV_RESULT_UNSUPPORTED
     assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0.5) == M.MAV_RESULT_DENIED
     assert s.command(M.MAV_CMD_MISSION_START) == M.MAV_RESULT_DENIED  # no mission yet
@@ -118,17 +141,22 @@ def test_parameters_read_write_and_refuse_unstable_gains(stack):
                                        M.MAV_PARAM_TYPE_REAL32))
     echo = stack.wait_for(["PARAM_VALUE"], lambda m: m.param_id == "DQ_KPR_X")
     assert echo.param_value == pytest.approx(6.0)
-    # k_i = 100 > k_p k_d = 60: refused, the old value stays and a STATUSTEXT says why
+    # k_i = 100 > k_p k_d = 60: refused, the old value stays; PARAM_ERROR comes first (MAVSDK
+    # reports it), a STATUSTEXT says why
     s.send(M.MAVLink_param_set_message(s.target_system, s.target_component, b"DQ_KIR_X", 100.0,
                                        M.MAV_PARAM_TYPE_REAL32))
-    echo = text = None
+    echo = text = error = None
     deadline = time.monotonic() + 5.0
     while (echo is None or text is None) and time.monotonic() < deadline:
-        m = s.recv(["PARAM_VALUE", "STATUSTEXT"], timeout=0.2)
+        m = s.recv(["PARAM_VALUE", "STATUSTEXT", "PARAM_ERROR"], timeout=0.2)
+        if m is not None and m.get_type() == "PARAM_ERROR" and m.param_id == "DQ_KIR_X":
+            error = m
         if m is not None and m.get_type() == "PARAM_VALUE" and m.param_id == "DQ_KIR_X":
             echo = m
+            assert error is not None  # before the echo
         elif m is not None and m.get_type() == "STATUSTEXT" and "DQ_KIR_X" in m.text:
             text = m
+    assert error is not None and error.error == M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE
     assert echo is not None and echo.param_value == pytest.approx(0.1)
     assert text is not None and "k_p k_d > k_i" in text.text
     assert _param(stack, "DQ_KIR_X").param_value == pytest.approx(0.1)
@@ -190,11 +218,13 @@ def test_commands_with_bad_parameters_are_denied_with_a_reason(stack):
     """NaN, infinities and out-of-range values: DENIED (never silence) and a STATUSTEXT."""
     s = stack.session
     nan, inf = float("nan"), float("inf")
-    assert s.command(M.MAV_CMD_DO_SET_MODE, nan, 4, 3) == M.MAV_RESULT_DENIED
-    assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, inf) == M.MAV_RESULT_DENIED
-    assert s.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, nan, 1000) == M.MAV_RESULT_DENIED
-    assert s.command(M.MAV_CMD_DO_SET_MISSION_CURRENT, 1e12) == M.MAV_RESULT_DENIED
-    text = stack.wait_for(["STATUSTEXT"], lambda m: "denied" in m.text or "no mission" in
-                          m.text, 3.0)
-    assert text is not None
+    for command, params, reason in (
+            (M.MAV_CMD_DO_SET_MODE, (nan, 4, 3), "unsupported mode"),
+            (M.MAV_CMD_COMPONENT_ARM_DISARM, (inf,), "p1 must be 0 or 1"),
+            (M.MAV_CMD_SET_MESSAGE_INTERVAL, (nan, 1000), "no message id"),
+            (M.MAV_CMD_DO_SET_MISSION_CURRENT, (1e12,), "no mission item"),
+            (M.MAV_CMD_NAV_TAKEOFF, (nan,) * 7, "takeoff: not armed")):
+        assert s.command(command, *params) == M.MAV_RESULT_DENIED
+        # the Session keeps the STATUSTEXTs that came with and after the refusal
+        assert any(reason in text for text in s.last_texts), (command, s.last_texts)
     assert stack.procs["fcu"].poll() is None

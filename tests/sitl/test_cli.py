@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import os
 import pty
 import select
+import socket
 import subprocess
 import sys
 import time
@@ -56,19 +58,37 @@ def vehicle(tmp_path) -> Iterator[Vehicle]:
 
 
 def test_status_arm_mode_disarm(vehicle):
-    """status shows identity and state; arm, mode and disarm report the vehicle's answer."""
+    """status shows identity and state, formatted (no Python notation, millimetres);
+    arm, mode and disarm report the vehicle's answer, a refusal with its reason."""
     out = vehicle.gcs("status")
     assert out.returncode == 0, out.stderr
-    for text in ("MAV_TYPE_HEXAROTOR", "mode: HOLD", "armed: False", "MISSION_INT",
-                 "landed: on ground", "health: ok", "position_ned_m: [0.0, 0.0"):
-        assert text in out.stdout
+    for text in ("MAV_TYPE_HEXAROTOR", "mode: HOLD", "armed: no", "MISSION_INT",
+                 "landed: on ground", "health: ok", "position_ned_m: 0.000, 0.000, ",
+                 "system: 1 (component 1)", "% lost ("):
+        assert text in out.stdout, out.stdout
+    for python in ("[", "]", "{", "'", "True", "False"):
+        assert python not in out.stdout, out.stdout
     assert vehicle.gcs("arm").stdout.strip() == "arm: MAV_RESULT_ACCEPTED"
-    assert "armed: True" in vehicle.gcs("status").stdout
+    assert "armed: yes" in vehicle.gcs("status").stdout
     bad = vehicle.gcs("mode", "ACRO")
-    assert bad.returncode == 1 and "unknown mode" in bad.stderr
-    assert vehicle.gcs("mode", "MISSION").returncode == 1  # no mission: DENIED
+    assert bad.returncode == 2 and "unknown mode ACRO (one of " in bad.stderr
+    denied = vehicle.gcs("mode", "MISSION")  # no mission: DENIED, and the vehicle says why
+    assert denied.returncode == 1
+    assert denied.stdout.strip() == "mode MISSION refused: MAV_RESULT_DENIED: no mission"
     assert vehicle.gcs("mode", "hold").returncode == 0
     assert vehicle.gcs("disarm").stdout.strip() == "disarm: MAV_RESULT_ACCEPTED"
+
+
+def test_status_json_is_one_document(vehicle):
+    """status --json prints one JSON document with float32 values in their shortest form."""
+    out = vehicle.gcs("status", "--json")
+    assert out.returncode == 0, out.stderr
+    doc = json.loads(out.stdout)
+    assert doc["system"] == 1 and doc["mode"] == "HOLD" and doc["armed"] is False
+    assert doc["landed"] == "on ground" and doc["health"] == "ok"
+    assert len(doc["position_ned_m"]) == 3 and len(doc["q_ned_frd"]) == 4
+    assert all(len(repr(v)) <= 16 for v in doc["q_ned_frd"])  # no 0.10000000149011612
+    assert set(doc["link"]) == {"loss_percent", "received", "lost"}
 
 
 @pytest.mark.parametrize("fmt", ["wpl", "toml"])
@@ -137,7 +157,7 @@ def test_parameters(vehicle):
     listing = vehicle.gcs("param", "list")
     assert listing.returncode == 0
     names = [line.split()[0] for line in listing.stdout.splitlines()]
-    assert len(names) == len(SPECS) == 31 and "DQ_KPR_X" in names and "MIS_ENV_CHK" in names
+    assert len(names) == len(SPECS) and "DQ_KPR_X" in names and "MIS_ENV_CHK" in names
     assert vehicle.gcs("param", "get", "DQ_KDD_Z").stdout.strip() == "DQ_KDD_Z = 10"
     ok = vehicle.gcs("param", "set", "MIS_CRUISE_SPD", "3.5")
     assert ok.returncode == 0 and "MIS_CRUISE_SPD = 3.5" in ok.stdout
@@ -154,8 +174,8 @@ def test_goto_reaches_a_six_dof_pose(vehicle):
                       "--tolerance", "0.05", "--tolerance-deg", "1")
     assert out.returncode == 0, out.stderr
     assert "reached" in out.stdout
-    status = vehicle.gcs("status").stdout
-    roll, pitch, yaw = eval(status.split("roll_pitch_yaw_deg: ")[1].splitlines()[0])
+    status = json.loads(vehicle.gcs("status", "--json").stdout)
+    roll, pitch, yaw = status["roll_pitch_yaw_deg"]
     assert abs(roll - 20) < 2 and abs(pitch) < 2 and abs(yaw - 60) < 2
 
 
@@ -215,3 +235,229 @@ def test_no_vehicle_is_a_clear_error(tmp_path):
                           f"udpin:127.0.0.1:{free_port()}", "--wait", "1"], cwd=ROOT,
                          capture_output=True, text=True, timeout=30, check=False)
     assert out.returncode == 1 and "no vehicle heartbeat" in out.stderr
+
+
+# ------------------------------------------------------------------ input and links
+
+
+def _cmd(*argv: str, timeout: float = 30.0) -> tuple[subprocess.CompletedProcess, float]:
+    """Run `gcs`, `fcu` or `sitl` (python -m); (result, seconds taken)."""
+    module = {"gcs": "gcs.cli", "fcu": "fcu.node", "sitl": "sitl.node"}[argv[0]]
+    t0 = time.monotonic()
+    out = subprocess.run([sys.executable, "-m", module, *argv[1:]], cwd=ROOT,
+                         capture_output=True, text=True, timeout=timeout, check=False)
+    return out, time.monotonic() - t0
+
+
+def _one_line_error(out: subprocess.CompletedProcess, code: int, *texts: str) -> None:
+    lines = out.stderr.splitlines()
+    assert out.returncode == code, (out.returncode, out.stdout, out.stderr)
+    assert len(lines) == 1 and "Traceback" not in out.stderr, out.stderr
+    for text in texts:
+        assert text in lines[0], lines[0]
+
+
+FCU_ARGS = ("--vehicle", str(VEHICLE), "--gains", str(PID))
+CASE1 = str(SCENARIOS / "case1_figure8.toml")
+BAD_INPUT = [
+    # link URLs: MAVSDK's forms parse, bad ones are refused before any wait
+    (("gcs", "status", "--connect", "udpin://127.0.0.1:99999"), "port 99999 out of range"),
+    (("gcs", "status", "--connect", "udpin:127.0.0.1"), "no port"),
+    (("gcs", "status", "--connect", "udpout:127.0.0.1:0"), "port 0 out of range"),
+    (("gcs", "status", "--connect", "bogus:1:2"), "unknown link type 'bogus'"),
+    (("gcs", "status", "--connect", "serial:/dev/ttyNOPE0:57600"),
+     "no such device /dev/ttyNOPE0"),
+    (("gcs", "status", "--connect", "serial:/dev/ttyNOPE0"), "expected serial:DEVICE:BAUD"),
+    (("gcs", "status", "--connect", f"serial:{CASE1}:57600"), "is not a serial device"),
+    (("gcs", "view", "--connect", "tcp://127.0.0.1:70000"), "port 70000 out of range"),
+    (("fcu", *FCU_ARGS, "--sim", "udpin://127.0.0.1:99999"), "port 99999 out of range"),
+    (("fcu", *FCU_ARGS, "--gcs", "udpout:127.0.0.1"), "no port"),
+    (("fcu", *FCU_ARGS, "--gcs", "serial:///dev/ttyNOPE0:57600"), "no such device"),
+    (("sitl", CASE1, "--link", "tcpin:127.0.0.1:65536"), "port 65536 out of range"),
+    (("sitl", CASE1, "--link", "udp:"), "no port"),
+    # arguments, names and files, checked before anything is opened
+    (("gcs", "mode", "FOO"), "unknown mode FOO (one of HOLD, "),
+    (("gcs", "mode"), "required: name"),
+    (("gcs", "status", "--wait", "-1"), "--wait"),
+    (("fcu", "--gains", str(PID)), "required: --vehicle"),
+    (("gcs", "mission", "upload", "/nonexistent/mission.toml"), "/nonexistent/mission.toml"),
+    (("gcs", "status", "--signing-key", "/nonexistent/key"), "/nonexistent/key"),
+    (("gcs", "keygen", "/nonexistent/folder/key"), "its folder does not exist"),
+    (("gcs", "log", "record", "/nonexistent/folder/x.tlog"),
+     "folder /nonexistent/folder does not exist"),
+    (("gcs", "log", "record", "/tmp"), "is a folder"),
+    (("gcs", "mission", "download", "/nonexistent/folder/m.toml"), "/nonexistent/folder"),
+    (("gcs", "run", CASE1, "--out", CASE1), "is not a folder"),
+    (("gcs", "report", "/nonexistent/run"), "/nonexistent/run"),
+    (("fcu", *FCU_ARGS, "--stats", "/nonexistent/folder/s.json"), "does not exist"),
+    (("sitl", CASE1, "--truth-log", "/nonexistent/folder/t.ulg"), "does not exist"),
+    (("gcs", "router", "--listen", "tcp/127.0.0.1"), "expected PROTO/HOST:PORT"),
+]
+
+
+@pytest.mark.parametrize(("argv", "text"), BAD_INPUT, ids=[" ".join(a[:3]) + " " + a[-1][-24:]
+                                                           for a, _ in BAD_INPUT])
+def test_bad_input_is_one_line_and_exit_2_without_waiting(argv, text):
+    """No vehicle anywhere: every bad input is refused at once, exit 2, one stderr line,
+    no traceback (the unknown mode used to wait for a vehicle, then exit 1)."""
+    out, took = _cmd(*argv)
+    _one_line_error(out, 2, text)
+    assert took < 5.0, f"{argv} took {took:.1f} s"
+
+
+def test_mission_file_errors_reach_one_line(tmp_path):
+    broken = tmp_path / "broken.toml"
+    broken.write_text('[[item]]\ntype = "keyframe"\ntime_s = 1.0\n')
+    out, took = _cmd("gcs", "mission", "upload", str(broken), "--connect",
+                     f"udpin:127.0.0.1:{free_port()}")
+    _one_line_error(out, 2, "position_ned_m")
+    assert took < 5.0
+
+
+def test_mavsdk_url_forms_reach_the_link(tmp_path):
+    """MAVSDK's spellings open real links: nothing answers, so the wait ends (exit 1)."""
+    for url in (f"udpin://127.0.0.1:{free_port()}", f"udp://127.0.0.1:{free_port()}",
+                f"udpout://127.0.0.1:{free_port()}"):
+        out, _ = _cmd("gcs", "status", "--connect", url, "--wait", "0.5")
+        _one_line_error(out, 1, "no vehicle heartbeat")
+
+
+def test_refused_tcp_connect_is_one_line_exit_1():
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]  # bound, not listening: connects are refused
+        for url in (f"tcp:127.0.0.1:{port}", f"tcp://127.0.0.1:{port}"):
+            out, took = _cmd("gcs", "status", "--connect", url)
+            _one_line_error(out, 1, f"cannot connect to 127.0.0.1:{port}",
+                            "connection refused")
+            assert took < 5.0
+        for argv in (("gcs", "status", "--connect", f"zenoh:mavlink@tcp/127.0.0.1:{port}"),
+                     ("sitl", CASE1, "--link", f"zenoh:mavlink@tcp/127.0.0.1:{port}")):
+            out, took = _cmd(*argv)  # no Zenoh router there: the peer is missing, exit 1
+            _one_line_error(out, 1, "cannot open a Zenoh session")
+            assert took < 5.0
+
+
+def _holder(kind: int, reuse: bool = True) -> socket.socket:
+    """Another process's socket on a port (SO_REUSEADDR set, as pymavlink sets it)."""
+    s = socket.socket(socket.AF_INET, kind)
+    if reuse:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    s.bind(("127.0.0.1", 0))
+    if kind == socket.SOCK_STREAM:
+        s.listen(1)
+    return s
+
+
+@pytest.mark.parametrize("who", ["gcs udpin", "gcs udpin://", "gcs tcpin", "fcu --gcs",
+                                 "fcu --sim", "sitl --link", "sitl tcpin", "gcs router"])
+def test_busy_port_is_refused_never_shared(who):
+    """A port another process holds is an error naming it, never silently shared."""
+    kind = socket.SOCK_STREAM if "tcp" in who or "router" in who else socket.SOCK_DGRAM
+    with _holder(kind) as held:
+        port = held.getsockname()[1]
+        argv = {
+            "gcs udpin": ("gcs", "status", "--connect", f"udpin:127.0.0.1:{port}"),
+            "gcs udpin://": ("gcs", "status", "--connect", f"udpin://127.0.0.1:{port}"),
+            "gcs tcpin": ("gcs", "status", "--connect", f"tcpin:127.0.0.1:{port}"),
+            "fcu --gcs": ("fcu", *FCU_ARGS, "--gcs", f"udpin:127.0.0.1:{port}"),
+            "fcu --sim": ("fcu", *FCU_ARGS, "--sim", f"udpin:127.0.0.1:{port}"),
+            "sitl --link": ("sitl", CASE1, "--link", f"udpin:127.0.0.1:{port}"),
+            "sitl tcpin": ("sitl", CASE1, "--link", f"tcpin:127.0.0.1:{port}"),
+            "gcs router": ("gcs", "router", "--listen", f"tcp/127.0.0.1:{port}"),
+        }[who]
+        out, took = _cmd(*argv)
+    _one_line_error(out, 2, f"127.0.0.1:{port} is in use by another process")
+    assert took < 5.0
+
+
+def test_two_ground_stations_on_one_udpin_port(tmp_path):
+    """The second `gcs` on a port the first listens on is told so (it used to share it
+    silently, each getting part of the datagrams)."""
+    port = free_port()
+    first = subprocess.Popen([sys.executable, "-m", "gcs.cli", "status", "--connect",
+                              f"udpin:127.0.0.1:{port}", "--wait", "20"], cwd=ROOT,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 15
+        while True:  # until the first one holds the port
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+                try:
+                    probe.bind(("127.0.0.1", port))
+                except OSError:
+                    break
+            assert time.monotonic() < deadline and first.poll() is None
+            time.sleep(0.1)
+        out, took = _cmd("gcs", "watch", "--connect", f"udpin:127.0.0.1:{port}")
+        _one_line_error(out, 2, f"127.0.0.1:{port} is in use by another process")
+        assert took < 5.0 and first.poll() is None
+    finally:
+        first.kill()
+        first.wait()
+
+
+def test_refusal_prints_the_vehicles_reason(tmp_path):
+    """An FCU without a simulator refuses to arm; `gcs arm` prints the STATUSTEXT that came
+    with the COMMAND_ACK, not only MAV_RESULT_DENIED."""
+    gcs = free_port()
+    procs = {"fcu": start("fcu", ["fcu.node", *FCU_ARGS, "--sim",
+                                  f"udpout:127.0.0.1:{free_port()}", "--gcs",
+                                  f"udpout:127.0.0.1:{gcs}"], tmp_path)}
+    try:
+        out, _ = _cmd("gcs", "arm", "--connect", f"udpin:127.0.0.1:{gcs}")
+        assert out.returncode == 1, out.stderr
+        assert out.stdout.strip() == \
+            "arm refused: MAV_RESULT_DENIED: arming refused: no state input", out.stdout
+    finally:
+        stop(procs)
+
+
+def test_watch_shows_link_lost_when_the_fcu_dies(vehicle):
+    """Piped, watch prints plain snapshots: landed state and health while the FCU lives,
+    then "LINK LOST for N s" with the values marked stale once it is killed."""
+    watch = subprocess.Popen([sys.executable, "-m", "gcs.cli", "watch", "--connect",
+                              vehicle.connect, "--rate", "4", "--duration", "9"], cwd=ROOT,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(4.0)
+        vehicle.procs["fcu"].kill()
+        out, err = watch.communicate(timeout=30)
+    finally:
+        if watch.poll() is None:
+            watch.kill()
+            watch.wait()
+    assert watch.returncode == 0, err
+    assert "\x1b" not in out  # plain text when piped
+    frames = out.split("system 1 ")
+    alive = [f for f in frames if "LINK LOST" not in f and "position NED" in f]
+    assert alive and "on ground" in alive[-1] and "health        ok" in alive[-1]
+    assert "[stale]" not in "".join(alive)
+    lost = [f for f in frames if "LINK LOST for" in f]
+    assert lost, out[-2000:]
+    last = lost[-1]
+    assert "[stale]" in last and "position NED" in last
+    seconds = int(last.split("LINK LOST for ")[1].split(" s")[0])
+    assert 3 <= seconds <= 8
+
+
+def test_every_transport_carries_the_ground_station(tmp_path):
+    """One link layer for gcs and fcu: the FCU serves udpin, tcpin and a tcp client link;
+    `gcs status` reaches it over udpout://, tcp:// and tcpin (MAVSDK's forms included)."""
+    udp, tcpin, tcp = free_port(), free_port(socket.SOCK_STREAM), free_port(socket.SOCK_STREAM)
+    procs = {"fcu": start("fcu", ["fcu.node", *FCU_ARGS, "--sim",
+                                  f"udpout:127.0.0.1:{free_port()}",
+                                  "--gcs", f"udpin://127.0.0.1:{udp}",
+                                  "--gcs", f"tcpin:127.0.0.1:{tcpin}",
+                                  "--gcs", f"tcp:127.0.0.1:{tcp}"], tmp_path)}
+    try:
+        deadline = time.monotonic() + 20
+        while "fcu: system 1" not in (tmp_path / "fcu.log").read_text():  # links are open
+            assert time.monotonic() < deadline and procs["fcu"].poll() is None
+            time.sleep(0.1)
+        for url in (f"udpout://127.0.0.1:{udp}", f"tcp://127.0.0.1:{tcpin}",
+                    f"tcpin:127.0.0.1:{tcp}"):
+            out, _ = _cmd("gcs", "status", "--connect", url)
+            assert out.returncode == 0, (url, out.stderr, (tmp_path / "fcu.log").read_text())
+            assert "MAV_TYPE_HEXAROTOR" in out.stdout and "mode: HOLD" in out.stdout, url
+    finally:
+        stop(procs)

@@ -236,3 +236,170 @@ def test_mavsdk_uploads_downloads_arms_flies_and_reads_telemetry(tmp_path):
     assert r["armed"] is True
     done_us = r["progress"][-1][0]
     assert r["mode"][-1][0] > done_us and r["mode"][-1][1].name == "HOLD", r["mode"]
+
+
+# ------------------------------------------------------------------ MAVSDK as for PX4
+
+
+class Watch:
+    """The test's own view of the FCU (its pymavlink Session), recorded in a thread:
+    (wall time, message) for HEARTBEAT, LOCAL_POSITION_NED, EXTENDED_SYS_STATE, STATUSTEXT."""
+
+    KINDS = ("HEARTBEAT", "LOCAL_POSITION_NED", "EXTENDED_SYS_STATE", "STATUSTEXT")
+
+    def __init__(self, session) -> None:
+        import threading
+
+        self.session = session
+        self.seen: list[tuple[float, object]] = []
+        self.running = True
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while self.running:
+            msg = self.session.recv(list(self.KINDS), timeout=0.1)
+            if msg is not None and msg.get_srcComponent() == 1:
+                self.seen.append((time.monotonic(), msg))
+
+    def stop(self) -> None:
+        self.running = False
+        self.thread.join(timeout=5)
+
+    def of(self, kind: str) -> list:
+        return [m for _, m in list(self.seen) if m.get_type() == kind]
+
+    def modes(self) -> list[str]:
+        from common.modes import decode_custom
+
+        names: list[str] = []
+        for hb in self.of("HEARTBEAT"):
+            mode = decode_custom(hb.custom_mode)
+            name = mode.name if mode is not None else str(hb.custom_mode)
+            if not names or names[-1] != name:
+                names.append(name)
+        return names
+
+
+RTL_AWAY_NED = (3.0, -4.0, -2.0)  # where a mission takes the vehicle before RTL
+
+
+async def _px4_flight(grpc_port: int, watch: Watch) -> dict:
+    from mavsdk.action import ActionError
+    from mavsdk.param import ParamError
+    from mavsdk.telemetry import FlightMode, LandedState
+
+    drone = System(mavsdk_server_address="127.0.0.1", port=grpc_port)
+    await drone.connect()
+    state = await _first(drone.core.connection_state(), lambda s: s.is_connected, 20)
+    assert state is not None and state.is_connected
+    r: dict = {}
+    # before arming: health as MAVSDK derives it for PX4 (SYS_STATUS, HOME_POSITION,
+    # LOCAL_POSITION_NED)
+    r["health"] = await _first(drone.telemetry.health(), lambda h: h.is_armable and
+                               h.is_local_position_ok and h.is_home_position_ok, 15)
+    r["all_ok"] = await _first(drone.telemetry.health_all_ok(), lambda _: True, 5)
+    r["battery"] = await _first(drone.telemetry.battery(), lambda _: True, 5)
+    r["mode0"] = await _first(drone.telemetry.flight_mode(), lambda _: True, 5)
+    # parameters: a refusal is reported as such, not as a timeout
+    r["refusals"] = []
+    for name, value in (("MIS_LAND_SPD", -1.0), ("DQ_KIR_X", 100.0), ("NO_SUCH_PARAM", 1.0)):
+        t0 = time.monotonic()
+        try:
+            await drone.param.set_param_float(name, value)
+        except ParamError as exc:
+            r["refusals"].append((name, exc._result.result.name, time.monotonic() - t0))
+    r["land_spd"] = await drone.param.get_param_float("MIS_LAND_SPD")
+    await drone.action.set_takeoff_altitude(3.0)  # MIS_TAKEOFF_ALT, as for PX4
+    await drone.action.set_return_to_launch_altitude(6.0)  # RTL_RETURN_ALT
+    r["takeoff_alt"] = await drone.action.get_takeoff_altitude()
+    r["rtl_alt"] = await drone.action.get_return_to_launch_altitude()
+
+    await drone.action.arm()
+    await drone.action.takeoff()
+    r["hold"] = await _first(drone.telemetry.flight_mode(), lambda m: m == FlightMode.HOLD and
+                             any(m.text.startswith("takeoff complete")
+                                 for m in watch.of("STATUSTEXT")), 60)
+    await asyncio.sleep(1.0)
+    r["after_takeoff"] = await _first(drone.telemetry.position_velocity_ned(),
+                                      lambda _: True, 5)
+
+    # away from home with a one-waypoint mission, then home with RTL
+    await drone.mission_raw.upload_mission([MissionItem(
+        0, M.MAV_FRAME_LOCAL_NED, M.MAV_CMD_NAV_WAYPOINT, 1, 1, 0.0, 0.0, 0.0, math.nan,
+        local_xy(RTL_AWAY_NED[0]), local_xy(RTL_AWAY_NED[1]), RTL_AWAY_NED[2],
+        M.MAV_MISSION_TYPE_MISSION)])
+    await drone.mission_raw.start_mission()
+    await _first(drone.mission_raw.mission_progress(), lambda p: p.current == p.total, 60)
+    await _first(drone.telemetry.flight_mode(), lambda m: m == FlightMode.HOLD, 30)
+    r["away"] = await _first(drone.telemetry.position_velocity_ned(), lambda _: True, 5)
+    await drone.action.return_to_launch()
+    r["rtl_mode"] = await _first(drone.telemetry.flight_mode(),
+                                 lambda m: m == FlightMode.RETURN_TO_LAUNCH, 10)
+    await _first(drone.telemetry.armed(), lambda armed: not armed, 120)
+    r["landed"] = await _first(drone.telemetry.landed_state(),
+                               lambda s: s == LandedState.ON_GROUND, 10)
+    await asyncio.sleep(0.5)
+    r["end"] = await _first(drone.telemetry.position_velocity_ned(), lambda _: True, 5)
+    try:
+        await drone.action.takeoff()  # disarmed: refused, and MAVSDK says so
+        r["takeoff_disarmed"] = "SUCCESS"
+    except ActionError as exc:
+        r["takeoff_disarmed"] = exc._result.result.name
+    return r
+
+
+@pytest.mark.timeout(240)
+def test_mavsdk_health_takeoff_and_return_to_launch(tmp_path):
+    """Given the FCU (Case I, on the ground, lockstep) seen by MAVSDK as a PX4 autopilot,
+    then before arming is_armable, the gyro, accelerometer, local and home position health
+    are true (health_all_ok false: no GNSS, no magnetometer), the battery is unknown, refused
+    parameter sets are reported as refusals (VALUE_OUT_OF_RANGE, DOES_NOT_EXIST) at once;
+    Action.takeoff() climbs MIS_TAKEOFF_ALT (set by MAVSDK) and holds (TAKEOFF then HOLD);
+    after a waypoint away, return_to_launch() climbs to RTL_RETURN_ALT, flies home, lands
+    and disarms there."""
+    port = free_port()
+    stack = launch(tmp_path, "case1_figure8", fcu_args=("--gcs", f"udpout:127.0.0.1:{port}"))
+    watch = Watch(stack.session)
+    server = None
+    try:
+        server = MavsdkServer(f"udpin://127.0.0.1:{port}", tmp_path / "mavsdk_server.log")
+        r = asyncio.run(asyncio.wait_for(_px4_flight(server.grpc_port(timeout=30), watch), 220))
+    finally:
+        watch.stop()
+        if server is not None:
+            server.close()
+        stack.session.close()
+        stop(stack.procs)
+
+    h = r["health"]
+    assert h.is_armable and h.is_gyrometer_calibration_ok and h.is_accelerometer_calibration_ok
+    assert h.is_local_position_ok and h.is_home_position_ok
+    assert not h.is_global_position_ok and not h.is_magnetometer_calibration_ok
+    assert r["all_ok"] is False
+    b = r["battery"]  # not measured: MAVSDK shows unknown, except SYS_STATUS's voltage
+    assert b.remaining_percent == -1.0 and math.isnan(b.current_battery_a)
+    assert math.isnan(b.capacity_consumed_ah) and math.isnan(b.temperature_degc)
+    assert r["mode0"].name == "HOLD"
+    assert [(n, res) for n, res, _ in r["refusals"]] == [
+        ("MIS_LAND_SPD", "VALUE_OUT_OF_RANGE"), ("DQ_KIR_X", "VALUE_OUT_OF_RANGE"),
+        ("NO_SUCH_PARAM", "DOES_NOT_EXIST")]
+    assert all(seconds < 0.5 for *_, seconds in r["refusals"])  # answered, not timed out
+    assert r["land_spd"] == pytest.approx(0.5)
+    assert r["takeoff_alt"] == pytest.approx(3.0) and r["rtl_alt"] == pytest.approx(6.0)
+
+    p = r["after_takeoff"].position
+    assert (p.north_m, p.east_m, p.down_m) == pytest.approx((0.0, 0.0, -3.0), abs=0.03)
+    p = r["away"].position
+    assert (p.north_m, p.east_m, p.down_m) == pytest.approx(RTL_AWAY_NED, abs=0.05)
+    modes = watch.modes()
+    assert modes[:4] == ["HOLD", "TAKEOFF", "HOLD", "MISSION"], modes
+    assert modes[4:6] == ["HOLD", "RTL"], modes
+    downs = [m.z for m in watch.of("LOCAL_POSITION_NED")]
+    assert min(downs) == pytest.approx(-6.0, abs=0.05)  # climbed to RTL_RETURN_ALT
+    assert r["landed"].name == "ON_GROUND"
+    p = r["end"].position
+    assert (p.north_m, p.east_m, p.down_m) == pytest.approx((0.0, 0.0, 0.0), abs=0.05)
+    texts = [m.text for m in watch.of("STATUSTEXT")]
+    assert "landed: disarmed" in texts and "disarmed in the air" not in texts
+    assert r["takeoff_disarmed"] == "COMMAND_DENIED"

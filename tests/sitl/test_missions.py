@@ -41,7 +41,8 @@ def test_upload_download_round_trip_and_atomic_refusal(stack):
     keyframe = MissionItem(0, M.MAV_FRAME_LOCAL_NED, MAV_CMD_POSE_KEYFRAME, 1, 1, 4.0, 0.125,
                            0.25, -0.375, local_xy(1.5), local_xy(-2.25), -3.0)
     unsupported = keyframe._replace(command=M.MAV_CMD_DO_SET_SERVO)
-    bad_frame = keyframe._replace(frame=M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+    # global frames with an altitude are converted through the home; terrain ones are not
+    bad_frame = keyframe._replace(frame=M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT)
     bad_param = keyframe._replace(param1=math.nan)
     for items, expected in (([keyframe, unsupported.with_seq(1)], M.MAV_MISSION_UNSUPPORTED),
                             ([bad_frame], M.MAV_MISSION_UNSUPPORTED_FRAME),

@@ -4,15 +4,19 @@ vehicle still in the air is never taken for landed."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+
+import pytest
 
 from common.config import load_gains, load_vehicle
 from common.modes import Mode
-from common.outcome import CRASH
+from common.outcome import CRASH, FAILSAFE
 from fcu.commander import (
     LANDED_STILL_S,
     MAV_RESULT_DENIED,
     TOUCHDOWN_DEPTH_M,
+    FlightSettings,
     pose_ref,
 )
 from fcu.failsafe import FailsafeSettings
@@ -138,3 +142,132 @@ def test_saturation_is_monitored_in_the_step():
         pipe.step(t, 0.002)
     assert pipe.saturated_steps > 100 and pipe.failsafe == "rotor saturation"
     assert any(e.text.startswith("rotors saturated") for e in pipe.events)
+
+
+# ------------------------------------------------------------------ TAKEOFF, RTL, POSCTL
+
+
+def _kinematic(pipe: Pipeline, t0: int, seconds: float, sticks=None, now_s=None,
+               ground: bool = True) -> list[tuple[int, tuple[float, float, float], str]]:
+    """Step the pipeline with a vehicle that is where it was told to be (held at z >= 0
+    when `ground`); (t, position, mode) per step."""
+    c = pipe.commander
+    out = []
+    t = t0
+    for _ in range(round(seconds * 500)):
+        t += 2000
+        if sticks is not None:
+            c.manual_input(now_s(t) if now_s else 0.0, *sticks(t * 1e-6))
+        pipe.step(t)
+        ref = c.last_ref if pipe.armed and c.last_ref is not None else None
+        p = ref.p_enu_m if ref is not None else pipe.state.p_enu_m
+        if ground:
+            p = (p[0], p[1], max(0.0, p[2]))
+        q = ref.q_enu_flu if ref is not None else pipe.state.q_enu_flu
+        pipe.on_state(t, VehicleState(p, q, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), t)
+        out.append((t, p, c.mode.name))
+    return out
+
+
+def _on_ground(flight=None) -> Pipeline:
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
+                    limits=MissionLimits(vehicle=vehicle))
+    if flight is not None:
+        pipe.commander.flight = flight
+    pipe.on_state(0, VehicleState((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    return pipe
+
+
+def test_takeoff_climbs_mis_takeoff_alt_then_holds():
+    """Given a vehicle armed on the ground, when NAV_TAKEOFF comes without an altitude, then
+    the mode is TAKEOFF, the set-point climbs MIS_TAKEOFF_ALT (2.5 m) straight up (at most
+    MIS_TKO_SPD on average), and the mode becomes HOLD there; disarmed, it is refused."""
+    pipe = _on_ground()
+    c = pipe.commander
+    assert c.takeoff()[0] == MAV_RESULT_DENIED  # not armed
+    assert pipe.arm()[0] == 0
+    assert c.takeoff()[0] == 0 and c.mode == Mode.TAKEOFF and c.flight_started
+    trace = _kinematic(pipe, 0, 5.0)
+    t_hold = next(t for t, _, mode in trace if mode == "HOLD")
+    assert t_hold * 1e-6 >= 2.5 / 1.0  # 2.5 m at MIS_TKO_SPD 1 m/s (stretched if needed)
+    for _, p, _ in trace:
+        assert p[0] == 0.0 and p[1] == 0.0 and 0.0 <= p[2] <= 2.5 + 1e-9
+    assert trace[-1][1][2] == pytest.approx(2.5) and trace[-1][2] == "HOLD"
+    assert "takeoff complete: mode HOLD" in [e.text for e in pipe.events]
+
+
+def test_takeoff_to_an_altitude_and_below_the_minimum():
+    """Given a target altitude 4 m above home, then the climb is to 4 m; given one below the
+    vehicle (MAVProxy's `takeoff 5` as AMSL), then MIS_TAKEOFF_ALT is climbed, with a
+    warning (as PX4 raises it to its minimum)."""
+    pipe = _on_ground()
+    c = pipe.commander
+    pipe.arm()
+    assert c.takeoff(4.0)[0] == 0
+    assert _kinematic(pipe, 0, 8.0)[-1][1][2] == pytest.approx(4.0)
+    pipe = _on_ground()
+    pipe.arm()
+    assert pipe.commander.takeoff(-483.0)[0] == 0
+    assert _kinematic(pipe, 0, 5.0)[-1][1][2] == pytest.approx(2.5)
+    assert any("minimum climb" in e.text for e in pipe.events)
+
+
+def test_rtl_climbs_flies_home_and_touches_down():
+    """Given the vehicle 4 m north-east-ish of home at 2 m, when RTL starts, then the
+    set-point climbs to RTL_RETURN_ALT (only up), then travels level to above home, then
+    descends there, and the land detector disarms on the ground; nothing overshoots."""
+    flight = FlightSettings(rtl_return_alt_m=5.0, rtl_cruise_m_s=2.0)
+    pipe = _on_ground(flight)
+    c = pipe.commander
+    pipe.on_state(0, VehicleState((3.0, 2.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    assert c.set_mode(Mode.RTL, 0.0)[0] == MAV_RESULT_DENIED  # not armed
+    pipe.arm()
+    assert c.set_mode(Mode.RTL, 0.0)[0] == 0 and c.mode == Mode.RTL and c.landing
+    trace = _kinematic(pipe, 0, 30.0)
+    heights = [p[2] for _, p, _ in trace]
+    top = heights.index(max(heights))
+    assert max(heights) == pytest.approx(5.0)
+    assert all(p[:2] == (3.0, 2.0) for _, p, _ in trace[:top])  # straight up first
+    assert all(math.isclose(p[2], 5.0) for _, p, _ in trace if 0.1 < math.hypot(*p[:2]) <
+               math.hypot(3.0, 2.0) - 0.1)  # level travel
+    assert all(math.hypot(*p[:2]) <= math.hypot(3.0, 2.0) + 1e-9 for _, p, _ in trace)
+    assert not pipe.armed and trace[-1][1] == pytest.approx((0.0, 0.0, 0.0), abs=1e-6)
+    assert "landed: disarmed" in [e.text for e in pipe.events]
+    assert not any(e.kind == CRASH for e in pipe.events)
+
+
+def test_rtl_above_the_return_altitude_does_not_climb():
+    pipe = _on_ground(FlightSettings(rtl_return_alt_m=1.0))
+    pipe.on_state(0, VehicleState((0.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    pipe.arm()
+    assert pipe.commander.set_mode(Mode.RTL, 0.0)[0] == 0
+    assert max(p[2] for _, p, _ in _kinematic(pipe, 0, 3.0)) == pytest.approx(3.0)
+
+
+def test_posctl_needs_manual_control_and_falls_back_to_hold():
+    """POSCTL is refused without a MANUAL_CONTROL stream; with one, the sticks move the
+    set-point (forward = the heading: east for the identity attitude), and when the stream
+    stops for COM_RC_LOSS_T (wall clock) the vehicle holds, with a failsafe."""
+    pipe = _on_ground()
+    c = pipe.commander
+    pipe.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    assert c.set_mode(Mode.POSCTL, 10.0)[0] == MAV_RESULT_DENIED
+    c.manual_input(10.0, 0, 0, 500, 0)
+    assert c.set_mode(Mode.POSCTL, 10.2)[0] == 0
+    pipe.arm()
+    assert c.flight_started
+    trace = _kinematic(pipe, 0, 4.0, sticks=lambda t: (1000 if t < 2.0 else 0, 0, 500, 0),
+                       now_s=lambda t: 10.0 + t * 1e-6, ground=False)
+    end = trace[-1][1]
+    assert end[0] == pytest.approx(2 * 5.0, abs=0.03) and abs(end[1]) < 1e-9  # east
+    assert end[2] == pytest.approx(2.0)
+    pipe.check_links(14.3)
+    assert c.mode == Mode.POSCTL
+    pipe.check_links(14.6)  # 0.6 s after the last MANUAL_CONTROL
+    assert c.mode == Mode.HOLD and pipe.events[-1].kind == FAILSAFE
+    assert c.hold.p_enu_m == pytest.approx(end)

@@ -29,7 +29,8 @@ ROOT = Path(__file__).resolve().parents[2]
 COMMANDS = (M.MAV_CMD_COMPONENT_ARM_DISARM, M.MAV_CMD_DO_SET_MODE, M.MAV_CMD_MISSION_START,
             M.MAV_CMD_DO_SET_MISSION_CURRENT, M.MAV_CMD_NAV_LAND,
             M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAV_CMD_GET_MESSAGE_INTERVAL,
-            M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, 0, 65535)
+            M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+            M.MAV_CMD_NAV_TAKEOFF, M.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0, 65535)
 
 
 class MemoryLink(Link):
@@ -100,7 +101,7 @@ def _field(ftype: str, length: int, name: str) -> st.SearchStrategy:
         one = st.one_of(st.sampled_from([lo, hi, 0, 1, lo + 1, hi - 1]), st.integers(lo, hi))
         if name == "command":
             one = st.one_of(st.sampled_from(COMMANDS), one)
-        if name in ("target_system",):
+        if name in ("target_system", "target"):
             one = st.sampled_from([0, 1, 2, 255])
     return st.lists(one, min_size=length, max_size=length) if length else one
 
@@ -139,7 +140,7 @@ _IDS = st.sampled_from([float(i) for i in (0, 1, 31, 32, 245, 512, 2**24, -1)])
 _INTERVALS = st.sampled_from([2.0**31 + 5, 2.0**32, 2.0**31 - 1, 1.0, -1.0, 0.0, -2.0, 1e9,
                               0.4, math.nan])
 _SEQUENCE_COMMANDS = (M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAV_CMD_GET_MESSAGE_INTERVAL) * 3 + \
-    COMMANDS[:9]
+    COMMANDS[:11]
 _COMMAND = st.tuples(st.sampled_from(_SEQUENCE_COMMANDS), st.one_of(_IDS, _IDS, _FLOATS),
                      st.one_of(_INTERVALS, _INTERVALS, _FLOATS), _FLOATS, st.integers(0, 1))
 
@@ -359,3 +360,124 @@ def test_a_refusal_answers_only_the_link_that_asked():
     acks, texts = _acks_and_texts(links[0])
     assert acks == [M.MAV_RESULT_DENIED] and texts
     assert _acks_and_texts(links[1]) == ([], [])
+
+
+def _sent(link: MemoryLink, kind: str) -> list:
+    return [m for m in parsed(link) if m.get_type() == kind]
+
+
+def test_refused_param_set_answers_param_error_first():
+    """Given PARAM_SETs refused (out of range; unknown name), then the link that asked gets
+    PARAM_ERROR (VALUE_OUT_OF_RANGE with the index; DOES_NOT_EXIST with -1) before the
+    unchanged PARAM_VALUE, and the other link hears nothing; an accepted set is echoed to
+    every link."""
+    server, links = make_server()
+    for link in links:
+        parsed(link)
+    sent = M.MAVLink_param_set_message(1, 1, b"MIS_LAND_SPD", -1.0, M.MAV_PARAM_TYPE_REAL32)
+    server.handle(0, parser().parse_buffer(pack(encoder(245, 190), sent))[0], now_s=1.0)
+    msgs = [m for m in parsed(links[0]) if m.get_type() in ("PARAM_ERROR", "PARAM_VALUE")]
+    assert [m.get_type() for m in msgs] == ["PARAM_ERROR", "PARAM_VALUE"]
+    err, value = msgs
+    assert err.error == M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE and err.param_id == "MIS_LAND_SPD"
+    assert (err.target_system, err.target_component) == (245, 190)
+    assert err.param_index == server.params.index("MIS_LAND_SPD") and value.param_value == 0.5
+    assert parsed(links[1]) == []
+    server.handle(0, M.MAVLink_param_set_message(1, 1, b"NO_SUCH", 1.0, 9), now_s=1.0)
+    err = _sent(links[0], "PARAM_ERROR")
+    assert err[0].error == M.MAV_PARAM_ERROR_DOES_NOT_EXIST and err[0].param_index == -1
+    server.handle(0, M.MAVLink_param_set_message(1, 1, b"MIS_TAKEOFF_ALT", 4.0, 9), now_s=1.0)
+    assert [m.param_value for m in _sent(links[1], "PARAM_VALUE")] == [4.0]
+    assert server.pipeline.commander.flight.takeoff_alt_m == 4.0
+
+
+def test_heartbeat_and_sys_status_tell_the_truth():
+    """HEARTBEAT: MAV_AUTOPILOT_PX4, PX4's custom mode and base flags (MANUAL_INPUT in
+    POSCTL). SYS_STATUS: present = the simulated IMU, barometer, external pose, AHRS,
+    controllers, outputs, pre-arm check; no magnetometer, GNSS, RC (until MANUAL_CONTROL),
+    fence; geofence health set (no breach), pre-arm healthy with a state; battery not
+    measured."""
+    server, _ = make_server()
+    hb = server.build(M.MAVLINK_MSG_ID_HEARTBEAT)[0]
+    assert hb.autopilot == M.MAV_AUTOPILOT_PX4 and hb.custom_mode == 4 << 16 | 3 << 24
+    assert hb.base_mode & M.MAV_MODE_FLAG_AUTO_ENABLED
+    ss = server.build(M.MAVLINK_MSG_ID_SYS_STATUS)[0]
+    present, health = ss.onboard_control_sensors_present, ss.onboard_control_sensors_health
+    for bit in (M.MAV_SYS_STATUS_SENSOR_3D_GYRO, M.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
+                M.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
+                M.MAV_SYS_STATUS_SENSOR_VISION_POSITION, M.MAV_SYS_STATUS_AHRS,
+                M.MAV_SYS_STATUS_PREARM_CHECK, M.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS):
+        assert present & bit and health & bit and ss.onboard_control_sensors_enabled & bit
+    for bit in (M.MAV_SYS_STATUS_SENSOR_3D_MAG, M.MAV_SYS_STATUS_SENSOR_GPS,
+                M.MAV_SYS_STATUS_SENSOR_RC_RECEIVER, M.MAV_SYS_STATUS_GEOFENCE,
+                M.MAV_SYS_STATUS_SENSOR_OPTICAL_FLOW):
+        assert not present & bit
+    assert health & M.MAV_SYS_STATUS_GEOFENCE and not health & M.MAV_SYS_STATUS_SENSOR_GPS
+    assert (ss.voltage_battery, ss.current_battery, ss.battery_remaining) == (65535, -1, -1)
+    server.handle(0, M.MAVLink_manual_control_message(1, 0, 0, 500, 0, 0), now_s=5.0)
+    server.now_s = 5.1
+    ss = server.build(M.MAVLINK_MSG_ID_SYS_STATUS)[0]
+    rc = M.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+    assert ss.onboard_control_sensors_present & rc and ss.onboard_control_sensors_health & rc
+    _command(server, 0, M.MAV_CMD_DO_SET_MODE, 1 | 64 | 16, 3, 0)
+    assert server.pipeline.commander.mode.name == "POSCTL"
+    hb = server.build(M.MAVLINK_MSG_ID_HEARTBEAT)[0]
+    assert hb.base_mode & M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED and hb.custom_mode == 3 << 16
+    server.now_s = 6.0
+    ss = server.build(M.MAVLINK_MSG_ID_SYS_STATUS)[0]
+    assert ss.onboard_control_sensors_present & rc and not ss.onboard_control_sensors_health & rc
+    server.pipeline.state = None
+    ss = server.build(M.MAVLINK_MSG_ID_SYS_STATUS)[0]
+    assert not ss.onboard_control_sensors_health & M.MAV_SYS_STATUS_PREARM_CHECK
+
+
+def test_manual_control_for_another_system_is_ignored():
+    server, _ = make_server()
+    c = server.pipeline.commander
+    server.handle(0, M.MAVLink_manual_control_message(2, 1000, 0, 500, 0, 0), now_s=1.0)
+    assert c.sticks == (0.0, 0.0, 0.0, 0.0) and server.ignored_messages == 1
+    server.handle(0, M.MAVLink_manual_control_message(1, 1000, 0, 500, 0, 0), now_s=1.0)
+    assert c.sticks.forward == 1.0
+
+
+def test_takeoff_and_rtl_commands():
+    """NAV_TAKEOFF: refused disarmed; armed with p7 NaN -> TAKEOFF; NAV_RETURN_TO_LAUNCH and
+    DO_SET_MODE AUTO.RTL -> RTL; each ACKed once."""
+    server, links = make_server()
+    nan = math.nan
+    _command(server, 0, M.MAV_CMD_NAV_TAKEOFF, nan, nan, nan, nan, nan, nan, nan)
+    assert _acks_and_texts(links[0])[0] == [M.MAV_RESULT_DENIED]
+    _command(server, 0, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    _command(server, 0, M.MAV_CMD_NAV_TAKEOFF, nan, nan, nan, nan, nan, nan, nan)
+    assert _acks_and_texts(links[0])[0] == [M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_ACCEPTED]
+    assert server.pipeline.commander.mode.name == "TAKEOFF"
+    _command(server, 0, M.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+    assert _acks_and_texts(links[0])[0] == [M.MAV_RESULT_ACCEPTED]
+    assert server.pipeline.commander.mode.name == "RTL"
+    _command(server, 0, M.MAV_CMD_DO_SET_MODE, 1, 4, 3)
+    _command(server, 0, M.MAV_CMD_DO_SET_MODE, 1, 4, 5)
+    assert _acks_and_texts(links[0])[0] == [M.MAV_RESULT_ACCEPTED] * 2
+    assert server.pipeline.commander.mode.name == "RTL"
+    assert server.internal_errors == 0
+
+
+def test_a_mode_change_is_announced_at_once():
+    """Given the HEARTBEAT streams due in a second, when the mode changes, then the next tick
+    sends a HEARTBEAT with the new mode on every link that has the stream on (once), and
+    none on a link that turned it off."""
+    server, links = make_server()
+    server.tick(100.0)
+    _command(server, 1, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_HEARTBEAT, -1)
+    server.tick(100.1)
+    for link in links:
+        parsed(link)
+    _command(server, 0, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    server.tick(100.2)
+    server.tick(100.3)
+    beats = [m for m in parsed(links[0]) if m.get_type() == "HEARTBEAT"]
+    assert len(beats) == 1 and beats[0].base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+    assert not [m for m in parsed(links[1]) if m.get_type() == "HEARTBEAT"]
+    server.tick(101.0)  # the cadence goes on from the announcement
+    assert not [m for m in parsed(links[0]) if m.get_type() == "HEARTBEAT"]
+    server.tick(101.25)
+    assert [m for m in parsed(links[0]) if m.get_type() == "HEARTBEAT"]

@@ -1,0 +1,119 @@
+"""POSCTL from MANUAL_CONTROL, as QGroundControl's virtual joystick sends it (x forward, y
+right, r yaw, -1000..1000; z throttle 0..1000 with 500 at the centre), against real sitl
+and fcu processes in real time (a pilot's seconds are wall-clock seconds)."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import pytest
+
+from common.mavlink import MAV
+from common.modes import MAIN_POSCTL, Mode
+from fcu.manual import StickSettings, deflection
+
+M = MAV
+pytestmark = pytest.mark.timeout(120)
+STREAM_HZ = 25.0
+
+
+class Sticks:
+    """MANUAL_CONTROL at STREAM_HZ from a thread, the values set by the test."""
+
+    def __init__(self, session) -> None:
+        self.session = session
+        self.values = (0, 0, 500, 0)
+        self.running = True
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        s = self.session
+        while self.running:
+            x, y, z, r = self.values
+            s.send(M.MAVLink_manual_control_message(s.target_system, x, y, z, r, 0))
+            time.sleep(1.0 / STREAM_HZ)
+
+    def hold(self, seconds: float, x: int = 0, y: int = 0, z: int = 500, r: int = 0) -> None:
+        self.values = (x, y, z, r)
+        time.sleep(seconds)
+        self.values = (0, 0, 500, 0)
+
+    def stop(self) -> None:
+        self.running = False
+        self.thread.join(timeout=2)
+
+
+def _latest(stack, kind: str, timeout: float = 2.0):
+    """A message of `kind` sent after this call: what is queued is dropped first (a loaded
+    machine may have a backlog), then the next one is taken."""
+    while stack.session.conn.recv_msg() is not None:  # the queue and the socket, emptied
+        pass
+    msg = stack.session.recv([kind], timeout=timeout)
+    assert msg is not None
+    return msg
+
+
+def test_posctl_sticks_move_the_vehicle_and_centred_it_holds(rt_stack):
+    """Given the vehicle armed on the ground in POSCTL with centred sticks, when the throttle
+    is held full up for 1 s, then it climbs speed_up * 1 s (3 m); when the forward stick is
+    held at half for 2 s, then it moves V * 2 s along its heading (V = MPC_VEL_MANUAL times
+    the deflection after the dead zone: 4.74 m) and nowhere else; centred, it holds (drift
+    below 2 cm over 2 s); the yaw stick turns it clockwise; when MANUAL_CONTROL stops, it
+    holds (HOLD) after COM_RC_LOSS_T with a failsafe message."""
+    s = rt_stack.session
+    defaults = StickSettings()
+    sticks = Sticks(s)
+    try:
+        time.sleep(0.3)
+        assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
+        base = (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
+                | M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED)  # as pymavlink's px4_map["POSCTL"]
+        assert s.command(M.MAV_CMD_DO_SET_MODE, base, MAIN_POSCTL, 0) == M.MAV_RESULT_ACCEPTED
+        hb = rt_stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1 and
+                               m.custom_mode == Mode.POSCTL.custom_mode)
+        assert hb is not None and hb.base_mode & M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+
+        sticks.hold(1.0, z=1000)  # full throttle: climb at MPC_Z_VEL_MAX_UP
+        time.sleep(2.0)
+        p0 = _latest(rt_stack, "LOCAL_POSITION_NED")
+        sp = _latest(rt_stack, "POSITION_TARGET_LOCAL_NED")
+        assert p0.z == pytest.approx(-defaults.speed_up_m_s * 1.0, abs=0.3), (p0, sp)
+        yaw = _latest(rt_stack, "ATTITUDE").yaw
+
+        sticks.hold(2.0, x=500)  # half forward for 2 s
+        time.sleep(2.0)  # braking at MPC_ACC_HOR takes 0.8 s
+        p1 = _latest(rt_stack, "LOCAL_POSITION_NED")
+        speed = deflection(0.5) * defaults.speed_xy_m_s
+        dn, de = p1.x - p0.x, p1.y - p0.y
+        along = dn * math.cos(yaw) + de * math.sin(yaw)
+        across = -dn * math.sin(yaw) + de * math.cos(yaw)
+        assert along == pytest.approx(speed * 2.0, rel=0.05), (dn, de, yaw)
+        assert abs(across) < 0.05 and abs(p1.z - p0.z) < 0.05
+
+        samples = []
+        t_end = time.monotonic() + 2.0
+        while time.monotonic() < t_end:
+            m = s.recv(["LOCAL_POSITION_NED"], timeout=0.1)
+            if m is not None:
+                samples.append((m.x, m.y, m.z))
+        assert len(samples) > 20
+        assert max(math.dist(p, samples[0]) for p in samples) < 0.02  # holds
+
+        sticks.hold(1.0, r=1000)  # full yaw right for 1 s: MPC_MAN_Y_MAX * 1 s clockwise
+        time.sleep(1.5)  # braking at 180 deg/s^2 takes 0.5 s
+        turned = math.degrees(_latest(rt_stack, "ATTITUDE").yaw - yaw)
+        assert (turned + 180.0) % 360.0 - 180.0 == pytest.approx(defaults.yaw_rate_deg_s,
+                                                                 abs=8.0)
+
+        sticks.stop()  # the pilot's link goes: HOLD after COM_RC_LOSS_T (0.5 s)
+        lost = time.monotonic()
+        text = rt_stack.wait_for(["STATUSTEXT"], lambda m: "manual control lost" in m.text)
+        assert text is not None and time.monotonic() - lost >= 0.4
+        hb = rt_stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1 and
+                               m.custom_mode == Mode.HOLD.custom_mode)
+        assert hb is not None and hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+    finally:
+        sticks.stop()
