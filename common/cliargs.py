@@ -25,3 +25,13 @@ def check_output_path(option: str, path: Path | None) -> None:
         raise ConfigError(f"{option} {path}: is a folder, not a file")
     if not path.parent.is_dir():
         raise ConfigError(f"{option} {path}: folder {path.parent} does not exist")
+
+
+def read_text_file(path: Path, error: type[Exception]) -> str:
+    """A text file the user named, or `error` with one line saying why it cannot be read."""
+    try:
+        return path.read_text()
+    except OSError as exc:
+        raise error(f"{path}: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None

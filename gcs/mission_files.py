@@ -31,6 +31,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from common.cliargs import read_text_file
 from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
 from common.mission_items import (
     GEO_FRAMES,
@@ -542,13 +543,7 @@ def format_mission(items: Sequence[MissionItem], fmt: str,
 def read_mission(path: Path, fmt: str | None = None) -> list[MissionItem]:
     """A mission file: `fmt` (plan, wpl, toml), else by extension (.plan, .waypoints,
     .toml), else by content (a JSON object, a `QGC WPL` header, or TOML)."""
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise MissionFileError(f"{path}: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise MissionFileError(f"{path}: not a text file ({exc.reason} at byte "
-                               f"{exc.start})") from None
+    text = read_text_file(path, MissionFileError)
     items = parse_mission(text, file_format(path, fmt, text), str(path))
     if not items:
         raise MissionFileError(f"{path}: no mission items (use `gcs mission clear` to clear)")

@@ -23,6 +23,7 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 
+from common.cliargs import read_text_file
 from common.mavlink import MAV
 
 M = MAV
@@ -126,13 +127,7 @@ def parse_params(text: str, source: str = "<params>") -> list[ParamEntry]:
 
 
 def read_params(path: Path) -> list[ParamEntry]:
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ParamFileError(f"{path}: {exc.strerror}") from None
-    except UnicodeDecodeError as exc:
-        raise ParamFileError(f"{path}: not a text file ({exc.reason} at byte "
-                             f"{exc.start})") from None
+    text = read_text_file(path, ParamFileError)
     entries = parse_params(text, str(path))
     if not entries:
         raise ParamFileError(f"{path}: no parameters")
