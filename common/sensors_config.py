@@ -1,0 +1,183 @@
+"""Typed sensor profiles (IMU, barometer, magnetometer, motion capture) loaded from TOML.
+
+Same rules as `common.config`: every key is required and checked (type, finite, range),
+unknown keys are refused, and errors are `ConfigError` naming the file and the key.
+Units are SI and in the key names; frames are in the key names (NED earth field).
+`kind = "truth"` declares a perfect profile and then requires every noise, bias, latency
+and dropout figure to be zero.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from common.config import ConfigError, _read_toml, _Table
+
+Vec3 = tuple[float, float, float]
+
+RATE_MIN_HZ = 1.0
+RATE_MAX_HZ = 10000.0
+IMU_RATE_MIN_HZ = 500.0
+KINDS = ("truth", "model")
+
+
+@dataclass(frozen=True)
+class GyroConfig:
+    noise_density_rad_s_sqrt_hz: float  # white noise density N (datasheet)
+    turn_on_bias_sigma_rad_s: float  # sigma of the constant drawn at start
+    bias_random_walk_rad_s2_sqrt_hz: float  # sigma_rw: bias += sigma_rw sqrt(dt) n
+    range_rad_s: float  # saturation, per axis
+
+
+@dataclass(frozen=True)
+class AccelConfig:
+    noise_density_m_s2_sqrt_hz: float
+    turn_on_bias_sigma_m_s2: float
+    bias_random_walk_m_s3_sqrt_hz: float
+    range_m_s2: float
+
+
+@dataclass(frozen=True)
+class ImuConfig:
+    rate_hz: float  # 500..10000
+    vibration_factor: float  # multiplies both white noise densities
+    gyro: GyroConfig
+    accel: AccelConfig
+
+
+@dataclass(frozen=True)
+class BaroConfig:
+    rate_hz: float
+    noise_m: float  # sigma of pressure altitude per sample
+    bias_m: float  # constant offset (optional key, default 0)
+
+
+@dataclass(frozen=True)
+class MagConfig:
+    rate_hz: float
+    field_ned_gauss: Vec3  # fixed earth field in NED
+    noise_gauss: float  # sigma per axis per sample
+
+
+@dataclass(frozen=True)
+class MocapConfig:
+    rate_hz: float
+    position_noise_m: float  # sigma per axis
+    attitude_noise_rad: float  # sigma per axis of the small body-frame rotation
+    latency_s: float  # capture at t is delivered at t + latency (any float >= 0)
+    dropout_probability: float  # per capture, 0..1
+
+
+@dataclass(frozen=True)
+class SensorProfile:
+    name: str
+    kind: str  # "truth" or "model"
+    imu: ImuConfig
+    baro: BaroConfig
+    mag: MagConfig
+    mocap: MocapConfig
+
+    @property
+    def is_truth(self) -> bool:
+        return self.kind == "truth"
+
+
+def _rate(t: _Table, lo: float = RATE_MIN_HZ) -> float:
+    return t.number("rate_hz", lo=lo, hi=RATE_MAX_HZ)
+
+
+def _nonneg(t: _Table, key: str, default: Any = ...) -> float:
+    return t.number(key, default, lo=0.0)
+
+
+def _parse_imu(t: _Table) -> ImuConfig:
+    rate = _rate(t, IMU_RATE_MIN_HZ)
+    vib = _nonneg(t, "vibration_factor")
+    g = t.table("gyro")
+    gyro = GyroConfig(
+        noise_density_rad_s_sqrt_hz=_nonneg(g, "noise_density_rad_s_sqrt_hz"),
+        turn_on_bias_sigma_rad_s=_nonneg(g, "turn_on_bias_sigma_rad_s"),
+        bias_random_walk_rad_s2_sqrt_hz=_nonneg(g, "bias_random_walk_rad_s2_sqrt_hz"),
+        range_rad_s=g.number("range_rad_s", lo=0.0, lo_open=True))
+    g.finish()
+    a = t.table("accel")
+    accel = AccelConfig(
+        noise_density_m_s2_sqrt_hz=_nonneg(a, "noise_density_m_s2_sqrt_hz"),
+        turn_on_bias_sigma_m_s2=_nonneg(a, "turn_on_bias_sigma_m_s2"),
+        bias_random_walk_m_s3_sqrt_hz=_nonneg(a, "bias_random_walk_m_s3_sqrt_hz"),
+        range_m_s2=a.number("range_m_s2", lo=0.0, lo_open=True))
+    a.finish()
+    t.finish()
+    return ImuConfig(rate_hz=rate, vibration_factor=vib, gyro=gyro, accel=accel)
+
+
+def _parse_baro(t: _Table) -> BaroConfig:
+    out = BaroConfig(rate_hz=_rate(t), noise_m=_nonneg(t, "noise_m"),
+                     bias_m=t.number("bias_m", 0.0))
+    t.finish()
+    return out
+
+
+def _parse_mag(t: _Table) -> MagConfig:
+    field_ned = t.numbers("field_ned_gauss", 3)
+    out = MagConfig(rate_hz=_rate(t), field_ned_gauss=(field_ned[0], field_ned[1], field_ned[2]),
+                    noise_gauss=_nonneg(t, "noise_gauss"))
+    t.finish()
+    return out
+
+
+def _parse_mocap(t: _Table) -> MocapConfig:
+    out = MocapConfig(
+        rate_hz=_rate(t),
+        position_noise_m=_nonneg(t, "position_noise_m"),
+        attitude_noise_rad=_nonneg(t, "attitude_noise_rad"),
+        latency_s=_nonneg(t, "latency_s"),
+        dropout_probability=t.number("dropout_probability", lo=0.0, hi=1.0))
+    t.finish()
+    return out
+
+
+# Fields that a `kind = "truth"` profile must hold at zero (section, field).
+_TRUTH_ZERO = (
+    ("imu.gyro", "noise_density_rad_s_sqrt_hz"), ("imu.gyro", "turn_on_bias_sigma_rad_s"),
+    ("imu.gyro", "bias_random_walk_rad_s2_sqrt_hz"),
+    ("imu.accel", "noise_density_m_s2_sqrt_hz"), ("imu.accel", "turn_on_bias_sigma_m_s2"),
+    ("imu.accel", "bias_random_walk_m_s3_sqrt_hz"),
+    ("baro", "noise_m"), ("baro", "bias_m"), ("mag", "noise_gauss"),
+    ("mocap", "position_noise_m"), ("mocap", "attitude_noise_rad"), ("mocap", "latency_s"),
+    ("mocap", "dropout_probability"),
+)
+
+
+def _check_truth(p: SensorProfile, source: str) -> None:
+    for section, key in _TRUTH_ZERO:
+        obj: Any = p
+        for part in section.split("."):
+            obj = getattr(obj, part)
+        assert key in {f.name for f in fields(obj)}
+        if getattr(obj, key) != 0.0:
+            raise ConfigError(f"{source}: key '{section}.{key}': expected 0 in a "
+                              f"kind = \"truth\" profile, got {getattr(obj, key)!r}")
+
+
+def parse_sensor_profile(data: dict[str, Any], source: str) -> SensorProfile:
+    t = _Table(data, source)
+    profile = SensorProfile(
+        name=t.string("name"),
+        kind=t.string("kind", choices=KINDS),
+        imu=_parse_imu(t.table("imu")),
+        baro=_parse_baro(t.table("baro")),
+        mag=_parse_mag(t.table("mag")),
+        mocap=_parse_mocap(t.table("mocap")))
+    t.finish()
+    if profile.is_truth:
+        _check_truth(profile, source)
+    return profile
+
+
+def load_sensor_profile(path: str | Path) -> SensorProfile:
+    """Read and validate a sensor profile (config/sensors/*.toml)."""
+    path = Path(path)
+    return parse_sensor_profile(_read_toml(path), str(path))

@@ -1,0 +1,224 @@
+"""Pure, seeded sensor models of the simulator: IMU, barometer, magnetometer, motion capture.
+
+Frames: the models work in the plant's frames, ENU world and FLU body; conversion to the
+wire (NED/FRD) happens elsewhere (common.frames). Each sensor owns a numpy Generator seeded
+from (seed, sensor name), so its draws do not depend on which other sensors were sampled.
+The caller samples each sensor at its own period (`period_s`), passing time explicitly.
+
+    gyro/accel:  y = sat(x + b0 + b_rw(t) + k_vib N sqrt(rate) n),  b_rw += s_rw sqrt(dt) n
+    baro:        h = z_enu + bias + s n
+    mag:         m_flu = R(q_enu_flu)^T ned_to_enu(B_ned) + s n
+    mocap:       p = p_enu + s_p n,  q = q_enu_flu * exp(s_a n),  delivered at t + latency
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.frames import ned_to_enu
+from common.quaternion import Quat, Vec3, q_exp, q_mul, q_rotate_inv
+from common.sensors_config import (
+    AccelConfig,
+    BaroConfig,
+    GyroConfig,
+    ImuConfig,
+    MagConfig,
+    MocapConfig,
+    SensorProfile,
+)
+
+
+def sensor_rng(seed: int, name: str) -> np.random.Generator:
+    """A Generator that depends only on (seed, name): crc32 gives a stable name key."""
+    return np.random.default_rng(np.random.SeedSequence([seed, zlib.crc32(name.encode())]))
+
+
+def _vec3(a: np.ndarray) -> Vec3:
+    return (float(a[0]), float(a[1]), float(a[2]))
+
+
+class _Triad:
+    """One three-axis inertial sensor: turn-on bias, bias random walk, white noise, range."""
+
+    def __init__(self, rng: np.random.Generator, *, white_sigma: float, turn_on_sigma: float,
+                 random_walk: float, limit: float) -> None:
+        self.rng = rng
+        self.white_sigma = white_sigma
+        self.random_walk = random_walk
+        self.limit = limit
+        self.turn_on_bias = rng.normal(0.0, 1.0, 3) * turn_on_sigma
+        self.walk = np.zeros(3)
+
+    @property
+    def bias(self) -> Vec3:
+        return _vec3(self.turn_on_bias + self.walk)
+
+    def sample(self, truth: Vec3, dt_s: float) -> Vec3:
+        if not dt_s > 0.0:
+            raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
+        draws = self.rng.normal(0.0, 1.0, 6)  # always six draws: the stream stays aligned
+        self.walk = self.walk + self.random_walk * math.sqrt(dt_s) * draws[3:]
+        y = np.asarray(truth, dtype=float) + self.turn_on_bias + self.walk
+        if self.white_sigma > 0.0:
+            y = y + self.white_sigma * draws[:3]
+        return _vec3(np.clip(y, -self.limit, self.limit))
+
+
+@dataclass(frozen=True)
+class ImuSample:
+    t_s: float
+    omega_flu_rad_s: Vec3
+    f_flu_m_s2: Vec3
+
+
+class ImuModel:
+    """Gyro and accelerometer in FLU; white sigma = vibration_factor * N * sqrt(rate_hz)."""
+
+    def __init__(self, cfg: ImuConfig, seed: int) -> None:
+        self.cfg = cfg
+        self.gyro = _gyro(cfg.gyro, cfg, sensor_rng(seed, "imu.gyro"))
+        self.accel = _accel(cfg.accel, cfg, sensor_rng(seed, "imu.accel"))
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.cfg.rate_hz
+
+    def sample(self, t_s: float, dt_s: float, omega_flu_rad_s: Vec3,
+               f_flu_m_s2: Vec3) -> ImuSample:
+        """One sample from the true body rate and specific force (Plant.specific_force_flu)."""
+        return ImuSample(t_s, self.gyro.sample(omega_flu_rad_s, dt_s),
+                         self.accel.sample(f_flu_m_s2, dt_s))
+
+
+def _gyro(g: GyroConfig, imu: ImuConfig, rng: np.random.Generator) -> _Triad:
+    return _Triad(rng, white_sigma=imu.vibration_factor * g.noise_density_rad_s_sqrt_hz
+                  * math.sqrt(imu.rate_hz), turn_on_sigma=g.turn_on_bias_sigma_rad_s,
+                  random_walk=g.bias_random_walk_rad_s2_sqrt_hz, limit=g.range_rad_s)
+
+
+def _accel(a: AccelConfig, imu: ImuConfig, rng: np.random.Generator) -> _Triad:
+    return _Triad(rng, white_sigma=imu.vibration_factor * a.noise_density_m_s2_sqrt_hz
+                  * math.sqrt(imu.rate_hz), turn_on_sigma=a.turn_on_bias_sigma_m_s2,
+                  random_walk=a.bias_random_walk_m_s3_sqrt_hz, limit=a.range_m_s2)
+
+
+@dataclass(frozen=True)
+class BaroSample:
+    t_s: float
+    alt_m: float  # pressure altitude above the home point (ENU up)
+
+
+class BaroModel:
+    """Pressure altitude: z_enu + bias + white noise (pressure conversion is the link's)."""
+
+    def __init__(self, cfg: BaroConfig, seed: int) -> None:
+        self.cfg = cfg
+        self.rng = sensor_rng(seed, "baro")
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.cfg.rate_hz
+
+    def sample(self, t_s: float, p_enu_m: Vec3) -> BaroSample:
+        n = float(self.rng.normal(0.0, 1.0))
+        alt = p_enu_m[2] + self.cfg.bias_m
+        if self.cfg.noise_m > 0.0:
+            alt += self.cfg.noise_m * n
+        return BaroSample(t_s, alt)
+
+
+@dataclass(frozen=True)
+class MagSample:
+    t_s: float
+    b_flu_gauss: Vec3
+
+
+class MagModel:
+    """The fixed earth field (given in NED) seen in FLU, plus white noise."""
+
+    def __init__(self, cfg: MagConfig, seed: int) -> None:
+        self.cfg = cfg
+        self.rng = sensor_rng(seed, "mag")
+        self.b_enu_gauss: Vec3 = ned_to_enu(cfg.field_ned_gauss)
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.cfg.rate_hz
+
+    def sample(self, t_s: float, q_enu_flu: Quat) -> MagSample:
+        n = self.rng.normal(0.0, 1.0, 3)
+        b = q_rotate_inv(q_enu_flu, self.b_enu_gauss)
+        if self.cfg.noise_gauss > 0.0:
+            b = _vec3(np.asarray(b) + self.cfg.noise_gauss * n)
+        return MagSample(t_s, b)
+
+
+@dataclass(frozen=True)
+class PoseDelivery:
+    capture_s: float  # when the pose was measured
+    delivered_s: float  # capture_s + latency_s: when the receiver gets it
+    p_enu_m: Vec3
+    q_enu_flu: Quat
+
+
+class MocapModel:
+    """External pose: noisy capture, seeded dropouts, a FIFO that delivers after latency_s."""
+
+    def __init__(self, cfg: MocapConfig, seed: int) -> None:
+        self.cfg = cfg
+        self.rng = sensor_rng(seed, "mocap")
+        self.queue: deque[PoseDelivery] = deque()
+        self.captures = 0
+        self.dropped = 0
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.cfg.rate_hz
+
+    def capture(self, t_s: float, p_enu_m: Vec3, q_enu_flu: Quat) -> None:
+        """Measure the true pose at t_s (call once per period) and queue it unless dropped.
+
+        Attitude noise is a body-frame rotation vector d ~ N(0, s^2 I): q = q_true exp(d).
+        """
+        if self.queue and t_s < self.queue[-1].capture_s:
+            raise ValueError(f"capture times must not decrease: {t_s} after "
+                             f"{self.queue[-1].capture_s}")
+        u = float(self.rng.random())  # fixed draw count per capture, dropped or not
+        n = self.rng.normal(0.0, 1.0, 6)
+        self.captures += 1
+        if u < self.cfg.dropout_probability:
+            self.dropped += 1
+            return
+        p, q = p_enu_m, q_enu_flu
+        if self.cfg.position_noise_m > 0.0:
+            p = _vec3(np.asarray(p_enu_m) + self.cfg.position_noise_m * n[:3])
+        if self.cfg.attitude_noise_rad > 0.0:
+            q = q_mul(q_enu_flu, q_exp(_vec3(self.cfg.attitude_noise_rad * n[3:])))
+        self.queue.append(PoseDelivery(t_s, t_s + self.cfg.latency_s, p, q))
+
+    def deliver(self, t_s: float) -> list[PoseDelivery]:
+        """Every queued capture whose delivery time is <= t_s, oldest first."""
+        out: list[PoseDelivery] = []
+        while self.queue and self.queue[0].delivered_s <= t_s:
+            out.append(self.queue.popleft())
+        return out
+
+
+@dataclass
+class SensorSuite:
+    """The four models of one profile, each with its own seeded stream."""
+
+    imu: ImuModel
+    baro: BaroModel
+    mag: MagModel
+    mocap: MocapModel
+
+    @classmethod
+    def from_profile(cls, profile: SensorProfile, seed: int) -> SensorSuite:
+        return cls(ImuModel(profile.imu, seed), BaroModel(profile.baro, seed),
+                   MagModel(profile.mag, seed), MocapModel(profile.mocap, seed))
