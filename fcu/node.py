@@ -110,7 +110,7 @@ class FlightController:
 
     def _log_text(self, severity: int, text: str) -> None:
         if self.log is not None:
-            self.log.text(self.time_us, severity, text)
+            self.log.log(self.time_us, severity, text)  # a STATUSTEXT that is not an event
 
     # ------------------------------------------------------------------ parameters
 

@@ -51,7 +51,7 @@ NAV_STATE = {Mode.HOLD: px4.NAVIGATION_STATE_AUTO_LOITER,
              Mode.RTL: px4.NAVIGATION_STATE_AUTO_RTL,
              Mode.POSCTL: px4.NAVIGATION_STATE_POSCTL}
 CRITICAL_FAILSAFES = ("diverged", "non-finite command")
-class OnboardLog:
+class OnboardLog(ULogWriter):
     """Append-only onboard log of a pipeline; `step` after each control step, `flush` after
     it (the process) or whenever convenient (in-process)."""
 
@@ -65,7 +65,7 @@ class OnboardLog:
         home = home or Home()  # the FCU's default home
         self.ref_origin = (0, home.lat_deg, home.lon_deg, home.alt_m)
         self.params = dict(params)
-        self.writer = ULogWriter(sink, ONBOARD_TOPICS, info={
+        super().__init__(sink, ONBOARD_TOPICS, info={
             "sys_name": "dqflight", "ver_hw": "SITL", "ver_sw": "0.1.0",
             "sys_mcu": "python", "sys_toolchain": "CPython"}, params=self.params)
         self.px4_period_us = 1_000_000 // PX4_HZ
@@ -85,7 +85,7 @@ class OnboardLog:
         """Queue the records of one control step at flight time t_us."""
         pipe = self.pipeline
         state = pipe.state
-        w = self.writer
+        w = self
         if out.result is not None and state is not None:
             row = onboard_row(out.t_us, state, out.result, out.speed_rad_s, out.tilt_rad,
                               out.armed, step_us)
@@ -98,7 +98,7 @@ class OnboardLog:
     def _px4(self, out: StepOutput, t_us: int) -> None:
         pipe = self.pipeline
         state = pipe.state
-        w = self.writer
+        w = self
         stamp = out.t_us
         if state is not None:
             valid = not state_lost(t_us, pipe.state_rx_us, pipe.settings)
@@ -149,7 +149,7 @@ class OnboardLog:
             return
         self.last_status = key
         self.next_status_us = (t_us // self.status_period_us + 1) * self.status_period_us
-        w = self.writer
+        w = self
         gcs_lost = pipe.failsafe == "GCS link lost"
         w.add("vehicle_status", (
             t_us, self.armed_time_us, self.takeoff_time_us,
@@ -164,26 +164,11 @@ class OnboardLog:
 
     def events(self, events: list[Event]) -> None:
         for ev in events:
-            self.writer.log(ev.t_us, ev.severity, ev.text)
-
-    def text(self, t_us: int, severity: int, text: str) -> None:
-        """A STATUSTEXT the vehicle sent that is not one of the pipeline's events."""
-        self.writer.log(t_us, severity, text)
+            self.log(ev.t_us, ev.severity, ev.text)
 
     def set_params(self, values: Mapping[str, float]) -> None:
         """Log the parameters that changed since the last call."""
         for name, value in values.items():
             if self.params.get(name) != value:
                 self.params[name] = value
-                self.writer.param(name, value)
-
-    def flush(self) -> None:
-        self.writer.flush()
-
-    @property
-    def failed(self) -> str:
-        """Why the log stopped (a full disk, an I/O error), "" while it is written."""
-        return self.writer.failed
-
-    def close(self) -> None:
-        self.writer.close()
+                self.param(name, value)

@@ -226,7 +226,7 @@ class SimulatorServer:
                 due += behind
                 self.skipped_s += behind
                 if self.log is not None:
-                    self.log.text(self.state.time_us, MAV.MAV_SEVERITY_WARNING,
+                    self.log.log(self.state.time_us, MAV.MAV_SEVERITY_WARNING,
                                   f"simulator stalled {behind:.3f} s: resumed from here")
             while self.running:
                 wait = due - time.monotonic()

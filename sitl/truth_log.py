@@ -24,17 +24,18 @@ TRUTH_TOPICS = (DQ_TRUTH, px4.VEHICLE_LOCAL_POSITION_GROUNDTRUTH,
 GROUNDTRUTH_HZ = 100
 
 
-class TruthLog:
-    """Append-only truth log; `record` queues one state, `flush` writes what is queued."""
+class TruthLog(ULogWriter):
+    """Append-only truth log; `record` queues one state, `log` a string, `flush` writes what
+    is queued (ULogWriter)."""
 
     def __init__(self, sink: str | Path | bytearray, scenario_name: str) -> None:
-        self.writer = ULogWriter(sink, TRUTH_TOPICS, info={
+        super().__init__(sink, TRUTH_TOPICS, info={
             "sys_name": "dqflight sitl", "ver_hw": "SITL", "sim_scenario": scenario_name})
         self.period_us = 1_000_000 // GROUNDTRUTH_HZ
         self.next_gt_us = 0
 
     def record(self, s: PlantState) -> None:
-        w = self.writer
+        w = self
         t = s.time_us
         row = truth_row(s)
         w.add("dq_truth", (t, *row[1:]))
@@ -45,16 +46,3 @@ class TruthLog:
             w.add(px4.VEHICLE_ATTITUDE_GROUNDTRUTH.name, px4.attitude_record(t, t, s.q_enu_flu))
             w.add(px4.VEHICLE_ANGULAR_VELOCITY_GROUNDTRUTH.name,
                   px4.angular_velocity_record(t, t, s.omega_flu_rad_s))
-
-    def text(self, t_us: int, severity: int, text: str) -> None:
-        self.writer.log(t_us, severity, text)
-
-    def flush(self) -> None:
-        self.writer.flush()
-
-    @property
-    def failed(self) -> str:
-        return self.writer.failed
-
-    def close(self) -> None:
-        self.writer.close()
