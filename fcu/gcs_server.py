@@ -43,6 +43,7 @@ STATUSTEXT_LEN = 50
 MAX_PARSERS = 64  # one per (link, peer); peers cycling source ports cannot grow it
 STATUSTEXT_BURST = 20.0
 STATUSTEXT_RATE = 10.0  # per second and link
+RETRY_WINDOW_S = 5.0  # a COMMAND_LONG with confirmation > 0 this soon after is a retry
 # Every message type a ground station can send that the server acts on (the rest are
 # ignored); the dispatch property test and the fuzz campaign send each of them.
 HANDLED = ("HEARTBEAT", "COMMAND_LONG", "COMMAND_INT", "MISSION_COUNT", "MISSION_ITEM_INT",
@@ -68,6 +69,14 @@ class GcsLink:
     schedule: Schedule = field(default_factory=Schedule.default)
     text_tokens: float = 20.0  # STATUSTEXT budget (see GcsServer.say)
     text_refill_s: float = 0.0
+
+
+def _command_key(msg: MAV.MAVLink_message) -> bytes:
+    """A command's identity for retries: its id and parameters, bit for bit (NaN too)."""
+    params = [getattr(msg, f"param{i}") for i in range(1, 8)] if msg.get_type() == \
+        "COMMAND_LONG" else [*(getattr(msg, f"param{i}") for i in range(1, 5)), msg.x, msg.y,
+                             msg.z, msg.frame]
+    return struct.pack("<I", msg.command) + struct.pack(f"<{len(params)}d", *params)
 
 
 def _as_int(x: float, lo: int, hi: int) -> int | None:
@@ -109,6 +118,10 @@ class GcsServer:
         self.on_text: Callable[[int, str], None] | None = None
         self.v_enu_m_s = (0.0, 0.0, 0.0)
         self.announced: tuple[bool, int] | None = None  # (armed, custom_mode) last sent
+        # The last command each sender had executed, for its retries (command protocol:
+        # a re-send carries confirmation > 0 and is answered, never executed again).
+        self._executed: dict[tuple[int, int, int], tuple[bytes, float, int, str]] = {}
+        self.repeated_commands = 0
 
     def _encoder(self, index: int) -> MAV.MAVLink:
         mav = encoder(self.system_id, COMPONENT)
@@ -263,6 +276,33 @@ class GcsServer:
     # ------------------------------------------------------------------ commands
 
     def _command(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
+        """Execute a COMMAND_LONG/INT and ACK it; a COMMAND_LONG re-sent by its sender
+        (confirmation > 0, the same command and parameters, within RETRY_WINDOW_S of the
+        first) gets the first answer again: a retry after a lost or late ACK must not start
+        a mission, a landing or an RTL a second time, mid-flight."""
+        sender = (index, msg.get_srcSystem(), msg.get_srcComponent())
+        key = _command_key(msg)
+        last = self._executed.get(sender)
+        if getattr(msg, "confirmation", 0) > 0 and last is not None and last[0] == key \
+                and now_s - last[1] <= RETRY_WINDOW_S:
+            self.repeated_commands += 1
+            self._ack(index, msg, msg.command, last[2])
+            if last[3] and last[2] != M.MAV_RESULT_ACCEPTED:
+                self.say(M.MAV_SEVERITY_WARNING, last[3], index)
+            return
+        result, text = self._execute(index, msg, now_s)
+        if result is None:
+            return  # answered with its message (requests): a retry asks again
+        if len(self._executed) >= MAX_PARSERS and sender not in self._executed:
+            del self._executed[next(iter(self._executed))]
+        self._executed[sender] = (key, now_s, result, text)
+        self._ack(index, msg, msg.command, result)
+        if text and result != M.MAV_RESULT_ACCEPTED:
+            self.say(M.MAV_SEVERITY_WARNING, text, index)
+
+    def _execute(self, index: int, msg: MAV.MAVLink_message,
+                 now_s: float) -> tuple[int | None, str]:
+        """(MAV_RESULT, reason) of a command, or (None, "") when it was answered here."""
         cmd = msg.command
         p = (msg.param1, msg.param2, msg.param3, msg.param4)
         pipe = self.pipeline
@@ -317,22 +357,20 @@ class GcsServer:
                 self._ack(index, msg, cmd, M.MAV_RESULT_ACCEPTED)
                 self.send(M.MAVLink_message_interval_message(
                     msg_id, self.links[index].schedule.interval_us(msg_id)), index)
-                return
+                return None, ""
         elif cmd in (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             msg_id = M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if cmd != M.MAV_CMD_REQUEST_MESSAGE \
                 else _as_int(p[0], 0, 0xFFFFFF)
             if msg_id is None or (msg_id not in REQUESTABLE
                                   and msg_id not in _ALWAYS_REQUESTABLE):
                 self._ack(index, msg, cmd, M.MAV_RESULT_UNSUPPORTED)
-                return
+                return None, ""
             self._ack(index, msg, cmd, M.MAV_RESULT_ACCEPTED)
             self.send_message(msg_id, index)
-            return
+            return None, ""
         else:
             result = M.MAV_RESULT_UNSUPPORTED
-        self._ack(index, msg, cmd, result)
-        if text and result != M.MAV_RESULT_ACCEPTED:
-            self.say(M.MAV_SEVERITY_WARNING, text, index)
+        return result, text
 
     def _takeoff(self, msg: MAV.MAVLink_message) -> tuple[int, str]:
         """MAV_CMD_NAV_TAKEOFF: altitude NaN (MAVSDK's, QGC's) -> MIS_TAKEOFF_ALT above the

@@ -237,6 +237,7 @@ class FlightController:
         return {"steps": self.steps, "deadline_misses": self.deadline_misses,
                 "signing_rejects": server.signing_rejects,
                 "resent_answers": sim.resent_answers,
+                "repeated_commands": server.repeated_commands,
                 "rejected_bytes": server.rejected_bytes + sim.rejected_bytes,
                 "ignored_messages": server.ignored_messages + sim.ignored_messages,
                 "internal_errors": server.internal_errors,

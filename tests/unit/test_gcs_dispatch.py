@@ -481,3 +481,53 @@ def test_a_mode_change_is_announced_at_once():
     assert not [m for m in parsed(links[0]) if m.get_type() == "HEARTBEAT"]
     server.tick(101.25)
     assert [m for m in parsed(links[0]) if m.get_type() == "HEARTBEAT"]
+
+
+def test_a_retried_command_is_answered_not_executed_again():
+    """Given MISSION_START executed and the flight under way, when the sender re-sends it
+    with confirmation 1 (its ACK was lost or late, as on a loaded machine), then the vehicle
+    answers ACCEPTED again and the mission keeps its start time; a fresh MISSION_START
+    (confirmation 0) and a retry that differs in a parameter are executed."""
+    from common.config import load_scenario
+    from gcs.scenario_mission import scenario_mission
+
+    server, links = make_server()
+    c = server.pipeline.commander
+    c.set_mission(tuple(scenario_mission(load_scenario(
+        ROOT / "config/scenarios/case1_figure8.toml"))))
+
+    def start(confirmation: int, first: float = 0.0, now_s: float = 1.0) -> None:
+        server.handle(0, M.MAVLink_command_long_message(
+            1, 1, M.MAV_CMD_MISSION_START, confirmation, first, 0, 0, 0, 0, 0, 0), now_s)
+
+    def started_at() -> float:
+        assert c.executor is not None
+        return c.executor._t_start
+
+    _command(server, 0, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    start(0)
+    for k in range(1, 11):
+        server.pipeline.step(k * 2000)
+    t0 = started_at()
+    start(1, now_s=1.5)
+    start(2, now_s=2.0)
+    assert _acks_and_texts(links[0])[0] == [M.MAV_RESULT_ACCEPTED] * 4
+    assert started_at() == t0 and server.repeated_commands == 2
+    server.pipeline.step(22_000)
+    start(1, now_s=1.0 + 6.0)  # beyond the retry window: a new command
+    assert started_at() > t0
+    t1 = started_at()
+    server.pipeline.step(24_000)
+    start(0, now_s=7.1)  # confirmation 0: a new command, whatever came before
+    assert started_at() > t1
+    t2 = started_at()
+    server.pipeline.step(26_000)
+    start(1, first=1.0, now_s=7.2)  # another item: not a retry of the last one
+    assert started_at() > t2 and c.mission_current == 1
+    # a retry of a refused command repeats the refusal and its reason
+    start(0, first=999.0, now_s=8.0)
+    start(1, first=999.0, now_s=8.1)
+    acks, texts = _acks_and_texts(links[0])
+    assert acks[-2:] == [M.MAV_RESULT_DENIED] * 2
+    assert sum("999" in t for t in texts) == 2
+    assert server.internal_errors == 0
