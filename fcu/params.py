@@ -53,6 +53,9 @@ SPECS: tuple[ParamSpec, ...] = (
     *_gain_specs(),
     ParamSpec("DQ_DAMPING", 0.0, 0.0, 1.0, "enum",
               "damping D of eq. (16): 0 = 2 k_d.(ln q_e)', 1 = k_d.xi_e (eq. 33)"),
+    ParamSpec("CA_LAG_COMP", 1.0, 0.0, 1.0, "enum",
+              "allocation: 1 = lead rotor speeds and tilts for the rotor lag (tau up/down) and "
+              "the tilt rate limit, from the reference; 0 = plain eqs. (28-29)"),
     ParamSpec("MIS_TKO_SPD", 1.0, 0.05, 10.0, "m/s", "takeoff climb speed when p2 is 0"),
     ParamSpec("MIS_CRUISE_SPD", 2.0, 0.05, 20.0, "m/s", "waypoint travel speed"),
     ParamSpec("MIS_LAND_SPD", 0.5, 0.05, 5.0, "m/s", "landing descent speed"),
@@ -190,4 +193,5 @@ def apply_params(store: ParamStore, pipeline: Pipeline) -> MissionLimits:
     limits = mission_limits(v, pipeline.vehicle)
     pipeline.configure(store.gains(), limits, failsafe_settings(v), v["COM_OF_LOSS_T"],
                        flight_settings(v))
+    pipeline.core.set_lag_compensation(v["CA_LAG_COMP"] == 1.0)
     return limits

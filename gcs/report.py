@@ -1002,6 +1002,10 @@ def make_table1_report(table_dir: Path, *,
              enumerate((s, c) for _, s in CASES for c in CONTROLLERS)}
     table["rows"] = sorted([*table["rows"], *(saved_rows[k] for k in from_json)],
                            key=lambda r: order[(r["scenario"], r["controller"])])
+    for r in table["rows"]:  # the plain allocation's figures (CA_LAG_COMP 0), as table1 ran them
+        plain = saved_rows.get((r["scenario"], r["controller"]), {}).get("plain")
+        if plain is not None:
+            r.setdefault("plain", plain)
     figures = [table1_chart(table, table_dir / TABLE1_PNG)]
 
     pd1 = runs.get((CASE1, "pd"))
