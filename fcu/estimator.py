@@ -9,21 +9,25 @@ local (body) attitude error q = q_hat * exp(dtheta) (Sola, "Quaternion kinematic
 error-state Kalman filter", 2017, sec. 5.3 and 7). The pose is plain quaternion + vector
 (not a dual quaternion): position and attitude are gated and fused as separate 3-vectors.
 
-- Strapdown (Sola eq. 260, ZOH of the sample over the interval ending at its t_us, the specific
-  force rotated to mid-interval): p += v dt + a_W dt^2/2, v += a_W dt, q = q exp((w_m - b_g) dt).
-- Covariance (Sola eq. 269-274): P = F P F^T + Q with F = I + [dp/dv = I dt,
+- Strapdown (Sola sec. 5.4.1, eq. 260; each sample held over the interval ending at its t_us,
+  the specific force rotated to mid-interval): p += v dt + a_W dt^2/2, v += a_W dt,
+  q = q exp((w_m - b_g) dt).
+- Covariance (Sola sec. 5.4.3, eq. 269-274): P = F P F^T + Q with F = I + [dp/dv = I dt,
   dv/dtheta = -R [a]x dt, dv/db_a = -R dt, dtheta/dtheta = I - [w dt]x, dtheta/db_g = -I dt].
   Discretisation: per IMU sample, delta-velocity variance (accel_noise dt)^2 and delta-angle
   variance (gyro_noise dt)^2 (Sola eq. 271-272, EKF2's daxVar/dvxVar: the settings are the
   per-sample sigmas); bias random walks sigma^2 dt (Sola eq. 273-274: densities).
 - Update: Joseph form, symmetrised, diagonal floors; injection and reset Jacobian
-  G = I - [dtheta/2]x on the attitude block (Sola eq. 282-287).
+  G = I - [dtheta/2]x on the attitude block (Sola sec. 6.2-6.3, eq. 282-287).
+- Covariance steps every cov_period_s of IMU time (EKF2_PREDICT_US) from the interval's
+  deltas, and before every fusion; the nominal state integrates every sample.
 - Delayed fusion as EKF2 (EKF2_EV_DELAY): the filter runs at the horizon
   t_h = newest IMU - pose_delay_s on the buffered IMU samples; a pose is fused at the
-  buffered sample nearest its capture time. The output at the newest IMU time re-propagates
-  the buffered samples from the horizon state after every correction (exact, no lag; chosen
-  over EKF2's output-predictor feedback, see benchmarks/bench_estimator.py), and otherwise
-  integrates each new sample once.
+  buffered sample nearest its capture time. Output predictor: the output state integrates
+  each new sample once; a horizon correction is carried to it by the linearised transition
+  over the buffered interval (no lag, no EKF2-style feedback time constant), and every
+  output_resync_s (and after resets) the buffered samples are re-propagated exactly. Both
+  agree within 1 um; re-propagating after every fusion costs ~2x (bench_estimator.py).
 - Gates (EKF2 test ratio): max over axes of innov^2 / (gate^2 S) > 1 refuses position or
   attitude (separately). A pose counts as fused when both parts pass, else as rejected (a
   passing part is still fused). After pose_reset_timeout_s of refused position (attitude),
@@ -50,9 +54,10 @@ _State = tuple[float, float, float, float, float, float, float, float, float, fl
                float, float, float, float, float, float]
 
 _I15 = np.eye(_N)
-_IDX_POS = np.array([0, 1, 2])
-_IDX_ATT = np.array([6, 7, 8])
-_IDX_BOTH = np.array([0, 1, 2, 6, 7, 8])
+_H_POS = _I15[[0, 1, 2]]  # measurement selectors
+_H_ATT = _I15[[6, 7, 8]]
+_H_BOTH = _I15[[0, 1, 2, 6, 7, 8]]
+_G_IDX = np.array([6 * _N + 7, 6 * _N + 8, 7 * _N + 6, 7 * _N + 8, 8 * _N + 6, 8 * _N + 7])
 
 
 def _flat_indices() -> np.ndarray:
@@ -299,16 +304,18 @@ class Estimator:
 
     def on_imu(self, s: ImuInput) -> None:
         """One IMU sample: buffer it, advance the horizon, propagate the output to s.t_us."""
-        t = s.t_us
         w = s.omega_flu_rad_s
         f = s.f_flu_m_s2
         try:
+            t = s.t_us if type(s.t_us) is int else int(s.t_us)
             ok = math.isfinite(w[0] + w[1] + w[2] + f[0] + f[1] + f[2]) and t > self._last_t
-        except (TypeError, IndexError, OverflowError):
+        except (TypeError, IndexError, OverflowError, ValueError):
             ok = False
         if not ok:
             self._imu_ignored += 1
             return
+        if t is not s.t_us:
+            s = s._replace(t_us=t)
         if self._last_t >= 0:
             self._dt_us = t - self._last_t
         self._last_t = t
@@ -623,11 +630,11 @@ class Estimator:
         self._pos_ratio, self._att_ratio = tr_p, tr_a
         ok_p, ok_a = tr_p <= 1.0, tr_a <= 1.0
         if ok_p and ok_a:
-            self._update(_IDX_BOTH, [*yp, *ya], [r_p] * 3 + [r_a] * 3)
+            self._update(_H_BOTH, [*yp, *ya], [r_p] * 3 + [r_a] * 3)
         elif ok_p:
-            self._update(_IDX_POS, list(yp), [r_p] * 3)
+            self._update(_H_POS, list(yp), [r_p] * 3)
         elif ok_a:
-            self._update(_IDX_ATT, list(ya), [r_a] * 3)
+            self._update(_H_ATT, list(ya), [r_a] * 3)
         c = m.capture_us
         reset = False
         if ok_p:
@@ -669,20 +676,25 @@ class Estimator:
         self._resets += 1
         self._rejected_in_row = 0
 
-    def _update(self, idx: np.ndarray, y: list[float], r: list[float]) -> None:
+    def _update(self, H: np.ndarray, y: list[float], r: list[float]) -> None:
+        """Joseph-form update with the selector H (rows of I15), symmetrised; injection
+        (Sola eq. 282-283) and the attitude reset G = I - [dtheta/2]x (eq. 287) folded in:
+        P = (G A) P (G A)^T + (G K) R (G K)^T, A = I - K H."""
         P = self._P
-        pht = P[:, idx]
-        S = pht[idx, :]
-        S.flat[::len(idx) + 1] += r
+        pht = P.dot(H.T)
+        S = H.dot(pht)
+        S.flat[::len(r) + 1] += r
         K = pht.dot(np.linalg.inv(S))
         dx = K.dot(y).tolist()
-        A = _I15.copy()
-        A[:, idx] -= K
+        hx, hy, hz = 0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8]
+        Gr = _I15.copy()
+        Gr.flat[_G_IDX] = (hz, -hy, -hz, hx, hy, -hx)
+        A = Gr.dot(_I15 - K.dot(H))
+        GK = Gr.dot(K)
         P = A.dot(P).dot(A.T)
-        P += (K * r).dot(K.T)
+        P += (GK * r).dot(GK.T)
         P += P.T
         P *= 0.5
-        # inject (Sola eq. 282-283) and reset the attitude block (eq. 287)
         x = self._h_x
         q = q_mul((x[6], x[7], x[8], x[9]), q_exp((dx[6], dx[7], dx[8])))
         n = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
@@ -691,10 +703,6 @@ class Estimator:
                      q[0] * n, q[1] * n, q[2] * n, q[3] * n,
                      x[10] + dx[9], x[11] + dx[10], x[12] + dx[11],
                      x[13] + dx[12], x[14] + dx[13], x[15] + dx[14])
-        hx, hy, hz = 0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8]
-        G = np.array(((1.0, hz, -hy), (-hz, 1.0, hx), (hy, -hx, 1.0)))
-        P[6:9, :] = G.dot(P[6:9, :])
-        P[:, 6:9] = P[:, 6:9].dot(G.T)
         self._bound(P)
         self._P = P
 
