@@ -11,7 +11,10 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from common.sensors_config import SensorProfile
 
 Vec3 = tuple[float, float, float]
 
@@ -352,6 +355,14 @@ class Scenario:
     divergence_position_m: float = 10.0
     source: str = ""
     files: dict[str, str] = field(default_factory=dict)
+    # The simulated sensors (config/sensors/): None or a kind "truth" profile means the
+    # exact state on the wire and no estimator (DESIGN.md section 3).
+    sensors: SensorProfile | None = None
+
+    @property
+    def uses_sensors(self) -> bool:
+        """Whether the FCU flies on its estimator (a sensor model, not the exact state)."""
+        return self.sensors is not None and not self.sensors.is_truth
 
     @property
     def gains(self) -> Gains:
@@ -442,6 +453,10 @@ def load_scenario(path: str | Path) -> Scenario:
     ideal = actuators.boolean("ideal", False)
     actuators.finish()
 
+    from common.sensors_config import resolve_sensor_profile
+
+    sensors = resolve_sensor_profile(t.string("sensors", "truth"), base) \
+        if t.has("sensors") else None
     scenario = Scenario(
         name=t.string("name"),
         duration_s=t.number("duration_s", lo=0.0, lo_open=True),
@@ -464,6 +479,7 @@ def load_scenario(path: str | Path) -> Scenario:
         source=source,
         files={"scenario": str(path.resolve()), "vehicle": str(vehicle_path),
                "gains_pid": str(pid_path), "gains_pd": str(pd_path)},
+        sensors=sensors,
     )
     t.finish()
     if not scenario.gains_pd.is_pd:

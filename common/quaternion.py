@@ -125,3 +125,10 @@ def angle_between_rows(q: np.ndarray, q_d: np.ndarray) -> np.ndarray:
     w2, v2 = q[:, 0], q[:, 1:]
     vec = w1[:, None] * v2 + w2[:, None] * v1 + np.cross(v1, v2)
     return np.asarray(2.0 * np.arctan2(np.linalg.norm(vec, axis=1), dot))
+
+
+def rotate_rows(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rows of q (w, x, y, z) applied to rows of v: q v q* (body to world for q_enu_flu)."""
+    w, u = q[:, :1], q[:, 1:]
+    t = 2.0 * np.cross(u, v)
+    return np.asarray(v + w * t + np.cross(u, t))

@@ -78,6 +78,7 @@ class SensorProfile:
     baro: BaroConfig
     mag: MagConfig
     mocap: MocapConfig
+    source: str = ""  # the file it was read from
 
     @property
     def is_truth(self) -> bool:
@@ -170,7 +171,8 @@ def parse_sensor_profile(data: dict[str, Any], source: str) -> SensorProfile:
         imu=_parse_imu(t.table("imu")),
         baro=_parse_baro(t.table("baro")),
         mag=_parse_mag(t.table("mag")),
-        mocap=_parse_mocap(t.table("mocap")))
+        mocap=_parse_mocap(t.table("mocap")),
+        source=source)
     t.finish()
     if profile.is_truth:
         _check_truth(profile, source)
@@ -181,3 +183,26 @@ def load_sensor_profile(path: str | Path) -> SensorProfile:
     """Read and validate a sensor profile (config/sensors/*.toml)."""
     path = Path(path)
     return parse_sensor_profile(_read_toml(path), str(path))
+
+
+SHIPPED_PROFILES = Path(__file__).resolve().parents[1] / "config" / "sensors"
+
+
+def profile_names() -> list[str]:
+    """The profiles that ship in config/sensors/."""
+    return sorted(p.stem for p in SHIPPED_PROFILES.glob("*.toml"))
+
+
+def resolve_sensor_profile(name: str, base: Path | None = None) -> SensorProfile:
+    """A profile by name (config/sensors/NAME.toml) or by file path (relative to `base`,
+    e.g. the scenario's folder)."""
+    if name.endswith(".toml") or "/" in name:
+        path = Path(name) if base is None else base / name
+    else:
+        path = SHIPPED_PROFILES / f"{name}.toml"
+        if not path.is_file():
+            raise ConfigError(f"sensor profile {name!r}: not one of "
+                              f"{', '.join(profile_names())} (or a .toml file)")
+    if not path.is_file():
+        raise ConfigError(f"sensor profile {name!r}: no such file {path}")
+    return load_sensor_profile(path)

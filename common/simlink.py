@@ -1,5 +1,7 @@
-"""The simulator link's hot pair of messages, packed and parsed without pymavlink's object
-machinery: ODOMETRY (SITL -> FCU, state) and HIL_ACTUATOR_CONTROLS (FCU -> SITL, command).
+"""The simulator link's hot messages, packed and parsed without pymavlink's object
+machinery: ODOMETRY (SITL -> FCU: the state, or with a sensor profile the motion-capture
+pose), HIL_SENSOR (SITL -> FCU: IMU, magnetometer, barometer) and HIL_ACTUATOR_CONTROLS
+(FCU -> SITL, command).
 
 Frames are standard MAVLink 2 (magic 0xFD, trailing-zero payload truncation, CRC-16/MCRF4XX
 with the message's CRC_EXTRA); layouts and CRC_EXTRA come from pymavlink's `common` dialect,
@@ -30,9 +32,11 @@ except ImportError:  # pragma: no cover - pymavlink depends on fastcrc; keep a f
 
 _ODO = MAV.MAVLink_odometry_message
 _HAC = MAV.MAVLink_hil_actuator_controls_message
-ODOMETRY_ID, HIL_ACTUATOR_CONTROLS_ID = _ODO.id, _HAC.id
+_HIL = MAV.MAVLink_hil_sensor_message
+ODOMETRY_ID, HIL_ACTUATOR_CONTROLS_ID, HIL_SENSOR_ID = _ODO.id, _HAC.id, _HIL.id
 _ODO_STRUCT = struct.Struct(_ODO.unpacker.format)
 _HAC_STRUCT = struct.Struct(_HAC.unpacker.format)
+_HIL_STRUCT = struct.Struct(_HIL.unpacker.format)
 _HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sys, comp, id
 _ZERO_COV = (0.0,) * 21
 _NAN_COV = (float("nan"),) + (0.0,) * 20  # first element NaN: covariance unknown
@@ -40,14 +44,50 @@ LOCKSTEP_FLAG = 1
 MODE_ARMED = MAV.MAV_MODE_FLAG_SAFETY_ARMED
 
 
+NAN_COVARIANCE = _NAN_COV
+
+
 class Odometry(NamedTuple):
-    """State on the wire: local NED position, attitude NED->FRD, FRD body velocity and rates."""
+    """State on the wire: local NED position, attitude NED->FRD, FRD body velocity and rates.
+
+    As the simulator's exact state: estimator_type NAIVE, covariances unknown. As a
+    motion-capture pose (as PX4 takes external vision): estimator_type MOCAP, time_usec the
+    capture time, velocity and rates NaN (not measured), the pose covariance's diagonal
+    (upper-right triangle, row-major: indices 0, 6, 11 position, 15, 18, 20 attitude)."""
 
     time_usec: int
     p_ned_m: tuple[float, float, float]
     q_ned_frd: tuple[float, float, float, float]
     v_frd_m_s: tuple[float, float, float]
     omega_frd_rad_s: tuple[float, float, float]
+    estimator_type: int = MAV.MAV_ESTIMATOR_TYPE_NAIVE
+    pose_covariance: tuple[float, ...] = _NAN_COV
+    frame_id: int = MAV.MAV_FRAME_LOCAL_NED
+    child_frame_id: int = MAV.MAV_FRAME_BODY_FRD
+
+
+def pose_covariance(pos_var_m2: float, att_var_rad2: float) -> tuple[float, ...]:
+    """The 21-element upper-triangle pose covariance with a diagonal only."""
+    cov = [0.0] * 21
+    for i in (0, 6, 11):
+        cov[i] = pos_var_m2
+    for i in (15, 18, 20):
+        cov[i] = att_var_rad2
+    return tuple(cov)
+
+
+class HilSensor(NamedTuple):
+    """HIL_SENSOR: one IMU sample (FRD) with the magnetometer (gauss, FRD) and barometer
+    fields; `fields_updated` says which of them are new in this sample (HIL_SENSOR_*)."""
+
+    time_usec: int
+    acc_frd_m_s2: tuple[float, float, float]
+    gyro_frd_rad_s: tuple[float, float, float]
+    mag_frd_gauss: tuple[float, float, float]
+    abs_pressure_hpa: float
+    pressure_alt_m: float
+    temperature_c: float
+    fields_updated: int
 
 
 class ActuatorControls(NamedTuple):
@@ -68,9 +108,29 @@ def _frame(msg_id: int, crc_extra: int, payload: bytes, seq: int, sysid: int,
 
 def _odometry_payload(o: Odometry) -> bytes:
     return _ODO_STRUCT.pack(o.time_usec, *o.p_ned_m, *o.q_ned_frd, *o.v_frd_m_s,
-                            *o.omega_frd_rad_s, *_NAN_COV, *_NAN_COV,
-                            MAV.MAV_FRAME_LOCAL_NED, MAV.MAV_FRAME_BODY_FRD, 0,
-                            MAV.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+                            *o.omega_frd_rad_s, *o.pose_covariance, *_NAN_COV,
+                            o.frame_id, o.child_frame_id, 0, o.estimator_type, 100)
+
+
+def _hil_sensor_payload(h: HilSensor) -> bytes:
+    return _HIL_STRUCT.pack(h.time_usec, *h.acc_frd_m_s2, *h.gyro_frd_rad_s, *h.mag_frd_gauss,
+                            h.abs_pressure_hpa, 0.0, h.pressure_alt_m, h.temperature_c,
+                            h.fields_updated, 0)
+
+
+def pack_hil_sensor(h: HilSensor, seq: int, sysid: int, compid: int) -> bytes:
+    return _frame(HIL_SENSOR_ID, _HIL.crc_extra, _hil_sensor_payload(h), seq, sysid, compid)
+
+
+def unpack_hil_sensor(payload: bytes) -> HilSensor:
+    v = _HIL_STRUCT.unpack(payload)
+    return HilSensor(v[0], (v[1], v[2], v[3]), (v[4], v[5], v[6]), (v[7], v[8], v[9]), v[10],
+                     v[12], v[13], v[14])
+
+
+def through_wire_hil_sensor(h: HilSensor) -> HilSensor:
+    """What the receiver of `h` reads: its floats rounded to float32 (in-process runs)."""
+    return unpack_hil_sensor(_hil_sensor_payload(h))
 
 
 def pack_odometry(o: Odometry, seq: int, sysid: int, compid: int) -> bytes:
@@ -101,7 +161,7 @@ class Frame(NamedTuple):
     raw: bytes
 
 
-_HOT = {ODOMETRY_ID, HIL_ACTUATOR_CONTROLS_ID}
+_HOT = {ODOMETRY_ID, HIL_ACTUATOR_CONTROLS_ID, HIL_SENSOR_ID}
 # Every message of the dialect: (CRC_EXTRA as a byte, full payload length). A frame can be
 # checked only when its message is known: a header naming any other message is rejected
 # (byte by byte, as corruption), so that it cannot swallow the valid frames after it.
@@ -193,7 +253,7 @@ class FrameReader:
 def unpack_odometry(payload: bytes) -> Odometry:
     v = _ODO_STRUCT.unpack(payload)
     return Odometry(v[0], (v[1], v[2], v[3]), (v[4], v[5], v[6], v[7]), (v[8], v[9], v[10]),
-                    (v[11], v[12], v[13]))
+                    (v[11], v[12], v[13]), v[59], tuple(v[14:35]), v[56], v[57])
 
 
 def unpack_actuator_controls(payload: bytes) -> ActuatorControls:

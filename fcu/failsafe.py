@@ -27,6 +27,9 @@ class FailsafeSettings:
     saturation_s: float = 2.0  # COM_SAT_T, flight clock
     saturation_hold: bool = False  # COM_SAT_ACT = 1: abort a mission to HOLD
     divergence_m: float = DIVERGENCE_M  # COM_DIV_POS
+    pose_loss_s: float = 1.0  # COM_POS_LOSS_T: dead-reckon this long without a pose, then HOLD
+    pose_loss_land_s: float = 2.0  # COM_POS_LAND_T: then LAND after this long in HOLD
+    gate_failures: int = 20  # EKF_GATE_N: poses refused by the gate in a row: inconsistent
 
 
 def state_lost(t_us: int, state_rx_us: int | None, settings: FailsafeSettings) -> bool:
@@ -34,6 +37,17 @@ def state_lost(t_us: int, state_rx_us: int | None, settings: FailsafeSettings) -
     if state_rx_us is None:
         return False
     return (t_us - state_rx_us) * 1e-6 > settings.state_loss_s
+
+
+def pose_loss_level(t_us: int, last_fusion_us: int, settings: FailsafeSettings) -> int:
+    """0: the pose source is fresh (or dead-reckoning within COM_POS_LOSS_T), 1: HOLD,
+    2: LAND (COM_POS_LAND_T later); on the flight clock, from the last fused capture."""
+    if last_fusion_us < 0:
+        return 0
+    age_s = (t_us - last_fusion_us) * 1e-6
+    if age_s > settings.pose_loss_s + settings.pose_loss_land_s:
+        return 2
+    return 1 if age_s > settings.pose_loss_s else 0
 
 
 def offboard_lost(now_s: float, received_s: float, timeout_s: float) -> bool:

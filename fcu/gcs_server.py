@@ -434,7 +434,7 @@ class GcsServer:
             return
         i = self.params.index(name)
         try:
-            self.params.set(name, float(msg.param_value))
+            self.params.set(name, float(msg.param_value), armed=self.pipeline.armed)
         except ParamError as exc:
             self.send(M.MAVLink_param_error_message(
                 msg.get_srcSystem(), msg.get_srcComponent(), name.encode(), i,
@@ -458,7 +458,9 @@ class GcsServer:
                       q_angle(q_mul(q_conj(ref.q_enu_flu), state.q_enu_flu)))
         v_enu = q_rotate(state.q_enu_flu, state.v_flu_m_s) if state is not None \
             else (0.0, 0.0, 0.0)
-        return Snapshot(self.time_us, state, ref, errors, pipe.last_output, v_enu, c.landed)
+        est = pipe.estimator.status() if pipe.estimator is not None else None
+        return Snapshot(self.time_us, state, ref, errors, pipe.last_output, v_enu, c.landed,
+                        est, pipe.pose_level > 0)
 
     def mission_current_msg(self) -> MAV.MAVLink_message:
         c = self.pipeline.commander
@@ -485,7 +487,7 @@ class GcsServer:
             state_ok = pipe.state is not None and pipe.failsafe != "state input lost"
             heard = c.sticks_received_s > -math.inf
             msgs = sys_status(state_ok=state_ok, control_ok=state_ok and not pipe.failsafe,
-                              prearm_ok=state_ok, load_permille=0,
+                              prearm_ok=state_ok and pipe.estimator_ready, load_permille=0,
                               manual_control=c.manual_fresh(self.now_s) if heard else None,
                               rejected=self.rejected_bytes + self.ignored_messages,
                               signing_rejects=self.signing_rejects)

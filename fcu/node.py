@@ -35,12 +35,13 @@ from common.mission_items import HomePosition
 from common.outcome import Event
 from common.parent import stop_with_parent
 from common.ulog import ULogError
+from fcu.estimator import ImuInput, PoseInput
 from fcu.gcs_server import COMPONENT, GcsServer
 from fcu.mission_protocol import MissionServer
 from fcu.onboard_log import OnboardLog
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
-from fcu.sim_bridge import SimBridge
+from fcu.sim_bridge import Resent, SimBridge
 from fcu.telemetry import Home, heartbeat
 
 M = MAV
@@ -116,6 +117,7 @@ class FlightController:
 
     def _apply_params(self) -> None:
         self.missions.limits = apply_params(self.params, self.pipeline)
+        self.sim.use_estimator = self.pipeline.estimator is not None
         if self.log is not None:
             self.log.set_params(self.params.values)
 
@@ -123,7 +125,20 @@ class FlightController:
 
     def _on_sim_datagram(self, peer: object, data: bytes) -> None:
         self.last_sim_rx_s = time.monotonic()
+        pipe = self.pipeline
         for sample in self.sim.receive(peer, data):
+            if isinstance(sample, PoseInput):
+                pipe.on_pose(sample)
+                continue
+            if isinstance(sample, ImuInput | Resent):
+                if isinstance(sample, ImuInput):
+                    pipe.on_imu(sample)
+                t_us = sample.t_us
+                if self.lockstep and t_us % self.period_us == 0:
+                    self.time_us = t_us
+                    if pipe.flight_started or pipe.needs_time:
+                        self._control_step(t_us, self.period_us * 1e-6)
+                continue
             if self.lockstep:
                 self.time_us = sample.stamp_us
                 rx_us = sample.stamp_us
@@ -238,6 +253,7 @@ class FlightController:
                 "signing_rejects": server.signing_rejects,
                 "resent_answers": sim.resent_answers,
                 "repeated_commands": server.repeated_commands,
+                "flight_start_us": pipe.flight_start_us,
                 "rejected_bytes": server.rejected_bytes + sim.rejected_bytes,
                 "ignored_messages": server.ignored_messages + sim.ignored_messages,
                 "internal_errors": server.internal_errors,

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 from common.config import ConfigError, Gains, VehicleConfig, check_stability
 from fcu.commander import FlightSettings
+from fcu.estimator import EstimatorSettings
 from fcu.failsafe import FailsafeSettings
 from fcu.manual import StickSettings
 from fcu.mission import MissionLimits
@@ -93,7 +94,34 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_ACC_DOWN_MAX", 3.0, 0.5, 15.0, "m/s^2",
               "POSCTL: downward acceleration limit"),
     ParamSpec("MPC_MAN_Y_MAX", 90.0, 0.0, 400.0, "deg/s", "POSCTL: yaw rate at full stick"),
+    # The estimator (fcu/estimator.py); EKF2's names and defaults where EKF2 has the figure.
+    ParamSpec("EKF_EN", 0.0, 0.0, 1.0, "enum",
+              "state source: 0 = ODOMETRY as the exact state, 1 = the estimator from "
+              "HIL_SENSOR and the external pose (ODOMETRY, motion capture)"),
+    ParamSpec("EKF_EV_DELAY", 0.02, 0.0, 0.3, "s",
+              "fusion horizon behind the newest IMU sample (EKF2_EV_DELAY)"),
+    ParamSpec("EKF_GYR_NOISE", 0.015, 1e-4, 1.0, "rad/s", "gyro noise (EKF2_GYR_NOISE)"),
+    ParamSpec("EKF_ACC_NOISE", 0.35, 1e-3, 10.0, "m/s^2",
+              "accelerometer noise (EKF2_ACC_NOISE)"),
+    ParamSpec("EKF_GYR_B_NOISE", 1e-3, 0.0, 1.0, "rad/s^2",
+              "gyro bias process noise (EKF2_GYR_B_NOISE)"),
+    ParamSpec("EKF_ACC_B_NOISE", 3e-3, 0.0, 1.0, "m/s^3",
+              "accelerometer bias process noise (EKF2_ACC_B_NOISE)"),
+    ParamSpec("EKF_EVP_NOISE", 0.001, 1e-5, 10.0, "m",
+              "least external position noise, when the pose's covariance says less"),
+    ParamSpec("EKF_EVA_NOISE", 0.002, 1e-5, 1.0, "rad",
+              "least external attitude noise, when the pose's covariance says less"),
+    ParamSpec("EKF_EV_GATE", 5.0, 1.0, 100.0, "SD",
+              "innovation gate of the external pose (EKF2_EV_POS_GATE)"),
+    ParamSpec("EKF_GATE_N", 20.0, 1.0, 10000.0, "count",
+              "poses refused by the gate in a row: estimator inconsistent, LAND"),
+    ParamSpec("COM_POS_LOSS_T", 1.0, 0.0, 60.0, "s",
+              "pose source lost: dead-reckon this long, then HOLD"),
+    ParamSpec("COM_POS_LAND_T", 2.0, 0.0, 600.0, "s",
+              "pose source lost: LAND after this long in HOLD"),
 )
+# Parameters that change the state source: refused while armed (PX4 asks for a reboot).
+LOCKED_WHEN_ARMED = frozenset(s.name for s in SPECS if s.name.startswith("EKF_"))
 BY_NAME = {s.name: s for s in SPECS}
 
 
@@ -133,11 +161,13 @@ class ParamStore:
         return Gains(axes("kp_r"), axes("kp_d"), axes("ki_r"), axes("ki_d"), axes("kd_r"),
                      axes("kd_d"), damping=DAMPING_CODES[round(v["DQ_DAMPING"])])
 
-    def set(self, name: str, value: float) -> float:
+    def set(self, name: str, value: float, armed: bool = False) -> float:
         """Set a parameter; returns the stored (float32) value or raises ParamError."""
         spec = BY_NAME.get(name)
         if spec is None:
             raise ParamError(f"unknown parameter {name}")
+        if armed and name in LOCKED_WHEN_ARMED and _f32(value) != self.values[name]:
+            raise ParamError(f"{name} refused: the estimator's settings change only disarmed")
         if not math.isfinite(value) or not spec.lo <= value <= spec.hi:
             raise ParamError(f"{name} refused: {value:g} not in [{spec.lo:g}, {spec.hi:g}]")
         if spec.unit == "enum" and value != round(value):
@@ -159,7 +189,23 @@ def failsafe_settings(values: dict[str, float]) -> FailsafeSettings:
     return FailsafeSettings(
         gcs_loss_s=values["COM_DL_LOSS_T"], gcs_loss_land_s=values["COM_DL_LAND_T"],
         state_loss_s=values["COM_STATE_LOSS_T"], saturation_s=values["COM_SAT_T"],
-        saturation_hold=values["COM_SAT_ACT"] == 1.0, divergence_m=values["COM_DIV_POS"])
+        saturation_hold=values["COM_SAT_ACT"] == 1.0, divergence_m=values["COM_DIV_POS"],
+        pose_loss_s=values["COM_POS_LOSS_T"], pose_loss_land_s=values["COM_POS_LAND_T"],
+        gate_failures=round(values["EKF_GATE_N"]))
+
+
+def estimator_settings(values: dict[str, float], gravity_m_s2: float
+                       ) -> EstimatorSettings | None:
+    """The EKF_* parameters as the estimator's settings; None when EKF_EN is 0."""
+    if values["EKF_EN"] != 1.0:
+        return None
+    return EstimatorSettings(
+        gravity_m_s2=gravity_m_s2, gyro_noise_rad_s=values["EKF_GYR_NOISE"],
+        accel_noise_m_s2=values["EKF_ACC_NOISE"],
+        gyro_bias_noise_rad_s2=values["EKF_GYR_B_NOISE"],
+        accel_bias_noise_m_s3=values["EKF_ACC_B_NOISE"],
+        pose_pos_noise_m=values["EKF_EVP_NOISE"], pose_att_noise_rad=values["EKF_EVA_NOISE"],
+        pose_delay_s=values["EKF_EV_DELAY"], pose_gate_sd=values["EKF_EV_GATE"])
 
 
 def mission_limits(values: dict[str, float], vehicle: VehicleConfig | None = None
@@ -193,5 +239,7 @@ def apply_params(store: ParamStore, pipeline: Pipeline) -> MissionLimits:
     limits = mission_limits(v, pipeline.vehicle)
     pipeline.configure(store.gains(), limits, failsafe_settings(v), v["COM_OF_LOSS_T"],
                        flight_settings(v))
+    if not pipeline.armed:
+        pipeline.use_estimator(estimator_settings(v, pipeline.vehicle.gravity_m_s2))
     pipeline.core.set_lag_compensation(v["CA_LAG_COMP"] == 1.0)
     return limits

@@ -1,7 +1,12 @@
 """The FCU's pipeline, one tick at a time (Crazyflie's stabilizer loop, PX4's modules):
 
-    state input -> commander (reference) -> controller (tracker, eq. 16/33)
-                -> allocator (eq. 28-29) -> supervisor (the one output gate) -> outputs
+    state input or estimator (IMU + pose) -> commander (reference)
+                -> controller (tracker, eq. 16/33) -> allocator (eq. 28-29)
+                -> supervisor (the one output gate) -> outputs
+
+The state is either the exact state from the simulator link (ODOMETRY; parameter
+EKF_EN = 0) or the estimator's output at the newest IMU sample, with the bias-corrected
+rate (EKF_EN = 1: `on_imu`, `on_pose`; fcu/estimator.py).
 
 Pure and I/O-free: the flight clock `t_us` and the period `dt_s` come in as arguments (the
 process shell passes simulated time in lockstep and the measured, clamped period in real
@@ -29,12 +34,14 @@ from fcu.commander import (
 )
 from fcu.core import FlightCore, StepResult
 from fcu.dualquat import q_normalize, q_rotate
+from fcu.estimator import Estimator, EstimatorSettings, ImuInput, PoseInput
 from fcu.failsafe import (
     FailsafeSettings,
     GcsLinkMonitor,
     SaturationMonitor,
     manual_control_lost,
     offboard_lost,
+    pose_loss_level,
     state_lost,
 )
 from fcu.mission import MissionLimits
@@ -74,6 +81,9 @@ class Pipeline:
         self.last_output: StepOutput | None = None
         self.steps = 0
         self.saturated_steps = 0
+        self.estimator: Estimator | None = None  # EKF_EN = 1
+        self.pose_level = 0  # pose loss: 0 fresh, 1 HOLD, 2 LAND (failsafe.pose_loss_level)
+        self.flight_start_us: int | None = None  # the flight clock at the flight's start
 
     # ------------------------------------------------------------------ inputs
 
@@ -86,6 +96,58 @@ class Pipeline:
         self.commander.state = state
         self.commander.clock_us = rx_us
         self.commander.update_landed()
+
+    def use_estimator(self, settings: EstimatorSettings | None) -> None:
+        """Fly on the estimator with these settings, or (None) on the exact state input.
+        Switching resets the estimator: it aligns again (refused while armed)."""
+        if settings is None:
+            self.estimator = None
+        elif self.estimator is None or self.estimator.settings != settings:
+            self.estimator = Estimator(settings)
+            self.state = None
+            self.commander.state = None
+
+    def on_imu(self, sample: ImuInput) -> None:
+        """One IMU sample (HIL_SENSOR) for the estimator; its stamp is the state's."""
+        est = self.estimator
+        if est is None:
+            return
+        est.on_imu(sample)
+        if sample.t_us > self.state_time_us:
+            self.state_time_us = sample.t_us  # answers echo the newest sample
+        if sample.t_us % self.period_us == 0:
+            self._take_estimate()  # the state of the period (telemetry, arming, the step)
+
+    def on_pose(self, pose: PoseInput) -> None:
+        """One external pose (motion capture) for the estimator."""
+        if self.estimator is not None:
+            self.estimator.on_pose(pose)
+
+    @property
+    def estimator_ready(self) -> bool:
+        """Aligned and converged (arming needs it); always true without an estimator."""
+        est = self.estimator
+        if est is None:
+            return True
+        st = est.status()
+        return st.aligned and st.converged and st.healthy
+
+    @property
+    def needs_time(self) -> bool:
+        """In lockstep, periods before the flight that the FCU answers (disarmed): the
+        estimator aligns on the vehicle at rest while simulated time runs."""
+        return not self.commander.flight_started and not self.estimator_ready
+
+    def _take_estimate(self) -> None:
+        est = self.estimator
+        if est is None:
+            return
+        out = est.output()
+        if out is not None:
+            t_us, state = out
+            stamp = self.state_time_us
+            self.on_state(t_us, state, t_us)
+            self.state_time_us = max(stamp, t_us)
 
     def configure(self, gains: Gains, limits: MissionLimits, failsafes: FailsafeSettings,
                   offboard_timeout_s: float, flight: FlightSettings | None = None) -> None:
@@ -102,11 +164,19 @@ class Pipeline:
 
     def arm(self) -> tuple[int, str]:
         was = self.commander.armed
+        if not was and self.estimator is not None:
+            st = self.estimator.status()
+            why = ("not aligned (keep the vehicle still; a pose source is needed)"
+                   if not st.aligned else "not converged" if not st.converged else
+                   "unhealthy" if not st.healthy else "")
+            if why:
+                return 1, f"arming refused: estimator {why}"  # MAV_RESULT_TEMPORARILY_REJECTED
         result = self.commander.arm()
         if result[0] == MAV_RESULT_ACCEPTED and not was:
             self.core.tracker.reset()
             self.saturation = SaturationMonitor()
             self.failsafe = ""
+            self.pose_level = 0
         return result
 
     @property
@@ -128,6 +198,10 @@ class Pipeline:
         cmd = self.commander
         cmd.clock_us = t_us
         self.steps += 1
+        if cmd.flight_started and self.flight_start_us is None:
+            self.flight_start_us = t_us
+        if cmd.armed and self.estimator is not None:
+            self._check_estimator(t_us)
         if cmd.armed and state_lost(t_us, self.state_rx_us, self.settings):
             self.failsafe = "state input lost"
             cmd.say(SEVERITY_CRITICAL, "failsafe: state input lost", FAILSAFE)
@@ -170,6 +244,36 @@ class Pipeline:
         self.last_output = StepOutput(max(self.state_time_us, 0), speeds, tilts,
                                       self.commander.armed, result)
         return self.last_output
+
+    def _check_estimator(self, t_us: int) -> None:
+        """Estimator failsafes: a failed estimate disarms (nothing to fly on); a pose source
+        lost dead-reckons for COM_POS_LOSS_T, then HOLD, then LAND after COM_POS_LAND_T;
+        EKF_GATE_N poses refused in a row (inconsistent): LAND."""
+        assert self.estimator is not None
+        st = self.estimator.status()
+        cmd = self.commander
+        if not st.healthy:
+            self.failsafe = "estimator failed"
+            cmd.say(SEVERITY_EMERGENCY, "failsafe: estimator failed", FAILSAFE)
+            cmd.disarm(force=True, reason="estimator failed: disarmed")
+            return
+        if st.rejected_in_row >= self.settings.gate_failures and self.failsafe != \
+                "estimator inconsistent":
+            self.failsafe = "estimator inconsistent"
+            cmd.failsafe_land(f"failsafe: estimator inconsistent ({st.rejected_in_row} poses "
+                              "refused in a row): LAND")
+        level = pose_loss_level(t_us, st.last_fusion_us, self.settings)
+        if level > self.pose_level:
+            self.failsafe = "pose source lost"
+            if level == 1 and not cmd.landing:
+                cmd.failsafe_hold("failsafe: pose source lost: HOLD")
+            elif level == 2:
+                cmd.failsafe_land("failsafe: pose source lost: LAND")
+        elif level == 0 and self.pose_level > 0:
+            if self.failsafe == "pose source lost":
+                self.failsafe = ""
+            cmd.say(SEVERITY_INFO, "pose source regained")
+        self.pose_level = level
 
     def _check_saturation(self, t_us: int, saturated: bool) -> None:
         change = self.saturation.update(t_us, saturated, self.settings)

@@ -3,8 +3,12 @@ HIL_ACTUATOR_CONTROLS out (DESIGN.md section 3).
 
 Lockstep: a state already answered (same `time_usec`) gets the stored answer again, without
 stepping anything (so loss changes timing, never results); an older state is stale and
-dropped. A state no vehicle can be in (not finite, not a unit quaternion, absurdly far or
-fast) is refused and counted: a stream of them is state loss for the failsafe.
+dropped. With the estimator (EKF_EN = 1) the same holds for HIL_SENSOR, whose sample at the
+end of a control period stands for the state; ODOMETRY is then an external pose (motion
+capture) for the estimator, stamped with its capture time, each taken once.
+
+A state no vehicle can be in (not finite, not a unit quaternion, absurdly far or fast) is
+refused and counted: a stream of them is state loss for the failsafe.
 """
 
 from __future__ import annotations
@@ -15,15 +19,19 @@ from typing import NamedTuple
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.links import Link
 from common.simlink import (
+    HIL_SENSOR_ID,
     LOCKSTEP_FLAG,
     MODE_ARMED,
     ODOMETRY_ID,
     ActuatorControls,
     FrameReader,
+    HilSensor,
     Odometry,
     pack_actuator_controls,
+    unpack_hil_sensor,
     unpack_odometry,
 )
+from fcu.estimator import ImuInput, PoseInput
 from fcu.pipeline import StepOutput
 from fcu.tracker import VehicleState
 
@@ -37,6 +45,12 @@ class StateSample(NamedTuple):
     state: VehicleState
 
 
+class Resent(NamedTuple):
+    """The newest IMU sample again, not yet answered (lockstep: the simulator waits for it)."""
+
+    t_us: int
+
+
 def state_from_odometry(odo: Odometry) -> VehicleState | None:
     """ENU/FLU state of an ODOMETRY, or None when no vehicle can be in it."""
     values = (*odo.p_ned_m, *odo.q_ned_frd, *odo.v_frd_m_s, *odo.omega_frd_rad_s)
@@ -48,6 +62,27 @@ def state_from_odometry(odo: Odometry) -> VehicleState | None:
         return None
     return VehicleState(ned_to_enu(odo.p_ned_m), q_ned_frd_to_enu_flu(odo.q_ned_frd),
                         frd_to_flu(odo.v_frd_m_s), frd_to_flu(odo.omega_frd_rad_s))
+
+
+def imu_from_hil_sensor(h: HilSensor) -> ImuInput:
+    """The IMU sample of a HIL_SENSOR in FLU (not checked: the estimator refuses NaN)."""
+    return ImuInput(h.time_usec, frd_to_flu(h.gyro_frd_rad_s), frd_to_flu(h.acc_frd_m_s2))
+
+
+def pose_from_odometry(odo: Odometry) -> PoseInput | None:
+    """The external pose of an ODOMETRY (ENU/FLU, its capture time and variances), or None
+    when its position or attitude is not finite or the quaternion not a unit one."""
+    values = (*odo.p_ned_m, *odo.q_ned_frd)
+    if not all(math.isfinite(v) for v in values):
+        return None
+    if abs(math.sqrt(sum(c * c for c in odo.q_ned_frd)) - 1.0) > 0.01 or \
+            max(abs(c) for c in odo.p_ned_m) > MAX_POSITION_M:
+        return None
+    cov = odo.pose_covariance
+    pos_var, att_var = cov[0], cov[15]
+    return PoseInput(odo.time_usec, ned_to_enu(odo.p_ned_m), q_ned_frd_to_enu_flu(odo.q_ned_frd),
+                     pos_var if math.isfinite(pos_var) and pos_var > 0.0 else math.nan,
+                     att_var if math.isfinite(att_var) and att_var > 0.0 else math.nan)
 
 
 def actuator_controls(out: StepOutput, w_max: float, lockstep: bool) -> ActuatorControls:
@@ -73,18 +108,30 @@ class SimBridge:
         self.resent_answers = 0
         self.rejected_bytes = 0
         self.ignored_messages = 0
+        self.use_estimator = False  # EKF_EN: HIL_SENSOR and poses in, not the exact state
+        self.imu_us = -1  # the newest IMU sample taken
+        self.pose_us = -1  # the newest pose capture taken
 
-    def receive(self, peer: object, data: bytes) -> list[StateSample]:
-        """New valid states of our vehicle in a datagram (duplicates answered here)."""
+    def receive(self, peer: object,
+                data: bytes) -> list[StateSample | ImuInput | PoseInput | Resent]:
+        """New inputs of our vehicle in a datagram, in order: valid states (exact state
+        input), or IMU samples and poses (estimator); duplicates answered here."""
         frames, rejected = self.reader.feed(peer, data)
         self.rejected_bytes += rejected
-        out = []
+        out: list[StateSample | ImuInput | PoseInput | Resent] = []
         for f in frames:
-            if f.msg_id != ODOMETRY_ID:
-                continue  # HIL_SENSOR and others: for estimators to come
+            if f.msg_id not in (ODOMETRY_ID, HIL_SENSOR_ID):
+                continue
             if f.sysid != self.system_id:
                 self.ignored_messages += 1  # another vehicle's simulator: not our state
                 continue
+            if self.use_estimator:
+                item = self._estimator_input(f.msg_id, f.payload)
+                if item is not None:
+                    out.append(item)
+                continue
+            if f.msg_id != ODOMETRY_ID:
+                continue  # HIL_SENSOR without the estimator: not used
             odo = unpack_odometry(f.payload)
             if self.lockstep and odo.time_usec == self.answered_us:
                 self.link.send(self.answer)  # the same answer, nothing stepped again
@@ -99,6 +146,32 @@ class SimBridge:
                 continue
             out.append(StateSample(odo.time_usec, state))
         return out
+
+    def _estimator_input(self, msg_id: int,
+                         payload: bytes) -> ImuInput | PoseInput | Resent | None:
+        if msg_id == HIL_SENSOR_ID:
+            h = unpack_hil_sensor(payload)
+            if self.lockstep and h.time_usec == self.answered_us:
+                self.link.send(self.answer)  # the same answer, nothing stepped again
+                self.resent_answers += 1
+                return None
+            if self.lockstep and h.time_usec == self.imu_us:
+                return Resent(h.time_usec)  # taken once; the flight may have started since
+            if h.time_usec <= self.imu_us:
+                self.ignored_messages += 1  # a re-sent or stale sample: taken once
+                return None
+            self.imu_us = h.time_usec
+            return imu_from_hil_sensor(h)
+        odo = unpack_odometry(payload)
+        if odo.time_usec <= self.pose_us:
+            self.ignored_messages += 1
+            return None
+        pose = pose_from_odometry(odo)
+        if pose is None:
+            self.ignored_messages += 1
+            return None
+        self.pose_us = odo.time_usec
+        return pose
 
     def send(self, out: StepOutput) -> None:
         """Answer the state stamped out.t_us (and remember the answer in lockstep)."""

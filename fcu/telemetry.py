@@ -14,6 +14,8 @@ from typing import NamedTuple
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
 from common.mavlink import MAV
 from common.modes import MAIN_POSCTL
+from common.simlink import pose_covariance
+from fcu.estimator import EstimatorStatus
 from fcu.pipeline import StepOutput
 from fcu.tracker import Reference, VehicleState
 
@@ -33,6 +35,7 @@ DEFAULT_INTERVALS_S: dict[int, float] = {
     M.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: 0.1,
     M.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
     M.MAVLINK_MSG_ID_HOME_POSITION: 5.0,
+    M.MAVLINK_MSG_ID_ESTIMATOR_STATUS: 1.0,  # only with the estimator (EKF_EN = 1)
 }
 REQUESTABLE = {*DEFAULT_INTERVALS_S, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION}
 CAPABILITIES = (M.MAV_PROTOCOL_CAPABILITY_MISSION_INT | M.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
@@ -56,6 +59,8 @@ class Snapshot(NamedTuple):
     output: StepOutput | None
     v_enu_m_s: tuple[float, float, float]
     landed: bool
+    estimator: EstimatorStatus | None = None  # None: flying on the exact state input
+    pose_lost: bool = False  # the estimator dead-reckons beyond COM_POS_LOSS_T
 
 
 def _i32(x: float) -> int:
@@ -225,6 +230,7 @@ class Builders:
             M.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: self.errors,
             M.MAVLINK_MSG_ID_HOME_POSITION: self.home_position,
             M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self.extended_sys_state,
+            M.MAVLINK_MSG_ID_ESTIMATOR_STATUS: self.estimator_status,
         }
 
     @staticmethod
@@ -272,14 +278,50 @@ class Builders:
             _i32(-p_ned[2] * 1000), *(max(-32768, min(32767, round(c * 100))) for c in v), hdg)
 
     def odometry(self, src: Snapshot):
+        """The state the FCU flies on: the estimate (estimator_type AUTOPILOT, with its
+        pose and velocity variances) or the external state passed through (MOCAP)."""
         s = src.state
         if s is None:
             return None
+        est = src.estimator
+        pose_cov = [math.nan] + [0.0] * 20
+        vel_cov = [math.nan] + [0.0] * 20
+        kind = M.MAV_ESTIMATOR_TYPE_MOCAP
+        if est is not None:
+            kind = M.MAV_ESTIMATOR_TYPE_AUTOPILOT
+            pn, pe, pd = (est.pos_sd_m[1], est.pos_sd_m[0], est.pos_sd_m[2])  # ENU -> NED
+            ax, ay, az = est.att_sd_rad[0], -est.att_sd_rad[1], -est.att_sd_rad[2]
+            pose_cov = list(pose_covariance(0.0, 0.0))
+            for i, sd in zip((0, 6, 11, 15, 18, 20), (pn, pe, pd, ax, ay, az), strict=True):
+                pose_cov[i] = sd * sd
+            vel_cov = [0.0] * 21
+            ve, vn, vu = est.vel_sd_m_s
+            for i, sd in zip((0, 6, 11), (vn, ve, vu), strict=True):
+                vel_cov[i] = sd * sd
+            vel_cov[15] = math.nan  # rates: not estimated (bias-corrected gyro)
         return M.MAVLink_odometry_message(
             src.time_us, M.MAV_FRAME_LOCAL_NED, M.MAV_FRAME_BODY_FRD, *enu_to_ned(s.p_enu_m),
             q_enu_flu_to_ned_frd(s.q_enu_flu), *flu_to_frd(s.v_flu_m_s),
-            *flu_to_frd(s.omega_flu_rad_s), [math.nan] + [0.0] * 20, [math.nan] + [0.0] * 20,
-            0, M.MAV_ESTIMATOR_TYPE_MOCAP, 100)
+            *flu_to_frd(s.omega_flu_rad_s), pose_cov, vel_cov, 0, kind, 100)
+
+    def estimator_status(self, src: Snapshot):
+        """ESTIMATOR_STATUS as PX4 fills it: solution flags, test ratios (pose position in
+        pos_horiz/vert_ratio, pose attitude in mag_ratio: the heading aid), accuracies."""
+        est = src.estimator
+        if est is None:
+            return None
+        flags = 0
+        if est.aligned and est.healthy:
+            flags = (M.ESTIMATOR_ATTITUDE | M.ESTIMATOR_VELOCITY_HORIZ
+                     | M.ESTIMATOR_VELOCITY_VERT | M.ESTIMATOR_PRED_POS_HORIZ_REL)
+            if not src.pose_lost:
+                flags |= M.ESTIMATOR_POS_HORIZ_REL | M.ESTIMATOR_POS_VERT_ABS
+        if not est.healthy:
+            flags |= M.ESTIMATOR_ACCEL_ERROR
+        sx, sy, sz = est.pos_sd_m
+        return M.MAVLink_estimator_status_message(
+            src.time_us, flags, 0.0, est.pos_test_ratio, est.pos_test_ratio,
+            est.att_test_ratio, 0.0, 0.0, math.hypot(sx, sy), sz)
 
     def actuators(self, src: Snapshot):
         out = src.output

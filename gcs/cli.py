@@ -67,6 +67,16 @@ def _positive(text: str) -> float:
     return value
 
 
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text}") from None
+    if not 0 <= value < 2**63:
+        raise argparse.ArgumentTypeError(f"expected 0..2^63-1, got {text}")
+    return value
+
+
 def _finite(text: str) -> float:
     try:
         value = float(text)
@@ -107,6 +117,12 @@ def build_parser() -> argparse.ArgumentParser:
                      help="rotors and tilt servos follow their commands instantly")
     run.add_argument("--duration", type=_positive, metavar="S",
                      help="cut the scenario short after S simulated seconds")
+    run.add_argument("--sensors", metavar="PROFILE",
+                     help="sensor profile: truth (the exact state, no estimator), "
+                          "mocap-indoor, degraded (config/sensors/) or a .toml file; "
+                          "default: the scenario's, else truth")
+    run.add_argument("--seed", type=_seed, metavar="N",
+                     help="seed of the sensors' noise (default: the scenario's seed key)")
     run.add_argument("--link", choices=("udp", "tcp", "zenoh"), default="udp",
                      help="links between the processes: udp (default), tcp (simulator link "
                           "over TCP) or zenoh (every link over Zenoh)")
@@ -260,7 +276,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     scenario = apply_overrides(load_scenario(args.scenario), controller=args.controller,
                                ideal_actuators=True if args.ideal_actuators else None,
-                               duration_s=args.duration)
+                               duration_s=args.duration, sensors=args.sensors,
+                               seed=args.seed)
     if args.fleet < 1:
         print("gcs run: --fleet needs at least 1 vehicle", file=sys.stderr)
         return 2

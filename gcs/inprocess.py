@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,13 +26,25 @@ from common.config import Scenario
 from common.mavlink import encoder, pack, parser
 from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
 from common.outcome import Event, diverged
-from common.simlink import through_wire_controls, through_wire_odometry
+from common.sensors_config import resolve_sensor_profile
+from common.simlink import (
+    HilSensor,
+    Odometry,
+    through_wire_controls,
+    through_wire_hil_sensor,
+    through_wire_odometry,
+)
 from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
 from fcu.mission import check_mission, localize
 from fcu.onboard_log import OnboardLog
 from fcu.params import ParamError, ParamStore, apply_params
-from fcu.pipeline import Pipeline
-from fcu.sim_bridge import actuator_controls, state_from_odometry
+from fcu.pipeline import Pipeline, StepOutput
+from fcu.sim_bridge import (
+    actuator_controls,
+    imu_from_hil_sensor,
+    pose_from_odometry,
+    state_from_odometry,
+)
 from fcu.telemetry import Home
 from fcu.tracker import VehicleState
 from fcu.trajectory import Trajectory
@@ -48,6 +61,7 @@ from sitl.plant import (
     rotate_inv,
     truth_row,
 )
+from sitl.sensor_feed import SensorFeed
 from sitl.truth_log import TruthLog
 
 
@@ -73,8 +87,14 @@ class RunResult:
 
 def apply_overrides(scenario: Scenario, *, controller: str | None = None,
                     ideal_actuators: bool | None = None,
-                    duration_s: float | None = None) -> Scenario:
+                    duration_s: float | None = None, sensors: str | None = None,
+                    seed: int | None = None) -> Scenario:
+    """The scenario with the command line's choices (a sensor profile by name or file)."""
     changes: dict[str, Any] = {}
+    if sensors is not None:
+        changes["sensors"] = resolve_sensor_profile(sensors)
+    if seed is not None:
+        changes["seed"] = seed
     if controller is not None:
         changes["controller"] = controller
     if ideal_actuators is not None:
@@ -85,8 +105,17 @@ def apply_overrides(scenario: Scenario, *, controller: str | None = None,
 
 
 def scenario_params(scenario: Scenario) -> dict[str, float]:
-    """Parameters a run sets on the FCU beyond its defaults (the same through processes)."""
-    return {"COM_DIV_POS": scenario.divergence_position_m}
+    """Parameters a run sets on the FCU beyond its defaults (the same through processes):
+    with a sensor profile, the estimator on and its fusion horizon at the pose's latency
+    (as a user sets EKF2_EV_DELAY to the measured latency). Set in this order."""
+    params = {"COM_DIV_POS": scenario.divergence_position_m}
+    if scenario.uses_sensors:
+        assert scenario.sensors is not None
+        params["EKF_EV_DELAY"] = scenario.sensors.mocap.latency_s
+        # Last: the estimator starts (and in lockstep simulated time runs, aligning it) once
+        # it is on, so the flight starts at the same instant however the sets were timed.
+        params["EKF_EN"] = 1.0
+    return params
 
 
 def fcu_pipeline(scenario: Scenario) -> tuple[Pipeline, ParamStore]:
@@ -125,6 +154,37 @@ def state_for_fcu(s: PlantState) -> VehicleState:
     return state
 
 
+def feed_fcu(pipeline: Pipeline, messages: list[HilSensor | Odometry]) -> None:
+    """A period's sensor messages as the FCU takes them from the simulator link (float32)."""
+    for m in messages:
+        if isinstance(m, HilSensor):
+            pipeline.on_imu(imu_from_hil_sensor(through_wire_hil_sensor(m)))
+        else:
+            pose = pose_from_odometry(through_wire_odometry(m))
+            if pose is not None:
+                pipeline.on_pose(pose)
+
+
+def align(pipeline: Pipeline, plant: Plant, feed: SensorFeed, state: PlantState,
+          substeps: int, dt_s: float, record: Callable[[PlantState], None],
+          logged: Callable[[StepOutput], None], max_s: float = 60.0) -> PlantState:
+    """Before the flight: the world stands still while time and the sensors run, and the
+    FCU answers disarmed, until its estimator is aligned and converged (as sitl/node.py).
+    `record` gets each state sent but the last, `logged` each step's output."""
+    feed_fcu(pipeline, feed.period([state]))
+    while pipeline.needs_time:
+        if state.time_us > max_s * 1e6:
+            raise InProcessError(f"the estimator did not align within {max_s:g} s")
+        record(state)
+        logged(pipeline.step(state.time_us, dt_s))
+        states = []
+        for _ in range(substeps):
+            state = state._replace(time_us=state.time_us + plant.dt_us)
+            states.append(state)
+        feed_fcu(pipeline, feed.period(states))
+    return state
+
+
 def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
                  logs: bool = True) -> RunResult:
     """Fly a scenario's mission to its end; deterministic for a given scenario. With `logs`,
@@ -149,16 +209,33 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
         raise InProcessError(f"mission refused: MAV_MISSION_RESULT {check.result}: "
                              f"{check.reason}")
     cmd.set_mission(localize(items, home))
-    pipeline.on_state(state.time_us, state_for_fcu(state), state.time_us)
+    dt_s = control_dt_us * 1e-6
+    truth_rows: list[tuple[float, ...]] = []
+    onboard_rows: list[tuple[float, ...]] = []
+    feed = None
+    if scenario.uses_sensors:
+        assert scenario.sensors is not None
+        feed = SensorFeed(scenario.sensors, scenario.seed, plant, control_dt_us)
+
+        def record(s: PlantState) -> None:
+            truth_rows.append(truth_row(s))
+            if truth_log is not None:
+                truth_log.record(s)
+
+        def logged(out: StepOutput) -> None:
+            if onboard_log is not None:
+                onboard_log.step(out, 0.0, out.t_us)
+
+        state = align(pipeline, plant, feed, state, substeps, dt_s, record, logged)
+    else:
+        pipeline.on_state(state.time_us, state_for_fcu(state), state.time_us)
     for what, (code, text) in (("arming", pipeline.arm()),
                                ("mission start", cmd.mission_start(0))):
         if code != 0:
             raise InProcessError(f"{what} refused: {text}")
-
-    end_us = round(scenario.duration_s * 1e6)
-    dt_s = control_dt_us * 1e-6
-    truth_rows: list[tuple[float, ...]] = []
-    onboard_rows: list[tuple[float, ...]] = []
+    start_us = state.time_us  # the flight's start: the scenario's clock counts from it
+    plant.disturbance = plant.disturbance.from_time(start_us * 1e-6)
+    end_us = start_us + round(scenario.duration_s * 1e6)
     clock = time.perf_counter
     logged_events = 0
     wall0 = clock()
@@ -167,8 +244,8 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
         truth_rows.append(truth_row(state))
         if truth_log is not None:
             truth_log.record(state)
-        seen = state_for_fcu(state)
-        pipeline.on_state(t_us, seen, t_us)
+        if feed is None:
+            pipeline.on_state(t_us, state_for_fcu(state), t_us)
         t0 = clock()
         out = pipeline.step(t_us, dt_s)
         step_us = (clock() - t0) * 1e6
@@ -185,8 +262,12 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
         wire = through_wire_controls(actuator_controls(out, vehicle.rotor_speed_max_rad_s,
                                                        lockstep=True))
         command = command_from_controls(wire.controls, wire.mode, vehicle, state)
+        states = []
         for _ in range(substeps):
             state = plant.step(state, command)
+            states.append(state)
+        if feed is not None:
+            feed_fcu(pipeline, feed.period(states))
     wall = clock() - wall0
 
     if truth_log is not None and onboard_log is not None:
@@ -198,7 +279,8 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
     events = list(cmd.events)
     metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
                             events=events, wall_time_s=wall, transport="in-process",
-                            lockstep=True, mission_completed=cmd.mission_done)
+                            lockstep=True, mission_completed=cmd.mission_done,
+                            flight_start_us=start_us)
     return RunResult(metrics, truth, onboard, events,
                      bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None)
 

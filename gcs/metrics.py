@@ -14,7 +14,7 @@ import numpy as np
 
 from common.config import Scenario
 from common.outcome import CRASH_SPEED_M_S, Event, classify, diverged_rows, touchdowns
-from common.quaternion import angle_between_rows
+from common.quaternion import angle_between_rows, rotate_rows
 
 
 def attitude_error_rad(q: np.ndarray, q_d: np.ndarray) -> np.ndarray:
@@ -78,15 +78,33 @@ def crash_time_us(truth_columns: Sequence[str], truth: np.ndarray) -> int | None
     return None
 
 
+def estimation_error(truth_columns: Sequence[str], truth_j: np.ndarray,
+                     onboard_columns: Sequence[str], onboard_j: np.ndarray) -> dict[str, Any]:
+    """The estimate (the state the FCU flew on) against the truth at the same steps: position
+    and world-frame velocity error norms, attitude error angle, each {max, mean, rmse}."""
+    p = log_columns(truth_columns, truth_j, "px", "py", "pz")
+    v = log_columns(truth_columns, truth_j, "vx", "vy", "vz")
+    q = log_columns(truth_columns, truth_j, "qw", "qx", "qy", "qz")
+    p_e = log_columns(onboard_columns, onboard_j, "px", "py", "pz")
+    q_e = log_columns(onboard_columns, onboard_j, "qw", "qx", "qy", "qz")
+    v_e = rotate_rows(q_e, log_columns(onboard_columns, onboard_j, "vbx", "vby", "vbz"))
+    return {"position_m": error_stats(np.linalg.norm(p_e - p, axis=1)),
+            "velocity_m_s": error_stats(np.linalg.norm(v_e - v, axis=1)),
+            "attitude_rad": error_stats(attitude_error_rad(q_e, q))}
+
+
 def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.ndarray,
                   onboard_columns: Sequence[str], onboard: np.ndarray, *,
                   events: Sequence[Event], wall_time_s: float, transport: str,
                   lockstep: bool, deadline_misses: int = 0, mission_completed: bool = False,
-                  stopped: str = "", reached_end: bool | None = None) -> dict[str, Any]:
+                  stopped: str = "", reached_end: bool | None = None,
+                  flight_start_us: int = 0) -> dict[str, Any]:
     """metrics.json content (DESIGN.md section 6), status included (common.outcome).
 
     `reached_end`: whether the run reached its end; None reads it from the truth log (the
-    simulator's clock is the flight's in lockstep and in-process). `stopped`: "timeout" or
+    simulator's clock is the flight's in lockstep and in-process). `flight_start_us`: the
+    flight's start on that clock (after the estimator's alignment with a sensor profile):
+    the scenario's duration counts from it. `stopped`: "timeout" or
     "aborted" when the runner could not finish.
 
     Errors compare the plant's true pose with the desired pose the FCU computed for the same
@@ -110,15 +128,23 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
     t_truth = truth[:, list(truth_columns).index("time_us")] if len(truth) else np.zeros(0)
     if reached_end is None:  # lockstep: the simulator's clock is the flight's
         reached_end = bool(len(t_truth)) and \
-            int(t_truth[-1]) >= round(scenario.duration_s * 1e6)
+            int(t_truth[-1]) >= flight_start_us + round(scenario.duration_s * 1e6)
     outcome = classify(reached_end=reached_end, events=events,
                        divergence_t_us=divergence_t_us,
                        crash_t_us=crash_time_us(truth_columns, truth), stopped=stopped)
-    sim_time_s = float(t_truth[-1] * 1e-6) if len(t_truth) else 0.0
+    sim_time_s = float((t_truth[-1] - flight_start_us) * 1e-6) if len(t_truth) else 0.0
     steps = onboard_j[:end, list(onboard_columns).index("step_us")]
     sat = onboard_j[:end, list(onboard_columns).index("saturated")]
+    sensors: dict[str, Any] = {}
+    if scenario.uses_sensors:
+        assert scenario.sensors is not None
+        sensors = {"estimation_error": estimation_error(truth_columns, truth_j[:end],
+                                                        onboard_columns, onboard_j[:end])}
     return {
         "scenario": scenario.name,
+        "sensors": scenario.sensors.name if scenario.sensors is not None else "truth",
+        **sensors,
+        "alignment_s": flight_start_us * 1e-6,
         "controller": scenario.controller,
         "lockstep": lockstep,
         "transport": transport,

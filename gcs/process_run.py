@@ -10,6 +10,7 @@ import json
 import shutil
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -221,6 +222,9 @@ class _Flight:
             fcu.append("--realtime")
         if sc.ideal_actuators:
             sitl.append("--ideal-actuators")
+        if sc.sensors is not None:
+            sitl += ["--sensors", sc.sensors.source]
+        sitl += ["--seed", str(sc.seed)]
         key = None
         if self.signing_key_file:
             key = read_signing_key(self.signing_key_file)
@@ -242,7 +246,17 @@ class _Flight:
         assert s is not None
         try:
             s.wait_vehicle(timeout=30.0, system_id=self.plan.sysid)
-            # the FCU reports attitude once it has a state from the simulator
+        except GcsError:
+            self.children.check()
+            raise
+        # Parameters first: EKF_EN decides what the FCU flies on (its state comes after).
+        for name, value in scenario_params(sc).items():
+            now, texts = param_set(s, name, value)
+            if now != struct.unpack("<f", struct.pack("<f", value))[0]:  # REAL32
+                raise RunError(f"the vehicle refused {name} = {value:g} (kept {now:g}): "
+                               + "; ".join(texts))
+        try:
+            # the FCU reports attitude once it has a state (or an aligned estimate)
             if s.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is None:
                 self.children.check()
                 raise GcsError("the vehicle reports no state: is the simulator running?\n"
@@ -250,11 +264,6 @@ class _Flight:
         except GcsError:
             self.children.check()
             raise
-        for name, value in scenario_params(sc).items():
-            now, texts = param_set(s, name, value)
-            if now != value:
-                raise RunError(f"the vehicle refused {name} = {value:g} (kept {now:g}): "
-                               + "; ".join(texts))
         items = scenario_mission(sc)
         answer = upload_detailed(s.conn, s.target_system, s.target_component, items,
                                  send=s.send)
@@ -262,16 +271,22 @@ class _Flight:
             raise RunError(f"mission upload refused: {answer.describe()}")
         # The flight's clock starts at MISSION_START: 0 in lockstep (simulated time stands
         # still until then), the FCU's monotonic time in real time.
+        # With a sensor profile the flight starts when the estimator has aligned (lockstep:
+        # simulated time stands still from then until MISSION_START).
         start_ms = 0
-        if self.realtime:
-            att = s.recv(["ATTITUDE_QUATERNION"], timeout=5.0)
-            start_ms = att.time_boot_ms if att is not None else 0
+        aligned_by = time.monotonic() + 60.0
         for command, params, what in (
                 (M.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), "arming"),
                 (M.MAV_CMD_MISSION_START, (0.0, float(len(items) - 1)), "mission start")):
             ack = s.command(command, *params)
+            while ack == M.MAV_RESULT_TEMPORARILY_REJECTED and time.monotonic() < aligned_by:
+                time.sleep(0.2)  # the estimator is aligning: ask again
+                ack = s.command(command, *params)
             if ack != M.MAV_RESULT_ACCEPTED:
-                raise RunError(f"{what} refused: MAV_RESULT {ack}")
+                raise RunError(f"{what} refused: {s.describe(ack)}")
+            if what == "arming" and (self.realtime or sc.uses_sensors):
+                att = s.recv(["ATTITUDE_QUATERNION"], timeout=5.0)
+                start_ms = att.time_boot_ms if att is not None else 0
         self.wall0 = time.monotonic()
         self.items = len(items)
         _watch(s, self.children, self.progress, start_ms * 1e-3 + sc.duration_s, len(items),
@@ -309,7 +324,8 @@ class _Flight:
                                 deadline_misses=int(stats.get("deadline_misses", 0)),
                                 mission_completed=self.progress.mission_completed
                                 or bool(stats.get("mission_completed")), stopped=stopped,
-                                reached_end=(not stopped) if self.realtime else None)
+                                reached_end=(not stopped) if self.realtime else None,
+                                flight_start_us=int(stats.get("flight_start_us") or 0))
         if error is not None:
             metrics["error"] = str(error)
         metrics["system_id"] = self.plan.sysid

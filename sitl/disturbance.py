@@ -24,12 +24,18 @@ def _evaluate(terms: tuple[DisturbanceTerm, ...], t_s: float) -> Vec3:
 
 
 class Disturbance:
-    """Sum of pulse and sine terms; `wrench(t)` is a pure function of time."""
+    """Sum of pulse and sine terms; `wrench(t)` is a pure function of time, the scenario's
+    times counted from `t0_s` (the flight's start: after the estimator's alignment)."""
 
     def __init__(self, force_terms: tuple[DisturbanceTerm, ...] = (),
-                 torque_terms: tuple[DisturbanceTerm, ...] = ()) -> None:
+                 torque_terms: tuple[DisturbanceTerm, ...] = (), t0_s: float = 0.0) -> None:
         self.force_terms = force_terms
         self.torque_terms = torque_terms
+        self.t0_s = t0_s
+
+    def from_time(self, t0_s: float) -> Disturbance:
+        """The same terms with the scenario's clock starting at t0_s."""
+        return Disturbance(self.force_terms, self.torque_terms, t0_s)
 
     @property
     def active(self) -> bool:
@@ -39,4 +45,5 @@ class Disturbance:
         """(force_flu_n, torque_flu_nm) at time t."""
         if not self.active:
             return _ZERO, _ZERO
+        t_s -= self.t0_s
         return _evaluate(self.force_terms, t_s), _evaluate(self.torque_terms, t_s)

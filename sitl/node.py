@@ -5,9 +5,20 @@ simulated time and advances one control period only when a HIL_ACTUATOR_CONTROLS
 state (`time_usec` echoed); duplicates and stale answers are ignored, and a state that stays
 unanswered is re-sent after a few milliseconds of wall time, so loss delays but never
 deadlocks. Simulated time therefore stands still until the FCU starts answering (when the
-flight starts). Real time (`--realtime`): physics paced by the monotonic clock, the latest
-command held; a process stopped or starved for longer than MAX_LAG_S resumes from where it
-stood instead of replaying the missed wall time in a burst.
+flight starts).
+
+With a sensor profile (`--sensors`, DESIGN.md section 3) the FCU gets what a real vehicle
+gets instead of the exact state: HIL_SENSOR per IMU sample (the one at the end of each
+control period drives the lockstep) and the motion-capture pose as ODOMETRY after its
+latency (sitl/sensor_feed.py); the exact state goes only to the truth log. Its estimator
+aligns on the ground before it may arm: the FCU answers those periods disarmed, and the
+world stands still (time and sensors run) until the first armed answer, the flight's start,
+from which the scenario's clock (disturbances, duration) counts.
+
+Real time (`--realtime`): physics paced by the monotonic clock, the latest command held; a
+process stopped or starved for longer than MAX_LAG_S resumes from where it stood instead of
+replaying the missed wall time in a burst. With a sensor profile each sample goes out as it
+falls due; the world does not stand still before the flight.
 
 The ground-truth log (one row per state sent) is the run's reference for every metric.
 """
@@ -30,10 +41,13 @@ from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
 from common.links import LinkError, open_link, parse_url
 from common.mavlink import MAV, encoder, pack
 from common.parent import stop_with_parent
+from common.sensors_config import SensorProfile, resolve_sensor_profile
 from common.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
     FrameReader,
+    HilSensor,
     Odometry,
+    pack_hil_sensor,
     pack_odometry,
     unpack_actuator_controls,
 )
@@ -46,10 +60,10 @@ from sitl.plant import (
     initial_state,
     rotate_inv,
 )
+from sitl.sensor_feed import SensorFeed, pressure_hpa
 from sitl.truth_log import TruthLog
 
 SITL_COMPONENT = MAV.MAV_COMP_ID_PERIPHERAL
-SEA_LEVEL_HPA = 1013.25
 SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each exchange
 MAX_LAG_S = 0.05  # real time: further behind the wall clock than this, skip ahead
 
@@ -82,7 +96,8 @@ class SimulatorServer:
     def __init__(self, scenario: Scenario, link_url: str, *, truth_log: Path | None,
                  end_time_s: float | None, realtime: bool, control_rate_hz: int,
                  hil_sensor_hz: float, resend_ms: float, system_id: int,
-                 home_alt_m: float = 0.0) -> None:
+                 home_alt_m: float = 0.0, sensors: SensorProfile | None = None,
+                 seed: int = 0) -> None:
         self.scenario = scenario
         self.plant = Plant(scenario.vehicle, dt_us=1_000_000 // scenario.physics_rate_hz,
                            ideal_actuators=scenario.ideal_actuators,
@@ -97,7 +112,12 @@ class SimulatorServer:
         self.link = open_link(link_url, role="sim_server", system_id=system_id)
         self.reader = FrameReader(self.link.is_stream)
         self.realtime = realtime
-        self.end_us = None if end_time_s is None else round(end_time_s * 1e6)
+        self.duration_us = None if end_time_s is None else round(end_time_s * 1e6)
+        # The flight's start (the first armed answer): the scenario's clock counts from it.
+        self.flight_start_us: int | None = None
+        self.end_us: int | None = None
+        self.feed = SensorFeed(sensors, seed, self.plant, self.control_dt_us, home_alt_m) \
+            if sensors is not None and not sensors.is_truth else None
         self.sensor_every = (max(1, round(control_rate_hz / hil_sensor_hz))
                              if hil_sensor_hz > 0 else 0)
         self.resend_s = resend_ms * 1e-3
@@ -117,7 +137,17 @@ class SimulatorServer:
 
     # ------------------------------------------------------------------ messages
 
-    def _datagram(self, s: PlantState) -> bytes:
+    def _datagram(self, states: list[PlantState]) -> bytes:
+        """A control period's messages: the exact state (truth), or the sensors' samples."""
+        s = states[-1]
+        if self.feed is not None:
+            parts = []
+            for m in self.feed.period(states):
+                self.seq = (self.seq + 1) & 0xFF
+                parts.append(pack_hil_sensor(m, self.seq, self.system_id, SITL_COMPONENT)
+                             if isinstance(m, HilSensor) else
+                             pack_odometry(m, self.seq, self.system_id, SITL_COMPONENT))
+            return b"".join(parts)
         self.seq = (self.seq + 1) & 0xFF
         data = pack_odometry(odometry(s), self.seq, self.system_id, SITL_COMPONENT)
         if self.sensor_every and (s.time_us // self.control_dt_us) % self.sensor_every == 0:
@@ -128,14 +158,14 @@ class SimulatorServer:
         acc = flu_to_frd(self.plant.specific_force_flu(s))
         gyro = flu_to_frd(s.omega_flu_rad_s)
         alt = self.home_alt_m + s.p_enu_m[2]
-        pressure = SEA_LEVEL_HPA * (1.0 - 2.25577e-5 * alt) ** 5.25588
+        pressure = pressure_hpa(alt)
         msg = MAV.MAVLink_hil_sensor_message(
             s.time_us, *acc, *gyro, 0.0, 0.0, 0.0, pressure, 0.0, alt, 15.0,
             0x1A3F, 0)  # bits: acc, gyro, abs pressure, pressure altitude, temperature; no mag
         return pack(self.mav, msg)
 
-    def _send_state(self) -> None:
-        self._last_datagram = self._datagram(self.state)
+    def _send_state(self, states: list[PlantState] | None = None) -> None:
+        self._last_datagram = self._datagram(states or [self.state])
         self.link.send(self._last_datagram)
         if self.log is not None:
             self.log.record(self.state)
@@ -149,10 +179,26 @@ class SimulatorServer:
     def _command_from(self, controls: tuple[float, ...], mode: int) -> ActuatorCommand:
         return command_from_controls(controls, mode, self.scenario.vehicle, self.state)
 
-    def _advance(self) -> None:
+    def _on_answer(self, armed: bool) -> None:
+        """An answer to the latest state: the first armed one starts the flight."""
+        if armed and self.flight_start_us is None:
+            self.flight_start_us = self.state.time_us
+            self.plant.disturbance = self.plant.disturbance.from_time(self.state.time_us * 1e-6)
+            if self.duration_us is not None:
+                self.end_us = self.state.time_us + self.duration_us
+
+    def _advance(self) -> list[PlantState]:
+        """One control period; before the flight starts the world stands still while time
+        (and the sensors) run, so the estimator aligns on a vehicle at rest."""
+        states = []
         for _ in range(self.substeps):
-            self.state = self.plant.step(self.state, self.command)
+            if self.flight_start_us is None:
+                self.state = self.state._replace(time_us=self.state.time_us + self.plant.dt_us)
+            else:
+                self.state = self.plant.step(self.state, self.command)
+            states.append(self.state)
         self.steps += 1
+        return states
 
     def _answers(self) -> list[tuple[int, tuple[float, ...], int]]:
         out = []
@@ -179,6 +225,8 @@ class SimulatorServer:
             self.close()
 
     def _at_end(self) -> bool:
+        if self.realtime:
+            return self.duration_us is not None and self.state.time_us >= self.duration_us
         return self.end_us is not None and self.state.time_us >= self.end_us
 
     def _run_lockstep(self) -> None:
@@ -205,9 +253,9 @@ class SimulatorServer:
                 if time_usec != self.state.time_us or self._at_end():
                     self.ignored_answers += 1  # duplicate, stale, or the run has ended
                     continue
+                self._on_answer(bool(mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED))
                 self.command = self._command_from(controls, mode)
-                self._advance()
-                self._send_state()
+                self._send_state(self._advance())
                 last_progress = time.monotonic()
 
     def _run_realtime(self) -> None:
@@ -238,9 +286,17 @@ class SimulatorServer:
                     break
             self.state = self.plant.step(self.state, self.command)
             physics_steps += 1
+            if self.feed is not None:  # every sample as it is due, not once a period
+                data = self._datagram([self.state])
+                if data:
+                    self.link.send(data)
             if physics_steps % self.substeps == 0:
                 self.steps += 1
-                self._send_state()
+                if self.feed is None:
+                    self._send_state()
+                elif self.log is not None:
+                    self.log.record(self.state)
+                    self.log.flush()
         while self.running:  # the run has ended: keep the link quiet until told to stop
             select.select(self.link.filenos(), [], [], 0.1)
             self._answers()
@@ -261,13 +317,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--truth-log", type=Path,
                    help="write the ground-truth log (ULog) here, e.g. truth.ulg")
     p.add_argument("--end-time", type=float, metavar="S",
-                   help="stop advancing at this simulated time (default: the scenario's "
-                        "duration in lockstep, never in real time)")
+                   help="stop advancing this long after the flight starts (default: the "
+                        "scenario's duration in lockstep, never in real time)")
     p.add_argument("--control-rate", type=int, default=None,
                    help="control periods per second (default: the scenario's)")
     p.add_argument("--ideal-actuators", action="store_true")
     p.add_argument("--hil-sensor-hz", type=float, default=100.0,
-                   help="HIL_SENSOR rate in simulated time (0: off)")
+                   help="with the truth profile: HIL_SENSOR rate in simulated time (0: off)")
+    p.add_argument("--sensors", metavar="PROFILE",
+                   help="sensor profile: a name in config/sensors/ (truth, mocap-indoor, "
+                        "degraded) or a .toml file (default: the scenario's, else truth)")
+    p.add_argument("--seed", type=int, metavar="N",
+                   help="seed of the sensors' noise (default: the scenario's seed)")
     p.add_argument("--resend-ms", type=float, default=5.0,
                    help="re-send an unanswered state after this wall time")
     p.add_argument("--sysid", type=int, default=1)
@@ -293,6 +354,13 @@ def main(argv: list[str] | None = None) -> int:
             if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
                 raise ConfigError(f"--position: expected X,Y,Z in metres, got {args.position}")
             scenario = dataclasses.replace(scenario, initial_position_enu_m=xyz)
+        if args.sensors is not None:
+            scenario = dataclasses.replace(scenario,
+                                           sensors=resolve_sensor_profile(args.sensors))
+        if args.seed is not None:
+            if not 0 <= args.seed < 2**63:
+                raise ConfigError(f"--seed: expected 0..2^63-1, got {args.seed}")
+            scenario = dataclasses.replace(scenario, seed=args.seed)
         rate = args.control_rate or scenario.control_rate_hz
         if not 1 <= rate <= 1000:
             raise ConfigError(f"--control-rate: expected 1..1000 Hz, got {rate}")
@@ -304,7 +372,8 @@ def main(argv: list[str] | None = None) -> int:
         server = SimulatorServer(scenario, args.link, truth_log=args.truth_log,
                                  end_time_s=end, realtime=args.realtime,
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
-                                 resend_ms=args.resend_ms, system_id=args.sysid)
+                                 resend_ms=args.resend_ms, system_id=args.sysid,
+                                 sensors=scenario.sensors, seed=scenario.seed)
     except LinkError as exc:  # 2: bad URL, busy port, missing device; 1: peer not there
         print(f"sitl: {exc}", file=sys.stderr)
         return exc.exit_code

@@ -20,14 +20,18 @@ from common.mavlink import MAV, encoder, pack, parser
 from common.mission_items import MissionItem
 from common.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
+    HIL_SENSOR_ID,
     ODOMETRY_ID,
     ActuatorControls,
     FrameReader,
+    HilSensor,
     Odometry,
     pack_actuator_controls,
+    pack_hil_sensor,
     pack_odometry,
     split_frames,
     unpack_actuator_controls,
+    unpack_hil_sensor,
     unpack_odometry,
 )
 from fcu.mission import MissionLimits, validate_mission
@@ -47,7 +51,10 @@ vec3 = st.tuples(f32, f32, f32)
 u8 = st.integers(0, 255)
 
 odometry = st.builds(Odometry, st.integers(0, 2**64 - 1), vec3, st.tuples(f32, f32, f32, f32),
-                     vec3, vec3)
+                     vec3, vec3, u8, st.lists(f32, min_size=21, max_size=21).map(tuple), u8,
+                     u8)
+hil_sensor = st.builds(HilSensor, st.integers(0, 2**64 - 1), vec3, vec3, vec3, f32, f32, f32,
+                       st.integers(0, 2**32 - 1))
 controls = st.builds(ActuatorControls, st.integers(0, 2**64 - 1),
                      st.lists(f32, min_size=16, max_size=16).map(tuple), u8,
                      st.integers(0, 2**64 - 1))
@@ -55,10 +62,14 @@ controls = st.builds(ActuatorControls, st.integers(0, 2**64 - 1),
 
 @st.composite
 def hot_frame(draw) -> bytes:
-    """A valid ODOMETRY or HIL_ACTUATOR_CONTROLS frame with any field values and identity."""
+    """A valid ODOMETRY (state or pose), HIL_SENSOR or HIL_ACTUATOR_CONTROLS frame with any
+    field values and identity."""
     seq, sysid, compid = draw(u8), draw(u8), draw(u8)
-    if draw(st.booleans()):
+    kind = draw(st.integers(0, 2))
+    if kind == 0:
         return pack_odometry(draw(odometry), seq, sysid, compid)
+    if kind == 1:
+        return pack_hil_sensor(draw(hil_sensor), seq, sysid, compid)
     return pack_actuator_controls(draw(controls), seq, sysid, compid)
 
 
@@ -66,13 +77,17 @@ def hot_frame(draw) -> bytes:
 def other_frame(draw) -> bytes:
     """A valid frame of another message of the dialect (as on a shared link)."""
     mav = encoder(draw(st.integers(1, 255)), draw(u8))
-    kind = draw(st.sampled_from(["heartbeat", "hil_sensor", "command_long"]))
+    kind = draw(st.sampled_from(["heartbeat", "hil_state_quaternion", "command_long"]))
     if kind == "heartbeat":
         msg = M.MAVLink_heartbeat_message(draw(u8), draw(u8), draw(u8), 0, draw(u8), 3)
-    elif kind == "hil_sensor":
-        msg = M.MAVLink_hil_sensor_message(draw(st.integers(0, 2**64 - 1)),
-                                           *(draw(f32) for _ in range(13)),
-                                           draw(st.integers(0, 2**32 - 1)), draw(u8))
+    elif kind == "hil_state_quaternion":
+        i16 = st.integers(-2**15, 2**15 - 1)
+        msg = M.MAVLink_hil_state_quaternion_message(
+            draw(st.integers(0, 2**64 - 1)), [draw(f32) for _ in range(4)],
+            *(draw(f32) for _ in range(3)), *(draw(st.integers(-2**31, 2**31 - 1))
+                                              for _ in range(3)),
+            *(draw(i16) for _ in range(3)), draw(st.integers(0, 2**16 - 1)),
+            draw(st.integers(0, 2**16 - 1)), *(draw(i16) for _ in range(3)))
     else:
         msg = M.MAVLink_command_long_message(draw(u8), draw(u8), draw(st.integers(0, 65535)),
                                              draw(u8), *(draw(f32) for _ in range(7)))
@@ -111,6 +126,8 @@ def check_split(data: bytes, frames, rejected: int, tail: bytes = b"") -> None:
             f.raw[7] | f.raw[8] << 8 | f.raw[9] << 16, f.raw[5], f.raw[6])
         if f.msg_id == ODOMETRY_ID:
             unpack_odometry(f.payload)
+        elif f.msg_id == HIL_SENSOR_ID:
+            unpack_hil_sensor(f.payload)
         elif f.msg_id == HIL_ACTUATOR_CONTROLS_ID:
             unpack_actuator_controls(f.payload)
         else:
