@@ -319,6 +319,28 @@ class DisturbanceTerm:
     phase_rad: float = 0.0
 
 
+SENSOR_FAULT_KINDS = ("mocap_off", "gyro_bias_step", "imu_nan", "pose_nan")
+
+
+@dataclass(frozen=True)
+class SensorFault:
+    """One injected sensor fault, times counted from the flight's start (the scenario clock).
+
+    mocap_off: no pose captured while start_s <= t < end_s; gyro_bias_step: `amplitude`
+    (rad/s, FLU) added to the gyro from start_s on (until end_s, if given); imu_nan: the IMU
+    samples of the window carry NaN in the gyro and the accelerometer; pose_nan: the poses
+    captured in the window carry NaN.
+    """
+
+    kind: str
+    start_s: float
+    end_s: float = math.inf
+    amplitude: Vec3 = (0.0, 0.0, 0.0)
+
+    def active(self, t_s: float) -> bool:
+        return self.start_s <= t_s < self.end_s
+
+
 @dataclass(frozen=True)
 class TrajectoryConfig:
     kind: str
@@ -358,6 +380,8 @@ class Scenario:
     # The simulated sensors (config/sensors/): None or a kind "truth" profile means the
     # exact state on the wire and no estimator (DESIGN.md section 3).
     sensors: SensorProfile | None = None
+    # Faults injected into the simulated sensors ([[sensor_fault]]; a sensor profile needed).
+    sensor_faults: tuple[SensorFault, ...] = ()
 
     @property
     def uses_sensors(self) -> bool:
@@ -388,6 +412,25 @@ def _parse_terms(tables: list[_Table]) -> tuple[DisturbanceTerm, ...]:
         t.finish()
         terms.append(term)
     return tuple(terms)
+
+
+def _parse_sensor_faults(tables: list[_Table]) -> tuple[SensorFault, ...]:
+    faults = []
+    for t in tables:
+        kind = t.string("kind", choices=SENSOR_FAULT_KINDS)
+        start_s = t.number("start_s", lo=0.0)
+        if kind == "gyro_bias_step":
+            end_s = t.number("end_s") if t.has("end_s") else math.inf
+            amplitude = t.numbers("amplitude", 3)
+        else:  # a window: both ends
+            end_s = t.number("end_s")
+            amplitude = (0.0, 0.0, 0.0)
+        if end_s <= start_s:
+            raise t.error("end_s", f"a time after start_s = {start_s}")
+        t.finish()
+        faults.append(SensorFault(kind, start_s, end_s,
+                                  (amplitude[0], amplitude[1], amplitude[2])))
+    return tuple(faults)
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -457,6 +500,11 @@ def load_scenario(path: str | Path) -> Scenario:
 
     sensors = resolve_sensor_profile(t.string("sensors", "truth"), base) \
         if t.has("sensors") else None
+    sensor_faults = _parse_sensor_faults(t.tables("sensor_fault"))
+    if sensor_faults and (sensors is None or sensors.is_truth):
+        raise ConfigError(f"{source}: key 'sensor_fault': faults need a sensor profile "
+                          f"(key 'sensors', not the exact state), got "
+                          f"{'no sensors key' if sensors is None else repr(sensors.name)}")
     scenario = Scenario(
         name=t.string("name"),
         duration_s=t.number("duration_s", lo=0.0, lo_open=True),
@@ -480,6 +528,7 @@ def load_scenario(path: str | Path) -> Scenario:
         files={"scenario": str(path.resolve()), "vehicle": str(vehicle_path),
                "gains_pid": str(pid_path), "gains_pd": str(pd_path)},
         sensors=sensors,
+        sensor_faults=sensor_faults,
     )
     t.finish()
     if not scenario.gains_pd.is_pd:

@@ -235,6 +235,8 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
             raise InProcessError(f"{what} refused: {text}")
     start_us = state.time_us  # the flight's start: the scenario's clock counts from it
     plant.disturbance = plant.disturbance.from_time(start_us * 1e-6)
+    if feed is not None:
+        feed.start_flight(start_us, scenario.sensor_faults)
     end_us = start_us + round(scenario.duration_s * 1e6)
     clock = time.perf_counter
     logged_events = 0

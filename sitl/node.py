@@ -184,6 +184,8 @@ class SimulatorServer:
         if armed and self.flight_start_us is None:
             self.flight_start_us = self.state.time_us
             self.plant.disturbance = self.plant.disturbance.from_time(self.state.time_us * 1e-6)
+            if self.feed is not None:
+                self.feed.start_flight(self.state.time_us, self.scenario.sensor_faults)
             if self.duration_us is not None:
                 self.end_us = self.state.time_us + self.duration_us
 
