@@ -130,6 +130,8 @@ class FlightController:
             if isinstance(sample, PoseInput):
                 pipe.on_pose(sample)
                 continue
+            if isinstance(sample, Resent) and self.sim.repeat(sample.t_us):
+                continue  # answered already: the same answer went again
             if isinstance(sample, ImuInput | Resent):
                 if isinstance(sample, ImuInput):
                     pipe.on_imu(sample)

@@ -46,7 +46,7 @@ class StateSample(NamedTuple):
 
 
 class Resent(NamedTuple):
-    """The newest IMU sample again, not yet answered (lockstep: the simulator waits for it)."""
+    """The newest state or IMU sample again (lockstep: a re-send; see SimBridge.repeat)."""
 
     t_us: int
 
@@ -109,6 +109,7 @@ class SimBridge:
         self.rejected_bytes = 0
         self.ignored_messages = 0
         self.use_estimator = False  # EKF_EN: HIL_SENSOR and poses in, not the exact state
+        self.state_us = -1  # the newest state taken (lockstep: each is stepped once)
         self.imu_us = -1  # the newest IMU sample taken
         self.pose_us = -1  # the newest pose capture taken
 
@@ -133,17 +134,17 @@ class SimBridge:
             if f.msg_id != ODOMETRY_ID:
                 continue  # HIL_SENSOR without the estimator: not used
             odo = unpack_odometry(f.payload)
-            if self.lockstep and odo.time_usec == self.answered_us:
-                self.link.send(self.answer)  # the same answer, nothing stepped again
-                self.resent_answers += 1
+            if self.lockstep and odo.time_usec == self.state_us:
+                out.append(Resent(odo.time_usec))  # taken once: `repeat` answers it
                 continue
-            if self.lockstep and odo.time_usec < self.answered_us:
+            if self.lockstep and odo.time_usec < self.state_us:
                 self.ignored_messages += 1  # stale
                 continue
             state = state_from_odometry(odo)
             if state is None:
                 self.ignored_messages += 1
                 continue
+            self.state_us = odo.time_usec
             out.append(StateSample(odo.time_usec, state))
         return out
 
@@ -151,12 +152,8 @@ class SimBridge:
                          payload: bytes) -> ImuInput | PoseInput | Resent | None:
         if msg_id == HIL_SENSOR_ID:
             h = unpack_hil_sensor(payload)
-            if self.lockstep and h.time_usec == self.answered_us:
-                self.link.send(self.answer)  # the same answer, nothing stepped again
-                self.resent_answers += 1
-                return None
             if self.lockstep and h.time_usec == self.imu_us:
-                return Resent(h.time_usec)  # taken once; the flight may have started since
+                return Resent(h.time_usec)  # taken once: `repeat` answers it
             if h.time_usec <= self.imu_us:
                 self.ignored_messages += 1  # a re-sent or stale sample: taken once
                 return None
@@ -172,6 +169,18 @@ class SimBridge:
             return None
         self.pose_us = odo.time_usec
         return pose
+
+    def repeat(self, t_us: int) -> bool:
+        """A state or sample taken before came again (lockstep): if it was answered, send
+        the same answer, nothing stepped again (so loss changes timing, never results), and
+        return True; False when it is still unanswered (the flight may have started since:
+        the caller may step on it now). A stream can deliver a state and its re-send in one
+        read: whichever comes second finds the first answered."""
+        if t_us != self.answered_us:
+            return False
+        self.link.send(self.answer)
+        self.resent_answers += 1
+        return True
 
     def send(self, out: StepOutput) -> None:
         """Answer the state stamped out.t_us (and remember the answer in lockstep)."""

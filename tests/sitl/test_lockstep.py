@@ -128,10 +128,13 @@ def test_repeated_state_gets_the_stored_answer(tmp_path):
     try:
         s = stack.session
 
-        def state(t_us):
+        def frame(t_us):
             odo = Odometry(t_us, (-1.0, 0.0, -2.0), (math.sqrt(0.5), 0, 0, math.sqrt(0.5)),
                            (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-            sim.sendto(pack_odometry(odo, 0, 1, 200), fcu_addr[0])
+            return pack_odometry(odo, 0, 1, 200)
+
+        def state(t_us):
+            sim.sendto(frame(t_us), fcu_addr[0])
 
         def answer():
             try:
@@ -175,6 +178,12 @@ def test_repeated_state_gets_the_stored_answer(tmp_path):
         assert t == 2000
         state(0)  # stale
         assert answer() is None
+        # A state and its re-send in one read (a TCP stream coalesces them under load):
+        # stepped once, so both answers are the same bytes, sequence number included.
+        sim.sendto(frame(4000) * 2, fcu_addr[0])
+        third, fourth = answer(), answer()
+        assert third is not None and third == fourth
+        assert unpack_actuator_controls(split_frames(third)[0][0].payload).time_usec == 4000
     finally:
         stack.session.close()
         stop(stack.procs)
