@@ -2,9 +2,11 @@
 
 The same `FlightCore` runs in the in-process runner, in the FCU process and in log replays;
 time and dt come in as arguments, never from a clock. With lag compensation on (parameter
-CA_LAG_COMP = 1, the default) the allocation's commands are led for the rotor lag and the
-tilt rate limit, from the reference's nominal wrench (fcu.allocation.LagCompensator); off,
-the step is the paper's plain allocation (eqs. 28-29), bit for bit.
+CA_LAG_COMP = 1, the FCU's default, put in force by fcu.params.apply_params) the allocation's
+commands are led for the rotor lag and the tilt rate limit, from the reference's nominal
+wrench (fcu.allocation.LagCompensator); off (a FlightCore built without it, as the control
+law alone is flown in tests of eqs. 18-21), the step is the paper's plain allocation
+(eqs. 28-29), bit for bit.
 """
 
 from __future__ import annotations
@@ -63,7 +65,7 @@ class _Tracker(DualQuaternionTracker):
 class FlightCore:
     def __init__(self, vehicle: VehicleConfig, gains: Gains, control_rate_hz: int,
                  initial_tilt_rad: tuple[float, ...] | None = None, *,
-                 lag_compensation: bool = True) -> None:
+                 lag_compensation: bool = False) -> None:
         self.vehicle = vehicle
         self.dt_s = 1.0 / control_rate_hz
         self.allocator = Allocator(vehicle, initial_tilt_rad)

@@ -181,7 +181,7 @@ def test_lead_depends_on_the_reference_only():
     gains = load_scenario(ROOT / "config" / "scenarios" / "case1_figure8.toml").gains
     diffs = []
     for seed in (1, 2):
-        on = FlightCore(VEHICLE, gains, 500)
+        on = FlightCore(VEHICLE, gains, 500, lag_compensation=True)
         off = FlightCore(VEHICLE, gains, 500, lag_compensation=False)
         rows = []
         for s, r in zip(_noisy_states(refs, seed), refs, strict=True):
@@ -253,6 +253,7 @@ def test_parameter_reaches_the_core():
     assert (spec.default, spec.lo, spec.hi, spec.unit) == (1.0, 0.0, 1.0, "enum")
     gains = load_scenario(ROOT / "config" / "scenarios" / "case1_figure8.toml").gains
     store, pipeline = ParamStore(gains), Pipeline(VEHICLE, gains, 500)
+    assert not pipeline.core.lag_compensation  # FlightCore alone: the plain allocation
     apply_params(store, pipeline)
     assert pipeline.core.lag_compensation
     store.set("CA_LAG_COMP", 0.0)
