@@ -380,6 +380,9 @@ class Scenario:
     # The simulated sensors (config/sensors/): None or a kind "truth" profile means the
     # exact state on the wire and no estimator (DESIGN.md section 3).
     sensors: SensorProfile | None = None
+    # FCU parameters the run sets (PARAM_SET before the mission; the table [params]), e.g.
+    # CA_LAG_COMP = 0 for the paper's plain allocation; names and ranges are the FCU's.
+    params: dict[str, float] = field(default_factory=dict)
     # Faults injected into the simulated sensors ([[sensor_fault]]; a sensor profile needed).
     sensor_faults: tuple[SensorFault, ...] = ()
 
@@ -500,6 +503,13 @@ def load_scenario(path: str | Path) -> Scenario:
 
     sensors = resolve_sensor_profile(t.string("sensors", "truth"), base) \
         if t.has("sensors") else None
+    params_t = t.table("params", {})
+    params: dict[str, float] = {}
+    for name in list(params_t.data):
+        if not (isinstance(name, str) and 0 < len(name) <= 16):
+            raise params_t.error(name, "a parameter name of at most 16 characters")
+        params[name] = params_t.number(name)
+    params_t.finish()
     sensor_faults = _parse_sensor_faults(t.tables("sensor_fault"))
     if sensor_faults and (sensors is None or sensors.is_truth):
         raise ConfigError(f"{source}: key 'sensor_fault': faults need a sensor profile "
@@ -528,6 +538,7 @@ def load_scenario(path: str | Path) -> Scenario:
         files={"scenario": str(path.resolve()), "vehicle": str(vehicle_path),
                "gains_pid": str(pid_path), "gains_pd": str(pd_path)},
         sensors=sensors,
+        params=params,
         sensor_faults=sensor_faults,
     )
     t.finish()

@@ -106,9 +106,13 @@ def apply_overrides(scenario: Scenario, *, controller: str | None = None,
 
 def scenario_params(scenario: Scenario) -> dict[str, float]:
     """Parameters a run sets on the FCU beyond its defaults (the same through processes):
-    with a sensor profile, the estimator on and its fusion horizon at the pose's latency
-    (as a user sets EKF2_EV_DELAY to the measured latency). Set in this order."""
+    no lead for actuators without lag; the scenario's own [params]; with a sensor profile, the
+    estimator on and its fusion horizon at the pose's latency (as a user sets EKF2_EV_DELAY to
+    the measured latency). Set in this order."""
     params = {"COM_DIV_POS": scenario.divergence_position_m}
+    if scenario.ideal_actuators:
+        params["CA_LAG_COMP"] = 0.0  # actuators without lag: nothing to lead
+    params.update(scenario.params)
     if scenario.uses_sensors:
         assert scenario.sensors is not None
         params["EKF_EV_DELAY"] = scenario.sensors.mocap.latency_s
@@ -154,15 +158,24 @@ def state_for_fcu(s: PlantState) -> VehicleState:
     return state
 
 
-def feed_fcu(pipeline: Pipeline, messages: list[HilSensor | Odometry]) -> None:
-    """A period's sensor messages as the FCU takes them from the simulator link (float32)."""
+def feed_fcu(pipeline: Pipeline, messages: list[HilSensor | Odometry]) -> float:
+    """A period's sensor messages as the FCU takes them from the simulator link (float32);
+    returns the microseconds the estimator spent on them (part of the FCU's step time)."""
+    spent = 0.0
+    clock = time.perf_counter
     for m in messages:
         if isinstance(m, HilSensor):
-            pipeline.on_imu(imu_from_hil_sensor(through_wire_hil_sensor(m)))
+            imu = imu_from_hil_sensor(through_wire_hil_sensor(m))
+            t0 = clock()
+            pipeline.on_imu(imu)
         else:
             pose = pose_from_odometry(through_wire_odometry(m))
-            if pose is not None:
-                pipeline.on_pose(pose)
+            if pose is None:
+                continue
+            t0 = clock()
+            pipeline.on_pose(pose)
+        spent += (clock() - t0) * 1e6
+    return spent
 
 
 def align(pipeline: Pipeline, plant: Plant, feed: SensorFeed, state: PlantState,
@@ -240,6 +253,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
     end_us = start_us + round(scenario.duration_s * 1e6)
     clock = time.perf_counter
     logged_events = 0
+    input_us = 0.0  # the estimator's work on the period's inputs
     wall0 = clock()
     while True:
         t_us = state.time_us
@@ -250,7 +264,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
             pipeline.on_state(t_us, state_for_fcu(state), t_us)
         t0 = clock()
         out = pipeline.step(t_us, dt_s)
-        step_us = (clock() - t0) * 1e6
+        step_us = (clock() - t0) * 1e6 + input_us
         if out.result is not None and pipeline.state is not None:
             onboard_rows.append(onboard_row(t_us, pipeline.state, out.result, out.speed_rad_s,
                                             out.tilt_rad, out.armed, step_us))
@@ -269,7 +283,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
             state = plant.step(state, command)
             states.append(state)
         if feed is not None:
-            feed_fcu(pipeline, feed.period(states))
+            input_us = feed_fcu(pipeline, feed.period(states))
     wall = clock() - wall0
 
     if truth_log is not None and onboard_log is not None:
@@ -283,6 +297,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
                             events=events, wall_time_s=wall, transport="in-process",
                             lockstep=True, mission_completed=cmd.mission_done,
                             flight_start_us=start_us)
+    metrics["fcu_params"] = scenario_params(scenario)
     return RunResult(metrics, truth, onboard, events,
                      bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None)
 

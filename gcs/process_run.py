@@ -329,6 +329,7 @@ class _Flight:
         if error is not None:
             metrics["error"] = str(error)
         metrics["system_id"] = self.plan.sysid
+        metrics["fcu_params"] = scenario_params(sc)
         metrics["start_position_enu_m"] = list(sc.initial_position_enu_m)
         metrics["fcu"] = {k: v for k, v in stats.items() if k != "events"}
         metrics["overrides"] = {"controller": sc.controller,

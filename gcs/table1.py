@@ -9,10 +9,9 @@ second as "plain" and table1.md shows it in columns of its own.
 
 from __future__ import annotations
 
+import dataclasses
 import json
-from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +84,8 @@ def table_markdown(table: dict[str, Any]) -> str:
         "",
         "Position error norm in m, attitude error angle in rad; max / mean / RMSE over the run.",
     ]
+    if table.get("sensors", "truth") != "truth":
+        lines += ["", f"Sensor profile: {table['sensors']} (the FCU flies on its estimator)."]
     if plain:
         lines += [
             "",
@@ -122,44 +123,24 @@ def table_markdown(table: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-@contextmanager
-def _run_parameter(name: str, value: float | None) -> Iterator[None]:
-    """Runs started inside set parameter `name` to `value` on the vehicle as one of the run's
-    parameters (gcs.inprocess.scenario_params: PARAM_SET before the mission through processes,
-    the parameter store in-process); None leaves the parameters as they are."""
-    import gcs.inprocess as inprocess
-    import gcs.process_run as process_run
-
-    if value is None:
-        yield
-        return
-    base = inprocess.scenario_params
-
-    def params(scenario: Any) -> dict[str, float]:
-        return {**base(scenario), name: value}
-
-    inprocess.scenario_params = process_run.scenario_params = params
-    try:
-        yield
-    finally:
-        inprocess.scenario_params = process_run.scenario_params = base
-
-
-def _run_one(job: tuple[str, str, bool, float | None, str, bool, float | None]
-             ) -> dict[str, Any]:
+def _run_one(job: tuple[str, str, bool, float | None, str, bool, float | None, str | None,
+                        int | None]) -> dict[str, Any]:
     from common.config import load_scenario
     from gcs.inprocess import apply_overrides, run_scenario
     from gcs.process_run import run_processes
     from gcs.runio import prepare_run_dir, write_run
 
-    path, ctrl, ideal, duration, out, in_process, lag_comp = job
+    path, ctrl, ideal, duration, out, in_process, lag_comp, sensors, seed = job
     prepare_run_dir(Path(out), force=True)  # table1 owns its run folders
     scenario = apply_overrides(load_scenario(path), controller=ctrl,
-                               ideal_actuators=ideal or None, duration_s=duration)
-    with _run_parameter("CA_LAG_COMP", lag_comp):
-        if not in_process:
-            return run_processes(scenario, Path(out))
-        result = run_scenario(scenario)
+                               ideal_actuators=ideal or None, duration_s=duration,
+                               sensors=sensors, seed=seed)
+    if lag_comp is not None:
+        scenario = dataclasses.replace(scenario,
+                                       params={**scenario.params, "CA_LAG_COMP": lag_comp})
+    if not in_process:
+        return run_processes(scenario, Path(out))
+    result = run_scenario(scenario)
     write_run(Path(out), scenario, result)
     return result.metrics
 
@@ -167,10 +148,12 @@ def _run_one(job: tuple[str, str, bool, float | None, str, bool, float | None]
 def run_table1(config_dir: Path, out_dir: Path, *, ideal: bool = False,
                duration_s: float | None = None, workers: int | None = None,
                in_process: bool = False, progress=None,
-               lag_comp: str = "both") -> dict[str, Any]:
+               lag_comp: str = "both", sensors: str | None = None,
+               seed: int | None = None) -> dict[str, Any]:
     """Run the 8 cases in parallel (through sitl + fcu processes unless `in_process`), with
     the default allocation (`lag_comp` "on"), the plain one (CA_LAG_COMP 0: "off") or both
-    (16 runs, the plain ones in DIR/plain/); write table1.md and table1.json."""
+    (16 runs, the plain ones in DIR/plain/), on the sensor profile `sensors` (default: the
+    scenarios', truth) with `seed`; write table1.md and table1.json."""
     if lag_comp not in LAG_COMP:
         raise ValueError(f"lag_comp must be one of {', '.join(LAG_COMP)}, got {lag_comp!r}")
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -182,7 +165,8 @@ def run_table1(config_dir: Path, out_dir: Path, *, ideal: bool = False,
         sets.append((lag_comp == "both", 0.0, out_dir / PLAIN_DIR if lag_comp == "both"
                      else out_dir))
     jobs = [((str(config_dir / f"{scen}.toml"), ctrl, ideal, duration_s,
-              str(folder / f"{scen}_{ctrl}"), in_process, value), (is_plain, scen, ctrl))
+              str(folder / f"{scen}_{ctrl}"), in_process, value, sensors, seed),
+             (is_plain, scen, ctrl))
             for is_plain, value, folder in sets for scen, ctrl in keys]
     results: dict[tuple[str, str], dict[str, Any]] = {}
     plain: dict[tuple[str, str], dict[str, Any]] = {}
@@ -197,6 +181,8 @@ def run_table1(config_dir: Path, out_dir: Path, *, ideal: bool = False,
                 progress(f"table1: {done}/{len(jobs)} runs done "
                          f"(last: {scen} {ctrl.upper()}{' plain' if is_plain else ''})")
     table = table_json(results, plain or None)
+    profiles = {m.get("sensors", "truth") for m in (*results.values(), *plain.values())}
+    table["sensors"] = ", ".join(sorted(profiles))
     (out_dir / "table1.json").write_text(json.dumps(table, indent=2) + "\n")
     (out_dir / "table1.md").write_text(table_markdown(table))
     from gcs.report import table1_chart  # matplotlib only where a chart is drawn

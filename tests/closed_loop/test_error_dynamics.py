@@ -14,7 +14,6 @@ from fcu.dualquat import q_conj, q_exp, q_log, q_mul
 from fcu.trajectory import Hover
 from gcs.inprocess import fly_reference, run_scenario
 from gcs.metrics import attitude_error_rad
-from gcs.table1 import _run_parameter
 from sitl.plant import Plant
 
 from .conftest import scenario
@@ -122,11 +121,10 @@ def test_near_pi_rotates_the_short_way(hover_ideal, theta0):
 
 def test_case1_ideal_actuators_within_a_millimetre():
     """Given Case I with ideal actuators and the exact law at 500 Hz, then the errors stay
-    within 1 mm and 0.05 mrad over all 160 s (MODEL.md section 5). The plain allocation
-    (CA_LAG_COMP 0): the default one leads its commands for the vehicle file's lagging
-    actuators, which ideal ones are not."""
-    with _run_parameter("CA_LAG_COMP", 0.0):
-        result = run_scenario(scenario("case1_figure8", ideal_actuators=True))
+    within 1 mm and 0.05 mrad over all 160 s (MODEL.md section 5). A run with ideal
+    actuators sets CA_LAG_COMP 0 (gcs.inprocess.scenario_params): there is no lag to lead."""
+    result = run_scenario(scenario("case1_figure8", ideal_actuators=True))
+    assert result.metrics["fcu_params"]["CA_LAG_COMP"] == 0.0
     m = result.metrics
     assert m["status"] == "completed" and m["sim_time_s"] == pytest.approx(160.0)
     assert m["position_error_m"]["max"] < 1e-3

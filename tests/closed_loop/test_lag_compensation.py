@@ -3,15 +3,17 @@ default actuators (rotor lag, rate-limited tilts), CA_LAG_COMP 1 against 0."""
 
 from __future__ import annotations
 
+import dataclasses
+
 from gcs.inprocess import run_scenario
-from gcs.table1 import _run_parameter
 
 from .conftest import scenario
 
 
 def _metrics(lag_comp: float) -> dict:
-    with _run_parameter("CA_LAG_COMP", lag_comp):
-        return run_scenario(scenario("case1_figure8", duration_s=25.0), logs=False).metrics
+    sc = scenario("case1_figure8", duration_s=25.0)
+    sc = dataclasses.replace(sc, params={"CA_LAG_COMP": lag_comp})  # a scenario's [params]
+    return run_scenario(sc, logs=False).metrics
 
 
 def test_lag_compensation_halves_case1_error():

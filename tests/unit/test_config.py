@@ -255,6 +255,27 @@ def test_scenario_broken_refused(tree, old, new, needles):
     assert "case1_figure8.toml" in msg or "none.toml" in msg
 
 
+def test_scenario_sensors_and_params(tree):
+    """Given a scenario naming a sensor profile and FCU parameters, then both load; a
+    profile that does not exist, a non-numeric parameter or an over-long name is refused."""
+    path = tree / "scenarios/case1_figure8.toml"
+    original = path.read_text()
+    path.write_text(original.replace("seed = 0", 'seed = 4\nsensors = "degraded"') +
+                    "\n[params]\nCA_LAG_COMP = 0\nEKF_EV_GATE = 3.5\n")
+    sc = load_scenario(path)
+    assert sc.seed == 4 and sc.uses_sensors and sc.sensors is not None
+    assert sc.sensors.name == "degraded"
+    assert sc.params == {"CA_LAG_COMP": 0.0, "EKF_EV_GATE": 3.5}
+    path.write_text(original.replace("seed = 0", 'seed = 0\nsensors = "nosuch"'))
+    refused(load_scenario, path, "nosuch", "mocap-indoor")
+    path.write_text(original + '\n[params]\nCA_LAG_COMP = "on"\n')
+    refused(load_scenario, path, "params.CA_LAG_COMP", "a number")
+    path.write_text(original + "\n[params]\nA_NAME_BEYOND_SIXTEEN = 1\n")
+    refused(load_scenario, path, "16 characters")
+    path.write_text(original)
+    assert not load_scenario(path).uses_sensors and load_scenario(path).params == {}
+
+
 def test_scenario_disturbance_errors_refused(tree):
     """Given a pulse without end or an unknown term key, when loaded, then it is refused."""
     path = tree / "scenarios/case2_impulse.toml"
