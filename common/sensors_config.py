@@ -9,6 +9,7 @@ and dropout figure to be zero.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,17 @@ class ImuConfig:
     vibration_factor: float  # multiplies both white noise densities
     gyro: GyroConfig
     accel: AccelConfig
+
+    @property
+    def gyro_sigma_rad_s(self) -> float:
+        """White noise per sample: vibration_factor * N * sqrt(rate) (SENSORS.md)."""
+        return self.vibration_factor * self.gyro.noise_density_rad_s_sqrt_hz * \
+            math.sqrt(self.rate_hz)
+
+    @property
+    def accel_sigma_m_s2(self) -> float:
+        return self.vibration_factor * self.accel.noise_density_m_s2_sqrt_hz * \
+            math.sqrt(self.rate_hz)
 
 
 @dataclass(frozen=True)

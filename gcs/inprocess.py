@@ -106,18 +106,24 @@ def apply_overrides(scenario: Scenario, *, controller: str | None = None,
 
 def scenario_params(scenario: Scenario) -> dict[str, float]:
     """Parameters a run sets on the FCU beyond its defaults (the same through processes):
-    no lead for actuators without lag; the scenario's own [params]; with a sensor profile, the
-    estimator on and its fusion horizon at the pose's latency (as a user sets EKF2_EV_DELAY to
-    the measured latency). Set in this order."""
+    no lead for actuators without lag; with a sensor profile the estimator's IMU noise figures
+    those of the profile's IMU and its fusion horizon at the pose's latency (as a user tunes
+    EKF2_GYR_NOISE, EKF2_ACC_NOISE and EKF2_EV_DELAY to the vehicle); the scenario's own
+    [params]; last, with a sensor profile, the estimator on. Set in this order."""
     params = {"COM_DIV_POS": scenario.divergence_position_m}
     if scenario.ideal_actuators:
         params["CA_LAG_COMP"] = 0.0  # actuators without lag: nothing to lead
-    params.update(scenario.params)
     if scenario.uses_sensors:
         assert scenario.sensors is not None
+        imu = scenario.sensors.imu
+        params["EKF_GYR_NOISE"] = max(imu.gyro_sigma_rad_s, 1e-4)  # the IMU's, per sample
+        params["EKF_ACC_NOISE"] = max(imu.accel_sigma_m_s2, 1e-3)
         params["EKF_EV_DELAY"] = scenario.sensors.mocap.latency_s
+    params.update(scenario.params)
+    if scenario.uses_sensors:
         # Last: the estimator starts (and in lockstep simulated time runs, aligning it) once
         # it is on, so the flight starts at the same instant however the sets were timed.
+        params.pop("EKF_EN", None)
         params["EKF_EN"] = 1.0
     return params
 

@@ -259,7 +259,10 @@ class _Flight:
             # the FCU reports attitude once it has a state (or an aligned estimate)
             if s.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is None:
                 self.children.check()
-                raise GcsError("the vehicle reports no state: is the simulator running?\n"
+                why = ("its estimator did not align (it needs the vehicle still and a pose; "
+                       "EKF_GYR_NOISE and EKF_ACC_NOISE must cover the IMU's noise)"
+                       if sc.uses_sensors else "is the simulator running?")
+                raise GcsError(f"the vehicle reports no state: {why}\n"
                                + self.children.tails())
         except GcsError:
             self.children.check()

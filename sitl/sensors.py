@@ -96,14 +96,14 @@ class ImuModel:
 
 
 def _gyro(g: GyroConfig, imu: ImuConfig, rng: np.random.Generator) -> _Triad:
-    return _Triad(rng, white_sigma=imu.vibration_factor * g.noise_density_rad_s_sqrt_hz
-                  * math.sqrt(imu.rate_hz), turn_on_sigma=g.turn_on_bias_sigma_rad_s,
+    return _Triad(rng, white_sigma=imu.gyro_sigma_rad_s,
+                  turn_on_sigma=g.turn_on_bias_sigma_rad_s,
                   random_walk=g.bias_random_walk_rad_s2_sqrt_hz, limit=g.range_rad_s)
 
 
 def _accel(a: AccelConfig, imu: ImuConfig, rng: np.random.Generator) -> _Triad:
-    return _Triad(rng, white_sigma=imu.vibration_factor * a.noise_density_m_s2_sqrt_hz
-                  * math.sqrt(imu.rate_hz), turn_on_sigma=a.turn_on_bias_sigma_m_s2,
+    return _Triad(rng, white_sigma=imu.accel_sigma_m_s2,
+                  turn_on_sigma=a.turn_on_bias_sigma_m_s2,
                   random_walk=a.bias_random_walk_m_s3_sqrt_hz, limit=a.range_m_s2)
 
 
