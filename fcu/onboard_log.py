@@ -11,6 +11,21 @@ Topics (ULog, read with pyulog); PX4's layouts are in `common.px4_topics`:
   reference); actuator_motors (speed / limit), actuator_servos (tilt wrapped to [-pi, pi),
   divided by pi), control_allocator_status (rotors at their limits).
 - At STATUS_HZ and at every change: vehicle_status, failsafe_flags, mission_result.
+- With the estimator on (EKF_EN = 1; declared always, empty otherwise): every input the
+  estimator received, in the order it received them: `sensor_combined` (each IMU sample,
+  FRD, the HIL_SENSOR's float32 values, timestamp = the sample's time) and
+  `vehicle_visual_odometry` (each external pose: timestamp = when it was received, on the
+  IMU clock: the time of the IMU sample it arrived before, as the simulator sends a pose
+  before the IMU sample of the same instant; timestamp_sample = its capture time; the
+  values `fcu.sim_bridge.pose_from_odometry` produced, in NED as on the wire, from which
+  the conversion to ENU gives them back exactly). A replay (`gcs replay`) that merges the
+  two by timestamp, a pose before the IMU sample of the same timestamp, feeds the
+  estimator what the FCU fed it. At PX4_HZ: `estimator_status`, and once aligned
+  `estimator_states` (the output state at the newest IMU sample, EKF2's order),
+  `estimator_innovations` and `estimator_innovation_test_ratios` (of the last pose).
+  With the first input, two information messages give what the replay needs beyond the
+  parameters: `dq_gravity_m_s2` (the estimator's gravity, as text: exact) and
+  `dq_control_period_us` (the estimate is taken at IMU samples on multiples of it).
 
 Parameters are in the definitions (their values when the log opened) and as changes in the
 data; everything the vehicle says (events and STATUSTEXT) is a logged string at its flight
@@ -26,8 +41,9 @@ from common import px4_topics as px4
 from common.modes import Mode
 from common.outcome import Event
 from common.quaternion import q_rotate
-from common.ulog import Topic, ULogWriter
+from common.ulog import Topic, ULogWriter, info_message
 from fcu.core import ONBOARD_COLUMNS, onboard_row
+from fcu.estimator import ImuInput, PoseInput
 from fcu.failsafe import state_lost
 from fcu.pipeline import Pipeline, StepOutput
 from fcu.telemetry import Home
@@ -39,7 +55,7 @@ ONBOARD_TOPICS = (
     px4.TRAJECTORY_SETPOINT, px4.VEHICLE_LOCAL_POSITION_SETPOINT,
     px4.VEHICLE_ATTITUDE_SETPOINT, px4.VEHICLE_RATES_SETPOINT, px4.ACTUATOR_MOTORS,
     px4.ACTUATOR_SERVOS, px4.CONTROL_ALLOCATOR_STATUS, px4.VEHICLE_STATUS,
-    px4.FAILSAFE_FLAGS, px4.MISSION_RESULT)
+    px4.FAILSAFE_FLAGS, px4.MISSION_RESULT, *px4.ESTIMATOR_TOPICS)
 PX4_HZ = 50
 STATUS_HZ = 2
 MAV_TYPE_HEXAROTOR = 13
@@ -78,6 +94,11 @@ class OnboardLog(ULogWriter):
         self.nav_state_since_us = 0
         self.last_nav_state = -1
         self.seq_reached = -1
+        pipeline.estimator_inputs = []  # the pipeline keeps the estimator's inputs for us
+        self.estimator_info_logged = False
+        self.imu_t_us = -1  # the newest IMU sample logged
+        self.imu_dt_us = 0
+        self.poses_waiting: list[PoseInput] = []  # received after it: stamped with the next
 
     # ------------------------------------------------------------------ records
 
@@ -86,6 +107,7 @@ class OnboardLog(ULogWriter):
         pipe = self.pipeline
         state = pipe.state
         w = self
+        self._estimator_inputs()
         if out.result is not None and state is not None:
             row = onboard_row(out.t_us, state, out.result, out.speed_rad_s, out.tilt_rad,
                               out.armed, step_us)
@@ -123,6 +145,68 @@ class OnboardLog(ULogWriter):
         saturated = out.result is not None and out.result.allocation.saturated
         w.add("control_allocator_status", px4.control_allocator_status_record(
             t_us, out.speed_rad_s, self.w_max, out.armed, saturated))
+        if pipe.estimator is not None:
+            self._estimator(t_us)
+
+    def _estimator_inputs(self) -> None:
+        """sensor_combined and vehicle_visual_odometry records of the inputs the pipeline
+        handed to the estimator since the last call (a pose waits for the next IMU sample,
+        whose time is its timestamp)."""
+        pipe = self.pipeline
+        inputs = pipe.estimator_inputs
+        if not inputs:
+            return
+        if not self.estimator_info_logged and pipe.estimator is not None:
+            self.estimator_info_logged = True
+            gravity = pipe.estimator.settings.gravity_m_s2
+            self._pending.append(info_message("dq_gravity_m_s2", repr(gravity)))
+            self._pending.append(info_message("dq_control_period_us", pipe.period_us))
+        for m in inputs:
+            if isinstance(m, PoseInput):
+                self.poses_waiting.append(m)
+            elif isinstance(m, ImuInput):
+                self._imu(m)
+        inputs.clear()
+
+    def _imu(self, m: ImuInput) -> None:
+        t = m.t_us
+        if self.imu_t_us >= 0:
+            self.imu_dt_us = min(max(t - self.imu_t_us, 0), 0xFFFFFFFF)
+        for pose in self.poses_waiting:
+            self._pose(t, pose)
+        self.poses_waiting.clear()
+        self.add("sensor_combined", px4.sensor_combined_record(
+            t, m.omega_flu_rad_s, m.f_flu_m_s2, self.imu_dt_us))
+        self.imu_t_us = t
+
+    def _pose(self, rx_us: int, m: PoseInput) -> None:
+        self.add("vehicle_visual_odometry", px4.visual_odometry_record(
+            rx_us, m.capture_us, m.p_enu_m, m.q_enu_flu, m.pos_var_m2, m.att_var_rad2))
+
+    def _estimator(self, t_us: int) -> None:
+        """The estimator's state, innovations, test ratios and status at flight time t_us."""
+        pipe = self.pipeline
+        est = pipe.estimator
+        assert est is not None
+        st = est.status()
+        stamp = max(st.t_us, 0)
+        w = self
+        if st.aligned:
+            out = est.output()
+            if out is not None:
+                s = out[1]
+                w.add("estimator_states", px4.estimator_states_record(
+                    t_us, stamp, s.p_enu_m, q_rotate(s.q_enu_flu, s.v_flu_m_s), s.q_enu_flu,
+                    st.gyro_bias_rad_s, st.accel_bias_m_s2, est.covariance.diagonal().tolist()))
+                w.add("estimator_innovations", px4.estimator_innovations_record(
+                    t_us, stamp, st.pos_innov_m, st.att_innov_rad, s.q_enu_flu))
+                w.add("estimator_innovation_test_ratios", px4.estimator_test_ratios_record(
+                    t_us, stamp, st.pos_test_ratio, st.att_test_ratio))
+        w.add("estimator_status", px4.estimator_status_record(
+            t_us, stamp, aligned=st.aligned, healthy=st.healthy,
+            in_air=not pipe.commander.landed, dead_reckoning=pipe.pose_level > 0,
+            pos_sd_enu_m=st.pos_sd_m, pos_ratio=st.pos_test_ratio,
+            att_ratio=st.att_test_ratio))
 
     def _status(self, t_us: int) -> None:
         pipe = self.pipeline
@@ -161,6 +245,15 @@ class OnboardLog(ULogWriter):
                                  pipe.failsafe in CRITICAL_FAILSAFES))
         w.add("mission_result", (t_us, self.seq_reached, cmd.mission_current,
                                  len(cmd.mission), bool(cmd.mission), cmd.mission_done))
+
+    def close(self) -> None:
+        """The estimator's last inputs (poses after the last IMU sample stamped with the time
+        the next one was due), then the file closed."""
+        self._estimator_inputs()
+        for pose in self.poses_waiting:
+            self._pose(max(self.imu_t_us + self.imu_dt_us, 0), pose)
+        self.poses_waiting.clear()
+        super().close()
 
     def events(self, events: list[Event]) -> None:
         for ev in events:

@@ -84,6 +84,10 @@ class Pipeline:
         self.estimator: Estimator | None = None  # EKF_EN = 1
         self.pose_level = 0  # pose loss: 0 fresh, 1 HOLD, 2 LAND (failsafe.pose_loss_level)
         self.flight_start_us: int | None = None  # the flight clock at the flight's start
+        # A logger sets this to a list: every input handed to the estimator is appended, in
+        # arrival order, for the logger to drain (the onboard log's sensor topics). None
+        # keeps nothing.
+        self.estimator_inputs: list[ImuInput | PoseInput] | None = None
 
     # ------------------------------------------------------------------ inputs
 
@@ -112,6 +116,8 @@ class Pipeline:
         est = self.estimator
         if est is None:
             return
+        if self.estimator_inputs is not None:
+            self.estimator_inputs.append(sample)
         est.on_imu(sample)
         if sample.t_us > self.state_time_us:
             self.state_time_us = sample.t_us  # answers echo the newest sample
@@ -121,6 +127,8 @@ class Pipeline:
     def on_pose(self, pose: PoseInput) -> None:
         """One external pose (motion capture) for the estimator."""
         if self.estimator is not None:
+            if self.estimator_inputs is not None:
+                self.estimator_inputs.append(pose)
             self.estimator.on_pose(pose)
 
     @property
