@@ -160,6 +160,23 @@ def build_parser() -> argparse.ArgumentParser:
                          "gcs table1 folder and all its runs")
     rep.add_argument("run_dir", type=Path)
 
+    rpl = sub.add_parser(
+        "replay", help="re-run the estimator on an onboard.ulg's sensor topics and compare "
+        "with the logged estimate (exit 0 agree, 1 differ, 2 bad input)",
+        description="Re-run the estimator on the log's sensor_combined and "
+        "vehicle_visual_odometry (merged in the order the FCU received them) with the "
+        "log's parameters, and compare its estimate with dq_onboard's at every control "
+        "step. Exit status: 0 agree (to float rounding, normally bit-identical), 1 differ "
+        "(expected with --param), 2 bad input.")
+    rpl.add_argument("log", type=Path, help="an onboard.ulg of a run with the estimator")
+    rpl.add_argument("--out", type=Path, metavar="FILE",
+                     help="write the replayed estimate at each control step (time_us, px..wz "
+                          "as in dq_onboard): CSV if FILE ends in .csv, else JSON "
+                          "{\"columns\": [...], \"rows\": [...]}")
+    rpl.add_argument("--param", action="append", metavar="NAME=VALUE",
+                     help="override a logged parameter for the replay (repeatable), e.g. "
+                          "EKF_EVP_NOISE=0.01")
+
     st = sub.add_parser("status", parents=[link],
                         help="identity, mode, position, attitude, health")
     st.add_argument("--json", action="store_true", help="print one JSON document")
@@ -417,6 +434,13 @@ def _endpoint_problem(endpoint: str) -> str:
                 return f"{host}:{port} is in use by another process"
             return f"cannot listen on {endpoint}: {exc.strerror or exc}"
     return ""
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """The estimator re-run on an onboard log (gcs.replay): 0 agree, 1 differ, 2 bad input."""
+    from gcs.replay import main as replay_main
+
+    return replay_main(args)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -792,6 +816,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_table1(args)
         if args.command == "report":
             return cmd_report(args)
+        if args.command == "replay":
+            return cmd_replay(args)
         if args.command == "router":
             return cmd_router(args)
         if args.command == "keygen":
