@@ -17,6 +17,12 @@ and `DIR/report.md`:
 - fig6_path_3d.png: desired vs flown path in 3D.
 - fig7_8_disturbance.png (runs with [[disturbance.*]] tables only): one run's position and
   attitude error with the pulse intervals shaded and the applied body-frame force and torque.
+- estimation.png and innovations.png (runs with the estimator only: metrics.json has
+  `estimation_error`): the estimate (dq_onboard's state) minus the truth (dq_truth, joined on
+  time_us): position and velocity error norms and the attitude error angle; the pose's
+  innovations (estimator_innovations: position NED, heading) and test ratios
+  (estimator_innovation_test_ratios, the gate at 1). report.md gets the estimation_error
+  figures beside them.
 
 `make_table1_report(dir)` does the above for each of the 8 run folders of a table1 folder
 (`<scenario>_<controller>`, e.g. `case2_impulse_pd`) and writes, in the table1 folder itself:
@@ -57,9 +63,11 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from common.quaternion import rotate_rows
+from common.ulog import ULogError, open_ulog, topic_rows
 from gcs.euler import zyx_events
 from gcs.metrics import attitude_error_rad, join_logs, log_columns
-from gcs.runio import check_run_dir, read_run_logs
+from gcs.runio import ONBOARD_LOG, check_run_dir, read_run_logs
 from gcs.table1 import CASES, CONTROLLERS, PAPER, STATS, table_json, table_markdown
 
 FIG_DIR = "figures"
@@ -70,6 +78,8 @@ FIG6 = "fig6_path_3d.png"
 FIG7 = "fig7_disturbance_pid.png"
 FIG8 = "fig8_disturbance_pd.png"
 FIG78 = "fig7_8_disturbance.png"
+FIG_ESTIMATION = "estimation.png"
+FIG_INNOVATIONS = "innovations.png"
 REPORT = "report.md"
 TABLE1_JSON = "table1.json"  # what makes a folder a table1 folder
 TABLE1_PNG = "table1.png"
@@ -663,6 +673,137 @@ def fig7_8_case2(runs: Sequence[RunData | None], controller: str, path: Path) ->
 
 
 # ---------------------------------------------------------------------------------------------
+# The estimator (runs with a sensor profile)
+# ---------------------------------------------------------------------------------------------
+
+def estimation_errors(data: RunData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(t s, position error norm m, world velocity error norm m/s, attitude error angle rad)
+    of the estimate (dq_onboard's state) against the truth at the same control steps, as
+    gcs.metrics.estimation_error computes them; non-finite rows dropped, cut at divergence."""
+    tc, truth, oc, onboard = read_run_logs(data.run_dir)
+    truth = truth[np.isfinite(truth[:, tc.index("time_us")])]
+    onboard = onboard[np.isfinite(onboard[:, oc.index("time_us")])]
+    common_t, truth, onboard = join_logs(tc, truth, oc, onboard)
+    q_e = log_columns(oc, onboard, "qw", "qx", "qy", "qz")
+    dp = np.linalg.norm(log_columns(oc, onboard, "px", "py", "pz")
+                        - log_columns(tc, truth, "px", "py", "pz"), axis=1)
+    dv = np.linalg.norm(rotate_rows(q_e, log_columns(oc, onboard, "vbx", "vby", "vbz"))
+                        - log_columns(tc, truth, "vx", "vy", "vz"), axis=1)
+    da = attitude_error_rad(q_e, log_columns(tc, truth, "qw", "qx", "qy", "qz"))
+    t = common_t * 1e-6
+    keep = np.isfinite(dp) & np.isfinite(dv) & np.isfinite(da)
+    if data.metrics.get("divergence_t_s") is not None:
+        keep &= t <= float(data.metrics["divergence_t_s"]) + 1e-9
+    return t[keep], dp[keep], dv[keep], da[keep]
+
+
+def fig_estimation(data: RunData, path: Path) -> Path:
+    """The estimate minus the truth: position error norm, velocity error norm (world frame)
+    and attitude error angle over time."""
+    t, dp, dv, da = estimation_errors(data)
+    fig = _new_figure(7.5)
+    axes = fig.subplots(3, 1, sharex=True)
+    for ax, y, color, label, unit in (
+            (axes[0], dp, "tab:blue", "|p̂ − p|", "m"),
+            (axes[1], dv, "tab:green", "|v̂ − v|", "m/s"),
+            (axes[2], da, "tab:purple", "∠(q* q̂)", "rad")):
+        tt, yy = _thin(t, y)
+        ax.plot(tt, yy, color=color, lw=1.0, label=label)
+        ax.set_title(f"{label}: {_stats_text(y, unit)}", fontsize=10, loc="left")
+        _style(ax, f"{label} ({unit})", xlabel=ax is axes[2])
+        _legend_right(ax)
+        _mark_end(ax, data)
+    fig.suptitle(f"{data.title}: estimation error (estimate minus truth)")
+    return _save(fig, path)
+
+
+def _innovation_rows(data: RunData) -> tuple[tuple[str, ...], np.ndarray, tuple[str, ...],
+                                             np.ndarray]:
+    path = data.run_dir / ONBOARD_LOG
+    ulog = open_ulog(path, ["estimator_innovations", "estimator_innovation_test_ratios"])
+    ic, innov = topic_rows(ulog, "estimator_innovations")
+    rc, ratio = topic_rows(ulog, "estimator_innovation_test_ratios")
+    return ic, innov, rc, ratio
+
+
+def fig_innovations(data: RunData, path: Path) -> Path | None:
+    """The pose's innovations (EKF2's sign: prediction minus measurement; position NED, the
+    attitude's about NED down as heading) and their test ratios (fused while <= 1)."""
+    try:
+        ic, innov, rc, ratio = _innovation_rows(data)
+    except ULogError as exc:
+        data.notes.append(f"innovations not drawn: {exc}")
+        return None
+    if not len(innov):
+        data.notes.append("innovations not drawn: estimator_innovations is empty")
+        return None
+    fig = _new_figure(7.5)
+    axes = fig.subplots(3, 1, sharex=True)
+    ti = innov[:, ic.index("time_us")] * 1e-6
+    pos = np.column_stack([innov[:, ic.index(c)] for c in ("ev_hpos[0]", "ev_hpos[1]",
+                                                          "ev_vpos")])
+    idx = thin_indices(pos)
+    for k, name in enumerate("NED"):
+        axes[0].plot(ti[idx], pos[idx, k], color=AXIS_COLORS[k], lw=0.9, label=f"{name}")
+    axes[0].axhline(0.0, color="k", lw=0.6, alpha=0.5)
+    axes[0].set_title("position innovation (prediction − pose), NED", fontsize=10, loc="left")
+    _style(axes[0], "m")
+    _legend_right(axes[0])
+    hd = innov[:, ic.index("heading")]
+    th, yh = _thin(ti, hd)
+    axes[1].plot(th, yh, color="tab:purple", lw=0.9, label="heading")
+    axes[1].axhline(0.0, color="k", lw=0.6, alpha=0.5)
+    axes[1].set_title("attitude innovation about NED down (heading)", fontsize=10, loc="left")
+    _style(axes[1], "rad")
+    _legend_right(axes[1])
+    tr = ratio[:, rc.index("time_us")] * 1e-6
+    for col, color, label in (("ev_vpos", "tab:blue", "position"),
+                              ("heading", "tab:purple", "attitude")):
+        if len(ratio):
+            tt, yy = _thin(tr, ratio[:, rc.index(col)])
+            axes[2].plot(tt, yy, color=color, lw=0.9, label=label)
+    axes[2].axhline(1.0, color="red", lw=1.0, ls="--", label="gate")
+    axes[2].set_yscale("log")
+    axes[2].set_title("test ratios innov² / (gate² S): refused above 1", fontsize=10,
+                      loc="left")
+    _style(axes[2], "ratio", xlabel=True)
+    _legend_right(axes[2])
+    for ax in axes:
+        _mark_end(ax, data)
+    fig.suptitle(f"{data.title}: the motion-capture pose's innovations")
+    return _save(fig, path)
+
+
+def estimation_figures(data: RunData, out: Path) -> list[Path]:
+    """estimation.png and, when the log has them, innovations.png."""
+    figures = [fig_estimation(data, out / FIG_ESTIMATION)]
+    innov = fig_innovations(data, out / FIG_INNOVATIONS)
+    if innov is not None:
+        figures.append(innov)
+    return figures
+
+
+def _estimation_md(est: dict[str, Any], figures: list[Path]) -> list[str]:
+    """report.md's section on the estimator: metrics.json's estimation_error and the links
+    to its figures."""
+    lines = ["", "## Estimation error", "",
+             "The estimate the controller flew on (dq_onboard) against the truth (dq_truth) "
+             "at the same control steps.", "",
+             "| quantity | max | mean | RMSE |", "|---|---:|---:|---:|"]
+    for key, label in (("position_m", "position (m)"), ("velocity_m_s", "velocity (m/s)"),
+                       ("attitude_rad", "attitude (rad)")):
+        row = est.get(key, {})
+        if isinstance(row, dict):
+            lines.append(f"| {label} | {_fmt(row.get('max'))} | {_fmt(row.get('mean'))} | "
+                         f"{_fmt(row.get('rmse'))} |")
+    lines.append("")
+    for fig in figures:
+        if fig.name in (FIG_ESTIMATION, FIG_INNOVATIONS):
+            lines.append(f"- [{CAPTIONS[fig.name]}]({FIG_DIR}/{fig.name})")
+    return lines
+
+
+# ---------------------------------------------------------------------------------------------
 # report.md
 # ---------------------------------------------------------------------------------------------
 
@@ -759,6 +900,9 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
     else:
         lines.append("None: a Z-Y-X description of the desired attitude stays regular and "
                      "continuous over this run.")
+    est = m.get("estimation_error")
+    if isinstance(est, dict):
+        lines += _estimation_md(est, figures)
     lines += ["", "## Figures", ""]
     for fig in figures:
         rel = f"{FIG_DIR}/{fig.name}"
@@ -776,6 +920,8 @@ CAPTIONS = {FIG3: "Fig. 3: tilt angles before and after unwrapping",
             FIG8: "Fig. 8: Case II, robustness to disturbance, PD (impulse, sinusoidal, "
                   "irregular)",
             FIG78: "Fig. 7/8: response to the disturbances",
+            FIG_ESTIMATION: "Estimation error: the estimate minus the truth",
+            FIG_INNOVATIONS: "The pose's innovations and test ratios",
             TABLE1_PNG: "Table I: RMSE, ours vs the paper"}
 
 
@@ -790,6 +936,8 @@ def write_run_report(data: RunData) -> list[Path]:
     figures.append(fig6_path(data, out / FIG6))
     if data.disturbed:
         figures.append(fig78_disturbance(data, out / FIG78))
+    if isinstance(data.metrics.get("estimation_error"), dict):
+        figures += estimation_figures(data, out)
     report = data.run_dir / REPORT
     report.write_text(_report_md(data, events, figures))
     return [*figures, report]
