@@ -2,11 +2,12 @@
 
 Runs and reports:
     gcs run SCENARIO.toml [--in-process | --realtime] [--controller pid|pd]
-            [--ideal-actuators] [--duration S] [--link udp|tcp|zenoh] [--zenoh URL]
-            [--fleet N [--spacing METRES]] --out DIR
+            [--ideal-actuators] [--duration S] [--sensors PROFILE] [--seed N]
+            [--link udp|tcp|zenoh] [--zenoh URL] [--fleet N [--spacing METRES]] --out DIR
     gcs router [--listen ENDPOINT]
     gcs keygen FILE
-    gcs table1 [--in-process] [--ideal-actuators] [--duration S] --out DIR
+    gcs table1 [--in-process] [--ideal-actuators] [--duration S] [--sensors PROFILE]
+            [--seed N] [--lag-comp both|on|off] --out DIR
     gcs report RUN_DIR | TABLE1_DIR
 Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0.1:14550):
     gcs status [--json] | arm | disarm [--force] | mode NAME
@@ -28,6 +29,7 @@ from pathlib import Path
 
 from common.cliargs import OneLineParser
 from common.config import ConfigError, load_scenario
+from common.sensors_config import resolve_sensor_profile
 from common.links import LinkError, parse_url
 
 DEFAULT_SCENARIOS = Path(__file__).resolve().parent.parent / "config" / "scenarios"
@@ -144,6 +146,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="run in this machine's processes without MAVLink")
     t1.add_argument("--ideal-actuators", action="store_true")
     t1.add_argument("--duration", type=_positive, metavar="S")
+    t1.add_argument("--sensors", metavar="PROFILE",
+                    help="sensor profile of every run (as gcs run --sensors)")
+    t1.add_argument("--seed", type=_seed, metavar="N", help="seed of the sensors' noise")
+    t1.add_argument("--lag-comp", choices=("both", "on", "off"), default="both",
+                    help="allocations flown: the FCU's (CA_LAG_COMP 1), the paper's plain "
+                         "one (0, in DIR/plain/), or both (default)")
     t1.add_argument("--scenarios", type=Path, default=DEFAULT_SCENARIOS, metavar="DIR",
                     help="folder holding the four scenario files")
     t1.add_argument("--jobs", type=int, default=None, help="parallel runs")
@@ -351,10 +359,18 @@ def cmd_table1(args: argparse.Namespace) -> int:
     from gcs.table1 import run_table1
 
     progress = Progress()
-    progress("table1: 8 runs ...")
+    progress(f"table1: {16 if args.lag_comp == 'both' else 8} runs ...")
+    try:
+        if args.sensors is not None:
+            resolve_sensor_profile(args.sensors)  # a bad name: one line, before any run
+    except ConfigError as exc:
+        progress.done()
+        print(f"gcs table1: {exc}", file=sys.stderr)
+        return 2
     table = run_table1(args.scenarios, args.out, ideal=args.ideal_actuators,
                        duration_s=args.duration, workers=args.jobs,
-                       in_process=args.in_process, progress=progress)
+                       in_process=args.in_process, progress=progress,
+                       lag_comp=args.lag_comp, sensors=args.sensors, seed=args.seed)
     progress.done()
     print((args.out / "table1.md").read_text())
     print(f"wrote {args.out / 'table1.md'}, {args.out / 'table1.json'} and "
