@@ -96,8 +96,9 @@ class EstimatorSettings:
     init_accel_bias_sd_m_s2: float = 0.1  # initial accel bias sd
     pose_reset_timeout_s: float = 1.0  # refused this long: reset to the pose (EKF2 7 s)
     pose_queue_max: int = 64  # queued poses beyond this are refused
-    converged_pos_sd_m: float = 0.01  # converged: pos sd below this ...
-    converged_att_sd_rad: float = 0.01  # ... and attitude sd below this
+    converged_pos_sd_m: float = 0.002  # converged (arming allowed): pos sd below this ...
+    converged_vel_sd_m_s: float = 0.01  # ... velocity sd below this ...
+    converged_att_sd_rad: float = 0.002  # ... and attitude sd below this
     healthy_pos_sd_max_m: float = 10.0  # healthy only while pos sd below this
     healthy_vel_sd_max_m_s: float = 10.0  # ... velocity sd below this
     healthy_att_sd_max_rad: float = 0.5  # ... attitude sd below this
@@ -113,6 +114,7 @@ class EstimatorSettings:
                      "align_accel_change_m_s2", "align_pose_max_age_s", "init_vel_sd_m_s",
                      "init_vel_sd_in_flight_m_s", "init_gyro_bias_sd_rad_s",
                      "init_accel_bias_sd_m_s2", "pose_reset_timeout_s", "converged_pos_sd_m",
+                     "converged_vel_sd_m_s",
                      "converged_att_sd_rad", "healthy_pos_sd_max_m", "healthy_vel_sd_max_m_s",
                      "healthy_att_sd_max_rad", "var_max"):
             v = getattr(self, name)
@@ -144,7 +146,7 @@ class PoseInput(NamedTuple):
 class EstimatorStatus(NamedTuple):
     t_us: int
     aligned: bool
-    converged: bool  # aligned and pos/att sd below the settings' thresholds
+    converged: bool  # aligned and pos/vel/att sd below the settings' thresholds
     pos_sd_m: Vec3
     vel_sd_m_s: Vec3
     att_sd_rad: Vec3
@@ -808,7 +810,7 @@ class Estimator:
         healthy = (spd and pos_sd < st.healthy_pos_sd_max_m
                    and vel_sd < st.healthy_vel_sd_max_m_s and att_sd < st.healthy_att_sd_max_rad)
         converged = (healthy and pos_sd < st.converged_pos_sd_m
-                     and att_sd < st.converged_att_sd_rad)
+                     and vel_sd < st.converged_vel_sd_m_s and att_sd < st.converged_att_sd_rad)
         return EstimatorStatus(
             t_us=self._o_t if self._aligned else self._last_t,
             aligned=self._aligned, converged=converged,

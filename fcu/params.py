@@ -105,8 +105,9 @@ SPECS: tuple[ParamSpec, ...] = (
               "accelerometer noise (EKF2_ACC_NOISE)"),
     ParamSpec("EKF_GYR_B_NOISE", 1e-3, 0.0, 1.0, "rad/s^2",
               "gyro bias process noise (EKF2_GYR_B_NOISE)"),
-    ParamSpec("EKF_ACC_B_NOISE", 3e-3, 0.0, 1.0, "m/s^3",
-              "accelerometer bias process noise (EKF2_ACC_B_NOISE)"),
+    ParamSpec("EKF_ACC_B_NOISE", 2e-2, 0.0, 1.0, "m/s^3",
+              "accelerometer bias process noise (ArduPilot EKF3's 2e-2: EKF2's 3e-3 "
+              "under-models a bias walking 6e-3 m/s^3/sqrt(Hz), and the velocity lags)"),
     ParamSpec("EKF_EVP_NOISE", 0.001, 1e-5, 10.0, "m",
               "least external position noise, when the pose's covariance says less"),
     ParamSpec("EKF_EVA_NOISE", 0.002, 1e-5, 1.0, "rad",
@@ -115,13 +116,17 @@ SPECS: tuple[ParamSpec, ...] = (
               "innovation gate of the external pose (EKF2_EV_POS_GATE)"),
     ParamSpec("EKF_GATE_N", 20.0, 1.0, 10000.0, "count",
               "poses refused by the gate in a row: estimator inconsistent, LAND"),
+    ParamSpec("IMU_GYRO_CUTOFF", 40.0, 0.0, 1000.0, "Hz",
+              "with the estimator: low-pass cut-off of the rate the controller damps with "
+              "(second-order Butterworth; 0: none), as PX4's IMU_GYRO_CUTOFF"),
     ParamSpec("COM_POS_LOSS_T", 1.0, 0.0, 60.0, "s",
               "pose source lost: dead-reckon this long, then HOLD"),
     ParamSpec("COM_POS_LAND_T", 2.0, 0.0, 600.0, "s",
               "pose source lost: LAND after this long in HOLD"),
 )
 # Parameters that change the state source: refused while armed (PX4 asks for a reboot).
-LOCKED_WHEN_ARMED = frozenset(s.name for s in SPECS if s.name.startswith("EKF_"))
+LOCKED_WHEN_ARMED = frozenset(s.name for s in SPECS
+                              if s.name.startswith("EKF_") or s.name == "IMU_GYRO_CUTOFF")
 BY_NAME = {s.name: s for s in SPECS}
 
 
@@ -240,6 +245,7 @@ def apply_params(store: ParamStore, pipeline: Pipeline) -> MissionLimits:
     pipeline.configure(store.gains(), limits, failsafe_settings(v), v["COM_OF_LOSS_T"],
                        flight_settings(v))
     if not pipeline.armed:
+        pipeline.set_gyro_cutoff(v["IMU_GYRO_CUTOFF"])
         pipeline.use_estimator(estimator_settings(v, pipeline.vehicle.gravity_m_s2))
     pipeline.core.set_lag_compensation(v["CA_LAG_COMP"] == 1.0)
     return limits

@@ -29,8 +29,8 @@ from pathlib import Path
 
 from common.cliargs import OneLineParser
 from common.config import ConfigError, load_scenario
-from common.sensors_config import resolve_sensor_profile
 from common.links import LinkError, parse_url
+from common.sensors_config import resolve_sensor_profile
 
 DEFAULT_SCENARIOS = Path(__file__).resolve().parent.parent / "config" / "scenarios"
 DEFAULT_CONNECT = "udpin:127.0.0.1:14550"

@@ -106,10 +106,11 @@ def apply_overrides(scenario: Scenario, *, controller: str | None = None,
 
 def scenario_params(scenario: Scenario) -> dict[str, float]:
     """Parameters a run sets on the FCU beyond its defaults (the same through processes):
-    no lead for actuators without lag; with a sensor profile the estimator's IMU noise figures
-    those of the profile's IMU and its fusion horizon at the pose's latency (as a user tunes
-    EKF2_GYR_NOISE, EKF2_ACC_NOISE and EKF2_EV_DELAY to the vehicle); the scenario's own
-    [params]; last, with a sensor profile, the estimator on. Set in this order."""
+    no lead for actuators without lag; with a sensor profile the estimator's noise figures
+    those of the profile's IMU and motion capture and its fusion horizon at the pose's
+    latency (as a user tunes EKF2_GYR_NOISE, EKF2_ACC_NOISE, EKF2_EVP_NOISE, EKF2_EVA_NOISE
+    and EKF2_EV_DELAY to the vehicle); the scenario's own [params]; last, with a sensor
+    profile, the estimator on. Set in this order."""
     params = {"COM_DIV_POS": scenario.divergence_position_m}
     if scenario.ideal_actuators:
         params["CA_LAG_COMP"] = 0.0  # actuators without lag: nothing to lead
@@ -118,7 +119,10 @@ def scenario_params(scenario: Scenario) -> dict[str, float]:
         imu = scenario.sensors.imu
         params["EKF_GYR_NOISE"] = max(imu.gyro_sigma_rad_s, 1e-4)  # the IMU's, per sample
         params["EKF_ACC_NOISE"] = max(imu.accel_sigma_m_s2, 1e-3)
-        params["EKF_EV_DELAY"] = scenario.sensors.mocap.latency_s
+        mocap = scenario.sensors.mocap
+        params["EKF_EVP_NOISE"] = max(mocap.position_noise_m, 1e-5)  # trust its covariance
+        params["EKF_EVA_NOISE"] = max(mocap.attitude_noise_rad, 1e-5)
+        params["EKF_EV_DELAY"] = mocap.latency_s
     params.update(scenario.params)
     if scenario.uses_sensors:
         # Last: the estimator starts (and in lockstep simulated time runs, aligning it) once

@@ -39,7 +39,7 @@ _NAN4 = (float("nan"),) * 4
 
 def pressure_hpa(alt_amsl_m: float) -> float:
     """ISA pressure at an altitude (the barometric formula below 11 km)."""
-    return SEA_LEVEL_HPA * (1.0 - 2.25577e-5 * alt_amsl_m) ** 5.25588
+    return SEA_LEVEL_HPA * float((1.0 - 2.25577e-5 * alt_amsl_m) ** 5.25588)
 
 
 def _period_us(rate_hz: float, physics_dt_us: int, what: str) -> int:
