@@ -249,7 +249,8 @@ class Estimator:
         self._aligned = False
         self._last_t = -1
         self._last_w: Vec3 = _ZERO3
-        self._dt_us = 1000  # nominal IMU period (last dt seen)
+        self._dt_us = 1000  # nominal IMU period (the shortest interval seen)
+        self._dt_seen = False
         self._pending: deque[ImuInput] = deque()  # samples newer than the horizon
         self._poses: list[PoseInput] = []  # queued, by capture time
         self._latest_pose: PoseInput | None = None
@@ -318,8 +319,10 @@ class Estimator:
             return
         if t is not s.t_us:
             s = s._replace(t_us=t)
-        if self._last_t >= 0:
-            self._dt_us = t - self._last_t
+        if self._last_t >= 0:  # the nominal period: the shortest interval (a gap is no period)
+            dt = t - self._last_t
+            self._dt_us = dt if not self._dt_seen else min(self._dt_us, dt)
+            self._dt_seen = True
         self._last_t = t
         self._last_w = w
         pend = self._pending
