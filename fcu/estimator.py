@@ -143,6 +143,16 @@ class PoseInput(NamedTuple):
     att_var_rad2: float = math.nan
 
 
+class EstimatorHealth(NamedTuple):
+    """The part of the status the flight checks every period (Estimator.health)."""
+
+    aligned: bool
+    converged: bool
+    healthy: bool
+    rejected_in_row: int
+    last_fusion_us: int
+
+
 class EstimatorStatus(NamedTuple):
     t_us: int
     aligned: bool
@@ -787,6 +797,28 @@ class Estimator:
         return self._o_t, VehicleState((x[0], x[1], x[2]), q,
                                        q_rotate_inv(q, (x[3], x[4], x[5])),
                                        (w[0] - x[10], w[1] - x[11], w[2] - x[12]))
+
+    def health(self) -> EstimatorHealth:
+        """What the failsafes and arming need each control period, without status()'s
+        Cholesky test (the covariance is kept positive definite by construction; status()
+        checks it for telemetry and logs): finite state, the standard deviations."""
+        st = self.settings
+        if not self._aligned:
+            return EstimatorHealth(False, False, False, self._rejected_in_row,
+                                   self._last_fusion_us)
+        d = self._P.diagonal().tolist()
+        if not (math.isfinite(sum(d)) and math.isfinite(sum(self._o_x)) and min(d) > 0.0):
+            return EstimatorHealth(True, False, False, self._rejected_in_row,
+                                   self._last_fusion_us)
+        pos_var, vel_var, att_var = max(d[0:3]), max(d[3:6]), max(d[6:9])
+        healthy = (pos_var < st.healthy_pos_sd_max_m ** 2
+                   and vel_var < st.healthy_vel_sd_max_m_s ** 2
+                   and att_var < st.healthy_att_sd_max_rad ** 2)
+        converged = (healthy and pos_var < st.converged_pos_sd_m ** 2
+                     and vel_var < st.converged_vel_sd_m_s ** 2
+                     and att_var < st.converged_att_sd_rad ** 2)
+        return EstimatorHealth(True, converged, healthy, self._rejected_in_row,
+                               self._last_fusion_us)
 
     def status(self) -> EstimatorStatus:
         st = self.settings

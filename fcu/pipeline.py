@@ -163,7 +163,7 @@ class Pipeline:
         est = self.estimator
         if est is None:
             return True
-        st = est.status()
+        st = est.health()
         return st.aligned and st.converged and st.healthy
 
     @property
@@ -205,7 +205,7 @@ class Pipeline:
     def arm(self) -> tuple[int, str]:
         was = self.commander.armed
         if not was and self.estimator is not None:
-            st = self.estimator.status()
+            st = self.estimator.health()
             why = ("not aligned (keep the vehicle still; a pose source is needed)"
                    if not st.aligned else "not converged" if not st.converged else
                    "unhealthy" if not st.healthy else "")
@@ -290,7 +290,7 @@ class Pipeline:
         lost dead-reckons for COM_POS_LOSS_T, then HOLD, then LAND after COM_POS_LAND_T;
         EKF_GATE_N poses refused in a row (inconsistent): LAND."""
         assert self.estimator is not None
-        st = self.estimator.status()
+        st = self.estimator.health()
         cmd = self.commander
         if not st.healthy:
             self.failsafe = "estimator failed"

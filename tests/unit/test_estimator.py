@@ -425,8 +425,12 @@ def test_dead_reckoning_covariance_grows_and_blows_up():
         if k == 2999:
             sd_before.append(e.status())
         if k >= 2999:
-            st = e.status()
+            st, h = e.status(), e.health()
             healthy.append((st.pos_sd_m[0], st.healthy))
+            # the per-period check agrees with the full status
+            assert (h.aligned, h.converged, h.healthy, h.rejected_in_row,
+                    h.last_fusion_us) == (st.aligned, st.converged, st.healthy,
+                                          st.rejected_in_row, st.last_fusion_us)
 
     run(data, est, pose_filter=lambda d, m: m if m.capture_us <= cut else None, on_step=step)
     st0, st1 = sd_before[0], est.status()
@@ -435,6 +439,8 @@ def test_dead_reckoning_covariance_grows_and_blows_up():
         assert all(b > a for a, b in zip(getattr(st0, f), getattr(st1, f), strict=True)), f
     assert st0.healthy and not st1.healthy
     assert all(h == (sd < 0.05) for sd, h in healthy)
+    est._P[4, 4] = math.nan  # a covariance that is not finite any more
+    assert not est.health().healthy and not est.status().healthy
     print(f"after 10 s without poses: pos sd {st1.pos_sd_m[0]:.3f} m, att sd "
           f"{1e3 * st1.att_sd_rad[0]:.2f} mrad")
 
