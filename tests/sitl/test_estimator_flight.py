@@ -397,7 +397,7 @@ def test_nan_frames_on_the_wire_are_skipped_and_the_lockstep_answers(tmp_path):
         assert {300_000, 302_000, 304_000, 306_000, 308_000} <= set(answered)
         # aligned (not answered any more: the world waits for the flight) after the NaN,
         # within align_time_s = 1 s of still samples: NaN in the estimator's alignment
-        # window would have restarted it (1.4 s). (0.31 s today: see the xfail below.)
+        # window would have restarted it (1.4 s).
         assert answered[-1] >= 308_000 and unanswered == [answered[-1] + 2000]
         assert answered[-1] < 1.2e6
         ack = s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
@@ -409,9 +409,6 @@ def test_nan_frames_on_the_wire_are_skipped_and_the_lockstep_answers(tmp_path):
     assert json.loads(stats.read_text())["ignored_messages"] >= 10
 
 
-@pytest.mark.xfail(strict=True, reason="fcu/estimator.py measures the alignment window as "
-                   "samples x the latest IMU interval: the interval after refused (NaN) "
-                   "samples, 11 ms, counts for every sample, and it aligns after 0.31 s")
 def test_refused_imu_samples_do_not_shorten_the_alignment():
     """At rest, 10 ms of NaN IMU samples at 0.3 s: the estimator still needs its 1 s
     (align_time_s) of still samples before it is aligned."""
@@ -432,7 +429,7 @@ def test_refused_imu_samples_do_not_shorten_the_alignment():
         inprocess.feed_fcu(pipeline, feed.period(states))
     assert pipeline.estimator is not None
     assert pipeline.estimator.status().imu_ignored == 10
-    assert state.time_us >= 1_000_000  # 0.31 s today
+    assert state.time_us >= 1_000_000
 
 
 # ---------------------------------------------------------------------------- command line
