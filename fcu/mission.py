@@ -91,6 +91,9 @@ SUPPORTED_COMMANDS = frozenset({MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT,
                                 MAV_CMD_NAV_LOITER_TIME, MAV_CMD_NAV_LAND,
                                 MAV_CMD_POSE_KEYFRAME, MAV_CMD_FIGURE_EIGHT})
 
+# Item ends are sums of float seconds; the flight clock is integer microseconds. An item
+# that ends at a step's instant ends at that step whatever the rounding of the sum.
+TIME_EPS_S = 1e-9
 MAV_MISSION_ACCEPTED = 0
 MAV_MISSION_UNSUPPORTED_FRAME = 2
 MAV_MISSION_UNSUPPORTED = 3
@@ -656,12 +659,12 @@ class MissionExecutor:
         while True:
             if self._reached < self._announced:
                 seg = segs[self._reached]
-                if seg.t1 <= t_s:
+                if seg.t1 <= t_s + TIME_EPS_S:
                     events.append(MissionEvent("reached", seg.seq))
                     self._reached += 1
                     continue
                 break
-            if self._announced < len(segs) and segs[self._announced].t0 <= t_s:
+            if self._announced < len(segs) and segs[self._announced].t0 <= t_s + TIME_EPS_S:
                 seg = segs[self._announced]
                 events.append(MissionEvent("current", seg.seq))
                 self.current_seq = seg.seq

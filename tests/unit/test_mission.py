@@ -139,6 +139,20 @@ def test_case1_events_follow_the_timeline():
     assert ex.completed and ex.current_seq == 3
 
 
+@pytest.mark.parametrize("start_us", [1_026_000, 1_430_000, 987_654_000, 3_600_002_000])
+def test_items_end_at_their_step_from_any_start(start_us):
+    """Given Case I started on the flight clock at start_us (an estimator's alignment time:
+    the items' ends are float sums that round differently), then each item ends at the step
+    of its planned microsecond and the mission completes at start + 160 s, not a step late."""
+    ex = started(scenario_mission(load_scenario(CASE1)), t0=start_us * 1e-6)
+    ends = []
+    for k in range(80001):
+        t_us = start_us + 2000 * k
+        ends.extend(t_us - start_us for ev in ex.update(t_us * 1e-6) if ev.kind == "reached")
+    assert ends == [10_000_000, 20_000_000, 140_000_000, 160_000_000]
+    assert ex.completed
+
+
 # ----------------------------------------------------------------------------------------
 # Derivatives of every item kind against central differences
 # ----------------------------------------------------------------------------------------
