@@ -436,6 +436,15 @@ def _parse_sensor_faults(tables: list[_Table]) -> tuple[SensorFault, ...]:
     return tuple(faults)
 
 
+def check_sensor_faults(faults: tuple[SensorFault, ...], sensors: SensorProfile | None,
+                        where: str) -> None:
+    """Faults act on simulated sensors: refused with the exact state (no profile, truth)."""
+    if faults and (sensors is None or sensors.is_truth):
+        raise ConfigError(f"{where}: faults need a sensor profile (key 'sensors', not the "
+                          f"exact state), got "
+                          f"{'no sensors key' if sensors is None else repr(sensors.name)}")
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Load a scenario and the vehicle and gain files it names (paths relative to it)."""
     path = Path(path)
@@ -511,10 +520,7 @@ def load_scenario(path: str | Path) -> Scenario:
         params[name] = params_t.number(name)
     params_t.finish()
     sensor_faults = _parse_sensor_faults(t.tables("sensor_fault"))
-    if sensor_faults and (sensors is None or sensors.is_truth):
-        raise ConfigError(f"{source}: key 'sensor_fault': faults need a sensor profile "
-                          f"(key 'sensors', not the exact state), got "
-                          f"{'no sensors key' if sensors is None else repr(sensors.name)}")
+    check_sensor_faults(sensor_faults, sensors, f"{source}: key 'sensor_fault'")
     scenario = Scenario(
         name=t.string("name"),
         duration_s=t.number("duration_s", lo=0.0, lo_open=True),

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from common.config import Scenario
+from common.config import Scenario, check_sensor_faults
 from common.mavlink import encoder, pack, parser
 from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
 from common.outcome import Event, diverged
@@ -101,7 +101,9 @@ def apply_overrides(scenario: Scenario, *, controller: str | None = None,
         changes["ideal_actuators"] = ideal_actuators
     if duration_s is not None:
         changes["duration_s"] = min(duration_s, scenario.duration_s)
-    return dataclasses.replace(scenario, **changes)
+    out = dataclasses.replace(scenario, **changes)
+    check_sensor_faults(out.sensor_faults, out.sensors, "--sensors")
+    return out
 
 
 def scenario_params(scenario: Scenario) -> dict[str, float]:

@@ -36,7 +36,13 @@ import time
 from pathlib import Path
 
 from common.cliargs import OneLineParser, check_output_path
-from common.config import ConfigError, Scenario, VehicleConfig, load_scenario
+from common.config import (
+    ConfigError,
+    Scenario,
+    VehicleConfig,
+    check_sensor_faults,
+    load_scenario,
+)
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
 from common.links import LinkError, open_link, parse_url
 from common.mavlink import MAV, encoder, pack
@@ -283,6 +289,7 @@ class SimulatorServer:
                 readable, _, _ = select.select(self.link.filenos(), [], [], max(0.0, wait))
                 if readable:
                     for _t, controls, mode in self._answers():
+                        self._on_answer(bool(mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED))
                         self.command = self._command_from(controls, mode)
                 if wait <= 0.0:
                     break
@@ -359,6 +366,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.sensors is not None:
             scenario = dataclasses.replace(scenario,
                                            sensors=resolve_sensor_profile(args.sensors))
+        check_sensor_faults(scenario.sensor_faults, scenario.sensors, "--sensors")
         if args.seed is not None:
             if not 0 <= args.seed < 2**63:
                 raise ConfigError(f"--seed: expected 0..2^63-1, got {args.seed}")

@@ -260,3 +260,15 @@ def test_a_fault_needs_a_sensor_profile(tmp_path):
         load_scenario(_scenario(tmp_path, fault.replace("[[sensor_fault]]",
                                                          "[sensor_fault]")))
     assert load_scenario(_scenario(tmp_path, fault, '"degraded"')).sensor_faults
+
+
+def test_the_command_line_cannot_drop_a_scenario_s_faults(tmp_path):
+    """`--sensors truth` on a scenario with faults is refused (gcs run, gcs table1 and
+    sitl share apply_overrides' or the same check), never a run without its faults."""
+    from gcs.inprocess import apply_overrides
+
+    fault = '[[sensor_fault]]\nkind = "mocap_off"\nstart_s = 1.0\nend_s = 2.0\n'
+    sc = load_scenario(_scenario(tmp_path, fault))
+    with pytest.raises(ConfigError, match="faults need a sensor profile"):
+        apply_overrides(sc, sensors="truth")
+    assert apply_overrides(sc, sensors="degraded").sensor_faults == sc.sensor_faults
