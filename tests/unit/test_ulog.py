@@ -70,9 +70,11 @@ def test_records_info_params_and_strings_read_back_by_pyulog(tmp_path):
 
 
 def test_px4_layouts_are_valid_ulog_formats(tmp_path):
-    """Every PX4 layout is written and read back field for field (names as PX4 has them)."""
+    """Every PX4 layout (the estimator's too) is written and read back field for field
+    (names as PX4 has them)."""
     topics = [v for v in vars(px4).values() if isinstance(v, Topic)]
     assert len(topics) == 16
+    topics += list(px4.ESTIMATOR_TOPICS)
     w = ULogWriter(tmp_path / "px4.ulg", topics)
     for t in topics:
         w.add(t.name, (1, *[0] * (t.width - 1)))
