@@ -206,9 +206,8 @@ class Pipeline:
         was = self.commander.armed
         if not was and self.estimator is not None:
             st = self.estimator.health()
-            why = ("not aligned (keep the vehicle still; a pose source is needed)"
-                   if not st.aligned else "not converged" if not st.converged else
-                   "unhealthy" if not st.healthy else "")
+            why = ("not aligned" if not st.aligned else "not converged" if not st.converged
+                   else "unhealthy" if not st.healthy else "")  # within one STATUSTEXT
             if why:
                 return 1, f"arming refused: estimator {why}"  # MAV_RESULT_TEMPORARILY_REJECTED
         result = self.commander.arm()
@@ -300,8 +299,7 @@ class Pipeline:
         if st.rejected_in_row >= self.settings.gate_failures and self.failsafe != \
                 "estimator inconsistent":
             self.failsafe = "estimator inconsistent"
-            cmd.failsafe_land(f"failsafe: estimator inconsistent ({st.rejected_in_row} poses "
-                              "refused in a row): LAND")
+            cmd.failsafe_land("failsafe: estimator inconsistent: LAND")
         level = pose_loss_level(t_us, st.last_fusion_us, self.settings)
         if level > self.pose_level:
             self.failsafe = "pose source lost"
