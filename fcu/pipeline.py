@@ -45,7 +45,7 @@ from fcu.failsafe import (
     state_lost,
 )
 from fcu.mission import MissionLimits
-from fcu.rate_filter import GyroLowPass
+from fcu.rate_filter import ImuRateFilter
 from fcu.supervisor import Supervisor
 from fcu.tracker import VehicleState
 
@@ -83,9 +83,7 @@ class Pipeline:
         self.steps = 0
         self.saturated_steps = 0
         self.estimator: Estimator | None = None  # EKF_EN = 1
-        self.gyro_cutoff_hz = 0.0  # IMU_GYRO_CUTOFF: the rate's low-pass (0: none)
-        self.gyro_lpf: GyroLowPass | None = None  # built at the IMU's rate
-        self._gyro_last: tuple[int, tuple[float, float, float]] | None = None
+        self.rate_filter = ImuRateFilter(0.0)  # IMU_GYRO_CUTOFF: the rate's low-pass
         self.pose_level = 0  # pose loss: 0 fresh, 1 HOLD, 2 LAND (failsafe.pose_loss_level)
         self.flight_start_us: int | None = None  # the flight clock at the flight's start
         # A logger sets this to a list: every input handed to the estimator is appended, in
@@ -114,14 +112,12 @@ class Pipeline:
             self.estimator = Estimator(settings)
             self.state = None
             self.commander.state = None
-            self.gyro_lpf = None
-            self._gyro_last = None
+            self.rate_filter = ImuRateFilter(self.rate_filter.cutoff_hz)
 
     def set_gyro_cutoff(self, cutoff_hz: float) -> None:
         """IMU_GYRO_CUTOFF; a change restarts the filter (at the IMU's rate)."""
-        if cutoff_hz != self.gyro_cutoff_hz:
-            self.gyro_cutoff_hz = cutoff_hz
-            self.gyro_lpf = None
+        if cutoff_hz != self.rate_filter.cutoff_hz:
+            self.rate_filter = ImuRateFilter(cutoff_hz)
 
     def on_imu(self, sample: ImuInput) -> None:
         """One IMU sample (HIL_SENSOR) for the estimator; its stamp is the state's."""
@@ -131,24 +127,11 @@ class Pipeline:
         if self.estimator_inputs is not None:
             self.estimator_inputs.append(sample)
         est.on_imu(sample)
-        self._filter_gyro(sample)
+        self.rate_filter.update(sample.t_us, sample.omega_flu_rad_s)
         if sample.t_us > self.state_time_us:
             self.state_time_us = sample.t_us  # answers echo the newest sample
         if sample.t_us % self.period_us == 0:
             self._take_estimate()  # the state of the period (telemetry, arming, the step)
-
-    def _filter_gyro(self, sample: ImuInput) -> None:
-        """IMU_GYRO_CUTOFF's low-pass on every finite sample (its rate from the samples)."""
-        w = sample.omega_flu_rad_s
-        if not all(math.isfinite(c) for c in w):
-            return
-        last = self._gyro_last
-        self._gyro_last = (sample.t_us, w)
-        if self.gyro_lpf is None:
-            if last is None or not self.gyro_cutoff_hz or sample.t_us <= last[0]:
-                return
-            self.gyro_lpf = GyroLowPass(1e6 / (sample.t_us - last[0]), self.gyro_cutoff_hz)
-        self.gyro_lpf.update(w)
 
     def on_pose(self, pose: PoseInput) -> None:
         """One external pose (motion capture) for the estimator."""
@@ -179,12 +162,7 @@ class Pipeline:
         out = est.output()
         if out is not None:
             t_us, state = out
-            lpf, last = self.gyro_lpf, self._gyro_last
-            if lpf is not None and lpf.active and last is not None:
-                # the estimate's rate is the newest sample less the bias: filter the sample
-                w, raw = lpf.output, last[1]
-                state = state._replace(omega_flu_rad_s=tuple(  # type: ignore[arg-type]
-                    o + f - r for o, f, r in zip(state.omega_flu_rad_s, w, raw, strict=True)))
+            state = self.rate_filter.apply(state)
             stamp = self.state_time_us
             self.on_state(t_us, state, t_us)
             self.state_time_us = max(stamp, t_us)

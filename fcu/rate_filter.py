@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+from fcu.tracker import VehicleState
+
 Vec3 = tuple[float, float, float]
 
 
@@ -63,3 +65,34 @@ class GyroLowPass:
             self._d1[i] = d0
         self.output = (y[0], y[1], y[2])
         return self.output
+
+
+class ImuRateFilter:
+    """IMU_GYRO_CUTOFF on the estimator's rate: every finite gyro sample goes through a
+    GyroLowPass built at the IMU's own rate (from the first two samples); `apply` gives a
+    state whose rate is the newest sample less the bias (the estimator's output) the
+    filtered rate less the same bias. The pipeline and a log replay share it."""
+
+    def __init__(self, cutoff_hz: float) -> None:
+        self.cutoff_hz = cutoff_hz
+        self.lpf: GyroLowPass | None = None
+        self.last: tuple[int, Vec3] | None = None
+
+    def update(self, t_us: int, w: Vec3) -> None:
+        if not all(math.isfinite(c) for c in w):
+            return
+        last = self.last
+        self.last = (t_us, w)
+        if self.lpf is None:
+            if last is None or not self.cutoff_hz or t_us <= last[0]:
+                return
+            self.lpf = GyroLowPass(1e6 / (t_us - last[0]), self.cutoff_hz)
+        self.lpf.update(w)
+
+    def apply(self, state: VehicleState) -> VehicleState:
+        lpf, last = self.lpf, self.last
+        if lpf is None or not lpf.active or last is None:
+            return state
+        o, f, r = state.omega_flu_rad_s, lpf.output, last[1]
+        return state._replace(omega_flu_rad_s=(o[0] + f[0] - r[0], o[1] + f[1] - r[1],
+                                               o[2] + f[2] - r[2]))

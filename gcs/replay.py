@@ -45,6 +45,7 @@ from common.ulog import ULogError, open_ulog, topic_rows
 from fcu.dualquat import q_normalize
 from fcu.estimator import Estimator, EstimatorSettings, ImuInput, PoseInput
 from fcu.params import BY_NAME, estimator_settings
+from fcu.rate_filter import ImuRateFilter
 
 TOLERANCE = 1e-9  # relative (to max(1, |value|)): float rounding, far below any estimate
 STATE_COLUMNS = ("px", "py", "pz", "qw", "qx", "qy", "qz", "vbx", "vby", "vbz",
@@ -202,6 +203,7 @@ def replay(path: str | Path, overrides: dict[str, float] | None = None) -> Repla
         notes.append(f"no dq_control_period_us in the log: {period_us} us from dq_onboard")
 
     est = Estimator(settings)
+    rate_filter = ImuRateFilter(values.get("IMU_GYRO_CUTOFF", 0.0))  # as the pipeline
     taken_t: list[int] = []
     taken: list[tuple[float, ...]] = []
     for _, kind, _, m in items:
@@ -211,10 +213,11 @@ def replay(path: str | Path, overrides: dict[str, float] | None = None) -> Repla
             continue
         assert isinstance(m, ImuInput)
         est.on_imu(m)
+        rate_filter.update(m.t_us, m.omega_flu_rad_s)
         if m.t_us % period_us == 0:
             out = est.output()
             if out is not None:
-                s = out[1]
+                s = rate_filter.apply(out[1])
                 taken_t.append(m.t_us)
                 taken.append((*s.p_enu_m, *q_normalize(s.q_enu_flu), *s.v_flu_m_s,
                               *s.omega_flu_rad_s))

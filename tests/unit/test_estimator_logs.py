@@ -127,7 +127,11 @@ def test_a_truth_run_has_no_estimator_topics(truth_run):
 
 def test_replay_reproduces_the_logged_estimate_bit_for_bit(est_run, tmp_path):
     r = rp.replay(est_run / "onboard.ulg")
-    assert len(r.time_us) == 2001 and r.imu_samples == 5001 and r.poses == 1000
+    # every IMU sample from 0 to the end (alignment, then 4 s of flight), a pose per 5 ms
+    end_us = round(json.loads((est_run / "metrics.json").read_text())["alignment_s"] * 1e6) \
+        + 4_000_000
+    assert len(r.time_us) == 2001 and r.imu_samples == end_us // 1000 + 1
+    assert r.poses == (end_us - 5000) // 5000 + 1  # captures 0 .. end - latency
     assert r.bit_identical and r.agree
     proc = _gcs("replay", str(est_run / "onboard.ulg"), "--out", str(tmp_path / "r.json"))
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -44,7 +44,7 @@ def test_parameters_reach_the_estimator_and_the_failsafes():
     fs = pipeline.settings
     assert (fs.gate_failures, fs.pose_loss_s, fs.pose_loss_land_s) == \
         pytest.approx((7, 0.7, 4.0), rel=1e-6)
-    assert pipeline.gyro_cutoff_hz == pytest.approx(60.0)
+    assert pipeline.rate_filter.cutoff_hz == pytest.approx(60.0)
     store.set("EKF_EN", 0.0)
     apply_params(store, pipeline)
     assert pipeline.estimator is None
