@@ -13,7 +13,7 @@ from .conftest import scenario
 
 
 def _attitude_rmse(cutoff_hz: float) -> float:
-    sc = dataclasses.replace(scenario("case1_figure8", duration_s=14.0),
+    sc = dataclasses.replace(scenario("case1_figure8", duration_s=6.0),
                              sensors=resolve_sensor_profile("mocap-indoor"),
                              params={"IMU_GYRO_CUTOFF": cutoff_hz})
     m = run_scenario(sc, logs=False).metrics

@@ -227,7 +227,7 @@ def _gcs(*argv: str) -> tuple[int, str, str]:
 
 
 @pytest.fixture(scope="module")
-def table1_dir(tmp_path_factory) -> Path:
+def table1_dir(tmp_path_factory) -> Path:  # tests using it share one xdist group: built once
     """`gcs table1 --in-process --duration 8` (through run_table1), then `gcs report` on it."""
     from gcs.table1 import run_table1
 
@@ -253,6 +253,7 @@ def _row(text: str, name: str) -> str:
     return rows[0]
 
 
+@pytest.mark.xdist_group("table1_report")
 def test_table1_folder_report(table1_dir):
     """Given a table1 folder of 8 short runs, when `gcs report DIR` runs, then every run
     folder has Fig. 3, 4 and 6 (Fig. 5 for Case I PD only, Fig. 7/8 for disturbed runs) and
@@ -290,6 +291,14 @@ def test_table1_folder_report(table1_dir):
                                      ((s, c) for _, s in CASES for c in CONTROLLERS)):
         assert f"{pos[2]:.4f}" in text and f"{att[2]:.4f}" in text, (scen, ctrl)
     assert "8 of 8 runs reported" in text and "Missing" not in text
+    # Both allocations were flown (run_table1's default): the plain runs in plain/, and
+    # the table's columns beside ours with the plain runs' own figures.
+    md = (table1_dir / "table1.md").read_text()
+    assert "position (plain)" in md and "CA_LAG_COMP 0" in md
+    for name in RUN_NAMES:
+        plain = json.loads((table1_dir / "plain" / name / "metrics.json").read_text())
+        assert plain["fcu_params"]["CA_LAG_COMP"] == 0.0
+        assert f"{plain['position_error_m']['rmse']:.4g}" in md, name
     links = _links(text)
     for fig in (TABLE1_PNG, FIG5, FIG7, FIG8):
         assert fig in links
@@ -301,6 +310,7 @@ def test_table1_folder_report(table1_dir):
         assert (table1_dir / link).is_file(), link
 
 
+@pytest.mark.xdist_group("table1_report")
 def test_partial_table1_folder(table1_dir, tmp_path):
     """Given a table1 folder with one run folder removed and one whose log is not the one
     metrics.json was made from, then `gcs report` reports the six others (and the figures
