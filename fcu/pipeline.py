@@ -49,6 +49,8 @@ from fcu.rate_filter import ImuRateFilter
 from fcu.supervisor import Supervisor
 from fcu.tracker import VehicleState
 
+ALIGN_MAX_S = 60.0  # lockstep: simulated time runs for the alignment at most this long
+
 
 class StepOutput(NamedTuple):
     """What one tick sends to the actuators, and what the controller computed."""
@@ -90,6 +92,7 @@ class Pipeline:
         # arrival order, for the logger to drain (the onboard log's sensor topics). None
         # keeps nothing.
         self.estimator_inputs: list[ImuInput | PoseInput] | None = None
+        self._align_timeout_said = False
 
     # ------------------------------------------------------------------ inputs
 
@@ -152,8 +155,17 @@ class Pipeline:
     @property
     def needs_time(self) -> bool:
         """In lockstep, periods before the flight that the FCU answers (disarmed): the
-        estimator aligns on the vehicle at rest while simulated time runs."""
-        return not self.commander.flight_started and not self.estimator_ready
+        estimator aligns on the vehicle at rest while simulated time runs, for at most
+        ALIGN_MAX_S of it (then the FCU says so once and waits, as without a sensor)."""
+        if self.commander.flight_started or self.estimator_ready:
+            return False
+        if self.state_time_us < ALIGN_MAX_S * 1_000_000:
+            return True
+        if not self._align_timeout_said:
+            self._align_timeout_said = True
+            self.commander.say(SEVERITY_CRITICAL,
+                               f"estimator not aligned in {ALIGN_MAX_S:g} s: waiting")
+        return False
 
     def _take_estimate(self) -> None:
         est = self.estimator

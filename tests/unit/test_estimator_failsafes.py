@@ -104,3 +104,16 @@ def test_a_failed_estimate_disarms():
     b.run(0.004)
     assert not b.pipeline.armed and b.pipeline.failsafe == "estimator failed"
     assert any("estimator failed" in t for t in b.texts())
+
+
+def test_alignment_gives_up_after_a_minute_without_poses():
+    """No pose source: simulated time runs for the alignment at most ALIGN_MAX_S, then the
+    FCU says so once and stops asking for time (lockstep waits, as for a silent sensor)."""
+    b = Bench()
+    b.poses = False
+    b.run(59.0)
+    assert b.pipeline.needs_time
+    b.run(1.1)
+    assert not b.pipeline.needs_time and not b.pipeline.needs_time
+    assert b.texts().count("estimator not aligned in 60 s: waiting") == 1
+    assert b.pipeline.arm()[0] == 1
