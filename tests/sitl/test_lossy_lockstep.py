@@ -59,3 +59,40 @@ def test_ten_percent_loss_with_duplication_and_reordering_gives_the_same_flight(
     keep = [i for i, c in enumerate(columns) if c != "step_us"]
     assert clean_rows.shape == lossy_rows.shape and len(clean_rows) == 15001
     assert np.array_equal(clean_rows[:, keep], lossy_rows[:, keep])
+
+
+@pytest.mark.timeout(240)
+def test_loss_with_sensors_gives_the_same_flight(tmp_path):
+    """With a sensor profile (HIL_SENSOR per IMU sample, delayed poses, the estimator's
+    alignment before the flight) the same impairments change timing, never results: every
+    IMU sample and pose is taken once, whatever is lost, duplicated or held back."""
+    from common.sensors_config import resolve_sensor_profile
+
+    scenario = dataclasses.replace(load_scenario(CASE1), duration_s=2.5,
+                                   sensors=resolve_sensor_profile("mocap-indoor"))
+    clean = run_processes(scenario, tmp_path / "clean")
+    proxies: list[UdpProxy] = []
+
+    def route(port: int) -> int:
+        proxy = UdpProxy(port, Impairment(drop=0.10, duplicate=0.05, reorder=0.05), seed=12)
+        proxies.append(proxy)
+        return proxy.port
+
+    try:
+        lossy = run_processes(scenario, tmp_path / "lossy", sim_route=route,
+                              wall_timeout_s=150.0)
+    finally:
+        for p in proxies:
+            p.close()
+    counts = proxies[0].counts
+    assert counts["dropped"] > 200 and counts["duplicated"] > 100 and counts["reordered"] > 100
+    assert lossy["status"] == clean["status"] == "completed"
+    for key in ("position_error_m", "attitude_error_rad", "estimation_error", "samples",
+                "sim_time_s", "alignment_s"):
+        assert lossy[key] == clean[key], key
+    assert (tmp_path / "clean" / "truth.ulg").read_bytes() == \
+        (tmp_path / "lossy" / "truth.ulg").read_bytes()
+    columns, clean_rows = read_topic(tmp_path / "clean" / "onboard.ulg", "dq_onboard")
+    _, lossy_rows = read_topic(tmp_path / "lossy" / "onboard.ulg", "dq_onboard")
+    keep = [i for i, c in enumerate(columns) if c != "step_us"]
+    assert np.array_equal(clean_rows[:, keep], lossy_rows[:, keep])
