@@ -359,6 +359,7 @@ def _data_lines(ax) -> list:
     return [ln for ln in ax.get_lines() if len(ln.get_xdata()) > 2]
 
 
+@pytest.mark.xdist_group("table1_report")
 def test_fig7_8_rows_and_divergence(table1_dir):
     """Given the three Case II runs, then Figs. 7 and 8 have the rows impulse, sinusoidal,
     irregular (lettered down the columns, as the paper's "(a) and (d)"), the drawn errors are
@@ -409,6 +410,7 @@ def test_fig7_8_rows_and_divergence(table1_dir):
     assert not any("missing" in t for t in titles[:3] + titles[6:])
 
 
+@pytest.mark.xdist_group("table1_report")
 def test_fig5_is_the_pd_errors(table1_dir):
     """Given the Case I runs, then Fig. 5 shows the PD run's attitude error and position
     error (the maxima of metrics.json), with the PID run's drawn for comparison."""
