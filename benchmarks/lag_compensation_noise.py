@@ -19,6 +19,7 @@ constant rate bias of 2 mrad/s on each axis. The noise enters through the runner
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -31,7 +32,6 @@ from common.config import load_scenario
 from fcu.dualquat import q_mul
 from fcu.tracker import VehicleState
 from gcs.inprocess import apply_overrides, run_scenario
-from gcs.table1 import _run_parameter
 from sitl.plant import PlantState
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -81,11 +81,11 @@ def _jitter(x: np.ndarray) -> tuple[float, float]:
 def fly(lag_comp: float, seed: int, duration_s: float | None) -> dict[str, Any]:
     scenario = apply_overrides(load_scenario(ROOT / "config" / "scenarios" /
                                              "case1_figure8.toml"), duration_s=duration_s)
+    scenario = dataclasses.replace(scenario, params={"CA_LAG_COMP": lag_comp})
     clean = inprocess.state_for_fcu
     inprocess.state_for_fcu = noisy(seed)
     try:
-        with _run_parameter("CA_LAG_COMP", lag_comp):
-            result = run_scenario(scenario, logs=False)
+        result = run_scenario(scenario, logs=False)
     finally:
         inprocess.state_for_fcu = clean
     m = result.metrics
