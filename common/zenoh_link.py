@@ -110,6 +110,7 @@ class ZenohLink(Link):
         self._qlock = threading.Lock()
         self._poked = False
         self._lock = threading.Lock()
+        self._pub_lock = threading.Lock()  # the publisher: sends against re-target and close
         self.vehicles: set[int] = set()
         self._on_liveliness = on_liveliness
         try:
@@ -181,7 +182,7 @@ class ZenohLink(Link):
 
     def set_target(self, system_id: int) -> None:
         """GCS: send to this vehicle's `in` key from now on."""
-        with self._lock:
+        with self._pub_lock:
             if self._pub is not None:
                 self._pub.undeclare()
             self._pub = self.session.declare_publisher(f"{self.prefix}/{system_id}/in",
@@ -215,9 +216,12 @@ class ZenohLink(Link):
         return out
 
     def send(self, data: bytes) -> None:
-        pub = self._pub
-        if pub is not None:
-            pub.put(data)
+        # Under the lock: another thread may be re-targeting (set_target) or closing, and a
+        # put on the publisher it undeclares raises "Undeclared publisher".
+        with self._pub_lock:
+            pub = self._pub
+            if pub is not None:
+                pub.put(data)
 
     def close_fds(self) -> None:
         with self._qlock:  # a late callback then writes to -1, never to a reused number
@@ -231,7 +235,9 @@ class ZenohLink(Link):
                     pass
 
     def close(self) -> None:
-        for entity in (self._token, self._live, getattr(self, "_sub", None), self._pub):
+        with self._pub_lock:
+            pub, self._pub = self._pub, None  # later sends are dropped, as on a closed socket
+        for entity in (self._token, self._live, getattr(self, "_sub", None), pub):
             if entity is not None:
                 try:
                     entity.undeclare()

@@ -240,3 +240,35 @@ def test_liveliness_wakeup_without_samples_is_cleared_by_recv(router):
         link.close()
     link._on_sample(_Sample(b"late"))  # a callback after close writes nowhere
     assert link.fileno() == -1
+
+
+def test_sends_while_another_thread_retargets_and_closes(router):
+    """A ground station's heartbeat thread sends while the caller picks another vehicle
+    (set_target undeclares the old publisher) and finally closes the link: no send ever
+    lands on an undeclared publisher ("Undeclared publisher"), and a send after close is
+    dropped, as on a closed socket."""
+    link = ZenohLink(parse_url(f"zenoh:race@{router}"), role="gcs", system_id=0)
+    errors: list[BaseException] = []
+    stop = threading.Event()
+
+    def sender() -> None:
+        try:
+            while not stop.is_set():
+                link.send(b"\xfd" + bytes(20))
+        except BaseException as exc:  # noqa: BLE001 - the test reports whatever happened
+            errors.append(exc)
+
+    threads = [threading.Thread(target=sender) for _ in range(2)]
+    for t in threads:
+        t.start()
+    try:
+        for i in range(200):
+            link.set_target(1 + i % 3)
+    finally:
+        link.close()
+        time.sleep(0.05)
+        stop.set()
+        for t in threads:
+            t.join(timeout=10)
+    assert errors == []
+    link.send(b"after close")
