@@ -255,7 +255,7 @@ def test_sends_while_another_thread_retargets_and_closes(router):
         try:
             while not stop.is_set():
                 link.send(b"\xfd" + bytes(20))
-        except BaseException as exc:  # noqa: BLE001 - the test reports whatever happened
+        except BaseException as exc:  # the test reports whatever happened
             errors.append(exc)
 
     threads = [threading.Thread(target=sender) for _ in range(2)]
