@@ -14,6 +14,7 @@ from gcs.inprocess import run_scenario
 from gcs.metrics import rank_key
 from gcs.table1 import PAPER
 
+from .. import reference_runs
 from .conftest import ROOT, SCENARIOS, scenario
 
 DESIGN_KEYS = {"scenario", "controller", "lockstep", "transport", "sim_time_s", "wall_time_s",
@@ -34,10 +35,11 @@ def _all_finite(obj) -> bool:
     return True
 
 
+@pytest.mark.xdist_group(reference_runs.GROUP)
 def test_case1_pid_default_actuators_beats_table1():
     """Given Case I with rotor lag, rate-limited tilts and 500 Hz control, then the PID
     tracker is at or below the paper's Table I on all six figures."""
-    m = run_scenario(scenario("case1_figure8")).metrics
+    m = reference_runs.case1_metrics()
     assert m["status"] == "completed" and m["sim_time_s"] == pytest.approx(160.0)
     pos, att = PAPER["case1_figure8"]["pid"]
     for stat, paper_pos, paper_att in zip(("max", "mean", "rmse"), pos, att, strict=True):

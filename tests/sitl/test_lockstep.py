@@ -26,11 +26,11 @@ from common.simlink import (
 )
 from common.ulog import read_topic
 from fcu.trajectory import FigureEight
-from gcs.inprocess import run_scenario
 from gcs.mission_client import upload
 from gcs.process_run import run_processes
 from gcs.scenario_mission import scenario_mission
 
+from .. import reference_runs
 from ..udp_proxy import Impairment, UdpProxy
 from .conftest import ROOT, SCENARIOS, launch, stop
 
@@ -49,6 +49,7 @@ def _within(ours: float, ref: float, floor: float) -> bool:
 
 
 @pytest.mark.timeout(900)
+@pytest.mark.xdist_group(reference_runs.GROUP)
 def test_case1_through_processes_matches_in_process(tmp_path):
     """Given `gcs run case1_figure8.toml` (lockstep, UDP), then the mission completes and the
     errors are within 5 % (or 1 mm / 0.1 mrad) of the in-process run; the FCU's desired
@@ -60,7 +61,7 @@ def test_case1_through_processes_matches_in_process(tmp_path):
     assert m["mission_completed"] is True and m["lockstep"] is True
     assert m["transport"] == "udp" and m["status"] == "completed"
     assert m["sim_time_s"] == pytest.approx(160.0)
-    ref = run_scenario(load_scenario(CASE1)).metrics
+    ref = reference_runs.case1_metrics()
     for stat in ("max", "mean", "rmse"):
         assert _within(m["position_error_m"][stat], ref["position_error_m"][stat], 1e-3)
         assert _within(m["attitude_error_rad"][stat], ref["attitude_error_rad"][stat], 1e-4)

@@ -1,0 +1,20 @@
+"""In-process runs that several tests compare with, flown once per test worker (the tests
+that use one share an xdist group, so they run on the same worker)."""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from common.config import load_scenario
+from gcs.inprocess import run_scenario
+
+CASE1 = Path(__file__).resolve().parents[1] / "config" / "scenarios" / "case1_figure8.toml"
+GROUP = "case1_reference"  # the xdist group of the tests that use case1_metrics
+
+
+@cache
+def case1_metrics() -> dict[str, Any]:
+    """metrics.json of Case I (160 s, PID, default actuators) in-process."""
+    return run_scenario(load_scenario(CASE1), logs=False).metrics
