@@ -26,8 +26,8 @@ from common.ulog import read_topic, tail_record
 from .conftest import ROOT, SCENARIOS
 
 CASE1 = SCENARIOS / "case1_figure8.toml"
-DURATION_S = 44.0  # lockstep runs
-PAUSE_AT_S = 40.0  # simulated time at which a child is paused
+DURATION_S = 26.0  # lockstep runs: the climb, the hover and 6 s of the figure-infinity
+PAUSE_AT_S = 22.0  # simulated time at which a child is paused (in the figure-infinity)
 PAUSE_S = 3.0
 RT_DURATION_S = 14.0  # the real-time run
 RT_PAUSE_S = 2.0
@@ -252,7 +252,7 @@ class Reference:
 
 @pytest.fixture(scope="module")
 def quiet(tmp_path_factory) -> Iterator[Reference]:
-    """Case I, lockstep, 50 s, on a machine left alone."""
+    """Case I, lockstep, DURATION_S, on a machine left alone."""
     out = tmp_path_factory.mktemp("clock") / "quiet"
     run = _start(out, "--duration", f"{DURATION_S:g}")
     try:
@@ -271,8 +271,8 @@ def quiet(tmp_path_factory) -> Iterator[Reference]:
 @pytest.mark.timeout(600)
 @pytest.mark.parametrize("starvation", ["sitl-paused", "fcu-paused", "cpu-hog"])
 def test_lockstep_run_is_unchanged_by_starvation(quiet, tmp_path, starvation):
-    """Given the quiet lockstep run of Case I (50 s), when the same run is starved (the sitl
-    or the fcu child stopped with SIGSTOP for 3 s at about 40 s of simulated time, or both
+    """Given the quiet lockstep run of Case I (26 s), when the same run is starved (the sitl
+    or the fcu child stopped with SIGSTOP for 3 s at about 22 s of simulated time, or both
     cores kept busy by two spinning processes for the whole run), then it still completes
     (exit 0, status completed) and its truth and onboard logs equal the quiet run's sample
     for sample (all columns but the onboard log's wall-clock step_us)."""
