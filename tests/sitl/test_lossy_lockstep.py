@@ -19,6 +19,24 @@ from .conftest import SCENARIOS
 CASE1 = SCENARIOS / "case1_figure8.toml"
 
 
+def _lossy_run(scenario, out, seed: int) -> tuple[dict, dict[str, int]]:
+    """The run through a proxy on the simulator link that drops 10 % of the datagrams both
+    ways, duplicates 5 % and holds 5 % back; its metrics and the proxy's counts."""
+    proxies: list[UdpProxy] = []
+
+    def route(port: int) -> int:
+        proxy = UdpProxy(port, Impairment(drop=0.10, duplicate=0.05, reorder=0.05), seed=seed)
+        proxies.append(proxy)
+        return proxy.port
+
+    try:
+        metrics = run_processes(scenario, out, sim_route=route, wall_timeout_s=150.0)
+    finally:
+        for p in proxies:
+            p.close()
+    return metrics, proxies[0].counts
+
+
 @pytest.mark.timeout(240)
 def test_ten_percent_loss_with_duplication_and_reordering_gives_the_same_flight(tmp_path):
     """Case I's first 30 s with 10 % of the simulator link's datagrams dropped both ways,
@@ -28,21 +46,8 @@ def test_ten_percent_loss_with_duplication_and_reordering_gives_the_same_flight(
     t0 = time.monotonic()
     clean = run_processes(scenario, tmp_path / "clean")
     t1 = time.monotonic()
-    proxies: list[UdpProxy] = []
-
-    def route(port: int) -> int:
-        proxy = UdpProxy(port, Impairment(drop=0.10, duplicate=0.05, reorder=0.05), seed=11)
-        proxies.append(proxy)
-        return proxy.port
-
-    try:
-        lossy = run_processes(scenario, tmp_path / "lossy", sim_route=route,
-                              wall_timeout_s=150.0)
-    finally:
-        for p in proxies:
-            p.close()
+    lossy, counts = _lossy_run(scenario, tmp_path / "lossy", seed=11)
     t2 = time.monotonic()
-    counts = proxies[0].counts
     print(f"\nclean {t1 - t0:.1f} s, lossy {t2 - t1:.1f} s of wall time; proxy {counts}; "
           f"fcu {lossy['fcu']}")
     assert counts["dropped"] > 1000 and counts["duplicated"] > 500
@@ -71,20 +76,7 @@ def test_loss_with_sensors_gives_the_same_flight(tmp_path):
     scenario = dataclasses.replace(load_scenario(CASE1), duration_s=2.5,
                                    sensors=resolve_sensor_profile("mocap-indoor"))
     clean = run_processes(scenario, tmp_path / "clean")
-    proxies: list[UdpProxy] = []
-
-    def route(port: int) -> int:
-        proxy = UdpProxy(port, Impairment(drop=0.10, duplicate=0.05, reorder=0.05), seed=12)
-        proxies.append(proxy)
-        return proxy.port
-
-    try:
-        lossy = run_processes(scenario, tmp_path / "lossy", sim_route=route,
-                              wall_timeout_s=150.0)
-    finally:
-        for p in proxies:
-            p.close()
-    counts = proxies[0].counts
+    lossy, counts = _lossy_run(scenario, tmp_path / "lossy", seed=12)
     assert counts["dropped"] > 200 and counts["duplicated"] > 100 and counts["reordered"] > 100
     assert lossy["status"] == clean["status"] == "completed"
     for key in ("position_error_m", "attitude_error_rad", "estimation_error", "samples",
