@@ -458,9 +458,8 @@ class GcsServer:
                       q_angle(q_mul(q_conj(ref.q_enu_flu), state.q_enu_flu)))
         v_enu = q_rotate(state.q_enu_flu, state.v_flu_m_s) if state is not None \
             else (0.0, 0.0, 0.0)
-        est = pipe.estimator.status() if pipe.estimator is not None else None
         return Snapshot(self.time_us, state, ref, errors, pipe.last_output, v_enu, c.landed,
-                        est, pipe.pose_level > 0)
+                        pipe.estimator, pipe.pose_level > 0)
 
     def mission_current_msg(self) -> MAV.MAVLink_message:
         c = self.pipeline.commander

@@ -15,7 +15,7 @@ from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_
 from common.mavlink import MAV
 from common.modes import MAIN_POSCTL
 from common.simlink import pose_covariance
-from fcu.estimator import EstimatorStatus
+from fcu.estimator import Estimator
 from fcu.pipeline import StepOutput
 from fcu.tracker import Reference, VehicleState
 
@@ -59,7 +59,9 @@ class Snapshot(NamedTuple):
     output: StepOutput | None
     v_enu_m_s: tuple[float, float, float]
     landed: bool
-    estimator: EstimatorStatus | None = None  # None: flying on the exact state input
+    # None: flying on the exact state input; its status() is taken only by the builders
+    # that report it (ODOMETRY, ESTIMATOR_STATUS), not for every snapshot
+    estimator: Estimator | None = None
     pose_lost: bool = False  # the estimator dead-reckons beyond COM_POS_LOSS_T
 
 
@@ -283,7 +285,7 @@ class Builders:
         s = src.state
         if s is None:
             return None
-        est = src.estimator
+        est = src.estimator.status() if src.estimator is not None else None
         pose_cov = [math.nan] + [0.0] * 20
         vel_cov = [math.nan] + [0.0] * 20
         kind = M.MAV_ESTIMATOR_TYPE_MOCAP
@@ -307,7 +309,7 @@ class Builders:
     def estimator_status(self, src: Snapshot):
         """ESTIMATOR_STATUS as PX4 fills it: solution flags, test ratios (pose position in
         pos_horiz/vert_ratio, pose attitude in mag_ratio: the heading aid), accuracies."""
-        est = src.estimator
+        est = src.estimator.status() if src.estimator is not None else None
         if est is None:
             return None
         flags = 0

@@ -306,6 +306,13 @@ def test_arming_is_refused_until_the_estimator_has_aligned(tmp_path):
         assert hb is not None and hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED
         est = s.recv(["ESTIMATOR_STATUS"], timeout=3.0)
         assert est is not None
+        # what the estimate says of itself: a solution with position, accuracies of mm
+        want = M.ESTIMATOR_ATTITUDE | M.ESTIMATOR_POS_HORIZ_REL | M.ESTIMATOR_VELOCITY_HORIZ
+        assert est.flags & want == want and not est.flags & M.ESTIMATOR_ACCEL_ERROR
+        assert 0.0 < est.pos_horiz_accuracy < 0.002 and 0.0 < est.pos_vert_accuracy < 0.002
+        odo = s.recv(["ODOMETRY"], timeout=3.0)
+        assert odo is not None and odo.estimator_type == M.MAV_ESTIMATOR_TYPE_AUTOPILOT
+        assert 0.0 < odo.pose_covariance[0] < 4e-6 and 0.0 < odo.pose_covariance[15] < 4e-6
     finally:
         s.close()
         stop(procs)
