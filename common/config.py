@@ -319,6 +319,35 @@ class DisturbanceTerm:
     phase_rad: float = 0.0
 
 
+def direction_flu(azimuth_deg: float, elevation_deg: float) -> Vec3:
+    """Unit vector in FLU at an azimuth from +x towards +y and an elevation towards +z."""
+    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
+    return (math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el))
+
+
+ACTUATOR_FAULT_KINDS = ("rotor_off", "rotor_stuck", "tilt_stuck", "tilt_off")
+
+
+@dataclass(frozen=True)
+class ActuatorFault:
+    """One actuator failing at a time of the scenario clock (sitl/actuator_faults.py).
+
+    rotor_off: the rotor's speed command is 0 (it spins down with its lag); rotor_stuck: the
+    rotor keeps the speed it had at start_s; tilt_stuck: the servo keeps the tilt it had at
+    start_s; tilt_off: the servo is unpowered, and as the plant has no dynamics about the
+    tilt axis (MODEL.md 2: a kinematic, rate-limited servo) it stays where it stopped, as
+    tilt_stuck does. From start_s until end_s (for ever by default).
+    """
+
+    kind: str
+    index: int  # rotor / servo 0..n-1
+    start_s: float
+    end_s: float = math.inf
+
+    def active(self, t_s: float) -> bool:
+        return self.start_s <= t_s < self.end_s
+
+
 SENSOR_FAULT_KINDS = ("mocap_off", "gyro_bias_step", "imu_nan", "pose_nan")
 
 
@@ -385,6 +414,8 @@ class Scenario:
     params: dict[str, float] = field(default_factory=dict)
     # Faults injected into the simulated sensors ([[sensor_fault]]; a sensor profile needed).
     sensor_faults: tuple[SensorFault, ...] = ()
+    # Rotors and tilt servos failing during the flight ([[actuator_fault]]).
+    actuator_faults: tuple[ActuatorFault, ...] = ()
 
     @property
     def uses_sensors(self) -> bool:
@@ -402,7 +433,7 @@ def _parse_terms(tables: list[_Table]) -> tuple[DisturbanceTerm, ...]:
         kind = t.string("kind", choices=PROFILE_KINDS)
         term = DisturbanceTerm(
             kind=kind,
-            amplitude=t.numbers("amplitude", 3),  # type: ignore[arg-type]
+            amplitude=_amplitude(t),
             start_s=t.number("start_s", 0.0, lo=0.0),
             end_s=t.number("end_s", math.inf) if t.has("end_s") else math.inf,
             omega_rad_s=t.number("omega_rad_s", 0.0) if kind == "sine" else 0.0,
@@ -415,6 +446,43 @@ def _parse_terms(tables: list[_Table]) -> tuple[DisturbanceTerm, ...]:
         t.finish()
         terms.append(term)
     return tuple(terms)
+
+
+def _amplitude(t: _Table) -> Vec3:
+    """A term's per-axis amplitude: `amplitude = [x, y, z]`, or `magnitude` along a direction
+    given as `direction_flu = [x, y, z]` (normalised) or `azimuth_deg` and `elevation_deg`
+    (`direction_flu`; for sweeps of a disturbance's size and direction)."""
+    if not t.has("magnitude"):
+        a = t.numbers("amplitude", 3)
+        return (a[0], a[1], a[2])
+    if t.has("amplitude"):
+        raise t.error("magnitude", "either 'amplitude' or 'magnitude' (with a direction), "
+                      "not both")
+    magnitude = t.number("magnitude", lo=0.0)
+    if t.has("direction_flu"):
+        d = t.numbers("direction_flu", 3)
+        n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        if not n > 0.0:
+            raise t.error("direction_flu", "a non-zero vector")
+        u = (d[0] / n, d[1] / n, d[2] / n)
+    else:
+        u = direction_flu(t.number("azimuth_deg", 0.0), t.number("elevation_deg", 0.0))
+    return (magnitude * u[0], magnitude * u[1], magnitude * u[2])
+
+
+def _parse_actuator_faults(tables: list[_Table], n_rotors: int) -> tuple[ActuatorFault, ...]:
+    faults = []
+    for t in tables:
+        fault = ActuatorFault(
+            kind=t.string("kind", choices=ACTUATOR_FAULT_KINDS),
+            index=t.integer("index", lo=0, hi=n_rotors - 1),
+            start_s=t.number("start_s", 0.0, lo=0.0),
+            end_s=t.number("end_s") if t.has("end_s") else math.inf)
+        if fault.end_s <= fault.start_s:
+            raise t.error("end_s", f"a time after start_s = {fault.start_s}")
+        t.finish()
+        faults.append(fault)
+    return tuple(faults)
 
 
 def _parse_sensor_faults(tables: list[_Table]) -> tuple[SensorFault, ...]:
@@ -445,19 +513,68 @@ def check_sensor_faults(faults: tuple[SensorFault, ...], sensors: SensorProfile 
                           f"{'no sensors key' if sensors is None else repr(sensors.name)}")
 
 
+INLINE = "<inline>"  # Scenario.files entry of a vehicle or gain table given in the scenario
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Load a scenario and the vehicle and gain files it names (paths relative to it)."""
     path = Path(path)
+    return scenario_from_data(_read_toml(path), path)
+
+
+def resolved_scenario_data(path: str | Path) -> dict[str, Any]:
+    """The scenario file as data with its vehicle and gain files inlined as tables and its
+    other file references made absolute: one self-contained description of a run, which
+    `scenario_from_data` loads exactly as `load_scenario` loads the file (campaigns set
+    keys in it and hash it)."""
+    path = Path(path)
+    data = _read_toml(path)
+    base = path.parent
+    t = _Table(data, str(path))
+
+    def inline(value: Any, key: str) -> Any:
+        if isinstance(value, str):
+            return _read_toml((base / value).resolve())
+        if isinstance(value, dict):
+            return value
+        raise t.error(key, "a file name or a table")
+
+    data["vehicle"] = inline(data.get("vehicle"), "vehicle")
+    gains = data.get("gains")
+    if not isinstance(gains, dict):
+        raise t.error("gains", "a table")
+    data["gains"] = {k: inline(v, f"gains.{k}") for k, v in gains.items()}
+    traj = data.get("trajectory")
+    if isinstance(traj, dict) and isinstance(traj.get("mission"), str):
+        traj["mission"] = str((base / traj["mission"]).resolve())
+    sensors = data.get("sensors")
+    if isinstance(sensors, str) and (base / sensors).is_file():
+        data["sensors"] = str((base / sensors).resolve())
+    return data
+
+
+def scenario_from_data(data: dict[str, Any], path: str | Path) -> Scenario:
+    """A scenario from its TOML data; file names are relative to `path`'s folder, and the
+    vehicle and each gain set may be a file name or an inline table."""
+    path = Path(path)
     source = str(path)
-    t = _Table(_read_toml(path), source)
+    t = _Table(data, source)
     base = path.parent
 
     def rel(key: str, table: _Table) -> Path:
         return (base / table.string(key)).resolve()
 
-    vehicle_path = rel("vehicle", t)
+    def part(key: str, table: _Table, parse: Any, load: Any) -> tuple[Any, str]:
+        value = table.raw(key)
+        if isinstance(value, dict):
+            return parse(value, f"{source}: table '{table.prefix}{key}'"), INLINE
+        file = rel(key, table)
+        return load(file), str(file)
+
+    vehicle, vehicle_path = part("vehicle", t, parse_vehicle, load_vehicle)
     gains_t = t.table("gains")
-    pid_path, pd_path = rel("pid", gains_t), rel("pd", gains_t)
+    gains_pid, pid_path = part("pid", gains_t, parse_gains, load_gains)
+    gains_pd, pd_path = part("pd", gains_t, parse_gains, load_gains)
     gains_t.finish()
 
     rates = t.table("rates", {})
@@ -521,13 +638,14 @@ def load_scenario(path: str | Path) -> Scenario:
     params_t.finish()
     sensor_faults = _parse_sensor_faults(t.tables("sensor_fault"))
     check_sensor_faults(sensor_faults, sensors, f"{source}: key 'sensor_fault'")
+    actuator_faults = _parse_actuator_faults(t.tables("actuator_fault"), vehicle.n_rotors)
     scenario = Scenario(
         name=t.string("name"),
         duration_s=t.number("duration_s", lo=0.0, lo_open=True),
         controller=t.string("controller", "pid", choices=CONTROLLERS),
-        vehicle=load_vehicle(vehicle_path),
-        gains_pid=load_gains(pid_path),
-        gains_pd=load_gains(pd_path),
+        vehicle=vehicle,
+        gains_pid=gains_pid,
+        gains_pd=gains_pd,
         control_rate_hz=control_hz,
         physics_rate_hz=physics_hz,
         ideal_actuators=ideal,
@@ -541,11 +659,12 @@ def load_scenario(path: str | Path) -> Scenario:
         # the range of the FCU's parameter COM_DIV_POS, which a run sets from this key
         divergence_position_m=t.number("divergence_position_m", 10.0, lo=0.1, hi=1000.0),
         source=source,
-        files={"scenario": str(path.resolve()), "vehicle": str(vehicle_path),
-               "gains_pid": str(pid_path), "gains_pd": str(pd_path)},
+        files={"scenario": str(path.resolve()), "vehicle": vehicle_path,
+               "gains_pid": pid_path, "gains_pd": pd_path},
         sensors=sensors,
         params=params,
         sensor_faults=sensor_faults,
+        actuator_faults=actuator_faults,
     )
     t.finish()
     if not scenario.gains_pd.is_pd:

@@ -8,6 +8,7 @@ Runs and reports:
     gcs keygen FILE
     gcs table1 [--in-process] [--ideal-actuators] [--duration S] [--sensors PROFILE]
             [--seed N] [--lag-comp both|on|off] --out DIR
+    gcs campaign CAMPAIGN.toml --out DIR [--scheduler tcp://HOST:8786] [--workers N]
     gcs report RUN_DIR | TABLE1_DIR
 Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0.1:14550):
     gcs status [--json] | arm | disarm [--force] | mode NAME
@@ -157,6 +158,18 @@ def build_parser() -> argparse.ArgumentParser:
     t1.add_argument("--jobs", type=int, default=None, help="parallel runs")
     t1.add_argument("--out", type=Path, required=True, metavar="DIR")
 
+    cp = sub.add_parser("campaign", help="fly a campaign of runs (grid, Monte-Carlo) on Dask")
+    cp.add_argument("campaign", type=Path, help="campaign file (config/campaigns/)")
+    cp.add_argument("--out", type=Path, required=True,
+                    help="campaign folder: results.csv, runs.jsonl, summary.md; resumed "
+                         "if it holds runs already")
+    cp.add_argument("--scheduler", default=None, metavar="tcp://HOST:8786",
+                    help="a running Dask scheduler (default: a local cluster on 127.0.0.1)")
+    cp.add_argument("--workers", type=int, default=None,
+                    help="local cluster's worker processes (default: one per CPU)")
+    cp.add_argument("--dashboard", default="127.0.0.1:8787", metavar="HOST:PORT|none",
+                    help="local cluster's dashboard address (default 127.0.0.1:8787)")
+    cp.add_argument("--no-report", action="store_true", help="no summary.md and figures")
     rt = sub.add_parser("router", help="a Zenoh router for the machine (or for others)")
     rt.add_argument("--listen", action="append", metavar="ENDPOINT",
                     help="endpoint to listen on, repeatable (default tcp/127.0.0.1:7447)")
@@ -376,6 +389,48 @@ def cmd_table1(args: argparse.Namespace) -> int:
     print(f"wrote {args.out / 'table1.md'}, {args.out / 'table1.json'} and "
           f"{args.out / 'table1.png'}")
     return 0 if table["rows"] else 1
+
+
+def cmd_campaign(args: argparse.Namespace) -> int:
+    """Exit 0 when every run is recorded (whatever its status), 1 when runs could not be
+    executed, 2 for bad input."""
+    from gcs.campaign import CampaignError, expand, load_campaign, read_journal, run_campaign
+
+    try:
+        campaign = load_campaign(args.campaign)
+        if args.workers is not None and args.workers < 1:
+            raise CampaignError("--workers needs at least 1")
+        if args.scheduler is not None and args.workers is not None:
+            raise CampaignError("--workers sizes a local cluster: not with --scheduler")
+        if args.out.exists() and not args.out.is_dir():
+            raise CampaignError(f"{args.out}: not a folder")
+        total = len(expand(campaign, args.out))
+    except CampaignError as exc:
+        print(f"gcs campaign: {exc}", file=sys.stderr)
+        return 2
+    done = len(read_journal(args.out)) if args.out.is_dir() else 0
+    print(f"campaign {campaign.name}: {total} runs ({campaign.transport}); "
+          f"{min(done, total)} recorded in {args.out} already", file=sys.stderr)
+    dashboard = None if args.dashboard.lower() == "none" else args.dashboard
+    try:
+        outcome = run_campaign(campaign, args.out, scheduler=args.scheduler,
+                               workers=args.workers, dashboard=dashboard,
+                               report=not args.no_report)
+    except OSError as exc:  # no scheduler at that address, a cluster that did not start
+        print(f"gcs campaign: {exc}", file=sys.stderr)
+        return 1
+    flown = outcome.flown
+    rate = outcome.sim_s / outcome.wall_s if outcome.wall_s > 0 and flown else 0.0
+    print(f"campaign {campaign.name}: {len(outcome.rows)}/{outcome.total} runs recorded "
+          f"({outcome.recorded_before} before, {flown} flown now in {outcome.wall_s:.1f} s "
+          f"on {outcome.workers} workers: {rate:.1f} simulated s per wall s)")
+    if outcome.dashboard:
+        print(f"  dashboard was {outcome.dashboard}")
+    for index, why in sorted(outcome.failed.items()):
+        print(f"gcs campaign: run {index} not executed: {why}", file=sys.stderr)
+    print(f"  wrote {args.out / 'results.csv'}"
+          + ("" if args.no_report else f" and {args.out / 'summary.md'}"))
+    return outcome.exit_code
 
 
 def cmd_keygen(args: argparse.Namespace) -> int:
@@ -830,6 +885,8 @@ def main(argv: list[str] | None = None) -> int:
             return cmd_run(args)
         if args.command == "table1":
             return cmd_table1(args)
+        if args.command == "campaign":
+            return cmd_campaign(args)
         if args.command == "report":
             return cmd_report(args)
         if args.command == "replay":

@@ -50,6 +50,7 @@ from fcu.tracker import VehicleState
 from fcu.trajectory import Trajectory
 from gcs.metrics import build_metrics
 from gcs.scenario_mission import scenario_mission
+from sitl.actuator_faults import ActuatorFaults
 from sitl.disturbance import Disturbance
 from sitl.node import command_from_controls, odometry
 from sitl.plant import (
@@ -261,6 +262,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
     plant.disturbance = plant.disturbance.from_time(start_us * 1e-6)
     if feed is not None:
         feed.start_flight(start_us, scenario.sensor_faults)
+    faults = ActuatorFaults(scenario.actuator_faults, start_us)
     end_us = start_us + round(scenario.duration_s * 1e6)
     clock = time.perf_counter
     logged_events = 0
@@ -291,7 +293,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
         command = command_from_controls(wire.controls, wire.mode, vehicle, state)
         states = []
         for _ in range(substeps):
-            state = plant.step(state, command)
+            state = plant.step(state, faults.apply(command, state))
             states.append(state)
         if feed is not None:
             input_us = feed_fcu(pipeline, feed.period(states))

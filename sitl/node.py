@@ -58,6 +58,7 @@ from common.simlink import (
     unpack_actuator_controls,
 )
 from common.ulog import ULogError
+from sitl.actuator_faults import ActuatorFaults
 from sitl.disturbance import Disturbance
 from sitl.plant import (
     ActuatorCommand,
@@ -110,6 +111,7 @@ class SimulatorServer:
                            ground_enabled=scenario.ground_enabled,
                            disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
         self.state = initial_state(scenario, self.plant)
+        self.faults = ActuatorFaults(scenario.actuator_faults)
         self.control_dt_us = 1_000_000 // control_rate_hz
         if self.control_dt_us % self.plant.dt_us:
             raise ConfigError(f"control period {self.control_dt_us} us is not a multiple of "
@@ -190,6 +192,7 @@ class SimulatorServer:
         if armed and self.flight_start_us is None:
             self.flight_start_us = self.state.time_us
             self.plant.disturbance = self.plant.disturbance.from_time(self.state.time_us * 1e-6)
+            self.faults.start_flight(self.state.time_us)
             if self.feed is not None:
                 self.feed.start_flight(self.state.time_us, self.scenario.sensor_faults)
             if self.duration_us is not None:
@@ -203,7 +206,8 @@ class SimulatorServer:
             if self.flight_start_us is None:
                 self.state = self.state._replace(time_us=self.state.time_us + self.plant.dt_us)
             else:
-                self.state = self.plant.step(self.state, self.command)
+                self.state = self.plant.step(self.state,
+                                             self.faults.apply(self.command, self.state))
             states.append(self.state)
         self.steps += 1
         return states
@@ -293,7 +297,7 @@ class SimulatorServer:
                         self.command = self._command_from(controls, mode)
                 if wait <= 0.0:
                     break
-            self.state = self.plant.step(self.state, self.command)
+            self.state = self.plant.step(self.state, self.faults.apply(self.command, self.state))
             physics_steps += 1
             if self.feed is not None:  # every sample as it is due, not once a period
                 data = self._datagram([self.state])
