@@ -218,8 +218,11 @@ def _axis(t: Any, where: str) -> Axis:
         num = t.get("num")
         if isinstance(num, bool) or not isinstance(num, int) or num < 1:
             raise CampaignError(f"{where}: key 'num': expected an integer >= 1, got {num!r}")
-        values = [float(v) for v in np.linspace(_number(t, "start", where),
-                                                _number(t, "stop", where), num)]
+        lo, hi = _number(t, "start", where), _number(t, "stop", where)
+        values = [float(v) for v in np.linspace(lo, hi, num)]
+        if (all(isinstance(t[k], int) for k in ("start", "stop"))
+                and all(v.is_integer() for v in values)):
+            values = [int(v) for v in values]  # whole steps between integers: integers
     if len(keys) == 1:
         rows = tuple((v,) for v in values)
     else:
@@ -732,6 +735,9 @@ def run_campaign(campaign: Campaign, out: Path, *, scheduler: str | None = None,
                    time.monotonic() - t0, sim_s, n_workers, link)
 
 
+CONNECT_TIMEOUT_S = 10.0  # to a running scheduler
+
+
 class _client:
     """A Dask client on the given scheduler, or on a LocalCluster started (and stopped)
     here: worker processes with one thread each, everything on 127.0.0.1."""
@@ -748,7 +754,7 @@ class _client:
         from dask.distributed import Client, LocalCluster
 
         if self.scheduler is not None:
-            self.client = Client(self.scheduler, timeout=30)
+            self.client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
             return self.client, self.client.dashboard_link
         n = self.workers or default_workers()
         # The dashboard's own warnings (a busy port: it takes another) are not errors.
