@@ -423,9 +423,8 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     rate = outcome.sim_s / outcome.wall_s if outcome.wall_s > 0 and flown else 0.0
     print(f"campaign {campaign.name}: {len(outcome.rows)}/{outcome.total} runs recorded "
           f"({outcome.recorded_before} before, {flown} flown now in {outcome.wall_s:.1f} s "
-          f"on {outcome.workers} workers: {rate:.1f} simulated s per wall s)")
-    if outcome.dashboard:
-        print(f"  dashboard was {outcome.dashboard}")
+          f"on {outcome.workers} workers after {outcome.startup_s:.1f} s of start-up: "
+          f"{rate:.1f} simulated s per wall s)")
     for index, why in sorted(outcome.failed.items()):
         print(f"gcs campaign: run {index} not executed: {why}", file=sys.stderr)
     print(f"  wrote {args.out / 'results.csv'}"
