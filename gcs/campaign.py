@@ -55,6 +55,7 @@ import math
 import os
 import re
 import shutil
+import socket
 import sys
 import tempfile
 import time
@@ -469,7 +470,7 @@ def _write_scenario_files(data: dict[str, Any], folder: Path) -> Path:
 
 def warm_worker() -> None:
     """Import what a run needs, once per worker, before the runs are timed."""
-    import gcs.inprocess  # noqa: F401
+    import gcs.inprocess
     import gcs.process_run  # noqa: F401
 
 
@@ -480,6 +481,7 @@ def _through_processes(spec: RunSpec, folder: Path) -> dict[str, Any]:
     """A run through sitl and fcu processes on their own free ports (or Zenoh prefix), in
     its run folder or a temporary one."""
     from common.config import load_scenario
+    from common.links import free_port
     from gcs.process_run import RunError, run_processes
 
     where = folder if spec.keep != "none" else Path(tempfile.mkdtemp(prefix="campaign-run-"))
@@ -487,9 +489,12 @@ def _through_processes(spec: RunSpec, folder: Path) -> dict[str, Any]:
     try:
         scenario = load_scenario(_write_scenario_files(spec.data, where))
         for attempt in range(1, START_ATTEMPTS + 1):
+            # Zenoh: the run's own prefix and its own router on a free port (a router
+            # shared by concurrent runs would stop with the run that started it).
+            router = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
             try:
                 metrics = run_processes(scenario, where, transport=spec.transport,
-                                        zenoh_url=f"zenoh:campaign/{spec.run_id}")
+                                        zenoh_url=f"zenoh:campaign/{spec.run_id}@{router}")
                 break
             except RunError:
                 if attempt == START_ATTEMPTS:

@@ -24,6 +24,7 @@ Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -169,6 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="local cluster's worker processes (default: one per CPU)")
     cp.add_argument("--dashboard", default="127.0.0.1:8787", metavar="HOST:PORT|none",
                     help="local cluster's dashboard address (default 127.0.0.1:8787)")
+    cp.add_argument("--transport", choices=("in-process", "udp", "tcp", "zenoh"),
+                    default=None, help="override the campaign file's transport")
     cp.add_argument("--no-report", action="store_true", help="no summary.md and figures")
     rt = sub.add_parser("router", help="a Zenoh router for the machine (or for others)")
     rt.add_argument("--listen", action="append", metavar="ENDPOINT",
@@ -398,6 +401,8 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
     try:
         campaign = load_campaign(args.campaign)
+        if args.transport is not None:
+            campaign = dataclasses.replace(campaign, transport=args.transport)
         if args.workers is not None and args.workers < 1:
             raise CampaignError("--workers needs at least 1")
         if args.scheduler is not None and args.workers is not None:
