@@ -53,7 +53,7 @@ key = "actuator_fault[0].index"
 values = [1, 4]
 [[axis]]
 key = "actuator_fault[0].start_s"
-values = [0.5]
+values = [0.501]  # inside a control period: the fault starts at a physics step
 """
 
 
