@@ -52,7 +52,7 @@ def pseudo_inverse(a: np.ndarray) -> np.ndarray:
 @njit
 def wrap_pi(x: float) -> float:
     """Wrap an angle to (-pi, pi]."""
-    y = np.fmod(x + math.pi, TWO_PI)
+    y = float(np.fmod(x + math.pi, TWO_PI))
     if y <= 0.0:
         y += TWO_PI
     return y - math.pi
@@ -190,7 +190,7 @@ class ActuatorFigures(NamedTuple):
 
 
 @njit
-def speed_lead(rate_rad_s2: float, figures: ActuatorFigures) -> float:
+def speed_lead(rate_rad_s2: float, figures: tuple[float, float, float]) -> float:
     """Lead that makes a first-order rotor lag follow a speed ramp of `rate_rad_s2` without
     steady lag: tau * w', with tau_up on a rising ramp and tau_down on a falling one.
 
@@ -205,7 +205,7 @@ def speed_lead(rate_rad_s2: float, figures: ActuatorFigures) -> float:
 
 @njit
 def rotor_period(w0: float, c: float, dt_s: float,
-                 figures: ActuatorFigures) -> tuple[float, float]:
+                 figures: tuple[float, float, float]) -> tuple[float, float]:
     """A rotor at w0 under a command c held for dt_s (MODEL.md 2's lag, exact): its speed at
     the end and its mean of w^2 (thrust) over the period. The speed moves towards c without
     crossing it, so one constant applies all period: w(t) = c + d e^(-t/tau), d = w0 - c, and
@@ -218,7 +218,7 @@ def rotor_period(w0: float, c: float, dt_s: float,
 
 
 @njit
-def tilt_lead(rate_rad_s: float, dt_s: float, figures: ActuatorFigures) -> float:
+def tilt_lead(rate_rad_s: float, dt_s: float, figures: tuple[float, float, float]) -> float:
     """Lead of a tilt command for a tilt ramp of `rate_rad_s`, held for dt_s per command.
 
     A servo limited to R = rate_max moves from its last command to the next, Delta = r dt

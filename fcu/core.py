@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from common.config import Gains, VehicleConfig
-from common.jit import njit
+from common.jit import njit, warm_up
 from fcu import allocation as al
 from fcu import tracker as tr
 from fcu.allocation import AllocationResult, Allocator, LagCompensator, allocation_result
@@ -133,6 +133,15 @@ class FlightCore:
         self.compensator.bind(self.params[_P_LAG:PARAMS_SIZE], self.state[_S_LAG:STATE_SIZE])
         self.inp = np.zeros(IN_SIZE)
         self.out = np.zeros(OUT_SIZE)
+        warm_up("fcu.core", self._warm_up)
+
+    def _warm_up(self) -> None:
+        """The fused step once, on copies of the buffers, at identity with lag compensation
+        (compiles or loads the kernels before the first control period)."""
+        inp = np.zeros(IN_SIZE)
+        inp[3] = inp[16] = 1.0  # q = q_d = identity
+        inp[32], inp[33] = self.dt_s, 1.0
+        core_kernel(inp, self.params.copy(), self.state.copy(), np.zeros(OUT_SIZE))
 
     def set_lag_compensation(self, on: bool) -> None:
         """CA_LAG_COMP: lead the commands for the actuators' lag (on) or not; switching on

@@ -121,12 +121,12 @@ def nominal_wrench(vehicle: VehicleConfig, ref: Reference) -> tuple[Vec3, Vec3]:
     m, g, inertia = vehicle.mass_kg, vehicle.gravity_m_s2, vehicle.inertia_diag_kg_m2
     parts = (ref.q_enu_flu, ref.a_enu_m_s2, ref.omega_flu_rad_s, ref.omega_dot_flu_rad_s2)
     if all(isinstance(c, float) for p in parts for c in p):
-        return nominal_wrench_kernel(m, g, inertia, *parts)  # type: ignore[arg-type]
+        return nominal_wrench_kernel(m, g, inertia, *parts)
     n = max(np.size(c) for p in parts for c in p)
     q, a, w, wd = (np.array([np.broadcast_to(np.asarray(c, dtype=np.float64), (n,))
                              for c in p]) for p in parts)
     rows = _nominal_wrench_rows(m, g, inertia, q, a, w, wd)
-    return (rows[0], rows[1], rows[2]), (rows[3], rows[4], rows[5])  # type: ignore[return-value]
+    return (rows[0], rows[1], rows[2]), (rows[3], rows[4], rows[5])
 
 
 def _hover(ref: Reference) -> Reference:

@@ -71,8 +71,10 @@ class TrackerOutput(NamedTuple):
 
 
 @njit
-def reference_twist(ref: Reference) -> tuple[DualVec, DualVec]:
-    """xi_d = omega_d + eps R_d^T p_d' and its derivative (MODEL.md section 4)."""
+def reference_twist(ref: tuple[Vec3, Quat, Vec3, Vec3, Vec3, Vec3]
+                    ) -> tuple[DualVec, DualVec]:
+    """xi_d = omega_d + eps R_d^T p_d' and its derivative (MODEL.md section 4), for a
+    Reference (or the tuple of its fields)."""
     q = ref[1]
     w = ref[4]
     v_b = q_rotate_inv(q, ref[2])

@@ -33,7 +33,7 @@ import numpy as np
 
 from common.config import Scenario, VehicleConfig
 from common.geometry import rotor_frames
-from common.jit import njit
+from common.jit import njit, warm_up
 from sitl.disturbance import Disturbance, disturbance_kernel
 
 Vec3 = tuple[float, float, float]
@@ -383,6 +383,15 @@ class Plant:
         self.params = pp
         self.disturbance = disturbance or Disturbance()
         self.last_rk4_steps = 0  # RK4 steps of the last `step` (one per smooth piece)
+        warm_up("sitl.plant", self._warm_up)
+
+    def _warm_up(self) -> None:
+        """Two steps at rest in the air (compiles or loads the step kernels before the
+        first control period)."""
+        row = state_row(self.initial_state((0.0, 0.0, 1.0), on_ground=False))
+        self.step_rows(row, np.zeros(12), np.empty((2, STATE_SIZE)))
+        step_kernel(self.params, self._disturbance.table, row, np.zeros(12),
+                    np.empty(STATE_SIZE))
 
     @property
     def disturbance(self) -> Disturbance:
