@@ -34,8 +34,9 @@ def _sources_hash() -> str:
     return digest.hexdigest()[:16]
 
 
-if not numba.config.CACHE_DIR:  # NUMBA_CACHE_DIR set by the user wins
-    numba.config.CACHE_DIR = str(ROOT / "__pycache__" / f"numba-{_sources_hash()}")
+_config: Any = numba.config
+if not _config.CACHE_DIR:  # NUMBA_CACHE_DIR set by the user wins
+    _config.CACHE_DIR = str(ROOT / "__pycache__" / f"numba-{_sources_hash()}")
 
 F = TypeVar("F", bound=Callable[..., Any])
 
