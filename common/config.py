@@ -565,16 +565,18 @@ def scenario_from_data(data: dict[str, Any], path: str | Path) -> Scenario:
         return (base / table.string(key)).resolve()
 
     def part(key: str, table: _Table, parse: Any, load: Any) -> tuple[Any, str]:
+        """(a loader, the file or INLINE): files are read after the scenario's own keys
+        are checked, so a scenario's own mistake is the one reported first."""
         value = table.raw(key)
         if isinstance(value, dict):
-            return parse(value, f"{source}: table '{table.prefix}{key}'"), INLINE
+            return (lambda: parse(value, f"{source}: table '{table.prefix}{key}'")), INLINE
         file = rel(key, table)
-        return load(file), str(file)
+        return (lambda: load(file)), str(file)
 
-    vehicle, vehicle_path = part("vehicle", t, parse_vehicle, load_vehicle)
+    vehicle_of, vehicle_path = part("vehicle", t, parse_vehicle, load_vehicle)
     gains_t = t.table("gains")
-    gains_pid, pid_path = part("pid", gains_t, parse_gains, load_gains)
-    gains_pd, pd_path = part("pd", gains_t, parse_gains, load_gains)
+    pid_of, pid_path = part("pid", gains_t, parse_gains, load_gains)
+    pd_of, pd_path = part("pd", gains_t, parse_gains, load_gains)
     gains_t.finish()
 
     rates = t.table("rates", {})
@@ -638,14 +640,14 @@ def scenario_from_data(data: dict[str, Any], path: str | Path) -> Scenario:
     params_t.finish()
     sensor_faults = _parse_sensor_faults(t.tables("sensor_fault"))
     check_sensor_faults(sensor_faults, sensors, f"{source}: key 'sensor_fault'")
-    actuator_faults = _parse_actuator_faults(t.tables("actuator_fault"), vehicle.n_rotors)
+    actuator_faults = _parse_actuator_faults(t.tables("actuator_fault"), N_ROTORS)
     scenario = Scenario(
         name=t.string("name"),
         duration_s=t.number("duration_s", lo=0.0, lo_open=True),
         controller=t.string("controller", "pid", choices=CONTROLLERS),
-        vehicle=vehicle,
-        gains_pid=gains_pid,
-        gains_pd=gains_pd,
+        vehicle=vehicle_of(),
+        gains_pid=pid_of(),
+        gains_pd=pd_of(),
         control_rate_hz=control_hz,
         physics_rate_hz=physics_hz,
         ideal_actuators=ideal,

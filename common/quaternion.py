@@ -4,9 +4,10 @@ by the flight core (`fcu.dualquat` builds dual quaternions on it), the frame con
 on purpose: an independent plant is what makes closed-loop tests mean something.
 
 Conventions: Hamilton product, scalar first (w, x, y, z); q rotates body vectors into the
-world frame. Scalar code on tuples: these run in the 500 Hz control step, where many small
-numpy calls would cost more than the arithmetic. `angle_between_rows` is the vectorised
-attitude error for logs.
+world frame. Scalar code on float tuples, compiled by numba (`common.jit.njit`): the flight
+core's kernels (tracker, allocation) call these at machine speed, and Python callers get
+tuples back. Written with indexing only, so tuples, lists and arrays of floats all work.
+`angle_between_rows` is the vectorised attitude error for logs.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from common.jit import njit
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -28,12 +31,14 @@ _SMALL_ANGLE = 1e-6
 # ----------------------------------------------------------------------------------------
 
 
+@njit
 def cross(a: Vec3, b: Vec3) -> Vec3:
-    ax, ay, az = a
-    bx, by, bz = b
+    ax, ay, az = a[0], a[1], a[2]
+    bx, by, bz = b[0], b[1], b[2]
     return (ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx)
 
 
+@njit
 def norm3(a: Vec3) -> float:
     return math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
 
@@ -43,33 +48,38 @@ def norm3(a: Vec3) -> float:
 # ----------------------------------------------------------------------------------------
 
 
+@njit
 def q_mul(a: Quat, b: Quat) -> Quat:
     """Hamilton product a b."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
+    aw, ax, ay, az = a[0], a[1], a[2], a[3]
+    bw, bx, by, bz = b[0], b[1], b[2], b[3]
     return (aw * bw - ax * bx - ay * by - az * bz,
             aw * bx + ax * bw + ay * bz - az * by,
             aw * by - ax * bz + ay * bw + az * bx,
             aw * bz + ax * by - ay * bx + az * bw)
 
 
+@njit
 def q_conj(q: Quat) -> Quat:
     return (q[0], -q[1], -q[2], -q[3])
 
 
+@njit
 def q_norm(q: Quat) -> float:
     return math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
 
 
+@njit
 def q_normalize(q: Quat) -> Quat:
     n = q_norm(q)
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
+@njit
 def q_rotate(q: Quat, v: Vec3) -> Vec3:
     """R(q) v for a unit quaternion (body to world when q = q_wb)."""
-    w, x, y, z = q
-    vx, vy, vz = v
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    vx, vy, vz = v[0], v[1], v[2]
     # t = 2 (q_vec x v); v' = v + w t + q_vec x t
     tx = 2.0 * (y * vz - z * vy)
     ty = 2.0 * (z * vx - x * vz)
@@ -79,14 +89,16 @@ def q_rotate(q: Quat, v: Vec3) -> Vec3:
             vz + w * tz + x * ty - y * tx)
 
 
+@njit
 def q_rotate_inv(q: Quat, v: Vec3) -> Vec3:
     """R(q)^T v (world to body when q = q_wb)."""
     return q_rotate((q[0], -q[1], -q[2], -q[3]), v)
 
 
+@njit
 def q_exp(rotvec: Vec3) -> Quat:
     """Unit quaternion of the rotation vector `rotvec` (angle |rotvec| about its axis)."""
-    rx, ry, rz = rotvec
+    rx, ry, rz = rotvec[0], rotvec[1], rotvec[2]
     half = 0.5 * math.sqrt(rx * rx + ry * ry + rz * rz)
     if half < _SMALL_ANGLE:
         k = 0.5 * (1.0 - half * half / 6.0)  # sin(half)/(2 half) by its series
@@ -95,13 +107,14 @@ def q_exp(rotvec: Vec3) -> Quat:
     return (math.cos(half), k * rx, k * ry, k * rz)
 
 
+@njit
 def q_log(q: Quat) -> Vec3:
     """Rotation vector theta n of a unit quaternion, theta in [0, pi] (shortest path).
 
     q and -q give the same result except at theta = pi exactly, where n and -n are equal
     rotations.
     """
-    w, x, y, z = q
+    w, x, y, z = q[0], q[1], q[2], q[3]
     if w < 0.0:
         w, x, y, z = -w, -x, -y, -z
     s = math.sqrt(x * x + y * y + z * z)
@@ -112,6 +125,7 @@ def q_log(q: Quat) -> Vec3:
     return (k * x, k * y, k * z)
 
 
+@njit
 def q_angle(q: Quat) -> float:
     """Rotation angle of q in [0, pi], robust near 0 and pi."""
     s = math.sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3])

@@ -4,6 +4,10 @@ rotor speeds and tilts (eq. 29) -> unwrapped tilts (Algorithm 1, corrected; MODE
 `LagCompensator` (parameter CA_LAG_COMP) leads those commands for the actuators the paper
 takes as ideal: the rotors' first-order speed lag (unequal up and down time constants) and
 the tilt servos' rate limit, by feed-forward from the reference's nominal wrench.
+
+The per-step maths are compiled kernels (numba) on flat float arrays (`allocate_kernel`,
+`lead_kernel`, `apply_kernel`); the classes keep their parameters and state in arrays that
+the flight core's fused step uses directly, and their methods are the typed Python face.
 """
 
 from __future__ import annotations
@@ -15,9 +19,16 @@ import numpy as np
 
 from common.config import VehicleConfig
 from common.geometry import rotor_frames
+from common.jit import njit
 from fcu.dualquat import Vec3, cross
 
 TWO_PI = 2.0 * math.pi
+N_ROTORS = 6  # the hexarotor (common.config refuses other counts)
+ALLOC_PARAMS_SIZE = 74  # A^+ row-major (12 x 6), w_max, hold speed
+ALLOC_OUT_SIZE = 31  # Omega (12), speeds (6), raw tilts (6), tilts (6), saturated
+LAG_PARAMS_SIZE = 78  # A^+ (72), w_max, lead_max, hold speed, tau_up, tau_down, tilt rate
+LAG_STATE_SIZE = 26  # last nominal speeds (6), tilts (6), has_last, model (6), has_model,
+# mean bias (6)
 
 
 def allocation_matrix(vehicle: VehicleConfig) -> np.ndarray:
@@ -38,9 +49,10 @@ def pseudo_inverse(a: np.ndarray) -> np.ndarray:
     return a.T @ np.linalg.inv(a @ a.T)
 
 
+@njit
 def wrap_pi(x: float) -> float:
     """Wrap an angle to (-pi, pi]."""
-    y = math.fmod(x + math.pi, TWO_PI)
+    y = float(np.fmod(x + math.pi, TWO_PI))
     if y <= 0.0:
         y += TWO_PI
     return y - math.pi
@@ -52,6 +64,50 @@ class AllocationResult(NamedTuple):
     tilt_raw_rad: tuple[float, ...]  # atan2 of eq. (29), in [-pi, pi]
     tilt_rad: tuple[float, ...]  # continuous tilt after unwrapping
     saturated: bool
+
+
+@njit
+def solve_kernel(ap: np.ndarray, w6: np.ndarray, om: np.ndarray) -> None:
+    """Omega = A^+ [f; tau] (eq. 28), minimum-norm, into om (12)."""
+    fx, fy, fz, tx, ty, tz = w6[0], w6[1], w6[2], w6[3], w6[4], w6[5]
+    for r in range(2 * N_ROTORS):
+        j = 6 * r
+        om[r] = (ap[j] * fx + ap[j + 1] * fy + ap[j + 2] * fz + ap[j + 3] * tx
+                 + ap[j + 4] * ty + ap[j + 5] * tz)
+
+
+@njit
+def allocate_kernel(ap: np.ndarray, w6: np.ndarray, tilt: np.ndarray, out: np.ndarray) -> None:
+    """Eqs. (28-29) with saturation and the corrected unwrap (Algorithm 1, MODEL.md 2) for
+    the wrench w6 = [f; tau]; `tilt` (6) is the unwrapped tilt, advanced in place; `out`
+    gets ALLOC_OUT_SIZE values."""
+    solve_kernel(ap, w6, out[0:12])
+    w_max, hold = ap[72], ap[73]
+    saturated = 0.0
+    for i in range(N_ROTORS):
+        lat, ver = out[2 * i], out[2 * i + 1]
+        w = math.sqrt(math.sqrt(lat * lat + ver * ver))
+        raw = math.atan2(lat, ver)
+        out[18 + i] = raw
+        if w > w_max:
+            w = w_max
+            saturated = 1.0
+        if w >= hold:
+            tilt[i] += wrap_pi(raw - tilt[i])
+        out[12 + i] = w
+        out[24 + i] = tilt[i]
+    out[30] = saturated
+
+
+def allocation_result(out: list[float]) -> AllocationResult:
+    """AllocationResult of allocate_kernel's ALLOC_OUT_SIZE values (as Python floats)."""
+    return AllocationResult(tuple(out[0:12]), tuple(out[12:18]), tuple(out[18:24]),
+                            tuple(out[24:30]), out[30] != 0.0)
+
+
+def pinv_params(vehicle: VehicleConfig) -> np.ndarray:
+    """A^+ of the vehicle, row-major (72 values)."""
+    return np.ascontiguousarray(pseudo_inverse(allocation_matrix(vehicle))).reshape(-1)
 
 
 class Allocator:
@@ -67,40 +123,40 @@ class Allocator:
         self.n = vehicle.n_rotors
         self.matrix = allocation_matrix(vehicle)
         self.pinv = pseudo_inverse(self.matrix)
-        self._rows = tuple(tuple(float(x) for x in row) for row in self.pinv)
         self.speed_max = vehicle.rotor_speed_max_rad_s
         self.hold_speed = hold_speed_rad_s
-        self.tilt: list[float] = list(initial_tilt_rad or (0.0,) * self.n)
+        self.params = np.concatenate([pinv_params(vehicle), [self.speed_max, hold_speed_rad_s]])
+        self.tilt_array = np.array(initial_tilt_rad or (0.0,) * self.n, dtype=np.float64)
+
+    @property
+    def tilt(self) -> list[float]:
+        """The unwrapped tilts (a copy)."""
+        return list(self.tilt_array.tolist())
 
     def reset(self, tilt_rad: tuple[float, ...]) -> None:
-        self.tilt = list(tilt_rad)
+        self.tilt_array[:] = tilt_rad
+
+    def bind(self, params: np.ndarray, tilt: np.ndarray) -> None:
+        """Keep parameters and tilts in these arrays from now on (views of a fused step's
+        buffers), with their current values."""
+        params[:] = self.params
+        tilt[:] = self.tilt_array
+        self.params, self.tilt_array = params, tilt
 
     def solve(self, force_flu_n: Vec3, torque_flu_nm: Vec3) -> tuple[float, ...]:
         """Omega = A^+ [f; tau] (eq. 28), minimum-norm."""
-        fx, fy, fz = force_flu_n
-        tx, ty, tz = torque_flu_nm
-        return tuple(a * fx + b * fy + c * fz + d * tx + e * ty + f * tz
-                     for a, b, c, d, e, f in self._rows)
+        om = np.empty(2 * self.n)
+        solve_kernel(self.params, np.array((*force_flu_n, *torque_flu_nm), dtype=np.float64),
+                     om)
+        return tuple(om.tolist())
 
     def allocate(self, force_flu_n: Vec3, torque_flu_nm: Vec3) -> AllocationResult:
         """Rotor speeds and continuous tilts for a desired body wrench (eqs. 28-29)."""
-        om = self.solve(force_flu_n, torque_flu_nm)
-        speeds, raws = [], []
-        tilt = self.tilt
-        w_max, hold = self.speed_max, self.hold_speed
-        saturated = False
-        for i in range(self.n):
-            lat, ver = om[2 * i], om[2 * i + 1]
-            w = math.sqrt(math.sqrt(lat * lat + ver * ver))
-            raw = math.atan2(lat, ver)
-            raws.append(raw)
-            if w > w_max:
-                w = w_max
-                saturated = True
-            if w >= hold:
-                tilt[i] += wrap_pi(raw - tilt[i])
-            speeds.append(w)
-        return AllocationResult(om, tuple(speeds), tuple(raws), tuple(tilt), saturated)
+        out = np.empty(ALLOC_OUT_SIZE)
+        allocate_kernel(self.params,
+                        np.array((*force_flu_n, *torque_flu_nm), dtype=np.float64),
+                        self.tilt_array, out)
+        return allocation_result(out.tolist())
 
 
 def hover_command(vehicle: VehicleConfig) -> tuple[tuple[float, ...], tuple[float, ...]]:
@@ -133,7 +189,8 @@ class ActuatorFigures(NamedTuple):
                    vehicle.tilt_rate_max_rad_s)
 
 
-def speed_lead(rate_rad_s2: float, figures: ActuatorFigures) -> float:
+@njit
+def speed_lead(rate_rad_s2: float, figures: tuple[float, float, float]) -> float:
     """Lead that makes a first-order rotor lag follow a speed ramp of `rate_rad_s2` without
     steady lag: tau * w', with tau_up on a rising ramp and tau_down on a falling one.
 
@@ -143,23 +200,25 @@ def speed_lead(rate_rad_s2: float, figures: ActuatorFigures) -> float:
     it delays by tau (undone by the lead) and whose periodic part keeps its mean (DC gain 1),
     so the lagged rotor's mean over each period equals the held command of an ideal rotor.
     """
-    return (figures.tau_up_s if rate_rad_s2 > 0.0 else figures.tau_down_s) * rate_rad_s2
+    return (figures[0] if rate_rad_s2 > 0.0 else figures[1]) * rate_rad_s2
 
 
+@njit
 def rotor_period(w0: float, c: float, dt_s: float,
-                 figures: ActuatorFigures) -> tuple[float, float]:
+                 figures: tuple[float, float, float]) -> tuple[float, float]:
     """A rotor at w0 under a command c held for dt_s (MODEL.md 2's lag, exact): its speed at
     the end and its mean of w^2 (thrust) over the period. The speed moves towards c without
     crossing it, so one constant applies all period: w(t) = c + d e^(-t/tau), d = w0 - c, and
     mean w^2 = c^2 + 2 c d tau (1 - E) / dt + d^2 tau (1 - E^2) / (2 dt), E = e^(-dt/tau)."""
-    tau = figures.tau_up_s if c > w0 else figures.tau_down_s
+    tau = figures[0] if c > w0 else figures[1]
     e = math.exp(-dt_s / tau)
     d = w0 - c
     k = tau / dt_s
     return c + d * e, c * c + 2.0 * c * d * k * (1.0 - e) + 0.5 * d * d * k * (1.0 - e * e)
 
 
-def tilt_lead(rate_rad_s: float, dt_s: float, figures: ActuatorFigures) -> float:
+@njit
+def tilt_lead(rate_rad_s: float, dt_s: float, figures: tuple[float, float, float]) -> float:
     """Lead of a tilt command for a tilt ramp of `rate_rad_s`, held for dt_s per command.
 
     A servo limited to R = rate_max moves from its last command to the next, Delta = r dt
@@ -168,7 +227,7 @@ def tilt_lead(rate_rad_s: float, dt_s: float, figures: ActuatorFigures) -> float
     much further ahead makes the mean equal again; a ramp at or beyond R (the servo moves at
     its limit all period) is led by the most a period's mean can gain, R dt / 2.
     """
-    r_max = figures.tilt_rate_max_rad_s
+    r_max = figures[2]
     if abs(rate_rad_s) >= r_max:
         return math.copysign(0.5 * r_max * dt_s, rate_rad_s)
     return rate_rad_s * abs(rate_rad_s) * dt_s / (2.0 * r_max)
@@ -210,50 +269,52 @@ class LagCompensator:
 
     def __init__(self, vehicle: VehicleConfig, hold_speed_rad_s: float = 1.0) -> None:
         self.figures = ActuatorFigures.of(vehicle)
-        pinv = pseudo_inverse(allocation_matrix(vehicle))
-        self.pinv_rows = tuple(tuple(float(x) for x in row) for row in pinv)
         self.speed_max = vehicle.rotor_speed_max_rad_s
         self.lead_max = LEAD_MAX_SHARE * self.speed_max
         self.hold_speed = hold_speed_rad_s
-        self._last: tuple[tuple[float, ...], tuple[float, ...]] | None = None
-        self.model: list[float] | None = None  # the rotors' speeds by the internal model
-        self.mean_bias: list[float] = [0.0] * vehicle.n_rotors  # b_i
+        self.params = np.concatenate([pinv_params(vehicle), [
+            self.speed_max, self.lead_max, hold_speed_rad_s, *self.figures]])
+        self.state = np.zeros(LAG_STATE_SIZE)
 
     def reset(self) -> None:
         """Forget the last nominal speeds and tilts (the next period is not led), the rotor
         model and the mean correction."""
-        self._last = None
-        self.model = None
-        self.mean_bias = [0.0] * len(self.mean_bias)
+        self.state[:] = 0.0
+
+    def bind(self, params: np.ndarray, state: np.ndarray) -> None:
+        """Keep parameters and state in these arrays from now on (views of a fused step's
+        buffers), with their current values."""
+        params[:] = self.params
+        state[:] = self.state
+        self.params, self.state = params, state
+
+    @property
+    def model(self) -> list[float] | None:
+        """The rotors' speeds by the internal model (None before the first command)."""
+        return self.state[13:19].tolist() if self.state[19] else None
+
+    @property
+    def mean_bias(self) -> list[float]:
+        """The mean correction b_i."""
+        return list(self.state[20:26].tolist())
 
     def nominal(self, force_flu_n: Vec3,
                 torque_flu_nm: Vec3) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """Speeds and atan2 tilts of a (nominal) wrench by eqs. (28-29), without unwrapping."""
-        fx, fy, fz = force_flu_n
-        tx, ty, tz = torque_flu_nm
-        om = [a * fx + b * fy + c * fz + d * tx + e * ty + f * tz
-              for a, b, c, d, e, f in self.pinv_rows]
-        lat, ver = om[0::2], om[1::2]
-        return (tuple(math.sqrt(math.sqrt(x * x + y * y)) for x, y in zip(lat, ver, strict=True)),
-                tuple(math.atan2(x, y) for x, y in zip(lat, ver, strict=True)))
+        speeds, tilts = np.empty(N_ROTORS), np.empty(N_ROTORS)
+        nominal_kernel(self.params, np.array((*force_flu_n, *torque_flu_nm), dtype=np.float64),
+                       speeds, tilts)
+        return tuple(speeds.tolist()), tuple(tilts.tolist())
 
     def lead(self, force_ff_n: Vec3, torque_ff_nm: Vec3,
              dt_s: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """Speed and tilt leads for this period from the reference's nominal wrench (zero on
         the first period after `reset`, and for a period without positive dt)."""
-        speeds, tilts = self.nominal(force_ff_n, torque_ff_nm)
-        last, self._last = self._last, (speeds, tilts)
-        n = len(speeds)
-        if last is None or not dt_s > 0.0:
-            return (0.0,) * n, (0.0,) * n
-        fig, lim, hold = self.figures, self.lead_max, self.hold_speed
-        w_lead, a_lead = [], []
-        for w, a, w0, a0 in zip(speeds, tilts, *last, strict=True):
-            lw = speed_lead((w - w0) / dt_s, fig)
-            w_lead.append(lim if lw > lim else (-lim if lw < -lim else lw))
-            a_lead.append(tilt_lead(wrap_pi(a - a0) / dt_s, dt_s, fig)
-                          if w >= hold and w0 >= hold else 0.0)
-        return tuple(w_lead), tuple(a_lead)
+        w_lead, a_lead = np.empty(N_ROTORS), np.empty(N_ROTORS)
+        lead_kernel(self.params, self.state,
+                    np.array((*force_ff_n, *torque_ff_nm), dtype=np.float64), float(dt_s),
+                    w_lead, a_lead)
+        return tuple(w_lead.tolist()), tuple(a_lead.tolist())
 
     def apply(self, plain: AllocationResult, w_lead: tuple[float, ...],
               a_lead: tuple[float, ...], dt_s: float) -> AllocationResult:
@@ -261,22 +322,75 @@ class LagCompensator:
         speeds clamped to [0, w_max] (the lead does not count as saturation), tilts led only
         where the plain one is not held; then the rotor model and the correction advance by
         the period dt_s under the speeds sent."""
-        w_max, hold = self.speed_max, self.hold_speed
-        bias = self.mean_bias
-        speeds = []
-        for w, lw, b in zip(plain.speed_rad_s, w_lead, bias, strict=True):
-            c = w + lw - b
-            speeds.append(0.0 if c < 0.0 else (w_max if c > w_max else c))
-        model = self.model if self.model is not None else list(speeds)
-        if dt_s > 0.0:
-            fig, lim, gain = self.figures, self.lead_max, dt_s / MEAN_TAU_S
-            for i, (w, c) in enumerate(zip(plain.speed_rad_s, speeds, strict=True)):
-                model[i], mean_sq = rotor_period(model[i], c, dt_s, fig)
-                if 0.0 < c < w_max and w >= hold:
-                    b = bias[i] + gain * (mean_sq - w * w) / (2.0 * w)
-                    bias[i] = lim if b > lim else (-lim if b < -lim else b)
-        self.model = model
-        tilts = tuple(a + (la if w >= hold else 0.0)
-                      for a, la, w in zip(plain.tilt_rad, a_lead, plain.speed_rad_s,
-                                          strict=True))
-        return plain._replace(speed_rad_s=tuple(speeds), tilt_rad=tilts)
+        speeds, tilts = np.empty(N_ROTORS), np.empty(N_ROTORS)
+        apply_kernel(self.params, self.state,
+                     np.array(plain.speed_rad_s, dtype=np.float64),
+                     np.array(plain.tilt_rad, dtype=np.float64),
+                     np.array(w_lead, dtype=np.float64), np.array(a_lead, dtype=np.float64),
+                     float(dt_s), speeds, tilts)
+        return plain._replace(speed_rad_s=tuple(speeds.tolist()),
+                              tilt_rad=tuple(tilts.tolist()))
+
+
+@njit
+def nominal_kernel(cp: np.ndarray, w6: np.ndarray, speeds: np.ndarray,
+                   tilts: np.ndarray) -> None:
+    """Speeds and atan2 tilts of a (nominal) wrench w6 by eqs. (28-29), not unwrapped."""
+    om = np.empty(2 * N_ROTORS)
+    solve_kernel(cp, w6, om)
+    for i in range(N_ROTORS):
+        x, y = om[2 * i], om[2 * i + 1]
+        speeds[i] = math.sqrt(math.sqrt(x * x + y * y))
+        tilts[i] = math.atan2(x, y)
+
+
+@njit
+def lead_kernel(cp: np.ndarray, cs: np.ndarray, w6_ff: np.ndarray, dt_s: float,
+                w_lead: np.ndarray, a_lead: np.ndarray) -> None:
+    """LagCompensator.lead on the compensator's arrays (parameters cp, state cs)."""
+    speeds, tilts = np.empty(N_ROTORS), np.empty(N_ROTORS)
+    nominal_kernel(cp, w6_ff, speeds, tilts)
+    had_last = cs[12] != 0.0
+    w_last, a_last = cs[0:6].copy(), cs[6:12].copy()
+    cs[0:6] = speeds
+    cs[6:12] = tilts
+    cs[12] = 1.0
+    if not had_last or not dt_s > 0.0:
+        w_lead[:] = 0.0
+        a_lead[:] = 0.0
+        return
+    lim, hold = cp[73], cp[74]
+    fig = (cp[75], cp[76], cp[77])
+    for i in range(N_ROTORS):
+        w, a, w0, a0 = speeds[i], tilts[i], w_last[i], a_last[i]
+        lw = speed_lead((w - w0) / dt_s, fig)
+        w_lead[i] = lim if lw > lim else (-lim if lw < -lim else lw)
+        a_lead[i] = (tilt_lead(wrap_pi(a - a0) / dt_s, dt_s, fig)
+                     if w >= hold and w0 >= hold else 0.0)
+
+
+@njit
+def apply_kernel(cp: np.ndarray, cs: np.ndarray, plain_speeds: np.ndarray,
+                 plain_tilts: np.ndarray, w_lead: np.ndarray, a_lead: np.ndarray, dt_s: float,
+                 speeds: np.ndarray, tilts: np.ndarray) -> None:
+    """LagCompensator.apply on the compensator's arrays: led speeds and tilts out."""
+    w_max, lim, hold = cp[72], cp[73], cp[74]
+    fig = (cp[75], cp[76], cp[77])
+    bias = cs[20:26]
+    model = cs[13:19]
+    for i in range(N_ROTORS):
+        c = plain_speeds[i] + w_lead[i] - bias[i]
+        speeds[i] = 0.0 if c < 0.0 else (w_max if c > w_max else c)
+    if cs[19] == 0.0:
+        model[:] = speeds
+        cs[19] = 1.0
+    if dt_s > 0.0:
+        gain = dt_s / MEAN_TAU_S
+        for i in range(N_ROTORS):
+            w, c = plain_speeds[i], speeds[i]
+            model[i], mean_sq = rotor_period(model[i], c, dt_s, fig)
+            if 0.0 < c < w_max and w >= hold:
+                b = bias[i] + gain * (mean_sq - w * w) / (2.0 * w)
+                bias[i] = lim if b > lim else (-lim if b < -lim else b)
+    for i in range(N_ROTORS):
+        tilts[i] = plain_tilts[i] + (a_lead[i] if plain_speeds[i] >= hold else 0.0)

@@ -244,8 +244,8 @@ class Pipeline:
         result = self.core.step(state, ref, dt_s)
         alloc = result.allocation
         err = math.dist(state.p_enu_m, ref.p_enu_m)
-        finite = all(math.isfinite(v) for v in (*state.p_enu_m, *state.q_enu_flu,
-                                                *state.v_flu_m_s, *state.omega_flu_rad_s))
+        finite = all(map(math.isfinite, (*state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
+                                          *state.omega_flu_rad_s)))
         if diverged(err, finite, self.settings.divergence_m):
             self.failsafe = "diverged"
             cmd.say(SEVERITY_EMERGENCY, f"failsafe: diverged ({err:.1f} m)", DIVERGED)

@@ -54,11 +54,11 @@ class Resent(NamedTuple):
 def state_from_odometry(odo: Odometry) -> VehicleState | None:
     """ENU/FLU state of an ODOMETRY, or None when no vehicle can be in it."""
     values = (*odo.p_ned_m, *odo.q_ned_frd, *odo.v_frd_m_s, *odo.omega_frd_rad_s)
-    if not all(math.isfinite(v) for v in values):
+    if not all(map(math.isfinite, values)):
         return None
     q_norm = math.sqrt(sum(c * c for c in odo.q_ned_frd))
-    if abs(q_norm - 1.0) > 0.01 or max(abs(c) for c in odo.p_ned_m) > MAX_POSITION_M or \
-            max(abs(c) for c in (*odo.v_frd_m_s, *odo.omega_frd_rad_s)) > MAX_RATE:
+    if abs(q_norm - 1.0) > 0.01 or max(map(abs, odo.p_ned_m)) > MAX_POSITION_M or \
+            max(map(abs, (*odo.v_frd_m_s, *odo.omega_frd_rad_s))) > MAX_RATE:
         return None
     return VehicleState(ned_to_enu(odo.p_ned_m), q_ned_frd_to_enu_flu(odo.q_ned_frd),
                         frd_to_flu(odo.v_frd_m_s), frd_to_flu(odo.omega_frd_rad_s))
@@ -73,10 +73,10 @@ def pose_from_odometry(odo: Odometry) -> PoseInput | None:
     """The external pose of an ODOMETRY (ENU/FLU, its capture time and variances), or None
     when its position or attitude is not finite or the quaternion not a unit one."""
     values = (*odo.p_ned_m, *odo.q_ned_frd)
-    if not all(math.isfinite(v) for v in values):
+    if not all(map(math.isfinite, values)):
         return None
     if abs(math.sqrt(sum(c * c for c in odo.q_ned_frd)) - 1.0) > 0.01 or \
-            max(abs(c) for c in odo.p_ned_m) > MAX_POSITION_M:
+            max(map(abs, odo.p_ned_m)) > MAX_POSITION_M:
         return None
     cov = odo.pose_covariance
     pos_var, att_var = cov[0], cov[15]

@@ -28,8 +28,7 @@ class Supervisor:
     def gate(self, armed: bool, speed_rad_s: tuple[float, ...],
              tilt_rad: tuple[float, ...]) -> GateOutput:
         """What reaches the actuators for a command and the arming state."""
-        finite = all(math.isfinite(x) for x in speed_rad_s) and all(
-            math.isfinite(x) for x in tilt_rad)
+        finite = all(map(math.isfinite, speed_rad_s)) and all(map(math.isfinite, tilt_rad))
         if not finite:
             return GateOutput(self.zero, self.held_tilt, "non-finite actuator command")
         self.held_tilt = tuple(tilt_rad)

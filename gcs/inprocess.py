@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import struct
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from common.config import Scenario, check_sensor_faults
+from common.jit import compile_time_s
 from common.mavlink import encoder, pack, parser
 from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
 from common.outcome import Event, diverged
@@ -58,8 +60,11 @@ from sitl.plant import (
     ActuatorCommand,
     Plant,
     PlantState,
+    command_row,
     initial_state,
     rotate_inv,
+    state_of_row,
+    state_row,
     truth_row,
 )
 from sitl.sensor_feed import SensorFeed
@@ -162,9 +167,17 @@ def through_wire_item(item: MissionItem) -> MissionItem:
     return item_from_message(msg)
 
 
+_ODOMETRY_FLOATS = struct.Struct("<13f")  # ODOMETRY's x .. yawspeed fields, as on the wire
+
+
 def state_for_fcu(s: PlantState) -> VehicleState:
-    """What the FCU sees: the state as ODOMETRY carries it, float32 and all."""
-    state = state_from_odometry(through_wire_odometry(odometry(s)))
+    """What the FCU sees: the state as ODOMETRY carries it, float32 and all (the fields the
+    state is read from, rounded as through_wire_odometry rounds them)."""
+    odo = odometry(s)
+    v = _ODOMETRY_FLOATS.unpack(_ODOMETRY_FLOATS.pack(*odo.p_ned_m, *odo.q_ned_frd,
+                                                      *odo.v_frd_m_s, *odo.omega_frd_rad_s))
+    state = state_from_odometry(odo._replace(p_ned_m=v[0:3], q_ned_frd=v[3:7],
+                                             v_frd_m_s=v[7:10], omega_frd_rad_s=v[10:13]))
     if state is None:
         raise InProcessError(f"t = {s.time_us * 1e-6:.3f} s: the plant's state is not one "
                              "the FCU accepts")
@@ -267,10 +280,13 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
     clock = time.perf_counter
     logged_events = 0
     input_us = 0.0  # the estimator's work on the period's inputs
+    row = state_row(state)  # the plant's state as its kernels keep it (a truth row)
+    substates = np.empty((substeps, len(TRUTH_COLUMNS)))
+    rows: list[np.ndarray] = []
     wall0 = clock()
     while True:
         t_us = state.time_us
-        truth_rows.append(truth_row(state))
+        rows.append(row)
         if truth_log is not None:
             truth_log.record(state)
         if feed is None:
@@ -291,25 +307,34 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
         wire = through_wire_controls(actuator_controls(out, vehicle.rotor_speed_max_rad_s,
                                                        lockstep=True))
         command = command_from_controls(wire.controls, wire.mode, vehicle, state)
-        states = []
-        for _ in range(substeps):
-            state = plant.step(state, faults.apply(command, state))
-            states.append(state)
+        if faults.active:  # a failed actuator is told what it is told at each physics step
+            for k in range(substeps):
+                applied = faults.apply(command, state_of_row(row.tolist()))
+                plant.step_rows(row, command_row(applied), substates[k:k + 1])
+                row = substates[k].copy()
+        else:
+            plant.step_rows(row, command_row(command), substates)
+            row = substates[-1].copy()
         if feed is not None:
+            states = [state_of_row(r) for r in substates.tolist()]
+            state = states[-1]
             input_us = feed_fcu(pipeline, feed.period(states))
+        else:
+            state = state_of_row(row.tolist())
     wall = clock() - wall0
 
     if truth_log is not None and onboard_log is not None:
         onboard_log.events(cmd.events[logged_events:])
         truth_log.close()
         onboard_log.close()
-    truth = np.array(truth_rows, dtype=float)
+    truth = np.vstack([np.array(truth_rows, dtype=float).reshape(-1, len(TRUTH_COLUMNS)),
+                       *rows])
     onboard = np.array(onboard_rows, dtype=float).reshape(-1, len(ONBOARD_COLUMNS))
     events = list(cmd.events)
     metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
                             events=events, wall_time_s=wall, transport="in-process",
                             lockstep=True, mission_completed=cmd.mission_done,
-                            flight_start_us=start_us)
+                            flight_start_us=start_us, compile_time_s=compile_time_s())
     metrics["fcu_params"] = scenario_params(scenario)
     return RunResult(metrics, truth, onboard, events,
                      bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None)

@@ -98,14 +98,16 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
                   events: Sequence[Event], wall_time_s: float, transport: str,
                   lockstep: bool, deadline_misses: int = 0, mission_completed: bool = False,
                   stopped: str = "", reached_end: bool | None = None,
-                  flight_start_us: int = 0) -> dict[str, Any]:
+                  flight_start_us: int = 0,
+                  compile_time_s: float | None = None) -> dict[str, Any]:
     """metrics.json content (DESIGN.md section 6), status included (common.outcome).
 
     `reached_end`: whether the run reached its end; None reads it from the truth log (the
     simulator's clock is the flight's in lockstep and in-process). `flight_start_us`: the
     flight's start on that clock (after the estimator's alignment with a sensor profile):
     the scenario's duration counts from it. `stopped`: "timeout" or
-    "aborted" when the runner could not finish.
+    "aborted" when the runner could not finish. `compile_time_s` (in-process runs): the
+    seconds its process spent compiling or loading the numba kernels, outside wall_time_s.
 
     Errors compare the plant's true pose with the desired pose the FCU computed for the same
     control step (`join_logs`). A run diverges at the first joined sample that `diverged`
@@ -150,6 +152,7 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
         "transport": transport,
         "sim_time_s": sim_time_s,
         "wall_time_s": wall_time_s,
+        **({} if compile_time_s is None else {"compile_time_s": compile_time_s}),
         "real_time_factor": sim_time_s / wall_time_s if wall_time_s > 0 else 0.0,
         "control_rate_hz": scenario.control_rate_hz,
         "physics_rate_hz": scenario.physics_rate_hz,

@@ -1,26 +1,53 @@
-"""Body-frame (FLU) force and torque disturbances of the Case II profiles (MODEL.md 5)."""
+"""Body-frame (FLU) force and torque disturbances of the Case II profiles (MODEL.md 5).
+
+The terms are a flat table (`terms_table`, one row per term) that a compiled kernel
+(`disturbance_kernel`, numba) sums; the plant's step kernel calls it at its RK4 stage times.
+"""
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from common.config import DisturbanceTerm
+from common.jit import njit
 
 Vec3 = tuple[float, float, float]
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
+# One row per term: part (0 force, 1 torque), pulse (1) or sine (0), start_s, end_s,
+# omega_rad_s, phase_rad, amplitude x, y, z.
+TERM_SIZE = 9
 
 
-def _evaluate(terms: tuple[DisturbanceTerm, ...], t_s: float) -> Vec3:
-    x = y = z = 0.0
-    for term in terms:
-        if t_s < term.start_s or t_s >= term.end_s:
+def terms_table(force_terms: tuple[DisturbanceTerm, ...],
+                torque_terms: tuple[DisturbanceTerm, ...]) -> np.ndarray:
+    """The kernel's table of the terms, force terms first, each part in its order."""
+    rows = [(float(part), 1.0 if term.kind == "pulse" else 0.0, term.start_s, term.end_s,
+             term.omega_rad_s, term.phase_rad, *term.amplitude)
+            for part, terms in ((0, force_terms), (1, torque_terms)) for term in terms]
+    return np.array(rows, dtype=np.float64).reshape(-1, TERM_SIZE)
+
+
+@njit
+def disturbance_kernel(terms: np.ndarray, t_s: float) -> tuple[Vec3, Vec3]:
+    """(force_flu_n, torque_flu_nm) at time t_s (the scenario's clock): the sum of the pulse
+    terms active at t_s and of the sine terms amplitude sin(omega t + phase)."""
+    fx = fy = fz = tx = ty = tz = 0.0
+    for j in range(terms.shape[0]):
+        row = terms[j]
+        if t_s < row[2] or t_s >= row[3]:
             continue
-        k = 1.0 if term.kind == "pulse" else math.sin(term.omega_rad_s * t_s + term.phase_rad)
-        ax, ay, az = term.amplitude
-        x += k * ax
-        y += k * ay
-        z += k * az
-    return (x, y, z)
+        k = 1.0 if row[1] != 0.0 else math.sin(row[4] * t_s + row[5])
+        if row[0] == 0.0:
+            fx += k * row[6]
+            fy += k * row[7]
+            fz += k * row[8]
+        else:
+            tx += k * row[6]
+            ty += k * row[7]
+            tz += k * row[8]
+    return (fx, fy, fz), (tx, ty, tz)
 
 
 class Disturbance:
@@ -32,6 +59,7 @@ class Disturbance:
         self.force_terms = force_terms
         self.torque_terms = torque_terms
         self.t0_s = t0_s
+        self.table = terms_table(force_terms, torque_terms)
 
     def from_time(self, t0_s: float) -> Disturbance:
         """The same terms with the scenario's clock starting at t0_s."""
@@ -45,5 +73,4 @@ class Disturbance:
         """(force_flu_n, torque_flu_nm) at time t."""
         if not self.active:
             return _ZERO, _ZERO
-        t_s -= self.t0_s
-        return _evaluate(self.force_terms, t_s), _evaluate(self.torque_terms, t_s)
+        return disturbance_kernel(self.table, float(t_s) - self.t0_s)

@@ -1,0 +1,67 @@
+"""The one place numba is imported: `njit` compiles a function to machine code (nopython
+mode, no fastmath: IEEE arithmetic in the order written, so compiled and interpreted maths
+agree to the bit) and caches it on disk, so that a later process loads it instead of
+compiling it again. Typed for mypy: the decorated function keeps its signature.
+
+numba checks a cached kernel against its own source file only, while a kernel inlines the
+kernels it calls from other modules (the tracker's has the dual-quaternion algebra in it):
+an edit of `fcu/dualquat.py` would leave a stale tracker in the cache. So the cache lives in
+`__pycache__/numba-<hash>` at the project's root, the hash taken over every module that
+defines kernels (KERNEL_MODULES): any edit of one of them starts a fresh cache.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar, cast
+
+import numba
+
+ROOT = Path(__file__).resolve().parent.parent
+KERNEL_MODULES = ("common/jit.py", "common/quaternion.py", "fcu/dualquat.py",
+                  "fcu/tracker.py", "fcu/allocation.py", "fcu/feasibility.py", "fcu/core.py",
+                  "sitl/plant.py", "sitl/disturbance.py")
+
+
+def _sources_hash() -> str:
+    digest = hashlib.sha256()
+    for name in KERNEL_MODULES:
+        digest.update(name.encode())
+        digest.update((ROOT / name).read_bytes())
+    return digest.hexdigest()[:16]
+
+
+_config: Any = numba.config
+if not _config.CACHE_DIR:  # NUMBA_CACHE_DIR set by the user wins
+    _config.CACHE_DIR = str(ROOT / "__pycache__" / f"numba-{_sources_hash()}")
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def njit(fn: F) -> F:
+    """`numba.njit(cache=True)` with the signature of `fn` kept for the type checker."""
+    return cast(F, numba.njit(cache=True)(fn))
+
+
+_warmed: set[str] = set()
+_compile_s = [0.0]
+
+
+def warm_up(name: str, call: Callable[[], object]) -> None:
+    """Run `call` (kernels on sample inputs of their run-time types) once per process: its
+    first call compiles the kernels or loads them from the cache, which is timed here rather
+    than in the first control step."""
+    if name in _warmed:
+        return
+    _warmed.add(name)
+    t0 = time.perf_counter()
+    call()
+    _compile_s[0] += time.perf_counter() - t0
+
+
+def compile_time_s() -> float:
+    """Seconds this process spent in `warm_up` (compiling or loading kernels)."""
+    return _compile_s[0]
