@@ -14,6 +14,9 @@ refused and counted: a stream of them is state loss for the failsafe.
 from __future__ import annotations
 
 import math
+import select
+import statistics
+import time
 from typing import NamedTuple
 
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
@@ -23,13 +26,16 @@ from common.simlink import (
     LOCKSTEP_FLAG,
     MODE_ARMED,
     ODOMETRY_ID,
+    TIMESYNC_ID,
     ActuatorControls,
     FrameReader,
     HilSensor,
     Odometry,
     pack_actuator_controls,
+    pack_timesync,
     unpack_hil_sensor,
     unpack_odometry,
+    unpack_timesync,
 )
 from fcu.estimator import ImuInput, PoseInput
 from fcu.pipeline import StepOutput
@@ -38,6 +44,18 @@ from fcu.tracker import VehicleState
 MAX_POSITION_M = 1e6  # a state farther from the origin is refused as invalid
 MAX_RATE = 1e4  # m/s and rad/s: a state moving faster is refused as invalid
 CONTROLS = 16  # HIL_ACTUATOR_CONTROLS carries 16 floats
+
+
+class RoundTrips(NamedTuple):
+    """TIMESYNC round trips with the simulator (`SimBridge.round_trips`)."""
+
+    samples_us: list[float]
+    lost: int
+    other: list[tuple[object, bytes]]  # what else came meanwhile, to be handled as usual
+
+    @property
+    def median_us(self) -> float | None:
+        return statistics.median(self.samples_us) if len(self.samples_us) >= 10 else None
 
 
 class StateSample(NamedTuple):
@@ -169,6 +187,53 @@ class SimBridge:
             return None
         self.pose_us = odo.time_usec
         return pose
+
+    def round_trips(self, n: int, *, timeout_s: float = 0.05, max_lost: int = 3,
+                    budget_s: float = 3.0) -> RoundTrips:
+        """`n` round trips of a TIMESYNC request (MAVLink's round-trip message, 28 bytes on
+        the wire) to the simulator and its answer, one at a time on the simulator link's own
+        socket, waiting for each in `select` as any blocking receiver does: the transport's
+        round trip between the two processes, with the least work on either side (a
+        pre-built frame each way; the simulator answers before anything else).
+
+        Stops after `max_lost` requests without an answer within `timeout_s` (a simulator
+        that does not answer TIMESYNC) or after `budget_s`. Everything else that arrives
+        meanwhile is returned in `other`, in order, for the caller to handle."""
+        link = self.link
+        stream = link.is_stream
+        reader = FrameReader(stream)  # sees the bytes the bridge's reader will see later
+        samples: list[float] = []
+        other: list[tuple[object, bytes]] = []
+        lost = 0
+        clock = time.monotonic_ns
+        end = clock() + round(budget_s * 1e9)
+        while len(samples) < n and lost < max_lost and clock() < end:
+            self.seq = (self.seq + 1) & 0xFF
+            t0 = clock()
+            link.send(pack_timesync(0, t0, self.seq, self.system_id, self.component_id))
+            deadline = t0 + round(timeout_s * 1e9)
+            answered = False
+            while not answered:
+                left = deadline - clock()
+                if left <= 0 or not select.select(link.filenos(), [], [], left * 1e-9)[0]:
+                    break
+                for peer, data in link.recv():
+                    t1 = clock()
+                    frames, rejected = reader.feed(peer, data)
+                    only_answer = not stream and not rejected and len(frames) == 1
+                    for f in frames:
+                        if f.msg_id != TIMESYNC_ID or f.sysid != self.system_id:
+                            only_answer = False
+                            continue
+                        tc1, ts1 = unpack_timesync(f.payload)
+                        if tc1 != 0 and ts1 == t0 and not answered:
+                            samples.append((t1 - t0) * 1e-3)
+                            answered = True
+                    if not only_answer:
+                        other.append((peer, data))
+            if not answered:
+                lost += 1
+        return RoundTrips(samples, lost, other)
 
     def repeat(self, t_us: int) -> bool:
         """A state or sample taken before came again (lockstep): if it was answered, send
