@@ -272,7 +272,7 @@ class FlightController:
                     os.sched_yield()  # let a process that has work run on this core
                     continue
                 self.rx_ns = perf()
-                for peer, data in sim_link.recv():
+                for peer, data in sim_link.recv(1):  # one is ready; more: the next turn
                     self._on_sim_datagram(peer, data)
                 if self.rtt_probes:
                     self._measure_rtt()

@@ -71,12 +71,15 @@ class Resent(NamedTuple):
 
 def state_from_odometry(odo: Odometry) -> VehicleState | None:
     """ENU/FLU state of an ODOMETRY, or None when no vehicle can be in it."""
-    values = (*odo.p_ned_m, *odo.q_ned_frd, *odo.v_frd_m_s, *odo.omega_frd_rad_s)
-    if not all(math.isfinite(v) for v in values):
+    p, q, v, w = odo.p_ned_m, odo.q_ned_frd, odo.v_frd_m_s, odo.omega_frd_rad_s
+    # One sum for the finiteness of all 13 values: NaN and inf propagate through it, and a
+    # sum that overflows needs values far beyond the limits checked below anyway.
+    if not math.isfinite(sum(p) + sum(q) + sum(v) + sum(w)):
         return None
-    q_norm = math.sqrt(sum(c * c for c in odo.q_ned_frd))
-    if abs(q_norm - 1.0) > 0.01 or max(abs(c) for c in odo.p_ned_m) > MAX_POSITION_M or \
-            max(abs(c) for c in (*odo.v_frd_m_s, *odo.omega_frd_rad_s)) > MAX_RATE:
+    qw, qx, qy, qz = q
+    if abs(math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz) - 1.0) > 0.01 or \
+            max(abs(p[0]), abs(p[1]), abs(p[2])) > MAX_POSITION_M or \
+            max(abs(v[0]), abs(v[1]), abs(v[2]), abs(w[0]), abs(w[1]), abs(w[2])) > MAX_RATE:
         return None
     return VehicleState(ned_to_enu(odo.p_ned_m), q_ned_frd_to_enu_flu(odo.q_ned_frd),
                         frd_to_flu(odo.v_frd_m_s), frd_to_flu(odo.omega_frd_rad_s))
@@ -136,10 +139,11 @@ class SimBridge:
         """New inputs of our vehicle in a datagram, in order: valid states (exact state
         input), or IMU samples and poses (estimator); duplicates answered here."""
         frames, rejected = self.reader.feed(peer, data)
-        self.rejected_bytes += rejected
+        if rejected:
+            self.rejected_bytes += rejected
         out: list[StateSample | ImuInput | PoseInput | Resent] = []
         for f in frames:
-            if f.msg_id not in (ODOMETRY_ID, HIL_SENSOR_ID):
+            if f.msg_id != ODOMETRY_ID and f.msg_id != HIL_SENSOR_ID:
                 continue
             if f.sysid != self.system_id:
                 self.ignored_messages += 1  # another vehicle's simulator: not our state

@@ -45,7 +45,7 @@ from common.config import (
     load_scenario,
 )
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
-from common.links import LinkError, open_link, parse_url
+from common.links import RECV_BATCH, LinkError, open_link, parse_url
 from common.mavlink import MAV
 from common.parent import stop_with_parent
 from common.sensors_config import SensorProfile, resolve_sensor_profile
@@ -97,13 +97,16 @@ def command_from_controls(controls: tuple[float, ...], mode: int, vehicle: Vehic
     (zero unless SAFETY_ARMED), controls[n..2n) tilts; a value that is not finite means
     zero speed or the current tilt."""
     n = vehicle.n_rotors
-    w_max = vehicle.rotor_speed_max_rad_s
-    speeds = tuple(c * w_max if math.isfinite(c) else 0.0 for c in controls[:n])
-    tilts = tuple(c if math.isfinite(c) else state.tilt_rad[i]
-                  for i, c in enumerate(controls[n:2 * n]))
-    if not mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED:
+    isfinite = math.isfinite
+    if mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED:
+        w_max = vehicle.rotor_speed_max_rad_s
+        speeds = tuple([c * w_max if isfinite(c) else 0.0 for c in controls[:n]])
+    else:
         speeds = (0.0,) * n
-    return ActuatorCommand(speeds, tilts)
+    tilts = controls[n:2 * n]
+    if not isfinite(sum(tilts)):
+        tilts = tuple([c if isfinite(c) else t for c, t in zip(tilts, state.tilt_rad, strict=True)])
+    return ActuatorCommand(speeds, tuple(tilts))
 
 
 class SimulatorServer:
@@ -241,9 +244,9 @@ class SimulatorServer:
         self.steps += 1
         return states
 
-    def _answers(self) -> list[tuple[int, tuple[float, ...], int]]:
+    def _answers(self, limit: int = RECV_BATCH) -> list[tuple[int, tuple[float, ...], int]]:
         out = []
-        for peer, data in self.link.recv():
+        for peer, data in self.link.recv(limit):
             frames, rejected = self.reader.feed(peer, data)
             self.rejected_bytes += rejected
             for f in frames:
@@ -297,7 +300,8 @@ class SimulatorServer:
         while self.running:
             now = time.monotonic()
             idle = now - last_progress
-            if spin and idle < SPIN_S:  # the answer is microseconds away: poll for it
+            spinning = spin and idle < SPIN_S
+            if spinning:  # the answer is microseconds away: poll for it
                 if not select.select(fds, [], [], 0.0)[0]:
                     os.sched_yield()  # let a process that has work run on this core
                     continue
@@ -314,7 +318,7 @@ class SimulatorServer:
                         last_resend = time.monotonic()
                     continue
             rx_ns = perf()
-            answers = self._answers()
+            answers = self._answers(1 if spinning else RECV_BATCH)
             parsed_ns = perf()
             for time_usec, controls, mode in answers:
                 if time_usec != self.state.time_us or self._at_end():
