@@ -101,7 +101,9 @@ class FlightController:
         self.sim_heartbeat_due = 0.0
         self.last_sim_rx_s = time.monotonic()
         self.sim_silent = False
-        self.rtt_probes = rtt_probes  # TIMESYNC round trips at the simulator's first word
+        # TIMESYNC round trips at the simulator's first word; lockstep only (in real time the
+        # control loop must not stop for them)
+        self.rtt_probes = rtt_probes if lockstep else 0
         self.rtt: dict | None = None
         self.sim_heard = False
         self.stage_ns = dict.fromkeys(STAGES, 0)
@@ -401,8 +403,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="MAVLink 2 signing on the GCS links: sign telemetry, refuse unsigned "
                         "or wrongly signed input (key from `gcs keygen`)")
     p.add_argument("--rtt-probes", type=int, default=0, metavar="N",
-                   help="time N TIMESYNC round trips with the simulator when it is first "
-                        "heard (the link's round trip, in --stats; default 0: none)")
+                   help="lockstep: time N TIMESYNC round trips with the simulator when it is "
+                        "first heard (the link's round trip, in --stats; default 0: none)")
     return p
 
 
