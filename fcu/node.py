@@ -187,8 +187,7 @@ class FlightController:
     def _control_step(self, t_us: int, dt_s: float) -> None:
         """One control period; its compute time includes the estimator's work on the
         period's inputs (IMU samples and poses), spent as they arrived. The answer goes out
-        before the step is logged (the simulator works meanwhile); the log reaches the file
-        in housekeeping, every few milliseconds of wall time."""
+        before the step is logged and the log written (the simulator works meanwhile)."""
         perf = time.perf_counter_ns
         timed = self.lockstep and self.done_ns > 0 and self.pipeline.flight_started
         t0 = perf()
@@ -201,6 +200,7 @@ class FlightController:
         self.steps += 1
         if self.log is not None:
             self.log.step(out, step_us, t_us)
+            self._flush_log()  # in the file when the step returns (the answer went first)
         t3 = perf()
         if timed:
             ns = self.stage_ns

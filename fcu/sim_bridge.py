@@ -193,7 +193,7 @@ class SimBridge:
         return pose
 
     def round_trips(self, n: int, *, timeout_s: float = 0.05, max_lost: int = 3,
-                    budget_s: float = 3.0) -> RoundTrips:
+                    budget_s: float = 1.0) -> RoundTrips:
         """`n` round trips of a TIMESYNC request (MAVLink's round-trip message, 28 bytes on
         the wire) to the simulator and its answer, one at a time on the simulator link's own
         socket, waiting for each in `select` as any blocking receiver does: the transport's

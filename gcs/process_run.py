@@ -217,7 +217,9 @@ class _Flight:
         fcu = [py, "-m", "fcu.node", "--vehicle", sc.files["vehicle"], "--gains", gains,
                "--sim", p.sim_client, "--gcs", p.fcu_gcs, "--sysid", str(p.sysid),
                "--rate", str(sc.control_rate_hz), "--onboard-log", str(p.out / ONBOARD_LOG),
-               "--stats", str(p.out / "fcu_stats.json"), "--rtt-probes", str(RTT_PROBES)]
+               "--stats", str(p.out / "fcu_stats.json")]
+        if p.sim_client.startswith(("udpout:", "tcp:")):  # sockets: time the round trip
+            fcu += ["--rtt-probes", str(RTT_PROBES)]
         if not self.realtime:  # lockstep: the simulator itself stops at the end, exactly
             sitl += ["--end-time", repr(sc.duration_s)]
         else:
