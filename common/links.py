@@ -177,8 +177,10 @@ class Link:
     def is_stream(self) -> bool:
         return self.url.scheme in ("tcp", "tcpin", "serial")
 
-    def recv(self) -> list[tuple[object, bytes]]:
-        """Ready (peer, bytes) pairs; empty when nothing is waiting."""
+    def recv(self, limit: int = RECV_BATCH) -> list[tuple[object, bytes]]:
+        """Ready (peer, bytes) pairs, at most `limit` of them; empty when nothing is waiting.
+        (A caller that knows one is ready and wants no more asks for 1: a datagram socket
+        then does not try again only to be told that nothing is left.)"""
         raise NotImplementedError
 
     def send(self, data: bytes) -> None:
@@ -247,10 +249,10 @@ class UdpLink(Link):
     def fileno(self) -> int:
         return self.sock.fileno()
 
-    def recv(self) -> list[tuple[object, bytes]]:
+    def recv(self, limit: int = RECV_BATCH) -> list[tuple[object, bytes]]:
         out: list[tuple[object, bytes]] = []
         now = time.monotonic()
-        for _ in range(RECV_BATCH):
+        for _ in range(limit):
             try:
                 data, addr = self.sock.recvfrom(65535)
             except (BlockingIOError, InterruptedError):
@@ -457,13 +459,13 @@ class TcpClientLink(Link):
         raise LinkUnavailable(f"link '{self.url}': cannot connect to "
                               f"{self.address[0]}:{self.address[1]}: {why}")
 
-    def recv(self) -> list[tuple[object, bytes]]:
+    def recv(self, limit: int = RECV_BATCH) -> list[tuple[object, bytes]]:
         self._poll()
         if not self.connected:
             return []
         out: list[tuple[object, bytes]] = []
         assert self.sock is not None  # connected
-        for _ in range(RECV_BATCH):
+        for _ in range(limit):
             try:
                 data = self.sock.recv(65536)
             except (BlockingIOError, InterruptedError):
@@ -533,7 +535,7 @@ class TcpServerLink(Link):
     def filenos(self) -> list[int]:
         return [self.server.fileno(), *self.clients]
 
-    def recv(self) -> list[tuple[object, bytes]]:
+    def recv(self, limit: int = RECV_BATCH) -> list[tuple[object, bytes]]:
         for _ in range(RECV_BATCH):
             try:
                 conn, _ = self.server.accept()
@@ -550,7 +552,7 @@ class TcpServerLink(Link):
             self.clients[conn.fileno()] = conn
         out: list[tuple[object, bytes]] = []
         for fd, conn in list(self.clients.items()):
-            for _ in range(RECV_BATCH):
+            for _ in range(limit):
                 try:
                     data = conn.recv(65536)
                 except (BlockingIOError, InterruptedError):
@@ -655,13 +657,13 @@ class SerialLink(Link):
         self._reopen()
         return self.port.fileno() if self.port is not None else -1
 
-    def recv(self) -> list[tuple[object, bytes]]:
+    def recv(self, limit: int = RECV_BATCH) -> list[tuple[object, bytes]]:
         serial = _pyserial()
         self._reopen()
         out: list[tuple[object, bytes]] = []
         if self.port is None:
             return out
-        for _ in range(RECV_BATCH):
+        for _ in range(limit):
             try:
                 data = self.port.read(4096)
             except (serial.SerialException, OSError):

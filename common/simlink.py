@@ -33,10 +33,13 @@ except ImportError:  # pragma: no cover - pymavlink depends on fastcrc; keep a f
 _ODO = MAV.MAVLink_odometry_message
 _HAC = MAV.MAVLink_hil_actuator_controls_message
 _HIL = MAV.MAVLink_hil_sensor_message
+_TSY = MAV.MAVLink_timesync_message
 ODOMETRY_ID, HIL_ACTUATOR_CONTROLS_ID, HIL_SENSOR_ID = _ODO.id, _HAC.id, _HIL.id
+TIMESYNC_ID = _TSY.id
 _ODO_STRUCT = struct.Struct(_ODO.unpacker.format)
 _HAC_STRUCT = struct.Struct(_HAC.unpacker.format)
 _HIL_STRUCT = struct.Struct(_HIL.unpacker.format)
+_TSY_STRUCT = struct.Struct(_TSY.unpacker.format)  # tc1, ts1 (int64, ns)
 _HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sys, comp, id
 _ZERO_COV = (0.0,) * 21
 _NAN_COV = (float("nan"),) + (0.0,) * 20  # first element NaN: covariance unknown
@@ -97,13 +100,29 @@ class ActuatorControls(NamedTuple):
     flags: int
 
 
+_CRC_EXTRA_BYTES = [bytes([i]) for i in range(256)]
+_CRC_STRUCT = struct.Struct("<H")
+
+
 def _frame(msg_id: int, crc_extra: int, payload: bytes, seq: int, sysid: int,
            compid: int) -> bytes:
     payload = payload.rstrip(b"\x00") or b"\x00"
     header = _HEADER.pack(0xFD, len(payload), 0, 0, seq & 0xFF, sysid, compid,
                           msg_id & 0xFFFF, msg_id >> 16)
-    crc = _crc(bytes([crc_extra]), _crc(payload, _crc(header[1:])))
-    return header + payload + struct.pack("<H", crc)
+    body = header + payload
+    return body + _CRC_STRUCT.pack(_crc(_CRC_EXTRA_BYTES[crc_extra], _crc(body[1:])))
+
+
+def pack_timesync(tc1_ns: int, ts1_ns: int, seq: int, sysid: int, compid: int) -> bytes:
+    """TIMESYNC (MAVLink's round-trip message): a request has tc1 = 0 and ts1 = the
+    sender's clock; the answer carries tc1 = the responder's clock and ts1 echoed."""
+    return _frame(TIMESYNC_ID, _TSY.crc_extra, _TSY_STRUCT.pack(tc1_ns, ts1_ns), seq, sysid,
+                  compid)
+
+
+def unpack_timesync(payload: bytes) -> tuple[int, int]:
+    """(tc1, ts1) of a TIMESYNC payload (zero-extended, as `split_frames` returns it)."""
+    return _TSY_STRUCT.unpack_from(payload)
 
 
 def _odometry_payload(o: Odometry) -> bytes:
@@ -161,7 +180,7 @@ class Frame(NamedTuple):
     raw: bytes
 
 
-_HOT = {ODOMETRY_ID, HIL_ACTUATOR_CONTROLS_ID, HIL_SENSOR_ID}
+_HOT = {ODOMETRY_ID, HIL_ACTUATOR_CONTROLS_ID, HIL_SENSOR_ID, TIMESYNC_ID}
 # Every message of the dialect: (CRC_EXTRA as a byte, full payload length). A frame can be
 # checked only when its message is known: a header naming any other message is rejected
 # (byte by byte, as corruption), so that it cannot swallow the valid frames after it.

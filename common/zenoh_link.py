@@ -196,12 +196,12 @@ class ZenohLink(Link):
         """Samples waiting for recv()."""
         return len(self._queue)
 
-    def recv(self) -> list[tuple[object, bytes]]:
-        """At most RECV_BATCH samples, oldest first. While samples remain the pipe stays
-        readable, so the caller's `select` wakes again for them."""
+    def recv(self, limit: int = RECV_BATCH) -> list[tuple[object, bytes]]:
+        """At most `limit` (by default RECV_BATCH) samples, oldest first. While samples
+        remain the pipe stays readable, so the caller's `select` wakes again for them."""
         with self._qlock:
             q = self._queue
-            n = min(len(q), RECV_BATCH)
+            n = min(len(q), limit)
             out: list[tuple[object, bytes]] = [q.popleft() for _ in range(n)]
             if q:
                 if not self._poked:

@@ -50,12 +50,18 @@ HOUSEKEEPING_S = 0.002
 SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each state
 SIM_SILENT_S = 1.0  # lockstep: report a simulator silent this long (wall clock)
 MAX_DT_PERIODS = 5  # real time: the integrated period is clamped to this many periods
+# Per-step stages timed in lockstep flight (`stage_us` in the stats): waiting for the next
+# state (the simulator's work and the transport; housekeeping excluded), reading and
+# converting it, the pipeline's step, packing and sending the answer, the onboard log's
+# records, the link-facing housekeeping (telemetry, heartbeats, log writes) per step.
+STAGES = ("wait", "rx", "step", "tx", "log", "housekeeping")
 
 
 class FlightController:
     def __init__(self, pipeline: Pipeline, sim_url: str, gcs_urls: list[str], *,
                  system_id: int, lockstep: bool, home: Home, onboard_log: Path | None,
-                 stats_path: Path | None, signing_key: bytes | None = None) -> None:
+                 stats_path: Path | None, signing_key: bytes | None = None,
+                 rtt_probes: int = 0) -> None:
         self.pipeline = pipeline
         self.system_id = system_id
         self.lockstep = lockstep
@@ -95,6 +101,15 @@ class FlightController:
         self.sim_heartbeat_due = 0.0
         self.last_sim_rx_s = time.monotonic()
         self.sim_silent = False
+        # TIMESYNC round trips at the simulator's first word; lockstep only (in real time the
+        # control loop must not stop for them)
+        self.rtt_probes = rtt_probes if lockstep else 0
+        self.rtt: dict | None = None
+        self.sim_heard = False
+        self.stage_ns = dict.fromkeys(STAGES, 0)
+        self.timed_steps = 0
+        self.rx_ns = 0  # when the datagram being handled was read
+        self.done_ns = 0  # when the last control step's work (answer, log records) was done
         self._apply_params()
 
     def _flush_log(self) -> None:
@@ -124,7 +139,21 @@ class FlightController:
 
     # ------------------------------------------------------------------ simulator link
 
+    def _measure_rtt(self) -> None:
+        """The simulator link's round trip (TIMESYNC ping-pong), once, when the simulator
+        is first heard: before the flight, both processes otherwise idle."""
+        n, self.rtt_probes = self.rtt_probes, 0
+        rt = self.sim.round_trips(n)
+        median = rt.median_us
+        self.rtt = {"median_us": median, "samples": len(rt.samples_us), "lost": rt.lost,
+                    "p10_us": _quantile(rt.samples_us, 0.1),
+                    "p90_us": _quantile(rt.samples_us, 0.9)}
+        for peer, data in rt.other:
+            self._on_sim_datagram(peer, data)
+        self.last_sim_rx_s = time.monotonic()
+
     def _on_sim_datagram(self, peer: object, data: bytes) -> None:
+        self.sim_heard = True
         self.last_sim_rx_s = time.monotonic()
         pipe = self.pipeline
         for sample in self.sim.receive(peer, data):
@@ -157,16 +186,31 @@ class FlightController:
 
     def _control_step(self, t_us: int, dt_s: float) -> None:
         """One control period; its compute time includes the estimator's work on the
-        period's inputs (IMU samples and poses), spent as they arrived."""
-        t0 = time.perf_counter()
+        period's inputs (IMU samples and poses), spent as they arrived. The answer goes out
+        before the step is logged and the log written (the simulator works meanwhile)."""
+        perf = time.perf_counter_ns
+        timed = self.lockstep and self.done_ns > 0 and self.pipeline.flight_started
+        t0 = perf()
         out = self.pipeline.step(t_us, dt_s)
-        step_us = (time.perf_counter() - t0) * 1e6 + self.input_us
+        t1 = perf()
+        step_us = (t1 - t0) * 1e-3 + self.input_us
         self.input_us = 0.0
         self.sim.send(out)
+        t2 = perf()
         self.steps += 1
         if self.log is not None:
             self.log.step(out, step_us, t_us)
-            self._flush_log()
+            self._flush_log()  # in the file when the step returns (the answer went first)
+        t3 = perf()
+        if timed:
+            ns = self.stage_ns
+            ns["wait"] += self.rx_ns - self.done_ns
+            ns["rx"] += t0 - self.rx_ns
+            ns["step"] += t1 - t0
+            ns["tx"] += t2 - t1
+            ns["log"] += t3 - t2
+            self.timed_steps += 1
+        self.done_ns = t3 if self.lockstep and self.pipeline.flight_started else 0
 
     # ------------------------------------------------------------------ housekeeping
 
@@ -218,9 +262,27 @@ class FlightController:
         sim_link = self.sim.link
         links = [(-1, sim_link), *enumerate(self.server.links[i].link
                                             for i in range(len(self.server.links)))]
+        c = self.pipeline.commander
+        perf = time.perf_counter_ns
+        fast = self.lockstep and sim_link.spin
         while self.running:
-            fds = {fd: entry for entry in links for fd in entry[1].filenos()}
             now = time.monotonic()
+            if fast and now - self.last_sim_rx_s < SPIN_S and now < next_housekeeping:
+                # Lockstep, the next state microseconds away: poll the simulator link alone
+                # (the GCS links wait for the housekeeping, at most HOUSEKEEPING_S).
+                if not select.select(sim_link.filenos(), [], [], 0.0)[0]:
+                    os.sched_yield()  # let a process that has work run on this core
+                    continue
+                self.rx_ns = perf()
+                for peer, data in sim_link.recv(1):  # one is ready; more: the next turn
+                    self._on_sim_datagram(peer, data)
+                if self.rtt_probes:
+                    self._measure_rtt()
+                if c.events or c.mission_events:
+                    self._timed_housekeeping(time.monotonic())
+                    next_housekeeping = time.monotonic() + HOUSEKEEPING_S
+                continue
+            fds = {fd: entry for entry in links for fd in entry[1].filenos()}
             wake = min(self.server.next_due(), next_housekeeping + 0.05)
             if not self.lockstep:
                 wake = min(wake, next_tick)
@@ -233,12 +295,15 @@ class FlightController:
                 continue
             if not readable and timeout == 0.0:
                 os.sched_yield()  # polling: let a process that has work run on this core
+            self.rx_ns = perf()
             for index, link in {fds[fd] for fd in readable}:
                 for peer, data in link.recv():
                     if index < 0:
                         self._on_sim_datagram(peer, data)
                     else:
                         self.server.on_datagram(index, peer, data, time.monotonic())
+            if self.rtt_probes and self.sim_heard:
+                self._measure_rtt()
             now = time.monotonic()
             if not self.lockstep and now >= next_tick:
                 late = now - next_tick
@@ -251,11 +316,20 @@ class FlightController:
                 last_tick = now
                 self.time_us = round((now - self.boot_s) * 1e6)
                 self._control_step(self.time_us, dt_s)
-            c = self.pipeline.commander
             if now >= next_housekeeping or c.events or c.mission_events:
                 # Link-facing work at most every few ms: the lockstep path stays lean.
-                self._housekeeping(now)
+                self._timed_housekeeping(now)
                 next_housekeeping = now + HOUSEKEEPING_S
+
+    def _timed_housekeeping(self, now: float) -> None:
+        if not self.done_ns:
+            self._housekeeping(now)
+            return
+        t0 = time.perf_counter_ns()
+        self._housekeeping(now)
+        spent = time.perf_counter_ns() - t0
+        self.stage_ns["housekeeping"] += spent
+        self.done_ns += spent  # not waiting meanwhile
 
     def stats(self) -> dict:
         pipe, server, sim = self.pipeline, self.server, self.sim
@@ -270,6 +344,10 @@ class FlightController:
                 "mission_completed": pipe.commander.mission_done,
                 "saturated_steps": pipe.saturated_steps,
                 "lockstep": self.lockstep,
+                "sim_rtt": self.rtt,
+                "timed_steps": self.timed_steps,
+                "stage_us": {k: v / max(self.timed_steps, 1) * 1e-3
+                             for k, v in self.stage_ns.items()},
                 "events": [e.as_json() for e in self.events]}
 
     def close(self) -> None:
@@ -287,6 +365,13 @@ class FlightController:
             os.replace(tmp, self.stats_path)
         for link in (self.sim.link, *(gl.link for gl in self.server.links)):
             link.close()
+
+
+def _quantile(samples: list[float], q: float) -> float | None:
+    if not samples:
+        return None
+    ordered = sorted(samples)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 def _home(text: str) -> Home:
@@ -317,6 +402,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--signing-key", metavar="FILE",
                    help="MAVLink 2 signing on the GCS links: sign telemetry, refuse unsigned "
                         "or wrongly signed input (key from `gcs keygen`)")
+    p.add_argument("--rtt-probes", type=int, default=0, metavar="N",
+                   help="lockstep: time N TIMESYNC round trips with the simulator when it is "
+                        "first heard (the link's round trip, in --stats; default 0: none)")
     return p
 
 
@@ -330,6 +418,8 @@ def main(argv: list[str] | None = None) -> int:
             check_output_path(option, path)
         if not 1 <= args.rate <= 1000:
             raise ConfigError(f"--rate: expected 1..1000 Hz, got {args.rate}")
+        if not 0 <= args.rtt_probes <= 100_000:
+            raise ConfigError(f"--rtt-probes: expected 0..100000, got {args.rtt_probes}")
         if not 1 <= args.sysid <= 254:
             raise ConfigError(f"--sysid: expected 1..254, got {args.sysid}")
         pipeline = Pipeline(load_vehicle(args.vehicle), load_gains(args.gains), args.rate)
@@ -337,7 +427,8 @@ def main(argv: list[str] | None = None) -> int:
         fc = FlightController(pipeline, args.sim, args.gcs or list(DEFAULT_GCS),
                               system_id=args.sysid, lockstep=not args.realtime,
                               home=args.home, onboard_log=args.onboard_log,
-                              stats_path=args.stats, signing_key=key)
+                              stats_path=args.stats, signing_key=key,
+                              rtt_probes=args.rtt_probes)
     except LinkError as exc:  # 2: bad URL, busy port, missing device; 1: peer not there
         print(f"fcu: {exc}", file=sys.stderr)
         return exc.exit_code

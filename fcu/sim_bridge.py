@@ -14,6 +14,9 @@ refused and counted: a stream of them is state loss for the failsafe.
 from __future__ import annotations
 
 import math
+import select
+import statistics
+import time
 from typing import NamedTuple
 
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
@@ -23,13 +26,16 @@ from common.simlink import (
     LOCKSTEP_FLAG,
     MODE_ARMED,
     ODOMETRY_ID,
+    TIMESYNC_ID,
     ActuatorControls,
     FrameReader,
     HilSensor,
     Odometry,
     pack_actuator_controls,
+    pack_timesync,
     unpack_hil_sensor,
     unpack_odometry,
+    unpack_timesync,
 )
 from fcu.estimator import ImuInput, PoseInput
 from fcu.pipeline import StepOutput
@@ -38,6 +44,18 @@ from fcu.tracker import VehicleState
 MAX_POSITION_M = 1e6  # a state farther from the origin is refused as invalid
 MAX_RATE = 1e4  # m/s and rad/s: a state moving faster is refused as invalid
 CONTROLS = 16  # HIL_ACTUATOR_CONTROLS carries 16 floats
+
+
+class RoundTrips(NamedTuple):
+    """TIMESYNC round trips with the simulator (`SimBridge.round_trips`)."""
+
+    samples_us: list[float]
+    lost: int
+    other: list[tuple[object, bytes]]  # what else came meanwhile, to be handled as usual
+
+    @property
+    def median_us(self) -> float | None:
+        return statistics.median(self.samples_us) if len(self.samples_us) >= 10 else None
 
 
 class StateSample(NamedTuple):
@@ -53,12 +71,15 @@ class Resent(NamedTuple):
 
 def state_from_odometry(odo: Odometry) -> VehicleState | None:
     """ENU/FLU state of an ODOMETRY, or None when no vehicle can be in it."""
-    values = (*odo.p_ned_m, *odo.q_ned_frd, *odo.v_frd_m_s, *odo.omega_frd_rad_s)
-    if not all(map(math.isfinite, values)):
+    p, q, v, w = odo.p_ned_m, odo.q_ned_frd, odo.v_frd_m_s, odo.omega_frd_rad_s
+    # One sum for the finiteness of all 13 values: NaN and inf propagate through it, and a
+    # sum that overflows needs values far beyond the limits checked below anyway.
+    if not math.isfinite(sum(p) + sum(q) + sum(v) + sum(w)):
         return None
-    q_norm = math.sqrt(sum(c * c for c in odo.q_ned_frd))
-    if abs(q_norm - 1.0) > 0.01 or max(map(abs, odo.p_ned_m)) > MAX_POSITION_M or \
-            max(map(abs, (*odo.v_frd_m_s, *odo.omega_frd_rad_s))) > MAX_RATE:
+    qw, qx, qy, qz = q
+    if abs(math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz) - 1.0) > 0.01 or \
+            max(abs(p[0]), abs(p[1]), abs(p[2])) > MAX_POSITION_M or \
+            max(abs(v[0]), abs(v[1]), abs(v[2]), abs(w[0]), abs(w[1]), abs(w[2])) > MAX_RATE:
         return None
     return VehicleState(ned_to_enu(odo.p_ned_m), q_ned_frd_to_enu_flu(odo.q_ned_frd),
                         frd_to_flu(odo.v_frd_m_s), frd_to_flu(odo.omega_frd_rad_s))
@@ -118,10 +139,11 @@ class SimBridge:
         """New inputs of our vehicle in a datagram, in order: valid states (exact state
         input), or IMU samples and poses (estimator); duplicates answered here."""
         frames, rejected = self.reader.feed(peer, data)
-        self.rejected_bytes += rejected
+        if rejected:
+            self.rejected_bytes += rejected
         out: list[StateSample | ImuInput | PoseInput | Resent] = []
         for f in frames:
-            if f.msg_id not in (ODOMETRY_ID, HIL_SENSOR_ID):
+            if f.msg_id != ODOMETRY_ID and f.msg_id != HIL_SENSOR_ID:
                 continue
             if f.sysid != self.system_id:
                 self.ignored_messages += 1  # another vehicle's simulator: not our state
@@ -169,6 +191,53 @@ class SimBridge:
             return None
         self.pose_us = odo.time_usec
         return pose
+
+    def round_trips(self, n: int, *, timeout_s: float = 0.05, max_lost: int = 3,
+                    budget_s: float = 1.0) -> RoundTrips:
+        """`n` round trips of a TIMESYNC request (MAVLink's round-trip message, 28 bytes on
+        the wire) to the simulator and its answer, one at a time on the simulator link's own
+        socket, waiting for each in `select` as any blocking receiver does: the transport's
+        round trip between the two processes, with the least work on either side (a
+        pre-built frame each way; the simulator answers before anything else).
+
+        Stops after `max_lost` requests without an answer within `timeout_s` (a simulator
+        that does not answer TIMESYNC) or after `budget_s`. Everything else that arrives
+        meanwhile is returned in `other`, in order, for the caller to handle."""
+        link = self.link
+        stream = link.is_stream
+        reader = FrameReader(stream)  # sees the bytes the bridge's reader will see later
+        samples: list[float] = []
+        other: list[tuple[object, bytes]] = []
+        lost = 0
+        clock = time.monotonic_ns
+        end = clock() + round(budget_s * 1e9)
+        while len(samples) < n and lost < max_lost and clock() < end:
+            self.seq = (self.seq + 1) & 0xFF
+            t0 = clock()
+            link.send(pack_timesync(0, t0, self.seq, self.system_id, self.component_id))
+            deadline = t0 + round(timeout_s * 1e9)
+            answered = False
+            while not answered:
+                left = deadline - clock()
+                if left <= 0 or not select.select(link.filenos(), [], [], left * 1e-9)[0]:
+                    break
+                for peer, data in link.recv():
+                    t1 = clock()
+                    frames, rejected = reader.feed(peer, data)
+                    only_answer = not stream and not rejected and len(frames) == 1
+                    for f in frames:
+                        if f.msg_id != TIMESYNC_ID or f.sysid != self.system_id:
+                            only_answer = False
+                            continue
+                        tc1, ts1 = unpack_timesync(f.payload)
+                        if tc1 != 0 and ts1 == t0 and not answered:
+                            samples.append((t1 - t0) * 1e-3)
+                            answered = True
+                    if not only_answer:
+                        other.append((peer, data))
+            if not answered:
+                lost += 1
+        return RoundTrips(samples, lost, other)
 
     def repeat(self, t_us: int) -> bool:
         """A state or sample taken before came again (lockstep): if it was answered, send

@@ -93,6 +93,32 @@ def estimation_error(truth_columns: Sequence[str], truth_j: np.ndarray,
             "attitude_rad": error_stats(attitude_error_rad(q_e, q))}
 
 
+def link_timing(metrics: dict[str, Any], fcu_stats: dict[str, Any],
+                sitl_stats: dict[str, Any], transport: str, *,
+                lockstep: bool) -> dict[str, Any]:
+    """The lockstep path's timing in a run through processes: the wall time per control step
+    (`step_wall_us`), the simulator link's round trip that the FCU timed before the flight
+    (TIMESYNC ping-pong between the two processes, median: `link_rtt_us`, and as
+    `udp_rtt_us` on UDP), their ratio `step_per_rtt`, and where a step's wall time goes
+    (`step_stages_us`: each process's stages, means per step, from their stats)."""
+    samples = int(metrics.get("samples") or 0)
+    wall = float(metrics.get("wall_time_s") or 0.0)
+    step_us = wall / samples * 1e6 if samples and lockstep else None
+    rtt = (fcu_stats.get("sim_rtt") or {}).get("median_us")
+    out: dict[str, Any] = {"step_wall_us": step_us, "link_rtt_us": rtt,
+                           "step_per_rtt": step_us / rtt if step_us and rtt else None}
+    if transport == "udp":
+        out["udp_rtt_us"] = rtt
+    stages = {}
+    if fcu_stats.get("stage_us"):
+        stages["fcu"] = fcu_stats["stage_us"]
+    if sitl_stats.get("stage_us"):
+        stages["sitl"] = sitl_stats["stage_us"]
+    if stages:
+        out["step_stages_us"] = stages
+    return out
+
+
 def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.ndarray,
                   onboard_columns: Sequence[str], onboard: np.ndarray, *,
                   events: Sequence[Event], wall_time_s: float, transport: str,

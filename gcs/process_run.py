@@ -30,7 +30,7 @@ from common.parent import child_env
 from common.ulog import ULogError, read_topic
 from fcu.core import ONBOARD_COLUMNS
 from gcs.inprocess import scenario_params
-from gcs.metrics import build_metrics
+from gcs.metrics import build_metrics, link_timing
 from gcs.mission_client import MissionError, upload_detailed
 from gcs.runio import ONBOARD_LOG, ONBOARD_TOPIC, TRUTH_LOG, TRUTH_TOPIC, write_metrics
 from gcs.scenario_mission import scenario_mission
@@ -40,6 +40,7 @@ from sitl.plant import TRUTH_COLUMNS
 
 M = MAV
 STALL_S = 60.0
+RTT_PROBES = 2000  # TIMESYNC round trips the FCU times with the simulator before the flight
 
 
 class RunError(RuntimeError):
@@ -204,17 +205,21 @@ class _Flight:
         p, sc, py = self.plan, self.plan.scenario, sys.executable
         p.out.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(sc.source, p.out / "scenario.toml")
-        for name in (TRUTH_LOG, ONBOARD_LOG, "fcu_stats.json", "flight.tlog"):
+        for name in (TRUTH_LOG, ONBOARD_LOG, "fcu_stats.json", "sitl_stats.json",
+                     "flight.tlog"):
             (p.out / name).unlink(missing_ok=True)
         gains = sc.files["gains_pid" if sc.controller == "pid" else "gains_pd"]
         x, y, z = sc.initial_position_enu_m
         sitl = [py, "-m", "sitl.node", sc.source, "--link", p.sim_server, "--sysid",
                 str(p.sysid), "--truth-log", str(p.out / TRUTH_LOG), "--control-rate",
-                str(sc.control_rate_hz), "--position", f"{x!r},{y!r},{z!r}"]
+                str(sc.control_rate_hz), "--position", f"{x!r},{y!r},{z!r}",
+                "--stats", str(p.out / "sitl_stats.json")]
         fcu = [py, "-m", "fcu.node", "--vehicle", sc.files["vehicle"], "--gains", gains,
                "--sim", p.sim_client, "--gcs", p.fcu_gcs, "--sysid", str(p.sysid),
                "--rate", str(sc.control_rate_hz), "--onboard-log", str(p.out / ONBOARD_LOG),
                "--stats", str(p.out / "fcu_stats.json")]
+        if p.sim_client.startswith(("udpout:", "tcp:")):  # sockets: time the round trip
+            fcu += ["--rtt-probes", str(RTT_PROBES)]
         if not self.realtime:  # lockstep: the simulator itself stops at the end, exactly
             sitl += ["--end-time", repr(sc.duration_s)]
         else:
@@ -335,6 +340,12 @@ class _Flight:
         metrics["fcu_params"] = scenario_params(sc)
         metrics["start_position_enu_m"] = list(sc.initial_position_enu_m)
         metrics["fcu"] = {k: v for k, v in stats.items() if k != "events"}
+        sitl_path = out / "sitl_stats.json"
+        sitl_stats = json.loads(sitl_path.read_text()) if sitl_path.exists() else {}
+        if sitl_stats:
+            metrics["sitl"] = sitl_stats
+        metrics.update(link_timing(metrics, stats, sitl_stats, transport,
+                                   lockstep=not self.realtime))
         metrics["overrides"] = {"controller": sc.controller,
                                 "ideal_actuators": sc.ideal_actuators,
                                 "duration_s": sc.duration_s}

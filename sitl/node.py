@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import math
 import os
 import select
@@ -44,18 +45,21 @@ from common.config import (
     load_scenario,
 )
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
-from common.links import LinkError, open_link, parse_url
-from common.mavlink import MAV, encoder, pack
+from common.links import RECV_BATCH, LinkError, open_link, parse_url
+from common.mavlink import MAV
 from common.parent import stop_with_parent
 from common.sensors_config import SensorProfile, resolve_sensor_profile
 from common.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
+    TIMESYNC_ID,
     FrameReader,
     HilSensor,
     Odometry,
     pack_hil_sensor,
     pack_odometry,
+    pack_timesync,
     unpack_actuator_controls,
+    unpack_timesync,
 )
 from common.ulog import ULogError
 from sitl.actuator_faults import ActuatorFaults
@@ -73,6 +77,12 @@ from sitl.truth_log import TruthLog
 SITL_COMPONENT = MAV.MAV_COMP_ID_PERIPHERAL
 SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each exchange
 MAX_LAG_S = 0.05  # real time: further behind the wall clock than this, skip ahead
+LOG_BATCH = 32  # lockstep: truth records handed to the kernel together (and when idle)
+HIL_SENSOR_FIELDS = 0x1A3F  # acc, gyro, abs pressure, pressure altitude, temperature; no mag
+# Per-step stages timed in lockstep flight (`stage_us` in the stats): waiting for the
+# answer (the FCU's work and the transport), reading and parsing it, the plant, packing the
+# state, sending it, the truth log.
+STAGES = ("wait", "rx", "plant", "pack", "send", "log")
 
 
 def odometry(s: PlantState) -> Odometry:
@@ -88,13 +98,16 @@ def command_from_controls(controls: tuple[float, ...], mode: int, vehicle: Vehic
     (zero unless SAFETY_ARMED), controls[n..2n) tilts; a value that is not finite means
     zero speed or the current tilt."""
     n = vehicle.n_rotors
-    w_max = vehicle.rotor_speed_max_rad_s
-    speeds = tuple(c * w_max if math.isfinite(c) else 0.0 for c in controls[:n])
-    tilts = tuple(c if math.isfinite(c) else state.tilt_rad[i]
-                  for i, c in enumerate(controls[n:2 * n]))
-    if not mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED:
+    isfinite = math.isfinite
+    if mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED:
+        w_max = vehicle.rotor_speed_max_rad_s
+        speeds = tuple([c * w_max if isfinite(c) else 0.0 for c in controls[:n]])
+    else:
         speeds = (0.0,) * n
-    return ActuatorCommand(speeds, tilts)
+    tilts = controls[n:2 * n]
+    if not isfinite(sum(tilts)):
+        tilts = tuple([c if isfinite(c) else t for c, t in zip(tilts, state.tilt_rad, strict=True)])
+    return ActuatorCommand(speeds, tuple(tilts))
 
 
 class SimulatorServer:
@@ -130,7 +143,6 @@ class SimulatorServer:
                              if hil_sensor_hz > 0 else 0)
         self.resend_s = resend_ms * 1e-3
         self.home_alt_m = home_alt_m
-        self.mav = encoder(system_id, SITL_COMPONENT)
         self.system_id = system_id
         self.seq = 0
         self.log = TruthLog(truth_log, scenario.name) if truth_log else None
@@ -139,6 +151,10 @@ class SimulatorServer:
         self.ignored_answers = 0
         self.rejected_bytes = 0
         self.resends = 0
+        self.timesync_answers = 0  # TIMESYNC requests answered (the FCU's round-trip probe)
+        self.stage_ns = dict.fromkeys(STAGES, 0)
+        self.timed_steps = 0
+        self._unflushed = 0
         self.skipped_s = 0.0  # real time: wall time not simulated (the process was stopped)
         self.running = True
         self._last_datagram = b""
@@ -166,23 +182,43 @@ class SimulatorServer:
         acc = flu_to_frd(self.plant.specific_force_flu(s))
         gyro = flu_to_frd(s.omega_flu_rad_s)
         alt = self.home_alt_m + s.p_enu_m[2]
-        pressure = pressure_hpa(alt)
-        msg = MAV.MAVLink_hil_sensor_message(
-            s.time_us, *acc, *gyro, 0.0, 0.0, 0.0, pressure, 0.0, alt, 15.0,
-            0x1A3F, 0)  # bits: acc, gyro, abs pressure, pressure altitude, temperature; no mag
-        return pack(self.mav, msg)
+        self.seq = (self.seq + 1) & 0xFF
+        return pack_hil_sensor(HilSensor(s.time_us, acc, gyro, (0.0, 0.0, 0.0),
+                                         pressure_hpa(alt), alt, 15.0, HIL_SENSOR_FIELDS),
+                               self.seq, self.system_id, SITL_COMPONENT)
 
-    def _send_state(self, states: list[PlantState] | None = None) -> None:
+    def _send_state(self, states: list[PlantState] | None = None, *, batch: bool = False,
+                    timed: bool = False) -> None:
+        """Send the state of a control period and log it; with `batch` (lockstep) the truth
+        records reach the kernel LOG_BATCH at a time, and whenever the loop goes idle.
+        `timed`: add the stages' times to `stage_ns`."""
+        t0 = time.perf_counter_ns() if timed else 0
         self._last_datagram = self._datagram(states or [self.state])
+        t1 = time.perf_counter_ns() if timed else 0
         self.link.send(self._last_datagram)
+        t2 = time.perf_counter_ns() if timed else 0
         if self.log is not None:
             self.log.record(self.state)
-            self.log.flush()
-            if self.log.failed:  # a full disk, an I/O error: the log ends, the world goes on
-                print(f"sitl: truth log stopped at t = {self.state.time_us * 1e-6:.3f} s: "
-                      f"{self.log.failed}", file=sys.stderr, flush=True)
-                self.log.close()
-                self.log = None
+            self._unflushed += 1
+            if not batch or self._unflushed >= LOG_BATCH:
+                self._flush_log()
+        if timed:
+            t3 = time.perf_counter_ns()
+            ns = self.stage_ns
+            ns["pack"] += t1 - t0
+            ns["send"] += t2 - t1
+            ns["log"] += t3 - t2
+
+    def _flush_log(self) -> None:
+        if self.log is None:
+            return
+        self._unflushed = 0
+        self.log.flush()
+        if self.log.failed:  # a full disk, an I/O error: the log ends, the world goes on
+            print(f"sitl: truth log stopped at t = {self.state.time_us * 1e-6:.3f} s: "
+                  f"{self.log.failed}", file=sys.stderr, flush=True)
+            self.log.close()
+            self.log = None
 
     def _command_from(self, controls: tuple[float, ...], mode: int) -> ActuatorCommand:
         return command_from_controls(controls, mode, self.scenario.vehicle, self.state)
@@ -212,9 +248,9 @@ class SimulatorServer:
         self.steps += 1
         return states
 
-    def _answers(self) -> list[tuple[int, tuple[float, ...], int]]:
+    def _answers(self, limit: int = RECV_BATCH) -> list[tuple[int, tuple[float, ...], int]]:
         out = []
-        for peer, data in self.link.recv():
+        for peer, data in self.link.recv(limit):
             frames, rejected = self.reader.feed(peer, data)
             self.rejected_bytes += rejected
             for f in frames:
@@ -223,7 +259,21 @@ class SimulatorServer:
                 elif f.msg_id == HIL_ACTUATOR_CONTROLS_ID:
                     a = unpack_actuator_controls(f.payload)
                     out.append((a.time_usec, a.controls, a.mode))
+                elif f.msg_id == TIMESYNC_ID:
+                    self._timesync(f.payload)
         return out
+
+    def _timesync(self, payload: bytes) -> None:
+        """Answer a TIMESYNC request (tc1 = 0) at once: tc1 = our monotonic clock in ns,
+        ts1 echoed; answers (tc1 != 0) are not ours to take. The FCU times its round trips
+        with these (`udp_rtt_us`), so nothing else is done for them."""
+        tc1, ts1 = unpack_timesync(payload)
+        if tc1 != 0:
+            return
+        self.seq = (self.seq + 1) & 0xFF
+        self.link.send(pack_timesync(time.monotonic_ns() or 1, ts1, self.seq, self.system_id,
+                                     SITL_COMPONENT))
+        self.timesync_answers += 1
 
     # ------------------------------------------------------------------ loops
 
@@ -243,32 +293,55 @@ class SimulatorServer:
 
     def _run_lockstep(self) -> None:
         self._send_state()
+        link = self.link
+        spin = link.spin
+        fds = link.filenos()
         last_progress = time.monotonic()
         last_resend = last_progress
+        sent_ns = time.perf_counter_ns()
+        ns = self.stage_ns
+        perf = time.perf_counter_ns
         while self.running:
             now = time.monotonic()
             idle = now - last_progress
-            spinning = idle < SPIN_S and self.link.spin  # the answer is microseconds away
-            wait = self.resend_s if idle < 0.5 else 0.05
-            since = now - max(last_resend, last_progress)
-            timeout = 0.0 if spinning else max(0.0, wait - since)
-            readable, _, _ = select.select(self.link.filenos(), [], [], timeout)
-            if not readable:
-                if spinning:
+            spinning = spin and idle < SPIN_S
+            if spinning:  # the answer is microseconds away: poll for it
+                if not select.select(fds, [], [], 0.0)[0]:
                     os.sched_yield()  # let a process that has work run on this core
-                elif time.monotonic() - max(last_resend, last_progress) >= wait:
-                    self.link.send(self._last_datagram)  # recover a lost state or answer
-                    self.resends += 1
-                    last_resend = time.monotonic()
-                continue
-            for time_usec, controls, mode in self._answers():
+                    continue
+            else:
+                if self._unflushed:
+                    self._flush_log()  # idle: what is logged reaches the file
+                wait = self.resend_s if idle < 0.5 else 0.05
+                since = now - max(last_resend, last_progress)
+                fds = link.filenos()
+                if not select.select(fds, [], [], max(0.0, wait - since))[0]:
+                    if time.monotonic() - max(last_resend, last_progress) >= wait:
+                        link.send(self._last_datagram)  # recover a lost state or answer
+                        self.resends += 1
+                        last_resend = time.monotonic()
+                    continue
+            rx_ns = perf()
+            answers = self._answers(1 if spinning else RECV_BATCH)
+            parsed_ns = perf()
+            for time_usec, controls, mode in answers:
                 if time_usec != self.state.time_us or self._at_end():
                     self.ignored_answers += 1  # duplicate, stale, or the run has ended
                     continue
+                timed = self.flight_start_us is not None  # in flight before this answer
                 self._on_answer(bool(mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED))
                 self.command = self._command_from(controls, mode)
-                self._send_state(self._advance())
+                t0 = perf()
+                states = self._advance()
+                if timed:
+                    ns["wait"] += rx_ns - sent_ns
+                    ns["rx"] += parsed_ns - rx_ns
+                    ns["plant"] += perf() - t0
+                    self.timed_steps += 1
+                self._send_state(states, batch=True, timed=timed)
+                sent_ns = perf()
                 last_progress = time.monotonic()
+            fds = link.filenos()
 
     def _run_realtime(self) -> None:
         period = self.plant.dt_us * 1e-6
@@ -314,6 +387,15 @@ class SimulatorServer:
             select.select(self.link.filenos(), [], [], 0.1)
             self._answers()
 
+    def stats(self) -> dict:
+        n = max(self.timed_steps, 1)
+        return {"steps": self.steps, "resends": self.resends,
+                "ignored_answers": self.ignored_answers,
+                "rejected_bytes": self.rejected_bytes,
+                "timesync_answers": self.timesync_answers,
+                "timed_steps": self.timed_steps,
+                "stage_us": {k: v / n * 1e-3 for k, v in self.stage_ns.items()}}
+
     def close(self) -> None:
         if self.log is not None:
             self.log.close()
@@ -345,6 +427,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resend-ms", type=float, default=5.0,
                    help="re-send an unanswered state after this wall time")
     p.add_argument("--sysid", type=int, default=1)
+    p.add_argument("--stats", type=Path,
+                   help="write run statistics (JSON: counts, per-step stage times) here at exit")
     p.add_argument("--position", metavar="X,Y,Z",
                    help="start position in ENU metres (default: the scenario's)")
     return p
@@ -356,6 +440,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         parse_url(args.link)  # before anything is opened
         check_output_path("--truth-log", args.truth_log)
+        check_output_path("--stats", args.stats)
         scenario = load_scenario(args.scenario)
         if args.ideal_actuators:
             scenario = dataclasses.replace(scenario, ideal_actuators=True)
@@ -406,6 +491,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"sitl: serving {scenario.name} on {args.link} "
           f"({'real time' if args.realtime else 'lockstep'})", flush=True)
     server.run()
+    if args.stats is not None:
+        tmp = args.stats.with_suffix(".tmp")
+        tmp.write_text(json.dumps(server.stats(), indent=2) + "\n")
+        os.replace(tmp, args.stats)
     print(f"sitl: stopped at t = {server.state.time_us * 1e-6:.3f} s after {server.steps} "
           f"control periods; {server.resends} re-sends, {server.ignored_answers} answers "
           f"ignored, {server.rejected_bytes} bytes rejected, {server.skipped_s:.3f} s of wall "

@@ -209,3 +209,31 @@ def test_tcp_simulator_link_flies_the_same_run(tmp_path):
     assert tcp["transport"] == "tcp" and tcp["status"] == "completed"
     for key in ("position_error_m", "attitude_error_rad", "samples", "sim_time_s"):
         assert tcp[key] == udp[key]
+
+
+def test_udp_rtt_is_measured_between_the_two_processes(tmp_path):
+    """Given a lockstep run through processes over UDP, then metrics.json has the simulator
+    link's round trip as timed between the FCU and the SITL before the flight: every
+    TIMESYNC probe answered by the SITL process, a median that is positive, finite and below
+    10 ms with a spread (measured, not a constant), and the step's wall time and its ratio
+    to that round trip beside it."""
+    from gcs.process_run import RTT_PROBES
+
+    scenario = dataclasses.replace(load_scenario(CASE1), duration_s=2.0)
+    m = run_processes(scenario, tmp_path / "run")
+    assert m["status"] == "completed"
+    rtt = m["fcu"]["sim_rtt"]
+    assert rtt["samples"] == RTT_PROBES and rtt["lost"] == 0
+    assert m["sitl"]["timesync_answers"] >= RTT_PROBES  # the other process answered them
+    assert m["udp_rtt_us"] == m["link_rtt_us"] == rtt["median_us"]
+    assert math.isfinite(m["udp_rtt_us"]) and 0.0 < m["udp_rtt_us"] < 10_000.0
+    assert 0.0 < rtt["p10_us"] <= m["udp_rtt_us"] <= rtt["p90_us"]
+    assert rtt["p10_us"] < rtt["p90_us"]
+    assert m["step_wall_us"] == pytest.approx(m["wall_time_s"] / m["samples"] * 1e6)
+    assert m["step_per_rtt"] == pytest.approx(m["step_wall_us"] / m["udp_rtt_us"])
+    for proc, stages in (("fcu", ("wait", "rx", "step", "tx", "log", "housekeeping")),
+                         ("sitl", ("wait", "rx", "plant", "pack", "send", "log"))):
+        got = m["step_stages_us"][proc]
+        assert set(got) == set(stages) and all(v >= 0.0 for v in got.values())
+    saved = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert saved["udp_rtt_us"] == m["udp_rtt_us"]
