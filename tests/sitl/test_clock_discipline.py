@@ -46,6 +46,9 @@ def _tail(path: Path) -> tuple[tuple[str, ...], tuple[float, ...]] | None:
     return tail_record(path, "dq_truth")
 
 
+SETTLE_S = 0.5  # after a child is stopped, before simulated time is read
+
+
 def _sim_time_s(out: Path) -> float | None:
     tail = _tail(out / "truth.ulg")
     return None if tail is None else float(tail[1][0]) * 1e-6
@@ -291,8 +294,11 @@ def test_lockstep_run_is_unchanged_by_starvation(quiet, tmp_path, starvation):
                 _wait_until(run, f"{PAUSE_AT_S:g} s of simulated time",
                             lambda: (_sim_time_s(out) or 0.0) >= PAUSE_AT_S)
                 run.pause(name)
+                # The simulator writes its truth log in batches and when it goes idle: the
+                # log's tail is the simulated time once the stop has taken hold.
+                time.sleep(SETTLE_S)
                 paused_at = _sim_time_s(out)
-                time.sleep(PAUSE_S)
+                time.sleep(PAUSE_S - SETTLE_S)
                 resumed_at = _sim_time_s(out)
                 run.resume_all()
             code = run.wait()

@@ -62,19 +62,27 @@ def test_case1_over_zenoh_equals_udp_exactly(tmp_path, router):
         (tmp_path / "zenoh" / "truth.ulg").read_bytes()
 
 
-def _observer(router: str, prefix: str, seconds: float, seen: dict) -> None:
-    """A plain Zenoh subscriber decoding MAVLink with pymavlink only."""
+def _observer(router: str, prefix: str, seconds: float, seen: dict,
+              heard: threading.Event | None = None) -> None:
+    """A plain Zenoh subscriber decoding MAVLink with pymavlink only, for `seconds` from the
+    first sample it hears (at most 30 s of waiting for one: processes start slowly on a
+    loaded machine); `heard` is set at that first sample."""
     session = zenoh.open(client_config([router]))
     parser = mavlink2.MAVLink(None)
     parser.robust_parsing = True
+    first = threading.Event()
 
     def on_sample(sample):
+        first.set()
+        if heard is not None:
+            heard.set()
         for msg in parser.parse_buffer(sample.payload.to_bytes()) or []:
             key = (str(sample.key_expr), msg.get_type())
             seen[key] = seen.get(key, 0) + 1
 
     sub = session.declare_subscriber(f"{prefix}/*/out", on_sample)
-    time.sleep(seconds)
+    if first.wait(timeout=30.0):
+        time.sleep(seconds)
     sub.undeclare()
     session.close()
 
@@ -88,9 +96,11 @@ def test_fleet_of_four_flies_like_one_with_observers(tmp_path, router):
     single = run_processes(sc, tmp_path / "single", transport="zenoh", zenoh_url=url)
     seen_early: dict = {}
     seen_late: dict = {}
-    early = threading.Thread(target=_observer, args=(router, "fleet", 3.0, seen_early))
-    late = threading.Thread(target=lambda: (time.sleep(4.0),
-                                            _observer(router, "fleet", 4.0, seen_late)))
+    fleet_up = threading.Event()
+    early = threading.Thread(target=_observer, args=(router, "fleet", 5.0, seen_early,
+                                                     fleet_up))
+    late = threading.Thread(target=lambda: (fleet_up.wait(timeout=30.0), time.sleep(4.0),
+                                            _observer(router, "fleet", 3.0, seen_late)))
     early.start()
     late.start()
     fleet = run_processes(sc, tmp_path / "fleet", transport="zenoh", zenoh_url=url, fleet=4)
