@@ -411,6 +411,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     stop_with_parent()
     args = build_parser().parse_args(argv)
+
+    def interrupted(_signum, _frame):  # a stop while starting (loading the kernels, say)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupted)
     try:
         for url in (args.sim, *(args.gcs or ())):  # every URL, before anything is opened
             parse_url(url)
@@ -429,6 +434,9 @@ def main(argv: list[str] | None = None) -> int:
                               home=args.home, onboard_log=args.onboard_log,
                               stats_path=args.stats, signing_key=key,
                               rtt_probes=args.rtt_probes)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the loop ran: nothing flown
+        print("fcu: stopped while starting", file=sys.stderr, flush=True)
+        return 0
     except LinkError as exc:  # 2: bad URL, busy port, missing device; 1: peer not there
         print(f"fcu: {exc}", file=sys.stderr)
         return exc.exit_code

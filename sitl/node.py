@@ -437,6 +437,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     stop_with_parent()
     args = build_parser().parse_args(argv)
+
+    def interrupted(_signum, _frame):  # a stop while starting (loading the kernels, say)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupted)
     try:
         parse_url(args.link)  # before anything is opened
         check_output_path("--truth-log", args.truth_log)
@@ -473,6 +478,9 @@ def main(argv: list[str] | None = None) -> int:
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
                                  resend_ms=args.resend_ms, system_id=args.sysid,
                                  sensors=scenario.sensors, seed=scenario.seed)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the loop ran: nothing flown
+        print("sitl: stopped while starting", file=sys.stderr, flush=True)
+        return 0
     except LinkError as exc:  # 2: bad URL, busy port, missing device; 1: peer not there
         print(f"sitl: {exc}", file=sys.stderr)
         return exc.exit_code

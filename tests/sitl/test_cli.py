@@ -53,8 +53,20 @@ def vehicle(tmp_path) -> Iterator[Vehicle]:
                              "--sim", f"udpout:127.0.0.1:{sim}", "--gcs",
                              f"udpout:127.0.0.1:{gcs}"], tmp_path),
     }
-    yield Vehicle(f"udpin:127.0.0.1:{gcs}", tmp_path, procs)
-    stop(procs)
+    try:
+        # Commands start once the vehicle has its state (the FCU reports attitude then):
+        # the processes load their compiled kernels first, slowly on a loaded machine.
+        from gcs.session import Session
+
+        session = Session(f"udpin:127.0.0.1:{gcs}")
+        try:
+            assert session.recv(["ATTITUDE_QUATERNION"], timeout=60.0) is not None, \
+                "the vehicle reports no state"
+        finally:
+            session.close()
+        yield Vehicle(f"udpin:127.0.0.1:{gcs}", tmp_path, procs)
+    finally:
+        stop(procs)
 
 
 def test_status_arm_mode_disarm(vehicle):
