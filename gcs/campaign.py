@@ -777,9 +777,12 @@ class _client:
         n = self.workers or default_workers()
         # The dashboard's own warnings (a busy port: it takes another) are not errors.
         logging.getLogger("distributed").setLevel(logging.ERROR)
+        # Without a dashboard the scheduler's HTTP server (health, metrics) still runs: on
+        # a free port of 127.0.0.1, not on the dashboard's 8787.
         self.cluster = LocalCluster(
             n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
             scheduler_port=0, dashboard_address=self.dashboard or None,
+            scheduler_kwargs=None if self.dashboard else {"dashboard_address": "127.0.0.1:0"},
             silence_logs=logging.ERROR, worker_dashboard_address=None)
         self.client = Client(self.cluster)
         self.client.wait_for_workers(n, timeout=60)

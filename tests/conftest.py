@@ -21,3 +21,10 @@ def pytest_configure(config: pytest.Config) -> None:
     scenario = load_scenario(CASE1)
     Plant(scenario.vehicle)
     fcu_pipeline(scenario)
+    # Kernels compiled for a caller's types on first use (the mission executor samples a
+    # rotation at many instants at once): flown here once, not first inside a real-time
+    # flight of some test, where a compilation would stall the loop.
+    from gcs.inprocess import apply_overrides, run_scenario
+
+    run_scenario(apply_overrides(load_scenario(CASE1.parent / "mission_tour.toml"),
+                                 duration_s=3.0), logs=False)
