@@ -773,7 +773,9 @@ class _client:
 
         if self.scheduler is not None:
             self.client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
-            return self.client, self.client.dashboard_link
+            services = self.client.scheduler_info().get("services", {})
+            has_dashboard = "dashboard" in services and self._bokeh_dashboard()
+            return self.client, self.client.dashboard_link if has_dashboard else None
         n = self.workers or default_workers()
         # The dashboard's own warnings (a busy port: it takes another) are not errors.
         logging.getLogger("distributed").setLevel(logging.ERROR)
@@ -787,6 +789,16 @@ class _client:
         self.client = Client(self.cluster)
         self.client.wait_for_workers(n, timeout=60)
         return self.client, (self.client.dashboard_link if self.dashboard else None)
+
+    def _bokeh_dashboard(self) -> bool:
+        """Whether the scheduler serves its dashboard pages (not only health and metrics)."""
+        import urllib.request
+
+        try:
+            with urllib.request.urlopen(self.client.dashboard_link, timeout=2.0) as r:
+                return bool(r.status == 200)
+        except OSError:
+            return False
 
     def __exit__(self, *exc: object) -> None:
         if self.client is not None:

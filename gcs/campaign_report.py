@@ -76,6 +76,11 @@ def per_value(rows: list[dict[str, Any]], key: str) -> list[dict[str, Any]]:
     return out
 
 
+def _order(d: tuple[Any, ...]) -> tuple[tuple[int, float, str], ...]:
+    """Directions in numeric order (numbers before anything else)."""
+    return tuple((0, float(x), "") if _num(x) is not None else (1, 0.0, str(x)) for x in d)
+
+
 def _find(columns: Sequence[str], suffix: str) -> str | None:
     hits = [c for c in columns if c.endswith(suffix)]
     return hits[0] if hits else None
@@ -160,8 +165,8 @@ def write_report(out: Path, campaign: Campaign, rows: list[dict[str, Any]]) -> P
                 ax.plot(th, rr, marker="o", label=str(g).upper() if g else "survived")
             ax.set_title(f"elevation {el:g} deg" if elevation else "")
         axes[0][0].legend(loc="lower left", bbox_to_anchor=(-0.15, -0.15))
-        fig.suptitle(f"Largest {magnitude.rsplit('.', 1)[0]} magnitude survived, by "
-                     "body-frame direction")
+        fig.suptitle(f"Largest magnitude survived by body-frame direction\n"
+                     f"({magnitude})", fontsize=10)
         fig.tight_layout()
         fig.savefig(out / "envelope.png", dpi=110)
         plt.close(fig)
@@ -171,7 +176,7 @@ def write_report(out: Path, campaign: Campaign, rows: list[dict[str, Any]]) -> P
                   "one survived too.", "",
                   "| direction | " + " | ".join(str(g) for g in sorted(env, key=str)) + " |",
                   "|---|" + "---|" * len(env)]
-        dirs = sorted({d for e in env.values() for d in e}, key=lambda d: tuple(map(str, d)))
+        dirs = sorted({d for e in env.values() for d in e}, key=_order)
         for d in dirs:
             lines.append(f"| {', '.join(_fmt(x) for x in d)} | " + " | ".join(
                 _fmt(env[g].get(d, math.nan)) for g in sorted(env, key=str)) + " |")
