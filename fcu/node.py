@@ -29,6 +29,7 @@ from pathlib import Path
 
 from common.cliargs import OneLineParser, check_output_path
 from common.config import ConfigError, load_gains, load_vehicle
+from common.jit import compile_time_s
 from common.links import LinkError, open_link, parse_url
 from common.mavlink import MAV, SigningKeyError, encoder, pack, read_signing_key
 from common.mission_items import HomePosition
@@ -334,6 +335,7 @@ class FlightController:
     def stats(self) -> dict:
         pipe, server, sim = self.pipeline, self.server, self.sim
         return {"steps": self.steps, "deadline_misses": self.deadline_misses,
+                "compile_time_s": compile_time_s(),
                 "signing_rejects": server.signing_rejects,
                 "resent_answers": sim.resent_answers,
                 "repeated_commands": server.repeated_commands,

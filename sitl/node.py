@@ -45,6 +45,7 @@ from common.config import (
     load_scenario,
 )
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
+from common.jit import compile_time_s
 from common.links import RECV_BATCH, LinkError, open_link, parse_url
 from common.mavlink import MAV
 from common.parent import stop_with_parent
@@ -390,6 +391,7 @@ class SimulatorServer:
     def stats(self) -> dict:
         n = max(self.timed_steps, 1)
         return {"steps": self.steps, "resends": self.resends,
+                "compile_time_s": compile_time_s(),
                 "ignored_answers": self.ignored_answers,
                 "rejected_bytes": self.rejected_bytes,
                 "timesync_answers": self.timesync_answers,

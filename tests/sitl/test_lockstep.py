@@ -237,3 +237,6 @@ def test_udp_rtt_is_measured_between_the_two_processes(tmp_path):
         assert set(got) == set(stages) and all(v >= 0.0 for v in got.values())
     saved = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert saved["udp_rtt_us"] == m["udp_rtt_us"]
+    # Both processes loaded their kernels before their loops ran, and say how long it took.
+    assert 0.0 < m["fcu"]["compile_time_s"] < 120.0 and 0.0 < m["sitl"]["compile_time_s"]
+    assert m["compile_time_s"] == m["fcu"]["compile_time_s"] + m["sitl"]["compile_time_s"]
