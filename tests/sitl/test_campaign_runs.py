@@ -24,6 +24,8 @@ from gcs.campaign import expand, load_campaign, run_campaign
 from gcs.cli import main
 from gcs.inprocess import run_scenario
 
+from .conftest import stop
+
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "config" / "scenarios"
 pytestmark = pytest.mark.xdist_group("campaign")  # clusters of two workers: one at a time
@@ -160,15 +162,7 @@ def test_separate_scheduler_and_workers_one_killed_give_the_same_table(
         assert again.flown == 0 and again.recorded_before == 8
         assert sum(journal_ids(remote).values()) == 8
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.terminate()
-        for p in procs:
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+        stop({str(i): p for i, p in enumerate(procs)})
 
 
 def test_runs_that_cannot_be_executed_exit_1_and_are_flown_on_resume(
