@@ -715,35 +715,36 @@ def run_campaign(campaign: Campaign, out: Path, *, scheduler: str | None = None,
     sim_s = 0.0
     n_workers = 0
     link: str | None = None
-    if todo:
-        progress = Progress(len(todo), progress_stream or sys.stderr)
-        journal = Journal(out)
-        try:
-            with _client(scheduler, workers, dashboard) as (client, link):
-                n_workers = len(client.scheduler_info().get("workers", {}))
-                if link:
-                    print(f"campaign: dashboard {link}", file=progress.stream, flush=True)
-                client.run(warm_worker)  # part of the start-up, not of the first runs
-                t_runs = time.monotonic()
-                progress.t0 = t_runs
-                for spec, row, error in _results(client, todo):
-                    if error is not None:
-                        failed[spec.index] = error
-                        progress.update("not executed")
-                        continue
-                    assert row is not None
-                    if row["run_id"] in recorded:
-                        continue  # a run's result arrived twice: recorded once
-                    recorded[row["run_id"]] = row
-                    journal.add(row)
-                    sim_s += float(row.get("sim_time_s") or 0.0)
-                    progress.update(str(row.get("status")))
-                    if on_result is not None:
-                        on_result(row)
-        finally:
-            journal.close()
-            write_table(out, campaign, specs, recorded)
-    rows = write_table(out, campaign, specs, recorded)
+    try:  # the table is written however the runs end (an interrupt included)
+        if todo:
+            progress = Progress(len(todo), progress_stream or sys.stderr)
+            journal = Journal(out)
+            try:
+                with _client(scheduler, workers, dashboard) as (client, link):
+                    n_workers = len(client.scheduler_info().get("workers", {}))
+                    if link:
+                        print(f"campaign: dashboard {link}", file=progress.stream, flush=True)
+                    client.run(warm_worker)  # part of the start-up, not of the first runs
+                    t_runs = time.monotonic()
+                    progress.t0 = t_runs
+                    for spec, row, error in _results(client, todo):
+                        if error is not None:
+                            failed[spec.index] = error
+                            progress.update("not executed")
+                            continue
+                        assert row is not None
+                        if row["run_id"] in recorded:
+                            continue  # a run's result arrived twice: recorded once
+                        recorded[row["run_id"]] = row
+                        journal.add(row)
+                        sim_s += float(row.get("sim_time_s") or 0.0)
+                        progress.update(str(row.get("status")))
+                        if on_result is not None:
+                            on_result(row)
+            finally:
+                journal.close()
+    finally:
+        rows = write_table(out, campaign, specs, recorded)
     if report:
         from gcs.campaign_report import write_report
 
