@@ -33,7 +33,7 @@ from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE, INFO, Event
-from fcu import manual
+from fcu import manual, offboard
 from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3
 from fcu.manual import ManualSetpoint, StickSettings
 from fcu.mission import MissionEvent, MissionExecutor, MissionLimits, level_attitude
@@ -89,6 +89,16 @@ class OffboardSetpoint:
     q_enu_flu: Quat | None = None
     omega_flu_rad_s: Vec3 = _ZERO
     received_s: float = -math.inf
+    seq: int = 0  # counts the samples taken: the reference anchors each new one
+
+    def target(self) -> offboard.Target:
+        """The sample as the shaper takes it: the attitude given, or level at the yaw given,
+        or None (keep the attitude)."""
+        q = self.q_enu_flu
+        if q is None and self.yaw_ned_rad is not None:
+            q = level_attitude(math.degrees(self.yaw_ned_rad))
+        return offboard.Target(self.seq, self.p_enu_m, self.v_enu_m_s, self.a_enu_m_s2, q,
+                               self.omega_flu_rad_s)
 
 
 class Commander:
@@ -116,6 +126,8 @@ class Commander:
         self.sticks_received_s = -math.inf  # wall clock; -inf: never
         self.manual_sp: ManualSetpoint | None = None  # POSCTL's set-point (None: from here)
         self.manual_limits: StickSettings = self.flight.sticks  # fitted to the vehicle
+        self.offboard_sp: offboard.Shaped | None = None  # OFFBOARD's shaper (None: from here)
+        self.offboard_limits: StickSettings = self.flight.sticks  # fitted at OFFBOARD's entry
         self.state: VehicleState | None = None
         self.last_ref: Reference | None = None
         self.clock_us = 0  # the flight clock at the latest input (events are stamped with it)
@@ -237,6 +249,8 @@ class Commander:
             self._start_landing()
         elif mode == Mode.OFFBOARD:
             self.mission_running = False
+            if previous != Mode.OFFBOARD:
+                self.offboard_sp = None  # the approach starts from the reference flown
         self._maybe_start_flight()
         if previous != mode:
             self.say(SEVERITY_INFO, f"mode {mode.name}")
@@ -392,6 +406,7 @@ class Commander:
             map(math.isfinite, a_ned)) else _ZERO
         sp.yaw_ned_rad = yaw if not type_mask & (1 << 10) and math.isfinite(yaw) else None
         sp.received_s = now_s
+        sp.seq += 1
         return True, ""
 
     def offboard_attitude(self, now_s: float, type_mask: int, q_ned_frd: Quat,
@@ -409,6 +424,7 @@ class Commander:
         sp.omega_flu_rad_s = frd_to_flu(rates_frd) if rates_ok and not type_mask & 0b111 \
             else _ZERO
         sp.received_s = now_s
+        sp.seq += 1
         return True, ""
 
     # ------------------------------------------------------------------ manual control
@@ -434,17 +450,19 @@ class Commander:
                                              p_vehicle)
         return ref
 
-    def _offboard_ref(self) -> Reference:
-        sp = self.offboard
-        hold = self.hold or self._current_pose_ref()
-        p = sp.p_enu_m if sp.p_enu_m is not None else hold.p_enu_m
-        if sp.q_enu_flu is not None:
-            q = sp.q_enu_flu
-        elif sp.yaw_ned_rad is not None:
-            q = level_attitude(math.degrees(sp.yaw_ned_rad))
-        else:
-            q = hold.q_enu_flu
-        return Reference(p, q, sp.v_enu_m_s, sp.a_enu_m_s2, sp.omega_flu_rad_s, _ZERO)
+    def _offboard_ref(self, t_us: int) -> Reference:
+        """The streamed target approached within POSCTL's limits (`fcu.offboard`), from the
+        reference flown when OFFBOARD began (its velocity and body rate too)."""
+        sp = self.offboard_sp
+        if sp is None:
+            start = self.last_ref if self.armed and self.last_ref is not None \
+                else self._current_pose_ref()
+            self.offboard_limits = manual.fit_envelope(offboard.limits(self.flight.sticks),
+                                                       self.limits.vehicle, start.q_enu_flu)
+            sp = offboard.start(t_us, start)
+        self.offboard_sp, ref = offboard.advance(sp, t_us, self.offboard.target(),
+                                                 self.offboard_limits)
+        return ref
 
     # ------------------------------------------------------------------ failsafe reactions
 
@@ -486,7 +504,7 @@ class Commander:
         if self.mode == Mode.MISSION and self.mission_running and self.executor is not None:
             return self._mission_ref(t_s)
         if self.mode == Mode.OFFBOARD:
-            return self._offboard_ref()
+            return self._offboard_ref(t_us)
         if self.mode == Mode.LAND and self.land is not None:
             self.land.update(t_s)
             ref = self.land.sample(t_s)

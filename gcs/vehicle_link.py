@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import struct
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -348,49 +349,84 @@ def pose_errors(snap: Snapshot, target: PoseTarget) -> tuple[float, float] | Non
     return dp, q_angle(q_mul(q_conj(target.q_ned_frd), q))
 
 
+class SetpointStream:
+    """Sends a pose target's two messages at `rate_hz` from its own thread until stopped,
+    whatever the caller waits for meanwhile (a command's answer, say), as MAVSDK's offboard
+    plugin does: PX4 and this FCU leave OFFBOARD once the stream pauses for COM_OF_LOSS_T."""
+
+    def __init__(self, session: Session, target: PoseTarget, rate_hz: float) -> None:
+        self._messages = target.messages(session)
+        self._session = session
+        self._period = 1.0 / rate_hz
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="gcs-setpoints", daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            for msg in self._messages:
+                self._session.send(msg)
+            self._stop.wait(self._period)
+
+    def __enter__(self) -> SetpointStream:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+
+
 def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: float,
          tolerance_rad: float, timeout: float, hold_s: float, rate_hz: float = 20.0,
          report=None) -> tuple[float, float]:
-    """Stream the pose target, switch to OFFBOARD (arming if asked), wait until reached."""
+    """Stream the pose target, switch to OFFBOARD (arming if asked), wait until reached and
+    held for `hold_s`. GcsError when refused, not reached within `timeout`, or when the
+    vehicle leaves OFFBOARD meanwhile (a failsafe, another ground station), with its
+    reason."""
     s = session
-    period = 1.0 / rate_hz
     snap = Snapshot()
+    offboard = by_name("OFFBOARD")
+    accepted_at = math.inf  # when OFFBOARD was accepted (monotonic s)
 
-    def stream(seconds: float, until=None):
+    def listen(seconds: float, until=None) -> bool:
         end = time.monotonic() + seconds
-        next_send = 0.0
-        while time.monotonic() < end:
-            now = time.monotonic()
-            if now >= next_send:
-                for msg in target.messages(s):
-                    s.send(msg)
-                next_send = now + period
-            msg = s.recv(None, timeout=min(period, max(0.0, end - now)))
+        while (left := end - time.monotonic()) > 0.0:
+            msg = s.recv(None, timeout=min(0.05, left))
             if msg is not None and msg.get_srcSystem() == s.target_system:
                 snap.update(msg)
+            hb = snap.get("HEARTBEAT")
+            if hb is not None and snap.heard["HEARTBEAT"] > accepted_at and \
+                    decode_custom(hb.custom_mode) != offboard:
+                now = decode_custom(hb.custom_mode)
+                why = f" ({snap.failsafe_text})" if snap.failsafe_text else ""
+                raise GcsError(f"the vehicle left OFFBOARD: now "
+                               f"{now.name if now else hb.custom_mode}{why}")
             if until is not None and until():
                 return True
         return False
 
-    stream(0.5)  # PX4 and this FCU need a setpoint stream before OFFBOARD is accepted
-    # a vehicle arms only once it knows its state: wait for its position to be reported
-    stream(10.0, until=lambda: snap.get("LOCAL_POSITION_NED") is not None)
-    if arm_first and (result := arm(s, True)) != M.MAV_RESULT_ACCEPTED:
-        raise GcsError(f"arming refused: {s.describe(result)}")
-    result = set_mode(s, "OFFBOARD")
-    if result != M.MAV_RESULT_ACCEPTED:
-        raise GcsError(f"OFFBOARD refused: {s.describe(result)}")
+    with SetpointStream(s, target, rate_hz):
+        listen(0.5)  # PX4 and this FCU need a setpoint stream before OFFBOARD is accepted
+        # a vehicle arms only once it knows its state: wait for its position to be reported
+        listen(10.0, until=lambda: snap.get("LOCAL_POSITION_NED") is not None)
+        if arm_first and (result := arm(s, True)) != M.MAV_RESULT_ACCEPTED:
+            raise GcsError(f"arming refused: {s.describe(result)}")
+        result = set_mode(s, "OFFBOARD")
+        if result != M.MAV_RESULT_ACCEPTED:
+            raise GcsError(f"OFFBOARD refused: {s.describe(result)}")
+        accepted_at = time.monotonic()
+        snap.failsafe_text = ""  # a failsafe from before does not explain what follows
 
-    def reached() -> bool:
-        errs = pose_errors(snap, target)
-        if report is not None and errs is not None:
-            report(errs)
-        return errs is not None and errs[0] <= tolerance_m and errs[1] <= tolerance_rad
+        def reached() -> bool:
+            errs = pose_errors(snap, target)
+            if report is not None and errs is not None:
+                report(errs)
+            return errs is not None and errs[0] <= tolerance_m and errs[1] <= tolerance_rad
 
-    if not stream(timeout, reached):
-        errs = pose_errors(snap, target)
-        where = "no position heard" if errs is None else \
-            f"position error {errs[0]:.3f} m, attitude error {math.degrees(errs[1]):.2f} deg"
-        raise GcsError(f"pose not reached within {timeout:g} s ({where})")
-    stream(hold_s)
-    return pose_errors(snap, target)  # type: ignore[return-value]
+        if not listen(timeout, reached):
+            errs = pose_errors(snap, target)
+            where = "no position heard" if errs is None else \
+                f"position error {errs[0]:.3f} m, attitude error {math.degrees(errs[1]):.2f} deg"
+            raise GcsError(f"pose not reached within {timeout:g} s ({where})")
+        listen(hold_s)
+        return pose_errors(snap, target)  # type: ignore[return-value]

@@ -473,3 +473,57 @@ def test_every_transport_carries_the_ground_station(tmp_path):
             assert "MAV_TYPE_HEXAROTOR" in out.stdout and "mode: HOLD" in out.stdout, url
     finally:
         stop(procs)
+
+
+def test_goto_ends_when_the_vehicle_leaves_offboard(tmp_path):
+    """goto streams its set-points from its own thread; when its whole process is paused
+    (SIGSTOP) for longer than COM_OF_LOSS_T, the FCU's failsafe holds, and once resumed goto
+    exits 1 at once, naming the mode the vehicle is in and the failsafe, instead of waiting
+    out its timeout. A second ground station link watches the mode; both processes fly by
+    the wall clock (in lockstep the 40 m could be flown before the pause)."""
+    import signal
+
+    from common.modes import Mode, decode_custom
+    from gcs.session import Session
+
+    sim, gcs, watch = free_port(), free_port(), free_port()
+    procs = {
+        "sitl": start("sitl", ["sitl.node", str(SCENARIOS / "case1_figure8.toml"), "--link",
+                               f"udpin:127.0.0.1:{sim}", "--realtime"], tmp_path),
+        "fcu": start("fcu", ["fcu.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
+                             "--sim", f"udpout:127.0.0.1:{sim}", "--realtime", "--gcs",
+                             f"udpout:127.0.0.1:{gcs}", "--gcs",
+                             f"udpout:127.0.0.1:{watch}"], tmp_path),
+    }
+    session = Session(f"udpin:127.0.0.1:{watch}")
+    try:
+        session.wait_vehicle(timeout=60.0)
+        assert session.recv(["ATTITUDE_QUATERNION"], timeout=60.0) is not None
+        procs["goto"] = subprocess.Popen(
+            [sys.executable, "-m", "gcs.cli", "goto", "0", "40", "-3", "--arm", "--timeout",
+             "120", "--connect", f"udpin:127.0.0.1:{gcs}"], cwd=ROOT, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True)
+
+        def mode(timeout: float) -> Mode | None:
+            hb = session.recv(["HEARTBEAT"], timeout=timeout)
+            return decode_custom(hb.custom_mode) if hb is not None else None
+
+        deadline = time.monotonic() + 60.0
+        while mode(1.0) != Mode.OFFBOARD:
+            assert time.monotonic() < deadline and procs["goto"].poll() is None, \
+                procs["goto"].communicate()
+        procs["goto"].send_signal(signal.SIGSTOP)
+        deadline = time.monotonic() + 10.0
+        while mode(1.0) != Mode.HOLD:
+            assert time.monotonic() < deadline, "the FCU did not hold without set-points"
+        procs["goto"].send_signal(signal.SIGCONT)
+        out, err = procs["goto"].communicate(timeout=30.0)
+        assert procs["goto"].returncode == 1, out + err
+        assert "the vehicle left OFFBOARD: now HOLD (failsafe: offboard setpoints lost: " \
+               "HOLD)" in err, err
+    finally:
+        session.close()
+        goto = procs.get("goto")
+        if goto is not None and goto.poll() is None:
+            goto.send_signal(signal.SIGCONT)
+        stop(procs)

@@ -4,6 +4,7 @@ vehicle still in the air is never taken for landed."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from fcu.commander import (
     pose_ref,
 )
 from fcu.failsafe import FailsafeSettings
+from fcu.manual import StickSettings
 from fcu.mission import MissionLimits
 from fcu.pipeline import Pipeline
 from fcu.tracker import VehicleState
@@ -126,8 +128,9 @@ def test_an_armed_vehicle_leaves_the_ground_when_it_rises_or_moves():
 
 
 def test_saturation_is_monitored_in_the_step():
-    """Given an offboard target 30 m away (the rotors saturate) and COM_SAT_T = 0.2 s, when
-    the pipeline steps for 0.5 s, then the saturation is counted and reported."""
+    """Given an offboard target 30 m away and a vehicle that does not move (the reference
+    leaves it and the rotors saturate) and COM_SAT_T = 0.2 s, when the pipeline steps for
+    1.5 s, then the saturation is counted and reported."""
     vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
     pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
                     failsafes=FailsafeSettings(saturation_s=0.2, divergence_m=1000.0))
@@ -137,7 +140,7 @@ def test_saturation_is_monitored_in_the_step():
     assert c.offboard_position(0.0, 1, 0, (30.0, 0.0, -5.0), (0.0, 0.0, 0.0),
                                (0.0, 0.0, 0.0), 0.0)[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
-    for t in range(0, 500_000, 2000):
+    for t in range(0, 1_500_000, 2000):
         pipe.on_state(t, _state(5.0), t)
         pipe.step(t, 0.002)
     assert pipe.saturated_steps > 100 and pipe.failsafe == "rotor saturation"
@@ -271,3 +274,38 @@ def test_posctl_needs_manual_control_and_falls_back_to_hold():
     pipe.check_links(14.6)  # 0.6 s after the last MANUAL_CONTROL
     assert c.mode == Mode.HOLD and pipe.events[-1].kind == FAILSAFE
     assert c.hold.p_enu_m == pytest.approx(end)
+
+
+# ------------------------------------------------------------------ OFFBOARD
+
+
+def test_offboard_approaches_a_pose_from_the_reference_flown_without_a_yaw_stick():
+    """Given MPC_MAN_Y_MAX = 0 (no yaw stick) and a vehicle that follows its reference, when
+    OFFBOARD gets a pose 10 m north at a heading of 120 deg (it faces east: 90 deg), then
+    the reference starts where the vehicle is, moves at most MPC_VEL_MANUAL, turns
+    (OFFBOARD's rotation limit is its own) and ends on the pose; a new sample 2 m further
+    is approached from there, no jump."""
+    from common.quaternion import q_angle, q_conj, q_exp, q_mul
+
+    pipe = _on_ground(FlightSettings(sticks=StickSettings(yaw_rate_deg_s=0.0)))
+    c = pipe.commander
+    pipe.on_state(0, VehicleState((0.0, 0.0, 3.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    assert pipe.arm()[0] == 0
+    q_ned_frd = (0.5, 0.0, 0.0, math.sqrt(0.75))  # 120 deg clockwise seen from above
+    assert c.offboard_position(0.0, 1, 0b0000_1101_1111_1000, (10.0, 0.0, -3.0),
+                               (0.0,) * 3, (0.0,) * 3, 0.0)[0]
+    assert c.offboard_attitude(0.0, 0b0100_0111, q_ned_frd, (0.0,) * 3)[0]
+    assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
+    track = _kinematic(pipe, 0, 12.0, ground=False)
+    p = [x[1] for x in track]
+    assert math.dist(p[0], (0.0, 0.0, 3.0)) < 1e-3
+    steps = [math.dist(a, b) * 500 for a, b in itertools.pairwise(p)]
+    assert max(steps) <= 5.0 + 1e-6 and max(steps) > 4.9
+    assert math.dist(p[-1], (0.0, 10.0, 3.0)) < 1e-6  # NED north is ENU y
+    q_want = q_exp((0.0, 0.0, math.radians(90.0 - 120.0)))  # ENU yaw = 90 deg - NED yaw
+    assert q_angle(q_mul(q_conj(q_want), c.last_ref.q_enu_flu)) < 1e-5
+    assert c.offboard_position(0.0, 1, 0b0000_1101_1111_1000, (12.0, 0.0, -3.0),
+                               (0.0,) * 3, (0.0,) * 3, 0.0)[0]
+    more = [x[1] for x in _kinematic(pipe, track[-1][0], 6.0, ground=False)]
+    assert math.dist(more[0], p[-1]) < 1e-4 and math.dist(more[-1], (0.0, 12.0, 3.0)) < 1e-3

@@ -1,0 +1,184 @@
+"""OFFBOARD's set-point shaper (fcu/offboard.py): a step is approached continuously, within
+the speed and acceleration limits, and reached exactly; a stream that is a trajectory is
+flown as streamed; velocity-only and rate-only samples fly the velocity and the rate."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import pytest
+
+from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate
+from fcu import offboard
+from fcu.manual import StickSettings
+from fcu.offboard import Target, sqrt_controller
+from fcu.tracker import Reference, pose_ref
+
+LIM = StickSettings(speed_xy_m_s=5.0, speed_up_m_s=3.0, speed_down_m_s=1.5, acc_xy_m_s2=3.0,
+                    acc_up_m_s2=3.0, acc_down_m_s2=2.0, yaw_rate_deg_s=90.0,
+                    yaw_acc_deg_s2=180.0)
+DT_US = 2000
+Z = (0.0, 0.0, 0.0)
+Q0 = (1.0, 0.0, 0.0, 0.0)
+
+
+def fly(start: Reference, targets, seconds: float) -> list[Reference]:
+    """The references, one per 2 ms step from t = 0 (the entry); `targets(k)` is the
+    sample seen at step k (it shapes the references from step k + 1 on)."""
+    s = offboard.start(0, start)
+    out = []
+    for k in range(0, round(seconds * 500) + 1):
+        s, ref = offboard.advance(s, k * DT_US, targets(k), LIM)
+        out.append(ref)
+    return out
+
+
+def rates(refs: list[Reference], pick) -> list[tuple[float, ...]]:
+    """Finite differences per second of a picked vector, step to step."""
+    return [tuple((b - a) * 500 for a, b in zip(pick(r0), pick(r1), strict=True))
+            for r0, r1 in itertools.pairwise(refs)]
+
+
+def test_sqrt_controller_is_linear_near_zero_then_a_braking_curve():
+    assert sqrt_controller(0.1, 2.0, 3.0, 0.0) == pytest.approx(0.2)
+    assert sqrt_controller(10.0, 2.0, 3.0, 0.0) == pytest.approx(math.sqrt(6 * (10 - 0.375)))
+    assert sqrt_controller(1e-4, 2.0, 3.0, 1e-5) == pytest.approx(2e-4)  # at most error/dt
+    lin = 3.0 / 4.0
+    assert sqrt_controller(lin, 2.0, 3.0, 0.0) == pytest.approx(2.0 * lin)  # continuous
+
+
+def test_a_far_step_is_flown_continuously_within_the_limits_and_reached():
+    """Given a hold at the origin, when a sample 20 m north-east and 8 m up arrives, then the
+    reference starts where it was, its horizontal speed and acceleration stay within 5 m/s
+    and 3 m/s^2, its climb within 3 m/s, the acceleration it reports is the one it flies,
+    and it ends on the target, still."""
+    target = Target(1, (14.0, 14.0, 8.0), Z, Z, None, Z)
+    refs = fly(pose_ref(Z, Q0), lambda k: target, 20.0)
+    assert math.dist(refs[0].p_enu_m, Z) < 1e-4
+    v = [r.v_enu_m_s for r in refs]
+    assert max(math.hypot(x[0], x[1]) for x in v) <= 5.0 + 1e-9
+    assert max(x[2] for x in v) <= 3.0 + 1e-9
+    assert max(math.hypot(x[0], x[1]) for x in v) > 4.9  # it does cruise
+    acc = rates(refs, lambda r: r.v_enu_m_s)
+    assert max(math.hypot(a[0], a[1]) for a in acc) <= 3.0 + 1e-6
+    for a, r in zip(acc, refs[1:], strict=False):
+        assert a == pytest.approx(r.a_enu_m_s2, abs=1e-6)
+    p = rates(refs, lambda r: r.p_enu_m)
+    for d, r in zip(p, refs[1:], strict=False):  # position integrates the velocity
+        assert d == pytest.approx(r.v_enu_m_s, abs=1e-6)
+    assert math.dist(refs[-1].p_enu_m, target.p_enu_m) < 1e-6
+    assert max(map(abs, refs[-1].v_enu_m_s)) < 1e-6
+
+
+def test_descents_are_slower_than_climbs():
+    """Given 10 m steps down and up, then the reference sinks at most 1.5 m/s (decelerating
+    at 3 m/s^2 up, accelerating at 2 m/s^2 down) and climbs at most 3 m/s."""
+    down = fly(pose_ref((0.0, 0.0, 20.0), Q0), lambda k: Target(1, (0.0, 0.0, 10.0), Z, Z,
+                                                                    None, Z), 15.0)
+    vz = [r.v_enu_m_s[2] for r in down]
+    assert min(vz) == pytest.approx(-1.5, abs=1e-9)
+    az = [r.a_enu_m_s2[2] for r in down]
+    assert min(az) >= -2.0 - 1e-9 and max(az) <= 3.0 + 1e-9
+    assert down[-1].p_enu_m[2] == pytest.approx(10.0, abs=1e-6)
+    up = fly(pose_ref(Z, Q0), lambda k: Target(1, (0.0, 0.0, 10.0), Z, Z, None, Z), 15.0)
+    assert max(r.v_enu_m_s[2] for r in up) == pytest.approx(3.0, abs=1e-9)
+    assert up[-1].p_enu_m[2] == pytest.approx(10.0, abs=1e-6)
+
+
+def test_an_attitude_step_turns_within_the_rate_limit_and_ends_on_the_target():
+    """Given a sample 150 deg away about a tilted axis, then the reference turns at most
+    90 deg/s about it, its body rate is the rate its attitude turns at, and it ends there."""
+    axis = (0.48, -0.6, 0.64)
+    q_t = q_exp(tuple(math.radians(150) * a for a in axis))
+    refs = fly(pose_ref(Z, Q0), lambda k: Target(1, None, Z, Z, q_t, Z), 8.0)
+    w = [math.sqrt(sum(x * x for x in r.omega_flu_rad_s)) for r in refs]
+    assert max(w) <= math.radians(90) + 1e-9 and max(w) > math.radians(89)
+    for r0, r1 in itertools.pairwise(refs):  # q1 = q0 exp(omega dt)
+        seen = q_mul(q_conj(r0.q_enu_flu), r1.q_enu_flu)
+        assert q_angle(q_mul(q_conj(q_exp(tuple(x * 0.002 for x in r1.omega_flu_rad_s))),
+                             seen)) < 1e-6
+    assert q_angle(q_mul(q_conj(q_t), refs[-1].q_enu_flu)) < 1e-6
+    assert max(map(abs, refs[-1].omega_flu_rad_s)) < 1e-6
+    assert max(math.dist(r.p_enu_m, Z) for r in refs) == 0.0  # the position stays
+
+
+def test_a_streamed_trajectory_is_flown_as_streamed():
+    """Given a circle (radius 2 m, 1 rad/s, turning with the vehicle) streamed at 50 Hz with
+    its velocity, acceleration and body rate, from a reference on it, then the reference
+    stays on the circle (within 0.1 mm) instead of lagging behind it."""
+    r_m, w = 2.0, 1.0
+
+    def on_circle(t: float) -> tuple:
+        c, s = math.cos(w * t), math.sin(w * t)
+        return ((r_m * c, r_m * s, 5.0), (-r_m * w * s, r_m * w * c, 0.0),
+                (-r_m * w * w * c, -r_m * w * w * s, 0.0), q_exp((0.0, 0.0, w * t)),
+                (0.0, 0.0, w))
+
+    def target(k: int) -> Target:
+        t = (k // 10) * 10 * 0.002  # a new sample every 10 steps (50 Hz)
+        p, v, a, q, om = on_circle(t)
+        return Target(k // 10, p, v, a, q, om)
+
+    p, v, a, q, om = on_circle(0.0)
+    refs = fly(Reference(p, q, v, a, om, Z), target, 6.0)
+    for k, ref in enumerate(refs):
+        p, v, _, q, _ = on_circle(k * 0.002)
+        assert math.dist(ref.p_enu_m, p) < 1e-4, k
+        assert math.dist(ref.v_enu_m_s, v) < 1e-3, k
+        assert q_angle(q_mul(q_conj(q), ref.q_enu_flu)) < 1e-6, k
+
+
+def test_velocity_and_rate_only_samples_fly_the_velocity_and_the_rate():
+    """Given samples without position (velocity 2 m/s east) and without attitude (a yaw rate
+    of 0.5 rad/s), then the reference accelerates to them and flies them: it moves east and
+    turns, and holds its height."""
+    refs = fly(pose_ref((0.0, 0.0, 3.0), Q0), lambda k: Target(k, None, (2.0, 0.0, 0.0), Z,
+                                                                   None, (0.0, 0.0, 0.5)),
+               5.0)
+    assert refs[-1].v_enu_m_s == pytest.approx((2.0, 0.0, 0.0), abs=1e-6)
+    assert refs[-1].omega_flu_rad_s == pytest.approx((0.0, 0.0, 0.5), abs=1e-6)
+    assert refs[-1].p_enu_m[0] == pytest.approx(2.0 * 5.0 - 2.0 ** 2 / (2 * 3.0), abs=0.05)
+    assert refs[-1].p_enu_m[1:] == pytest.approx((0.0, 3.0), abs=1e-9)
+    forward = q_rotate(refs[-1].q_enu_flu, (1.0, 0.0, 0.0))
+    turned = math.atan2(forward[1], forward[0])
+    assert turned == pytest.approx(0.5 * 5.0 - 0.5 ** 2 / (2 * math.pi), abs=0.02)
+
+
+def test_a_new_sample_keeps_the_reference_continuous_in_velocity_and_rate():
+    """Given a reference moving (1 m/s north, turning 0.3 rad/s about a tilted axis) when
+    OFFBOARD starts, and a sample elsewhere, then the first references continue its
+    velocity and body rate (no step), and the offsets rotate the rate correctly."""
+    om = (0.1, -0.2, 0.2)
+    q = q_exp((0.3, 0.2, -0.4))
+    start = Reference((0.0, 0.0, 5.0), q, (0.0, 1.0, 0.0), Z, om, Z)
+    target = Target(1, (5.0, 0.0, 5.0), Z, Z, q_exp((0.0, 0.0, 2.0)), (0.0, 0.0, 0.4))
+    refs = fly(start, lambda k: target, 10.0)
+    assert refs[0].v_enu_m_s == pytest.approx((0.0, 1.0, 0.0), abs=0.01)
+    assert refs[0].omega_flu_rad_s == pytest.approx(om, abs=0.01)
+    assert refs[0].p_enu_m == (0.0, 0.0, 5.0)
+    assert refs[1].p_enu_m == pytest.approx((0.0, 0.002, 5.0), abs=2e-5)
+    for r0, r1 in itertools.pairwise(refs):
+        seen = q_mul(q_conj(r0.q_enu_flu), r1.q_enu_flu)
+        assert q_angle(q_mul(q_conj(q_exp(tuple(x * 0.002 for x in r1.omega_flu_rad_s))),
+                             seen)) < 2e-5
+    end = refs[-1]
+    t = 10.0
+    assert end.omega_flu_rad_s == pytest.approx((0.0, 0.0, 0.4), abs=1e-6)
+    q_sp = q_mul(target.q_enu_flu, q_exp((0.0, 0.0, 0.4 * t)))
+    assert q_angle(q_mul(q_conj(q_sp), end.q_enu_flu)) < 1e-6
+
+
+@pytest.mark.parametrize("phi", [(0.0, 0.0, 0.0), (1e-8, 0.0, -2e-8), (0.3, -0.2, 0.1),
+                                 (1.5, 1.0, -1.2), (0.0, 2.9, 0.3)])
+def test_the_right_jacobian_is_the_body_rate_of_the_exponential_and_inverts(phi):
+    """J_r(phi) x is exp(phi)'s body rate when phi moves at x (by finite differences), and
+    J_r^-1 undoes it, below 3 rad."""
+    x = (0.4, -0.7, 0.25)
+    h = 1e-6
+    moved = q_exp(tuple(p + h * d for p, d in zip(phi, x, strict=True)))
+    body = q_mul(q_conj(q_exp(phi)), moved)
+    seen = tuple(2.0 * c / h for c in body[1:])
+    assert offboard.right_jacobian(phi, x) == pytest.approx(seen, abs=1e-5)
+    back = offboard.right_jacobian_inv(phi, offboard.right_jacobian(phi, x))
+    assert back == pytest.approx(x, abs=1e-9)
