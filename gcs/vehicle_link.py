@@ -93,10 +93,47 @@ def collect(session: Session, snapshot: Snapshot, seconds: float) -> Snapshot:
     return snapshot
 
 
-def status(session: Session, seconds: float = 1.5) -> dict[str, Any]:
-    """Identity, mode, armed, position, attitude, health, as a dict."""
-    session.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
-    snap = collect(session, Snapshot(), seconds)
+# What `status` asks for (MAV_CMD_REQUEST_MESSAGE) rather than waiting for a stream to bring
+# it: the identity, and the landed state and mission that vehicles send at 1 Hz or less.
+STATUS_REQUESTS = {"AUTOPILOT_VERSION": M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+                   "EXTENDED_SYS_STATE": M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+                   "MISSION_CURRENT": M.MAVLINK_MSG_ID_MISSION_CURRENT}
+
+
+def collect_requested(session: Session, snapshot: Snapshot, requests: dict[str, int],
+                      seconds: float, patience: float) -> Snapshot:
+    """Listen for `seconds`, and on until each requested message has come (asked again
+    every second) or its request was refused, at most `patience` seconds longer. The
+    requests go out together and their answers are read with everything else: waiting for
+    one request's COMMAND_ACK would drop the message another one brought."""
+    s = session
+    start = time.monotonic()
+    wanted = dict(requests)
+    asked_at = -math.inf
+    while True:
+        now = time.monotonic()
+        missing = {name: i for name, i in wanted.items() if snapshot.get(name) is None}
+        if (now - start >= seconds and not missing) or now - start >= seconds + patience:
+            return snapshot
+        if missing and now - asked_at >= 1.0:
+            for msg_id in missing.values():
+                s.send(M.MAVLink_command_long_message(s.target_system, s.target_component,
+                                                      M.MAV_CMD_REQUEST_MESSAGE, 0, msg_id,
+                                                      0, 0, 0, 0, 0, 0))
+            asked_at = now
+        msg = s.recv(None, timeout=0.05)
+        if msg is None or msg.get_srcSystem() != s.target_system:
+            continue
+        snapshot.update(msg)
+        if msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_REQUEST_MESSAGE and \
+                msg.result not in (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_IN_PROGRESS):
+            wanted = {}  # an ACK does not say which request it answers: stop asking
+
+
+def status(session: Session, seconds: float = 1.5, patience: float = 3.0) -> dict[str, Any]:
+    """Identity, mode, armed, position, attitude, health, as a dict: what the vehicle sent
+    in `seconds`, and what STATUS_REQUESTS asks for, waited for up to `patience` more."""
+    snap = collect_requested(session, Snapshot(), STATUS_REQUESTS, seconds, patience)
     out: dict[str, Any] = {"system": session.target_system,
                            "component": session.target_component}
     hb = snap.get("HEARTBEAT")

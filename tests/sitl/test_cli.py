@@ -91,6 +91,30 @@ def test_status_arm_mode_disarm(vehicle):
     assert vehicle.gcs("disarm").stdout.strip() == "disarm: MAV_RESULT_ACCEPTED"
 
 
+def test_status_asks_for_what_is_not_streamed(vehicle):
+    """Given a link on which the vehicle no longer streams EXTENDED_SYS_STATE and
+    MISSION_CURRENT (SET_MESSAGE_INTERVAL -1), when status runs, then it still shows the
+    landed state and the mission: it asks for them (REQUEST_MESSAGE) rather than hoping
+    that a 1 Hz stream brings them within its window."""
+    from gcs.session import Session
+    from pymavlink.dialects.v20 import common as M
+
+    session = Session(vehicle.connect)
+    try:
+        session.wait_vehicle(timeout=30.0)
+        for msg_id in (M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, M.MAVLINK_MSG_ID_MISSION_CURRENT):
+            assert session.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, -1) == \
+                M.MAV_RESULT_ACCEPTED
+        quiet = session.recv(["EXTENDED_SYS_STATE", "MISSION_CURRENT"], timeout=2.5)
+        assert quiet is None, "the streams did not stop"
+    finally:
+        session.close()
+    for _ in range(3):
+        out = vehicle.gcs("status")
+        assert out.returncode == 0, out.stderr
+        assert "landed: on ground" in out.stdout and "mission: none" in out.stdout, out.stdout
+
+
 def test_status_json_is_one_document(vehicle):
     """status --json prints one JSON document with float32 values in their shortest form."""
     out = vehicle.gcs("status", "--json")
