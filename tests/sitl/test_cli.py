@@ -96,8 +96,9 @@ def test_status_asks_for_what_is_not_streamed(vehicle):
     MISSION_CURRENT (SET_MESSAGE_INTERVAL -1), when status runs, then it still shows the
     landed state and the mission: it asks for them (REQUEST_MESSAGE) rather than hoping
     that a 1 Hz stream brings them within its window."""
-    from gcs.session import Session
     from pymavlink.dialects.v20 import common as M
+
+    from gcs.session import Session
 
     session = Session(vehicle.connect)
     try:
