@@ -212,6 +212,23 @@ def test_every_command_line_parses(block):
 # ------------------------------------------------------------------ running blocks
 
 
+def _kill_session(sid: int) -> None:
+    """SIGKILL every process of session `sid` (a session this test started)."""
+    import signal
+
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue  # gone meanwhile
+        fields = stat[stat.rindex(")") + 2:].split()
+        if int(fields[3]) == sid:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(int(entry.name), signal.SIGKILL)
+
+
 def _namespaces_work() -> bool:
     if shutil.which("unshare") is None or shutil.which("ip") is None:
         return False
@@ -279,9 +296,20 @@ def test_block_runs_as_written(block, tmp_path):
     env = {**os.environ, "HOME": str(home),
            "PATH": f"{Path(sys.prefix) / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}"}
     env.pop("VIRTUAL_ENV", None)
-    done = subprocess.run(["unshare", "-rn", "bash", "-c", script], cwd=work, env=env,
-                          capture_output=True, text=True, timeout=BLOCK_TIMEOUT_S,
-                          check=False)
+    # Its own session: the background jobs (`set -m` gives each its own process group)
+    # stay in it, so a block that overruns is stopped whole, none of its processes left.
+    proc = subprocess.Popen(["unshare", "-rn", "bash", "-c", script], cwd=work, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=BLOCK_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        _kill_session(proc.pid)
+        stdout, stderr = proc.communicate()
+        stdout += "\n@@timeout"
+    finally:
+        _kill_session(proc.pid)  # what a block left behind (nothing, when it works)
+    done = subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
     status = {}
     alive = {}
     for line in done.stdout.splitlines():
@@ -297,6 +325,8 @@ def test_block_runs_as_written(block, tmp_path):
                        for s in ("out", "err") if (out / f"{i}.{s}").exists())
 
     problems = []
+    if "@@timeout" in done.stdout:
+        problems.append(f"the block did not finish within {BLOCK_TIMEOUT_S} s (stopped)")
     for i, command in enumerate(shown):
         expected = int(m.group(1)) if (m := EXITS.search(command)) else 0
         if alive.get(i) is False:
