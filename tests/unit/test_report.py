@@ -226,8 +226,8 @@ def _gcs(*argv: str) -> tuple[int, str, str]:
     return rc, out.getvalue(), err.getvalue()
 
 
-@pytest.fixture(scope="module")
-def table1_dir(tmp_path_factory) -> Path:  # tests using it share one xdist group: built once
+@pytest.fixture(scope="session")  # its tests share one xdist group (one worker): built once
+def table1_dir(tmp_path_factory) -> Path:  # (module scope was torn down between them)
     """`gcs table1 --in-process --duration 8` (through run_table1), then `gcs report` on it."""
     from gcs.table1 import run_table1
 
