@@ -128,6 +128,11 @@ class Commander:
         self.manual_limits: StickSettings = self.flight.sticks  # fitted to the vehicle
         self.offboard_sp: offboard.Shaped | None = None  # OFFBOARD's shaper (None: from here)
         self.offboard_limits: StickSettings = self.flight.sticks  # fitted at OFFBOARD's entry
+        # HOLD brakes to `hold` (where the reference stops) with the same shaper
+        self.hold_sp: offboard.Shaped | None = None
+        self._hold_shaped: Reference | None = None  # the hold that hold_sp brakes to
+        self._hold_target: offboard.Target | None = None
+        self._hold_limits: StickSettings = self.flight.sticks
         self.state: VehicleState | None = None
         self.last_ref: Reference | None = None
         self.clock_us = 0  # the flight clock at the latest input (events are stamped with it)
@@ -515,9 +520,28 @@ class Commander:
             return self._auto_ref(t_us)
         if self.mode == Mode.POSCTL:
             return self._manual_ref(t_us)
+        return self._hold_ref(t_us)
+
+    def _hold_ref(self, t_us: int) -> Reference:
+        """HOLD: a reference that was moving brakes within OFFBOARD's limits to where it
+        comes to rest, and `hold` becomes that pose (PX4's and ArduPilot's hold); one at
+        rest is held as it is. A new `hold` (a mode change, a failsafe) brakes afresh."""
         if self.hold is None:
             self.hold = self._current_pose_ref()
-        return self.hold
+        if self._hold_shaped is not self.hold:
+            start = self.last_ref if self.armed and self.last_ref is not None else self.hold
+            self._hold_limits = manual.fit_envelope(offboard.limits(self.flight.sticks),
+                                                    self.limits.vehicle, start.q_enu_flu)
+            p, q = offboard.stopping_pose(start, self._hold_limits)
+            self.hold = self._hold_shaped = pose_ref(p, q)
+            self._hold_target = offboard.Target(0, p, _ZERO, _ZERO, q, _ZERO)
+            self.hold_sp = offboard.start(t_us, start)
+        assert self.hold_sp is not None
+        if offboard.settled(self.hold_sp) and self.hold_sp.seq == 0:
+            return self.hold
+        self.hold_sp, ref = offboard.advance(self.hold_sp, t_us, self._hold_target,
+                                             self._hold_limits)
+        return ref
 
     def _mission_ref(self, t_s: float) -> Reference:
         executor = self.executor

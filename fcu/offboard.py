@@ -104,6 +104,36 @@ def sqrt_controller(error: float, gain: float, accel: float, dt: float) -> float
     return min(rate, error / dt) if dt > 0.0 else rate
 
 
+def stop_distance(speed: float, gain: float, accel: float) -> float:
+    """How far the shaper's braking goes from `speed` (>= 0) to rest, so that a target that
+    far ahead is reached without overshoot: speed / gain in the linear region, the braking
+    curve's speed^2 / 2 accel (plus half its linear distance) beyond it."""
+    if speed <= accel / gain:
+        return speed / gain
+    return speed * speed / (2.0 * accel) + accel / (2.0 * gain * gain)
+
+
+def stopping_pose(ref: Reference, lim: StickSettings) -> tuple[Vec3, Quat]:
+    """Where a reference moving as `ref` comes to rest when braked within `lim` (HOLD's
+    target: PX4 and ArduPilot brake, then hold where they stopped)."""
+    p, v, w = ref.p_enu_m, ref.v_enu_m_s, ref.omega_flu_rad_s
+    h = math.hypot(v[0], v[1])
+    k = stop_distance(h, GAIN_1_S, lim.acc_xy_m_s2) / h if h > 0.0 else 0.0
+    up = v[2] > 0.0  # braking a climb takes a downward acceleration
+    dz = stop_distance(abs(v[2]), GAIN_1_S, lim.acc_down_m_s2 if up else lim.acc_up_m_s2)
+    n = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    turn = stop_distance(n, GAIN_ATT_1_S, math.radians(lim.yaw_acc_deg_s2)) / n \
+        if n > 0.0 else 0.0
+    return ((p[0] + v[0] * k, p[1] + v[1] * k, p[2] + math.copysign(dz, v[2])),
+            q_mul(ref.q_enu_flu, q_exp((w[0] * turn, w[1] * turn, w[2] * turn))))
+
+
+def settled(s: Shaped) -> bool:
+    """The reference is the sample's pose, still: no offset, no rate, no feed-forward."""
+    return not any((*s.e_enu_m, *s.de_enu_m_s, *s.eps_rad, *s.deps_rad_s, *s.v_enu_m_s,
+                    *s.a_enu_m_s2, *s.omega_flu_rad_s))
+
+
 def start(t_us: int, ref: Reference) -> Shaped:
     """Entering OFFBOARD at `ref` (the reference flown so far, or the pose held): no sample
     yet, the reference continues from there without acceleration."""

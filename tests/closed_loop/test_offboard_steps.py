@@ -92,3 +92,42 @@ def test_a_large_offboard_step_is_flown_at_bounded_speed_and_reached(start, ned,
     assert f["ref_speed"] <= 5.0 + 1e-9, f
     assert f["reached_s"] < seconds - 0.5 and f["error_m"] < 0.01, f
     assert f["error_rad"] < math.radians(0.2), f
+
+
+def test_hold_at_cruise_speed_brakes_then_holds_where_it_stopped():
+    """Given the vehicle flying OFFBOARD at 5 m/s, when HOLD comes, then it brakes within
+    the limits (no rotor saturates, tracking within 5 cm: as a step in the reference the
+    stop saturated the rotors for 1.7 s and lagged 1.6 m) and comes to rest at the hold
+    pose, ahead of where HOLD came, within 1 cm."""
+    sc = load_scenario(SCENARIOS / "case1_figure8.toml")
+    vehicle = sc.vehicle
+    plant = Plant(vehicle, dt_us=1000)
+    speeds, tilts = hover_speeds_and_tilts(plant)
+    state = plant.initial_state((0.0, 0.0, 5.0), on_ground=False, rotor_speed_rad_s=speeds,
+                                tilt_rad=tilts)
+    pipe, _ = fcu_pipeline(sc)
+    c = pipe.commander
+    pipe.on_state(0, state_for_fcu(state), 0)
+    assert pipe.arm()[0] == 0
+    assert c.offboard_position(0.0, 1, POSITION_ONLY, (100.0, 0.0, -5.0), (0.0,) * 3,
+                               (0.0,) * 3, math.nan)[0]
+    assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
+    track_m, at_hold = 0.0, None
+    for k in range(5000):
+        t = state.time_us
+        if k == 2500:
+            at_hold = state.p_enu_m
+            assert math.hypot(*state.v_enu_m_s[:2]) > 4.9
+            assert c.set_mode(Mode.HOLD, 0.0)[0] == 0
+        pipe.on_state(t, state_for_fcu(state), t)
+        out = pipe.step(t, 0.002)
+        track_m = max(track_m, math.dist(c.last_ref.p_enu_m, state.p_enu_m))
+        wire = through_wire_controls(actuator_controls(out, vehicle.rotor_speed_max_rad_s,
+                                                       lockstep=True))
+        command = command_from_controls(wire.controls, wire.mode, vehicle, state)
+        for _ in range(2):
+            state = plant.step(state, command)
+    assert pipe.armed and c.mode == Mode.HOLD and pipe.saturated_steps == 0
+    assert track_m < 0.05
+    assert c.hold.p_enu_m[1] > at_hold[1] + 4.0  # it braked from 5 m/s at 3 m/s^2
+    assert math.dist(state.p_enu_m, c.hold.p_enu_m) < 0.01

@@ -182,3 +182,30 @@ def test_the_right_jacobian_is_the_body_rate_of_the_exponential_and_inverts(phi)
     assert offboard.right_jacobian(phi, x) == pytest.approx(seen, abs=1e-5)
     back = offboard.right_jacobian_inv(phi, offboard.right_jacobian(phi, x))
     assert back == pytest.approx(x, abs=1e-9)
+
+
+@pytest.mark.parametrize("v", [(5.0, 0.0, 0.0), (0.3, -0.4, 0.0), (2.0, 1.0, 2.5),
+                               (0.0, 0.0, -1.5), (0.0, 0.0, 0.0)])
+def test_a_moving_reference_brakes_to_its_stopping_pose_without_overshoot(v):
+    """Given a reference moving at v and turning at 1 rad/s (HOLD's entry), when braked to
+    `stopping_pose`, then it never goes past that point along any axis, decelerates within
+    the limits, and ends there, still (at once when it was still)."""
+    w = (0.0, 0.6, 0.8)
+    start = Reference((1.0, 2.0, 5.0), Q0, v, Z, w, Z)
+    p_stop, q_stop = offboard.stopping_pose(start, LIM)
+    refs = fly(start, lambda k: Target(0, p_stop, Z, Z, q_stop, Z), 12.0)
+    for i in range(3):
+        if v[i] != 0.0:
+            past = [(r.p_enu_m[i] - p_stop[i]) * math.copysign(1.0, v[i]) for r in refs]
+            assert max(past) < 1e-6, i
+        else:
+            assert max(abs(r.p_enu_m[i] - p_stop[i]) for r in refs) < 1e-6, i
+    acc = rates(refs, lambda r: r.v_enu_m_s)
+    assert max(math.hypot(a[0], a[1]) for a in acc) <= 3.0 + 1e-6
+    assert min(a[2] for a in acc) >= -2.0 - 1e-6 and max(a[2] for a in acc) <= 3.0 + 1e-6
+    assert math.dist(refs[-1].p_enu_m, p_stop) < 1e-6
+    assert q_angle(q_mul(q_conj(q_stop), refs[-1].q_enu_flu)) < 1e-6
+    assert max(map(abs, (*refs[-1].v_enu_m_s, *refs[-1].omega_flu_rad_s))) < 1e-6
+    turned = q_angle(q_mul(q_conj(Q0), q_stop))
+    assert turned == pytest.approx(offboard.stop_distance(1.0, offboard.GAIN_ATT_1_S,
+                                                          math.pi), abs=1e-9)
