@@ -47,6 +47,10 @@ class RunError(RuntimeError):
     """A run that could not be carried out (a child died, the vehicle refused, a timeout)."""
 
 
+class ChildDied(RunError):
+    """A child process of the run ended before the run did."""
+
+
 @dataclass
 class Children:
     """The sitl and fcu child processes of one run, each logging to its own file."""
@@ -71,7 +75,7 @@ class Children:
             code = proc.poll()
             if code is not None:
                 tail = (self.out / f"{name}.log").read_text(errors="replace")[-800:]
-                raise RunError(f"{name} exited with status {code}:\n{tail}")
+                raise ChildDied(f"{name} exited with status {code}:\n{tail}")
 
     def stop(self, timeout: float = 10.0) -> None:
         for proc in self.procs.values():
@@ -245,6 +249,12 @@ class _Flight:
             self._fly()
         except BaseException as exc:  # reported by the caller with the vehicle's id
             self.error = exc
+            if isinstance(exc, GcsError | MissionError | RunError) and \
+                    not isinstance(exc, ChildDied):
+                try:  # a child that died explains what went wrong after it: say that
+                    self.children.check()
+                except ChildDied as died:
+                    self.error = RunError(f"{died}\n(then: {exc})")
 
     def _fly(self) -> None:
         s, sc = self.session, self.plan.scenario
