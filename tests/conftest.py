@@ -28,3 +28,18 @@ def pytest_configure(config: pytest.Config) -> None:
 
     run_scenario(apply_overrides(load_scenario(CASE1.parent / "mission_tour.toml"),
                                  duration_s=3.0), logs=False)
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Under `--dist loadgroup` every xdist_group mark must reach the test's id (`@group`),
+    or the groups the suite relies on (one campaign cluster at a time, one clock-discipline
+    run at a time, one table1 build) would be scattered over the workers without a word:
+    pytest 9.2 with pytest-xdist 3.8 did that."""
+    config = session.config
+    if not getattr(config.option, "loadgroup", False):
+        return
+    lost = [item.nodeid for item in session.items
+            if any(True for _ in item.iter_markers("xdist_group")) and "@" not in item.nodeid]
+    if lost:
+        raise pytest.UsageError(f"--dist loadgroup lost the xdist_group of {len(lost)} tests "
+                                f"(e.g. {lost[0]}): this pytest and pytest-xdist disagree")
