@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib
 import json
 import math
 import os
@@ -35,6 +36,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Any, Protocol
 
 from common.cliargs import OneLineParser, check_output_path
 from common.config import (
@@ -405,35 +407,97 @@ class SimulatorServer:
         self.link.close()
 
 
+# The simulator protocols `sitl` serves: its own link to this project's FCU, and the
+# interfaces through which external physics engines serve real firmware. Each has its own
+# default --link; with a firmware protocol the firmware drives simulated time.
+DQFLIGHT = "dqflight"
+DEFAULT_LINKS = {DQFLIGHT: "udpin:127.0.0.1:4560",  # this project's FCU (PX4's port)
+                 "ardupilot-json": "udpin:127.0.0.1:9002",  # ArduPilot's SIM_JSON
+                 "px4-hil": "tcpin:127.0.0.1:4560"}  # PX4's simulator MAVLink API
+FIRMWARE_MODULES = {"ardupilot-json": "sitl.ardupilot_json", "px4-hil": "sitl.px4_hil"}
+# Options that only the dqflight protocol takes (the firmware protocols refuse them): the
+# firmware sets the rates and drives the clock.
+DQFLIGHT_ONLY = ("realtime", "control_rate", "hil_sensor_hz", "resend_ms")
+
+
+class FirmwareServer(Protocol):
+    """What a firmware protocol's module provides as `Server(scenario, link_url, *,
+    truth_log, end_time_s)`: the plant behind the firmware's own simulator interface,
+    stepped by the firmware's packets, until `running` is cleared (SIGTERM, Ctrl-C) or
+    `end_time_s` of simulated time after the first packet."""
+
+    running: bool
+
+    def run(self) -> None: ...
+
+    def stats(self) -> dict[str, Any]: ...
+
+    def summary(self) -> str:
+        """The `sitl: stopped ...` line's text after "sitl: "."""
+        ...
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(prog="sitl", description="tilt-rotor plant on a simulator link")
+    p = OneLineParser(
+        prog="sitl", description="tilt-rotor plant on a simulator link",
+        epilog="protocols: dqflight (this project's FCU; every option applies), "
+               "ardupilot-json (ArduPilot's JSON SITL interface: ArduPilot sends servo "
+               "packets and drives simulated time) and px4-hil (PX4's simulator MAVLink API: "
+               "HIL_SENSOR, HIL_GPS, HIL_STATE_QUATERNION out, HIL_ACTUATOR_CONTROLS in, "
+               "lockstep on PX4's answers). With ardupilot-json and px4-hil the options "
+               "--link, --truth-log, --end-time (after the first packet; default: serve until "
+               "SIGTERM), --ideal-actuators, --sensors, --seed, --sysid, --stats and "
+               "--position apply; --realtime, --control-rate, --hil-sensor-hz and "
+               "--resend-ms are dqflight's only.")
     p.add_argument("scenario", type=Path, help="scenario TOML (vehicle, start, disturbances)")
-    p.add_argument("--link", default="udpin:127.0.0.1:4560",
-                   help="simulator link URL (default udpin:127.0.0.1:4560)")
+    p.add_argument("--protocol", choices=tuple(DEFAULT_LINKS), default=DQFLIGHT,
+                   help="simulator protocol (default dqflight)")
+    p.add_argument("--link", default=None,
+                   help="simulator link URL (default per protocol: dqflight "
+                        "udpin:127.0.0.1:4560, ardupilot-json udpin:127.0.0.1:9002, px4-hil "
+                        "tcpin:127.0.0.1:4560)")
     p.add_argument("--realtime", action="store_true", help="pace by the wall clock")
     p.add_argument("--truth-log", type=Path,
                    help="write the ground-truth log (ULog) here, e.g. truth.ulg")
     p.add_argument("--end-time", type=float, metavar="S",
                    help="stop advancing this long after the flight starts (default: the "
-                        "scenario's duration in lockstep, never in real time)")
+                        "scenario's duration in lockstep, never in real time; with a firmware "
+                        "protocol, after the first packet, default never)")
     p.add_argument("--control-rate", type=int, default=None,
                    help="control periods per second (default: the scenario's)")
     p.add_argument("--ideal-actuators", action="store_true")
-    p.add_argument("--hil-sensor-hz", type=float, default=100.0,
-                   help="with the truth profile: HIL_SENSOR rate in simulated time (0: off)")
+    p.add_argument("--hil-sensor-hz", type=float, default=None,
+                   help="with the truth profile: HIL_SENSOR rate in simulated time (0: off; "
+                        "default 100)")
     p.add_argument("--sensors", metavar="PROFILE",
                    help="sensor profile: a name in config/sensors/ (truth, mocap-indoor, "
                         "degraded) or a .toml file (default: the scenario's, else truth)")
     p.add_argument("--seed", type=int, metavar="N",
                    help="seed of the sensors' noise (default: the scenario's seed)")
-    p.add_argument("--resend-ms", type=float, default=5.0,
-                   help="re-send an unanswered state after this wall time")
+    p.add_argument("--resend-ms", type=float, default=None,
+                   help="re-send an unanswered state after this wall time (default 5)")
     p.add_argument("--sysid", type=int, default=1)
     p.add_argument("--stats", type=Path,
                    help="write run statistics (JSON: counts, per-step stage times) here at exit")
     p.add_argument("--position", metavar="X,Y,Z",
                    help="start position in ENU metres (default: the scenario's)")
     return p
+
+
+def _check_protocol_options(args: argparse.Namespace) -> None:
+    """Refuse what the chosen protocol does not take (exit 2), fill in the defaults."""
+    if args.protocol != DQFLIGHT:
+        given = [name for name in DQFLIGHT_ONLY if getattr(args, name) not in (None, False)]
+        if given:
+            flag = "--" + given[0].replace("_", "-")
+            raise ConfigError(f"{flag} does not apply to --protocol {args.protocol}: the "
+                              "firmware sets the rates and drives simulated time")
+    if args.link is None:
+        args.link = DEFAULT_LINKS[args.protocol]
+    if args.hil_sensor_hz is None:
+        args.hil_sensor_hz = 100.0
+    if args.resend_ms is None:
+        args.resend_ms = 5.0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -445,6 +509,7 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, interrupted)
     try:
+        _check_protocol_options(args)
         parse_url(args.link)  # before anything is opened
         check_output_path("--truth-log", args.truth_log)
         check_output_path("--stats", args.stats)
@@ -471,10 +536,12 @@ def main(argv: list[str] | None = None) -> int:
         if not 1 <= rate <= 1000:
             raise ConfigError(f"--control-rate: expected 1..1000 Hz, got {rate}")
         end = args.end_time
-        if end is None and not args.realtime:
+        if end is None and not args.realtime and args.protocol == DQFLIGHT:
             end = scenario.duration_s
         if end is not None and not (math.isfinite(end) and end > 0):
             raise ConfigError(f"--end-time: expected a positive number of seconds, got {end}")
+        if args.protocol != DQFLIGHT:
+            return _serve_firmware(args, scenario, end)
         server = SimulatorServer(scenario, args.link, truth_log=args.truth_log,
                                  end_time_s=end, realtime=args.realtime,
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
@@ -509,6 +576,36 @@ def main(argv: list[str] | None = None) -> int:
           f"control periods; {server.resends} re-sends, {server.ignored_answers} answers "
           f"ignored, {server.rejected_bytes} bytes rejected, {server.skipped_s:.3f} s of wall "
           "time skipped", flush=True)
+    return 0
+
+
+def _serve_firmware(args: argparse.Namespace, scenario: Scenario, end_s: float | None) -> int:
+    """Serve the plant to real firmware over its own simulator protocol until SIGTERM or
+    Ctrl-C (or `end_s` of simulated time after the firmware's first packet)."""
+    module = importlib.import_module(FIRMWARE_MODULES[args.protocol])
+    try:
+        server: FirmwareServer = module.Server(scenario, args.link, truth_log=args.truth_log,
+                                               end_time_s=end_s, system_id=args.sysid)
+    except LinkError as exc:
+        print(f"sitl: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except (ConfigError, ULogError) as exc:
+        print(f"sitl: {exc}", file=sys.stderr)
+        return 2
+
+    def stop(_signum: int, _frame: object) -> None:
+        server.running = False
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    print(f"sitl: serving {scenario.name} on {args.link} ({args.protocol}, lockstep driven "
+          "by the firmware)", flush=True)
+    server.run()
+    if args.stats is not None:
+        tmp = args.stats.with_suffix(".tmp")
+        tmp.write_text(json.dumps(server.stats(), indent=2) + "\n")
+        os.replace(tmp, args.stats)
+    print(f"sitl: {server.summary()}", flush=True)
     return 0
 
 
