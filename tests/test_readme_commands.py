@@ -1,4 +1,4 @@
-"""Every ```sh block of README.md works as written.
+"""Every ```sh block of README.md and of the pages in docs/ works as written.
 
 Each block is checked statically first: every `gcs`, `fcu` and `sitl` command line is
 accepted by the program's own argument parser, every `config/...` path it names exists, every
@@ -14,9 +14,9 @@ run, line by line, as a bash script:
   when the block's other lines are done, and must exit 0 on Ctrl-C (SIGINT);
 - every other line must exit 0, unless its comment says `# exits N`.
 
-`<!-- run-with: HEADING -->` before a block runs the sh block of the section HEADING first
-(its long-running commands in the background): e.g. the vehicle commands run against the
-`sitl` and `fcu` started as "Starting the processes by hand" says.
+`<!-- run-with: HEADING -->` before a block runs the sh block of the section HEADING of the
+same page first (its long-running commands in the background): e.g. the vehicle commands
+run against the `sitl` and `fcu` started as "Starting the processes by hand" says.
 
 Without network namespaces the blocks are only checked statically (skipped, with reason).
 """
@@ -38,6 +38,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+PAGES = [README, *sorted((ROOT / "docs").glob("**/*.md"))]
 NOT_RUN = re.compile(r"<!--\s*not-run:\s*(.*?)\s*-->")
 RUN_WITH = re.compile(r"<!--\s*run-with:\s*(.*?)\s*-->")
 EXITS = re.compile(r"#.*\bexits (\d+)\b")
@@ -49,6 +50,7 @@ pytestmark = pytest.mark.timeout(BLOCK_TIMEOUT_S + 30)
 
 @dataclass
 class Block:
+    page: str  # the page's path in the repository
     line: int  # of the opening fence, 1-based
     heading: str
     text: str
@@ -57,10 +59,11 @@ class Block:
 
     @property
     def name(self) -> str:
-        return f"L{self.line} {self.heading[:40]}"
+        where = "" if self.page == "README.md" else f"{self.page} "
+        return f"{where}L{self.line} {self.heading[:40]}"
 
 
-def read_blocks(text: str) -> list[Block]:
+def read_blocks(text: str, page: str = "README.md") -> list[Block]:
     blocks: list[Block] = []
     lines = text.splitlines()
     heading = ""
@@ -81,7 +84,7 @@ def read_blocks(text: str) -> list[Block]:
             directives = " ".join(before)
             not_run = NOT_RUN.search(directives)
             run_with = RUN_WITH.search(directives)
-            blocks.append(Block(start + 1, heading, "\n".join(body) + "\n",
+            blocks.append(Block(page, start + 1, heading, "\n".join(body) + "\n",
                                 not_run.group(1) if not_run else None,
                                 run_with.group(1) if run_with else None))
         elif line.strip().startswith("```"):  # another language: skip to its end
@@ -191,13 +194,14 @@ def static_problems(block: Block) -> list[str]:
     return problems
 
 
-BLOCKS = read_blocks(README.read_text())
+BLOCKS = [block for path in PAGES
+          for block in read_blocks(path.read_text(), str(path.relative_to(ROOT)))]
 
 
 def test_the_readme_has_sh_blocks_and_directives_name_real_sections():
     assert len(BLOCKS) >= 5
-    headings = {b.heading for b in BLOCKS}
     for block in BLOCKS:
+        headings = {b.heading for b in BLOCKS if b.page == block.page}
         assert block.not_run is None or block.not_run, f"{block.name}: not-run needs a reason"
         assert block.run_with is None or block.run_with in headings, \
             f"{block.name}: run-with names no section with an sh block: {block.run_with}"
@@ -287,7 +291,8 @@ def test_block_runs_as_written(block, tmp_path):
     if not _namespaces_work():
         pytest.skip("needs a private network namespace (unshare -rn) to use the README's "
                     "ports as written; checked statically only")
-    prelude = next((b for b in BLOCKS if b.heading == block.run_with), None) \
+    prelude = next((b for b in BLOCKS if b.page == block.page and b.heading == block.run_with),
+                   None) \
         if block.run_with else None
     work, out, home = _scratch(tmp_path), tmp_path / "out", tmp_path / "home"
     out.mkdir()
