@@ -5,12 +5,18 @@ unknown keys are refused, and errors are `ConfigError` naming the file and the k
 Units are SI and in the key names; frames are in the key names (NED earth field).
 `kind = "truth"` declares a perfect profile and then requires every noise, bias, latency
 and dropout figure to be zero.
+
+Timing: sensor k is sampled at k / rate_hz on the simulation clock (`period_us`, exact), each
+section may add a timing jitter (`jitter_s`, optional, below half its period), and what the
+plant cannot serve at a scenario's physics step and control period is refused by
+`check_servable` when the scenario and the profile meet, before anything runs.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +52,7 @@ class ImuConfig:
     vibration_factor: float  # multiplies both white noise densities
     gyro: GyroConfig
     accel: AccelConfig
+    jitter_s: float = 0.0  # sampling instants uniform within +-jitter_s of k / rate_hz
 
     @property
     def gyro_sigma_rad_s(self) -> float:
@@ -64,6 +71,7 @@ class BaroConfig:
     rate_hz: float
     noise_m: float  # sigma of pressure altitude per sample
     bias_m: float  # constant offset (optional key, default 0)
+    jitter_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -71,6 +79,7 @@ class MagConfig:
     rate_hz: float
     field_ned_gauss: Vec3  # fixed earth field in NED
     noise_gauss: float  # sigma per axis per sample
+    jitter_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -80,6 +89,7 @@ class MocapConfig:
     attitude_noise_rad: float  # sigma per axis of the small body-frame rotation
     latency_s: float  # capture at t is delivered at t + latency (any float >= 0)
     dropout_probability: float  # per capture, 0..1
+    jitter_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -97,8 +107,27 @@ class SensorProfile:
         return self.kind == "truth"
 
 
+SECTIONS = ("imu", "baro", "mag", "mocap")
+
+
+def period_us(rate_hz: float) -> Fraction:
+    """The exact sample period in microseconds (the float rate taken as it is stored)."""
+    return Fraction(1_000_000) / Fraction(rate_hz)
+
+
 def _rate(t: _Table, lo: float = RATE_MIN_HZ) -> float:
     return t.number("rate_hz", lo=lo, hi=RATE_MAX_HZ)
+
+
+def _jitter(t: _Table, rate_hz: float) -> float:
+    """`jitter_s` (optional, 0): at least 0 and below half the period, so that the samples
+    keep their order."""
+    jitter = t.number("jitter_s", 0.0, lo=0.0)
+    half_s = 0.5 / rate_hz
+    if not jitter < half_s:
+        raise ConfigError(f"{t.source}: {t.prefix}jitter_s = {jitter:g} is not below half "
+                          f"the sample period ({half_s:g} s at {rate_hz:g} Hz)")
+    return jitter
 
 
 def _nonneg(t: _Table, key: str, default: Any = ...) -> float:
@@ -122,34 +151,76 @@ def _parse_imu(t: _Table) -> ImuConfig:
         bias_random_walk_m_s3_sqrt_hz=_nonneg(a, "bias_random_walk_m_s3_sqrt_hz"),
         range_m_s2=a.number("range_m_s2", lo=0.0, lo_open=True))
     a.finish()
+    jitter = _jitter(t, rate)
     t.finish()
-    return ImuConfig(rate_hz=rate, vibration_factor=vib, gyro=gyro, accel=accel)
+    return ImuConfig(rate_hz=rate, vibration_factor=vib, gyro=gyro, accel=accel,
+                     jitter_s=jitter)
 
 
 def _parse_baro(t: _Table) -> BaroConfig:
-    out = BaroConfig(rate_hz=_rate(t), noise_m=_nonneg(t, "noise_m"),
-                     bias_m=t.number("bias_m", 0.0))
+    rate = _rate(t)
+    out = BaroConfig(rate_hz=rate, noise_m=_nonneg(t, "noise_m"),
+                     bias_m=t.number("bias_m", 0.0), jitter_s=_jitter(t, rate))
     t.finish()
     return out
 
 
 def _parse_mag(t: _Table) -> MagConfig:
     field_ned = t.numbers("field_ned_gauss", 3)
-    out = MagConfig(rate_hz=_rate(t), field_ned_gauss=(field_ned[0], field_ned[1], field_ned[2]),
-                    noise_gauss=_nonneg(t, "noise_gauss"))
+    rate = _rate(t)
+    out = MagConfig(rate_hz=rate, field_ned_gauss=(field_ned[0], field_ned[1], field_ned[2]),
+                    noise_gauss=_nonneg(t, "noise_gauss"), jitter_s=_jitter(t, rate))
     t.finish()
     return out
 
 
 def _parse_mocap(t: _Table) -> MocapConfig:
+    rate = _rate(t)
     out = MocapConfig(
-        rate_hz=_rate(t),
+        rate_hz=rate,
         position_noise_m=_nonneg(t, "position_noise_m"),
         attitude_noise_rad=_nonneg(t, "attitude_noise_rad"),
         latency_s=_nonneg(t, "latency_s"),
-        dropout_probability=t.number("dropout_probability", lo=0.0, hi=1.0))
+        dropout_probability=t.number("dropout_probability", lo=0.0, hi=1.0),
+        jitter_s=_jitter(t, rate))
     t.finish()
     return out
+
+
+def _check_rates(p: SensorProfile, source: str) -> None:
+    """Magnetometer and barometer ride on the IMU's HIL_SENSOR: not faster than the IMU."""
+    for section in ("baro", "mag"):
+        rate = getattr(p, section).rate_hz
+        if rate > p.imu.rate_hz:
+            raise ConfigError(f"{source}: {section}.rate_hz = {rate:g} is faster than "
+                              f"imu.rate_hz = {p.imu.rate_hz:g} (its samples are sent with "
+                              f"the IMU's)")
+
+
+def check_servable(p: SensorProfile, physics_dt_us: int, control_dt_us: int) -> None:
+    """Refuse (ConfigError naming the file and the key) what the plant cannot serve at this
+    physics step and control period: a sensor faster than the physics step, an IMU without a
+    sample at the end of every control period (its sample there drives the FCU's control
+    step and the lockstep), a jittered IMU (for the same reason). The truth profile is not
+    sampled (the exact state is sent): nothing to check."""
+    if p.is_truth:
+        return
+    src = p.source or repr(p.name)
+    for section in SECTIONS:
+        rate = getattr(p, section).rate_hz
+        if period_us(rate) < physics_dt_us:
+            raise ConfigError(f"{src}: {section}.rate_hz = {rate:g} is faster than the "
+                              f"physics step allows ({physics_dt_us} us: at most "
+                              f"{1e6 / physics_dt_us:g} Hz)")
+    per_period = Fraction(control_dt_us) / period_us(p.imu.rate_hz)
+    if per_period.denominator != 1:
+        raise ConfigError(f"{src}: imu.rate_hz = {p.imu.rate_hz:g} puts no sample at the end "
+                          f"of every {control_dt_us} us control period (the IMU drives the "
+                          f"control loop: a multiple of {1e6 / control_dt_us:g} Hz)")
+    if p.imu.jitter_s > 0.0:
+        raise ConfigError(f"{src}: imu.jitter_s = {p.imu.jitter_s:g}: the IMU's sample at "
+                          f"the end of each control period drives the control loop and "
+                          f"cannot move off it")
 
 
 # Fields that a `kind = "truth"` profile must hold at zero (section, field).
@@ -160,7 +231,8 @@ _TRUTH_ZERO = (
     ("imu.accel", "bias_random_walk_m_s3_sqrt_hz"),
     ("baro", "noise_m"), ("baro", "bias_m"), ("mag", "noise_gauss"),
     ("mocap", "position_noise_m"), ("mocap", "attitude_noise_rad"), ("mocap", "latency_s"),
-    ("mocap", "dropout_probability"),
+    ("mocap", "dropout_probability"), ("imu", "jitter_s"), ("baro", "jitter_s"),
+    ("mag", "jitter_s"), ("mocap", "jitter_s"),
 )
 
 
@@ -188,6 +260,7 @@ def parse_sensor_profile(data: dict[str, Any], source: str) -> SensorProfile:
     t.finish()
     if profile.is_truth:
         _check_truth(profile, source)
+    _check_rates(profile, source)
     return profile
 
 

@@ -5,8 +5,10 @@ Pure and I/O-free: given the plant states at the physics steps of a period, in t
 them (DESIGN.md section 3): one HIL_SENSOR per IMU sample (FRD specific force and rate, with
 the magnetometer and barometer fields flagged when they are new) and each motion-capture
 pose as ODOMETRY (estimator_type MOCAP, stamped with its capture time, its covariance)
-once its latency has passed, placed before the IMU sample of the same instant. The
-process (`sitl/node.py`) and the in-process runner share it, so both send the same samples.
+once its latency has passed, placed before the IMU sample of the same instant. Each sensor
+samples at its own rate and jitter, on or off the physics grid (`SampleClock`, `state_at`).
+The process (`sitl/node.py`) and the in-process runner share it, so both send the same
+samples.
 
 Injected faults (the scenario's [[sensor_fault]], `start_flight`) act on what the models
 return, never on their draws: every sensor draws as without the fault and the fault then
@@ -22,11 +24,11 @@ from collections.abc import Sequence
 from common.config import SENSOR_FAULT_KINDS, ConfigError, SensorFault
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
 from common.mavlink import MAV
-from common.quaternion import Vec3
-from common.sensors_config import SensorProfile
+from common.quaternion import Vec3, q_conj, q_exp, q_log, q_mul, q_normalize
+from common.sensors_config import SensorProfile, check_servable
 from common.simlink import HilSensor, Odometry, pose_covariance
 from sitl.plant import Plant, PlantState
-from sitl.sensors import ImuSample, SensorSuite
+from sitl.sensors import ImuSample, SampleClock, SensorSuite, sensor_rng
 
 SEA_LEVEL_HPA = 1013.25
 TEMPERATURE_C = 15.0
@@ -42,35 +44,55 @@ def pressure_hpa(alt_amsl_m: float) -> float:
     return SEA_LEVEL_HPA * float((1.0 - 2.25577e-5 * alt_amsl_m) ** 5.25588)
 
 
-def _period_us(rate_hz: float, physics_dt_us: int, what: str) -> int:
-    period = round(1e6 / rate_hz)
-    if period % physics_dt_us:
-        raise ConfigError(f"sensor profile: {what} period {period} us is not a multiple of "
-                          f"the physics step {physics_dt_us} us")
-    return period
+def state_at(a: PlantState, b: PlantState, t_us: int) -> PlantState:
+    """The plant's state at t_us in (a.time_us, b.time_us]: b itself at its own time (so
+    samples on the physics grid are exact), else linear in position, velocity, body rate,
+    rotor speeds and tilts and geodesic in attitude between the two physics steps, the
+    landed flag held from a."""
+    if t_us == b.time_us:
+        return b
+    w = (t_us - a.time_us) / (b.time_us - a.time_us)
+
+    def lerp(x: tuple[float, ...], y: tuple[float, ...]) -> tuple[float, ...]:
+        return tuple([xi + w * (yi - xi) for xi, yi in zip(x, y, strict=True)])
+
+    d = q_log(q_mul(q_conj(a.q_enu_flu), b.q_enu_flu))
+    q = q_normalize(q_mul(a.q_enu_flu, q_exp((w * d[0], w * d[1], w * d[2]))))
+    p, v, om = lerp(a.p_enu_m, b.p_enu_m), lerp(a.v_enu_m_s, b.v_enu_m_s), \
+        lerp(a.omega_flu_rad_s, b.omega_flu_rad_s)
+    return PlantState(t_us, (p[0], p[1], p[2]), (v[0], v[1], v[2]), q, (om[0], om[1], om[2]),
+                      lerp(a.rotor_speed_rad_s, b.rotor_speed_rad_s),
+                      lerp(a.tilt_rad, b.tilt_rad), a.landed)
 
 
 class SensorFeed:
-    """The seeded sensor models of a profile, sampled on the plant's physics steps."""
+    """The seeded sensor models of a profile, each sampled at its own instants (a
+    `SampleClock`: exact multiples of its period, optionally jittered), from the plant's
+    state at that instant (`state_at` between the two physics steps around it: a sample
+    carries what the vehicle did at its stamp, not up to a physics step earlier, which
+    would add a latency the estimator is not told of; on the grid the step itself)."""
 
     def __init__(self, profile: SensorProfile, seed: int, plant: Plant, control_dt_us: int,
                  home_alt_m: float = 0.0) -> None:
-        dt = plant.dt_us
-        self.imu_us = _period_us(profile.imu.rate_hz, dt, "IMU")
-        if control_dt_us % self.imu_us:
-            raise ConfigError(f"sensor profile {profile.name!r}: IMU period {self.imu_us} us "
-                              f"does not divide the control period {control_dt_us} us")
-        self.baro_us = _period_us(profile.baro.rate_hz, dt, "barometer")
-        self.mag_us = _period_us(profile.mag.rate_hz, dt, "magnetometer")
-        self.mocap_us = _period_us(profile.mocap.rate_hz, dt, "motion capture")
+        check_servable(profile, plant.dt_us, control_dt_us)
         self.profile = profile
         self.plant = plant
         self.suite = SensorSuite.from_profile(profile, seed)
+
+        def clock(section: str) -> SampleClock:
+            cfg = getattr(profile, section)
+            return SampleClock(cfg.rate_hz, cfg.jitter_s,
+                               sensor_rng(seed, f"{section}.jitter") if cfg.jitter_s else None)
+
+        self.imu_clock, self.baro_clock, self.mag_clock, self.mocap_clock = \
+            (clock(name) for name in ("imu", "baro", "mag", "mocap"))
         self.home_alt_m = home_alt_m
         cfg = profile.mocap
         self.mocap_cov = pose_covariance(max(cfg.position_noise_m, 1e-6) ** 2,
                                          max(cfg.attitude_noise_rad, 1e-6) ** 2)
-        self._last_us = -1
+        self._prev: PlantState | None = None
+        self._mag: Vec3 | None = None  # a magnetometer sample for the next HIL_SENSOR
+        self._baro_alt_m: float | None = None  # likewise the barometer's
         self.flight_start_us: int | None = None
         # The faults as windows on the simulation clock [start_us, end_us) (end None: open).
         self._faults: list[tuple[str, int, int | None, Vec3]] = []
@@ -125,38 +147,68 @@ class SensorFeed:
             mocap.queue[-1] = dataclasses.replace(mocap.queue[-1], p_enu_m=_NAN3,
                                                   q_enu_flu=_NAN4)
 
+    def _deliver(self, t_us: int, out: list[HilSensor | Odometry]) -> None:
+        """The poses whose latency has passed at t_us, as ODOMETRY at their capture time."""
+        for pose in self.suite.mocap.deliver((t_us + 0.5) * 1e-6):
+            out.append(Odometry(round(pose.capture_s * 1e6), enu_to_ned(pose.p_enu_m),
+                                q_enu_flu_to_ned_frd(pose.q_enu_flu), _NAN3, _NAN3,
+                                MAV.MAV_ESTIMATOR_TYPE_MOCAP, self.mocap_cov))
+
+    def _hil_sensor(self, s: PlantState) -> HilSensor:
+        """The IMU sample at s.time_us (taken now), with the newest magnetometer and
+        barometer samples not sent yet."""
+        t, dt_us = self.imu_clock.take()
+        t_s = t * 1e-6
+        imu = self.suite.imu.sample(t_s, dt_us * 1e-6, s.omega_flu_rad_s,
+                                    self.plant.specific_force_flu(s))
+        if self._faults:
+            imu = self._imu_faults(t, imu)
+        fields = IMU_FIELDS
+        mag = _NAN3
+        if self._mag is not None:
+            mag, self._mag = self._mag, None
+            fields |= MAG_FIELDS
+        pressure = alt = float("nan")
+        if self._baro_alt_m is not None:
+            alt, self._baro_alt_m = self._baro_alt_m, None
+            pressure = pressure_hpa(alt)
+            fields |= BARO_FIELDS
+        return HilSensor(t, flu_to_frd(imu.f_flu_m_s2), flu_to_frd(imu.omega_flu_rad_s), mag,
+                         pressure, alt, TEMPERATURE_C, fields)
+
     def period(self, states: Sequence[PlantState]) -> list[HilSensor | Odometry]:
-        """The messages for these physics-step states (times increasing, each once)."""
+        """The messages for these physics-step states (times increasing, each once): the
+        samples due since the previous state, in time order; at one instant a pose delivered
+        then goes before the IMU sample, and the magnetometer and barometer ride on the
+        IMU's HIL_SENSOR (flagged in its fields)."""
         out: list[HilSensor | Odometry] = []
         suite = self.suite
+        imu_c, baro_c, mag_c, mocap_c = (self.imu_clock, self.baro_clock, self.mag_clock,
+                                         self.mocap_clock)
         for s in states:
             t = s.time_us
-            if t <= self._last_us:
-                raise ValueError(f"sensor feed: time {t} us after {self._last_us} us")
-            self._last_us = t
-            t_s = t * 1e-6
-            if t % self.mocap_us == 0:
-                self._capture(t, s)
-            for pose in suite.mocap.deliver((t + 0.5) * 1e-6):
-                out.append(Odometry(round(pose.capture_s * 1e6), enu_to_ned(pose.p_enu_m),
-                                    q_enu_flu_to_ned_frd(pose.q_enu_flu), _NAN3, _NAN3,
-                                    MAV.MAV_ESTIMATOR_TYPE_MOCAP, self.mocap_cov))
-            if t % self.imu_us:
-                continue
-            imu = suite.imu.sample(t_s, self.imu_us * 1e-6, s.omega_flu_rad_s,
-                                   self.plant.specific_force_flu(s))
-            if self._faults:
-                imu = self._imu_faults(t, imu)
-            fields = IMU_FIELDS
-            mag = _NAN3
-            if t % self.mag_us == 0:
-                mag = flu_to_frd(suite.mag.sample(t_s, s.q_enu_flu).b_flu_gauss)
-                fields |= MAG_FIELDS
-            pressure = alt = float("nan")
-            if t % self.baro_us == 0:
-                alt = self.home_alt_m + suite.baro.sample(t_s, s.p_enu_m).alt_m
-                pressure = pressure_hpa(alt)
-                fields |= BARO_FIELDS
-            out.append(HilSensor(t, flu_to_frd(imu.f_flu_m_s2), flu_to_frd(imu.omega_flu_rad_s),
-                                 mag, pressure, alt, TEMPERATURE_C, fields))
+            prev = self._prev
+            if prev is None:
+                for c in (imu_c, baro_c, mag_c, mocap_c):
+                    c.start(t)
+            elif t <= prev.time_us:
+                raise ValueError(f"sensor feed: time {t} us after {prev.time_us} us")
+            self._prev = s
+            while True:
+                te = min(imu_c.due_us, baro_c.due_us, mag_c.due_us, mocap_c.due_us)
+                if te > t:
+                    break
+                at = s if prev is None else state_at(prev, s, te)
+                if mocap_c.due_us == te:
+                    self._capture(mocap_c.take()[0], at)
+                if mag_c.due_us == te:
+                    self._mag = flu_to_frd(suite.mag.sample(mag_c.take()[0] * 1e-6,
+                                                            at.q_enu_flu).b_flu_gauss)
+                if baro_c.due_us == te:
+                    self._baro_alt_m = self.home_alt_m + suite.baro.sample(
+                        baro_c.take()[0] * 1e-6, at.p_enu_m).alt_m
+                if imu_c.due_us == te:
+                    self._deliver(te, out)
+                    out.append(self._hil_sensor(at))
+            self._deliver(t, out)
         return out

@@ -3,7 +3,8 @@
 Frames: the models work in the plant's frames, ENU world and FLU body; conversion to the
 wire (NED/FRD) happens elsewhere (common.frames). Each sensor owns a numpy Generator seeded
 from (seed, sensor name), so its draws do not depend on which other sensors were sampled.
-The caller samples each sensor at its own period (`period_s`), passing time explicitly.
+The caller samples each sensor at its own period (`period_s`), passing time explicitly, at
+the instants a `SampleClock` gives (exact multiples of the period, optionally jittered).
 
     gyro/accel:  y = sat(x + b0 + b_rw(t) + k_vib N sqrt(rate) n),  b_rw += s_rw sqrt(dt) n
     baro:        h = z_enu + bias + s n
@@ -30,12 +31,71 @@ from common.sensors_config import (
     MagConfig,
     MocapConfig,
     SensorProfile,
+    period_us,
 )
 
 
 def sensor_rng(seed: int, name: str) -> np.random.Generator:
     """A Generator that depends only on (seed, name): crc32 gives a stable name key."""
     return np.random.default_rng(np.random.SeedSequence([seed, zlib.crc32(name.encode())]))
+
+
+class SampleClock:
+    """When one sensor samples, in integer microseconds of the simulation clock.
+
+    Sample k is due at round(k * 1e6 / rate_hz), computed from k with exact integers (so a
+    120 Hz clock is at 8333, 16667, 25000, ... and never drifts, however long the run), then
+    moved by its jitter: an integer uniform in [-jitter_s, +jitter_s] drawn from `rng` (one
+    draw per sample, none without jitter), never before the previous sample.
+    """
+
+    def __init__(self, rate_hz: float, jitter_s: float = 0.0,
+                 rng: np.random.Generator | None = None) -> None:
+        p = period_us(rate_hz)
+        self._num, self._den = p.numerator, p.denominator
+        self.jitter_us = math.floor(round(jitter_s * 1e6, 6))
+        if self.jitter_us and rng is None:
+            raise ValueError("a jittered sample clock needs a Generator")
+        self.rng = rng
+        self.k = 0  # the index of the next sample
+        self.due_us = 0  # the next sample's time (once started)
+        self.last_us: int | None = None  # the previous sample's time
+        self.started = False
+
+    def nominal_us(self, k: int) -> int:
+        """round(k * period) in us, halves up; exact for any k."""
+        return (2 * k * self._num + self._den) // (2 * self._den)
+
+    def start(self, t_us: int) -> None:
+        """The first sample is the first one due at or after t_us."""
+        k = max(0, t_us * self._den // self._num)
+        while k > 0 and self.nominal_us(k - 1) >= t_us:
+            k -= 1
+        while self.nominal_us(k) < t_us:
+            k += 1
+        self.k = k
+        self.due_us = self._jittered(k, t_us - 1)
+        self.started = True
+
+    def _jittered(self, k: int, after_us: int) -> int:
+        t = self.nominal_us(k)
+        if self.jitter_us:
+            assert self.rng is not None
+            t += int(self.rng.integers(-self.jitter_us, self.jitter_us, endpoint=True))
+        return max(t, after_us + 1)
+
+    def take(self) -> tuple[int, int]:
+        """The due sample's time and the time since the previous sample (the nominal
+        period for the first); the next sample is scheduled."""
+        t = self.due_us
+        if self.last_us is None:
+            dt = self.nominal_us(self.k + 1) - self.nominal_us(self.k)
+        else:
+            dt = t - self.last_us
+        self.last_us = t
+        self.k += 1
+        self.due_us = self._jittered(self.k, t)
+        return t, dt
 
 
 def _vec3(a: np.ndarray) -> Vec3:
