@@ -627,10 +627,12 @@ def scenario_from_data(data: dict[str, Any], path: str | Path) -> Scenario:
     ideal = actuators.boolean("ideal", False)
     actuators.finish()
 
-    from common.sensors_config import resolve_sensor_profile
+    from common.sensors_config import check_servable, resolve_sensor_profile
 
     sensors = resolve_sensor_profile(t.string("sensors", "truth"), base) \
         if t.has("sensors") else None
+    if sensors is not None:  # what the plant cannot serve at these rates: refused here
+        check_servable(sensors, 1_000_000 // physics_hz, 1_000_000 // control_hz)
     params_t = t.table("params", {})
     params: dict[str, float] = {}
     for name in list(params_t.data):

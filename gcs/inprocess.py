@@ -28,7 +28,7 @@ from common.jit import compile_time_s
 from common.mavlink import encoder, pack, parser
 from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
 from common.outcome import Event, diverged
-from common.sensors_config import resolve_sensor_profile
+from common.sensors_config import check_servable, resolve_sensor_profile
 from common.simlink import (
     HilSensor,
     Odometry,
@@ -109,6 +109,9 @@ def apply_overrides(scenario: Scenario, *, controller: str | None = None,
         changes["duration_s"] = min(duration_s, scenario.duration_s)
     out = dataclasses.replace(scenario, **changes)
     check_sensor_faults(out.sensor_faults, out.sensors, "--sensors")
+    if out.sensors is not None:  # refused before any run, processes or in-process
+        check_servable(out.sensors, 1_000_000 // out.physics_rate_hz,
+                       1_000_000 // out.control_rate_hz)
     return out
 
 
