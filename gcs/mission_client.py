@@ -164,10 +164,17 @@ class UploadResult(NamedTuple):
 
     result: int
     notes: tuple[str, ...] = ()  # STATUSTEXT from the vehicle during the upload
+    asked: int = -1  # the highest seq the vehicle asked for (-1: none): a refused item's
 
     @property
     def accepted(self) -> bool:
         return self.result == M.MAV_MISSION_ACCEPTED
+
+    @property
+    def about_item(self) -> bool:
+        """Whether the result names a fault of an item (the last one the vehicle asked
+        for, `asked`), rather than of the whole mission."""
+        return self.result in _ITEM_RESULTS and self.asked >= 0
 
     def describe(self) -> str:
         """e.g. "MAV_MISSION_DENIED: item 3: needs 1903 rad/s > 1445 (85% of 1700): ..." """
@@ -246,7 +253,7 @@ def upload_detailed(conn, target_system: int, target_component: int,
                 continue  # about an item, before we have sent one: an earlier transaction's
             if msg.type == M.MAV_MISSION_ACCEPTED and progress is not None:
                 progress(count, count)
-            return UploadResult(msg.type, texts.texts)
+            return UploadResult(msg.type, texts.texts, done)
         seq = msg.seq
         if not 0 <= seq < count:
             _send(M.MAVLink_mission_ack_message(

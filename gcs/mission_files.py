@@ -16,6 +16,12 @@ on the step reads back one step short about one time in sixteen (1.1 cm north); 
 quarter step, truncation and rounding both give the item's integer, and a file read here
 (rounding) gives the same items. The written position is within 3 mm of the item's.
 
+ArduPilot keeps its home at mission seq 0 (`gcs.mission_home`): a `.plan` holds it in
+`plannedHomePosition`, the TOML form in an optional `[home]` table (lat_deg, lon_deg, alt_m
+AMSL), and a WPL file for ArduPilot as line 0 (MAVProxy's convention). `read_mission_doc`
+gives the items with the file's home; `format_mission` writes the home where the format
+keeps it when the vehicle counts home in its mission (`home_at_seq0`).
+
 MAVProxy scales x and y by 1e7 in every frame, local ones included (where MAVLink takes
 1e4): a local-frame WPL file does not survive `wp load`. Write missions for MAVProxy in a
 global frame (`gcs mission download --frame global`, `to_frame`).
@@ -29,7 +35,7 @@ import struct
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from common.cliargs import read_text_file
 from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
@@ -43,6 +49,7 @@ from common.mission_items import (
     to_local,
     xy_scale,
 )
+from gcs.mission_home import with_home
 
 M = MAV
 WPL_HEADER = "QGC WPL 110"
@@ -55,6 +62,15 @@ KNOWN_FRAMES = frozenset(v for v in M.enums["MAV_FRAME"] if v != M.MAV_FRAME_ENU
 
 class MissionFileError(ValueError):
     """A mission file that cannot be read: names the file, the line or item, and why."""
+
+
+class MissionDoc(NamedTuple):
+    """A mission file's items and the home it names (a plan's plannedHomePosition, TOML's
+    [home]; None when it names none)."""
+
+    items: list[MissionItem]
+    home: HomePosition | None = None
+    fmt: str = ""  # plan, wpl or toml: the format it was read in
 
 
 # What MISSION_ITEM_INT can carry: a file whose values do not fit would parse and then fail
@@ -216,10 +232,15 @@ def _item_table(it: MissionItem) -> dict[str, Any]:
             "z": it.z}
 
 
-def format_toml(items: Sequence[MissionItem]) -> str:
+def format_toml(items: Sequence[MissionItem], home: HomePosition | None = None) -> str:
+    """The TOML form; `home` (ArduPilot's seq 0) as a `[home]` table when given."""
     out = ["# Mission: local NED (metres), times in seconds, yaw in degrees (nan: keep the",
            "# attitude). Item types and their MAVLink slots: README, section Missions.",
            'format = "dqflight-mission-1"', ""]
+    if home is not None:
+        out += ["# The vehicle's home (ArduPilot's mission seq 0): degrees, metres AMSL.",
+                "[home]", f"lat_deg = {_num(home.lat_deg)}", f"lon_deg = {_num(home.lon_deg)}",
+                f"alt_m = {_num(home.alt_m)}", ""]
     for it in items:
         out.append("[[item]]")
         out += [f"{key} = {_toml_value(value)}" for key, value in _item_table(it).items()]
@@ -259,14 +280,38 @@ _RAW_KEYS = {"type", "command", "frame", "autocontinue", "params", "x", "y", "z"
 FORMAT = "dqflight-mission-1"
 
 
+_HOME_KEYS = ("lat_deg", "lon_deg", "alt_m")
+
+
+def _toml_home(data: dict[str, Any], source: str) -> HomePosition | None:
+    t = data.get("home")
+    if t is None:
+        return None
+    where = f"{source}: [home]"
+    if not isinstance(t, dict):
+        raise MissionFileError(f"{where}: expected a table with {', '.join(_HOME_KEYS)}")
+    extra = set(t) - set(_HOME_KEYS)
+    if extra:
+        raise MissionFileError(f"{where}: unknown key '{sorted(extra)[0]}'")
+    lat, lon, alt = (_float(t, key, where) for key in _HOME_KEYS)
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and math.isfinite(alt)):
+        raise MissionFileError(f"{where}: not a position (lat {lat}, lon {lon}, alt {alt})")
+    return HomePosition(lat, lon, alt)
+
+
 def parse_toml(text: str, source: str = "<mission>") -> list[MissionItem]:
+    return parse_toml_doc(text, source).items
+
+
+def parse_toml_doc(text: str, source: str = "<mission>") -> MissionDoc:
+    """The items of the TOML form and its [home] (None without one)."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise MissionFileError(f"{source}: not valid TOML: {exc}") from None
     except RecursionError:  # tomllib recurses into nested arrays and tables
         raise MissionFileError(f"{source}: not valid TOML: nested too deeply") from None
-    unknown = set(data) - {"format", "item"}
+    unknown = set(data) - {"format", "item", "home"}
     if unknown:
         raise MissionFileError(f"{source}: unknown key '{sorted(unknown)[0]}'")
     if data.get("format", FORMAT) != FORMAT:
@@ -314,7 +359,7 @@ def parse_toml(text: str, source: str = "<mission>") -> list[MissionItem]:
         items.append(_checked(MissionItem(seq, M.MAV_FRAME_LOCAL_NED, command,
                                           1 if seq == 0 else 0, 1, p["p1"], p["p2"], p["p3"],
                                           p["p4"], x, y, p["z"]), where))
-    return items
+    return MissionDoc(items, _toml_home(data, source), "toml")
 
 
 # ------------------------------------------------------------------ QGroundControl .plan
@@ -340,11 +385,13 @@ def _json_num(v: float) -> float | None:
 
 
 def format_plan(items: Sequence[MissionItem], home: HomePosition | None = None, *,
-                hover_speed_m_s: float = 2.0, vehicle_type: int = MAV_TYPE_HEXAROTOR) -> str:
+                hover_speed_m_s: float = 2.0, vehicle_type: int = MAV_TYPE_HEXAROTOR,
+                firmware_type: int = MAV_AUTOPILOT_PX4) -> str:
     """A QGroundControl plan (JSON, `fileType` "Plan", version 1) with `items` as SimpleItems
     (`params` p1-p4, x, y, z; doJumpId = seq + 1, DO_JUMP's p1 a doJumpId),
     `plannedHomePosition` the vehicle's home (else the first global item, else zeros),
-    `firmwareType` 12 (PX4: the vehicle speaks PX4's modes), no geofence, no rally points.
+    `firmwareType` the autopilot's MAV_AUTOPILOT (12 PX4, as this FCU; 3 ArduPilot), no
+    geofence, no rally points.
     Keys sorted and 4-space indents, as QGC writes it."""
     out: list[dict[str, Any]] = []
     for it in items:
@@ -373,7 +420,7 @@ def format_plan(items: Sequence[MissionItem], home: HomePosition | None = None, 
         "fileType": PLAN_FILE_TYPE,
         "geoFence": {"circles": [], "polygons": [], "version": 2},
         "groundStation": "dqflight",
-        "mission": {"cruiseSpeed": QGC_CRUISE_SPEED, "firmwareType": MAV_AUTOPILOT_PX4,
+        "mission": {"cruiseSpeed": QGC_CRUISE_SPEED, "firmwareType": firmware_type,
                     "globalPlanAltitudeMode": ALT_MODE_RELATIVE,
                     "hoverSpeed": hover_speed_m_s, "items": out,
                     "plannedHomePosition": planned, "vehicleType": vehicle_type,
@@ -413,6 +460,12 @@ def parse_plan(text: str, source: str = "<mission>") -> list[MissionItem]:
     """The mission of a QGroundControl plan (version 1, mission version 2; SimpleItems only:
     QGC's complex items, such as surveys, are refused). null parameters are NaN; geofence
     and rally points are ignored."""
+    return parse_plan_doc(text, source).items
+
+
+def parse_plan_doc(text: str, source: str = "<mission>") -> MissionDoc:
+    """`parse_plan`'s items and the plan's `plannedHomePosition` [lat, lon, alt AMSL] (None
+    when absent or [0, 0, 0], which QGC and `format_plan` write when no home is known)."""
     try:
         doc = json.loads(text, parse_constant=_no_constant)
     except MissionFileError as exc:
@@ -476,7 +529,9 @@ def parse_plan(text: str, source: str = "<mission>") -> list[MissionItem]:
                 raise MissionFileError(f"{source}: item {i + 1}: DO_JUMP to doJumpId "
                                        f"{it.param1:g}, which no item has")
             items[i] = it._replace(param1=float(target))
-    return items
+    planned = None if home is None or all(v == 0 for v in home) else \
+        HomePosition(float(home[0]), float(home[1]), float(home[2]))
+    return MissionDoc(items, planned, "plan")
 
 
 # ------------------------------------------------------------------ frames
@@ -523,31 +578,48 @@ def file_format(path: Path | None, fmt: str | None = None, text: str | None = No
 
 def parse_mission(text: str, fmt: str, source: str = "<mission>") -> list[MissionItem]:
     """Items of a mission text in `fmt` (plan, wpl or toml)."""
+    return parse_mission_doc(text, fmt, source).items
+
+
+def parse_mission_doc(text: str, fmt: str, source: str = "<mission>") -> MissionDoc:
+    """Items and home of a mission text in `fmt` (plan, wpl or toml; WPL names no home
+    apart from its lines: `gcs.mission_home.for_ardupilot` reads line 0)."""
     if fmt == "plan":
-        return parse_plan(text, source)
+        return parse_plan_doc(text, source)
     if fmt == "wpl":
-        return parse_wpl(text, source)
-    return parse_toml(text, source)
+        return MissionDoc(parse_wpl(text, source), fmt="wpl")
+    return parse_toml_doc(text, source)
 
 
 def format_mission(items: Sequence[MissionItem], fmt: str,
-                   home: HomePosition | None = None) -> str:
-    """A mission text in `fmt` (plan, wpl or toml); `home` is the plan's planned home."""
+                   home: HomePosition | None = None, *, home_at_seq0: bool = False,
+                   firmware_type: int = MAV_AUTOPILOT_PX4,
+                   vehicle_type: int = MAV_TYPE_HEXAROTOR) -> str:
+    """A mission text in `fmt` (plan, wpl or toml); `home` is the plan's planned home. With
+    `home_at_seq0` (ArduPilot) `home` is also written where the format keeps it: WPL's line
+    0 (the items from line 1), TOML's [home]."""
     if fmt == "plan":
-        return format_plan(items, home)
+        return format_plan(items, home, firmware_type=firmware_type,
+                           vehicle_type=vehicle_type)
+    keep = home if home_at_seq0 else None
     if fmt == "wpl":
-        return format_wpl(items)
-    return format_toml(items)
+        return format_wpl(items if keep is None else with_home(items, keep))
+    return format_toml(items, keep)
 
 
 def read_mission(path: Path, fmt: str | None = None) -> list[MissionItem]:
     """A mission file: `fmt` (plan, wpl, toml), else by extension (.plan, .waypoints,
     .toml), else by content (a JSON object, a `QGC WPL` header, or TOML)."""
+    return read_mission_doc(path, fmt).items
+
+
+def read_mission_doc(path: Path, fmt: str | None = None) -> MissionDoc:
+    """`read_mission`'s items with the home the file names (`MissionDoc`)."""
     text = read_text_file(path, MissionFileError)
-    items = parse_mission(text, file_format(path, fmt, text), str(path))
-    if not items:
+    doc = parse_mission_doc(text, file_format(path, fmt, text), str(path))
+    if not doc.items:
         raise MissionFileError(f"{path}: no mission items (use `gcs mission clear` to clear)")
-    return items
+    return doc
 
 
 def write_mission(path: Path, items: Sequence[MissionItem], fmt: str | None = None,

@@ -13,7 +13,8 @@ loads; Mission Planner reads it too):
 
 one tab-separated line per parameter: system id, component id, name, value, MAV_PARAM_TYPE.
 Floating values are written as QGC writes them (18 decimals: a float32 reads back exactly),
-integer types as integers. Lines starting with '#' and blank lines are comments.
+integer types as integers, each with its real MAV_PARAM_TYPE (`gcs param save` writes the
+type the vehicle announced). Lines starting with '#' and blank lines are comments.
 """
 
 from __future__ import annotations
@@ -24,19 +25,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from common.cliargs import read_text_file
-from common.mavlink import MAV
+from gcs.param_wire import FLOAT_TYPES as _FLOAT_TYPES
+from gcs.param_wire import INT_RANGES as _INT_RANGES
+from gcs.param_wire import REAL32, float32
 
-M = MAV
 HEADER = "# Vehicle-Id Component-Id Name Value Type"
-REAL32 = M.MAV_PARAM_TYPE_REAL32
-_FLOAT_TYPES = {M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_TYPE_REAL64}
-_INT_RANGES = {M.MAV_PARAM_TYPE_UINT8: (0, 2**8 - 1), M.MAV_PARAM_TYPE_INT8: (-2**7, 2**7 - 1),
-               M.MAV_PARAM_TYPE_UINT16: (0, 2**16 - 1),
-               M.MAV_PARAM_TYPE_INT16: (-2**15, 2**15 - 1),
-               M.MAV_PARAM_TYPE_UINT32: (0, 2**32 - 1),
-               M.MAV_PARAM_TYPE_INT32: (-2**31, 2**31 - 1),
-               M.MAV_PARAM_TYPE_UINT64: (0, 2**64 - 1),
-               M.MAV_PARAM_TYPE_INT64: (-2**63, 2**63 - 1)}
+__all__ = ["HEADER", "REAL32", "ParamEntry", "ParamFileError", "float32", "format_params",
+           "parse_params", "read_params"]
 
 
 class ParamFileError(ValueError):
@@ -50,11 +45,6 @@ class ParamEntry:
     name: str
     value: float
     param_type: int = REAL32
-
-
-def float32(value: float) -> float:
-    """`value` as a float32 carries it (PARAM_SET / PARAM_VALUE)."""
-    return float(struct.unpack("<f", struct.pack("<f", value))[0])
 
 
 def _value_text(value: float, param_type: int) -> str:

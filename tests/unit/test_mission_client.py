@@ -202,13 +202,13 @@ def test_refusal_comes_with_the_vehicles_reason(vehicle_factory):
     reason = check_mission([takeoff, fast], vehicle.server.limits).reason
     assert reason.startswith("item 1: needs ")
     answer = upload_detailed(conn, *VEHICLE, [takeoff, fast])
-    assert answer == UploadResult(M.MAV_MISSION_DENIED, (reason,)) and not answer.accepted
+    assert answer == UploadResult(M.MAV_MISSION_DENIED, (reason,), 1) and not answer.accepted
     assert answer.describe() == f"MAV_MISSION_DENIED: {reason}"
     notes: list[str] = []
     assert upload(conn, *VEHICLE, [takeoff, fast], notes=notes) == M.MAV_MISSION_DENIED
     assert notes == [reason]
     ok = upload_detailed(conn, *VEHICLE, [takeoff, fast._replace(param1=3.0)])
-    assert ok == UploadResult(M.MAV_MISSION_ACCEPTED, ()) and ok.accepted
+    assert ok == UploadResult(M.MAV_MISSION_ACCEPTED, (), 1) and ok.accepted
     assert vehicle.server.mission[1].param1 == 3.0
 
 
