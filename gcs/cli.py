@@ -11,11 +11,13 @@ Runs and reports:
     gcs campaign CAMPAIGN.toml --out DIR [--scheduler tcp://HOST:8786] [--workers N]
     gcs report RUN_DIR | TABLE1_DIR
 Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0.1:14550):
-    gcs status [--json] | arm | disarm [--force] | mode NAME
+    gcs status [--json] | arm | disarm [--force] | mode NAME | takeoff [--alt M]
     gcs mission upload FILE | download [FILE] [--frame global|local] | clear | start
             (FILE: .plan QGC plan, .waypoints/.txt QGC WPL 110, .toml; or --format)
     gcs param list | get NAME | set NAME VALUE | save FILE | load FILE   (QGC .params)
     gcs goto X Y Z [--roll D --pitch D --yaw D] [--arm]     (local NED, m and deg)
+    (PX4, ArduPilot and this FCU: the autopilot is told by its HEARTBEAT; mode names are its
+    own or HOLD, LOITER, MISSION, TAKEOFF, LAND, RTL, POSCTL, OFFBOARD, mapped per autopilot)
     gcs watch
     gcs view [--port 8765] [--mcap FILE] | view RUN_DIR [--speed X]   (Foxglove WebSocket)
     gcs log record FILE [--duration S]
@@ -36,6 +38,7 @@ from common.sensors_config import resolve_sensor_profile
 
 DEFAULT_SCENARIOS = Path(__file__).resolve().parent.parent / "config" / "scenarios"
 DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
+HEARTBEAT_WAIT_S = 10.0  # --wait's default for the vehicle's heartbeat
 
 
 class Progress:
@@ -98,8 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
                            f"zenoh:PREFIX[@ENDPOINT], or MAVSDK's udpin://, udp://, tcp://, "
                            f"serial:// forms (default {DEFAULT_CONNECT})")
     link.add_argument("--sysid", type=int, help="the vehicle's system id (default: first heard)")
-    link.add_argument("--wait", type=_positive, default=10.0, metavar="S",
-                      help="how long to wait for the vehicle's heartbeat")
+    link.add_argument("--wait", type=_positive, default=None, metavar="S",
+                      help=f"how long to wait for the vehicle's heartbeat (default "
+                           f"{HEARTBEAT_WAIT_S:g}); mode and takeoff: also for the HEARTBEAT "
+                           f"that shows the mode engaged (default 3)")
     link.add_argument("--signing-key", metavar="FILE",
                       help="sign with this MAVLink 2 key and refuse unsigned input")
 
@@ -208,8 +213,30 @@ def build_parser() -> argparse.ArgumentParser:
     dis = sub.add_parser("disarm", parents=[link], help="disarm the vehicle")
     dis.add_argument("--force", action="store_true", help="disarm even in the air")
     md = sub.add_parser("mode", parents=[link], help="change the flight mode")
-    md.add_argument("name", help="HOLD (LOITER), MISSION, TAKEOFF, LAND, RTL, POSCTL or "
-                                 "OFFBOARD (PX4's names)")
+    md.add_argument("name", help="the vehicle's own mode (ArduCopter: STABILIZE, ALT_HOLD, "
+                                 "AUTO, GUIDED, LOITER, RTL, LAND, POSHOLD, BRAKE, ...; PX4: "
+                                 "HOLD, MISSION, POSCTL, OFFBOARD, ALTCTL, MANUAL, ...) or a "
+                                 "portable one: HOLD, LOITER, MISSION, TAKEOFF, LAND, RTL, "
+                                 "POSCTL, OFFBOARD (mapped per autopilot; TAKEOFF: as gcs "
+                                 "takeoff, without waiting for the height); case-insensitive. "
+                                 "Exit 0 only once a HEARTBEAT shows the mode")
+    tk = sub.add_parser("takeoff", parents=[link],
+                        help="take off to --alt above home (armed, on the ground) and wait "
+                             "until there",
+                        description="ArduCopter: GUIDED, then MAV_CMD_NAV_TAKEOFF (metres "
+                                    "above home); PX4 and this FCU: MAV_CMD_NAV_TAKEOFF (home's "
+                                    "altitude AMSL + --alt). Waits until the vehicle is within "
+                                    "--tolerance of the height (--no-wait: returns once "
+                                    "accepted). Exit 1 when disarmed, in the air, refused or "
+                                    "not there within --timeout.")
+    tk.add_argument("--alt", type=_positive, default=10.0, metavar="M",
+                    help="metres above home (default 10)")
+    tk.add_argument("--tolerance", type=_positive, default=0.5, metavar="M",
+                    help="reached within this much of --alt (default 0.5)")
+    tk.add_argument("--timeout", type=_positive, default=60.0, metavar="S",
+                    help="how long to wait for the height (default 60)")
+    tk.add_argument("--no-wait", action="store_true",
+                    help="return once the takeoff is accepted")
 
     mis = sub.add_parser("mission", help="upload, download, clear, start")
     msub = mis.add_subparsers(dest="action", required=True)
@@ -246,14 +273,17 @@ def build_parser() -> argparse.ArgumentParser:
                             help="set every parameter of FILE (QGC .params)")
     pload.add_argument("file", type=Path)
 
-    go = sub.add_parser("goto", parents=[link], help="fly to a 6-DoF pose in OFFBOARD")
+    go = sub.add_parser("goto", parents=[link],
+                        help="fly to a 6-DoF pose in OFFBOARD (PX4, this FCU), or to a "
+                             "position and yaw in GUIDED (ArduPilot: --roll/--pitch 0)")
     for axis in ("x", "y", "z"):
         go.add_argument(axis, type=_finite, help=f"{axis} in local NED, m")
     go.add_argument("--roll", type=_finite, default=0.0, help="deg (Z-Y-X, NED/FRD)")
     go.add_argument("--pitch", type=_finite, default=0.0, help="deg")
     go.add_argument("--yaw", type=_finite, default=90.0,
                     help="deg (default 90: body x east, the level ENU identity)")
-    go.add_argument("--arm", action="store_true", help="arm before switching to OFFBOARD")
+    go.add_argument("--arm", action="store_true",
+                    help="arm before switching to OFFBOARD (GUIDED)")
     go.add_argument("--tolerance", type=_positive, default=0.05, help="position, m")
     go.add_argument("--tolerance-deg", type=_positive, default=1.0, help="attitude, deg")
     go.add_argument("--timeout", type=_positive, default=60.0, metavar="S")
@@ -560,11 +590,25 @@ def _session(args: argparse.Namespace, tlog: Path | None = None):
     key = read_signing_key(args.signing_key) if args.signing_key else None
     session = Session(args.connect, tlog=tlog, vehicle=args.sysid or 0, signing_key=key)
     try:
-        session.wait_vehicle(timeout=args.wait, system_id=args.sysid)
+        session.wait_vehicle(timeout=_heartbeat_wait(args), system_id=args.sysid)
+        _request_streams(session, args)
     except BaseException:
         session.close()
         raise
     return session
+
+
+def _heartbeat_wait(args: argparse.Namespace) -> float:
+    return HEARTBEAT_WAIT_S if args.wait is None else args.wait
+
+
+def _request_streams(session, args: argparse.Namespace) -> None:
+    """Ask the vehicle for the telemetry the command needs (ArduPilot sends little until
+    asked); the session gives back what it changed when it closes."""
+    from gcs.autopilot.streams import needs
+
+    if session.autopilot is not None:
+        session.request_streams(needs(args.command, session.autopilot.kind))
 
 
 def _result(what: str, result: int, session=None) -> int:
@@ -601,8 +645,9 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
         if args.command == "disarm":
             return _result("disarm", vl.arm(session, False, force=args.force), session)
         if args.command == "mode":
-            return _result(f"mode {args.name.upper()}", vl.set_mode(session, args.name),
-                           session)
+            return _mode(args, session)
+        if args.command == "takeoff":
+            return _takeoff(args, session)
         if args.command == "mission":
             return _mission(args, session)
         if args.command == "param":
@@ -615,7 +660,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
             return watch(session, refresh_hz=args.rate, duration=args.duration,
                          all_vehicles=args.all)
         if args.command == "vehicles":
-            for sysid in vl.vehicles(session, args.wait):
+            for sysid in vl.vehicles(session, _heartbeat_wait(args)):
                 print(sysid)
             return 0
         raise AssertionError(args.command)
@@ -639,8 +684,8 @@ def cmd_view(args: argparse.Namespace) -> int:
                                vehicle_file=args.vehicle)
         key = read_signing_key(args.signing_key) if args.signing_key else None
         return view_live(args.connect, port=args.port, mcap=args.mcap,
-                         vehicle_file=args.vehicle, system_id=args.sysid, wait_s=args.wait,
-                         signing_key=key)
+                         vehicle_file=args.vehicle, system_id=args.sysid,
+                         wait_s=_heartbeat_wait(args), signing_key=key)
     except ViewError as exc:
         print(f"gcs view: {exc}", file=sys.stderr)
         return 2
@@ -804,10 +849,46 @@ def _param_load(args: argparse.Namespace, session) -> int:
     return 0 if refused == 0 else 1
 
 
+def _mode(args: argparse.Namespace, session) -> int:
+    """Exit 0 once a HEARTBEAT shows the mode; 1 refused or not confirmed; 2 a name the
+    autopilot does not have (with its names)."""
+    from gcs import vehicle_link as vl
+    from gcs.autopilot import UnknownMode
+
+    confirm = 3.0 if args.wait is None else args.wait
+    try:
+        result = vl.set_mode(session, args.name, confirm_s=confirm)
+    except UnknownMode as exc:
+        raise InputError(str(exc)) from None
+    return _result(f"mode {args.name.upper()}", result, session)
+
+
+def _takeoff(args: argparse.Namespace, session) -> int:
+    from gcs import vehicle_link as vl
+
+    progress = Progress()
+    confirm = 3.0 if args.wait is None else args.wait
+    result, height = vl.takeoff(session, args.alt, reach_s=None if args.no_wait else
+                                args.timeout, tolerance_m=args.tolerance, confirm_s=confirm,
+                                report=lambda h: progress(f"takeoff: {h:.2f} m above home"))
+    progress.done()
+    code = _result(f"takeoff to {args.alt:g} m", result, session)
+    if code == 0 and height is not None:
+        print(f"reached: {height:.2f} m above home")
+    return code
+
+
 def _goto(args: argparse.Namespace, session) -> int:
     import math
 
     from gcs import vehicle_link as vl
+    from gcs.autopilot import ARDUPILOT
+
+    if session.autopilot is not None and session.autopilot.kind == ARDUPILOT and \
+            (args.roll or args.pitch):
+        raise InputError("--roll and --pitch must be 0 on ArduPilot: it flies a position and "
+                         "a yaw in GUIDED (an attitude target there replaces the position "
+                         "target)")
 
     target = vl.PoseTarget.from_euler_deg((args.x, args.y, args.z), args.roll, args.pitch,
                                           args.yaw)
@@ -866,10 +947,11 @@ def check_input(args: argparse.Namespace) -> None:
 
         read_signing_key(args.signing_key)
     if args.command == "mode":
-        from common.modes import by_name, names
+        from gcs.autopilot import all_mode_names
 
-        if by_name(args.name) is None:
-            raise InputError(f"unknown mode {args.name} (one of {', '.join(names())})")
+        known = all_mode_names()
+        if args.name.strip().upper() not in known:
+            raise InputError(f"unknown mode {args.name} (one of {', '.join(known)})")
     elif args.command == "log":
         _writable_file(args.file, "log file")
 

@@ -6,6 +6,12 @@ The link is one of `common.links` (the same URLs and transports as `fcu` and `si
 loss), which the mission client and the tools built on pymavlink expect. pymavlink itself
 only encodes and decodes (`common.mavlink`).
 
+The station decodes with pymavlink's `ardupilotmega` dialect, a superset of `common` (the
+project's own processes speak common): ArduPilot's own messages (EKF_STATUS_REPORT, MEMINFO,
+...) are then received and counted, not lost, and common messages decode the same.
+`wait_vehicle` tells which autopilot answers (`gcs.autopilot`); `request_streams` asks it
+for the telemetry a command needs, and `close` gives back what was changed.
+
 Wall-clock timeouts are fine here: the GCS faces people and links, not the lockstep path.
 """
 
@@ -19,12 +25,16 @@ import time
 from pathlib import Path
 
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega
 
-import common.mavlink  # noqa: F401  (pins MAVLink 2 before mavutil is imported)
+import common.mavlink  # noqa: F401  (pins MAVLink 2 for mavutil)
 from common.links import Link, LinkUrl, TcpClientLink, open_link, parse_url
 from common.mavlink import GCS_SYSID, MAV, MAV_COMP_ID_MISSIONPLANNER
+from gcs.autopilot import Autopilot, autopilot_of
+from gcs.autopilot import streams as _streams
 
 M = MAV
+DIALECT = ardupilotmega  # what the station decodes: common and ArduPilot's own messages
 TCP_CONNECT_S = 3.0  # a tcp: link that has not connected by then is reported, exit 1
 REFUSAL_TEXT_S = 0.3  # after a refusal, how long to listen for the STATUSTEXT saying why
 MAX_PARSERS = 64  # one parser per peer (byte stream); the oldest goes beyond this
@@ -63,22 +73,22 @@ class LinkFile(mavutil.mavfile):
         self.link = link
         self._io = threading.Lock()
         self._queue: collections.deque = collections.deque()
-        self._parsers: dict[object, MAV.MAVLink] = {}
+        self._parsers: dict[object, ardupilotmega.MAVLink] = {}
         fd = link.fileno()
         mavutil.mavfile.__init__(self, fd if fd >= 0 else None, str(link.url),
                                  source_system=source_system,
                                  source_component=source_component, use_native=False)
-        # this project's dialect (MAVLink 2, common), whatever mavutil's default is
-        self.mav = MAV.MAVLink(self, srcSystem=source_system, srcComponent=source_component,
-                               use_native=False)
+        # MAVLink 2, ardupilotmega (common and more), whatever mavutil's default is
+        self.mav = DIALECT.MAVLink(self, srcSystem=source_system,
+                                   srcComponent=source_component, use_native=False)
         self.mav.robust_parsing = True
 
-    def _parser(self, peer: object) -> MAV.MAVLink:
+    def _parser(self, peer: object) -> ardupilotmega.MAVLink:
         parser = self._parsers.get(peer)
         if parser is None:
             if len(self._parsers) >= MAX_PARSERS:
                 del self._parsers[next(iter(self._parsers))]
-            parser = MAV.MAVLink(None, srcSystem=0, srcComponent=0, use_native=False)
+            parser = DIALECT.MAVLink(None, srcSystem=0, srcComponent=0, use_native=False)
             parser.robust_parsing = True
             parser.signing = self.mav.signing  # one key and replay record for the link
             self._parsers[peer] = parser
@@ -185,6 +195,8 @@ class Session:
         self.last_texts: list[str] = []  # STATUSTEXTs that came with the last command's ACK
         self.heartbeat_msg = None  # the vehicle heartbeat that wait_vehicle took
         self.heartbeat_at = 0.0  # and when (monotonic seconds)
+        self.autopilot: Autopilot | None = None  # which autopilot that heartbeat came from
+        self._streams = _streams.Streams()  # what request_streams changed on the link
         self._stop = threading.Event()
         self._period = 1.0 / heartbeat_hz
         self._thread = threading.Thread(target=self._heartbeats, name="gcs-heartbeat",
@@ -224,6 +236,7 @@ class Session:
             self.target_system = msg.get_srcSystem()
             self.target_component = msg.get_srcComponent()
             self.heartbeat_msg, self.heartbeat_at = msg, time.monotonic()
+            self.autopilot = autopilot_of(msg)
             self.conn.set_target(self.target_system)
             self.heartbeat()  # announce ourselves now: a udpin link has only now a peer
             return
@@ -270,7 +283,19 @@ class Session:
         name = enum[result].name if result in enum else f"MAV_RESULT {result}"
         return ": ".join([name, *dict.fromkeys(t for t in self.last_texts if t)])
 
+    def request_streams(self, wanted: dict[str, float]) -> None:
+        """Have the vehicle send these messages (name -> Hz) at least this often until the
+        session closes (`gcs.autopilot.streams`)."""
+        changed = _streams.request(self, wanted)
+        self._streams.changed = {**changed.changed, **self._streams.changed}
+        self._streams.groups.update(changed.groups)
+
     def close(self) -> None:
+        if self.target_system and (self._streams.changed or self._streams.groups):
+            try:
+                _streams.restore(self, self._streams)
+            except (OSError, GcsError):  # the link has gone: nothing to give back to
+                pass
         self._stop.set()
         self._thread.join(timeout=2.0)
         self.conn.close()

@@ -1,6 +1,8 @@
 """Ground-station actions on a connected vehicle, in standard MAVLink only, so that they work
 against PX4 and ArduPilot for the standard parts: status, arming, modes, parameters,
-offboard pose setpoints, recording.
+offboard pose setpoints, recording. What differs between autopilots (mode names and
+encodings, takeoff, which set-points a pose goto streams, health and readiness) comes from
+`gcs.autopilot`, chosen by the vehicle's HEARTBEAT.
 """
 
 from __future__ import annotations
@@ -13,27 +15,39 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from common.mavlink import MAV
-from common.modes import by_name, decode_custom, names
 from common.quaternion import q_angle, q_conj, q_exp, q_mul
+from gcs.autopilot import Autopilot, ModeTarget, autopilot_of
+from gcs.autopilot import commands as _commands
+from gcs.autopilot.health import format_readiness as _format_readiness
+from gcs.autopilot.health import health as _health
+from gcs.autopilot.health import readiness as _readiness
 from gcs.session import GcsError, Session
 
 M = MAV
-MODE_NAMES = tuple(names())  # PX4's: HOLD (LOITER), MISSION, OFFBOARD, LAND, TAKEOFF, RTL, ...
 _LANDED = {M.MAV_LANDED_STATE_ON_GROUND: "on ground", M.MAV_LANDED_STATE_IN_AIR: "in air",
            M.MAV_LANDED_STATE_TAKEOFF: "taking off", M.MAV_LANDED_STATE_LANDING: "landing",
            M.MAV_LANDED_STATE_UNDEFINED: "undefined"}
 
 
-def mode_name(custom_mode: int, autopilot: int) -> str:
-    """The modes of common.modes by name (PX4's encoding, also under MAV_AUTOPILOT_GENERIC
-    as this FCU said before); otherwise the raw custom mode."""
-    if autopilot in (M.MAV_AUTOPILOT_GENERIC, M.MAV_AUTOPILOT_PX4):
-        mode = decode_custom(custom_mode)
-        if mode is not None:
-            return mode.name
-        main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
-        return f"custom {main}.{sub}"
-    return f"custom {custom_mode}"
+def mode_name(custom_mode: int, autopilot: int, mav_type: int | None = None) -> str:
+    """A custom mode in its autopilot's own spelling (`gcs.autopilot`): PX4's (also under
+    MAV_AUTOPILOT_GENERIC, as this FCU said before), ArduPilot's by vehicle type (pymavlink's
+    names); the raw custom mode where it cannot be named."""
+    if autopilot == M.MAV_AUTOPILOT_ARDUPILOTMEGA and mav_type is None:
+        return f"custom {custom_mode}"
+    return heartbeat_mode(_Beat(autopilot, mav_type or 0, custom_mode))
+
+
+@dataclass(frozen=True)
+class _Beat:
+    autopilot: int
+    type: int
+    custom_mode: int
+
+
+def heartbeat_mode(heartbeat) -> str:
+    """The mode a HEARTBEAT shows, in its autopilot's own spelling."""
+    return autopilot_of(heartbeat).mode_name(heartbeat.custom_mode)
 
 
 def landed_name(state: int) -> str:
@@ -140,7 +154,7 @@ def status(session: Session, seconds: float = 1.5, patience: float = 3.0) -> dic
     if hb is not None:
         out.update(type=M.enums["MAV_TYPE"][hb.type].name,
                    autopilot=M.enums["MAV_AUTOPILOT"][hb.autopilot].name,
-                   mode=mode_name(hb.custom_mode, hb.autopilot),
+                   mode=heartbeat_mode(hb),
                    armed=bool(hb.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED),
                    system_status=M.enums["MAV_STATE"][hb.system_status].name)
     av = snap.get("AUTOPILOT_VERSION")
@@ -149,7 +163,8 @@ def status(session: Session, seconds: float = 1.5, patience: float = 3.0) -> dic
         out["version"] = f"{v >> 24}.{(v >> 16) & 0xFF}.{(v >> 8) & 0xFF}"
         out["capabilities"] = [e.name.replace("MAV_PROTOCOL_CAPABILITY_", "")
                                for bit, e in M.enums["MAV_PROTOCOL_CAPABILITY"].items()
-                               if av.capabilities & bit and bit]
+                               if av.capabilities & bit and bit & (bit - 1) == 0
+                               and not e.name.endswith("ENUM_END")]
     pos = snap.get("LOCAL_POSITION_NED")
     if pos is not None:
         out["position_ned_m"] = [_f32(pos.x), _f32(pos.y), _f32(pos.z)]
@@ -168,13 +183,10 @@ def status(session: Session, seconds: float = 1.5, patience: float = 3.0) -> dic
                          "relative_alt_m": round(gp.relative_alt * 1e-3, 3)}
     ss = snap.get("SYS_STATUS")
     if ss is not None:
-        present = ss.onboard_control_sensors_present
-        health = ss.onboard_control_sensors_health
-        out["health"] = "ok" if present & health == present else "unhealthy sensors: " + \
-            ", ".join(e.name.replace("MAV_SYS_STATUS_SENSOR_", "") for bit, e in
-                      M.enums["MAV_SYS_STATUS_SENSOR"].items()
-                      if bit and present & bit and not health & bit)
+        out["health"] = _health(ss)
         out["link_errors"] = ss.errors_comm
+    if ss is not None or snap.get("EKF_STATUS_REPORT") is not None:
+        out["readiness"] = _readiness(ss, snap.get("EKF_STATUS_REPORT"), snap.texts)
     ext = snap.get("EXTENDED_SYS_STATE")
     if ext is not None:
         out["landed"] = landed_name(ext.landed_state)
@@ -237,6 +249,8 @@ def format_status(status: dict[str, Any]) -> list[str]:
                     f"{value['received'] + value['lost']} messages)")
         elif key == "capabilities":
             text = ", ".join(value)
+        elif key == "readiness":
+            text = _format_readiness(value)
         elif key == "messages":
             lines += [f"{'message':>18}: {t}" for t in value]
             continue
@@ -262,14 +276,35 @@ def vehicles(session: Session, seconds: float) -> list[int]:
     return sorted(heard)
 
 
-def set_mode(session: Session, name: str) -> int:
-    """DO_SET_MODE by name (PX4's names and their aliases, `common.modes.by_name`)."""
-    mode = by_name(name)
-    if mode is None:
-        raise GcsError(f"unknown mode {name!r}: expected one of {', '.join(MODE_NAMES)}")
-    main, sub = mode.value
-    return session.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-                           main, sub)
+def _autopilot(session: Session) -> Autopilot:
+    return _commands.autopilot(session)
+
+
+def set_mode(session: Session, name: str, confirm_s: float = _commands.CONFIRM_S) -> int:
+    """Change mode by name: the vehicle's own names or the portable ones (`gcs.autopilot`;
+    UnknownMode for a name it lacks); TAKEOFF is the takeoff procedure at its default height.
+    The vehicle's answer; ACCEPTED only once a HEARTBEAT showed the mode, else GcsError
+    "not confirmed: the vehicle is in X"."""
+    target = _autopilot(session).resolve_mode(name)
+    try:
+        if target.takeoff:
+            return takeoff(session, _commands.DEFAULT_TAKEOFF_M, confirm_s=confirm_s)[0]
+        return _commands.set_mode(session, target, confirm_s)
+    except _commands.NotConfirmed as exc:
+        raise GcsError(str(exc)) from None
+
+
+def takeoff(session: Session, height_m: float, *, reach_s: float | None = None,
+            tolerance_m: float = 0.5, confirm_s: float = _commands.CONFIRM_S,
+            report=None) -> tuple[int, float | None]:
+    """Take off to `height_m` above home, the autopilot's way (`gcs.autopilot.commands`);
+    (the vehicle's answer, the height reached when waited for `reach_s`). GcsError for a
+    vehicle disarmed or in the air, or one that does not climb."""
+    try:
+        return _commands.takeoff(session, height_m, reach_s=reach_s, tolerance_m=tolerance_m,
+                                 confirm_s=confirm_s, report=report, fail=GcsError)
+    except _commands.NotConfirmed as exc:
+        raise GcsError(f"takeoff: {exc}") from None
 
 
 def arm(session: Session, armed: bool, force: bool = False) -> int:
@@ -366,23 +401,51 @@ class PoseTarget:
                         q_exp((math.radians(roll), 0.0, 0.0))))
         return cls(tuple(p_ned_m), q)
 
-    def messages(self, session: Session) -> list:
+    @property
+    def yaw_rad(self) -> float:
+        """The attitude's Z-Y-X yaw (NED, rad)."""
+        return _yaw_rad(self.q_ned_frd)
+
+    def messages(self, session: Session, attitude: bool = True) -> list:
+        """The set-points: the position (yaw ignored) and the attitude target; or, without
+        `attitude` (ArduPilot's GUIDED, where an attitude target replaces the position
+        target), the position with the yaw alone."""
         s = session
+        if not attitude:
+            return [M.MAVLink_set_position_target_local_ned_message(
+                0, s.target_system, s.target_component, M.MAV_FRAME_LOCAL_NED,
+                POSITION_AND_YAW, *self.p_ned_m, 0, 0, 0, 0, 0, 0, self.yaw_rad, 0)]
         pos = M.MAVLink_set_position_target_local_ned_message(
             0, s.target_system, s.target_component, M.MAV_FRAME_LOCAL_NED,
-            0b0000_1101_1111_1000, *self.p_ned_m, 0, 0, 0, 0, 0, 0, 0, 0)
+            POSITION_ONLY, *self.p_ned_m, 0, 0, 0, 0, 0, 0, 0, 0)
         att = M.MAVLink_set_attitude_target_message(
             0, s.target_system, s.target_component, 0b0100_0111, list(self.q_ned_frd), 0, 0, 0,
             0)
         return [pos, att]
 
 
-def pose_errors(snap: Snapshot, target: PoseTarget) -> tuple[float, float] | None:
+# SET_POSITION_TARGET_LOCAL_NED type_mask: bits set are ignored (velocity 3-5, acceleration
+# 6-8, yaw 10, yaw rate 11)
+POSITION_ONLY = 0b0000_1101_1111_1000
+POSITION_AND_YAW = 0b0000_1001_1111_1000
+
+
+def _yaw_rad(q: tuple[float, float, float, float]) -> float:
+    w, x, y, z = q
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def pose_errors(snap: Snapshot, target: PoseTarget, attitude: bool = True
+                ) -> tuple[float, float] | None:
+    """(position error m, attitude error rad); without `attitude`, the yaw error alone."""
     pos, att = snap.get("LOCAL_POSITION_NED"), snap.get("ATTITUDE_QUATERNION")
     if pos is None or att is None:
         return None
     dp = math.dist((pos.x, pos.y, pos.z), target.p_ned_m)
     q = (att.q1, att.q2, att.q3, att.q4)
+    if not attitude:
+        dyaw = _yaw_rad(q) - target.yaw_rad
+        return dp, abs(math.atan2(math.sin(dyaw), math.cos(dyaw)))
     return dp, q_angle(q_mul(q_conj(target.q_ned_frd), q))
 
 
@@ -391,8 +454,9 @@ class SetpointStream:
     whatever the caller waits for meanwhile (a command's answer, say), as MAVSDK's offboard
     plugin does: PX4 and this FCU leave OFFBOARD once the stream pauses for COM_OF_LOSS_T."""
 
-    def __init__(self, session: Session, target: PoseTarget, rate_hz: float) -> None:
-        self._messages = target.messages(session)
+    def __init__(self, session: Session, target: PoseTarget, rate_hz: float,
+                 attitude: bool = True) -> None:
+        self._messages = target.messages(session, attitude)
         self._session = session
         self._period = 1.0 / rate_hz
         self._stop = threading.Event()
@@ -404,26 +468,38 @@ class SetpointStream:
                 self._session.send(msg)
             self._stop.wait(self._period)
 
+    def start(self) -> None:
+        """Start sending (once; later calls do nothing)."""
+        if not self._thread.is_alive() and not self._stop.is_set():
+            self._thread.start()
+
     def __enter__(self) -> SetpointStream:
-        self._thread.start()
+        """The stream, not yet sending: `start` it (gcs goto starts it when the mode needs
+        it)."""
         return self
 
     def __exit__(self, *_exc: object) -> None:
         self._stop.set()
-        self._thread.join(timeout=2.0)
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
 
 
 def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: float,
          tolerance_rad: float, timeout: float, hold_s: float, rate_hz: float = 20.0,
          report=None) -> tuple[float, float]:
-    """Stream the pose target, switch to OFFBOARD (arming if asked), wait until reached and
-    held for `hold_s`. GcsError when refused, not reached within `timeout`, or when the
-    vehicle leaves OFFBOARD meanwhile (a failsafe, another ground station), with its
-    reason."""
+    """Fly to the pose in the autopilot's set-point mode (`Autopilot.guided_mode`), arming
+    if asked, and wait until reached and held for `hold_s`. PX4 and this FCU: stream the
+    position and attitude targets, then OFFBOARD (it needs the stream first). ArduPilot:
+    GUIDED, then the position and yaw alone (an attitude target would replace the
+    position target); the attitude error is then the yaw's. GcsError when refused, not
+    confirmed, not reached within `timeout`, or when the vehicle leaves the mode meanwhile
+    (a failsafe, another ground station), with its reason."""
     s = session
+    ap = _autopilot(s)
+    full = ap.attitude_targets
+    mode = ap.resolve_mode(ap.guided_mode)
     snap = Snapshot()
-    offboard = by_name("OFFBOARD")
-    accepted_at = math.inf  # when OFFBOARD was accepted (monotonic s)
+    accepted_at = math.inf  # when the mode was confirmed (monotonic s)
 
     def listen(seconds: float, until=None) -> bool:
         end = time.monotonic() + seconds
@@ -433,37 +509,48 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
                 snap.update(msg)
             hb = snap.get("HEARTBEAT")
             if hb is not None and snap.heard["HEARTBEAT"] > accepted_at and \
-                    decode_custom(hb.custom_mode) != offboard:
-                now = decode_custom(hb.custom_mode)
+                    not ap.same_mode(mode.custom_mode, hb.custom_mode):
                 why = f" ({snap.failsafe_text})" if snap.failsafe_text else ""
-                raise GcsError(f"the vehicle left OFFBOARD: now "
-                               f"{now.name if now else hb.custom_mode}{why}")
+                raise GcsError(f"the vehicle left {mode.name}: now "
+                               f"{ap.mode_name(hb.custom_mode)}{why}")
             if until is not None and until():
                 return True
         return False
 
-    with SetpointStream(s, target, rate_hz):
-        listen(0.5)  # PX4 and this FCU need a setpoint stream before OFFBOARD is accepted
+    with SetpointStream(s, target, rate_hz, attitude=full) as stream:
+        if full:
+            stream.start()
+            listen(0.5)  # PX4 and this FCU need a setpoint stream before OFFBOARD is accepted
         # a vehicle arms only once it knows its state: wait for its position to be reported
         listen(10.0, until=lambda: snap.get("LOCAL_POSITION_NED") is not None)
         if arm_first and (result := arm(s, True)) != M.MAV_RESULT_ACCEPTED:
             raise GcsError(f"arming refused: {s.describe(result)}")
-        result = set_mode(s, "OFFBOARD")
-        if result != M.MAV_RESULT_ACCEPTED:
-            raise GcsError(f"OFFBOARD refused: {s.describe(result)}")
+        _set_mode_or_fail(s, mode)
+        stream.start()  # ArduPilot: the targets count only once in GUIDED
         accepted_at = time.monotonic()
         snap.failsafe_text = ""  # a failsafe from before does not explain what follows
 
         def reached() -> bool:
-            errs = pose_errors(snap, target)
+            errs = pose_errors(snap, target, full)
             if report is not None and errs is not None:
                 report(errs)
             return errs is not None and errs[0] <= tolerance_m and errs[1] <= tolerance_rad
 
         if not listen(timeout, reached):
-            errs = pose_errors(snap, target)
+            errs = pose_errors(snap, target, full)
+            what = "attitude" if full else "yaw"
             where = "no position heard" if errs is None else \
-                f"position error {errs[0]:.3f} m, attitude error {math.degrees(errs[1]):.2f} deg"
+                f"position error {errs[0]:.3f} m, {what} error {math.degrees(errs[1]):.2f} deg"
             raise GcsError(f"pose not reached within {timeout:g} s ({where})")
         listen(hold_s)
-        return pose_errors(snap, target)  # type: ignore[return-value]
+        return pose_errors(snap, target, full)  # type: ignore[return-value]
+
+
+def _set_mode_or_fail(session: Session, mode: ModeTarget) -> None:
+    """The mode, confirmed by a HEARTBEAT; GcsError with the vehicle's reason otherwise."""
+    try:
+        result = _commands.set_mode(session, mode)
+    except _commands.NotConfirmed as exc:
+        raise GcsError(f"{mode.name} {exc}") from None
+    if result != M.MAV_RESULT_ACCEPTED:
+        raise GcsError(f"{mode.name} refused: {session.describe(result)}")

@@ -18,8 +18,10 @@ import time
 from collections.abc import Callable
 
 from common.mavlink import MAV
+from gcs.autopilot.health import format_readiness, readiness
+from gcs.autopilot.health import health as health_text
 from gcs.session import Session
-from gcs.vehicle_link import Snapshot, landed_name, link_quality, mode_name
+from gcs.vehicle_link import Snapshot, heartbeat_mode, landed_name, link_quality
 
 M = MAV
 STALE_S = 2.0  # no HEARTBEAT for longer than this: the link is lost
@@ -55,7 +57,7 @@ def view_lines(system_id: int, snap: Snapshot, now: float,
     landed = landed_name(ext.landed_state) if ext is not None else "landed state unknown"
     mc = snap.get("MISSION_CURRENT")
     mission = f"item {mc.seq}/{mc.total}" if mc is not None and mc.total else "no mission"
-    lines.append((f"mode {mode_name(hb.custom_mode, hb.autopilot):<10} "
+    lines.append((f"mode {heartbeat_mode(hb):<10} "
                   f"{'ARMED' if armed else 'disarmed':<9} {landed:<11} {mission}   "
                   f"status {_status_name(hb.system_status)}", VALUE))
     pos, att = snap.get("LOCAL_POSITION_NED"), snap.get("ATTITUDE")
@@ -84,16 +86,15 @@ def view_lines(system_id: int, snap: Snapshot, now: float,
                       VALUE))
         lines.append(("tilts  rad    " + " ".join(f"{v:7.3f}" for v in out.actuator[6:12]),
                       VALUE))
-    ss = snap.get("SYS_STATUS")
+    ss, ekf = snap.get("SYS_STATUS"), snap.get("EKF_STATUS_REPORT")
     if ss is not None:
-        present = ss.onboard_control_sensors_present
-        bad = present & ~ss.onboard_control_sensors_health
-        if bad:
-            names = [e.name.replace("MAV_SYS_STATUS_SENSOR_", "")
-                     for bit, e in M.enums["MAV_SYS_STATUS_SENSOR"].items() if bit and bad & bit]
-            lines.append(("health        unhealthy: " + ", ".join(names), WARN))
-        else:
-            lines.append(("health        ok", OK))
+        text = health_text(ss)
+        lines.append((f"health        {text.replace('unhealthy sensors:', 'unhealthy:')}",
+                      OK if text == "ok" else WARN))
+    if ss is not None or ekf is not None:
+        ready = readiness(ss, ekf, snap.texts)
+        lines.append((f"readiness     {format_readiness(ready)}",
+                      OK if ready["ready_to_arm"] and ready.get("ekf", "ok") == "ok" else WARN))
     loss, received, lost = quality
     sim = f"   vehicle clock {t_ms / 1000:8.2f} s" if t_ms is not None else ""
     lines.append((f"link  {snap_rate(snap, now):6.0f} msg/s   loss {loss:5.2f} %  ({lost} of "

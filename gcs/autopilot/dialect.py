@@ -133,7 +133,7 @@ class Autopilot:
         mapped = self._portable(key)
         if mapped is not None and mapped in own:
             return ModeTarget(mapped, own[mapped])
-        raise UnknownMode(f"unknown mode {name} for {self.label} "
+        raise UnknownMode(f"unknown mode {name} on {self.label} "
                           f"(one of {', '.join(self.mode_names())})")
 
     def mode_name(self, custom_mode: int) -> str:

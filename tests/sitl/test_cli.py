@@ -82,8 +82,8 @@ def test_status_arm_mode_disarm(vehicle):
         assert python not in out.stdout, out.stdout
     assert vehicle.gcs("arm").stdout.strip() == "arm: MAV_RESULT_ACCEPTED"
     assert "armed: yes" in vehicle.gcs("status").stdout
-    bad = vehicle.gcs("mode", "ACRO")
-    assert bad.returncode == 2 and "unknown mode ACRO (one of " in bad.stderr
+    bad = vehicle.gcs("mode", "BRAKE")  # ArduCopter's, not PX4's: exit 2 with PX4's names
+    assert bad.returncode == 2 and "unknown mode BRAKE on PX4 (one of HOLD, " in bad.stderr
     denied = vehicle.gcs("mode", "MISSION")  # no mission: DENIED, and the vehicle says why
     assert denied.returncode == 1
     assert denied.stdout.strip() == "mode MISSION refused: MAV_RESULT_DENIED: no mission"

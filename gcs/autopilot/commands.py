@@ -1,0 +1,173 @@
+"""Mode changes and takeoff, each the way the autopilot on the link does them.
+
+A mode change is MAV_CMD_DO_SET_MODE in the autopilot's own encoding; it succeeds only when
+a HEARTBEAT heard after the ACCEPTED answer shows the mode asked for (`confirm_mode`): an
+autopilot may accept and engage another mode (PX4's encoding read by ArduPilot did), or
+leave the mode at once. Takeoff: ArduCopter GUIDED then MAV_CMD_NAV_TAKEOFF with p7 in
+metres above home; PX4 (and this project's FCU) MAV_CMD_NAV_TAKEOFF with p7 AMSL (home's
+altitude from HOME_POSITION plus the height asked). Only an armed vehicle on the ground
+takes off.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import TYPE_CHECKING
+
+from common.mavlink import MAV
+from gcs.autopilot.dialect import Autopilot, ModeTarget
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from gcs.session import Session
+
+M = MAV
+CONFIRM_S = 3.0  # how long a mode change waits for a HEARTBEAT that shows it
+DEFAULT_TAKEOFF_M = 10.0  # gcs takeoff and gcs mode TAKEOFF, metres above home
+STATE_S = 2.0  # how long takeoff waits for the landed state it asks for
+_GROUND = (M.MAV_LANDED_STATE_ON_GROUND,)
+
+
+class NotConfirmed(RuntimeError):
+    """A mode change the vehicle accepted but did not show in its HEARTBEAT."""
+
+
+def autopilot(session: Session) -> Autopilot:
+    if session.autopilot is None:
+        raise RuntimeError("no vehicle heartbeat yet (wait_vehicle first)")
+    return session.autopilot
+
+
+def confirm_mode(session: Session, target: ModeTarget, timeout_s: float) -> None:
+    """Wait for a HEARTBEAT of the vehicle that shows `target`; NotConfirmed naming the
+    mode the last one showed, or that none came."""
+    ap = autopilot(session)
+    seen = None
+    end = time.monotonic() + timeout_s
+    while (left := end - time.monotonic()) > 0:
+        hb = session.recv(["HEARTBEAT"], timeout=left)
+        if hb is None or hb.get_srcSystem() != session.target_system or \
+                hb.get_srcComponent() != session.target_component:
+            continue
+        seen = hb
+        if ap.same_mode(target.custom_mode, hb.custom_mode):
+            return
+    if seen is None:
+        raise NotConfirmed(f"not confirmed: no HEARTBEAT within {timeout_s:g} s")
+    raise NotConfirmed(f"not confirmed: the vehicle is in {ap.mode_name(seen.custom_mode)}")
+
+
+def set_mode(session: Session, target: ModeTarget, confirm_s: float = CONFIRM_S) -> int:
+    """DO_SET_MODE to `target` (not the takeoff procedure: `takeoff`); the vehicle's answer.
+    ACCEPTED only once a HEARTBEAT showed the mode, else NotConfirmed."""
+    ap = autopilot(session)
+    result = session.command(M.MAV_CMD_DO_SET_MODE, *ap.set_mode_params(target.custom_mode))
+    if result == M.MAV_RESULT_ACCEPTED:
+        confirm_mode(session, target, confirm_s)
+    return result
+
+
+def flight_state(session: Session) -> tuple[bool, int | None, float | None]:
+    """(armed, EXTENDED_SYS_STATE.landed_state or None, height above home in m or None),
+    asked for (MAV_CMD_REQUEST_MESSAGE) and waited for up to STATE_S."""
+    s = session
+    armed = landed = height = None
+    asked = {M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: "EXTENDED_SYS_STATE",
+             M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "GLOBAL_POSITION_INT"}
+    for msg_id in asked:
+        s.send(M.MAVLink_command_long_message(s.target_system, s.target_component,
+                                              M.MAV_CMD_REQUEST_MESSAGE, 0, msg_id,
+                                              0, 0, 0, 0, 0, 0))
+    end = time.monotonic() + STATE_S
+    while (left := end - time.monotonic()) > 0 and (armed is None or landed is None
+                                                     or height is None):
+        msg = s.recv(["HEARTBEAT", "EXTENDED_SYS_STATE", "GLOBAL_POSITION_INT"],
+                     timeout=left)
+        if msg is None or msg.get_srcSystem() != s.target_system:
+            continue
+        kind = msg.get_type()
+        if kind == "HEARTBEAT" and msg.get_srcComponent() == s.target_component:
+            armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+        elif kind == "EXTENDED_SYS_STATE":
+            landed = msg.landed_state
+        elif kind == "GLOBAL_POSITION_INT":
+            height = msg.relative_alt * 1e-3
+    if armed is None and s.heartbeat_msg is not None:
+        armed = bool(s.heartbeat_msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+    return bool(armed), landed, height
+
+
+def takeoff_params(ap: Autopilot, height_m: float, home_alt_m: float | None
+                   ) -> tuple[float, ...]:
+    """MAV_CMD_NAV_TAKEOFF p1..p7 for a climb to `height_m` above home: p7 relative on
+    ArduPilot, AMSL on PX4 (home's altitude + height); yaw and position: the current."""
+    if not ap.takeoff_alt_amsl:
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, height_m)
+    if home_alt_m is None:
+        raise ValueError("PX4's takeoff altitude is AMSL: the vehicle's home is needed")
+    return (0.0, 0.0, 0.0, math.nan, math.nan, math.nan, home_alt_m + height_m)
+
+
+def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
+            reach_s: float | None = None, tolerance_m: float = 0.5,
+            confirm_s: float = CONFIRM_S, report: Callable[[float], None] | None = None,
+            fail: type[Exception] = RuntimeError) -> tuple[int, float | None]:
+    """Take off to `height_m` above home; (the vehicle's answer, the height reached when
+    `reach_s` is given: waited for until within `tolerance_m`). `fail` (the caller's error
+    type) for a vehicle that is disarmed, in the air, without home, or does not climb."""
+    from gcs.mission_client import home_position
+
+    s = session
+    ap = autopilot(s)
+    armed, landed, height = flight_state(s)
+    if not armed:
+        raise fail("takeoff: the vehicle is not armed (arm it first)")
+    in_air = landed not in _GROUND if landed is not None and \
+        landed != M.MAV_LANDED_STATE_UNDEFINED else (height is not None and height > 1.0)
+    if in_air:
+        raise fail("takeoff: the vehicle is in the air (takeoff is from the ground)")
+    if ap.takeoff_mode is not None:
+        mode = ap.resolve_mode(ap.takeoff_mode)
+        result = set_mode(s, mode, confirm_s)
+        if result != M.MAV_RESULT_ACCEPTED:
+            raise fail(f"takeoff: {mode.name} refused: {s.describe(result)}")
+    home_alt = None
+    if ap.takeoff_alt_amsl:
+        home = home_position(s.conn, s.target_system, s.target_component, send=s.send)
+        if home is None:
+            raise fail("takeoff: the vehicle sent no HOME_POSITION (its altitude is AMSL)")
+        home_alt = home.alt_m
+    result = s.command(M.MAV_CMD_NAV_TAKEOFF, *takeoff_params(ap, height_m, home_alt))
+    if result != M.MAV_RESULT_ACCEPTED or reach_s is None:
+        return result, None
+    reached = wait_height(s, height_m - tolerance_m, reach_s, report)
+    if reached is None:
+        raise fail(f"takeoff: {height_m:g} m not reached within {reach_s:g} s")
+    return result, reached
+
+
+def wait_height(session: Session, at_least_m: float, timeout_s: float,
+                report: Callable[[float], None] | None = None) -> float | None:
+    """Wait until the vehicle is at least `at_least_m` above home (GLOBAL_POSITION_INT's
+    relative altitude, else LOCAL_POSITION_NED's -z); the height then, None on timeout or
+    when it disarms."""
+    s = session
+    end = time.monotonic() + timeout_s
+    while (left := end - time.monotonic()) > 0:
+        msg = s.recv(["GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "HEARTBEAT"], timeout=left)
+        if msg is None or msg.get_srcSystem() != s.target_system:
+            continue
+        kind = msg.get_type()
+        if kind == "HEARTBEAT":
+            if msg.get_srcComponent() == s.target_component and \
+                    not msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
+                return None
+            continue
+        height = msg.relative_alt * 1e-3 if kind == "GLOBAL_POSITION_INT" else -msg.z
+        if report is not None:
+            report(height)
+        if height >= at_least_m:
+            return float(height)
+    return None
