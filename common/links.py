@@ -291,6 +291,10 @@ class UdpLink(Link):
         for addr in self._peers:
             self._sendto(data, addr)
 
+    def send_to(self, data: bytes, peer: object) -> None:
+        """Send to one peer that `recv` returned (an answer to its sender only)."""
+        self._sendto(data, peer)  # type: ignore[arg-type]
+
     def _sendto(self, data: bytes, addr: tuple[str, int]) -> None:
         try:
             self.sock.sendto(data, addr)

@@ -66,13 +66,13 @@ from common.simlink import (
 )
 from common.ulog import ULogError
 from sitl.actuator_faults import ActuatorFaults
-from sitl.disturbance import Disturbance
 from sitl.plant import (
     ActuatorCommand,
     Plant,
     PlantState,
     initial_state,
     rotate_inv,
+    scenario_plant,
 )
 from sitl.sensor_feed import SensorFeed, pressure_hpa
 from sitl.truth_log import TruthLog
@@ -113,6 +113,16 @@ def command_from_controls(controls: tuple[float, ...], mode: int, vehicle: Vehic
     return ActuatorCommand(speeds, tuple(tilts))
 
 
+def start_flight(scenario: Scenario, plant: Plant, faults: ActuatorFaults,
+                 feed: SensorFeed | None, t_us: int) -> None:
+    """The flight starts at t_us: the scenario's disturbances, actuator faults and sensor
+    faults count from it."""
+    plant.disturbance = plant.disturbance.from_time(t_us * 1e-6)
+    faults.start_flight(t_us)
+    if feed is not None:
+        feed.start_flight(t_us, scenario.sensor_faults)
+
+
 class SimulatorServer:
     """The plant behind a simulator link; I/O only, physics in `Plant`."""
 
@@ -122,10 +132,7 @@ class SimulatorServer:
                  home_alt_m: float = 0.0, sensors: SensorProfile | None = None,
                  seed: int = 0) -> None:
         self.scenario = scenario
-        self.plant = Plant(scenario.vehicle, dt_us=1_000_000 // scenario.physics_rate_hz,
-                           ideal_actuators=scenario.ideal_actuators,
-                           ground_enabled=scenario.ground_enabled,
-                           disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
+        self.plant = scenario_plant(scenario, 1_000_000 // scenario.physics_rate_hz)
         self.state = initial_state(scenario, self.plant)
         self.faults = ActuatorFaults(scenario.actuator_faults)
         self.control_dt_us = 1_000_000 // control_rate_hz
@@ -230,10 +237,7 @@ class SimulatorServer:
         """An answer to the latest state: the first armed one starts the flight."""
         if armed and self.flight_start_us is None:
             self.flight_start_us = self.state.time_us
-            self.plant.disturbance = self.plant.disturbance.from_time(self.state.time_us * 1e-6)
-            self.faults.start_flight(self.state.time_us)
-            if self.feed is not None:
-                self.feed.start_flight(self.state.time_us, self.scenario.sensor_faults)
+            start_flight(self.scenario, self.plant, self.faults, self.feed, self.state.time_us)
             if self.duration_us is not None:
                 self.end_us = self.state.time_us + self.duration_us
 

@@ -516,6 +516,13 @@ def hover_speeds_and_tilts(plant: Plant) -> tuple[tuple[float, ...], tuple[float
     return (w,) * n, (0.0,) * n
 
 
+def scenario_plant(scenario: Scenario, dt_us: int) -> Plant:
+    """The scenario's plant (vehicle, actuators, ground, disturbances) at a step of dt_us."""
+    return Plant(scenario.vehicle, dt_us=dt_us, ideal_actuators=scenario.ideal_actuators,
+                 ground_enabled=scenario.ground_enabled,
+                 disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
+
+
 def initial_state(scenario: Scenario, plant: Plant) -> PlantState:
     """Resting on the ground with rotors stopped, or airborne in hover (MODEL.md 5)."""
     if scenario.start == "ground":

@@ -1,0 +1,200 @@
+"""ArduCopter on this plant: `arducopter --model JSON:127.0.0.1` with ArduPilot's copter and
+hexa parameters and config/ardupilot/hexa_json.parm beside `sitl
+config/scenarios/ardupilot_hexa.toml --protocol ardupilot-json`, both inside a private
+network namespace. ArduCopter's EKF3 aligns on the plant's IMU and position, it arms in
+GUIDED, takes off to 10 m, flies 10 m north and lands, driven over MAVLink with pymavlink
+(`drive`, run inside the namespace as `python -m tests.sitl.test_arducopter_on_plant`);
+the flight is judged from the plant's truth.ulg.
+
+Skipped with the reason unless $ARDUCOPTER names the binary (tests/arducopter.py).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tests.arducopter import ROOT, namespace, needs_arducopter, start_arducopter, stop_group
+
+SCENARIO = ROOT / "config" / "scenarios" / "ardupilot_hexa.toml"
+PARAMS = ROOT / "config" / "ardupilot" / "hexa_json.parm"
+SPEEDUP = 20  # ArduCopter asks for 20x real time; the pair runs as fast as the slower allows
+GUIDED, LAND = 4, 9
+ALT_M, NORTH_M = 10.0, 10.0
+
+
+# ------------------------------------------------------------------ the MAVLink side
+
+
+def drive(url: str, timeout_s: float) -> dict[str, Any]:
+    """Fly ArduCopter over `url`: GUIDED, arm once the EKF lets it, take off to ALT_M, fly
+    NORTH_M north, land, wait for the disarm. Returns what it saw, ArduPilot's boot times in
+    seconds (its simulated clock)."""
+    from pymavlink import mavutil
+
+    mav = mavutil.mavlink
+    conn = mavutil.mavlink_connection(url, source_system=245, dialect="ardupilotmega")
+    deadline = time.monotonic() + timeout_s
+    hb = conn.wait_heartbeat(timeout=timeout_s)
+    if hb is None:
+        raise RuntimeError("no HEARTBEAT from ArduCopter")
+    sysid, compid = hb.get_srcSystem(), hb.get_srcComponent()
+    out: dict[str, Any] = {"texts": []}
+    seen: dict[str, Any] = {}
+
+    def pump(wait_s: float = 0.2) -> None:
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"flight not done within {timeout_s:g} s: {out}")
+        msg = conn.recv_match(blocking=True, timeout=wait_s)
+        while msg is not None:
+            kind = msg.get_type()
+            seen[kind] = msg
+            if kind == "STATUSTEXT":
+                out["texts"].append(msg.text)
+            msg = conn.recv_match(blocking=False)
+
+    def boot_s() -> float:
+        st = seen.get("SYSTEM_TIME")
+        return st.time_boot_ms * 1e-3 if st is not None else math.nan
+
+    def until(cond: Any, what: str, limit_s: float = 60.0) -> None:
+        end = time.monotonic() + limit_s
+        while not cond():
+            if time.monotonic() > end:
+                raise TimeoutError(f"{what} not within {limit_s:g} s; last texts "
+                                   f"{out['texts'][-5:]}")
+            pump()
+
+    def command(cmd: int, *params: float) -> None:
+        p = [*params, *([0.0] * (7 - len(params)))]
+        conn.mav.command_long_send(sysid, compid, cmd, 0, *p)
+
+    def mode_is(number: int) -> bool:
+        h = seen.get("HEARTBEAT")
+        return h is not None and h.get_srcSystem() == sysid and h.custom_mode == number
+
+    def armed() -> bool:
+        h = seen.get("HEARTBEAT")
+        return h is not None and bool(h.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    for msg_id in (mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mav.MAVLINK_MSG_ID_SYSTEM_TIME,
+                   mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT):
+        command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 100_000)
+    until(lambda: "SYSTEM_TIME" in seen and "LOCAL_POSITION_NED" in seen, "telemetry")
+    command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED)
+    until(lambda: mode_is(GUIDED), "GUIDED")
+    need = mav.EKF_PRED_POS_HORIZ_ABS | mav.EKF_POS_HORIZ_ABS | mav.EKF_VELOCITY_HORIZ
+
+    def ekf_ready() -> bool:
+        e = seen.get("EKF_STATUS_REPORT")
+        return e is not None and e.flags & need == need and not e.flags & mav.EKF_UNINITIALIZED
+
+    until(ekf_ready, "EKF3 position estimate", 60.0)
+    out["ekf_ready_s"] = boot_s()
+    last_try = 0.0
+    while not armed():  # the pre-arm checks pass a little after the EKF is ready
+        if time.monotonic() - last_try > 1.0:
+            command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+            last_try = time.monotonic()
+        pump()
+    out["armed_s"] = boot_s()
+    command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, ALT_M)
+    until(lambda: -seen["LOCAL_POSITION_NED"].z > ALT_M - 0.3, "takeoff to 10 m")
+    out["at_altitude_s"] = boot_s()
+    ignore = (mav.POSITION_TARGET_TYPEMASK_VX_IGNORE | mav.POSITION_TARGET_TYPEMASK_VY_IGNORE
+              | mav.POSITION_TARGET_TYPEMASK_VZ_IGNORE | mav.POSITION_TARGET_TYPEMASK_AX_IGNORE
+              | mav.POSITION_TARGET_TYPEMASK_AY_IGNORE | mav.POSITION_TARGET_TYPEMASK_AZ_IGNORE
+              | mav.POSITION_TARGET_TYPEMASK_YAW_IGNORE
+              | mav.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE)
+
+    def there() -> bool:
+        p = seen["LOCAL_POSITION_NED"]
+        conn.mav.set_position_target_local_ned_send(0, sysid, compid, mav.MAV_FRAME_LOCAL_NED,
+                                                    ignore, NORTH_M, 0, -ALT_M, 0, 0, 0, 0,
+                                                    0, 0, 0, 0)
+        return (math.hypot(p.x - NORTH_M, p.y) < 0.3 and abs(p.z + ALT_M) < 0.3
+                and math.sqrt(p.vx ** 2 + p.vy ** 2 + p.vz ** 2) < 0.2)
+
+    until(there, "10 m north")
+    out["north_s"] = boot_s()
+    command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, LAND)
+    until(lambda: mode_is(LAND), "LAND")
+    until(lambda: not armed(), "landed and disarmed", 90.0)
+    out["disarmed_s"] = boot_s()
+    out["texts"] = out["texts"][-20:]
+    return out
+
+
+# ------------------------------------------------------------------ the test
+
+
+def _truth(path: Path) -> dict[str, np.ndarray]:
+    from common.ulog import read_topic
+
+    names, rows = read_topic(path, "dq_truth")
+    return {name: rows[:, i] for i, name in enumerate(names)}
+
+
+@needs_arducopter
+@pytest.mark.timeout(240)
+def test_arducopter_flies_on_the_plant(tmp_path: Path) -> None:
+    truth_path = tmp_path / "truth.ulg"
+    stats_path = tmp_path / "stats.json"
+    with namespace() as ns:
+        sitl_log = (tmp_path / "sitl.log").open("wb")
+        sitl = ns.popen([sys.executable, "-m", "sitl.node", SCENARIO, "--protocol",
+                         "ardupilot-json", "--truth-log", truth_path, "--stats", stats_path],
+                        cwd=ROOT, stdout=sitl_log, stderr=subprocess.STDOUT)
+        sitl_log.close()
+        deadline = time.monotonic() + 60
+        while b"sitl: serving" not in (tmp_path / "sitl.log").read_bytes():
+            assert sitl.poll() is None, (tmp_path / "sitl.log").read_text()
+            assert time.monotonic() < deadline, "sitl did not start serving"
+            time.sleep(0.05)
+        start_arducopter(ns, tmp_path / "ardupilot", model="JSON:127.0.0.1", speedup=SPEEDUP,
+                         defaults=[PARAMS])
+        done = ns.run([sys.executable, "-m", "tests.sitl.test_arducopter_on_plant",
+                       "tcp:127.0.0.1:5760", "150"], cwd=ROOT, capture_output=True,
+                      text=True, timeout=180, check=False)
+        stop_group(sitl)
+    assert done.returncode == 0, done.stdout + done.stderr
+    flight = json.loads(done.stdout.strip().splitlines()[-1])
+    stats = json.loads(stats_path.read_text())
+    print(json.dumps({"flight": flight, "sitl": stats}))
+    assert stats["frame_rate_hz"] == 1200 and stats["step_us"] == 833
+    assert stats["bad_packets"] == 0 and stats["reboots"] == 0
+
+    t = _truth(truth_path)
+    up, north, east = t["pz"], t["py"], t["px"]
+    # the EKF aligned on the plant's IMU and the vehicle sat on the ground until armed
+    assert flight["ekf_ready_s"] < 60.0
+    assert float(np.max(up)) > ALT_M - 0.5 and float(np.max(up)) < ALT_M + 1.5
+    climb = int(np.argmax(up > ALT_M - 0.5))
+    assert math.hypot(north[climb], east[climb]) < 1.0  # took off straight up
+    # the descent starts where it was sent: 10 m north, within 1.5 m
+    top = np.flatnonzero(up > ALT_M - 1.0)[-1]
+    assert math.hypot(north[top] - NORTH_M, east[top]) < 1.5, (north[top], east[top])
+    # landed there, softly (the speed at the first contact after the last half metre), and
+    # stayed: disarmed, the rotors stopped
+    low = np.flatnonzero(up > 0.5)[-1]
+    touchdown = low + int(np.argmax(t["landed"][low:] == 1.0))
+    assert t["landed"][touchdown] == 1.0 and t["landed"][-1] == 1.0
+    assert abs(t["vz"][touchdown - 1]) < 1.0, t["vz"][touchdown - 1]
+    assert math.hypot(north[-1] - NORTH_M, east[-1]) < 1.5, (north[-1], east[-1])
+    assert all(t[f"rotor{i}"][-1] < 1.0 for i in range(6))
+    print(json.dumps({"max_alt_m": float(np.max(up)),
+                      "descent_start_error_m": math.hypot(north[top] - NORTH_M, east[top]),
+                      "final_error_m": math.hypot(north[-1] - NORTH_M, east[-1]),
+                      "touchdown_m_s": float(t["vz"][touchdown - 1])}))
+
+
+if __name__ == "__main__":
+    print(json.dumps(drive(sys.argv[1], float(sys.argv[2]))), flush=True)
