@@ -1,0 +1,203 @@
+"""PX4's side of the simulator MAVLink API as the plant sees it: pure, no I/O.
+
+- PX4's hexarotor X (airframe 6001_hexa_x, control allocation CA_ROTOR0..5): where each
+  of PX4's motor outputs sits (FRD, normalised) and its spin (CA_ROTORn_KM > 0: the
+  propeller turns counter-clockwise seen from above, so its drag torque yaws the body
+  clockwise, +yaw in FRD); `motor_order` finds the plant's rotor under each output from the
+  vehicle's geometry and refuses a vehicle whose rotors do not sit and spin as PX4 expects.
+- `command_from_outputs`: HIL_ACTUATOR_CONTROLS as the plant obeys it. PX4's simulated PWM
+  output (pwm_out_sim) scales a non-reversible motor to 0..1; rotor speed = output x
+  w_max (linear; thrust ~ output^2, PX4's THR_MDL_FAC = 1). Zero unless SAFETY_ARMED; a
+  value that is not finite stops that rotor; the tilts are held at 0 (a planar hexa).
+- `gps_fields`, `state_fields`: HIL_GPS and HIL_STATE_QUATERNION from the exact state, in
+  the units SimulatorMavlink.cpp reads (degE7, mm, cm/s, cdeg, mG).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from common.config import ConfigError, VehicleConfig
+from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
+from common.geometry import rotor_frames
+from sitl.plant import ActuatorCommand, PlantState
+
+
+class Px4Motor(NamedTuple):
+    """One output of PX4's hexa X: position (CA_ROTORn_PX forward, _PY right) and spin."""
+
+    px: float
+    py: float
+    km: float  # CA_ROTORn_KM: > 0 counter-clockwise seen from above
+
+
+# ROMFS/px4fmu_common/init.d/airframes/6001_hexa_x (KM defaults to +0.05 where not set).
+PX4_HEXA_X = (Px4Motor(0.0, 0.5, -0.05), Px4Motor(0.0, -0.5, 0.05),
+              Px4Motor(0.43, -0.25, -0.05), Px4Motor(-0.43, 0.25, 0.05),
+              Px4Motor(0.43, 0.25, 0.05), Px4Motor(-0.43, -0.25, -0.05))
+AZIMUTH_TOLERANCE_DEG = 1.0
+MODE_ARMED = 128  # MAV_MODE_FLAG_SAFETY_ARMED, as PX4 sets it in HIL_ACTUATOR_CONTROLS.mode
+LOCKSTEP_FLAG = 1  # HIL_ACTUATOR_CONTROLS.flags bit 0: PX4 built with the lockstep scheduler
+
+
+def _azimuth_frd_deg(x: float, y: float) -> float:
+    """Azimuth in the FRD x-y plane, from forward towards right, in [0, 360)."""
+    return math.degrees(math.atan2(y, x)) % 360.0
+
+
+def motor_order(vehicle: VehicleConfig) -> tuple[int, ...]:
+    """The plant's rotor index under each of PX4's hexa X outputs (MAIN1..6); ConfigError
+    when the vehicle is not a planar hexa with PX4's positions and spins."""
+    where = f"vehicle {vehicle.name!r}"
+    frames = rotor_frames(vehicle)
+    for i, fr in enumerate(frames):
+        if abs(fr.e_v_flu[2] - 1.0) > 1e-9:
+            raise ConfigError(f"{where}: rotor {i} does not thrust straight up at tilt 0 "
+                              f"(arm elevation {vehicle.arm_elevation_rad[i]:g} rad): px4-hil "
+                              "holds the tilts at 0 and needs a planar hexa")
+    order = []
+    for k, m in enumerate(PX4_HEXA_X):
+        want = _azimuth_frd_deg(m.px, m.py)
+        found = None
+        for i, fr in enumerate(frames):
+            x, y, _ = flu_to_frd(fr.r_flu_m)
+            d = abs((_azimuth_frd_deg(x, y) - want + 180.0) % 360.0 - 180.0)
+            if d <= AZIMUTH_TOLERANCE_DEG:
+                found = i
+        if found is None:
+            raise ConfigError(f"{where}: no rotor at PX4's motor {k + 1} (azimuth {want:.0f} "
+                              "deg from forward towards right)")
+        spin = 1 if m.km > 0 else -1
+        if frames[found].spin != spin:
+            raise ConfigError(
+                f"{where}: rotor {found} (PX4's motor {k + 1}) spins "
+                f"{'counter-clockwise' if frames[found].spin > 0 else 'clockwise'}; PX4's "
+                f"hexa X has it {'counter-clockwise' if spin > 0 else 'clockwise'} (use "
+                "config/scenarios/px4_hexa.toml, whose vehicle spins as PX4's)")
+        order.append(found)
+    if sorted(order) != list(range(len(PX4_HEXA_X))):
+        raise ConfigError(f"{where}: two of PX4's motors fall on one rotor")
+    return tuple(order)
+
+
+class Command(NamedTuple):
+    command: ActuatorCommand
+    nonfinite: int  # motor outputs that were NaN or infinite (their rotor stopped)
+
+
+def command_from_outputs(controls: tuple[float, ...], mode: int, order: tuple[int, ...],
+                         w_max_rad_s: float) -> Command:
+    """The rotor speeds PX4's motor outputs ask (controls[k] -> rotor order[k], 0..1 of
+    w_max, clamped), all zero unless armed; tilts 0."""
+    n = len(order)
+    speeds = [0.0] * n
+    bad = 0
+    armed = bool(mode & MODE_ARMED)
+    for k, rotor in enumerate(order):
+        u = controls[k]
+        if not math.isfinite(u):
+            bad += 1
+            continue
+        if armed:
+            speeds[rotor] = min(max(u, 0.0), 1.0) * w_max_rad_s
+    return Command(ActuatorCommand(tuple(speeds), (0.0,) * n), bad)
+
+
+class Home(NamedTuple):
+    lat_deg: float
+    lon_deg: float
+    alt_m: float  # AMSL
+
+
+# PX4's SITL default home (its Gazebo worlds and jMAVSim: a field near Zurich), where the
+# shipped sensor profiles' earth field (WMM, about 47 N 8 E) holds.
+PX4_HOME = Home(47.397742, 8.545594, 488.0)
+
+
+class GpsFields(NamedTuple):
+    """HIL_GPS as PX4 reads it."""
+
+    time_usec: int
+    fix_type: int
+    lat: int  # degE7
+    lon: int  # degE7
+    alt: int  # mm AMSL
+    eph: int  # cm
+    epv: int  # cm
+    vel: int  # ground speed, cm/s
+    vn: int  # cm/s NED
+    ve: int
+    vd: int
+    cog: int  # cdeg, 0..35999; 65535 unknown
+    satellites_visible: int
+
+
+class StateFields(NamedTuple):
+    """HIL_STATE_QUATERNION (ground truth) as PX4 reads it."""
+
+    time_usec: int
+    attitude_quaternion: tuple[float, float, float, float]  # NED -> FRD, (w, x, y, z)
+    rollspeed: float  # FRD, rad/s
+    pitchspeed: float
+    yawspeed: float
+    lat: int  # degE7
+    lon: int
+    alt: int  # mm AMSL
+    vx: int  # cm/s NED
+    vy: int
+    vz: int
+    ind_airspeed: int  # cm/s (no wind: the ground speed)
+    true_airspeed: int
+    xacc: int  # mG, FRD specific force (what an accelerometer reads)
+    yacc: int
+    zacc: int
+
+
+GPS_FIX_3D = 3
+GPS_SATELLITES = 10
+GPS_EPH_CM = 100  # 1 m, as PX4's Gazebo GPS plugin reports
+GPS_EPV_CM = 100
+COG_MIN_SPEED_M_S = 0.1  # below this the course over ground is unknown (65535)
+G0_M_S2 = 9.80665
+
+
+def _i16(v: float) -> int:
+    return max(-32768, min(32767, round(v)))
+
+
+def _u16(v: float) -> int:
+    return max(0, min(65535, round(v)))
+
+
+def _geodetic(s: PlantState, home: Home) -> tuple[int, int, int]:
+    lat, lon, alt = ned_to_geodetic(enu_to_ned(s.p_enu_m), *home)
+    return round(lat * 1e7), round(lon * 1e7), round(alt * 1e3)
+
+
+def gps_fields(s: PlantState, home: Home) -> GpsFields:
+    """An exact GPS fix of the state (3D fix, 10 satellites, 1 m accuracy)."""
+    lat, lon, alt = _geodetic(s, home)
+    vn, ve, vd = enu_to_ned(s.v_enu_m_s)
+    speed = math.hypot(vn, ve)
+    cog = 65535 if speed < COG_MIN_SPEED_M_S else \
+        round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0) % 36000
+    return GpsFields(s.time_us, GPS_FIX_3D, lat, lon, alt, GPS_EPH_CM, GPS_EPV_CM,
+                     _u16(speed * 100.0), _i16(vn * 100.0), _i16(ve * 100.0),
+                     _i16(vd * 100.0), cog, GPS_SATELLITES)
+
+
+def state_fields(s: PlantState, home: Home, f_flu_m_s2: tuple[float, float, float]
+                 ) -> StateFields:
+    """The exact state; `f_flu_m_s2` is the specific force (Plant.specific_force_flu)."""
+    lat, lon, alt = _geodetic(s, home)
+    v = enu_to_ned(s.v_enu_m_s)
+    w = flu_to_frd(s.omega_flu_rad_s)
+    f = flu_to_frd(f_flu_m_s2)
+    speed = _u16(math.sqrt(v[0] ** 2 + v[1] ** 2 + v[2] ** 2) * 100.0)
+    mg = 1000.0 / G0_M_S2
+    return StateFields(s.time_us, q_enu_flu_to_ned_frd(s.q_enu_flu), w[0], w[1], w[2],
+                       lat, lon, alt, _i16(v[0] * 100.0), _i16(v[1] * 100.0),
+                       _i16(v[2] * 100.0), speed, speed, _i16(f[0] * mg), _i16(f[1] * mg),
+                       _i16(f[2] * mg))
+

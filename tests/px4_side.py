@@ -1,0 +1,252 @@
+"""A scripted PX4 for `sitl --protocol px4-hil`, written from PX4's own reading code
+(src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp) since no PX4 binary is at
+hand. It does what that module does and checks what it relies on:
+
+- connects to the simulator as a TCP client, sends one HEARTBEAT (autopilot 12) and asks
+  HIL_STATE_QUATERNION at 5000 us (SET_MESSAGE_INTERVAL), as `run()` and `send()` do;
+- takes its clock from HIL_SENSOR id 0 (`px4_clock_settime`), publishes accel, gyro, mag
+  and baro only when all of a sensor's `fields_updated` bits are set (`update_sensors`,
+  SensorSource: ACCEL 0b111, GYRO 0b111000, MAG 0b111000000, BARO 0b1101000000000),
+  reads HIL_GPS in degE7, mm, cm, cm/s and HIL_STATE_QUATERNION in degE7, mm, cm/s;
+- answers nothing while it "starts up" (PX4 sends HIL_ACTUATOR_CONTROLS only once its
+  outputs are published), then answers every HIL_SENSOR with exactly one
+  HIL_ACTUATOR_CONTROLS stamped with its clock (flags bit 0: lockstep; mode 1 | 128 when
+  armed; motors 0..1 on the hexa X outputs, zero when disarmed);
+- flies: a hover and position controller on the ground truth (HIL_STATE_QUATERNION), mixed
+  onto PX4's hexa X outputs with PX4's allocation geometry (airframe 6001_hexa_x), so a
+  wrong motor order, spin or axis in the plant shows as a vehicle that does not hold.
+
+Every few hundred samples it holds its answer back for a while and looks whether the plant
+sent anything meanwhile (a plant that steps without the answer would have).
+"""
+
+from __future__ import annotations
+
+import math
+import select
+import socket
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from common.config import VehicleConfig
+from common.frames import geodetic_to_ned
+from common.mavlink import MAV, encoder, pack, parser
+
+ACCEL = 0b111
+GYRO = 0b111000
+MAG = 0b111000000
+BARO = 0b1101000000000
+DIFF_PRESS = 0b10000000000
+MODE_CUSTOM = 1
+MODE_ARMED = 128
+# PX4's hexa X (6001_hexa_x): CA_ROTORn_PX, _PY (FRD, normalised) and the sign of _KM
+# (+ counter-clockwise seen from above), per main output 1..6.
+HEXA_X = ((0.0, 0.5, -1), (0.0, -0.5, 1), (0.43, -0.25, -1), (-0.43, 0.25, 1),
+          (0.43, 0.25, 1), (-0.43, -0.25, -1))
+
+
+@dataclass
+class Sample:
+    time_usec: int
+    fields: int
+    acc: tuple[float, float, float]
+    gyro: tuple[float, float, float]
+    mag: tuple[float, float, float]
+    abs_pressure: float
+    pressure_alt: float
+    temperature: float
+    diff_pressure: float
+    sensor_id: int
+
+
+@dataclass
+class Report:
+    samples: list[Sample] = field(default_factory=list)
+    gps: list[tuple[int, object]] = field(default_factory=list)  # (clock, HIL_GPS)
+    states: list[tuple[int, object]] = field(default_factory=list)  # (clock, HSQ)
+    acks: list[object] = field(default_factory=list)
+    other: list[str] = field(default_factory=list)
+    answers: list[int] = field(default_factory=list)  # time_usec of each answer sent
+    published: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
+        ("accel", "gyro", "mag", "baro", "diff_press"), 0))
+    violations: list[str] = field(default_factory=list)
+    stalls: int = 0  # answers held back and checked
+    closed_by_plant: bool = False
+    wall_s: float = 0.0
+
+
+class HoverController:
+    """Position (NED) and attitude PD on the ground truth, mixed onto PX4's hexa X."""
+
+    def __init__(self, vehicle: VehicleConfig) -> None:
+        self.m = vehicle.mass_kg
+        self.g = vehicle.gravity_m_s2
+        self.j = vehicle.inertia_diag_kg_m2
+        self.t_max = vehicle.thrust_coeff * vehicle.rotor_speed_max_rad_s ** 2
+        km = vehicle.drag_coeff / vehicle.thrust_coeff
+        arm = vehicle.arm_length_m
+        cols = []
+        for px, py, spin in HEXA_X:
+            r = math.hypot(px, py)
+            x, y = arm * px / r, arm * py / r
+            cols.append((-y, x, spin * km, 1.0))  # roll, pitch, yaw torque, thrust per N
+        self.pinv = np.linalg.pinv(np.array(cols).T)
+        self.home: tuple[float, float, float] | None = None
+        self.yaw_sp: float | None = None
+
+    def outputs(self, hsq: object, target_ned: tuple[float, float, float]) -> list[float]:
+        q = hsq.attitude_quaternion  # type: ignore[attr-defined]
+        w, x, y, z = q
+        roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+        pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
+        yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        lat, lon, alt = hsq.lat * 1e-7, hsq.lon * 1e-7, hsq.alt * 1e-3  # type: ignore[attr-defined]
+        if self.home is None:
+            self.home = (lat, lon, alt)
+            self.yaw_sp = yaw
+        n, e, d = geodetic_to_ned(lat, lon, alt, *self.home)
+        vn, ve, vd = hsq.vx / 100, hsq.vy / 100, hsq.vz / 100  # type: ignore[attr-defined]
+        g = self.g
+        a_n = max(-3.0, min(3.0, 1.2 * (target_ned[0] - n) - 1.8 * vn))
+        a_e = max(-3.0, min(3.0, 1.2 * (target_ned[1] - e) - 1.8 * ve))
+        a_d = max(-4.0, min(4.0, 3.0 * (target_ned[2] - d) - 3.0 * vd))
+        c, s = math.cos(yaw), math.sin(yaw)
+        pitch_sp = max(-0.3, min(0.3, -(a_n * c + a_e * s) / g))
+        roll_sp = max(-0.3, min(0.3, (-a_n * s + a_e * c) / g))
+        thrust = self.m * (g - a_d) / max(0.5, math.cos(roll) * math.cos(pitch))
+        assert self.yaw_sp is not None
+        e_yaw = (self.yaw_sp - yaw + math.pi) % (2 * math.pi) - math.pi
+        p, qr, r = hsq.rollspeed, hsq.pitchspeed, hsq.yawspeed  # type: ignore[attr-defined]
+        tau = (self.j[0] * (49.0 * (roll_sp - roll) - 12.0 * p),
+               self.j[1] * (49.0 * (pitch_sp - pitch) - 12.0 * qr),
+               self.j[2] * (9.0 * e_yaw - 5.0 * r))
+        per_motor = self.pinv @ np.array([*tau, thrust])
+        return [math.sqrt(min(max(t, 0.0), self.t_max) / self.t_max) for t in per_motor]
+
+
+class ScriptedPX4:
+    """PX4's simulator module against the plant on 127.0.0.1:`port`."""
+
+    def __init__(self, port: int, vehicle: VehicleConfig, *, sysid: int = 1,
+                 answer_after_s: float = 0.3, arm_at_s: float = 1.0,
+                 waypoints: tuple[tuple[float, tuple[float, float, float]], ...] = (),
+                 stall_every: int = 0, stall_s: float = 0.03) -> None:
+        self.port = port
+        self.sysid = sysid
+        self.answer_after_us = round(answer_after_s * 1e6)
+        self.arm_at_us = round(arm_at_s * 1e6)
+        self.waypoints = waypoints  # (from time s, NED target); before the first: on ground
+        self.stall_every = stall_every
+        self.stall_s = stall_s
+        self.controller = HoverController(vehicle)
+        self.mav = encoder(sysid, MAV.MAV_COMP_ID_AUTOPILOT1)
+        self.decoder = parser()
+        self.clock_us = 0
+        self.hsq: object | None = None
+        self.sock: socket.socket | None = None
+
+    def connect(self, timeout_s: float = 20.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            try:
+                s.connect(("127.0.0.1", self.port))
+                break
+            except OSError:
+                s.close()
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.05)
+        self.sock = s
+        hb = MAV.MAVLink_heartbeat_message(0, 12, 0, 0, 0, 3)
+        ask = MAV.MAVLink_command_long_message(0, 0, MAV.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                               MAV.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, 5e3,
+                                               0, 0, 0, 0, 0)
+        s.sendall(pack(self.mav, hb) + pack(self.mav, ask))
+
+    def send(self, data: bytes) -> None:
+        assert self.sock is not None
+        self.sock.sendall(data)
+
+    def close(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+    def _target(self, t_us: int) -> tuple[float, float, float] | None:
+        target = None
+        for t_s, ned in self.waypoints:
+            if t_us >= t_s * 1e6:
+                target = ned
+        return target
+
+    def _answer(self, report: Report) -> None:
+        armed = self.clock_us >= self.arm_at_us and self.hsq is not None
+        controls = [0.0] * 16
+        target = self._target(self.clock_us)
+        if armed and target is not None:
+            controls[:6] = self.controller.outputs(self.hsq, target)
+        mode = MODE_CUSTOM | (MODE_ARMED if armed else 0)
+        msg = MAV.MAVLink_hil_actuator_controls_message(self.clock_us, controls, mode, 1)
+        n = len(report.answers)
+        if self.stall_every and n and n % self.stall_every == 0:
+            time.sleep(self.stall_s)  # the plant must not step meanwhile
+            assert self.sock is not None
+            if select.select([self.sock], [], [], 0)[0]:
+                report.violations.append(f"the plant sent while its sample at "
+                                         f"{self.clock_us} us had no answer")
+            report.stalls += 1
+        self.send(pack(self.mav, msg))
+        report.answers.append(self.clock_us)
+
+    def _hil_sensor(self, m: object, report: Report) -> None:
+        f = m.fields_updated  # type: ignore[attr-defined]
+        smp = Sample(m.time_usec, f, (m.xacc, m.yacc, m.zacc),  # type: ignore[attr-defined]
+                     (m.xgyro, m.ygyro, m.zgyro), (m.xmag, m.ymag, m.zmag),  # type: ignore[attr-defined]
+                     m.abs_pressure, m.pressure_alt, m.temperature,  # type: ignore[attr-defined]
+                     m.diff_pressure, m.id)  # type: ignore[attr-defined]
+        if smp.sensor_id == 0:
+            if report.samples and smp.time_usec <= self.clock_us:
+                report.violations.append(f"clock went from {self.clock_us} to "
+                                         f"{smp.time_usec} us")
+            self.clock_us = smp.time_usec
+        report.samples.append(smp)
+        for name, mask in (("accel", ACCEL), ("gyro", GYRO), ("mag", MAG), ("baro", BARO),
+                           ("diff_press", DIFF_PRESS)):
+            if f & mask == mask:
+                report.published[name] += 1
+        if smp.sensor_id == 0 and self.clock_us >= self.answer_after_us:
+            self._answer(report)
+
+    def run(self, until_s: float, wall_timeout_s: float = 60.0) -> Report:
+        """Until the clock reaches `until_s`, the plant closes the link or the wall time
+        runs out; the link stays open (close() it)."""
+        report = Report()
+        assert self.sock is not None
+        start = time.monotonic()
+        until_us = round(until_s * 1e6)
+        while self.clock_us < until_us and time.monotonic() - start < wall_timeout_s:
+            if not select.select([self.sock], [], [], 0.5)[0]:
+                continue
+            data = self.sock.recv(65536)
+            if not data:
+                report.closed_by_plant = True
+                break
+            for m in self.decoder.parse_buffer(data) or []:
+                kind = m.get_type()
+                if kind == "HIL_SENSOR":
+                    self._hil_sensor(m, report)
+                elif kind == "HIL_GPS":
+                    report.gps.append((self.clock_us, m))
+                elif kind == "HIL_STATE_QUATERNION":
+                    self.hsq = m
+                    report.states.append((self.clock_us, m))
+                elif kind == "COMMAND_ACK":
+                    report.acks.append(m)
+                else:
+                    report.other.append(kind)
+        report.wall_s = time.monotonic() - start
+        return report
