@@ -8,7 +8,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 BENCHMARKS = ("bench_step.py", "bench_flight_core.py", "bench_inprocess.py", "bench_lockstep.py",
-              "bench_zenoh.py",
+              "bench_zenoh.py", "bench_ardupilot_json.py",
               "bench_logs.py", "bench_estimator.py", "bench_estimator_fcu.py",
               "lag_compensation_noise.py",
               "divergence_limit.py", "mission_envelope.py")
