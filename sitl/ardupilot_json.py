@@ -157,6 +157,12 @@ class JsonPhysics:
     """The protocol without sockets: servo packets in, JSON answers out (`frame`)."""
 
     def __init__(self, scenario: Scenario) -> None:
+        if scenario.uses_sensors:
+            assert scenario.sensors is not None
+            raise ConfigError(f"--protocol ardupilot-json: sensor profile "
+                              f"'{scenario.sensors.name}': ArduPilot makes its own sensors "
+                              "from the exact state (its SIM_* parameters add their noise); "
+                              "use the truth profile")
         self.scenario = scenario
         self.rotor_of_motor = motor_map(scenario.vehicle)
         self._plants: dict[int, Plant] = {}

@@ -452,7 +452,9 @@ def build_parser() -> argparse.ArgumentParser:
                "--link, --truth-log, --end-time (after the first packet; default: serve until "
                "SIGTERM), --ideal-actuators, --sensors, --seed, --sysid, --stats and "
                "--position apply; --realtime, --control-rate, --hil-sensor-hz and "
-               "--resend-ms are dqflight's only.")
+               "--resend-ms are dqflight's only. ardupilot-json takes only the truth sensor "
+               "profile (ArduPilot makes its sensors from the exact state), so --seed does "
+               "nothing there.")
     p.add_argument("scenario", type=Path, help="scenario TOML (vehicle, start, disturbances)")
     p.add_argument("--protocol", choices=tuple(DEFAULT_LINKS), default=DQFLIGHT,
                    help="simulator protocol (default dqflight)")

@@ -310,3 +310,14 @@ def test_server_on_loopback(scenario, tmp_path: Path) -> None:
 def test_server_takes_only_udpin(scenario) -> None:
     with pytest.raises(LinkError, match="UDP"):
         Server(scenario, "tcpin:127.0.0.1:0", truth_log=None, end_time_s=None)
+
+
+def test_sensor_profiles_are_refused(scenario) -> None:
+    """ArduPilot simulates its sensors from the exact state: a profile would be ignored."""
+    from common.sensors_config import resolve_sensor_profile
+
+    noisy = dataclasses.replace(scenario, sensors=resolve_sensor_profile("mocap-indoor"))
+    with pytest.raises(ConfigError, match="mocap-indoor.*ArduPilot makes its own sensors"):
+        JsonPhysics(noisy)
+    truth = dataclasses.replace(scenario, sensors=resolve_sensor_profile("truth"))
+    assert JsonPhysics(truth).frame(frame(0))[1]
