@@ -221,6 +221,21 @@ class ScriptedPX4:
         if smp.sensor_id == 0 and self.clock_us >= self.answer_after_us:
             self._answer(report)
 
+    def _handle(self, data: bytes, report: Report) -> None:
+        for m in self.decoder.parse_buffer(data) or []:
+            kind = m.get_type()
+            if kind == "HIL_SENSOR":
+                self._hil_sensor(m, report)
+            elif kind == "HIL_GPS":
+                report.gps.append((self.clock_us, m))
+            elif kind == "HIL_STATE_QUATERNION":
+                self.hsq = m
+                report.states.append((self.clock_us, m))
+            elif kind == "COMMAND_ACK":
+                report.acks.append(m)
+            else:
+                report.other.append(kind)
+
     def run(self, until_s: float, wall_timeout_s: float = 60.0) -> Report:
         """Until the clock reaches `until_s`, the plant closes the link or the wall time
         runs out; the link stays open (close() it)."""
@@ -231,22 +246,14 @@ class ScriptedPX4:
         while self.clock_us < until_us and time.monotonic() - start < wall_timeout_s:
             if not select.select([self.sock], [], [], 0.5)[0]:
                 continue
-            data = self.sock.recv(65536)
+            try:
+                data = self.sock.recv(65536)
+                if data:
+                    self._handle(data, report)
+            except (BrokenPipeError, ConnectionResetError):
+                data = b""
             if not data:
                 report.closed_by_plant = True
                 break
-            for m in self.decoder.parse_buffer(data) or []:
-                kind = m.get_type()
-                if kind == "HIL_SENSOR":
-                    self._hil_sensor(m, report)
-                elif kind == "HIL_GPS":
-                    report.gps.append((self.clock_us, m))
-                elif kind == "HIL_STATE_QUATERNION":
-                    self.hsq = m
-                    report.states.append((self.clock_us, m))
-                elif kind == "COMMAND_ACK":
-                    report.acks.append(m)
-                else:
-                    report.other.append(kind)
         report.wall_s = time.monotonic() - start
         return report

@@ -1,0 +1,364 @@
+"""`sitl --protocol px4-hil` against a scripted PX4 (tests/px4_side.py, written from PX4's
+SimulatorMavlink.cpp): the message set, rates, units, frames and fields_updated bits as PX4
+reads them, lockstep held over a 30 s flight that the scripted side flies (judged from
+truth.ulg), and the safe reactions to bad input (garbage, other messages, non-finite
+outputs, stale answers, another system, a second client, a disconnect and a reconnect)."""
+
+from __future__ import annotations
+
+import json
+import math
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from common.config import load_scenario
+from common.links import free_port
+from common.mavlink import MAV, encoder, pack, parser
+from common.ulog import read_topic
+from sitl.px4_hil import Server
+from tests.px4_side import ACCEL, BARO, DIFF_PRESS, GYRO, MAG, ScriptedPX4
+
+from .conftest import ROOT, SCENARIOS, start, stop
+
+PX4_HEXA = SCENARIOS / "px4_hexa.toml"
+IMU_US = 4000  # PX4's simulators' 250 Hz, the lockstep rate
+FLIGHT_S = 30.0
+ALT_M, NORTH_M = 3.0, 2.0
+FIELD_NED = (0.216, 0.012, 0.425)  # config/sensors/truth.toml
+
+
+def _isa_hpa(alt_m: float) -> float:
+    return 1013.25 * (1.0 - 2.25577e-5 * alt_m) ** 5.25588
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory) -> Iterator[dict]:
+    """One 30 s flight: take off to 3 m at 1 s, 2 m north at 10 s, the plant stopping at
+    30 s after the firmware's first packet; every 250th answer held back 30 ms."""
+    tmp = tmp_path_factory.mktemp("px4")
+    port = free_port(socket.SOCK_STREAM)
+    procs = {"sitl": start("sitl", [
+        "sitl.node", str(PX4_HEXA), "--protocol", "px4-hil", "--link",
+        f"tcpin:127.0.0.1:{port}", "--truth-log", str(tmp / "truth.ulg"), "--stats",
+        str(tmp / "stats.json"), "--end-time", str(FLIGHT_S)], tmp)}
+    side = ScriptedPX4(port, load_scenario(PX4_HEXA).vehicle,
+                       waypoints=((1.0, (0.0, 0.0, -ALT_M)), (10.0, (NORTH_M, 0.0, -ALT_M))),
+                       stall_every=250)
+    try:
+        side.connect()
+        report = side.run(FLIGHT_S + 10.0, wall_timeout_s=120.0)
+        side.close()
+        rc = procs["sitl"].wait(timeout=30)
+        yield {"report": report, "rc": rc, "stats": json.loads((tmp / "stats.json").read_text()),
+               "truth": tmp / "truth.ulg", "log": (tmp / "sitl.log").read_text()}
+    finally:
+        side.close()
+        stop(procs)
+
+
+pytestmark = pytest.mark.timeout(180)
+
+
+def test_message_set_and_request(flight):
+    """Given PX4's connect (HEARTBEAT, SET_MESSAGE_INTERVAL HIL_STATE_QUATERNION 5000 us),
+    then only HIL_SENSOR, HIL_GPS, HIL_STATE_QUATERNION and one COMMAND_ACK ACCEPTED come,
+    and the plant stops by itself at --end-time."""
+    r, s = flight["report"], flight["stats"]
+    assert flight["rc"] == 0, flight["log"]
+    assert r.closed_by_plant
+    assert r.other == []
+    assert [(a.command, a.result) for a in r.acks] == [
+        (MAV.MAV_CMD_SET_MESSAGE_INTERVAL, MAV.MAV_RESULT_ACCEPTED)]
+    assert s["heartbeats"] == 1 and s["state_interval_us"] == 5000
+    assert r.samples and r.gps and r.states
+
+
+def test_rates_in_simulated_time(flight):
+    """Then HIL_SENSOR every 4000 us exactly; magnetometer on every 10 ms, barometer every
+    20 ms, HIL_GPS every 200 ms, HIL_STATE_QUATERNION 200 Hz (4 of 5 IMU samples)."""
+    r = flight["report"]
+    t = np.array([smp.time_usec for smp in r.samples])
+    assert t[0] == IMU_US and np.all(np.diff(t) == IMU_US)
+    assert t[-1] == FLIGHT_S * 1e6
+    mag_t = [smp.time_usec for smp in r.samples if smp.fields & MAG]
+    baro_t = [smp.time_usec for smp in r.samples if smp.fields & BARO]
+    end = int(FLIGHT_S * 1e6)
+
+    def riding(period_us: int) -> list[int]:  # on the first IMU sample at or after each
+        return [-(-k * period_us // IMU_US) * IMU_US for k in range(1, end // period_us + 1)]
+
+    assert mag_t == riding(10_000)
+    assert baro_t == riding(20_000)
+    gps_t = [m.time_usec for _, m in r.gps]
+    assert gps_t == [IMU_US, *range(200_000, end + 1, 200_000)]  # due at 0, 0.2 s, ...
+    hsq_t = np.array([m.time_usec for _, m in r.states])
+    in_window = hsq_t[(hsq_t >= 1e6) & (hsq_t < 29e6)]
+    assert len(in_window) == 28 * 200
+    assert set(np.diff(in_window)) <= {4000, 8000}
+
+
+def test_fields_updated_bits_as_px4_reads_them(flight):
+    """Then every sample publishes accel and gyro (all of 0x3F); mag (0x1C0) and baro
+    (0x1A00: abs pressure, pressure altitude, temperature) come whole or not at all;
+    never differential pressure; the counts PX4 publishes match the rates."""
+    r = flight["report"]
+    for smp in r.samples:
+        assert smp.fields & (ACCEL | GYRO) == ACCEL | GYRO
+        assert smp.fields & MAG in (0, MAG)
+        assert smp.fields & BARO in (0, BARO)
+        assert not smp.fields & DIFF_PRESS
+        assert smp.fields & ~(ACCEL | GYRO | MAG | BARO) == 0
+        assert smp.sensor_id == 0
+    n = len(r.samples)
+    assert r.published["accel"] == r.published["gyro"] == n
+    assert r.published["diff_press"] == 0
+    assert r.published["mag"] == pytest.approx(n * 100 / 250, abs=1)
+    assert r.published["baro"] == pytest.approx(n * 50 / 250, abs=1)
+
+
+def test_units_and_frames_at_rest(flight):
+    """Given the vehicle on the ground facing east (yaw +90 deg in NED) before it arms,
+    then accel (0, 0, -9.81) m/s^2 FRD, gyro 0, mag the NED field seen in FRD, pressure ISA
+    at 488 m in hPa, GPS at PX4's home (degE7, mm), ground truth facing east at home."""
+    r = flight["report"]
+    rest = [smp for smp in r.samples if smp.time_usec < 0.9e6]
+    for smp in rest:
+        assert smp.acc == pytest.approx((0.0, 0.0, -9.81), abs=1e-4)
+        assert smp.gyro == pytest.approx((0.0, 0.0, 0.0), abs=1e-6)
+    mags = [smp for smp in rest if smp.fields & MAG]
+    n, e, d = FIELD_NED
+    for smp in mags:
+        assert smp.mag == pytest.approx((e, -n, d), abs=1e-5)  # x_b east, y_b south
+    baros = [smp for smp in rest if smp.fields & BARO]
+    assert baros
+    for smp in baros:
+        assert smp.abs_pressure == pytest.approx(_isa_hpa(488.0), abs=0.01)
+        assert smp.pressure_alt == pytest.approx(488.0, abs=0.01)
+        assert smp.temperature == pytest.approx(15.0)
+    _, g = r.gps[0]
+    assert (g.lat, g.lon, g.alt) == (473977420, 85455940, 488000)
+    assert (g.fix_type, g.satellites_visible, g.vel, g.vn, g.ve, g.vd) == (3, 10, 0, 0, 0, 0)
+    assert g.eph == g.epv == 100
+    _, h = r.states[0]
+    assert h.attitude_quaternion == pytest.approx([math.sqrt(0.5), 0, 0, math.sqrt(0.5)],
+                                                  abs=1e-6)
+    assert (h.lat, h.lon, h.alt, h.zacc) == (473977420, 85455940, 488000, -1000)
+
+
+def test_lockstep_held_over_the_flight(flight):
+    """Then from PX4's first answer on the plant advanced one IMU period per answer and
+    never without one (it stayed silent through every held-back answer), no answer was
+    stale or extra, and each answer was stamped with the sample it answered."""
+    r, s = flight["report"], flight["stats"]
+    assert r.violations == []
+    assert r.stalls >= 25
+    first = r.answers[0]
+    assert first == 300_000  # the scripted PX4 starts answering at 0.3 s
+    after = [smp.time_usec for smp in r.samples if smp.time_usec >= first]
+    assert r.answers == after[:len(r.answers)]
+    used = [t for t in r.answers if t < FLIGHT_S * 1e6]  # the last one came after the end
+    assert s["steps"] == len(used)
+    assert s["answers"] in (len(used), len(r.answers))
+    assert s["paced_steps"] == first // IMU_US
+    assert (s["stale_answers"], s["extra_answers"], s["time_mismatches"]) == (0, 0, 0)
+    assert s["sent"]["hil_sensor"] == len(r.samples)
+    assert (s["rejected_bytes"], s["other_messages"], s["answer_waits"]) == (0, 0, 0)
+    print(f"px4-hil lockstep: {s['steps']} steps, {s['sent']['hil_sensor']} HIL_SENSOR, "
+          f"{s['sent']['hil_gps']} HIL_GPS, {s['sent']['hil_state_quaternion']} "
+          f"HIL_STATE_QUATERNION in {s['sim_time_s']:.1f} s; real-time factor "
+          f"{s['real_time_factor']:.1f} with the scripted PX4; side wall {r.wall_s:.2f} s")
+
+
+def test_flight_judged_from_truth(flight):
+    """Then the truth log (one row per IMU period) shows the scripted PX4's flight: on the
+    ground until it arms, at 3 m by 8 s, 2 m north by 25 s, level and facing east."""
+    cols, rows = read_topic(flight["truth"], "dq_truth")
+    c = {name: i for i, name in enumerate(cols)}
+    t = rows[:, 0]
+    assert t[0] == 0 and np.all(np.diff(t) == IMU_US)
+    early = rows[t < 1e6]
+    assert np.all(early[:, c["pz"]] == 0.0)
+    hover = rows[(t >= 8e6) & (t < 10e6)]
+    assert np.all(np.abs(hover[:, c["pz"]] - ALT_M) < 0.15)
+    assert np.all(np.hypot(hover[:, c["px"]], hover[:, c["py"]]) < 0.15)
+    moved = rows[t >= 25e6]
+    assert np.all(np.abs(moved[:, c["py"]] - NORTH_M) < 0.15)  # ENU y is north
+    assert np.all(np.abs(moved[:, c["px"]]) < 0.15)
+    assert np.all(np.abs(moved[:, c["pz"]] - ALT_M) < 0.15)
+    q = moved[:, [c["qw"], c["qx"], c["qy"], c["qz"]]]
+    assert np.all(np.abs(q[:, 0]) > math.cos(0.05 / 2))  # within 0.05 rad of level, east
+
+
+# ------------------------------------------------------------------ bad input, in-process
+
+
+class Peer:
+    """A raw TCP client speaking MAVLink to an in-process Server."""
+
+    def __init__(self, port: int, sysid: int = 1) -> None:
+        self.sock = socket.create_connection(("127.0.0.1", port), timeout=5)
+        self.mav = encoder(sysid, MAV.MAV_COMP_ID_AUTOPILOT1)
+        self.decoder = parser()
+        self.pending: list[int] = []
+
+    def send(self, msg_or_bytes) -> None:
+        data = msg_or_bytes if isinstance(msg_or_bytes, bytes) else pack(self.mav,
+                                                                        msg_or_bytes)
+        self.sock.sendall(data)
+
+    def next_sample(self, timeout_s: float = 5.0) -> int:
+        """The time of the next HIL_SENSOR in the stream."""
+        deadline = time.monotonic() + timeout_s
+        while not self.pending:
+            assert time.monotonic() < deadline, "no HIL_SENSOR"
+            self.pending += [m.time_usec for m in self.decoder.parse_buffer(
+                self.sock.recv(65536)) or [] if m.get_type() == "HIL_SENSOR"]
+        return self.pending.pop(0)
+
+    def latest_sample(self) -> int:
+        """The newest HIL_SENSOR sent so far (the ones before it skipped)."""
+        t = self.next_sample()
+        self.sock.setblocking(False)
+        try:
+            while True:
+                self.pending += [m.time_usec for m in self.decoder.parse_buffer(
+                    self.sock.recv(65536)) or [] if m.get_type() == "HIL_SENSOR"]
+        except BlockingIOError:
+            pass
+        finally:
+            self.sock.setblocking(True)
+        if self.pending:
+            t, self.pending = self.pending[-1], []
+        return t
+
+    def answer(self, t_us: int, controls=(0.0,) * 16, mode: int = 1, flags: int = 1) -> None:
+        self.send(MAV.MAVLink_hil_actuator_controls_message(t_us, list(controls), mode, flags))
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+@contextmanager
+def serving(tmp_path: Path) -> Iterator[tuple[Server, int]]:
+    port = free_port(socket.SOCK_STREAM)
+    server = Server(load_scenario(PX4_HEXA), f"tcpin:127.0.0.1:{port}",
+                    truth_log=tmp_path / "truth.ulg", end_time_s=None, system_id=1)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    try:
+        yield server, port
+    finally:
+        server.running = False
+        thread.join(timeout=10)
+        assert not thread.is_alive()
+
+
+def _until(predicate, timeout_s: float = 5.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.005)
+
+
+def test_bad_input_gets_safe_reactions(tmp_path):
+    """Given garbage, a message the plant does not take, an answer from another system, a
+    stale answer, a second answer, non-finite motor outputs and a second client, then each
+    is counted and ignored (or the rotor stopped), the plant keeps one step per answer."""
+    with serving(tmp_path) as (server, port):
+        px4 = Peer(port)
+        t = px4.next_sample()  # wall-clock pace before the first answer
+        px4.send(b"\x00\xfd\x07garbage" * 5)
+        px4.send(MAV.MAVLink_param_request_list_message(1, 1))
+        other = Peer.__new__(Peer)
+        other.mav = encoder(7, 1)
+        px4.send(pack(other.mav, MAV.MAVLink_hil_actuator_controls_message(
+            t, [0.5] * 16, 129, 1)))
+        _until(lambda: server.ignored_answers == 1 and server.other_messages == 1)
+        assert server.rejected_bytes > 0
+        # lock in: the answer to the latest sample, motors NaN and 2.0 while armed
+        sent = 0
+        while not server.locked:
+            t = px4.latest_sample()
+            px4.answer(t, (math.nan, 2.0) + (0.0,) * 14, mode=129)
+            sent += 1
+            _until(lambda n=sent: server.answers == n)
+        t1 = px4.next_sample()
+        assert t1 == t + IMU_US
+        assert server.nonfinite_outputs == sent
+        rotors = server.command.rotor_speed_rad_s
+        assert rotors[server.order[0]] == 0.0 and rotors[server.order[1]] == 1700.0
+        stale = server.stale_answers
+        px4.answer(t)  # stale: answers the sample before
+        px4.answer(t1)
+        px4.answer(t1)  # a second answer to the same sample
+        t2 = px4.next_sample()
+        assert t2 == t1 + IMU_US
+        _until(lambda: server.stale_answers == stale + 1 and server.extra_answers == 1)
+        second = socket.create_connection(("127.0.0.1", port), timeout=5)
+        _until(lambda: server.link.refused_clients == 1)
+        assert second.recv(100) == b""  # closed at once
+        second.close()
+        # no answer: no step (the plant waits)
+        time.sleep(0.1)
+        assert server.state.time_us == t2
+        px4.close()
+
+
+def test_disconnect_and_reconnect(tmp_path):
+    """Given PX4 gone while locked in, then the world stands still and its rotors are
+    commanded off; given PX4 back, then it starts on the wall-clock pace from where the
+    world stood (time never goes back) and locks in again on its answers."""
+    with serving(tmp_path) as (server, port):
+        px4 = Peer(port)
+        t = px4.next_sample()
+        px4.answer(t, (0.6,) * 6 + (0.0,) * 10, mode=129)
+        t = px4.next_sample()
+        assert server.locked
+        px4.close()
+        _until(lambda: server.disconnects == 1)
+        stood = server.state.time_us
+        assert stood == t
+        assert server.command.rotor_speed_rad_s == (0.0,) * 6
+        time.sleep(0.1)
+        assert server.state.time_us == stood  # nobody there: no time passes
+        back = Peer(port)
+        t_back = back.next_sample()
+        assert t_back == stood + IMU_US
+        assert server.connects == 2 and not server.locked
+        back.answer(t_back)
+        assert back.next_sample() == t_back + IMU_US
+        _until(lambda: server.locked)
+        back.close()
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--link", "udpin:127.0.0.1:4560"], "expected tcpin:HOST:PORT"),
+    (["--realtime"], "--realtime does not apply to --protocol px4-hil"),
+])
+def test_bad_options_exit_2(argv, message):
+    """Given a link PX4 cannot use or a dqflight-only option, then exit 2, one line."""
+    proc = subprocess.run([sys.executable, "-m", "sitl.node", str(PX4_HEXA), "--protocol",
+                           "px4-hil", *argv], cwd=ROOT, capture_output=True, text=True,
+                          timeout=60, check=False)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_vehicle_px4_cannot_fly_exit_2():
+    """Given a scenario whose hexa spins the other way round from PX4's, then exit 2 naming
+    the rotor, before anything listens."""
+    proc = subprocess.run([sys.executable, "-m", "sitl.node",
+                           str(SCENARIOS / "case2_impulse.toml"), "--protocol", "px4-hil",
+                           "--link", f"tcpin:127.0.0.1:{free_port(socket.SOCK_STREAM)}"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode == 2
+    assert "does not thrust straight up" in proc.stderr or "spins" in proc.stderr
