@@ -695,11 +695,12 @@ def _read_files(args: argparse.Namespace) -> None:
     """Read the file a mission or param command takes, before any network wait: a bad one
     raises MissionFileError or InputError (one line, exit status 2); the contents go to
     args.items / args.params. Files to be written must have a folder to go to."""
-    from gcs.mission_files import file_format, read_mission
+    from gcs.mission_files import file_format, read_mission_doc
     from gcs.param_files import ParamFileError, read_params
 
     if args.command == "mission" and args.action == "upload":
-        args.items = read_mission(args.file, args.format)
+        args.mission = read_mission_doc(args.file, args.format)
+        args.items = args.mission.items
     elif args.command == "mission" and args.action == "download" and args.file is not None:
         file_format(args.file, args.format)
         _writable_file(args.file, "mission file")
@@ -714,30 +715,58 @@ def _read_files(args: argparse.Namespace) -> None:
 
 def _mission(args: argparse.Namespace, session) -> int:
     from common.mavlink import MAV
+    from gcs.autopilot import autopilot_of
     from gcs.mission_client import clear, download, home_position, result_name, upload_detailed
     from gcs.mission_files import file_format, format_mission, to_frame
+    from gcs.mission_home import HomeError, WireMission, for_ardupilot, split_home
 
     t, c, send = session.target_system, session.target_component, session.send
     progress = Progress()
+    pilot = autopilot_of(session.heartbeat_msg)
+    at_seq0 = pilot.mission_home_at_seq0  # ArduPilot: home is seq 0, the plan from seq 1
 
     def report(done: int, total: int) -> None:
         progress(f"mission: {done}/{total} items")
 
     if args.action == "upload":
         items = args.items
-        answer = upload_detailed(session.conn, t, c, items, progress=report, send=send)
+        wire = WireMission(list(items))
+        if at_seq0:
+            need_home = args.mission.home is None or any(
+                it.frame == MAV.MAV_FRAME_LOCAL_NED for it in items)
+            vehicle_home = home_position(session.conn, t, c, send=send) if need_home \
+                else None
+            try:
+                wire = for_ardupilot(items, args.mission.fmt, args.mission.home, vehicle_home)
+            except HomeError as exc:
+                print(f"gcs mission: {exc}", file=sys.stderr)
+                return 1
+            h = wire.home
+            assert h is not None
+            print(f"home (seq 0): lat {h.lat_deg:.7f}, lon {h.lon_deg:.7f} deg, alt "
+                  f"{h.alt_m:.2f} m AMSL, from {wire.home_source}")
+        n = len(wire.items) - (1 if at_seq0 else 0)  # the plan's items, home not counted
+        answer = upload_detailed(session.conn, t, c, wire.items, progress=report, send=send)
         progress.done()
         if not answer.accepted:
-            print(f"upload of {len(items)} items refused: {answer.describe()}")
+            where = ""
+            if answer.about_item and not answer.notes:  # the vehicle said not which
+                where = ": the home item (seq 0)" if at_seq0 and answer.asked == 0 else \
+                    f": item {answer.asked + (0 if at_seq0 else 1)} of {n}"
+            print(f"upload of {n} items refused: {answer.describe()}{where}")
             return 1
-        print(f"upload of {len(items)} items: {result_name(answer.result)}")
+        print(f"upload of {n} items: {result_name(answer.result)}")
         return 0
     if args.action == "download":
         items = download(session.conn, t, c, progress=report, send=send)
         progress.done()
         fmt = file_format(args.file, args.format)
         frame = args.frame or ("global" if fmt == "plan" else None)  # QGC plans globally
-        home = home_position(session.conn, t, c, send=send) if frame is not None else None
+        home = None
+        if at_seq0:  # seq 0 is the vehicle's home: it goes where the format keeps home
+            home, items = split_home(items)
+        if home is None and (frame is not None or at_seq0):
+            home = home_position(session.conn, t, c, send=send)
         if frame is not None and home is None:
             if args.frame is not None or any(it.frame == MAV.MAV_FRAME_LOCAL_NED
                                              for it in items):
@@ -745,12 +774,16 @@ def _mission(args: argparse.Namespace, session) -> int:
                       file=sys.stderr)
                 return 1
             frame = None  # a plan of global items needs no conversion
-        text = format_mission(to_frame(items, frame, home), fmt, home)
+        hb = session.heartbeat_msg
+        text = format_mission(to_frame(items, frame, home), fmt, home,
+                              home_at_seq0=at_seq0, firmware_type=pilot.firmware_type,
+                              vehicle_type=hb.type)
         if args.file is None:
             print(text, end="")
         else:
             args.file.write_text(text)
-            print(f"downloaded {len(items)} items to {args.file}")
+            print(f"downloaded {len(items)} items to {args.file}"
+                  + (" (and home, seq 0)" if at_seq0 and home is not None else ""))
         return 0
     if args.action == "clear":
         result = clear(session.conn, t, c, send=send)
@@ -761,33 +794,42 @@ def _mission(args: argparse.Namespace, session) -> int:
 
 def _param(args: argparse.Namespace, session) -> int:
     from gcs import vehicle_link as vl
-    from gcs.param_files import float32
+    from gcs.param_wire import ParamValueError, intended
 
     if args.action == "list":
-        for name, value in vl.param_list(session).items():
-            print(f"{name:<16} {value:g}")
+        for name, p in vl.param_values(session).items():
+            print(f"{name:<16} {p.text()}")
         return 0
     if args.action == "get":
-        print(f"{args.name} = {vl.param_get(session, args.name):g}")
+        print(f"{args.name} = {vl.param_read(session, args.name).text()}")
         return 0
     if args.action == "save":
         return _param_save(args, session)
     if args.action == "load":
         return _param_load(args, session)
-    value, texts = vl.param_set(session, args.name, args.value)
+    current = vl.param_read(session, args.name)
+    try:
+        value, texts = vl.param_set(session, args.name, args.value,
+                                    param_type=current.param_type)
+    except ParamValueError as exc:
+        print(f"gcs param: {exc}", file=sys.stderr)
+        return 2
     for text in texts:
         print(f"vehicle: {text}")
-    print(f"{args.name} = {value:g}")
-    return 0 if value == float32(args.value) else 1
+    now = vl.ParamValue(value, current.param_type).text()
+    print(f"{args.name} = {now}")
+    if value == intended(args.name, args.value, current.param_type):
+        return 0
+    print(f"not taken: the vehicle keeps {now}")  # clamped, or refused with its reason
+    return 1
 
 
 def _param_save(args: argparse.Namespace, session) -> int:
     from common.mavlink import MAV
     from gcs import vehicle_link as vl
     from gcs.param_files import ParamEntry, format_params
-    from gcs.session import GcsError
 
-    values = vl.param_list(session)
+    values = vl.param_values(session)
     t, c = session.target_system, session.target_component
     beat = session.conn.messages.get("HEARTBEAT")
     stack = vehicle = version = git = ""
@@ -799,21 +841,14 @@ def _param_save(args: argparse.Namespace, session) -> int:
             MAV.MAV_TYPE_TRICOPTER, MAV.MAV_TYPE_COAXIAL) else \
             MAV.enums["MAV_TYPE"][beat.type].name.removeprefix("MAV_TYPE_").title() \
             if beat.type in MAV.enums["MAV_TYPE"] else ""
-    ver = session.conn.messages.get("AUTOPILOT_VERSION")
-    if ver is None:  # the header's version line; best effort
-        try:
-            session.command(MAV.MAV_CMD_REQUEST_MESSAGE, MAV.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
-                            timeout=0.5, retries=1)
-            ver = session.conn.messages.get("AUTOPILOT_VERSION") or \
-                session.recv(["AUTOPILOT_VERSION"], timeout=0.5)
-        except GcsError:
-            ver = None
-    if ver is not None and ver.get_srcSystem() == t:
+    ver = vl.autopilot_version(session)  # the header's version line; best effort
+    if ver is not None:
         sw = ver.flight_sw_version
         kind = {0: "dev", 64: "alpha", 128: "beta", 192: "rc", 255: ""}.get(sw & 0xFF, "")
         version = f"{sw >> 24 & 0xFF}.{sw >> 16 & 0xFF}.{sw >> 8 & 0xFF} {kind}".rstrip()
         git = bytes(ver.flight_custom_version).hex()
-    entries = [ParamEntry(t, c, name, value) for name, value in sorted(values.items())]
+    entries = [ParamEntry(t, c, name, p.value, p.param_type)
+               for name, p in sorted(values.items())]
     args.file.write_text(format_params(entries, system_id=t, stack=stack, vehicle=vehicle,
                                        version=version, git_revision=git))
     print(f"saved {len(entries)} parameters to {args.file}")
@@ -822,7 +857,7 @@ def _param_save(args: argparse.Namespace, session) -> int:
 
 def _param_load(args: argparse.Namespace, session) -> int:
     from gcs import vehicle_link as vl
-    from gcs.param_files import float32
+    from gcs.param_wire import ParamValueError, intended
     from gcs.session import GcsError
 
     t, c = session.target_system, session.target_component
@@ -834,16 +869,22 @@ def _param_load(args: argparse.Namespace, session) -> int:
     if any(e.system_id != t for e in entries):
         print(f"note: the file holds parameters of another vehicle; loading into system {t}")
     for e in entries:
-        try:
-            value, texts = vl.param_set(session, e.name, e.value)
+        try:  # the vehicle's own type, whatever the file says (older files say 9 for all)
+            ptype = vl.param_read(session, e.name).param_type
+            value, texts = vl.param_set(session, e.name, e.value, param_type=ptype)
         except GcsError:
             print(f"{e.name}: not answered (unknown to the vehicle?)")
             refused += 1
             continue
-        if value != float32(e.value):
+        except ParamValueError as exc:
+            print(f"{e.name} = {e.value:g}: {exc}")
+            refused += 1
+            continue
+        if value != intended(e.name, e.value, ptype):
             said = "; ".join(" ".join(str(x).split()) for x in texts)
             print(f"{e.name} = {e.value:g}: " +
-                  (f"vehicle: {said}" if said else f"not taken (the vehicle keeps {value:g})"))
+                  (f"vehicle: {said}" if said else
+                   f"not taken (the vehicle keeps {vl.ParamValue(value, ptype).text()})"))
             refused += 1
     print(f"loaded {len(entries) - refused} of {len(entries)} parameters from {args.file}")
     return 0 if refused == 0 else 1
