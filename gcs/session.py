@@ -25,16 +25,15 @@ import time
 from pathlib import Path
 
 from pymavlink import mavutil
-from pymavlink.dialects.v20 import ardupilotmega
 
 import common.mavlink  # noqa: F401  (pins MAVLink 2 for mavutil)
 from common.links import Link, LinkUrl, TcpClientLink, open_link, parse_url
 from common.mavlink import GCS_SYSID, MAV, MAV_COMP_ID_MISSIONPLANNER
 from gcs.autopilot import Autopilot, autopilot_of
 from gcs.autopilot import streams as _streams
+from gcs.autopilot.dialect import STATION_DIALECT as DIALECT
 
 M = MAV
-DIALECT = ardupilotmega  # what the station decodes: common and ArduPilot's own messages
 TCP_CONNECT_S = 3.0  # a tcp: link that has not connected by then is reported, exit 1
 REFUSAL_TEXT_S = 0.3  # after a refusal, how long to listen for the STATUSTEXT saying why
 MAX_PARSERS = 64  # one parser per peer (byte stream); the oldest goes beyond this
@@ -73,7 +72,7 @@ class LinkFile(mavutil.mavfile):
         self.link = link
         self._io = threading.Lock()
         self._queue: collections.deque = collections.deque()
-        self._parsers: dict[object, ardupilotmega.MAVLink] = {}
+        self._parsers: dict[object, DIALECT.MAVLink] = {}
         fd = link.fileno()
         mavutil.mavfile.__init__(self, fd if fd >= 0 else None, str(link.url),
                                  source_system=source_system,
@@ -83,7 +82,7 @@ class LinkFile(mavutil.mavfile):
                                    srcComponent=source_component, use_native=False)
         self.mav.robust_parsing = True
 
-    def _parser(self, peer: object) -> ardupilotmega.MAVLink:
+    def _parser(self, peer: object) -> DIALECT.MAVLink:
         parser = self._parsers.get(peer)
         if parser is None:
             if len(self._parsers) >= MAX_PARSERS:

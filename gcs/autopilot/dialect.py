@@ -32,12 +32,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega
 
 import common.mavlink  # noqa: F401  (pins MAVLink 2 before mavutil is used)
 from common import modes as px4_modes
 from common.mavlink import MAV
 
 M = MAV
+# What the station decodes: ardupilotmega holds common and ArduPilot's own messages
+# (EKF_STATUS_REPORT, MEMINFO, ...), which are then received, not counted lost; common
+# messages decode the same in both.
+STATION_DIALECT = ardupilotmega
 ARDUPILOT, PX4 = "ardupilot", "px4"
 PORTABLE_NAMES = ("HOLD", "LOITER", "MISSION", "TAKEOFF", "LAND", "RTL", "POSCTL", "OFFBOARD")
 TAKEOFF_PROCEDURE = "takeoff"

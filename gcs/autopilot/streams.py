@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from common.mavlink import MAV
-from gcs.autopilot.dialect import ARDUPILOT
+from gcs.autopilot.dialect import ARDUPILOT, STATION_DIALECT
 
 if TYPE_CHECKING:
     from gcs.session import Session
@@ -63,7 +63,7 @@ def needs(command: str, kind: str) -> dict[str, float]:
 
 
 def _msg_id(name: str) -> int:
-    return int(getattr(M, f"MAVLINK_MSG_ID_{name}"))
+    return int(getattr(STATION_DIALECT, f"MAVLINK_MSG_ID_{name}"))
 
 
 @dataclass
