@@ -29,6 +29,8 @@ PARAMS = ROOT / "config" / "ardupilot" / "hexa_json.parm"
 SPEEDUP = 20  # ArduCopter asks for 20x real time; the pair runs as fast as the slower allows
 GUIDED, LAND = 4, 9
 ALT_M, NORTH_M = 10.0, 10.0
+# read back to show that hexa_json.parm was loaded over ArduPilot's own files
+CHECKED_PARAMS = ("FRAME_TYPE", "MOT_PWM_MIN", "MOT_BAT_VOLT_MAX", "ATC_RAT_YAW_P")
 
 
 # ------------------------------------------------------------------ the MAVLink side
@@ -89,6 +91,13 @@ def drive(url: str, timeout_s: float) -> dict[str, Any]:
                    mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT):
         command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 100_000)
     until(lambda: "SYSTEM_TIME" in seen and "LOCAL_POSITION_NED" in seen, "telemetry")
+    out["params"] = {}
+    for name in CHECKED_PARAMS:
+        seen.pop("PARAM_VALUE", None)
+        conn.mav.param_request_read_send(sysid, compid, name.encode(), -1)
+        until(lambda name=name: getattr(seen.get("PARAM_VALUE"), "param_id", "") == name,
+              f"parameter {name}", 10.0)
+        out["params"][name] = seen["PARAM_VALUE"].param_value
     command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED)
     until(lambda: mode_is(GUIDED), "GUIDED")
     need = mav.EKF_PRED_POS_HORIZ_ABS | mav.EKF_POS_HORIZ_ABS | mav.EKF_VELOCITY_HORIZ
@@ -171,6 +180,10 @@ def test_arducopter_flies_on_the_plant(tmp_path: Path) -> None:
     print(json.dumps({"flight": flight, "sitl": stats}))
     assert stats["frame_rate_hz"] == 1200 and stats["step_us"] == 833
     assert stats["bad_packets"] == 0 and stats["reboots"] == 0
+    ours = dict(line.split()[:2] for line in PARAMS.read_text().splitlines()
+                if line.strip() and not line.startswith("#"))
+    for name, value in flight["params"].items():
+        assert value == pytest.approx(float(ours[name]), rel=1e-6), name
 
     t = _truth(truth_path)
     up, north, east = t["pz"], t["py"], t["px"]
