@@ -34,7 +34,6 @@ count from the first armed answer.
 
 from __future__ import annotations
 
-import math
 import select
 import struct
 import sys
@@ -44,11 +43,11 @@ from typing import Any, NamedTuple
 
 from common.config import ConfigError, Scenario, VehicleConfig
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
-from common.geometry import rotor_frames
 from common.links import LinkError, UdpLink, open_link, parse_url
 from common.mavlink import MAV
 from sitl.actuator_faults import ActuatorFaults
 from sitl.plant import ActuatorCommand, Plant, PlantState, initial_state, scenario_plant
+from sitl.rotor_layout import rotors_for_outputs
 from sitl.truth_log import TruthLog
 
 MAGIC_16 = 18458  # servo packet with 16 PWM channels
@@ -65,7 +64,6 @@ PWM_FULL_US = 2000  # at or above: w_max (MOT_PWM_MAX)
 # seen from above (+1 counter-clockwise, -1 clockwise).
 ARDUCOPTER_HEXA_X: tuple[tuple[float, int], ...] = (
     (90.0, -1), (-90.0, 1), (-30.0, -1), (150.0, 1), (30.0, 1), (-150.0, -1))
-_ANGLE_TOL_DEG = 1.0
 LOG_BATCH = 64  # truth records handed to the kernel together (and whenever the link idles)
 
 
@@ -98,34 +96,7 @@ def motor_map(vehicle: VehicleConfig) -> tuple[int, ...]:
     """The vehicle's rotor for each of ArduCopter's hexa X motors (channel order): the rotor
     at the motor's arm angle, which must lie in the body's plane and spin as ArduCopter's
     propeller there; ConfigError naming the first that does not."""
-    frames = rotor_frames(vehicle)
-    out = []
-    for channel, (angle_deg, spin) in enumerate(ARDUCOPTER_HEXA_X, start=1):
-        # clockwise from forward seen from above = -azimuth in FLU (anticlockwise from +x)
-        want = -angle_deg
-        match = [i for i, az in enumerate(vehicle.arm_azimuth_rad)
-                 if abs(_wrap_deg(math.degrees(az) - want)) <= _ANGLE_TOL_DEG]
-        if len(match) != 1:
-            raise ConfigError(f"vehicle {vehicle.name}: no rotor at ArduCopter's hexa X motor "
-                              f"{channel} (arm {angle_deg:g} deg clockwise from forward)")
-        i = match[0]
-        if abs(vehicle.arm_elevation_rad[i]) > 1e-9:
-            raise ConfigError(f"vehicle {vehicle.name}: rotor {i} (ArduCopter motor "
-                              f"{channel}) is tilted out of the body plane: ArduCopter's hexa "
-                              "X is planar")
-        if frames[i].spin != spin:
-            raise ConfigError(
-                f"vehicle {vehicle.name}: rotor {i} spins "
-                f"{'counter-clockwise' if frames[i].spin > 0 else 'clockwise'}, ArduCopter's "
-                f"hexa X motor {channel} there spins "
-                f"{'counter-clockwise' if spin > 0 else 'clockwise'} (its yaw control would "
-                "run backwards)")
-        out.append(i)
-    return tuple(out)
-
-
-def _wrap_deg(a: float) -> float:
-    return (a + 180.0) % 360.0 - 180.0
+    return rotors_for_outputs(vehicle, ARDUCOPTER_HEXA_X, "ArduCopter's hexa X")
 
 
 def rotor_speeds(pwm_us: tuple[int, ...], rotor_of_motor: tuple[int, ...],

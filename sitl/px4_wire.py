@@ -4,7 +4,8 @@
   of PX4's motor outputs sits (FRD, normalised) and its spin (CA_ROTORn_KM > 0: the
   propeller turns counter-clockwise seen from above, so its drag torque yaws the body
   clockwise, +yaw in FRD); `motor_order` finds the plant's rotor under each output from the
-  vehicle's geometry and refuses a vehicle whose rotors do not sit and spin as PX4 expects.
+  vehicle's geometry (`sitl.rotor_layout`) and refuses a vehicle whose rotors do not sit
+  and spin as PX4 expects.
 - `command_from_outputs`: HIL_ACTUATOR_CONTROLS as the plant obeys it. PX4's simulated PWM
   output (pwm_out_sim) scales a non-reversible motor to 0..1; rotor speed = output x
   w_max (linear; thrust ~ output^2, PX4's THR_MDL_FAC = 1). Zero unless SAFETY_ARMED; a
@@ -18,10 +19,10 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from common.config import ConfigError, VehicleConfig
+from common.config import VehicleConfig
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
-from common.geometry import rotor_frames
 from sitl.plant import ActuatorCommand, PlantState
+from sitl.rotor_layout import rotors_for_outputs
 
 
 class Px4Motor(NamedTuple):
@@ -36,49 +37,17 @@ class Px4Motor(NamedTuple):
 PX4_HEXA_X = (Px4Motor(0.0, 0.5, -0.05), Px4Motor(0.0, -0.5, 0.05),
               Px4Motor(0.43, -0.25, -0.05), Px4Motor(-0.43, 0.25, 0.05),
               Px4Motor(0.43, 0.25, 0.05), Px4Motor(-0.43, -0.25, -0.05))
-AZIMUTH_TOLERANCE_DEG = 1.0
 MODE_ARMED = 128  # MAV_MODE_FLAG_SAFETY_ARMED, as PX4 sets it in HIL_ACTUATOR_CONTROLS.mode
 LOCKSTEP_FLAG = 1  # HIL_ACTUATOR_CONTROLS.flags bit 0: PX4 built with the lockstep scheduler
-
-
-def _azimuth_frd_deg(x: float, y: float) -> float:
-    """Azimuth in the FRD x-y plane, from forward towards right, in [0, 360)."""
-    return math.degrees(math.atan2(y, x)) % 360.0
 
 
 def motor_order(vehicle: VehicleConfig) -> tuple[int, ...]:
     """The plant's rotor index under each of PX4's hexa X outputs (MAIN1..6); ConfigError
     when the vehicle is not a planar hexa with PX4's positions and spins."""
-    where = f"vehicle {vehicle.name!r}"
-    frames = rotor_frames(vehicle)
-    for i, fr in enumerate(frames):
-        if abs(fr.e_v_flu[2] - 1.0) > 1e-9:
-            raise ConfigError(f"{where}: rotor {i} does not thrust straight up at tilt 0 "
-                              f"(arm elevation {vehicle.arm_elevation_rad[i]:g} rad): px4-hil "
-                              "holds the tilts at 0 and needs a planar hexa")
-    order = []
-    for k, m in enumerate(PX4_HEXA_X):
-        want = _azimuth_frd_deg(m.px, m.py)
-        found = None
-        for i, fr in enumerate(frames):
-            x, y, _ = flu_to_frd(fr.r_flu_m)
-            d = abs((_azimuth_frd_deg(x, y) - want + 180.0) % 360.0 - 180.0)
-            if d <= AZIMUTH_TOLERANCE_DEG:
-                found = i
-        if found is None:
-            raise ConfigError(f"{where}: no rotor at PX4's motor {k + 1} (azimuth {want:.0f} "
-                              "deg from forward towards right)")
-        spin = 1 if m.km > 0 else -1
-        if frames[found].spin != spin:
-            raise ConfigError(
-                f"{where}: rotor {found} (PX4's motor {k + 1}) spins "
-                f"{'counter-clockwise' if frames[found].spin > 0 else 'clockwise'}; PX4's "
-                f"hexa X has it {'counter-clockwise' if spin > 0 else 'clockwise'} (use "
-                "config/scenarios/px4_hexa.toml, whose vehicle spins as PX4's)")
-        order.append(found)
-    if sorted(order) != list(range(len(PX4_HEXA_X))):
-        raise ConfigError(f"{where}: two of PX4's motors fall on one rotor")
-    return tuple(order)
+    layout = [(math.degrees(math.atan2(m.py, m.px)), 1 if m.km > 0 else -1)
+              for m in PX4_HEXA_X]
+    return rotors_for_outputs(vehicle, layout, "PX4's hexa X",
+                              " (config/scenarios/px4_hexa.toml has PX4's spins)")
 
 
 class Command(NamedTuple):

@@ -361,4 +361,4 @@ def test_vehicle_px4_cannot_fly_exit_2():
                            "--link", f"tcpin:127.0.0.1:{free_port(socket.SOCK_STREAM)}"],
                           cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
     assert proc.returncode == 2
-    assert "does not thrust straight up" in proc.stderr or "spins" in proc.stderr
+    assert "rotor 4 (PX4's hexa X motor 1) is tilted out of the body plane" in proc.stderr
