@@ -185,7 +185,7 @@ class Server:
     # ------------------------------------------------------------------ messages
 
     def _seq(self) -> int:
-        seq = self.mav.seq
+        seq = int(self.mav.seq)
         self.mav.seq = (seq + 1) % 256
         return seq
 

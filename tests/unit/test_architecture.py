@@ -16,7 +16,8 @@ PURE_MODULES = ("common/config.py", "common/geometry.py", "common/frames.py",
                 "fcu/commander.py", "fcu/failsafe.py", "fcu/pipeline.py", "common/outcome.py",
                 "fcu/feasibility.py", "common/quaternion.py",
                 "sitl/plant.py", "sitl/disturbance.py", "fcu/estimator.py", "fcu/rate_filter.py",
-                "sitl/sensors.py", "common/sensors_config.py")
+                "sitl/sensors.py", "common/sensors_config.py", "sitl/px4_wire.py",
+                "sitl/rotor_layout.py")
 
 
 def _imports(package: str) -> set[str]:
