@@ -295,7 +295,7 @@ def apply_message(sample: Sample, msg: Any) -> bool:
         from common.mavlink import MAV
         from gcs.vehicle_link import mode_name
 
-        sample.mode = mode_name(msg.custom_mode, msg.autopilot)
+        sample.mode = mode_name(msg.custom_mode, msg.autopilot, msg.type)
         sample.armed = bool(msg.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED)
     else:
         return False
