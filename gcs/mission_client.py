@@ -240,9 +240,10 @@ def upload_detailed(conn, target_system: int, target_component: int,
                             "the new mission")
                 else:
                     what = f"request for the item after {done}"
+                said = "".join(f"; the vehicle said: {t}" for t in texts.texts)
                 raise MissionError(
                     f"mission upload to system {target_system}: no {what} after "
-                    f"{retries + 1} tries ({wait * 1e3:.0f} ms each)")
+                    f"{retries + 1} tries ({wait * 1e3:.0f} ms each){said}")
             _send(last)
             deadline = time.monotonic() + wait
             continue

@@ -45,12 +45,14 @@ class _RawParamValue(M.MAVLink_param_value_message):
 class ScriptedAutopilot:
     """`kind` "ardupilot" or "px4"; `params` name -> (value, MAV_PARAM_TYPE); `refuse`
     command -> (MAV_MISSION_RESULT, text or ""): an uploaded item with that command is
-    refused. `home` None: it has no home (HOME_POSITION requests are refused)."""
+    refused. `home` None: it has no home (HOME_POSITION requests are refused). `mute`: a
+    text it says to a MISSION_COUNT, after which it asks for no item."""
 
     def __init__(self, kind: str, params: dict[str, tuple[float, int]] | None = None,
                  refuse: dict[int, tuple[int, str]] | None = None,
-                 home: tuple[float, float, float] | None = HOME) -> None:
+                 home: tuple[float, float, float] | None = HOME, mute: str = "") -> None:
         self.kind = kind
+        self.mute = mute
         self.params = dict(params or {})
         self.names = list(self.params)
         self.refuse = dict(refuse or {})
@@ -110,6 +112,9 @@ class ScriptedAutopilot:
         kind = msg.get_type()
         if kind == "COMMAND_LONG":
             self._command(msg)
+        elif kind == "MISSION_COUNT" and self.mute:
+            self._send(M.MAVLink_statustext_message(M.MAV_SEVERITY_WARNING,
+                                                    self.mute.encode()))
         elif kind == "MISSION_COUNT":
             self._upload, self._count = [], msg.count
             self._request(0)
