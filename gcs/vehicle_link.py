@@ -290,7 +290,10 @@ def set_mode(session: Session, name: str, confirm_s: float = _commands.CONFIRM_S
     target = _autopilot(session).resolve_mode(name)
     try:
         if target.takeoff:
-            return takeoff(session, _commands.DEFAULT_TAKEOFF_M, confirm_s=confirm_s)[0]
+            try:
+                return takeoff(session, _commands.DEFAULT_TAKEOFF_M, confirm_s=confirm_s)[0]
+            except GcsError as exc:
+                raise GcsError(f"takeoff: {exc}") from None
         return _commands.set_mode(session, target, confirm_s)
     except _commands.NotConfirmed as exc:
         raise GcsError(str(exc)) from None
@@ -306,7 +309,7 @@ def takeoff(session: Session, height_m: float, *, reach_s: float | None = None,
         return _commands.takeoff(session, height_m, reach_s=reach_s, tolerance_m=tolerance_m,
                                  confirm_s=confirm_s, report=report, fail=GcsError)
     except _commands.NotConfirmed as exc:
-        raise GcsError(f"takeoff: {exc}") from None
+        raise GcsError(str(exc)) from None
 
 
 def arm(session: Session, armed: bool, force: bool = False) -> int:

@@ -123,28 +123,32 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
     ap = autopilot(s)
     armed, landed, height = flight_state(s)
     if not armed:
-        raise fail("takeoff: the vehicle is not armed (arm it first)")
+        raise fail("the vehicle is not armed (arm it first)")
     in_air = landed not in _GROUND if landed is not None and \
         landed != M.MAV_LANDED_STATE_UNDEFINED else (height is not None and height > 1.0)
     if in_air:
-        raise fail("takeoff: the vehicle is in the air (takeoff is from the ground)")
+        raise fail("the vehicle is in the air (takeoff is from the ground)")
     if ap.takeoff_mode is not None:
         mode = ap.resolve_mode(ap.takeoff_mode)
         result = set_mode(s, mode, confirm_s)
         if result != M.MAV_RESULT_ACCEPTED:
-            raise fail(f"takeoff: {mode.name} refused: {s.describe(result)}")
+            raise fail(f"{mode.name} refused: {s.describe(result)}")
     home_alt = None
     if ap.takeoff_alt_amsl:
         home = home_position(s.conn, s.target_system, s.target_component, send=s.send)
         if home is None:
-            raise fail("takeoff: the vehicle sent no HOME_POSITION (its altitude is AMSL)")
+            raise fail("the vehicle sent no HOME_POSITION (its takeoff altitude is AMSL)")
         home_alt = home.alt_m
     result = s.command(M.MAV_CMD_NAV_TAKEOFF, *takeoff_params(ap, height_m, home_alt))
-    if result != M.MAV_RESULT_ACCEPTED or reach_s is None:
+    if result != M.MAV_RESULT_ACCEPTED:
+        return result, None
+    if ap.takeoff_mode is None:  # PX4: NAV_TAKEOFF engages its TAKEOFF mode
+        confirm_mode(s, ap.resolve_mode("TAKEOFF"), confirm_s)
+    if reach_s is None:
         return result, None
     reached = wait_height(s, height_m - tolerance_m, reach_s, report)
     if reached is None:
-        raise fail(f"takeoff: {height_m:g} m not reached within {reach_s:g} s")
+        raise fail(f"{height_m:g} m not reached within {reach_s:g} s")
     return result, reached
 
 

@@ -236,7 +236,8 @@ def test_a_refusal_is_returned_unconfirmed():
 
 
 def _flying(armed: bool, landed: int, relative_alt_mm: int = 0, mode: int = 0,
-            home_alt_mm: int = 584_000):
+            home_alt_mm: int = 584_000,
+            takeoff_mode: int = px4_modes.Mode.TAKEOFF.custom_mode):
     """A vehicle that answers REQUEST_MESSAGE and engages each DO_SET_MODE."""
     def on_command(msg):
         replies = [Vehicle().ack(msg)]
@@ -252,6 +253,8 @@ def _flying(armed: bool, landed: int, relative_alt_mm: int = 0, mode: int = 0,
                     -353632610, 1491652300, home_alt_mm, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0)))
         elif msg.command == M.MAV_CMD_DO_SET_MODE:
             replies.append(_heartbeat(int(msg.param2), armed, autopilot=v.autopilot_id))
+        elif msg.command == M.MAV_CMD_NAV_TAKEOFF and v.autopilot_id == M.MAV_AUTOPILOT_PX4:
+            replies.append(_heartbeat(takeoff_mode, armed, autopilot=v.autopilot_id))
         return replies
 
     v = Vehicle(on_command=on_command)
@@ -282,6 +285,11 @@ def test_px4_takes_off_to_an_amsl_altitude():
     assert math.isnan(takeoff.param5) and math.isnan(takeoff.param6)
     with pytest.raises(ValueError, match="AMSL"):
         commands.takeoff_params(PX4, 10.0, None)
+    held = _flying(armed=True, landed=M.MAV_LANDED_STATE_ON_GROUND,
+                   takeoff_mode=px4_modes.Mode.HOLD.custom_mode)  # accepted, but stays in HOLD
+    held.autopilot, held.autopilot_id = PX4, M.MAV_AUTOPILOT_PX4
+    with pytest.raises(commands.NotConfirmed, match="the vehicle is in HOLD"):
+        commands.takeoff(held, 10.0, confirm_s=0.2)
 
 
 @pytest.mark.parametrize(("armed", "landed", "rel_mm", "why"), [
