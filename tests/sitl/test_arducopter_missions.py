@@ -21,7 +21,7 @@ from gcs.param_files import parse_params
 from tests.arducopter import ROOT, namespace, needs_arducopter, start_arducopter, wait_port
 from tests.sitl.test_arducopter_gcs import Copter
 
-pytestmark = [needs_arducopter, pytest.mark.xdist_group("arducopter_missions")]
+pytestmark = [needs_arducopter, pytest.mark.xdist_group("arducopter")]
 
 GCS_PORT, OBSERVER_PORT = 5760, 5762
 CONNECT = ("--connect", f"tcp:127.0.0.1:{GCS_PORT}")
