@@ -66,6 +66,31 @@ def observe(port: int, out: str) -> None:
             fh.write(json.dumps(rec) + "\n")
 
 
+def intervals(port: int, ids: str) -> None:
+    """Print {message id: MESSAGE_INTERVAL.interval_us} for the comma-separated ids, as
+    ArduCopter answers MAV_CMD_GET_MESSAGE_INTERVAL on the link at TCP `port`."""
+    import os
+
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink import mavutil
+
+    conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", dialect="ardupilotmega",
+                                      source_system=249, source_component=190)
+    conn.wait_heartbeat(timeout=30)
+    M = mavutil.mavlink
+    wanted = [int(i) for i in ids.split(",")]
+    for msg_id in wanted:
+        conn.mav.command_long_send(1, 1, M.MAV_CMD_GET_MESSAGE_INTERVAL, 0, msg_id,
+                                   0, 0, 0, 0, 0, 0)
+    got: dict[int, int] = {}
+    deadline = time.monotonic() + 10
+    while len(got) < len(wanted) and time.monotonic() < deadline:
+        msg = conn.recv_match(type="MESSAGE_INTERVAL", blocking=True, timeout=1.0)
+        if msg is not None:
+            got[msg.message_id] = msg.interval_us
+    print(json.dumps(got))
+
+
 class Copter:
     """The running ArduCopter, the gcs CLI inside its namespace, and the observer's log."""
 
@@ -128,9 +153,9 @@ def copter(tmp_path_factory):
         yield copter
 
 
-def _mode_engaged(copter: Copter, name: str, expected: int) -> None:
+def _mode_engaged(copter: Copter, name: str, expected: int) -> int:
     """`gcs mode NAME`: exit 0 with the asked mode engaged (seen by the observer), or exit
-    1 with ArduCopter's reason; never exit 0 with another mode."""
+    1 with ArduCopter's reason; never exit 0 with another mode. The exit status."""
     out = copter.gcs("mode", name)
     done = time.time()
     seen = copter.mode_after(done)
@@ -142,6 +167,7 @@ def _mode_engaged(copter: Copter, name: str, expected: int) -> None:
         assert "refused" in out.stdout or "not confirmed" in out.stderr, (out.stdout,
                                                                           out.stderr)
         assert seen != expected or "not confirmed" not in out.stderr
+    return out.returncode
 
 
 @pytest.mark.timeout(120)
@@ -165,19 +191,27 @@ def test_status_on_the_default_link(copter):
     text = copter.gcs("status")
     assert "mode: STABILIZE" in text.stdout and "readiness: ready to arm, EKF ok" in \
         text.stdout, text.stdout
+    # what status asked for is given back: the link's streams are off again
+    ids = "32,31,1,245"  # LOCAL_POSITION_NED, ATTITUDE_QUATERNION, SYS_STATUS, EXT_SYS_STATE
+    after = copter.ns.run([sys.executable, "-c", "import sys; from tests.sitl."
+                           "test_arducopter_gcs import intervals; intervals(5760, sys.argv[1])",
+                           ids], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert after.returncode == 0, after.stderr
+    assert json.loads(after.stdout) == {i: -1 for i in ids.split(",")}, after.stdout
 
 
 @pytest.mark.timeout(150)
 def test_modes_on_the_ground(copter):
     """Each of ArduCopter's own modes and each portable name engages what was asked, or is
     exit 1 with ArduCopter's reason; never exit 0 with another mode. A name ArduCopter
-    lacks is exit 2 with its names; TAKEOFF disarmed is exit 1."""
-    for name, expected in (("STABILIZE", STABILIZE), ("alt_hold", ALT_HOLD),
-                           ("GUIDED", GUIDED), ("LOITER", LOITER), ("POSHOLD", POSHOLD),
-                           ("BRAKE", BRAKE), ("RTL", RTL), ("LAND", LAND), ("AUTO", AUTO),
-                           ("HOLD", BRAKE), ("MISSION", AUTO), ("POSCTL", POSHOLD),
-                           ("OFFBOARD", GUIDED), ("STABILIZE", STABILIZE)):
-        _mode_engaged(copter, name, expected)
+    lacks is exit 2 with its names; TAKEOFF disarmed is exit 1. (ArduCopter 4.7 takes each
+    of these modes disarmed on the ground: all exit 0.)"""
+    codes = {name: _mode_engaged(copter, name, expected) for name, expected in (
+        ("STABILIZE", STABILIZE), ("alt_hold", ALT_HOLD), ("GUIDED", GUIDED),
+        ("LOITER", LOITER), ("POSHOLD", POSHOLD), ("BRAKE", BRAKE), ("RTL", RTL),
+        ("LAND", LAND), ("AUTO", AUTO), ("HOLD", BRAKE), ("MISSION", AUTO),
+        ("POSCTL", POSHOLD), ("OFFBOARD", GUIDED), ("Stabilize", STABILIZE))}
+    assert set(codes.values()) == {0}, codes
     bad = copter.gcs("mode", "ALTCTL")  # PX4's name: ArduCopter has no such mode
     assert bad.returncode == 2 and "unknown mode ALTCTL on ArduCopter (one of STABILIZE" \
         in bad.stderr, bad.stderr
