@@ -6,8 +6,9 @@ link's interval (MAV_CMD_GET_MESSAGE_INTERVAL, answered by MESSAGE_INTERVAL) and
 message is off or slower than needed, sets it (MAV_CMD_SET_MESSAGE_INTERVAL); ArduPilot
 without that command gets the older REQUEST_DATA_STREAM for the message's stream group. On
 leaving, `restore` puts back exactly what was changed, to the interval read before (the
-default rate where none was read, and REQUEST_DATA_STREAM groups stopped only when they had
-been silent): another station's streams are never stopped.
+default rate where none was read); the REQUEST_DATA_STREAM groups it started, only for
+messages the link did not bring fast enough, are stopped again. Streams this station did
+not change are never touched, so another station's are never stopped.
 
 The requests go out together and the answers are read together (a vehicle answers each
 GET with an ACK and a MESSAGE_INTERVAL in either order).
