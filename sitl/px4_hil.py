@@ -21,14 +21,17 @@ the IMU period (at most the scenario's step).
 
 In: HIL_ACTUATOR_CONTROLS (motor outputs 0..1 on PX4's hexa X order, `sitl.px4_wire`).
 
-Lockstep as PX4 runs it: PX4's clock is the time of the latest HIL_SENSOR, and once its
-outputs run it answers each sample with one HIL_ACTUATOR_CONTROLS (flags bit 0 set, stamped
-with that clock). Until its first answer (PX4 starting up, EKF aligning) the plant sends one
-IMU sample per IMU period of wall time, as Gazebo does, so that PX4's clock runs; from the
-first lockstep answer on it advances one IMU period per answer and never without one. An
-answer stamped before the latest sample (to an earlier one) and a second answer to the same
-sample are counted and ignored. Answers without the lockstep flag (PX4 on the wall clock)
-set the held command and the plant keeps the wall-clock pace.
+The samples start when the firmware's first packet on a connection arrives (PX4 sends a
+HEARTBEAT first, so that the simulator starts sending). Lockstep as PX4 runs it: PX4's
+clock is the time of the latest HIL_SENSOR, and once its outputs run it answers each sample
+with one HIL_ACTUATOR_CONTROLS (flags bit 0 set, stamped with that clock). Until its first
+answer (PX4 starting up, EKF aligning) the plant sends one IMU sample per IMU period of
+wall time, as Gazebo does, so that PX4's clock runs; from the first lockstep answer on
+(whichever sample it answers) it advances one IMU period per answer to its latest sample
+and never without one. An answer stamped before the latest
+sample (to an earlier one) and a second answer to the same sample are counted and ignored.
+Answers without the lockstep flag (PX4 on the wall clock) set the held command and the
+plant keeps the wall-clock pace.
 
 Bad input, never a crash: bytes that are no MAVLink frame are counted and skipped; other
 messages are ignored (HEARTBEAT counted); an answer from another system id is ignored; a
@@ -151,6 +154,7 @@ class Server:
         self.running = True
         # link and lockstep state
         self.client = False
+        self.heard = False  # the firmware has spoken on this connection
         self.locked = False  # a lockstep answer has come: one step per answer
         self.answer: ActuatorCommand | None = None  # the answer to the latest sample
         self.command = ActuatorCommand((0.0,) * vehicle.n_rotors, (0.0,) * vehicle.n_rotors)
@@ -222,7 +226,12 @@ class Server:
         return b"".join(lead + imu)
 
     def _heard(self) -> None:
-        """Bytes from the firmware: the first start the clock of `end_time_s`."""
+        """Bytes from the firmware: the first on a connection start the samples (PX4 sends
+        its HEARTBEAT first "to initiate the SITL simulator to start sending sensor
+        data"), the first ever the clock of `end_time_s`."""
+        if not self.heard:
+            self.heard = True
+            self.due_s = time.monotonic()
         if self.end_us is None and self.duration_us is not None:
             self.end_us = self.state.time_us + self.duration_us
 
@@ -279,6 +288,7 @@ class Server:
         cmd = command_from_outputs(controls, mode, self.order, self.w_max)
         self.nonfinite_outputs += cmd.nonfinite
         if flags & LOCKSTEP_FLAG:
+            self.locked = True  # from the first lockstep answer on, as Gazebo does
             if time_usec < self.sent_us:
                 self.stale_answers += 1  # an answer to an earlier sample
                 return
@@ -287,7 +297,6 @@ class Server:
                 return
             if time_usec != self.sent_us:
                 self.time_mismatches += 1
-            self.locked = True
             self.answer = cmd.command
         else:
             self.locked = False
@@ -338,6 +347,7 @@ class Server:
 
     def _disconnected(self) -> None:
         self.client = False
+        self.heard = False
         self.disconnects += 1
         self.locked = False
         self.answer = None
@@ -369,6 +379,10 @@ class Server:
                 continue
             if not self.client:
                 self._connected()
+            if not self.heard:  # samples start when the firmware speaks
+                if select.select(link.filenos(), [], [], POLL_S)[0]:
+                    self._receive()
+                continue
             if not self.locked:  # the wall-clock pace
                 last_step_s = None
                 wait = self.due_s - time.monotonic()
