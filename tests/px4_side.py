@@ -67,6 +67,7 @@ class Report:
     gps: list[tuple[int, object]] = field(default_factory=list)  # (clock, HIL_GPS)
     states: list[tuple[int, object]] = field(default_factory=list)  # (clock, HSQ)
     acks: list[object] = field(default_factory=list)
+    odometry: list[object] = field(default_factory=list)  # motion capture (MOCAP)
     other: list[str] = field(default_factory=list)
     answers: list[int] = field(default_factory=list)  # time_usec of each answer sent
     published: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
@@ -233,6 +234,8 @@ class ScriptedPX4:
                 report.states.append((self.clock_us, m))
             elif kind == "COMMAND_ACK":
                 report.acks.append(m)
+            elif kind == "ODOMETRY":
+                report.odometry.append(m)
             else:
                 report.other.append(kind)
 

@@ -198,6 +198,35 @@ def test_flight_judged_from_truth(flight):
     assert np.all(np.abs(q[:, 0]) > math.cos(0.05 / 2))  # within 0.05 rad of level, east
 
 
+def test_a_sensor_profile_sets_the_rates(tmp_path):
+    """Given `--sensors mocap-indoor`, then its IMU (1 kHz, the lockstep rate, noisy) and its
+    motion capture (ODOMETRY MOCAP, 200 Hz) are what PX4 gets, on a 1 ms physics step."""
+    port = free_port(socket.SOCK_STREAM)
+    procs = {"sitl": start("sitl", [
+        "sitl.node", str(PX4_HEXA), "--protocol", "px4-hil", "--link",
+        f"tcpin:127.0.0.1:{port}", "--sensors", "mocap-indoor", "--stats",
+        str(tmp_path / "stats.json"), "--end-time", "2"], tmp_path)}
+    side = ScriptedPX4(port, load_scenario(PX4_HEXA).vehicle)
+    try:
+        side.connect()
+        r = side.run(10.0, wall_timeout_s=60.0)
+        side.close()
+        assert procs["sitl"].wait(timeout=30) == 0
+    finally:
+        side.close()
+        stop(procs)
+    s = json.loads((tmp_path / "stats.json").read_text())
+    assert (s["imu_hz"], s["physics_dt_us"], s["steps"]) == (1000.0, 1000, 1700)
+    t = np.array([smp.time_usec for smp in r.samples])
+    assert t[0] == 1000 and np.all(np.diff(t) == 1000) and t[-1] == 2_000_000
+    assert r.published["mag"] == 200 and r.published["baro"] == 100
+    acc_z = np.array([smp.acc[2] for smp in r.samples])
+    assert abs(acc_z.mean() + 9.81) < 0.05 and acc_z.std() > 1e-3  # the profile's noise
+    assert len(r.odometry) == pytest.approx(400, abs=2)
+    assert {m.estimator_type for m in r.odometry} == {MAV.MAV_ESTIMATOR_TYPE_MOCAP}
+    assert r.violations == []
+
+
 # ------------------------------------------------------------------ bad input, in-process
 
 
