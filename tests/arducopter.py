@@ -36,7 +36,10 @@ def binary() -> Path | None:
 
 
 def default_params() -> Path:
-    """ArduPilot's copter.parm and copter-hexa.parm: `default_params/` beside the binary."""
+    """ArduPilot's copter.parm and copter-hexa.parm: `default_params/` beside the binary, or
+    the folder $ARDUCOPTER_DEFAULTS names (ArduPilot's Tools/autotest/default_params/)."""
+    if os.environ.get("ARDUCOPTER_DEFAULTS"):
+        return Path(os.environ["ARDUCOPTER_DEFAULTS"]).expanduser().resolve()
     exe = binary()
     assert exe is not None
     return exe.parent / "default_params"
@@ -48,6 +51,11 @@ def skip_reason() -> str | None:
         return "set $ARDUCOPTER to an ArduCopter SITL binary to run the ArduPilot tests"
     if binary() is None:
         return f"$ARDUCOPTER={os.environ['ARDUCOPTER']} is not an executable file"
+    missing = [name for name in ("copter.parm", "copter-hexa.parm")
+               if not (default_params() / name).is_file()]
+    if missing:
+        return (f"{default_params()} lacks {', '.join(missing)} (ArduPilot's "
+                "Tools/autotest/default_params/)")
     for tool in ("unshare", "nsenter", "ip"):
         if shutil.which(tool) is None:
             return f"needs {tool} for a private network namespace"
