@@ -1,6 +1,6 @@
 """A scripted PX4 for `sitl --protocol px4-hil`, written from PX4's own reading code
-(src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp) since no PX4 binary is at
-hand. It does what that module does and checks what it relies on:
+(src/modules/simulation/simulator_mavlink/SimulatorMavlink.cpp), so that the protocol is
+tested without a PX4 build. It does what that module does and checks what it relies on:
 
 - connects to the simulator as a TCP client, sends one HEARTBEAT (autopilot 12) and asks
   HIL_STATE_QUATERNION at 5000 us (SET_MESSAGE_INTERVAL), as `run()` and `send()` do;
