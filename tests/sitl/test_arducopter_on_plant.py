@@ -6,13 +6,16 @@ GUIDED, takes off to 10 m, flies 10 m north and lands, driven over MAVLink with 
 (`drive`, run inside the namespace as `python -m tests.sitl.test_arducopter_on_plant`);
 the flight is judged from the plant's truth.ulg.
 
-Skipped with the reason unless $ARDUCOPTER names the binary (tests/arducopter.py).
+The flight is skipped with the reason unless $ARDUCOPTER names the binary
+(tests/arducopter.py); the `sitl` process is also tested against a scripted ArduPilot side.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import socket
+import struct
 import subprocess
 import sys
 import time
@@ -22,6 +25,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from common.links import free_port
+from common.ulog import read_topic
 from tests.arducopter import ROOT, namespace, needs_arducopter, start_arducopter, stop_group
 
 SCENARIO = ROOT / "config" / "scenarios" / "ardupilot_hexa.toml"
@@ -146,13 +151,48 @@ def drive(url: str, timeout_s: float) -> dict[str, Any]:
 
 
 def _truth(path: Path) -> dict[str, np.ndarray]:
-    from common.ulog import read_topic
-
     names, rows = read_topic(path, "dq_truth")
     return {name: rows[:, i] for i, name in enumerate(names)}
 
 
+@pytest.mark.timeout(60)
+def test_sitl_process_serves_a_scripted_arducopter(tmp_path: Path) -> None:
+    """`sitl --protocol ardupilot-json --end-time 1`: serves a scripted ArduPilot side on
+    loopback, stops 1 s of simulated time after the first packet, exit 0, with its stats,
+    summary line and truth log."""
+    port = free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sitl.node", str(SCENARIO), "--protocol", "ardupilot-json",
+         "--link", f"udpin:127.0.0.1:{port}", "--end-time", "1", "--truth-log",
+         str(tmp_path / "truth.ulg"), "--stats", str(tmp_path / "stats.json")],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert proc.stdout is not None
+        assert proc.stdout.readline().startswith(
+            f"sitl: serving ardupilot_hexa on udpin:127.0.0.1:{port} (ardupilot-json")
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as ap:
+            ap.settimeout(2.0)
+            n = 0
+            with pytest.raises(TimeoutError):  # no answer once the plant has stopped
+                while n < 2000:
+                    ap.sendto(struct.pack("<HHI16H", 18458, 1200, n, *(1000,) * 16),
+                              ("127.0.0.1", port))
+                    ap.recv(4096)
+                    n += 1
+        assert n == 1201  # 1201 steps of 833 us reach 1 s
+        assert proc.wait(20) == 0
+        out = proc.stdout.read()
+    finally:
+        stop_group(proc)
+    assert "sitl: stopped at t = 1.000 s after 1201 frames at 1200 Hz (833 us steps)" in out
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert stats["steps"] == 1201 and stats["bad_packets"] == 0
+    _, rows = read_topic(tmp_path / "truth.ulg", "dq_truth")
+    assert len(rows) == 1201 and rows[-1, 0] == 1201 * 833
+
+
 @needs_arducopter
+@pytest.mark.xdist_group("arducopter")
 @pytest.mark.timeout(240)
 def test_arducopter_flies_on_the_plant(tmp_path: Path) -> None:
     truth_path = tmp_path / "truth.ulg"
