@@ -317,7 +317,7 @@ def test_sensor_profiles_are_refused(scenario) -> None:
     from common.sensors_config import resolve_sensor_profile
 
     noisy = dataclasses.replace(scenario, sensors=resolve_sensor_profile("mocap-indoor"))
-    with pytest.raises(ConfigError, match="mocap-indoor.*ArduPilot makes its own sensors"):
+    with pytest.raises(ConfigError, match=r"mocap-indoor.*ArduPilot makes its own sensors"):
         JsonPhysics(noisy)
     truth = dataclasses.replace(scenario, sensors=resolve_sensor_profile("truth"))
     assert JsonPhysics(truth).frame(frame(0))[1]
