@@ -86,11 +86,20 @@ def _onboard_log_tells_the_same_story(path, mission_items: int) -> None:
     from common import px4_topics as px4
     from common.ulog import open_ulog
 
-    u = open_ulog(path)
+    # The mode changes on the FCU's wall clock (link check) and is logged with the next
+    # control step, which in lockstep waits for the simulator: on a loaded machine the
+    # HEARTBEAT can show LAND before the log does. Wait for the log's state, not a time.
+    deadline = time.monotonic() + 20.0
+    while True:
+        u = open_ulog(path)
+        status = u.get_dataset("vehicle_status").data
+        nav = list(status["nav_state"])
+        if nav[-1] == px4.NAVIGATION_STATE_AUTO_LAND or time.monotonic() > deadline:
+            break
+        time.sleep(0.1)
     changed = {name: value for _, name, value in u.changed_parameters}
     assert changed == {"COM_DL_LOSS_T": 1.0, "COM_DL_LAND_T": 1.5}
-    status = u.get_dataset("vehicle_status").data
-    arming, nav = list(status["arming_state"]), list(status["nav_state"])
+    arming = list(status["arming_state"])
     assert px4.ARMING_STATE_ARMED in arming
     lost = np.flatnonzero(status["gcs_connection_lost"])
     assert len(lost) and all(status["failsafe"][lost])
