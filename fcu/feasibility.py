@@ -1,5 +1,5 @@
-"""Can the vehicle fly a planned segment? Rotor speeds of the nominal wrench along its
-reference (pure: no I/O, no MAVLink).
+"""Can the vehicle fly a planned segment? What the allocation commands along its reference,
+judged against every actuator's model (pure: no I/O, no MAVLink).
 
 For a reference r(t) (fcu.tracker.Reference: p, q, v, a, omega, omega_dot; ENU / FLU) the
 wrench that makes the vehicle follow it exactly (MODEL.md section 4 with zero tracking error) is
@@ -7,14 +7,23 @@ wrench that makes the vehicle follow it exactly (MODEL.md section 4 with zero tr
     f_b = m R(q)^T (a - g_W),  g_W = [0, 0, -g];   tau_b = J omega_dot + omega x J omega,
 
 allocated with the pseudo-inverse of eq. (28), Omega = A^+ [f_b; tau_b], each rotor turning at
-w_i = (lat_i^2 + ver_i^2)^(1/4) (MODEL.md section 2). A segment is flyable when
-max_i w_i <= MARGIN w_max at every sample.
+w_i = (lat_i^2 + ver_i^2)^(1/4) with its tilt at alpha_i = atan2(lat_i, ver_i) (eq. 29,
+MODEL.md section 2). The actuators' models (MODEL.md 2, as the plant has them) limit:
+
+* rotor speed, with its first-order lag: the command that makes a lagging rotor follow w_i,
+  c_i = w_i + tau_up w_i' while it speeds up, must stay at most MARGIN w_max, and one that
+  slows down, w_i - tau_down |w_i'|, at least 0 (`Actuator` "rotor");
+* tilt servo rate: |alpha_i'| <= TILT_MARGIN tilt_rate_max (tilts are continuous and
+  unbounded, so only their rate is limited; "tilt servo").
 
 MARGIN = 0.85: the feed-forward may use at most 85 % of the rotor speed limit (72 % of the
 thrust), leaving the rest for the feedback that corrects tracking errors, disturbances and the
 rotor lag on top of it. It cannot be much lower: hovering at the worst attitude takes 1215 rad/s
 (71 %) on the tilted preset and 1402 rad/s (82 %) on the planar one, so a lower margin would
-refuse attitudes the vehicle holds.
+refuse attitudes the vehicle holds. TILT_MARGIN = 0.75: the feed-forward may turn a tilt at
+three quarters of the servo's rate, the rest is the feedback's (its corrections move the tilts
+too); the lag compensation's tilt lead (fcu.allocation.tilt_lead) makes a rate-limited servo
+follow a ramp below its limit without lag.
 
 Time scaling: flying a fixed path (position and attitude as functions of sigma = t / D) in D
 seconds scales velocities and body rates by 1/D and accelerations, omega_dot and omega x J omega
@@ -22,9 +31,16 @@ by 1/D^2, so with u = 1/D^2
 
     Omega(D) = Omega_0 + u Omega_1   (Omega_0: hover at the path's attitudes),
 
-exactly. Each rotor's w_i^4 = |Omega_0,i + u Omega_1,i|^2 is then a quadratic in u, and the
-shortest duration that keeps every sample inside the margin, for every longer duration too,
-comes in closed form (`TimeScaling.shortest`): no bisection.
+exactly, and d/dt = (1/D) d/dsigma: with Omega' = Omega_0' + u Omega_1' (sigma-derivatives,
+central differences of the 1 s path),
+
+    alpha_i' = (ver_i lat_i' - lat_i ver_i') / (lat_i^2 + ver_i^2) / D
+    w_i'     = (lat_i lat_i' + ver_i ver_i') / (2 w_i^3) / D.
+
+Rotor speed alone gives w_i^4 = |Omega_0,i + u Omega_1,i|^2, a quadratic in u whose bound comes
+in closed form; the rates add no closed form, so the shortest duration that fits at that and
+every longer duration is found from that bound up on a geometric grid, then by bisection
+(`TimeScaling.shortest`).
 
 Sampling: `MOVE_SAMPLES` evenly spaced instants of a quintic move including both ends, plus the
 instants of its extreme acceleration (s = 0.5 -/+ sqrt(3)/6) and of its top speed (s = 0.5);
@@ -33,7 +49,8 @@ attitude (T |n|) and of the path phase 2T (at least `MOVE_SAMPLES`, at most `FIG
 plus its ends (extreme T''), its middle (top T') and the phases T = j pi / 4 where the path's
 coordinates peak.
 
-Which items stretch and which are refused is the mission's business (fcu.mission).
+Which items stretch and which are refused is the mission's business (fcu.mission). Actuators
+are numbered 1..n as the vehicle file lists its arms (the paper's i = 1..6).
 """
 
 from __future__ import annotations
@@ -51,6 +68,12 @@ from fcu.dualquat import Quat, Vec3, cross, q_rotate_inv
 from fcu.tracker import Reference
 
 MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
+TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may use
+DIFF_STEP = 1e-6  # sigma step of the central differences of a 1 s path
+GRID_RATIO = 1.1  # `TimeScaling.shortest`: durations tried from the speed bound up
+GRID_FITS = 8  # ... until this many in a row fit (x 2.1 in duration)
+GRID_MAX = 1000  # ... at most this many (x 1e41)
+BISECT_TOL = 1e-4  # relative: the shortest duration found is at most this much too long
 MOVE_SAMPLES = 64
 FIGURE_STEP_RAD = 0.1  # rad: sampled peaks within 0.1 % of the dense peak (measured)
 FIGURE_SAMPLES_MAX = 4096
@@ -147,16 +170,35 @@ class Peak(NamedTuple):
     sample: int  # the index of the sample where it occurs
 
 
-class Envelope:
-    """One vehicle's rotor speed limit for feed-forward wrenches (`margin` w_max)."""
+class Excess(NamedTuple):
+    """The most demanding actuator over a segment's samples: `ratio` = need / limit (> 1: it
+    does not fit), which actuator (`kind` "rotor" or "tilt servo", `number` 1..n), what it
+    needs and its limit (rad/s), and the sample where it happens."""
 
-    def __init__(self, vehicle: VehicleConfig, margin: float = MARGIN) -> None:
-        if not 0.0 < margin <= 1.0:
-            raise ValueError(f"margin must be in (0, 1], got {margin}")
+    ratio: float
+    kind: str
+    number: int  # 1..n
+    need: float
+    limit: float
+    sample: int
+
+
+class Envelope:
+    """One vehicle's actuator limits for feed-forward commands (module docstring): rotor
+    speed `margin` w_max with its lag, tilt rate TILT_MARGIN tilt_rate_max."""
+
+    def __init__(self, vehicle: VehicleConfig, margin: float = MARGIN,
+                 tilt_margin: float = TILT_MARGIN) -> None:
+        if not 0.0 < margin <= 1.0 or not 0.0 < tilt_margin <= 1.0:
+            raise ValueError(f"margins must be in (0, 1], got {margin}, {tilt_margin}")
         self.vehicle = vehicle
         self.margin = margin
         self.speed_max = vehicle.rotor_speed_max_rad_s
         self.limit = margin * self.speed_max
+        self.tilt_margin = tilt_margin
+        self.tilt_rate_max = vehicle.tilt_rate_max_rad_s
+        self.tilt_limit = tilt_margin * self.tilt_rate_max
+        self.tau_up, self.tau_down = vehicle.rotor_tau_up_s, vehicle.rotor_tau_down_s
         self.pinv_t = pseudo_inverse(allocation_matrix(vehicle)).T  # 6 x 2n
 
     def omega_sq(self, ref: Reference) -> np.ndarray:
@@ -180,46 +222,159 @@ class Envelope:
         return Peak(float(per_sample[i]), i)
 
     def scaling(self, segment: Path) -> TimeScaling:
-        """Rotor speeds along `segment`'s path as a function of the time it is flown in."""
-        unit = segment.path(segment.instants())
-        om = self.omega_sq(unit)
-        om0 = np.broadcast_to(self.omega_sq(_hover(unit)), om.shape)  # a fixed attitude: 1 row
-        return TimeScaling(om0, om - om0, self.limit)
+        """What the allocation commands along `segment`'s path as a function of the time it
+        is flown in: Omega_0, Omega_1 at its instants and their sigma-derivatives."""
+        sigma = segment.instants()
+        parts = []
+        for x in (sigma, sigma - DIFF_STEP, sigma + DIFF_STEP):
+            unit = segment.path(x)
+            om = self.omega_sq(unit)
+            om0 = np.broadcast_to(self.omega_sq(_hover(unit)), om.shape)
+            parts.append((om0, om - om0))
+        (om0, om1), (lo0, lo1), (hi0, hi1) = parts
+        h2 = 2.0 * DIFF_STEP
+        return TimeScaling(self, om0, om1, (hi0 - lo0) / h2, (hi1 - lo1) / h2)
 
     def describe(self, speed_rad_s: float) -> str:
         return (f"needs {speed_rad_s:.0f} rad/s > {self.limit:.0f} "
                 f"({self.margin * 100:.0f}% of {self.speed_max:.0f})")
 
+    def explain(self, excess: Excess) -> str:
+        """`excess` for a person: "tilt servo 2 needs 13.1 rad/s, limit 2.0 (50% of 4.0)"."""
+        if excess.kind == TILT:
+            return (f"tilt servo {excess.number} needs {excess.need:.1f} rad/s, limit "
+                    f"{excess.limit:.1f} ({self.tilt_margin * 100:.0f}% of "
+                    f"{self.tilt_rate_max:.1f})")
+        if excess.kind == ROTOR_DOWN:
+            return (f"rotor {excess.number} must slow at {excess.need:.0f} rad/s^2, its lag "
+                    f"allows {excess.limit:.0f}")
+        return (f"rotor {excess.number} needs {excess.need:.0f} rad/s, limit "
+                f"{excess.limit:.0f} ({self.margin * 100:.0f}% of {self.speed_max:.0f})"
+                + (" with its lag" if excess.kind == ROTOR_LAG else ""))
+
+
+ROTOR = "rotor"
+ROTOR_LAG = "rotor lag"
+ROTOR_DOWN = "rotor slowing"
+TILT = "tilt servo"
+_TINY = 1e-12
+
 
 class TimeScaling:
-    """Omega(D) = Omega_0 + Omega_1 / D^2 at a path's sample instants (module docstring)."""
+    """Omega(D) = Omega_0 + Omega_1 / D^2 and its rates at a path's sample instants (module
+    docstring)."""
 
-    def __init__(self, om0: np.ndarray, om1: np.ndarray, limit: float) -> None:
-        self.om0, self.om1, self.limit = om0, om1, limit
+    def __init__(self, env: Envelope, om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray,
+                 dom1: np.ndarray) -> None:
+        self.env, self.limit = env, env.limit
+        self.om0, self.om1, self.dom0, self.dom1 = om0, om1, dom0, dom1
         self._shortest: float | None = None
 
-    def speeds(self, duration: float) -> np.ndarray:
+    def _omega(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
         u = 1.0 / (duration * duration) if duration > 0.0 else math.inf
-        return _speeds(self.om0 + u * self.om1)
+        return self.om0 + u * self.om1, self.dom0 + u * self.dom1
+
+    def speeds(self, duration: float) -> np.ndarray:
+        return _speeds(self._omega(duration)[0])
 
     def peak(self, duration: float) -> Peak:
         per_sample = self.speeds(duration).max(axis=1)
         i = int(np.argmax(per_sample))
         return Peak(float(per_sample[i]), i)
 
+    def rates(self, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rotor speeds, their rates and the tilt rates (samples x rotors) of the path flown
+        in `duration` s."""
+        om, dom = self._omega(duration)
+        lat, ver, dlat, dver = om[:, 0::2], om[:, 1::2], dom[:, 0::2], dom[:, 1::2]
+        sq = lat * lat + ver * ver
+        w = np.sqrt(np.sqrt(sq))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w_rate = np.where(sq > _TINY, (lat * dlat + ver * dver) / (2.0 * w * sq), 0.0)
+            tilt_rate = np.where(sq > _TINY, (ver * dlat - lat * dver) / sq, 0.0)
+        return w, w_rate / duration, tilt_rate / duration
+
+    def excess(self, duration: float) -> Excess:
+        """The most demanding actuator of the path flown in `duration` s (module docstring)."""
+        env = self.env
+        w, w_rate, tilt_rate = self.rates(duration)
+        up = w + env.tau_up * np.maximum(w_rate, 0.0)
+        slow = env.tau_down * np.maximum(-w_rate, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            down = np.where(slow > 0.0, slow / np.maximum(w, _TINY), 0.0)
+        candidates = (
+            (np.where(w_rate > 0.0, up, w) / env.limit, ROTOR, np.where(w_rate > 0.0, up, w),
+             np.full_like(w, env.limit)),
+            (down, ROTOR_DOWN, -np.minimum(w_rate, 0.0), w / env.tau_down),
+            (np.abs(tilt_rate) / env.tilt_limit, TILT, np.abs(tilt_rate),
+             np.full_like(w, env.tilt_limit)),
+        )
+        best: Excess | None = None
+        for ratio, kind, need, limit in candidates:
+            k = int(np.argmax(ratio))
+            sample, rotor = divmod(k, ratio.shape[1])
+            r = float(ratio.flat[k])
+            if best is None or r > best.ratio:
+                if kind == ROTOR and w[sample, rotor] <= env.limit < need[sample, rotor]:
+                    kind = ROTOR_LAG
+                best = Excess(r, kind, rotor + 1, float(need[sample, rotor]),
+                              float(limit[sample, rotor]), sample)
+        assert best is not None
+        return best
+
     def fits(self, duration: float) -> bool:
-        return self.peak(duration).speed_rad_s <= self.limit
+        return self.excess(duration).ratio <= 1.0
 
     def shortest(self) -> float:
         """The shortest duration D such that the path flown in D or any longer time keeps
-        every sampled rotor speed within the limit (slightly above the exact bound, by
-        `STRETCH_GUARD`); 0 when any duration does, inf when none does (hovering at some
-        attitude of the path already exceeds the limit)."""
+        every actuator within its limit (module docstring); 0 when any duration does, inf
+        when none does (hovering at some attitude of the path already exceeds the limit)."""
         if self._shortest is None:
-            self._shortest = self._bound()
+            self._shortest = self._search()
         return self._shortest
 
-    def _bound(self) -> float:
+    def _search(self) -> float:
+        """From the speed bound up: while a duration fails by a ratio r, the next tried is
+        r^(1/3) longer (no need decays faster than 1/D^3: accelerations scale by 1/D^2 and
+        rates take another 1/D, so this never jumps past the bound), at least GRID_RATIO;
+        GRID_FITS fitting durations in a row end the search, then bisection between the
+        last failing and the first fitting one."""
+        speed_bound = self._speed_bound()
+        if not math.isfinite(speed_bound):
+            return math.inf
+        if not np.any(self.om1) and not np.any(self.dom0):
+            return speed_bound  # nothing moves: no rates
+        start = d = max(speed_bound, 1e-3)
+        last_fail, first_fit, run = math.nan, d, 0
+        for _ in range(GRID_MAX):
+            ratio = self.excess(d).ratio
+            if ratio <= 1.0:
+                first_fit = d if run == 0 else first_fit
+                run += 1
+                if run >= GRID_FITS:
+                    break
+                d *= GRID_RATIO
+            else:
+                last_fail, run = d, 0
+                d *= max(GRID_RATIO, min(ratio, 1e6) ** (1.0 / 3.0))
+        else:
+            return math.inf
+        if math.isnan(last_fail):  # the speed bound (or 1 ms) already fits
+            return start
+        return self._refine(last_fail, first_fit)
+
+    def _refine(self, lo: float, hi: float) -> float:
+        """Bisection between a failing `lo` and a fitting `hi`, to BISECT_TOL of hi."""
+        while hi - lo > BISECT_TOL * hi:
+            mid = 0.5 * (lo + hi)
+            if self.fits(mid):
+                hi = mid
+            else:
+                lo = mid
+        return hi
+
+    def _speed_bound(self) -> float:
+        """Rotor speed alone (no lag): the closed form of the module docstring."""
         lat0, ver0 = self.om0[:, 0::2], self.om0[:, 1::2]
         lat1, ver1 = self.om1[:, 0::2], self.om1[:, 1::2]
         # w^4 = a u^2 + b u + (c + L^4) with u = 1 / D^2 >= 0.

@@ -37,19 +37,21 @@ wire's resolution costs no travel. A requested yaw change makes the move last at
 angle / turn rate.
 
 Flyable missions (`fcu.feasibility`, when `MissionLimits.vehicle` is given): every planned
-segment's nominal wrench must allocate to rotor speeds within `feasibility.MARGIN` w_max at
-every sample. Items whose duration comes from a speed (NAV_WAYPOINT and NAV_LOITER_TIME
-travel, NAV_TAKEOFF with p2 = 0, NAV_LAND) are STRETCHED: their travel takes the shortest time
-that passes the check whenever distance / speed (or the turn time) is shorter, and the planned
-timeline uses that time, both when a mission is validated and when `MissionExecutor` plans it,
-so the upload check and the flight agree. Items whose duration the user gave (POSE_KEYFRAME p1,
-NAV_TAKEOFF p2 > 0, FIGURE_EIGHT p2) keep it, and a mission with one that fails is REFUSED
-(MAV_MISSION_DENIED) with a reason naming the item, the rotor speed and the limit, and the
-duration that would pass (`check_mission`). Validation plans from the origin at the identity
-attitude (as the geofence does); the executor re-plans from the actual start pose with the same
-stretching rule, never refuses (a user-timed item that no longer fits from there flies as
-given) and keeps the speed-derived time of a move that no duration can make flyable (hovering
-at one of its attitudes already exceeds the margin; validation refuses those).
+segment's nominal wrench must allocate to commands every actuator can follow at every sample:
+rotor speeds within `feasibility.MARGIN` w_max with their lag, tilt rates within
+`feasibility.TILT_MARGIN` of the servos' rate limit. Items whose duration comes from a speed
+(NAV_WAYPOINT and NAV_LOITER_TIME travel, NAV_TAKEOFF with p2 = 0, NAV_LAND) are STRETCHED:
+their travel takes the shortest time that passes the check whenever distance / speed (or the
+turn time) is shorter, and the planned timeline uses that time, both when a mission is
+validated and when `MissionExecutor` plans it, so the upload check and the flight agree. Items
+whose duration the user gave (POSE_KEYFRAME p1, NAV_TAKEOFF p2 > 0, FIGURE_EIGHT p2) keep it,
+and a mission with one that fails is REFUSED (MAV_MISSION_DENIED) with a reason naming the
+item, the actuator and its limit, and the duration that would pass (`check_mission`).
+Validation plans from the origin at the identity attitude (as the geofence does); the executor
+re-plans from the actual start pose with the same stretching rule, never refuses (a user-timed
+item that no longer fits from there flies as given) and keeps the speed-derived time of a move
+that no duration can make flyable (hovering at one of its attitudes already exceeds the margin;
+validation refuses those).
 """
 
 from __future__ import annotations
@@ -122,7 +124,7 @@ _ZERO: Vec3 = (0.0, 0.0, 0.0)
 class MissionLimits:
     """What a mission may ask for, and the speeds of the items that have no duration.
 
-    `vehicle`: the airframe whose rotor speed envelope missions must respect (items stretched
+    `vehicle`: the airframe whose actuator envelope missions must respect (items stretched
     or refused, module docstring); None skips that check."""
 
     max_items: int = 500
@@ -308,8 +310,8 @@ def check_mission(items: Sequence[MissionItem], limits: MissionLimits,
     takeoff keeps x, y, landing goes to z = 0, the figure returns to its start. With
     `limits.vehicle`, the mission is also planned from the origin at the identity attitude,
     speed-timed items stretched, and an item whose given duration the vehicle cannot fly is
-    MAV_MISSION_DENIED with a reason such as "item 3: needs 1903 rad/s > 1445 (85% of 1700):
-    lengthen p1 to 0.87 s" (module docstring). Items are checked in order: the first
+    MAV_MISSION_DENIED with a reason such as "item 3: tilt servo 2 needs 13.1 rad/s, limit 2.0
+    (50% of 4.0): lengthen p1 to 2.31 s" (module docstring). Items are checked in order: the first
     failing item is reported.
     """
     if len(items) > limits.max_items:
@@ -491,18 +493,17 @@ _TIME_SLOT = {MAV_CMD_POSE_KEYFRAME: "p1", MAV_CMD_FIGURE_EIGHT: "p2", MAV_CMD_N
 
 
 def _envelope_reason(item: MissionItem, seg: _Segment, limits: MissionLimits) -> str:
-    """'' when the vehicle can fly the planned segment, else why not (for a person)."""
+    """'' when the vehicle can fly the planned segment, else why not (for a person), naming
+    the actuator and its limit (`fcu.feasibility.Envelope.explain`)."""
     if limits.vehicle is None or seg.duration <= 0.0 or (isinstance(seg, _Move)
                                                           and not seg.moves):
         return ""
     env = envelope(limits.vehicle)
     scaling = seg.scaling if seg.scaling is not None else env.scaling(seg)
+    excess = scaling.excess(seg.duration)
+    if excess.ratio <= 1.0:  # flown as planned (a stretched move: at its shortest)
+        return ""
     shortest = scaling.shortest()
-    if seg.duration >= shortest:  # this and any longer duration fit
-        return ""
-    peak = scaling.peak(seg.duration)
-    if peak.speed_rad_s <= env.limit:
-        return ""
     slot = _TIME_SLOT.get(item.command)
     if item.command == MAV_CMD_NAV_TAKEOFF and not item.param2 > 0.0:
         slot = None  # timed by the takeoff speed
@@ -512,7 +513,7 @@ def _envelope_reason(item: MissionItem, seg: _Segment, limits: MissionLimits) ->
         hint = "not flyable"
     else:
         hint = f"lengthen {slot} to {math.ceil(shortest * 100.0) / 100.0:.2f} s"
-    return f"item {item.seq}: {env.describe(peak.speed_rad_s)}: {hint}"
+    return f"item {item.seq}: {env.explain(excess)}: {hint}"
 
 
 def _plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
