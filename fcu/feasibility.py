@@ -14,7 +14,9 @@ MODEL.md section 2). The actuators' models (MODEL.md 2, as the plant has them) l
   c_i = w_i + tau_up w_i' while it speeds up, must stay at most MARGIN w_max, and one that
   slows down, w_i - tau_down |w_i'|, at least 0 (`Actuator` "rotor");
 * tilt servo rate: |alpha_i'| <= TILT_MARGIN tilt_rate_max (tilts are continuous and
-  unbounded, so only their rate is limited; "tilt servo").
+  unbounded, so only their rate is limited; "tilt servo"), and where a path starts from or
+  ends at rest with an acceleration (a figure-infinity), the tilt step there within what the
+  servo turns in TILT_STEP_S ("tilt step").
 
 MARGIN = 0.85: the feed-forward may use at most 85 % of the rotor speed limit (72 % of the
 thrust), leaving the rest for the feedback that corrects tracking errors, disturbances and the
@@ -69,6 +71,7 @@ from fcu.tracker import Reference
 
 MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
 TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may use
+TILT_STEP_S = 0.05  # a tilt step at a path's end may take the servo this long at its rate
 DIFF_STEP = 1e-6  # sigma step of the central differences of a 1 s path
 GRID_RATIO = 1.1  # `TimeScaling.shortest`: durations tried from the speed bound up
 GRID_FITS = 8  # ... until this many in a row fit (x 2.1 in duration)
@@ -233,7 +236,8 @@ class Envelope:
             parts.append((om0, om - om0))
         (om0, om1), (lo0, lo1), (hi0, hi1) = parts
         h2 = 2.0 * DIFF_STEP
-        return TimeScaling(self, om0, om1, (hi0 - lo0) / h2, (hi1 - lo1) / h2)
+        ends = np.flatnonzero((sigma == 0.0) | (sigma == 1.0))
+        return TimeScaling(self, om0, om1, (hi0 - lo0) / h2, (hi1 - lo1) / h2, ends)
 
     def describe(self, speed_rad_s: float) -> str:
         return (f"needs {speed_rad_s:.0f} rad/s > {self.limit:.0f} "
@@ -245,6 +249,10 @@ class Envelope:
             return (f"tilt servo {excess.number} needs {excess.need:.1f} rad/s, limit "
                     f"{excess.limit:.1f} ({self.tilt_margin * 100:.0f}% of "
                     f"{self.tilt_rate_max:.1f})")
+        if excess.kind == TILT_STEP:
+            return (f"tilt servo {excess.number} steps {excess.need:.2f} rad at a start or end, "
+                    f"limit {excess.limit:.2f} ({TILT_STEP_S * 1e3:.0f} ms at "
+                    f"{self.tilt_rate_max:.1f} rad/s)")
         if excess.kind == ROTOR_DOWN:
             return (f"rotor {excess.number} must slow at {excess.need:.0f} rad/s^2, its lag "
                     f"allows {excess.limit:.0f}")
@@ -257,6 +265,7 @@ ROTOR = "rotor"
 ROTOR_LAG = "rotor lag"
 ROTOR_DOWN = "rotor slowing"
 TILT = "tilt servo"
+TILT_STEP = "tilt step"
 _TINY = 1e-12
 
 
@@ -265,9 +274,10 @@ class TimeScaling:
     docstring)."""
 
     def __init__(self, env: Envelope, om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray,
-                 dom1: np.ndarray) -> None:
+                 dom1: np.ndarray, ends: np.ndarray | None = None) -> None:
         self.env, self.limit = env, env.limit
         self.om0, self.om1, self.dom0, self.dom1 = om0, om1, dom0, dom1
+        self.ends = np.zeros(0, dtype=np.intp) if ends is None else ends
         self._shortest: float | None = None
 
     def _omega(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
@@ -308,6 +318,7 @@ class TimeScaling:
             (down, ROTOR_DOWN, -np.minimum(w_rate, 0.0), w / env.tau_down),
             (np.abs(tilt_rate) / env.tilt_limit, TILT, np.abs(tilt_rate),
              np.full_like(w, env.tilt_limit)),
+            self._steps(duration),
         )
         best: Excess | None = None
         for ratio, kind, need, limit in candidates:
@@ -321,6 +332,20 @@ class TimeScaling:
                               float(limit[sample, rotor]), sample)
         assert best is not None
         return best
+
+    def _steps(self, duration: float) -> tuple[np.ndarray, str, np.ndarray, np.ndarray]:
+        """Tilt steps at the path's ends, where it starts from or stops at rest with an
+        acceleration (a figure's T'' = pi k^2 at once): against what a servo turns in
+        TILT_STEP_S (candidates of `excess`, zero elsewhere)."""
+        om, _ = self._omega(duration)
+        step = np.zeros(om[:, 0::2].shape)
+        if len(self.ends):
+            rows, rest = om[self.ends], self.om0[self.ends]
+            d = np.arctan2(rows[:, 0::2], rows[:, 1::2]) - np.arctan2(rest[:, 0::2],
+                                                                       rest[:, 1::2])
+            step[self.ends] = np.abs(np.arctan2(np.sin(d), np.cos(d)))
+        limit = self.env.tilt_rate_max * TILT_STEP_S
+        return step / limit, TILT_STEP, step, np.full_like(step, limit)
 
     def fits(self, duration: float) -> bool:
         return self.excess(duration).ratio <= 1.0

@@ -340,3 +340,48 @@ def test_feasibility_is_pure():
     io = {"pymavlink", "zenoh", "time", "socket", "threading", "select", "common.mavlink",
           "common.links", "common.simlink", "fcu.mission", "fcu.mission_protocol"}
     assert names and not {m for m in names if m in io or m.split(".")[0] in io}
+
+
+# ----------------------------------------------------------------------------------------
+# Tilt servos: rates along the path and steps at its ends
+# ----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
+@pytest.mark.parametrize("duration", [6.0, 20.0])
+def test_tilt_step_at_a_figure_start_is_the_flown_one(vehicle, duration):
+    """Given a figure-infinity (T'' = pi k^2 at once), then the tilt step the envelope finds at
+    its start is the one between the allocation of the figure's first sample and of the
+    same pose at rest, by atan2 of the flown reference."""
+    env = envelope(vehicle)
+    seg = _Figure(0, 0.0, (0.0, 0.0, 3.0), (1.0, 0.0, 0.0, 0.0), 1.5, duration,
+                  (0.5, -0.3, 1.0))
+    _ratio, kind, step, limit = env.scaling(seg)._steps(duration)
+    first = env.omega_sq(seg.sample(0.0))[0]
+    rest = env.omega_sq(seg.sample(0.0)._replace(
+        v_enu_m_s=ZERO, a_enu_m_s2=ZERO, omega_flu_rad_s=ZERO, omega_dot_flu_rad_s2=ZERO))[0]
+    d = np.arctan2(first[0::2], first[1::2]) - np.arctan2(rest[0::2], rest[1::2])
+    want = np.abs(np.angle(np.exp(1j * d)))
+    assert want.max() > 1e-3  # the figure does start with a step
+    assert np.allclose(step[0], want, rtol=1e-6, atol=1e-12)
+    assert kind == "tilt step" and np.all(limit == pytest.approx(4.0 * 0.05))
+
+
+@pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
+def test_fast_figure_is_refused_naming_a_tilt_servo(vehicle):
+    """Given a 2 m figure-infinity in 5 s (rotor speeds fit on the tilted preset), then DENIED
+    naming a tilt servo and its limit; the duration it proposes is accepted and its tilt rates
+    (dense, by differences) stay within the limit."""
+    fig = item(1, MAV_CMD_FIGURE_EIGHT, p1=2.0, p2=5.0, z=-3.0)  # turning 3 times about z
+    limits = MissionLimits(vehicle=vehicle)
+    result, seq, reason = check_mission([*START, fig], limits)
+    assert (result, seq) == (M.MAV_MISSION_DENIED, 1)
+    assert reason.startswith("item 1: tilt servo ") and "limit 3.0 (75% of 4.0)" in reason
+    proposed = float(reason.split("lengthen p2 to ")[1][:-2])
+    longer = [*START, fig._replace(param2=proposed)]
+    assert check_mission(longer, limits).result == M.MAV_MISSION_ACCEPTED
+    ex = started(longer, limits)
+    t0, t1 = ex.schedule[1][1:]
+    # inside the item (its end's step into the hold is the step check's)
+    assert dense_tilt_rate(envelope(vehicle), ex, t0 + 1e-3, t1 - 4e-3, dt=2e-3) <= \
+        envelope(vehicle).tilt_limit * 1.01
