@@ -265,7 +265,8 @@ def save_failed(out: Path, rec: dict[str, Any], prep: Prepared) -> None:
     (folder / f"{stem}.toml").write_text(
         f'# Random mission {rec["seed"]} ({rec["vehicle"]}): {"; ".join(rec["why"])}\n'
         f'name = "random_{stem}"\nduration_s = {prep.scenario.duration_s!r}\n'
-        f'controller = "pid"\nvehicle = "{vehicle}"\nseed = {rec["k"]}\n\n'
+        f'controller = "pid"\nvehicle = "{vehicle}"\nseed = {rec["k"]}\n'
+        f'sensors = "{rec["sensors"]}"\n\n'
         f'[gains]\npid = "{gains}/pid_eq30.toml"\npd = "{gains}/pd_eq33.toml"\n\n'
         f'[rates]\ncontrol_hz = {prep.scenario.control_rate_hz}\n'
         f'physics_hz = {prep.scenario.physics_rate_hz}\n\n'

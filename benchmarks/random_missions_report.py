@@ -158,7 +158,7 @@ def write_report(out: Path, results: list[dict[str, Any]], mocap: list[dict[str,
                     if not p.name.endswith(".mission.toml")) if (out / "failed").is_dir() else []
     if failed:
         lines += ["", f"Violating missions, re-flyable: failed/ ({len(failed)} scenario files, "
-                  "e.g. `gcs run failed/" + failed[0] + "`)."]
+                  "e.g. `gcs run --in-process failed/" + failed[0] + "`)."]
     lines += ["", f"Property {'HOLDS' if ok else 'FAILS'}."]
     text = "\n".join(lines) + "\n"
     (out / "summary.md").write_text(text)
