@@ -26,6 +26,7 @@ class FailsafeSettings:
     state_loss_s: float = 1.0  # COM_STATE_LOSS_T, flight clock
     saturation_s: float = 2.0  # COM_SAT_T, flight clock
     saturation_hold: bool = False  # COM_SAT_ACT = 1: abort a mission to HOLD
+    actuator_limit_s: float = 0.1  # COM_ACT_RATE_T: an actuator limited this long is reported
     divergence_m: float = DIVERGENCE_M  # COM_DIV_POS
     pose_loss_s: float = 1.0  # COM_POS_LOSS_T: dead-reckon this long without a pose, then HOLD
     pose_loss_land_s: float = 2.0  # COM_POS_LAND_T: then LAND after this long in HOLD

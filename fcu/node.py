@@ -345,6 +345,7 @@ class FlightController:
                 "internal_errors": server.internal_errors,
                 "mission_completed": pipe.commander.mission_done,
                 "saturated_steps": pipe.saturated_steps,
+                "tilt_rate_limited_steps": pipe.tilt_rate_limited_steps,
                 "lockstep": self.lockstep,
                 "sim_rtt": self.rtt,
                 "timed_steps": self.timed_steps,

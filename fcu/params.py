@@ -76,6 +76,9 @@ SPECS: tuple[ParamSpec, ...] = (
               "rotor speed saturation for longer than this is reported"),
     ParamSpec("COM_SAT_ACT", 0.0, 0.0, 1.0, "enum",
               "on long saturation: 0 = report, 1 = abort the mission to HOLD"),
+    ParamSpec("COM_ACT_RATE_T", 0.1, 0.002, 60.0, "s",
+              "a tilt servo commanded faster than its rate limit (by a model of it) or a rotor "
+              "clamped at its speed limit for longer than this is reported"),
     ParamSpec("COM_DIV_POS", 10.0, 0.1, 1000.0, "m",
               "divergence: tracking error beyond this disarms"),
     ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.1, 100.0, "m",
@@ -198,7 +201,8 @@ def failsafe_settings(values: dict[str, float]) -> FailsafeSettings:
     return FailsafeSettings(
         gcs_loss_s=values["COM_DL_LOSS_T"], gcs_loss_land_s=values["COM_DL_LAND_T"],
         state_loss_s=values["COM_STATE_LOSS_T"], saturation_s=values["COM_SAT_T"],
-        saturation_hold=values["COM_SAT_ACT"] == 1.0, divergence_m=values["COM_DIV_POS"],
+        saturation_hold=values["COM_SAT_ACT"] == 1.0,
+        actuator_limit_s=values["COM_ACT_RATE_T"], divergence_m=values["COM_DIV_POS"],
         pose_loss_s=values["COM_POS_LOSS_T"], pose_loss_land_s=values["COM_POS_LAND_T"],
         gate_failures=round(values["EKF_GATE_N"]))
 

@@ -23,6 +23,7 @@ from typing import NamedTuple
 from common.config import Gains, VehicleConfig
 from common.modes import Mode
 from common.outcome import DIVERGED, FAILSAFE, Event, diverged
+from fcu.actuator_monitor import ActuatorMonitor, unclamped_speeds
 from fcu.commander import (
     MAV_RESULT_ACCEPTED,
     SEVERITY_CRITICAL,
@@ -76,6 +77,10 @@ class Pipeline:
         self.supervisor = Supervisor(vehicle.n_rotors, vehicle.rotor_speed_max_rad_s,
                                      initial_tilt_rad)
         self.saturation = SaturationMonitor()
+        self.actuators = ActuatorMonitor(vehicle.n_rotors, vehicle.tilt_rate_max_rad_s,
+                                         vehicle.rotor_speed_max_rad_s,
+                                         self.core.allocator.hold_speed,
+                                         self.core.allocator.tilt)
         self.gcs_link = GcsLinkMonitor()
         self.state: VehicleState | None = None
         self.state_time_us = -1  # the stamp of the latest state
@@ -84,6 +89,7 @@ class Pipeline:
         self.last_output: StepOutput | None = None
         self.steps = 0
         self.saturated_steps = 0
+        self.tilt_rate_limited_steps = 0  # armed periods with a tilt servo rate-limited
         self.estimator: Estimator | None = None  # EKF_EN = 1
         self.rate_filter = ImuRateFilter(0.0)  # IMU_GYRO_CUTOFF: the rate's low-pass
         self.pose_level = 0  # pose loss: 0 fresh, 1 HOLD, 2 LAND (failsafe.pose_loss_level)
@@ -204,6 +210,7 @@ class Pipeline:
         if result[0] == MAV_RESULT_ACCEPTED and not was:
             self.core.tracker.reset()
             self.saturation = SaturationMonitor()
+            self.actuators.reset(self.core.allocator.tilt)
             self.failsafe = ""
             self.pose_level = 0
         return result
@@ -238,6 +245,7 @@ class Pipeline:
         state = self.state
         if state is None or not cmd.armed:
             out = self.supervisor.gate(False, self.supervisor.zero, tuple(self.core.allocator.tilt))
+            self.actuators.reset(out.tilt_rad)  # the servos settle on what is sent
             return self._output(out.speed_rad_s, out.tilt_rad, None)
         ref = cmd.reference(t_us)
         cmd.last_ref = ref
@@ -261,7 +269,9 @@ class Pipeline:
             return self._output(out.speed_rad_s, out.tilt_rad, result)
         if alloc.saturated:
             self.saturated_steps += 1
-        self._check_saturation(t_us, alloc.saturated)
+        self._check_saturation(t_us, alloc.saturated, alloc.omega_sq)
+        self._check_actuators(self.core.dt_s if dt_s is None else dt_s, out.tilt_rad,
+                              alloc.omega_sq)
         lift_n = q_rotate(state.q_enu_flu, result.tracker.force_flu_n)[2]
         if cmd.land_detector(t_us, lift_n, self.weight_n):
             cmd.disarm(reason="landed: disarmed")
@@ -303,7 +313,21 @@ class Pipeline:
             cmd.say(SEVERITY_INFO, "pose source regained")
         self.pose_level = level
 
-    def _check_saturation(self, t_us: int, saturated: bool) -> None:
+    def _check_actuators(self, dt_s: float, tilt_rad: tuple[float, ...],
+                         omega_sq: tuple[float, ...]) -> None:
+        """The actuators against their models (COM_ACT_RATE_T): a WARNING once per
+        episode for each tilt servo rate-limited or rotor at its speed limit for longer, an
+        INFO when they all cleared; reports only, the commands are not changed."""
+        limit_s = self.settings.actuator_limit_s
+        for notice in self.actuators.update(dt_s, tilt_rad, unclamped_speeds(omega_sq),
+                                            limit_s):
+            severity = SEVERITY_INFO if notice.kind == "clear" else SEVERITY_WARNING
+            self.commander.say(severity, notice.text(limit_s))
+        if any(self.actuators.tilt_limited):
+            self.tilt_rate_limited_steps += 1
+
+    def _check_saturation(self, t_us: int, saturated: bool,
+                          omega_sq: tuple[float, ...]) -> None:
         change = self.saturation.update(t_us, saturated, self.settings)
         cmd = self.commander
         if change == "start":
@@ -312,8 +336,11 @@ class Pipeline:
                     not cmd.landing:
                 cmd.failsafe_hold("failsafe: rotors saturated: mission aborted, HOLD")
             else:
+                speeds = unclamped_speeds(omega_sq)
+                which = ",".join(str(i + 1) for i, w in enumerate(speeds)
+                                 if w > self.vehicle.rotor_speed_max_rad_s)
                 cmd.say(SEVERITY_WARNING,
-                        f"rotors saturated for over {self.settings.saturation_s:g} s")
+                        f"rotors saturated for over {self.settings.saturation_s:g} s: {which}")
         elif change == "clear" and self.failsafe == "rotor saturation":
             self.failsafe = ""
 
