@@ -55,7 +55,7 @@ def refused(loader, path: Path, *needles: str) -> str:
 
 def test_shipped_file_lists_are_complete():
     """Given config/, when listed, then every preset directory holds files."""
-    assert len(VEHICLES) == 3 and len(GAINS) == 2 and len(SCENARIOS) == 7
+    assert len(VEHICLES) == 3 and len(GAINS) == 2 and len(SCENARIOS) == 8
 
 
 @pytest.mark.parametrize("path", VEHICLES, ids=lambda p: p.name)
