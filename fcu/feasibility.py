@@ -228,13 +228,13 @@ class Envelope:
         """What the allocation commands along `segment`'s path as a function of the time it
         is flown in: Omega_0, Omega_1 at its instants and their sigma-derivatives."""
         sigma = segment.instants()
-        parts = []
-        for x in (sigma, sigma - DIFF_STEP, sigma + DIFF_STEP):
-            unit = segment.path(x)
-            om = self.omega_sq(unit)
-            om0 = np.broadcast_to(self.omega_sq(_hover(unit)), om.shape)
-            parts.append((om0, om - om0))
-        (om0, om1), (lo0, lo1), (hi0, hi1) = parts
+        n = len(sigma)
+        unit = segment.path(np.concatenate([sigma, sigma - DIFF_STEP, sigma + DIFF_STEP]))
+        om_all = self.omega_sq(unit)
+        om0_all = np.broadcast_to(self.omega_sq(_hover(unit)), om_all.shape)
+        om1_all = om_all - om0_all
+        om0, lo0, hi0 = om0_all[:n], om0_all[n:2 * n], om0_all[2 * n:]
+        om1, lo1, hi1 = om1_all[:n], om1_all[n:2 * n], om1_all[2 * n:]
         h2 = 2.0 * DIFF_STEP
         ends = np.flatnonzero((sigma == 0.0) | (sigma == 1.0))
         return TimeScaling(self, om0, om1, (hi0 - lo0) / h2, (hi1 - lo1) / h2, ends)
@@ -266,7 +266,52 @@ ROTOR_LAG = "rotor lag"
 ROTOR_DOWN = "rotor slowing"
 TILT = "tilt servo"
 TILT_STEP = "tilt step"
+KINDS = (ROTOR, ROTOR_LAG, ROTOR_DOWN, TILT, TILT_STEP)  # `excess_kernel`'s kind codes
 _TINY = 1e-12
+
+
+@njit
+def excess_kernel(om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray, dom1: np.ndarray,
+                  is_end: np.ndarray, duration: float, limit: float, tau_up: float,
+                  tau_down: float, tilt_limit: float,
+                  step_limit: float) -> tuple[float, int, int, int, float, float]:
+    """The largest need / limit over samples and rotors of a path flown in `duration` s
+    (module docstring): (ratio, kind code of KINDS, rotor 0..n-1, sample, need, limit). The
+    tilt step is judged at the path's ends only (`is_end`), against its pose at rest."""
+    u = 1.0 / (duration * duration)
+    inv_d = 1.0 / duration
+    best, kind, rotor, sample, need, lim = -1.0, 0, 0, 0, 0.0, 0.0
+    for k in range(om0.shape[0]):
+        for i in range(om0.shape[1] // 2):
+            lat = om0[k, 2 * i] + u * om1[k, 2 * i]
+            ver = om0[k, 2 * i + 1] + u * om1[k, 2 * i + 1]
+            dlat = dom0[k, 2 * i] + u * dom1[k, 2 * i]
+            dver = dom0[k, 2 * i + 1] + u * dom1[k, 2 * i + 1]
+            sq = lat * lat + ver * ver
+            w = math.sqrt(math.sqrt(sq))
+            w_rate = tilt_rate = 0.0
+            if sq > _TINY:
+                w_rate = (lat * dlat + ver * dver) / (2.0 * w * sq) * inv_d
+                tilt_rate = (ver * dlat - lat * dver) / sq * inv_d
+            c = w + tau_up * w_rate if w_rate > 0.0 else w
+            if c / limit > best:
+                best, kind, need, lim = c / limit, 1 if w <= limit < c else 0, c, limit
+                rotor, sample = i, k
+            if w_rate < 0.0 and tau_down * -w_rate / max(w, _TINY) > best:
+                best, kind, need, lim = tau_down * -w_rate / max(w, _TINY), 2, -w_rate, \
+                    w / tau_down
+                rotor, sample = i, k
+            if abs(tilt_rate) / tilt_limit > best:
+                best, kind, need, lim = abs(tilt_rate) / tilt_limit, 3, abs(tilt_rate), \
+                    tilt_limit
+                rotor, sample = i, k
+            if is_end[k]:
+                d = math.atan2(lat, ver) - math.atan2(om0[k, 2 * i], om0[k, 2 * i + 1])
+                step = abs(math.atan2(math.sin(d), math.cos(d)))
+                if step / step_limit > best:
+                    best, kind, need, lim = step / step_limit, 4, step, step_limit
+                    rotor, sample = i, k
+    return best, kind, rotor, sample, need, lim
 
 
 class TimeScaling:
@@ -276,8 +321,11 @@ class TimeScaling:
     def __init__(self, env: Envelope, om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray,
                  dom1: np.ndarray, ends: np.ndarray | None = None) -> None:
         self.env, self.limit = env, env.limit
-        self.om0, self.om1, self.dom0, self.dom1 = om0, om1, dom0, dom1
-        self.ends = np.zeros(0, dtype=np.intp) if ends is None else ends
+        self.om0, self.om1, self.dom0, self.dom1 = (np.ascontiguousarray(x, dtype=np.float64)
+                                                    for x in (om0, om1, dom0, dom1))
+        self.is_end = np.zeros(len(om0), dtype=np.bool_)
+        if ends is not None:
+            self.is_end[ends] = True
         self._shortest: float | None = None
 
     def _omega(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
@@ -305,47 +353,13 @@ class TimeScaling:
         return w, w_rate / duration, tilt_rate / duration
 
     def excess(self, duration: float) -> Excess:
-        """The most demanding actuator of the path flown in `duration` s (module docstring)."""
+        """The most demanding actuator of the path flown in `duration` s (module docstring;
+        `excess_kernel`)."""
         env = self.env
-        w, w_rate, tilt_rate = self.rates(duration)
-        up = w + env.tau_up * np.maximum(w_rate, 0.0)
-        slow = env.tau_down * np.maximum(-w_rate, 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            down = np.where(slow > 0.0, slow / np.maximum(w, _TINY), 0.0)
-        candidates = (
-            (np.where(w_rate > 0.0, up, w) / env.limit, ROTOR, np.where(w_rate > 0.0, up, w),
-             np.full_like(w, env.limit)),
-            (down, ROTOR_DOWN, -np.minimum(w_rate, 0.0), w / env.tau_down),
-            (np.abs(tilt_rate) / env.tilt_limit, TILT, np.abs(tilt_rate),
-             np.full_like(w, env.tilt_limit)),
-            self._steps(duration),
-        )
-        best: Excess | None = None
-        for ratio, kind, need, limit in candidates:
-            k = int(np.argmax(ratio))
-            sample, rotor = divmod(k, ratio.shape[1])
-            r = float(ratio.flat[k])
-            if best is None or r > best.ratio:
-                if kind == ROTOR and w[sample, rotor] <= env.limit < need[sample, rotor]:
-                    kind = ROTOR_LAG
-                best = Excess(r, kind, rotor + 1, float(need[sample, rotor]),
-                              float(limit[sample, rotor]), sample)
-        assert best is not None
-        return best
-
-    def _steps(self, duration: float) -> tuple[np.ndarray, str, np.ndarray, np.ndarray]:
-        """Tilt steps at the path's ends, where it starts from or stops at rest with an
-        acceleration (a figure's T'' = pi k^2 at once): against what a servo turns in
-        TILT_STEP_S (candidates of `excess`, zero elsewhere)."""
-        om, _ = self._omega(duration)
-        step = np.zeros(om[:, 0::2].shape)
-        if len(self.ends):
-            rows, rest = om[self.ends], self.om0[self.ends]
-            d = np.arctan2(rows[:, 0::2], rows[:, 1::2]) - np.arctan2(rest[:, 0::2],
-                                                                       rest[:, 1::2])
-            step[self.ends] = np.abs(np.arctan2(np.sin(d), np.cos(d)))
-        limit = self.env.tilt_rate_max * TILT_STEP_S
-        return step / limit, TILT_STEP, step, np.full_like(step, limit)
+        ratio, kind, rotor, sample, need, limit = excess_kernel(
+            self.om0, self.om1, self.dom0, self.dom1, self.is_end, float(duration), env.limit,
+            env.tau_up, env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S)
+        return Excess(ratio, KINDS[kind], rotor + 1, need, limit, sample)
 
     def fits(self, duration: float) -> bool:
         return self.excess(duration).ratio <= 1.0
