@@ -14,7 +14,7 @@ PURE_MODULES = ("common/config.py", "common/geometry.py", "common/frames.py",
                 "fcu/dualquat.py", "fcu/trajectory.py", "fcu/tracker.py", "fcu/allocation.py",
                 "fcu/core.py", "fcu/mission.py", "fcu/supervisor.py", "common/modes.py",
                 "fcu/commander.py", "fcu/failsafe.py", "fcu/pipeline.py", "common/outcome.py",
-                "fcu/feasibility.py", "common/quaternion.py",
+                "fcu/feasibility.py", "common/quaternion.py", "fcu/actuator_monitor.py",
                 "sitl/plant.py", "sitl/disturbance.py", "fcu/estimator.py", "fcu/rate_filter.py",
                 "sitl/sensors.py", "common/sensors_config.py", "sitl/px4_wire.py",
                 "sitl/rotor_layout.py")
