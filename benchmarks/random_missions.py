@@ -250,6 +250,8 @@ def record(vehicle: str, k: int, seed: int, prep: Prepared) -> dict[str, Any]:
             "verdict": "accepted" if accepted else "refused",
             "result": prep.check.result, "reason": prep.check.reason,
             "reason_kind": "" if accepted else reason_kind(prep.check.reason),
+            "refused_item": "" if accepted or prep.check.seq is None
+            else item_kind(prep.items[prep.check.seq]),
             "planned_s": prep.planned[-1][2], "nominal_s": prep.nominal[-1][2],
             "stretched": bool(stretched), "stretched_items": stretched, "legs": legs}
 

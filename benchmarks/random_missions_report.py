@@ -118,6 +118,12 @@ def write_report(out: Path, results: list[dict[str, Any]], mocap: list[dict[str,
             ex = next(r["reason"] for r in results if r["vehicle"] == v
                       and r["reason_kind"] == kind)
             lines.append(f"| {v} | {kind} | {n} | {ex} |")
+    lines += ["", "| vehicle | refused item | count |", "|---|---|---|"]
+    for v in vehicles:
+        items = Counter(r.get("refused_item", "") for r in results
+                        if r["vehicle"] == v and r["verdict"] == "refused")
+        for kind, n in items.most_common():
+            lines.append(f"| {v} | {kind or '-'} | {n} |")
     lines += ["", "## Violations", "", "| vehicle | kind | count |", "|---|---|---|"]
     for v in vehicles:
         kinds = Counter(w.split(" ")[0] + (" " + w.split(" ")[1] if w.startswith(
