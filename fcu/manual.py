@@ -21,16 +21,9 @@ stopped; a stick held for T seconds at a deflection giving speed V moves the set
 `LEAD_M`. The attitude is the one at entry, turned about the world vertical by the yaw
 integrated so far (an omnidirectional vehicle keeps its roll and pitch in POSCTL).
 
-Flyable set-points (`fit_envelope`, fcu.setpoint_envelope): at the entry attitude turned to
-any yaw (and, for OFFBOARD and HOLD, whose attitude steps can take the vehicle anywhere, an
-SO(3) sample too), every corner of the acceleration limits and the rotation rate must keep
-each rotor within the envelope's speed limit (`fcu.feasibility`), each tilt within its rate
-limit while the body turns at that rate (about the world vertical for POSCTL, about any axis
-for OFFBOARD and HOLD: the rate is lowered in closed form), and each tilt STEP that a step
-of acceleration commands (from rest, or reversing) within what the servo turns in
-TILT_STEP_S, weighted by the rotor's thrust; the accelerations are halved until they do.
-The shapers have no jerk limit, so these steps set the accelerations: 0.375 to 0.75 m/s^2
-where 3 m/s^2 is asked (benchmarks/fit_envelope.py).
+Flyable set-points (`fit_envelope`): the accelerations are halved until the nominal wrench of
+every combination of their limits (and of the yaw rate and acceleration), at the entry
+attitude turned to any yaw, fits the vehicle's rotor envelope (`fcu.feasibility`).
 """
 
 from __future__ import annotations

@@ -21,11 +21,8 @@ braking curve sqrt(2 a |e|) beyond, never more than |e| / dt in a step. The corr
 rate is limited to the approach speeds and its change per step to the accelerations of
 `StickSettings`: POSCTL's MPC_VEL_MANUAL horizontally, MPC_Z_VEL_MAX_UP / _DN, MPC_ACC_HOR,
 MPC_ACC_UP_MAX / _DOWN_MAX, and a rotation about any axis at `ROTATION_RATE_DEG_S` and
-`ROTATION_ACC_DEG_S2` (`limits`), all fitted by `manual.fit_envelope` at OFFBOARD's entry
-(and HOLD's) to every actuator, for rotations about any axis at any attitude: the rotors'
-speed, the tilt servos' rate as the body turns (the rotation rate is lowered: about 20 deg/s
-on the tilted preset, 15 on the planar one) and the tilt steps of the step-wise accelerations
-(halved to 0.375 m/s^2 on both presets).
+`ROTATION_ACC_DEG_S2` (`limits`), all halved by `manual.fit_envelope` at OFFBOARD's entry
+until the rotors can fly them.
 
 So a stream that is a flyable trajectory (velocity and acceleration consistent with its
 positions) is flown as streamed (e stays zero), and a step of any size is flown at bounded
