@@ -6,8 +6,7 @@ omega, Omega = A^+ [f_b; tau_b], tilt alpha_i = atan2(lat_i, ver_i)) is evaluate
 
 * at a fixed set of attitudes (`attitudes`): the entry attitude turned to `YAW_SAMPLES` yaws
   and, for rotations about any axis, `SO3_SAMPLES` attitudes covering SO(3) (a super-Fibonacci
-  spiral, deterministic; the tilt steps, which sweep no axes, on `SO3_STEP_SAMPLES`);
-  attitudes where merely hovering exceeds the rotor limit are
+  spiral, deterministic); attitudes where merely hovering exceeds the rotor limit are
   skipped (a pose there is refused elsewhere, or cannot be shaped);
 * with every corner of the acceleration limits (8 horizontal directions x up, down, level,
   and rest) and the rotation rate and acceleration of either sign about `ROTATION_AXES` (body
@@ -46,7 +45,6 @@ from fcu.feasibility import TILT_STEP_S, Envelope
 
 YAW_SAMPLES = 12
 SO3_SAMPLES = 64
-SO3_STEP_SAMPLES = 1024  # tilt steps (no axes to sweep: cheap) on a denser sample
 THRUST_FLOOR = 0.2  # share of a rotor's hover thrust below which its tilt rate is not judged
 _PHI, _PSI = math.sqrt(2.0), 1.533751168755204288118041  # super-Fibonacci constants
 
@@ -94,14 +92,13 @@ def rotate_inv_n(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.asarray(v + w * t + np.cross(u, t))
 
 
-def attitudes(q0: tuple[float, float, float, float], any_axis: bool,
-              so3: int = SO3_SAMPLES) -> np.ndarray:
-    """q0 turned about the world vertical to YAW_SAMPLES yaws, and with `any_axis` an SO(3)
-    sample of `so3` too (rows, w x y z)."""
+def attitudes(q0: tuple[float, float, float, float], any_axis: bool) -> np.ndarray:
+    """q0 turned about the world vertical to YAW_SAMPLES yaws, and with `any_axis` the
+    SO(3) sample too (rows, w x y z)."""
     yaw = np.arange(YAW_SAMPLES) * (2.0 * np.pi / YAW_SAMPLES)
     turns = q_exp_n(np.stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw], 1))
     out = q_mul_n(turns, np.array(q0, dtype=np.float64))
-    return np.concatenate([out, so3_sample(so3)]) if any_axis else out
+    return np.concatenate([out, so3_sample()]) if any_axis else out
 
 
 def corners(acc_xy: float, acc_up: float, acc_down: float) -> np.ndarray:
@@ -183,12 +180,10 @@ def judge(env: Envelope, q0: tuple[float, float, float, float], acc_xy: float, a
     # tilt steps: rest -> corner and opposite corner -> corner; and a rotation acceleration
     # step about each axis from rest (its torque is small: judged apart)
     step = 0.0
-    qs = attitudes(q0, any_axis, SO3_STEP_SAMPLES)[:, None, :]
-    hover_s = _mag_alpha(_omega(env, qs, zero, zero, zero))[0]
-    qs = qs[np.sqrt(hover_s.max(axis=-1))[:, 0] <= env.limit]
-    to_mag, to_alpha = _mag_alpha(_omega(env, qs, an[:, :, 0], zero, zero))
+    to_mag, to_alpha = _mag_alpha(_omega(env, qn[:, :, 0], an[:, :, 0], zero, zero))
     wd = rate_acc_rad_s2 * ax[:, 0]
-    for fr in (_omega(env, qs, zero, zero, zero), _omega(env, qs, -an[:, :, 0], zero, zero)):
+    for fr in (_omega(env, qn[:, :, 0], zero, zero, zero),
+               _omega(env, qn[:, :, 0], -an[:, :, 0], zero, zero)):
         fr_mag, fr_alpha = _mag_alpha(fr)
         weight = np.minimum(1.0, np.minimum(to_mag, fr_mag) / share)
         step = max(step, float((_wrap(to_alpha - fr_alpha) * weight).max()))
