@@ -463,8 +463,7 @@ class Commander:
             start = self.last_ref if self.armed and self.last_ref is not None \
                 else self._current_pose_ref()
             self.offboard_limits = manual.fit_envelope(offboard.limits(self.flight.sticks),
-                                                       self.limits.vehicle, start.q_enu_flu,
-                                                       any_axis=True)
+                                                       self.limits.vehicle, start.q_enu_flu)
             sp = offboard.start(t_us, start)
         self.offboard_sp, ref = offboard.advance(sp, t_us, self.offboard.target(),
                                                  self.offboard_limits)
@@ -532,8 +531,7 @@ class Commander:
         if self._hold_shaped is not self.hold:
             start = self.last_ref if self.armed and self.last_ref is not None else self.hold
             self._hold_limits = manual.fit_envelope(offboard.limits(self.flight.sticks),
-                                                    self.limits.vehicle, start.q_enu_flu,
-                                                    any_axis=True)
+                                                    self.limits.vehicle, start.q_enu_flu)
             p, q = offboard.stopping_pose(start, self._hold_limits)
             self.hold = self._hold_shaped = pose_ref(p, q)
             self._hold_target = offboard.Target(0, p, _ZERO, _ZERO, q, _ZERO)

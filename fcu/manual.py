@@ -30,11 +30,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import NamedTuple
+from typing import Any, NamedTuple
+
+import numpy as np
 
 from common.config import VehicleConfig
 from common.frames import ned_to_enu
-from fcu import setpoint_envelope
 from fcu.dualquat import Quat, Vec3, q_exp, q_mul, q_rotate, q_rotate_inv
 from fcu.feasibility import envelope
 from fcu.tracker import Reference
@@ -189,44 +190,45 @@ def advance(sp: ManualSetpoint, t_us: int, sticks: Sticks, s: StickSettings,
     return new, Reference(p_new, q_new, v_new, a, omega, omega_dot)
 
 
-def needs(vehicle: VehicleConfig, q0: Quat, s: StickSettings,
-          any_axis: bool = False) -> setpoint_envelope.Needs:
-    """What the limits `s` need of the actuators at q0's attitude set (fcu.setpoint_envelope:
-    rotor speed, tilt rate of the rotation, tilt steps); rotations about the world vertical
-    only (POSCTL's yaw) or, with `any_axis`, about any axis at any attitude."""
-    return setpoint_envelope.judge(envelope(vehicle), q0, s.acc_xy_m_s2, s.acc_up_m_s2,
-                                   s.acc_down_m_s2, math.radians(s.yaw_rate_deg_s),
-                                   math.radians(s.yaw_acc_deg_s2), any_axis)
-
-
-def _fits(vehicle: VehicleConfig, q0: Quat, s: StickSettings, any_axis: bool = False) -> bool:
-    """Every need of `needs` within its limit."""
-    n = needs(vehicle, q0, s, any_axis)
+def _fits(vehicle: VehicleConfig, q0: Quat, s: StickSettings) -> bool:
+    """Every corner of the acceleration and yaw limits, at q0 turned to any of 12 yaws."""
     env = envelope(vehicle)
-    return n.rotor_ratio <= 1.0 and n.step_ratio <= 1.0 and \
-        n.tilt_per_rad * math.radians(s.yaw_rate_deg_s) <= env.tilt_limit * (1.0 + 1e-9)
+    acc: list[Vec3] = []  # world accelerations
+    rate: list[float] = []  # world yaw rates (about the ENU vertical) and their derivatives
+    rate_dot: list[float] = []
+    wz, wdz = math.radians(s.yaw_rate_deg_s), math.radians(s.yaw_acc_deg_s2)
+    for k in range(8):
+        ang = k * math.pi / 4.0
+        for az in (s.acc_up_m_s2, -s.acc_down_m_s2, 0.0):
+            for sign in (1.0, -1.0):
+                acc.append((s.acc_xy_m_s2 * math.cos(ang), s.acc_xy_m_s2 * math.sin(ang), az))
+                rate.append(sign * wz)
+                rate_dot.append(sign * wdz)
+    a: Any = tuple(np.array([x[i] for x in acc]) for i in range(3))
+    zero: Any = (0.0, 0.0, 0.0)
+    for j in range(12):
+        q = yawed(q0, j * math.pi / 6.0)
+        up = q_rotate_inv(q, (0.0, 0.0, 1.0))  # the world vertical in the body frame
+        w: Any = tuple(up[i] * np.array(rate) for i in range(3))
+        wd: Any = tuple(up[i] * np.array(rate_dot) for i in range(3))
+        if float(env.speeds(Reference(zero, q, zero, a, w, wd)).max()) > env.limit:
+            return False
+    return True
 
 
-def fit_envelope(s: StickSettings, vehicle: VehicleConfig | None, q0: Quat,
-                 any_axis: bool = False) -> StickSettings:
-    """`s` fitted to the vehicle (module docstring, "Flyable set-points"): the rotation rate
-    lowered to what the tilt servos follow; the accelerations (and the rotation's) halved
-    while a corner needs a rotor beyond its limit or a tilt step beyond what the servo turns
-    in TILT_STEP_S, at most FIT_HALVINGS times. As it is without a
-    vehicle; when nothing fits, the smallest one tried."""
+def fit_envelope(s: StickSettings, vehicle: VehicleConfig | None, q0: Quat) -> StickSettings:
+    """`s` with its accelerations (and yaw rate) halved until the vehicle can fly every
+    corner of them at the attitude q0 turned to any yaw; as it is without a vehicle. When
+    nothing fits (hovering there already exceeds the envelope) the smallest one tried."""
     if vehicle is None:
         return s
-    env = envelope(vehicle)
     trial = s
-    for k in range(FIT_HALVINGS + 1):
-        n = needs(vehicle, q0, trial, any_axis)
-        rate = math.degrees(setpoint_envelope.fitted_rate(n, env,
-                                                          math.radians(trial.yaw_rate_deg_s)))
-        trial = replace(trial, yaw_rate_deg_s=min(trial.yaw_rate_deg_s, rate))
-        if (n.rotor_ratio <= 1.0 and n.step_ratio <= 1.0) or k == FIT_HALVINGS:
+    for _ in range(FIT_HALVINGS):
+        if _fits(vehicle, q0, trial):
             return trial
         trial = replace(trial, acc_xy_m_s2=trial.acc_xy_m_s2 / 2,
                         acc_up_m_s2=trial.acc_up_m_s2 / 2,
                         acc_down_m_s2=trial.acc_down_m_s2 / 2,
+                        yaw_rate_deg_s=trial.yaw_rate_deg_s / 2,
                         yaw_acc_deg_s2=trial.yaw_acc_deg_s2 / 2)
     return trial
