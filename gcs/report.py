@@ -976,8 +976,9 @@ def _md_cell(text: str) -> str:
 
 
 def _events_summary(events: list[dict[str, Any]], limit: int = 4) -> str:
-    """One line: how many events, by severity, and the notable ones (warnings and worse,
-    failsafes, divergence), else the first few."""
+    """One line: how many events, by severity, and the notable ones in time order: every
+    reaction (failsafe, crash, divergence), then warnings up to `limit` in all (the rest
+    counted), else the first few."""
     if not events:
         return "none"
     counts: dict[str, int] = {}
@@ -985,9 +986,12 @@ def _events_summary(events: list[dict[str, Any]], limit: int = 4) -> str:
         level = e.get("severity")
         sev = SEVERITY.get(level, str(level)) if isinstance(level, int) else str(level)
         counts[sev] = counts.get(sev, 0) + 1
-    notable = [e for e in events if e.get("kind", "info") != "info"
-               or (isinstance(e.get("severity"), int) and e["severity"] <= 4)]
-    shown = (notable or events)[:limit]
+    reactions = [e for e in events if e.get("kind", "info") != "info"]
+    warnings = [e for e in events if e.get("kind", "info") == "info"
+                and isinstance(e.get("severity"), int) and e["severity"] <= 4]
+    notable = reactions + warnings  # failsafes, crashes, divergence always; then warnings
+    shown = (notable or events)[:max(limit, len(reactions))]
+    shown.sort(key=lambda e: e.get("t_s") or 0.0)
     parts = [f"{e.get('text', '?')} ({_fmt(e.get('t_s'))} s)" for e in shown]
     rest = len(notable or events) - len(shown)
     return (f"{len(events)} ({', '.join(f'{n} {s}' for s, n in counts.items())}): "

@@ -200,7 +200,7 @@ def test_refusal_comes_with_the_vehicles_reason(vehicle_factory):
     fast = MissionItem(1, M.MAV_FRAME_LOCAL_NED, MAV_CMD_POSE_KEYFRAME, 0, 1, 0.5, 0.0, 0.0,
                        0.0, local_xy(2.0), 0, -3.0)
     reason = check_mission([takeoff, fast], vehicle.server.limits).reason
-    assert reason.startswith("item 1: needs ")
+    assert reason.startswith("item 1: tilt servo ") and " rad/s, limit " in reason
     answer = upload_detailed(conn, *VEHICLE, [takeoff, fast])
     assert answer == UploadResult(M.MAV_MISSION_DENIED, (reason,), 1) and not answer.accepted
     assert answer.describe() == f"MAV_MISSION_DENIED: {reason}"

@@ -428,7 +428,7 @@ def test_refusal_reason_comes_as_statustext_before_the_ack():
     assert len(texts[0].text) == 50 and len(texts[1].text) < 50
     reason = " ".join("".join(t.text for t in texts).split())
     assert reason == check_mission(items, server.limits).reason
-    assert reason.startswith("item 1: needs ") and "lengthen p1 to" in reason
+    assert reason.startswith("item 1: tilt servo ") and "lengthen p1 to" in reason
     assert same_items(server.mission, old)
     again = [through_wire(r, VEHICLE) for r in server.handle(through_wire(
         M.MAVLink_mission_item_int_message(*VEHICLE, 1, items[1].frame, items[1].command, 0,

@@ -280,9 +280,14 @@ def test_table1_folder_report(table1_dir):
         assert f"**{m['status']}**" in row, row
         assert m["status_reason"] in row, row
         assert f"{len(m['events'])} (" in row, row  # the events' count, then the summary
-        for event in m["events"]:
-            if event["severity"] <= 4:  # warnings and worse are always named
-                assert event["text"] in row, (row, event)
+        reactions = [e for e in m["events"] if e["kind"] != "info"]
+        warnings = [e for e in m["events"] if e["kind"] == "info" and e["severity"] <= 4]
+        for event in reactions:  # failsafes, crashes, divergence are always named
+            assert event["text"] in row, (row, event)
+        named = [e for e in warnings if e["text"] in row]
+        assert len(named) >= min(len(warnings), max(0, 4 - len(reactions))), row
+        rest = len(reactions) + len(warnings) - max(4, len(reactions))
+        assert (f"… {rest} more" in row) == (rest > 0), row
         assert f"{m['position_error_m']['rmse']:.4g}" in text
     # The short runs still exercise both outcomes: PD loses the vehicle under the sine.
     assert statuses["case2_sine_pd"] == "diverged" and statuses["case1_figure8_pid"] == \
