@@ -44,7 +44,8 @@ in closed form; the rates add no closed form, so the shortest duration that fits
 every longer duration is found from that bound up on a geometric grid, then by bisection
 (`TimeScaling.shortest`).
 
-Sampling: `MOVE_SAMPLES` evenly spaced instants of a quintic move including both ends, plus the
+Sampling: `MOVE_SAMPLES` evenly spaced instants of a quintic move including both ends (more for
+a move that turns: at most `MOVE_STEP_RAD` of attitude apart), plus the
 instants of its extreme acceleration (s = 0.5 -/+ sqrt(3)/6) and of its top speed (s = 0.5);
 for the figure-infinity, evenly spaced instants with a step of at most `FIGURE_STEP_RAD` of
 attitude (T |n|) and of the path phase 2T (at least `MOVE_SAMPLES`, at most `FIGURE_SAMPLES_MAX`),
@@ -78,7 +79,8 @@ GRID_FITS = 8  # ... until this many in a row fit (x 2.1 in duration)
 GRID_MAX = 1000  # ... at most this many (x 1e41)
 BISECT_TOL = 1e-4  # relative: the shortest duration found is at most this much too long
 MOVE_SAMPLES = 64
-FIGURE_STEP_RAD = 0.1  # rad: sampled peaks within 0.1 % of the dense peak (measured)
+FIGURE_STEP_RAD = 0.02  # rad of attitude and phase between a figure's samples
+MOVE_STEP_RAD = 0.01  # rad of attitude between a turning move's samples
 FIGURE_SAMPLES_MAX = 4096
 STRETCH_GUARD = 1e-9  # relative: a stretched duration stays this far above the exact bound
 
@@ -97,9 +99,24 @@ _MOVE_INSTANTS = np.concatenate([np.linspace(0.0, 1.0, MOVE_SAMPLES), _QUINTIC_P
 _MOVE_INSTANTS.flags.writeable = False
 
 
-def move_instants() -> np.ndarray:
-    """Normalised check instants of a quintic move (module docstring; read-only)."""
-    return _MOVE_INSTANTS
+@lru_cache(maxsize=64)
+def _turning_instants(n: int) -> np.ndarray:
+    out = np.concatenate([np.linspace(0.0, 1.0, n), _QUINTIC_PEAKS])
+    out.flags.writeable = False
+    return out
+
+
+def move_instants(turn_rad: float = 0.0) -> np.ndarray:
+    """Normalised check instants of a quintic move that turns `turn_rad` (module docstring;
+    read-only): a tilt can swing fast where a rotor's thrust passes near zero as the body
+    turns, so a turning move is sampled at most MOVE_STEP_RAD of attitude apart."""
+    if turn_rad <= 0.0:
+        return _MOVE_INSTANTS
+    # the quintic's top rate is 1.875 x its mean: steps of turn / (n - 1) * 1.875 at most
+    n = math.ceil(1.875 * turn_rad / MOVE_STEP_RAD) + 1
+    if n <= MOVE_SAMPLES:
+        return _MOVE_INSTANTS
+    return _turning_instants(int(min(FIGURE_SAMPLES_MAX, 16 * math.ceil(n / 16))))
 
 
 def figure_instants(axis_norm: float, phase_instants: Any) -> np.ndarray:

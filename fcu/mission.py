@@ -429,7 +429,7 @@ class _Move(_Segment):
         return self._at(*quintic_poly(sigma), 1.0, many=True)
 
     def instants(self) -> np.ndarray:
-        return move_instants()
+        return move_instants(0.0 if self.phi is None else norm3(self.phi))
 
     @property
     def moves(self) -> bool:
