@@ -18,7 +18,7 @@ BIN = Path(sys.executable).parent
 pytestmark = pytest.mark.timeout(120)
 
 
-@pytest.mark.parametrize("delay_s", [0.15, 0.4, 0.8, 1.5])
+@pytest.mark.parametrize("delay_s", [0.4, 0.8, 1.5, 3.0])
 @pytest.mark.parametrize("prog", ["fcu", "sitl", "gcs"])
 def test_ctrl_c_while_starting_is_exit_0_without_a_traceback(prog, delay_s, tmp_path):
     port = free_port()
@@ -40,6 +40,7 @@ def test_ctrl_c_while_starting_is_exit_0_without_a_traceback(prog, delay_s, tmp_
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+    # (before ~0.4 s the interpreter itself may not have its SIGINT handler yet: not tested)
     assert "Traceback" not in err, err
     # fcu and sitl: 0 (as the README's "by hand" block needs); gcs: 0, or the run's own
     # verdict of a stopped flight, or 130 "interrupted"
