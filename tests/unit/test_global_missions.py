@@ -58,7 +58,7 @@ def _mission() -> list[MissionItem]:
             _local(2, M.MAV_CMD_NAV_LOITER_TIME, -1.5, 2.25, -4.0, p1=3.0),
             MissionItem(3, M.MAV_FRAME_LOCAL_NED, MAV_CMD_POSE_KEYFRAME, 0, 1, 6.0, 0.125,
                         -0.25, 0.5, local_xy(0.5), local_xy(0.75), -3.5),
-            MissionItem(4, M.MAV_FRAME_LOCAL_NED, MAV_CMD_FIGURE_EIGHT, 0, 1, 1.0, 110.0, 2.0,
+            MissionItem(4, M.MAV_FRAME_LOCAL_NED, MAV_CMD_FIGURE_EIGHT, 0, 1, 1.0, 120.0, 2.0,
                         1.0, 0, 0, -3.0),
             _local(5, M.MAV_CMD_NAV_LAND)]
 
