@@ -30,8 +30,11 @@ def test_ctrl_c_while_starting_is_exit_0_without_a_traceback(prog, delay_s, tmp_
             "gcs": ["run", "config/scenarios/case1_figure8.toml", "--out",
                     str(tmp_path / "run")]}[prog]
     root = Path(__file__).resolve().parents[2]
+    # As from a terminal: SIGINT at its default (pytest-xdist's workers ignore it, and a
+    # child started with it ignored would ignore a Ctrl-C until its own handler is set).
     proc = subprocess.Popen([str(BIN / prog), *argv], cwd=root, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         time.sleep(delay_s)  # the point of the test: a Ctrl-C at this moment of the start
         proc.send_signal(signal.SIGINT)
