@@ -36,6 +36,8 @@ from pathlib import Path
 
 import pytest
 
+from .terminal import sigint_default
+
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 PAGES = [README, *sorted((ROOT / "docs").glob("**/*.md"))]
@@ -305,7 +307,7 @@ def test_block_runs_as_written(block, tmp_path):
     # stay in it, so a block that overruns is stopped whole, none of its processes left.
     proc = subprocess.Popen(["unshare", "-rn", "bash", "-c", script], cwd=work, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=sigint_default)
     try:
         stdout, stderr = proc.communicate(timeout=BLOCK_TIMEOUT_S)
     except subprocess.TimeoutExpired:

@@ -14,6 +14,8 @@ import pytest
 
 from common.links import free_port
 
+from ..terminal import sigint_default
+
 BIN = Path(sys.executable).parent
 pytestmark = pytest.mark.timeout(120)
 
@@ -34,7 +36,7 @@ def test_ctrl_c_while_starting_is_exit_0_without_a_traceback(prog, delay_s, tmp_
     # child started with it ignored would ignore a Ctrl-C until its own handler is set).
     proc = subprocess.Popen([str(BIN / prog), *argv], cwd=root, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                            preexec_fn=sigint_default)
     try:
         time.sleep(delay_s)  # the point of the test: a Ctrl-C at this moment of the start
         proc.send_signal(signal.SIGINT)

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from ..terminal import sigint_default
+
 ROOT = Path(__file__).resolve().parents[2]
 CASE1 = ROOT / "config" / "scenarios" / "case1_figure8.toml"
 
@@ -58,7 +60,7 @@ def test_ctrl_c_leaves_an_aborted_run(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "gcs.cli", "run", str(CASE1), "--out",
                              str(out)], cwd=ROOT, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                            preexec_fn=sigint_default)
     try:
         deadline = time.monotonic() + 60.0
         while time.monotonic() < deadline and not (out / "onboard.ulg").exists():

@@ -35,6 +35,7 @@ from common.mavlink import MAV
 from common.quaternion import q_rotate
 from gcs.vehicle_link import PoseTarget, arm, set_mode
 
+from ..terminal import sigint_default
 from .conftest import ROOT, SCENARIOS, VEHICLE, launch, stop
 
 M = MAV
@@ -51,7 +52,7 @@ def _view(*args: str, stderr: Path) -> subprocess.Popen:
     with stderr.open("wb") as err:
         return subprocess.Popen([sys.executable, "-m", "gcs.cli", "view", *args], cwd=ROOT,
                                 stdout=subprocess.PIPE, stderr=err, stdin=subprocess.DEVNULL,
-                                text=True)
+                                text=True, preexec_fn=sigint_default)
 
 
 def _url(proc: subprocess.Popen, timeout: float = 30.0) -> str:
