@@ -33,8 +33,9 @@ from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE, INFO, Event
-from fcu import manual, offboard
+from fcu import approach, manual, offboard
 from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3
+from fcu.feasibility import Envelope, envelope
 from fcu.manual import ManualSetpoint, StickSettings
 from fcu.mission import MissionEvent, MissionExecutor, MissionLimits, level_attitude
 from fcu.tracker import Reference, VehicleState, pose_ref
@@ -109,6 +110,7 @@ class Commander:
         self.limits = limits
         self.offboard_timeout_s = offboard_timeout_s
         self.flight = flight or FlightSettings()
+        approach.warm()  # OFFBOARD's and HOLD's planner: compiled before the first period
         self.armed = False
         self.mode = Mode.HOLD
         self.flight_started = False  # lockstep: simulated time runs once this latches
@@ -127,12 +129,10 @@ class Commander:
         self.manual_sp: ManualSetpoint | None = None  # POSCTL's set-point (None: from here)
         self.manual_limits: StickSettings = self.flight.sticks  # fitted to the vehicle
         self.offboard_sp: offboard.Shaped | None = None  # OFFBOARD's shaper (None: from here)
-        self.offboard_limits: StickSettings = self.flight.sticks  # fitted at OFFBOARD's entry
+        self._offboard_refused = ""  # the last refusal said
         # HOLD brakes to `hold` (where the reference stops) with the same shaper
         self.hold_sp: offboard.Shaped | None = None
         self._hold_shaped: Reference | None = None  # the hold that hold_sp brakes to
-        self._hold_target: offboard.Target | None = None
-        self._hold_limits: StickSettings = self.flight.sticks
         self.state: VehicleState | None = None
         self.last_ref: Reference | None = None
         self.clock_us = 0  # the flight clock at the latest input (events are stamped with it)
@@ -456,18 +456,26 @@ class Commander:
         return ref
 
     def _offboard_ref(self, t_us: int) -> Reference:
-        """The streamed target approached within POSCTL's limits (`fcu.offboard`), from the
-        reference flown when OFFBOARD began (its velocity and body rate too)."""
+        """The streamed target approached within POSCTL's limits and the vehicle's envelope
+        (`fcu.offboard`), from the reference flown when OFFBOARD began (its velocity,
+        acceleration and body rate too)."""
         sp = self.offboard_sp
+        lim = offboard.limits(self.flight.sticks)
         if sp is None:
             start = self.last_ref if self.armed and self.last_ref is not None \
                 else self._current_pose_ref()
-            self.offboard_limits = manual.fit_envelope(offboard.limits(self.flight.sticks),
-                                                       self.limits.vehicle, start.q_enu_flu)
-            sp = offboard.start(t_us, start)
-        self.offboard_sp, ref = offboard.advance(sp, t_us, self.offboard.target(),
-                                                 self.offboard_limits)
+            sp = offboard.start(t_us, start, lim, self._envelope())
+        self.offboard_sp, ref = offboard.advance(sp, t_us, self.offboard.target(), lim,
+                                                 self._envelope())
+        refused = self.offboard_sp.refused
+        if refused and refused != self._offboard_refused:
+            self.say(SEVERITY_WARNING, refused)
+        self._offboard_refused = refused
         return ref
+
+    def _envelope(self) -> Envelope | None:
+        vehicle = self.limits.vehicle
+        return envelope(vehicle) if vehicle is not None else None
 
     # ------------------------------------------------------------------ failsafe reactions
 
@@ -530,17 +538,15 @@ class Commander:
             self.hold = self._current_pose_ref()
         if self._hold_shaped is not self.hold:
             start = self.last_ref if self.armed and self.last_ref is not None else self.hold
-            self._hold_limits = manual.fit_envelope(offboard.limits(self.flight.sticks),
-                                                    self.limits.vehicle, start.q_enu_flu)
-            p, q = offboard.stopping_pose(start, self._hold_limits)
-            self.hold = self._hold_shaped = pose_ref(p, q)
-            self._hold_target = offboard.Target(0, p, _ZERO, _ZERO, q, _ZERO)
-            self.hold_sp = offboard.start(t_us, start)
+            self.hold_sp, self.hold = offboard.brake(t_us, start,
+                                                     offboard.limits(self.flight.sticks),
+                                                     self._envelope())
+            self._hold_shaped = self.hold
         assert self.hold_sp is not None
-        if offboard.settled(self.hold_sp) and self.hold_sp.seq == 0:
+        if offboard.settled(self.hold_sp):
             return self.hold
-        self.hold_sp, ref = offboard.advance(self.hold_sp, t_us, self._hold_target,
-                                             self._hold_limits)
+        self.hold_sp, ref = offboard.advance(self.hold_sp, t_us, None,
+                                             offboard.limits(self.flight.sticks))
         return ref
 
     def _mission_ref(self, t_s: float) -> Reference:

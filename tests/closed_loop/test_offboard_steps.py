@@ -10,7 +10,7 @@ import math
 import pytest
 
 from common.config import load_scenario
-from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
+from common.frames import ned_to_enu, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
 from common.modes import Mode
 from common.quaternion import q_angle, q_conj, q_mul
 from gcs.inprocess import (
@@ -78,7 +78,7 @@ def fly_offboard(start_enu_m, target: PoseTarget, seconds: float) -> dict:
 @pytest.mark.parametrize(("start", "ned", "rpy", "seconds"), [
     ((-8.0, 5.0, 5.0), (1.0, -2.0, -3.0), (20.0, 0.0, 60.0), 8.0),  # the goto that crashed
     ((0.0, 0.0, 5.0), (30.0, -20.0, -10.0), (0.0, 0.0, -170.0), 14.0),
-    ((0.0, 0.0, 5.0), (0.0, 0.0, -5.0), (179.0, 0.0, 0.0), 6.0),  # upside down
+    ((0.0, 0.0, 5.0), (0.0, 0.0, -5.0), (179.0, 0.0, 0.0), 11.0),  # upside down, 8.8 s
 ])
 def test_a_large_offboard_step_is_flown_at_bounded_speed_and_reached(start, ned, rpy,
                                                                      seconds):
@@ -109,8 +109,11 @@ def test_hold_at_cruise_speed_brakes_then_holds_where_it_stopped():
     c = pipe.commander
     pipe.on_state(0, state_for_fcu(state), 0)
     assert pipe.arm()[0] == 0
-    assert c.offboard_position(0.0, 1, POSITION_ONLY, (100.0, 0.0, -5.0), (0.0,) * 3,
+    # 5 m/s north (a velocity set-point, the attitude held level)
+    assert c.offboard_position(0.0, 1, 0b0000_1101_1100_0111, (0.0,) * 3, (5.0, 0.0, 0.0),
                                (0.0,) * 3, math.nan)[0]
+    assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd(state.q_enu_flu),
+                               (0.0,) * 3)[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
     track_m, at_hold = 0.0, None
     for k in range(5000):

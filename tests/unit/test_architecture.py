@@ -17,7 +17,7 @@ PURE_MODULES = ("common/config.py", "common/geometry.py", "common/frames.py",
                 "fcu/feasibility.py", "common/quaternion.py", "fcu/actuator_monitor.py",
                 "sitl/plant.py", "sitl/disturbance.py", "fcu/estimator.py", "fcu/rate_filter.py",
                 "sitl/sensors.py", "common/sensors_config.py", "sitl/px4_wire.py",
-                "sitl/rotor_layout.py")
+                "sitl/rotor_layout.py", "fcu/approach.py", "fcu/offboard.py")
 
 
 def _imports(package: str) -> set[str]:

@@ -130,7 +130,8 @@ def test_an_armed_vehicle_leaves_the_ground_when_it_rises_or_moves():
 def test_saturation_is_monitored_in_the_step():
     """Given an offboard target 30 m away and a vehicle that does not move (the reference
     leaves it and the rotors saturate) and COM_SAT_T = 0.2 s, when the pipeline steps for
-    1.5 s, then the saturation is counted and reported."""
+    4 s (the approach starts smoothly: 7 m by then), then the saturation is counted and
+    reported."""
     vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
     pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
                     failsafes=FailsafeSettings(saturation_s=0.2, divergence_m=1000.0))
@@ -140,7 +141,7 @@ def test_saturation_is_monitored_in_the_step():
     assert c.offboard_position(0.0, 1, 0, (30.0, 0.0, -5.0), (0.0, 0.0, 0.0),
                                (0.0, 0.0, 0.0), 0.0)[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
-    for t in range(0, 1_500_000, 2000):
+    for t in range(0, 4_000_000, 2000):
         pipe.on_state(t, _state(5.0), t)
         pipe.step(t, 0.002)
     assert pipe.saturated_steps > 100 and pipe.failsafe == "rotor saturation"
@@ -301,7 +302,8 @@ def test_offboard_approaches_a_pose_from_the_reference_flown_without_a_yaw_stick
     p = [x[1] for x in track]
     assert math.dist(p[0], (0.0, 0.0, 3.0)) < 1e-3
     steps = [math.dist(a, b) * 500 for a, b in itertools.pairwise(p)]
-    assert max(steps) <= 5.0 + 1e-6 and max(steps) > 4.9
+    # at most MPC_VEL_MANUAL; the tilt servos (the envelope) bind first here, at 4.3 m/s
+    assert max(steps) <= 5.0 + 1e-6 and max(steps) > 4.0
     assert math.dist(p[-1], (0.0, 10.0, 3.0)) < 1e-6  # NED north is ENU y
     q_want = q_exp((0.0, 0.0, math.radians(90.0 - 120.0)))  # ENU yaw = 90 deg - NED yaw
     assert q_angle(q_mul(q_conj(q_want), c.last_ref.q_enu_flu)) < 1e-5

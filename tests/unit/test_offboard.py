@@ -1,6 +1,7 @@
-"""OFFBOARD's set-point shaper (fcu/offboard.py): a step is approached continuously, within
-the speed and acceleration limits, and reached exactly; a stream that is a trajectory is
-flown as streamed; velocity-only and rate-only samples fly the velocity and the rate."""
+"""OFFBOARD's set-point shaper (fcu/offboard.py, fcu/approach.py): a step is approached
+continuously in pose, velocity and acceleration, within the speed and acceleration limits,
+and reached exactly; a stream that is a trajectory is flown as streamed; velocity-only and
+rate-only samples fly the velocity and the rate; HOLD brakes to where it stops."""
 
 from __future__ import annotations
 
@@ -11,8 +12,9 @@ import pytest
 
 from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate
 from fcu import offboard
+from fcu.approach import right_jacobian, right_jacobian_inv
 from fcu.manual import StickSettings
-from fcu.offboard import Target, sqrt_controller
+from fcu.offboard import Target
 from fcu.tracker import Reference, pose_ref
 
 LIM = StickSettings(speed_xy_m_s=5.0, speed_up_m_s=3.0, speed_down_m_s=1.5, acc_xy_m_s2=3.0,
@@ -26,7 +28,7 @@ Q0 = (1.0, 0.0, 0.0, 0.0)
 def fly(start: Reference, targets, seconds: float) -> list[Reference]:
     """The references, one per 2 ms step from t = 0 (the entry); `targets(k)` is the
     sample seen at step k (it shapes the references from step k + 1 on)."""
-    s = offboard.start(0, start)
+    s = offboard.start(0, start, LIM)
     out = []
     for k in range(0, round(seconds * 500) + 1):
         s, ref = offboard.advance(s, k * DT_US, targets(k), LIM)
@@ -40,49 +42,46 @@ def rates(refs: list[Reference], pick) -> list[tuple[float, ...]]:
             for r0, r1 in itertools.pairwise(refs)]
 
 
-def test_sqrt_controller_is_linear_near_zero_then_a_braking_curve():
-    assert sqrt_controller(0.1, 2.0, 3.0, 0.0) == pytest.approx(0.2)
-    assert sqrt_controller(10.0, 2.0, 3.0, 0.0) == pytest.approx(math.sqrt(6 * (10 - 0.375)))
-    assert sqrt_controller(1e-4, 2.0, 3.0, 1e-5) == pytest.approx(2e-4)  # at most error/dt
-    lin = 3.0 / 4.0
-    assert sqrt_controller(lin, 2.0, 3.0, 0.0) == pytest.approx(2.0 * lin)  # continuous
-
-
 def test_a_far_step_is_flown_continuously_within_the_limits_and_reached():
     """Given a hold at the origin, when a sample 20 m north-east and 8 m up arrives, then the
     reference starts where it was, its horizontal speed and acceleration stay within 5 m/s
-    and 3 m/s^2, its climb within 3 m/s, the acceleration it reports is the one it flies,
-    and it ends on the target, still."""
+    and 3 m/s^2, its climb within 3 m/s, the acceleration it reports is the one it flies
+    (continuous: no step for the tilts to take), and it ends on the target, still."""
     target = Target(1, (14.0, 14.0, 8.0), Z, Z, None, Z)
     refs = fly(pose_ref(Z, Q0), lambda k: target, 20.0)
     assert math.dist(refs[0].p_enu_m, Z) < 1e-4
     v = [r.v_enu_m_s for r in refs]
     assert max(math.hypot(x[0], x[1]) for x in v) <= 5.0 + 1e-9
     assert max(x[2] for x in v) <= 3.0 + 1e-9
-    assert max(math.hypot(x[0], x[1]) for x in v) > 4.9  # it does cruise
+    assert max(math.hypot(x[0], x[1]) for x in v) > 4.8  # it is as fast as the limits let
+    assert max(math.hypot(*r.a_enu_m_s2[:2]) for r in refs) <= 3.0 + 1e-9
+    # differences of 2 ms steps: the mean over the step, within jerk x dt of its end
     acc = rates(refs, lambda r: r.v_enu_m_s)
-    assert max(math.hypot(a[0], a[1]) for a in acc) <= 3.0 + 1e-6
-    for a, r in zip(acc, refs[1:], strict=False):
-        assert a == pytest.approx(r.a_enu_m_s2, abs=1e-6)
+    for a, r0, r1 in zip(acc, refs, refs[1:], strict=False):
+        mid = [(x + y) / 2 for x, y in zip(r0.a_enu_m_s2, r1.a_enu_m_s2, strict=True)]
+        assert a == pytest.approx(mid, abs=2e-3)
+    jerk = rates(refs, lambda r: r.a_enu_m_s2)
+    assert max(math.dist(j, Z) for j in jerk) < 20.0  # no step in the acceleration
     p = rates(refs, lambda r: r.p_enu_m)
-    for d, r in zip(p, refs[1:], strict=False):  # position integrates the velocity
-        assert d == pytest.approx(r.v_enu_m_s, abs=1e-6)
+    for d, r0, r1 in zip(p, refs, refs[1:], strict=False):  # position integrates velocity
+        mid = [(x + y) / 2 for x, y in zip(r0.v_enu_m_s, r1.v_enu_m_s, strict=True)]
+        assert d == pytest.approx(mid, abs=2e-5)
     assert math.dist(refs[-1].p_enu_m, target.p_enu_m) < 1e-6
     assert max(map(abs, refs[-1].v_enu_m_s)) < 1e-6
 
 
 def test_descents_are_slower_than_climbs():
     """Given 10 m steps down and up, then the reference sinks at most 1.5 m/s (decelerating
-    at 3 m/s^2 up, accelerating at 2 m/s^2 down) and climbs at most 3 m/s."""
+    at most 3 m/s^2 up, accelerating at most 2 m/s^2 down) and climbs at most 3 m/s."""
     down = fly(pose_ref((0.0, 0.0, 20.0), Q0), lambda k: Target(1, (0.0, 0.0, 10.0), Z, Z,
                                                                     None, Z), 15.0)
     vz = [r.v_enu_m_s[2] for r in down]
-    assert min(vz) == pytest.approx(-1.5, abs=1e-9)
+    assert -1.5 - 1e-9 <= min(vz) < -1.45
     az = [r.a_enu_m_s2[2] for r in down]
     assert min(az) >= -2.0 - 1e-9 and max(az) <= 3.0 + 1e-9
     assert down[-1].p_enu_m[2] == pytest.approx(10.0, abs=1e-6)
     up = fly(pose_ref(Z, Q0), lambda k: Target(1, (0.0, 0.0, 10.0), Z, Z, None, Z), 15.0)
-    assert max(r.v_enu_m_s[2] for r in up) == pytest.approx(3.0, abs=1e-9)
+    assert 2.9 < max(r.v_enu_m_s[2] for r in up) <= 3.0 + 1e-9
     assert up[-1].p_enu_m[2] == pytest.approx(10.0, abs=1e-6)
 
 
@@ -93,11 +92,12 @@ def test_an_attitude_step_turns_within_the_rate_limit_and_ends_on_the_target():
     q_t = q_exp(tuple(math.radians(150) * a for a in axis))
     refs = fly(pose_ref(Z, Q0), lambda k: Target(1, None, Z, Z, q_t, Z), 8.0)
     w = [math.sqrt(sum(x * x for x in r.omega_flu_rad_s)) for r in refs]
-    assert max(w) <= math.radians(90) + 1e-9 and max(w) > math.radians(89)
-    for r0, r1 in itertools.pairwise(refs):  # q1 = q0 exp(omega dt)
+    assert max(w) <= math.radians(90) + 1e-9 and max(w) > math.radians(87)
+    for r0, r1 in itertools.pairwise(refs):  # q1 = q0 exp(omega dt), omega at mid-step
         seen = q_mul(q_conj(r0.q_enu_flu), r1.q_enu_flu)
-        assert q_angle(q_mul(q_conj(q_exp(tuple(x * 0.002 for x in r1.omega_flu_rad_s))),
-                             seen)) < 1e-6
+        mid = [(x + y) / 2 for x, y in zip(r0.omega_flu_rad_s, r1.omega_flu_rad_s,
+                                             strict=True)]
+        assert q_angle(q_mul(q_conj(q_exp(tuple(x * 0.002 for x in mid))), seen)) < 1e-6
     assert q_angle(q_mul(q_conj(q_t), refs[-1].q_enu_flu)) < 1e-6
     assert max(map(abs, refs[-1].omega_flu_rad_s)) < 1e-6
     assert max(math.dist(r.p_enu_m, Z) for r in refs) == 0.0  # the position stays
@@ -131,18 +131,23 @@ def test_a_streamed_trajectory_is_flown_as_streamed():
 
 def test_velocity_and_rate_only_samples_fly_the_velocity_and_the_rate():
     """Given samples without position (velocity 2 m/s east) and without attitude (a yaw rate
-    of 0.5 rad/s), then the reference accelerates to them and flies them: it moves east and
-    turns, and holds its height."""
+    of 0.5 rad/s), then the reference accelerates to them within the limits and flies them:
+    it moves east and turns (lagging the set-point by half the ramp, as a free end does, not
+    catching up), and holds its height."""
     refs = fly(pose_ref((0.0, 0.0, 3.0), Q0), lambda k: Target(k, None, (2.0, 0.0, 0.0), Z,
                                                                    None, (0.0, 0.0, 0.5)),
                5.0)
     assert refs[-1].v_enu_m_s == pytest.approx((2.0, 0.0, 0.0), abs=1e-6)
     assert refs[-1].omega_flu_rad_s == pytest.approx((0.0, 0.0, 0.5), abs=1e-6)
-    assert refs[-1].p_enu_m[0] == pytest.approx(2.0 * 5.0 - 2.0 ** 2 / (2 * 3.0), abs=0.05)
+    assert max(math.dist(r.a_enu_m_s2, Z) for r in refs) <= 3.0 + 1e-9
+    # the velocity ramps up in D >= 1.5 v / a = 1 s, lagging v D / 2 behind the set-point
+    ramp = [k for k, r in enumerate(refs) if abs(r.v_enu_m_s[0] - 2.0) > 1e-9][-1] * 0.002
+    assert 0.99 <= ramp < 1.1
+    assert refs[-1].p_enu_m[0] == pytest.approx(2.0 * 5.0 - 2.0 * ramp / 2, abs=0.01)
     assert refs[-1].p_enu_m[1:] == pytest.approx((0.0, 3.0), abs=1e-9)
     forward = q_rotate(refs[-1].q_enu_flu, (1.0, 0.0, 0.0))
     turned = math.atan2(forward[1], forward[0])
-    assert turned == pytest.approx(0.5 * 5.0 - 0.5 ** 2 / (2 * math.pi), abs=0.02)
+    assert 0.5 * 5.0 - 0.5 * 1.1 / 2 < turned < 0.5 * 5.0 - 0.5 * 0.45 / 2
 
 
 def test_a_new_sample_keeps_the_reference_continuous_in_velocity_and_rate():
@@ -179,33 +184,43 @@ def test_the_right_jacobian_is_the_body_rate_of_the_exponential_and_inverts(phi)
     moved = q_exp(tuple(p + h * d for p, d in zip(phi, x, strict=True)))
     body = q_mul(q_conj(q_exp(phi)), moved)
     seen = tuple(2.0 * c / h for c in body[1:])
-    assert offboard.right_jacobian(phi, x) == pytest.approx(seen, abs=1e-5)
-    back = offboard.right_jacobian_inv(phi, offboard.right_jacobian(phi, x))
+    assert right_jacobian(phi, x) == pytest.approx(seen, abs=1e-5)
+    back = right_jacobian_inv(phi, right_jacobian(phi, x))
     assert back == pytest.approx(x, abs=1e-9)
 
 
 @pytest.mark.parametrize("v", [(5.0, 0.0, 0.0), (0.3, -0.4, 0.0), (2.0, 1.0, 2.5),
                                (0.0, 0.0, -1.5), (0.0, 0.0, 0.0)])
-def test_a_moving_reference_brakes_to_its_stopping_pose_without_overshoot(v):
-    """Given a reference moving at v and turning at 1 rad/s (HOLD's entry), when braked to
-    `stopping_pose`, then it never goes past that point along any axis, decelerates within
-    the limits, and ends there, still (at once when it was still)."""
+def test_a_moving_reference_brakes_to_its_hold_pose_without_overshoot(v):
+    """Given a reference moving at v and turning at 1 rad/s (HOLD's entry), when braked
+    (`brake`), then it never goes past the hold pose along any axis, decelerates within the
+    limits with no step in its acceleration, and ends there, still (at once when it was
+    still); the hold is half the braking time at the entry's speed ahead."""
     w = (0.0, 0.6, 0.8)
     start = Reference((1.0, 2.0, 5.0), Q0, v, Z, w, Z)
-    p_stop, q_stop = offboard.stopping_pose(start, LIM)
-    refs = fly(start, lambda k: Target(0, p_stop, Z, Z, q_stop, Z), 12.0)
+    s, hold = offboard.brake(0, start, LIM)
+    assert s.plan is not None
+    d = s.plan.duration_s
+    p_stop, q_stop = hold.p_enu_m, hold.q_enu_flu
+    refs = []
+    for k in range(0, 12 * 500 + 1):
+        s, ref = offboard.advance(s, k * DT_US, None, LIM)
+        refs.append(ref)
+    assert refs[0].v_enu_m_s == pytest.approx(v, abs=1e-9)
+    assert refs[0].omega_flu_rad_s == pytest.approx(w, abs=1e-9)
     for i in range(3):
         if v[i] != 0.0:
             past = [(r.p_enu_m[i] - p_stop[i]) * math.copysign(1.0, v[i]) for r in refs]
             assert max(past) < 1e-6, i
         else:
             assert max(abs(r.p_enu_m[i] - p_stop[i]) for r in refs) < 1e-6, i
-    acc = rates(refs, lambda r: r.v_enu_m_s)
-    assert max(math.hypot(a[0], a[1]) for a in acc) <= 3.0 + 1e-6
-    assert min(a[2] for a in acc) >= -2.0 - 1e-6 and max(a[2] for a in acc) <= 3.0 + 1e-6
+        assert p_stop[i] - start.p_enu_m[i] == pytest.approx(v[i] * d / 2, abs=1e-9)
+    assert max(math.hypot(*r.a_enu_m_s2[:2]) for r in refs) <= 3.0 + 1e-9
+    assert min(r.a_enu_m_s2[2] for r in refs) >= -2.0 - 1e-9
+    assert max(r.a_enu_m_s2[2] for r in refs) <= 3.0 + 1e-9
+    assert max(math.dist(j, Z) for j in rates(refs, lambda r: r.a_enu_m_s2)) < 20.0
     assert math.dist(refs[-1].p_enu_m, p_stop) < 1e-6
     assert q_angle(q_mul(q_conj(q_stop), refs[-1].q_enu_flu)) < 1e-6
     assert max(map(abs, (*refs[-1].v_enu_m_s, *refs[-1].omega_flu_rad_s))) < 1e-6
-    turned = q_angle(q_mul(q_conj(Q0), q_stop))
-    assert turned == pytest.approx(offboard.stop_distance(1.0, offboard.GAIN_ATT_1_S,
-                                                          math.pi), abs=1e-9)
+    assert offboard.settled(s)
+    assert q_angle(q_mul(q_conj(Q0), q_stop)) == pytest.approx(1.0 * d / 2, abs=1e-9)

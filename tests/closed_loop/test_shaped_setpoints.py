@@ -1,0 +1,178 @@
+"""OFFBOARD steps and HOLD entries are shaped to what every actuator can follow, on both
+vehicle files (fcu/approach.py): 170 deg attitude steps about several axes and a HOLD at
+10 m/s are flown by the FCU's pipeline over the plant with no tilt servo rate-limited for
+COM_ACT_RATE_T (0.1 s) and within 5 cm and 3 deg of the shaped reference; a 170 deg roll,
+which no duration makes flyable (two tilts flip), is refused in attitude and held. An
+acceleration shaper without a jerk limit rate-limited tilt servos for 0.9 s and more on the
+roll, and lagged 7.5 cm (tilted) and 25 cm (planar) on the HOLD."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from common.config import load_vehicle
+from common.frames import enu_to_ned, q_enu_flu_to_ned_frd
+from common.modes import Mode
+from common.quaternion import q_angle, q_conj, q_exp, q_mul
+from gcs.inprocess import (
+    actuator_controls,
+    command_from_controls,
+    fcu_pipeline,
+    state_for_fcu,
+    through_wire_controls,
+)
+from sitl.plant import Plant, hover_speeds_and_tilts
+
+from .conftest import ROOT, scenario
+
+VEHICLES = ["hexa_tilted", "hexa_planar"]
+LIMIT_S = 0.1  # COM_ACT_RATE_T
+POSITION_ONLY = 0b0000_1101_1111_1000  # SET_POSITION_TARGET_LOCAL_NED: position and yaw
+VELOCITY_ONLY = 0b0000_1101_1100_0111  # ... velocity and yaw
+ATTITUDE_ONLY = 0b0100_0111  # SET_ATTITUDE_TARGET: attitude, no rates, no thrust
+
+
+class Flight:
+    """The pipeline flying the plant from a hover at `start_enu_m`, armed; `step` runs one
+    control period and keeps the figures."""
+
+    def __init__(self, vehicle_name: str, start_enu_m) -> None:
+        sc = scenario("case1_figure8",
+                      vehicle=load_vehicle(ROOT / "config" / "vehicles" /
+                                           f"{vehicle_name}.toml"))
+        self.vehicle = sc.vehicle
+        self.plant = Plant(self.vehicle, dt_us=1000)
+        speeds, tilts = hover_speeds_and_tilts(self.plant)
+        state = self.plant.initial_state(start_enu_m, on_ground=False,
+                                         rotor_speed_rad_s=speeds, tilt_rad=tilts)
+        self.state = state
+        self.pipe, _ = fcu_pipeline(sc)
+        self.pipe.on_state(0, state_for_fcu(self.state), 0)
+        assert self.pipe.arm()[0] == 0
+        self.track_m = self.track_rad = self.limited_s = 0.0
+
+    def step(self) -> None:
+        state, pipe = self.state, self.pipe
+        t = state.time_us
+        pipe.on_state(t, state_for_fcu(state), t)
+        out = pipe.step(t, 0.002)
+        ref = pipe.commander.last_ref
+        self.track_m = max(self.track_m, math.dist(ref.p_enu_m, state.p_enu_m))
+        self.track_rad = max(self.track_rad,
+                             q_angle(q_mul(q_conj(ref.q_enu_flu), state.q_enu_flu)))
+        self.limited_s = max(self.limited_s, *pipe.actuators.limited_s)
+        wire = through_wire_controls(actuator_controls(out, self.vehicle.rotor_speed_max_rad_s,
+                                                       lockstep=True))
+        command = command_from_controls(wire.controls, wire.mode, self.vehicle, state)
+        for _ in range(2):
+            state = self.plant.step(state, command)
+        self.state = state
+
+    def reports(self) -> list[str]:
+        return [e.text for e in self.pipe.commander.events
+                if "rate-limited" in e.text or "speed limit" in e.text]
+
+
+def _step_attitude(f: Flight, axis) -> tuple:
+    c = f.pipe.commander
+    q_t = q_exp(tuple(math.radians(170.0) * a for a in axis))
+    assert c.offboard_position(0.0, 1, POSITION_ONLY, enu_to_ned((0.0, 0.0, 5.0)),
+                               (0.0,) * 3, (0.0,) * 3, 0.0)[0]
+    assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q_t), (0.0,) * 3)[0]
+    assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
+    f.step()
+    assert c.offboard_sp is not None
+    return q_t, c.offboard_sp
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+@pytest.mark.parametrize("axis", [(0.0, 1.0, 0.0), (0.7071, 0.7071, 0.0),
+                                  (0.48, -0.6, 0.64), (0.7071, 0.0, 0.7071)])
+def test_a_170_degree_rotation_step_in_offboard_fits_every_actuator(vehicle, axis):
+    """Given a hover at 5 m, when OFFBOARD streams the same position turned 170 deg about a
+    body axis (pitch, and three tilted axes), then the approach keeps every tilt servo
+    within its rate (no limited period as long as COM_ACT_RATE_T, no report), the vehicle
+    stays within 5 cm and 3 deg of the reference, and it ends on the pose (1 cm, 0.5 deg)
+    still in OFFBOARD."""
+    f = Flight(vehicle, (0.0, 0.0, 5.0))
+    q_t, sp = _step_attitude(f, axis)
+    plan = sp.plan
+    assert plan is not None and plan.fits and not sp.refused, plan
+    for _ in range(round((plan.duration_s + 1.5) * 500)):
+        f.step()
+    c = f.pipe.commander
+    assert f.pipe.armed and c.mode == Mode.OFFBOARD and f.pipe.saturated_steps == 0
+    assert f.limited_s < LIMIT_S and not f.reports(), (f.limited_s, f.reports())
+    assert f.track_m < 0.05 and f.track_rad < math.radians(3.0), (f.track_m, f.track_rad)
+    assert math.dist(f.state.p_enu_m, (0.0, 0.0, 5.0)) < 0.01
+    assert q_angle(q_mul(q_conj(q_t), f.state.q_enu_flu)) < math.radians(0.5)
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+def test_a_170_degree_roll_that_would_flip_two_tilts_is_refused_and_held(vehicle):
+    """Given a hover at 5 m, when OFFBOARD streams a 170 deg roll (about the body's forward
+    axis rotors 2 and 5's thrust passes through zero: their tilts would flip half a turn,
+    which flown rate-limited them for 0.9 s or more), then the attitude is not flown: the
+    FCU says why in a warning, holds its attitude and position within 5 cm and 3 deg, with
+    no tilt servo rate-limited."""
+    f = Flight(vehicle, (0.0, 0.0, 5.0))
+    _, sp = _step_attitude(f, (1.0, 0.0, 0.0))
+    assert "tilt servo" in sp.refused and "flip" in sp.refused
+    for _ in range(3 * 500):
+        f.step()
+    c = f.pipe.commander
+    said = [e.text for e in c.events if e.text == sp.refused]
+    assert len(said) == 1  # once, not once per sample
+    assert f.pipe.armed and c.mode == Mode.OFFBOARD and f.pipe.saturated_steps == 0
+    assert f.limited_s < LIMIT_S and not f.reports(), (f.limited_s, f.reports())
+    assert f.track_m < 0.05 and f.track_rad < math.radians(3.0)
+    assert math.dist(f.state.p_enu_m, (0.0, 0.0, 5.0)) < 0.01
+    assert q_angle(f.state.q_enu_flu) < math.radians(0.5)
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+def test_hold_at_ten_metres_per_second_fits_every_actuator(vehicle):
+    """Given the vehicle flying east at 10 m/s (OFFBOARD velocity set-points at 20 Hz),
+    when HOLD comes, then the braking keeps every tilt servo within its rate (as does the
+    speed-up), the vehicle stays within 5 cm and 3 deg of the reference, and it comes to
+    rest at the hold pose, half the braking time at 10 m/s ahead (1 cm)."""
+    f = Flight(vehicle, (0.0, 0.0, 5.0))
+    c = f.pipe.commander
+
+    def stream(k: int) -> None:
+        if k % 25 == 0:
+            assert c.offboard_position(k * 0.002, 1, VELOCITY_ONLY, (0.0,) * 3,
+                                       enu_to_ned((10.0, 0.0, 0.0)), (0.0,) * 3, 0.0)[0]
+
+    stream(0)  # with the attitude held level (OFFBOARD needs a position or an attitude)
+    assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd((1.0, 0.0, 0.0, 0.0)),
+                               (0.0,) * 3)[0]
+    assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
+    k = 0
+    while k < 10 * 500:
+        stream(k)
+        f.step()
+        k += 1
+        if abs(c.last_ref.v_enu_m_s[0] - 10.0) < 1e-9 and k > 500:
+            break
+    for _ in range(250):  # 0.5 s at 10 m/s
+        stream(k)
+        f.step()
+        k += 1
+    assert math.hypot(*f.state.v_enu_m_s[:2]) > 9.9
+    at_hold = c.last_ref.p_enu_m
+    assert c.set_mode(Mode.HOLD, k * 0.002)[0] == 0
+    f.step()
+    assert c.hold_sp is not None and c.hold_sp.plan is not None
+    plan = c.hold_sp.plan
+    assert plan.fits and plan.duration_s >= 10.0 * 1.5 / 3.0 - 1e-9  # at MPC_ACC_HOR
+    hold = c.hold
+    assert hold.p_enu_m[0] - at_hold[0] == pytest.approx(10.0 * plan.duration_s / 2, abs=0.03)
+    for _ in range(round((plan.duration_s + 1.0) * 500)):
+        f.step()
+    assert f.pipe.armed and c.mode == Mode.HOLD and f.pipe.saturated_steps == 0
+    assert f.limited_s < LIMIT_S and not f.reports(), (f.limited_s, f.reports())
+    assert f.track_m < 0.05 and f.track_rad < math.radians(3.0), (f.track_m, f.track_rad)
+    assert math.dist(f.state.p_enu_m, hold.p_enu_m) < 0.01
