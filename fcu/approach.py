@@ -72,8 +72,10 @@ MAX_TRIES = 80
 SAMPLES = 64  # at least this many instants of the approach are checked
 STEP_RAD = 0.01  # ... at most this much attitude turned between two of them
 SAMPLES_MAX = 2048
+RAMP_SAMPLES = 32
 DIFF_S = 1e-5  # the central differences' time step (s)
 TINY = 1e-9  # an offset and its rates below this are zero: no plan
+CRUISE_MAX = 0.4  # a longer ramp share flies as the plain minimum-jerk blend
 FLIP_RAD = 1.0  # a nominal tilt that turns this much between two samples flips (`flip`)
 FLIP = "tilt flip"
 
@@ -103,7 +105,7 @@ class Approach(NamedTuple):
     """A planned approach: the quintics' coefficients (6 components x 6, in s = tau / D),
     its duration, and the most demanding actuator along it (None: no envelope checked)."""
 
-    coeffs: np.ndarray
+    coeffs: np.ndarray  # (6, 7): `coefficients`
     duration_s: float
     fits: bool
     excess: Excess | None
@@ -152,15 +154,45 @@ def quintic_to_rest(x0: float, v0: float, a0: float, d: float) -> tuple[float, .
 
 
 @njit
+def blend(s: float, r: float) -> tuple[float, float, float]:
+    """B(s) from 0 to 1 on [0, 1] and its first two s-derivatives, zero at both ends: the
+    minimum-jerk 10 s^3 - 15 s^4 + 6 s^5 for r = 0; for 0 < r <= 1/2 a cruise at
+    1 / (1 - r) between ramps of share r whose rate is the minimum-jerk blend of the ramp
+    (so B'' is continuous: no step in an acceleration)."""
+    if s <= 0.0:
+        return 0.0, 0.0, 0.0
+    if s >= 1.0:
+        return 1.0, 0.0, 0.0
+    if r <= 0.0:
+        s2 = s * s
+        return (s2 * s * (10.0 - 15.0 * s + 6.0 * s2), 30.0 * s2 * (1.0 - 2.0 * s + s2),
+                60.0 * s * (1.0 - 3.0 * s + 2.0 * s2))
+    k = 1.0 / (1.0 - r)
+    if r < s < 1.0 - r:
+        return k * (s - 0.5 * r), k, 0.0
+    u = s / r if s <= r else (1.0 - s) / r
+    u2 = u * u
+    big_q = u2 * u2 * (2.5 - 3.0 * u + u2)  # the integral of the ramp's rate
+    q = u2 * u * (10.0 - 15.0 * u + 6.0 * u2)
+    dq = 30.0 * u2 * (1.0 - u) * (1.0 - u)
+    if s <= r:
+        return k * r * big_q, k * q, k * dq / r
+    return 1.0 - k * r * big_q, k * q, -k * dq / r
+
+
+@njit
 def _component(k: np.ndarray, j: int, d: float, tau: float) -> tuple[float, float, float]:
-    """Component j's value, rate and acceleration at tau (zero from tau >= d on)."""
+    """Component j's value, rate and acceleration at tau (zero from tau >= d on): its
+    start k[j, 0] times 1 - B(s) (`blend`, cruise share k[j, 6]) plus the quintic of its
+    start's rates, k[j, 1..5]."""
     if tau >= d:
         return 0.0, 0.0, 0.0
     s = max(tau, 0.0) / d
-    c0, c1, c2, c3, c4, c5 = k[j, 0], k[j, 1], k[j, 2], k[j, 3], k[j, 4], k[j, 5]
-    x = c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
-    dx = (c1 + s * (2.0 * c2 + s * (3.0 * c3 + s * (4.0 * c4 + s * 5.0 * c5)))) / d
-    ddx = (2.0 * c2 + s * (6.0 * c3 + s * (12.0 * c4 + s * 20.0 * c5))) / (d * d)
+    x0, c1, c2, c3, c4, c5 = k[j, 0], k[j, 1], k[j, 2], k[j, 3], k[j, 4], k[j, 5]
+    b, db, ddb = blend(s, k[j, 6])
+    x = x0 * (1.0 - b) + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
+    dx = (-x0 * db + c1 + s * (2.0 * c2 + s * (3.0 * c3 + s * (4.0 * c4 + s * 5.0 * c5)))) / d
+    ddx = (-x0 * ddb + 2.0 * c2 + s * (6.0 * c3 + s * (12.0 * c4 + s * 20.0 * c5))) / (d * d)
     return x, dx, ddx
 
 
@@ -269,9 +301,11 @@ def free_end(x: Offset, d: float, free: tuple[bool, bool] = (True, True)) -> Off
                       eps=start(x.deps, x.ddeps) if free[1] else x.eps)
 
 
-def coefficients(x: Offset, d: float) -> np.ndarray:
-    rows = [quintic_to_rest(x.e[j], x.de[j], x.dde[j], d) for j in range(3)] + \
-        [quintic_to_rest(x.eps[j], x.deps[j], x.ddeps[j], d) for j in range(3)]
+def coefficients(x: Offset, d: float, r: float = 0.0) -> np.ndarray:
+    """Per component (e, then eps): its start, the quintic of its start's rates (from 0),
+    and the cruise share r (`_component`)."""
+    rows = [(x.e[j], *quintic_to_rest(0.0, x.de[j], x.dde[j], d)[1:], r) for j in range(3)] + \
+        [(x.eps[j], *quintic_to_rest(0.0, x.deps[j], x.ddeps[j], d)[1:], r) for j in range(3)]
     return np.array(rows)
 
 
@@ -279,37 +313,59 @@ def at_rest(x: Offset) -> bool:
     return max(map(abs, (*x.e, *x.de, *x.dde, *x.eps, *x.deps, *x.ddeps))) < TINY
 
 
-def _bound(x: Offset, lim: StickSettings) -> float:
-    """A lower bound on D from the limits (the search starts there and never goes below):
-    the rest-to-rest quintic's top speed is 1.875 and its top acceleration 5.774 times its
-    mean (a reference below its set-point climbs), and a rate v0 brakes at most at the
-    limit."""
-    e_xy, e_z, turn = math.hypot(x.e[0], x.e[1]), abs(x.e[2]), _norm(x.eps)
-    rot_rate, rot_acc = math.radians(lim.yaw_rate_deg_s), math.radians(lim.yaw_acc_deg_s2)
-    return max(D_MIN_S,
-               1.875 * e_xy / lim.speed_xy_m_s,
-               math.sqrt(5.774 * e_xy / lim.acc_xy_m_s2),
-               1.875 * e_z / (lim.speed_up_m_s if x.e[2] < 0.0 else lim.speed_down_m_s),
-               math.sqrt(5.774 * e_z / min(lim.acc_up_m_s2, lim.acc_down_m_s2)),
-               1.875 * turn / rot_rate, math.sqrt(5.774 * turn / rot_acc),
-               math.hypot(x.de[0], x.de[1]) / lim.acc_xy_m_s2,
+def _components(x: Offset, lim: StickSettings) -> list[tuple[float, float, float]]:
+    """(distance, speed limit, acceleration limit) of the offset's horizontal, vertical
+    (a reference below its set-point climbs) and rotation parts."""
+    return [(math.hypot(x.e[0], x.e[1]), lim.speed_xy_m_s, lim.acc_xy_m_s2),
+            (abs(x.e[2]), lim.speed_up_m_s if x.e[2] < 0.0 else lim.speed_down_m_s,
+             min(lim.acc_up_m_s2, lim.acc_down_m_s2)),
+            (_norm(x.eps), math.radians(lim.yaw_rate_deg_s), math.radians(lim.yaw_acc_deg_s2))]
+
+
+def _bound(x: Offset, lim: StickSettings, r: float = 0.0) -> float:
+    """A lower bound on D from the limits (the search starts there and never goes below).
+    From rest, `blend`'s top rate is 1.875 (r = 0) or 1 / (1 - r) times the mean, its top
+    acceleration 5.774 or 1.875 / (r (1 - r)) times the distance / D^2; a rate v0 brakes at
+    most at the limit."""
+    d = D_MIN_S
+    for dist, speed, acc in _components(x, lim):
+        if r <= 0.0:
+            d = max(d, 1.875 * dist / speed, math.sqrt(5.774 * dist / acc))
+        else:
+            d = max(d, dist / (speed * (1.0 - r)), math.sqrt(1.875 * dist / (acc * r * (1 - r))))
+    return max(d, math.hypot(x.de[0], x.de[1]) / lim.acc_xy_m_s2,
                abs(x.de[2]) / min(lim.acc_up_m_s2, lim.acc_down_m_s2),
-               _norm(x.deps) / rot_acc)
+               _norm(x.deps) / math.radians(lim.yaw_acc_deg_s2))
 
 
-def _instants(sp: Setpoint, x: Offset, d: float) -> np.ndarray:
-    """Check instants: evenly spaced over [0, d], at most STEP_RAD of attitude apart."""
-    turn = 1.875 * _norm(x.eps) + _norm(sp.w) * d + _norm(x.deps) * d
-    n = int(min(SAMPLES_MAX, max(SAMPLES, math.ceil(turn / STEP_RAD) + 1)))
-    return np.linspace(0.0, d, n)
+def cruise_share(x: Offset, lim: StickSettings) -> float:
+    """The cruise share r (`blend`) that reaches the speed limit of the part that takes
+    longest, ramping at its acceleration limit: D = dist / V + 1.875 V / A, r = 1.875 V /
+    (A D); 0 (no cruise) where the ramps would take most of it (r > CRUISE_MAX)."""
+    best_d, r = 0.0, 0.0
+    for dist, speed, acc in _components(x, lim):
+        ramp = 1.875 * speed / acc
+        d = dist / speed + ramp
+        if dist > 0.0 and d > best_d:
+            best_d, r = d, ramp / d
+    return r if 0.0 < r <= CRUISE_MAX else 0.0
 
 
-def check(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset, d: float
-          ) -> tuple[float, Excess | None]:
+def _instants(sp: Setpoint, x: Offset, d: float, r: float = 0.0) -> np.ndarray:
+    """Check instants: evenly spaced over [0, d], at most STEP_RAD of attitude apart (the
+    blend's top rate is at most twice its mean), and RAMP_SAMPLES in each ramp of a
+    cruise."""
+    turn = 2.0 * _norm(x.eps) + _norm(sp.w) * d + _norm(x.deps) * d
+    n = max(SAMPLES, math.ceil(turn / STEP_RAD) + 1, math.ceil(RAMP_SAMPLES / r) if r else 0)
+    return np.linspace(0.0, d, int(min(SAMPLES_MAX, n)))
+
+
+def check(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset, d: float,
+          r: float = 0.0) -> tuple[float, Excess | None]:
     """(ratio, excess) of the approach of offset x to set-point sp in d seconds: the largest
     share of a limit or an actuator's envelope it uses (> 1: it does not fit)."""
-    k = coefficients(x, d)
-    taus = _instants(sp, x, d)
+    k = coefficients(x, d, r)
+    taus = _instants(sp, x, d, r)
     ratio = float(_kinematic_ratio(k, d, taus, _limits(lim, x)))
     if env is None:
         return ratio, None
@@ -353,7 +409,8 @@ def plan(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
          free: tuple[bool, bool] = (False, False)) -> Approach | None:
     """The shortest approach of offset x to set-point sp that fits (module docstring); where
     `free` (position, attitude), x's value there is free (`free_end`): the approach starts
-    at the returned coefficients' first column. None: x is at rest at zero already."""
+    at the returned coefficients' first column. A fixed end is also tried with a cruise
+    (`cruise_share`), the shorter kept. None: x is at rest at zero already."""
     if at_rest(free_end(x, 0.0, free)):
         return None
     d = _bound(free_end(x, 0.0, free), lim)  # a free part's value is no bound
@@ -362,13 +419,24 @@ def plan(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
                 1.5 * abs(x.de[2]) / min(lim.acc_up_m_s2, lim.acc_down_m_s2))
     if free[1]:
         d = max(d, 1.5 * _norm(x.deps) / math.radians(lim.yaw_acc_deg_s2))
+    if env is not None:
+        flipped = flip(env, sp, free_end(x, d, free), d)
+        if flipped is not None:  # slower would leave that rotor's thrust wrong for longer
+            return Approach(coefficients(free_end(x, d, free), d), d, False, flipped)
+    best = _search(env, lim, sp, x, free, 0.0, d)
+    r = 0.0 if any(free) else cruise_share(x, lim)
+    if r > 0.0:
+        cruise = _search(env, lim, sp, x, free, r, _bound(x, lim, r))
+        if cruise.fits and (not best.fits or cruise.duration_s < best.duration_s):
+            best = cruise
+    return best
 
+
+def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
+            free: tuple[bool, bool], r: float, d: float) -> Approach:
+    """The shortest duration from d up that fits with cruise share r (module docstring)."""
     def trial(dur: float) -> tuple[float, Excess | None]:
-        return check(env, lim, sp, free_end(x, dur, free), dur)
-
-    flipped = flip(env, sp, free_end(x, d, free), d) if env is not None else None
-    if flipped is not None:  # slower would only leave that rotor's thrust wrong for longer
-        return Approach(coefficients(free_end(x, d, free), d), d, False, flipped)
+        return check(env, lim, sp, free_end(x, dur, free), dur, r)
 
     lo, best = math.nan, None
     for _ in range(MAX_TRIES):
@@ -381,7 +449,7 @@ def plan(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
             break
         d = min(D_MAX_S, d * max(GROW_MIN, min(math.sqrt(ratio), GROW_MAX)))
     if best is None:  # nothing fits: the longest tried
-        return Approach(coefficients(free_end(x, d, free), d), d, False, trial(d)[1])
+        return Approach(coefficients(free_end(x, d, free), d, r), d, False, trial(d)[1])
     hi, hi_excess = best
     while not math.isnan(lo) and hi - lo > REFINE_TOL * hi:
         mid = 0.5 * (lo + hi)
@@ -390,7 +458,7 @@ def plan(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
             hi, hi_excess = mid, excess
         else:
             lo = mid
-    return Approach(coefficients(free_end(x, hi, free), hi), hi, True, hi_excess)
+    return Approach(coefficients(free_end(x, hi, free), hi, r), hi, True, hi_excess)
 
 
 def start_offset(a: Approach) -> tuple[Vec3, Vec3]:
@@ -401,7 +469,7 @@ def start_offset(a: Approach) -> tuple[Vec3, Vec3]:
 
 
 def _warm() -> None:
-    k = np.zeros((6, 6))
+    k = np.zeros((6, 7))
     reference_kernel(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, 0.0, 0.0)
     _rows(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, np.zeros(2))
     _kinematic_ratio(k, 1.0, np.zeros(2), np.ones(8))
