@@ -38,7 +38,7 @@ def test_the_blend_goes_from_0_to_1_with_continuous_rate_and_acceleration(r):
     for x in s:
         if not 2 * h <= x <= 1 - 2 * h:
             continue
-        b, db, ddb = blend(x, r)
+        _, db, ddb = blend(x, r)
         lo, hi = blend(x - h, r), blend(x + h, r)
         assert (hi[0] - lo[0]) / (2 * h) == pytest.approx(db, abs=1e-5)
         assert (hi[1] - lo[1]) / (2 * h) == pytest.approx(ddb, abs=1e-3 + 1e-3 * abs(ddb))
