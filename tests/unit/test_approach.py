@@ -15,7 +15,7 @@ import pytest
 from common.config import load_vehicle
 from common.quaternion import q_exp
 from fcu import approach, offboard
-from fcu.approach import Offset, Setpoint, blend
+from fcu.approach import Setpoint, blend
 from fcu.feasibility import envelope
 from fcu.manual import StickSettings
 from fcu.offboard import Target
