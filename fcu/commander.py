@@ -448,8 +448,12 @@ class Commander:
         if sp is None:
             start = self._current_pose_ref()
             sp = manual.start(t_us, start.p_enu_m, start.q_enu_flu)
-            self.manual_limits = manual.fit_envelope(self.flight.sticks, self.limits.vehicle,
-                                                     start.q_enu_flu)
+            self.manual_limits = lim = manual.fit_envelope(self.flight.sticks,
+                                                           self.limits.vehicle,
+                                                           start.q_enu_flu)
+            if lim.acc_xy_m_s2 < self.flight.sticks.acc_xy_m_s2:  # said, as it is unusual
+                self.say(SEVERITY_INFO, f"POSCTL: acc {lim.acc_xy_m_s2:.2g} m/s2, jerk "
+                                        f"{lim.jerk_m_s3:.2g} m/s3 here")
         p_vehicle = self.state.p_enu_m if self.state is not None else None
         self.manual_sp, ref = manual.advance(sp, t_us, self.sticks, self.manual_limits,
                                              p_vehicle)

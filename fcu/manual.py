@@ -12,18 +12,30 @@ velocity, as PX4's position mode does without its expo curve:
     vertical:   up d * speed_up_m_s, down d * speed_down_m_s
     yaw:        d * yaw_rate_deg_s about the world vertical (clockwise seen from above)
 
-The set-point's velocity follows that target within the acceleration limits (acc_xy_m_s2
-horizontally, acc_up_m_s2 / acc_down_m_s2 vertically, yaw_acc_deg_s2), and its position
-integrates the velocity exactly (constant acceleration over each period). Sticks centred:
-the velocity brakes to zero at the acceleration limit and the set-point holds where it
-stopped; a stick held for T seconds at a deflection giving speed V moves the set-point V T
-(the ramp up and the braking cancel). The set-point never leads the vehicle by more than
-`LEAD_M`. The attitude is the one at entry, turned about the world vertical by the yaw
-integrated so far (an omnidirectional vehicle keeps its roll and pitch in POSCTL).
+The set-point's velocity follows that target with a jerk-limited acceleration, as PX4's
+and ArduPilot's jerk-limited shapers do (ArduPilot's `shape_vel_accel`): the acceleration
+wanted is `sqrt_controller` of the velocity error (second-order limit the jerk; gain
+GAIN_RATIO jerk / acceleration limit: ArduPilot's ratio 1 leaves an exponential tail that
+creeps 0.4 m after braking from 5 m/s), at most acc_xy_m_s2 horizontally and acc_up_m_s2 / acc_down_m_s2
+vertically (yaw_acc_deg_s2 in yaw), and the acceleration moves towards it by at most the jerk
+times the period (jerk_m_s3: PX4's MPC_JERK_MAX; yaw_jerk_deg_s3). The acceleration is thus
+continuous: an acceleration step is a step of every tilt angle, which a rate-limited servo
+cannot take. Position and velocity integrate the piecewise-linear acceleration exactly.
+Sticks centred: the velocity brakes to zero and the set-point holds where it stopped; a stick
+held for T seconds at a deflection giving speed V moves the set-point about V T (the ramp up
+and the braking nearly cancel: within 2 % for 2 s at 5 m/s). The set-point never leads the vehicle by more than `LEAD_M`. The attitude is
+the one at entry, turned about the world vertical by the yaw integrated so far (an
+omnidirectional vehicle keeps its roll and pitch in POSCTL).
 
-Flyable set-points (`fit_envelope`): the accelerations are halved until the nominal wrench of
-every combination of their limits (and of the yaw rate and acceleration), at the entry
-attitude turned to any yaw, fits the vehicle's rotor envelope (`fcu.feasibility`).
+Flyable set-points (`fit_envelope`): the accelerations (and the yaw rate and acceleration) are
+halved until the nominal wrench of every combination of their limits, at the entry attitude
+turned to any yaw, fits the vehicle's rotor envelope (`fcu.feasibility`); then the jerks and
+the yaw rate are cut until the tilt rates they cause there (the gradients of the allocated
+tilts in the acceleration, the yaw and the yaw acceleration, by central differences) keep
+within the tilt servos' share TILT_MARGIN: half of it for the jerk, a quarter each for the yaw
+rate and the yaw jerk. Where a corner takes a rotor's thrust near zero its tilt swings
+fast (the gradients grow without bound): while the jerk or yaw rate left would be below
+JERK_FLOOR_M_S3 or YAW_FLOOR_DEG_S, the accelerations are halved again.
 """
 
 from __future__ import annotations
@@ -47,6 +59,12 @@ DEADZONE = 0.05  # share of the deflection around the centre that commands nothi
 LEAD_M = 1.0  # the set-point stays within this distance of the vehicle
 MAX_DT_S = 0.1  # a longer gap between two samples integrates as this long
 FIT_HALVINGS = 8  # `fit_envelope` halves the accelerations at most this many times
+GAIN_RATIO = 4.0  # the shaper's gain near zero, times jerk / acceleration (ArduPilot: 1)
+REST_M_S, REST_M_S2 = 1e-6, 1e-5  # with the sticks centred, a velocity and an acceleration
+REST_RAD_S, REST_RAD_S2 = 1e-6, 1e-5  # below these are rest (and the yaw's)
+GRADIENT_STEP = 1e-4  # m/s^2 and rad (/s^2): `_tilt_gradients`' central differences
+JERK_SHARE, YAW_RATE_SHARE, YAW_JERK_SHARE = 0.5, 0.25, 0.25  # of the tilt rate budget
+JERK_FLOOR_M_S3, YAW_FLOOR_DEG_S = 1.0, 10.0  # below these, the accelerations are halved
 
 
 class Sticks(NamedTuple):
@@ -87,6 +105,8 @@ class StickSettings:
     acc_down_m_s2: float = 3.0  # MPC_ACC_DOWN_MAX
     yaw_rate_deg_s: float = 90.0  # MPC_MAN_Y_MAX
     yaw_acc_deg_s2: float = 180.0
+    jerk_m_s3: float = 8.0  # MPC_JERK_MAX
+    yaw_jerk_deg_s3: float = 720.0
 
 
 def deflection(s: float) -> float:
@@ -128,7 +148,7 @@ def heading_ned(q_enu_flu: Quat) -> float:
 
 class ManualSetpoint(NamedTuple):
     """The POSCTL set-point at t_us (ENU): position, velocity, the attitude at entry and the
-    NED yaw turned since, and the yaw rate."""
+    NED yaw turned since, the yaw rate, the acceleration and the yaw acceleration."""
 
     t_us: int
     p_enu_m: Vec3
@@ -136,6 +156,8 @@ class ManualSetpoint(NamedTuple):
     q0_enu_flu: Quat
     yaw_ned_rad: float = 0.0
     yaw_rate_ned_rad_s: float = 0.0
+    a_enu_m_s2: Vec3 = (0.0, 0.0, 0.0)
+    yaw_acc_ned_rad_s2: float = 0.0
 
     @property
     def q_enu_flu(self) -> Quat:
@@ -147,6 +169,24 @@ def start(t_us: int, p_enu_m: Vec3, q_enu_flu: Quat) -> ManualSetpoint:
     return ManualSetpoint(t_us, p_enu_m, (0.0, 0.0, 0.0), q_enu_flu)
 
 
+def sqrt_controller(error: float, gain: float, limit: float, dt: float) -> float:
+    """ArduPilot's sqrt_controller for error >= 0: the rate that brings `error` to zero,
+    gain * error near zero, sqrt(2 limit (error - limit / 2 gain^2)) beyond limit / gain^2,
+    and at most error / dt (the step does not overshoot)."""
+    linear = limit / (gain * gain)
+    rate = math.sqrt(2.0 * limit * (error - 0.5 * linear)) if error > linear else gain * error
+    return min(rate, error / dt) if dt > 0.0 else rate
+
+
+def _shape(err: float, a: float, acc_pos: float, acc_neg: float, jerk: float, dt: float
+           ) -> float:
+    """One axis of `shape_vel_accel`: the acceleration after dt for a velocity error err."""
+    acc = acc_pos if err > 0.0 else acc_neg
+    want = math.copysign(min(sqrt_controller(abs(err), GAIN_RATIO * jerk / acc, jerk, dt),
+                             acc), err)
+    return a + max(-jerk * dt, min(jerk * dt, want - a))
+
+
 def advance(sp: ManualSetpoint, t_us: int, sticks: Sticks, s: StickSettings,
             p_vehicle_enu_m: Vec3 | None = None) -> tuple[ManualSetpoint, Reference]:
     """The set-point at t_us after holding `sticks` since sp.t_us, and its reference
@@ -155,21 +195,32 @@ def advance(sp: ManualSetpoint, t_us: int, sticks: Sticks, s: StickSettings,
     q = sp.q_enu_flu
     v_ned, yaw_rate_target = stick_velocity(sticks, heading_ned(q), s)
     target = ned_to_enu(v_ned)
-    v = sp.v_enu_m_s
-    dvx, dvy = target[0] - v[0], target[1] - v[1]
-    dvz = target[2] - v[2]
-    dh = math.hypot(dvx, dvy)
-    lim = s.acc_xy_m_s2 * dt
-    if dh > lim:
-        dvx, dvy = dvx * lim / dh, dvy * lim / dh
-    dvz = max(-s.acc_down_m_s2 * dt, min(s.acc_up_m_s2 * dt, dvz))
-    dyr = yaw_rate_target - sp.yaw_rate_ned_rad_s
-    ylim = math.radians(s.yaw_acc_deg_s2) * dt
-    dyr = max(-ylim, min(ylim, dyr))
-    v_new = (v[0] + dvx, v[1] + dvy, v[2] + dvz)
+    v, a = sp.v_enu_m_s, sp.a_enu_m_s2
+    # horizontal: the error's direction, its size shaped, the change limited as a vector
+    ex, ey = target[0] - v[0], target[1] - v[1]
+    eh = math.hypot(ex, ey)
+    if eh > 0.0:
+        mag = min(sqrt_controller(eh, GAIN_RATIO * s.jerk_m_s3 / s.acc_xy_m_s2, s.jerk_m_s3,
+                                  dt), s.acc_xy_m_s2)
+        want_x, want_y = ex / eh * mag, ey / eh * mag
+    else:
+        want_x = want_y = 0.0
+    dax, day = want_x - a[0], want_y - a[1]
+    dah = math.hypot(dax, day)
+    if dah > s.jerk_m_s3 * dt:  # so dah > 0
+        dax, day = dax * s.jerk_m_s3 * dt / dah, day * s.jerk_m_s3 * dt / dah
+    az = _shape(target[2] - v[2], a[2], s.acc_up_m_s2, s.acc_down_m_s2, s.jerk_m_s3, dt)
+    a_new = (a[0] + dax, a[1] + day, az)
+    v_new = (v[0] + 0.5 * (a[0] + a_new[0]) * dt, v[1] + 0.5 * (a[1] + a_new[1]) * dt,
+             v[2] + 0.5 * (a[2] + a_new[2]) * dt)
+    if not any(target) and max(map(abs, v_new)) < REST_M_S and \
+            max(map(abs, a_new)) < REST_M_S2:
+        v_new = a_new = (0.0, 0.0, 0.0)  # at rest: no creep from the shaper's linear tail
     p = sp.p_enu_m
-    p_new = (p[0] + 0.5 * (v[0] + v_new[0]) * dt, p[1] + 0.5 * (v[1] + v_new[1]) * dt,
-             p[2] + 0.5 * (v[2] + v_new[2]) * dt)
+    h = dt * dt / 6.0
+    p_new = (p[0] + v[0] * dt + (2.0 * a[0] + a_new[0]) * h,
+             p[1] + v[1] * dt + (2.0 * a[1] + a_new[1]) * h,
+             p[2] + v[2] * dt + (2.0 * a[2] + a_new[2]) * h)
     if p_vehicle_enu_m is not None:
         d = (p_new[0] - p_vehicle_enu_m[0], p_new[1] - p_vehicle_enu_m[1],
              p_new[2] - p_vehicle_enu_m[2])
@@ -178,16 +229,20 @@ def advance(sp: ManualSetpoint, t_us: int, sticks: Sticks, s: StickSettings,
             k = LEAD_M / lead
             p_new = (p_vehicle_enu_m[0] + d[0] * k, p_vehicle_enu_m[1] + d[1] * k,
                      p_vehicle_enu_m[2] + d[2] * k)
-    yaw_rate = sp.yaw_rate_ned_rad_s + dyr
-    yaw = sp.yaw_ned_rad + 0.5 * (sp.yaw_rate_ned_rad_s + yaw_rate) * dt
-    a = (dvx / dt, dvy / dt, dvz / dt) if dt > 0.0 else (0.0, 0.0, 0.0)
-    yaw_acc = dyr / dt if dt > 0.0 else 0.0
-    new = ManualSetpoint(t_us, p_new, v_new, sp.q0_enu_flu, yaw, yaw_rate)
+    yaw_acc_max = math.radians(s.yaw_acc_deg_s2)
+    yaw_acc = _shape(yaw_rate_target - sp.yaw_rate_ned_rad_s, sp.yaw_acc_ned_rad_s2,
+                     yaw_acc_max, yaw_acc_max, math.radians(s.yaw_jerk_deg_s3), dt)
+    yaw_rate = sp.yaw_rate_ned_rad_s + 0.5 * (sp.yaw_acc_ned_rad_s2 + yaw_acc) * dt
+    if yaw_rate_target == 0.0 and abs(yaw_rate) < REST_RAD_S and abs(yaw_acc) < REST_RAD_S2:
+        yaw_rate = yaw_acc = 0.0
+    yaw = sp.yaw_ned_rad + sp.yaw_rate_ned_rad_s * dt + \
+        (2.0 * sp.yaw_acc_ned_rad_s2 + yaw_acc) * h
+    new = ManualSetpoint(t_us, p_new, v_new, sp.q0_enu_flu, yaw, yaw_rate, a_new, yaw_acc)
     q_new = new.q_enu_flu
     # a NED yaw rate turns about the ENU vertical the other way
     omega = q_rotate_inv(q_new, (0.0, 0.0, -yaw_rate))
     omega_dot = q_rotate_inv(q_new, (0.0, 0.0, -yaw_acc))
-    return new, Reference(p_new, q_new, v_new, a, omega, omega_dot)
+    return new, Reference(p_new, q_new, v_new, a_new, omega, omega_dot)
 
 
 def _fits(vehicle: VehicleConfig, q0: Quat, s: StickSettings) -> bool:
@@ -216,19 +271,87 @@ def _fits(vehicle: VehicleConfig, q0: Quat, s: StickSettings) -> bool:
     return True
 
 
-def fit_envelope(s: StickSettings, vehicle: VehicleConfig | None, q0: Quat) -> StickSettings:
-    """`s` with its accelerations (and yaw rate) halved until the vehicle can fly every
-    corner of them at the attitude q0 turned to any yaw; as it is without a vehicle. When
-    nothing fits (hovering there already exceeds the envelope) the smallest one tried."""
-    if vehicle is None:
-        return s
+def _tilts(vehicle: VehicleConfig, qs: list[Quat], acc: list[Vec3], yaw_acc: list[float]
+           ) -> np.ndarray:
+    """The allocated tilt angles (samples x rotors) of the nominal wrench at attitudes qs,
+    world accelerations acc and NED yaw accelerations yaw_acc (a turn about the vertical)."""
+    wd = [q_rotate_inv(q, (0.0, 0.0, -y)) for q, y in zip(qs, yaw_acc, strict=True)]
+    zero: Any = (0.0, 0.0, 0.0)
+    ref = Reference(zero, tuple(np.array([q[i] for q in qs]) for i in range(4)),  # type: ignore[arg-type]
+                    zero, tuple(np.array([a[i] for a in acc]) for i in range(3)),  # type: ignore[arg-type]
+                    zero, tuple(np.array([w[i] for w in wd]) for i in range(3)))  # type: ignore[arg-type]
+    om = envelope(vehicle).omega_sq(ref)
+    return np.asarray(np.arctan2(om[:, 0::2], om[:, 1::2]))
+
+
+def _tilt_gradients(vehicle: VehicleConfig, q0: Quat, s: StickSettings
+                    ) -> tuple[float, float, float]:
+    """The largest tilt-angle gradients over the corners of `_fits` (and hover) at q0 turned
+    to any of 12 yaws: in the world acceleration (rad per m/s^2, its norm), the yaw (rad per
+    rad) and the yaw acceleration (rad per rad/s^2), by central differences."""
+    h = GRADIENT_STEP
+    corners: list[Vec3] = [(0.0, 0.0, 0.0)]
+    for k in range(8):
+        ang = k * math.pi / 4.0
+        for az in (s.acc_up_m_s2, -s.acc_down_m_s2, 0.0):
+            corners.append((s.acc_xy_m_s2 * math.cos(ang), s.acc_xy_m_s2 * math.sin(ang), az))
+    qs: list[Quat] = []
+    acc: list[Vec3] = []
+    yaw_acc: list[float] = []
+    for j in range(12):
+        q = yawed(q0, j * math.pi / 6.0)
+        for a in corners:
+            for dq, da, dy in ((0.0, (h, 0, 0), 0.0), (0.0, (-h, 0, 0), 0.0),
+                               (0.0, (0, h, 0), 0.0), (0.0, (0, -h, 0), 0.0),
+                               (0.0, (0, 0, h), 0.0), (0.0, (0, 0, -h), 0.0),
+                               (h, (0, 0, 0), 0.0), (-h, (0, 0, 0), 0.0),
+                               (0.0, (0, 0, 0), h), (0.0, (0, 0, 0), -h)):
+                qs.append(yawed(q, dq) if dq else q)
+                acc.append((a[0] + da[0], a[1] + da[1], a[2] + da[2]))
+                yaw_acc.append(dy)
+    tilt = _tilts(vehicle, qs, acc, yaw_acc).reshape(-1, 10, vehicle.n_rotors)
+    diff = np.angle(np.exp(1j * (tilt[:, 0::2] - tilt[:, 1::2]))) / (2.0 * h)  # (n, 5, rotors)
+    g_acc = float(np.sqrt((diff[:, 0:3] ** 2).sum(axis=1)).max())
+    return g_acc, float(np.abs(diff[:, 3]).max()), float(np.abs(diff[:, 4]).max())
+
+
+def fit_rotors(s: StickSettings, vehicle: VehicleConfig, q0: Quat) -> StickSettings:
+    """`s` with its accelerations (and yaw rate and acceleration) halved until the rotors
+    fly every corner of them at q0 turned to any yaw (`_fits`), at most FIT_HALVINGS
+    times."""
     trial = s
     for _ in range(FIT_HALVINGS):
         if _fits(vehicle, q0, trial):
-            return trial
+            break
         trial = replace(trial, acc_xy_m_s2=trial.acc_xy_m_s2 / 2,
                         acc_up_m_s2=trial.acc_up_m_s2 / 2,
                         acc_down_m_s2=trial.acc_down_m_s2 / 2,
                         yaw_rate_deg_s=trial.yaw_rate_deg_s / 2,
                         yaw_acc_deg_s2=trial.yaw_acc_deg_s2 / 2)
     return trial
+
+
+def fit_envelope(s: StickSettings, vehicle: VehicleConfig | None, q0: Quat) -> StickSettings:
+    """`s` fitted to the rotors (`fit_rotors`), then its jerks and yaw rate cut to what the
+    tilt servos follow there (module docstring); as it is without a vehicle. When nothing
+    fits (hovering there already exceeds the envelope) the smallest one tried."""
+    if vehicle is None:
+        return s
+    trial = fit_rotors(s, vehicle, q0)
+    budget = envelope(vehicle).tilt_limit
+    g_acc, g_yaw, g_yaw_acc = _tilt_gradients(vehicle, q0, trial)
+    for _ in range(FIT_HALVINGS):  # where a corner's rotor thrust is near zero, its tilt
+        if JERK_SHARE * budget / max(g_acc, 1e-9) >= JERK_FLOOR_M_S3 and \
+                math.degrees(YAW_RATE_SHARE * budget / max(g_yaw, 1e-9)) >= YAW_FLOOR_DEG_S:
+            break  # swings fast: go gentler
+        trial = replace(trial, acc_xy_m_s2=trial.acc_xy_m_s2 / 2,
+                        acc_up_m_s2=trial.acc_up_m_s2 / 2,
+                        acc_down_m_s2=trial.acc_down_m_s2 / 2)
+        g_acc, g_yaw, g_yaw_acc = _tilt_gradients(vehicle, q0, trial)
+    return replace(
+        trial,
+        jerk_m_s3=min(trial.jerk_m_s3, JERK_SHARE * budget / max(g_acc, 1e-9)),
+        yaw_rate_deg_s=min(trial.yaw_rate_deg_s,
+                           math.degrees(YAW_RATE_SHARE * budget / max(g_yaw, 1e-9))),
+        yaw_jerk_deg_s3=min(trial.yaw_jerk_deg_s3,
+                            math.degrees(YAW_JERK_SHARE * budget / max(g_yaw_acc, 1e-9))))

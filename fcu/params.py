@@ -101,6 +101,8 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_ACC_DOWN_MAX", 3.0, 0.5, 15.0, "m/s^2",
               "POSCTL, OFFBOARD: downward acceleration limit"),
     ParamSpec("MPC_MAN_Y_MAX", 90.0, 0.0, 400.0, "deg/s", "POSCTL: yaw rate at full stick"),
+    ParamSpec("MPC_JERK_MAX", 8.0, 0.5, 500.0, "m/s^3",
+              "POSCTL: jerk limit (lower where the tilt servos need it)"),
     # The estimator (fcu/estimator.py); EKF2's names and defaults where EKF2 has the figure.
     ParamSpec("EKF_EN", 0.0, 0.0, 1.0, "enum",
               "state source: 0 = ODOMETRY as the exact state, 1 = the estimator from "
@@ -238,7 +240,7 @@ def flight_settings(values: dict[str, float]) -> FlightSettings:
         speed_xy_m_s=values["MPC_VEL_MANUAL"], speed_up_m_s=values["MPC_Z_VEL_MAX_UP"],
         speed_down_m_s=values["MPC_Z_VEL_MAX_DN"], acc_xy_m_s2=values["MPC_ACC_HOR"],
         acc_up_m_s2=values["MPC_ACC_UP_MAX"], acc_down_m_s2=values["MPC_ACC_DOWN_MAX"],
-        yaw_rate_deg_s=values["MPC_MAN_Y_MAX"])
+        yaw_rate_deg_s=values["MPC_MAN_Y_MAX"], jerk_m_s3=values["MPC_JERK_MAX"])
     return FlightSettings(takeoff_alt_m=values["MIS_TAKEOFF_ALT"],
                           rtl_return_alt_m=values["RTL_RETURN_ALT"],
                           rtl_cruise_m_s=values["MPC_XY_CRUISE"],

@@ -176,3 +176,29 @@ def test_hold_at_ten_metres_per_second_fits_every_actuator(vehicle):
     assert f.limited_s < LIMIT_S and not f.reports(), (f.limited_s, f.reports())
     assert f.track_m < 0.05 and f.track_rad < math.radians(3.0), (f.track_m, f.track_rad)
     assert math.dist(f.state.p_enu_m, hold.p_enu_m) < 0.01
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+def test_posctl_sticks_fit_every_actuator(vehicle):
+    """Given a hover at 5 m in POSCTL, when the pilot pushes full forward and right with
+    full yaw and throttle up for 2 s, then pulls back fully for 1 s, then centres, then the
+    jerk-limited set-point keeps every tilt servo within its rate (no report) and the
+    vehicle within 5 cm and 3 deg of it, and it comes to rest and holds (the set-point
+    still, the vehicle within 1 cm of it)."""
+    f = Flight(vehicle, (0.0, 0.0, 5.0))
+    c = f.pipe.commander
+    c.manual_input(0.0, 0, 0, 500, 0)
+    assert c.set_mode(Mode.POSCTL, 0.0)[0] == 0
+    for k in range(8 * 500):
+        t = k * 0.002
+        x, y, z, r = (1000, 1000, 1000, 1000) if t < 2.0 else \
+            (-1000, 0, 500, 0) if t < 3.0 else (0, 0, 500, 0)
+        c.manual_input(t, x, y, z, r)
+        f.step()
+    assert f.pipe.armed and c.mode == Mode.POSCTL and f.pipe.saturated_steps == 0
+    assert f.limited_s < LIMIT_S and not f.reports(), (f.limited_s, f.reports())
+    assert f.track_m < 0.05 and f.track_rad < math.radians(3.0), (f.track_m, f.track_rad)
+    ref = c.last_ref
+    assert max(map(abs, (*ref.v_enu_m_s, *ref.a_enu_m_s2, *ref.omega_flu_rad_s))) == 0.0
+    assert math.dist(f.state.p_enu_m, ref.p_enu_m) < 0.01
+    assert math.dist(ref.p_enu_m, (0.0, 0.0, 5.0)) > 3.0  # it did fly
