@@ -12,20 +12,21 @@ velocity, as PX4's position mode does without its expo curve:
     vertical:   up d * speed_up_m_s, down d * speed_down_m_s
     yaw:        d * yaw_rate_deg_s about the world vertical (clockwise seen from above)
 
-The set-point's velocity follows that target with a jerk-limited acceleration, as PX4's
-and ArduPilot's jerk-limited shapers do (ArduPilot's `shape_vel_accel`): the acceleration
-wanted is `sqrt_controller` of the velocity error (second-order limit the jerk; gain
-GAIN_RATIO jerk / acceleration limit: ArduPilot's ratio 1 leaves an exponential tail that
-creeps 0.4 m after braking from 5 m/s), at most acc_xy_m_s2 horizontally and acc_up_m_s2 / acc_down_m_s2
-vertically (yaw_acc_deg_s2 in yaw), and the acceleration moves towards it by at most the jerk
-times the period (jerk_m_s3: PX4's MPC_JERK_MAX; yaw_jerk_deg_s3). The acceleration is thus
-continuous: an acceleration step is a step of every tilt angle, which a rate-limited servo
-cannot take. Position and velocity integrate the piecewise-linear acceleration exactly.
-Sticks centred: the velocity brakes to zero and the set-point holds where it stopped; a stick
-held for T seconds at a deflection giving speed V moves the set-point about V T (the ramp up
-and the braking nearly cancel: within 2 % for 2 s at 5 m/s). The set-point never leads the vehicle by more than `LEAD_M`. The attitude is
-the one at entry, turned about the world vertical by the yaw integrated so far (an
-omnidirectional vehicle keeps its roll and pitch in POSCTL).
+The set-point's velocity follows that target with a jerk-limited acceleration, as PX4's and
+ArduPilot's jerk-limited shapers do (ArduPilot's `shape_vel_accel`): the acceleration wanted
+is `sqrt_controller` of the velocity error (second-order limit the jerk; gain GAIN_RATIO
+jerk / acceleration limit: ArduPilot's ratio 1 leaves an exponential tail that creeps 0.4 m
+after braking from 5 m/s), at most acc_xy_m_s2 horizontally and acc_up_m_s2 / acc_down_m_s2
+vertically (yaw_acc_deg_s2 in yaw), and the acceleration moves towards it by at most the
+jerk times the period (jerk_m_s3: PX4's MPC_JERK_MAX; yaw_jerk_deg_s3). The acceleration is
+thus continuous: an acceleration step is a step of every tilt angle, which a rate-limited
+servo cannot take. Position and velocity integrate the piecewise-linear acceleration
+exactly. Sticks centred: the velocity brakes to zero and the set-point holds where it
+stopped; a stick held for T seconds at a deflection giving speed V moves the set-point about
+V T (the ramp up and the braking nearly cancel: within 2 % for 2 s at 5 m/s). The set-point
+never leads the vehicle by more than `LEAD_M`. The attitude is the one at entry, turned
+about the world vertical by the yaw integrated so far (an omnidirectional vehicle keeps its
+roll and pitch in POSCTL).
 
 Flyable set-points (`fit_envelope`): the accelerations (and the yaw rate and acceleration) are
 halved until the nominal wrench of every combination of their limits, at the entry attitude
