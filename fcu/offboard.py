@@ -30,11 +30,11 @@ of the tracker's error instead, a 10 m, 150 deg step saturated the rotors for se
 the vehicle on the ground.
 
 A sample whose attitude can only be reached with a tilt flipping half a turn (a rotor's thrust
-passing through zero on the way, `approach.flip`: a roll about the body's forward axis of
-55 deg or more on the tilted preset, 90 deg or more on the planar) is not flown in attitude: the attitude flown is braked and held,
-the rest of the sample flown, and `Shaped.refused` says why (the commander sends it as a
-STATUSTEXT warning). Flown, such a roll rate-limited tilt servos 2 and 5 for 0.9 to 3.5 s and
-lost the vehicle when stretched.
+passing through zero on the way, `approach.flip`: a roll about the body's forward axis of 55
+deg or more on the tilted preset, 90 deg or more on the planar) is not flown in attitude: the
+attitude flown is braked and held, the rest of the sample flown, and `Shaped.refused` says why
+(the commander sends it as a STATUSTEXT warning). Flown, such a roll rate-limited tilt servos 2
+and 5 for 0.9 to 3.5 s and lost the vehicle when stretched.
 
 HOLD brakes a moving reference with the same approach, its end free (`stop`): the vehicle
 holds where the braking ends.
