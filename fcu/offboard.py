@@ -29,12 +29,13 @@ trajectory (velocity and acceleration consistent with its positions) is flown as
 of the tracker's error instead, a 10 m, 150 deg step saturated the rotors for seconds and put
 the vehicle on the ground.
 
-A sample whose attitude can only be reached with a tilt flipping half a turn (a rotor's thrust
-passing through zero on the way, `approach.flip`: a roll about the body's forward axis of 55
-deg or more on the tilted preset, 90 deg or more on the planar) is not flown in attitude: the
-attitude flown is braked and held, the rest of the sample flown, and `Shaped.refused` says why
-(the commander sends it as a STATUSTEXT warning). Flown, such a roll rate-limited tilt servos 2
-and 5 for 0.9 to 3.5 s and lost the vehicle when stretched.
+A sample whose attitude can only be reached with a tilt flipping half a turn, or with one
+turning faster than its servo however slowly the approach goes (up to `approach.D_MAX_S`),
+(a rotor's thrust passing through zero on the way, `approach.flip`: a roll about the body's
+forward axis of 55 deg or more on the tilted preset, 90 deg or more on the planar) is not
+flown in attitude: the attitude flown is braked and held, the rest of the sample flown, and
+`Shaped.refused` says why (the commander sends it as a STATUSTEXT warning). Flown, such a
+roll rate-limited tilt servos 2 and 5 for 0.9 to 3.5 s and lost the vehicle when stretched.
 
 HOLD brakes a moving reference with the same approach, its end free (`stop`): the vehicle
 holds where the braking ends.
@@ -52,7 +53,7 @@ from typing import NamedTuple
 from fcu import approach
 from fcu.approach import Approach, Offset, Setpoint, right_jacobian_inv
 from fcu.dualquat import Quat, Vec3, q_angle, q_conj, q_exp, q_log, q_mul, q_rotate_inv
-from fcu.feasibility import Envelope
+from fcu.feasibility import TILT, Envelope
 from fcu.manual import StickSettings
 from fcu.tracker import Reference
 
@@ -198,10 +199,14 @@ def _anchor(s: Shaped, target: Target, lim: StickSettings, env: Envelope | None)
     free = (target.p_enu_m is None, target.q_enu_flu is None)
     plan = approach.plan(env, lim, sp, _offset(ref, sp), free)
     refused, asked = "", None
-    if plan is not None and plan.excess is not None and plan.excess.kind == approach.FLIP:
-        # the attitude cannot be reached along its geodesic: hold the one flown (braked)
-        # (STATUSTEXT's 50 characters: the attitude is held, the rest flown)
-        refused = f"attitude not flown: tilt servo {plan.excess.number} would flip"
+    if plan is not None and not plan.fits and plan.excess is not None and \
+            plan.excess.kind in (approach.FLIP, TILT):
+        # the attitude cannot be reached along its geodesic in any time the planner tries:
+        # hold the one flown (braked), fly the rest (STATUSTEXT's 50 characters)
+        n = plan.excess.number
+        refused = f"attitude not flown: tilt servo {n} would flip" \
+            if plan.excess.kind == approach.FLIP else \
+            f"attitude not flown: tilt servo {n} needs {plan.excess.need:.1f} rad/s"
         asked = target._replace(seq=0)
         sp = sp._replace(q=ref.q_enu_flu, w=_ZERO)
         free = (free[0], True)

@@ -9,70 +9,23 @@ roll, and lagged 7.5 cm (tilted) and 25 cm (planar) on the HOLD."""
 from __future__ import annotations
 
 import math
+import random
 
 import pytest
 
-from common.config import load_vehicle
 from common.frames import enu_to_ned, q_enu_flu_to_ned_frd
 from common.modes import Mode
 from common.quaternion import q_angle, q_conj, q_exp, q_mul
-from gcs.inprocess import (
-    actuator_controls,
-    command_from_controls,
-    fcu_pipeline,
-    state_for_fcu,
-    through_wire_controls,
+
+from ..pipeline_flight import (
+    ATTITUDE_ONLY,
+    LIMIT_S,
+    POSITION_ONLY,
+    VEHICLES,
+    VELOCITY_ONLY,
+    Flight,
+    random_step,
 )
-from sitl.plant import Plant, hover_speeds_and_tilts
-
-from .conftest import ROOT, scenario
-
-VEHICLES = ["hexa_tilted", "hexa_planar"]
-LIMIT_S = 0.1  # COM_ACT_RATE_T
-POSITION_ONLY = 0b0000_1101_1111_1000  # SET_POSITION_TARGET_LOCAL_NED: position and yaw
-VELOCITY_ONLY = 0b0000_1101_1100_0111  # ... velocity and yaw
-ATTITUDE_ONLY = 0b0100_0111  # SET_ATTITUDE_TARGET: attitude, no rates, no thrust
-
-
-class Flight:
-    """The pipeline flying the plant from a hover at `start_enu_m`, armed; `step` runs one
-    control period and keeps the figures."""
-
-    def __init__(self, vehicle_name: str, start_enu_m) -> None:
-        sc = scenario("case1_figure8",
-                      vehicle=load_vehicle(ROOT / "config" / "vehicles" /
-                                           f"{vehicle_name}.toml"))
-        self.vehicle = sc.vehicle
-        self.plant = Plant(self.vehicle, dt_us=1000)
-        speeds, tilts = hover_speeds_and_tilts(self.plant)
-        state = self.plant.initial_state(start_enu_m, on_ground=False,
-                                         rotor_speed_rad_s=speeds, tilt_rad=tilts)
-        self.state = state
-        self.pipe, _ = fcu_pipeline(sc)
-        self.pipe.on_state(0, state_for_fcu(self.state), 0)
-        assert self.pipe.arm()[0] == 0
-        self.track_m = self.track_rad = self.limited_s = 0.0
-
-    def step(self) -> None:
-        state, pipe = self.state, self.pipe
-        t = state.time_us
-        pipe.on_state(t, state_for_fcu(state), t)
-        out = pipe.step(t, 0.002)
-        ref = pipe.commander.last_ref
-        self.track_m = max(self.track_m, math.dist(ref.p_enu_m, state.p_enu_m))
-        self.track_rad = max(self.track_rad,
-                             q_angle(q_mul(q_conj(ref.q_enu_flu), state.q_enu_flu)))
-        self.limited_s = max(self.limited_s, *pipe.actuators.limited_s)
-        wire = through_wire_controls(actuator_controls(out, self.vehicle.rotor_speed_max_rad_s,
-                                                       lockstep=True))
-        command = command_from_controls(wire.controls, wire.mode, self.vehicle, state)
-        for _ in range(2):
-            state = self.plant.step(state, command)
-        self.state = state
-
-    def reports(self) -> list[str]:
-        return [e.text for e in self.pipe.commander.events
-                if "rate-limited" in e.text or "speed limit" in e.text]
 
 
 def _step_attitude(f: Flight, axis) -> tuple:
@@ -202,3 +155,36 @@ def test_posctl_sticks_fit_every_actuator(vehicle):
     assert max(map(abs, (*ref.v_enu_m_s, *ref.a_enu_m_s2, *ref.omega_flu_rad_s))) == 0.0
     assert math.dist(f.state.p_enu_m, ref.p_enu_m) < 0.01
     assert math.dist(ref.p_enu_m, (0.0, 0.0, 5.0)) > 3.0  # it did fly
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+def test_random_offboard_steps_are_flown_in_the_envelope_or_refused_in_attitude(vehicle):
+    """Given 12 random OFFBOARD steps per vehicle file (seeded), then each is either flown
+    (no tilt servo rate-limited for COM_ACT_RATE_T, within 5 cm and 3 deg of the reference,
+    ending on the pose) or, where a tilt would flip, refused in attitude with the warning and
+    flown in position with the attitude held, under the same bounds."""
+    rng = random.Random(f"offboard-steps-{vehicle}")
+    for case in range(12):
+        p_t, q_t = random_step(rng)
+        f = Flight(vehicle, (0.0, 0.0, 15.0))
+        c = f.pipe.commander
+        assert c.offboard_position(0.0, 1, POSITION_ONLY, enu_to_ned(p_t), (0.0,) * 3,
+                                   (0.0,) * 3, 0.0)[0]
+        assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q_t),
+                                   (0.0,) * 3)[0]
+        assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
+        f.step()
+        sp = c.offboard_sp
+        assert sp is not None and sp.plan is not None
+        for _ in range(round((sp.plan.duration_s + 1.0) * 500)):
+            f.step()
+        what = (case, p_t, q_t, sp.refused, f.limited_s, f.reports(), f.track_m, f.track_rad)
+        assert f.pipe.armed and f.pipe.saturated_steps == 0, what
+        assert f.limited_s < LIMIT_S and not f.reports(), what
+        assert f.track_m < 0.05 and f.track_rad < math.radians(3.0), what
+        assert math.dist(f.state.p_enu_m, p_t) < 0.02, what
+        if sp.refused:
+            assert sp.refused in [e.text for e in c.events], what
+            assert q_angle(f.state.q_enu_flu) < math.radians(0.5), what
+        else:
+            assert q_angle(q_mul(q_conj(q_t), f.state.q_enu_flu)) < math.radians(0.5), what
