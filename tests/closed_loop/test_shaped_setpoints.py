@@ -188,3 +188,41 @@ def test_random_offboard_steps_are_flown_in_the_envelope_or_refused_in_attitude(
             assert q_angle(f.state.q_enu_flu) < math.radians(0.5), what
         else:
             assert q_angle(q_mul(q_conj(q_t), f.state.q_enu_flu)) < math.radians(0.5), what
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+def test_random_stick_sequences_fit_every_actuator(vehicle):
+    """Given 6 random stick sequences per vehicle file (seeded: every axis jumping between
+    random deflections every 0.2 to 1.5 s for 6 s, entered level or at a random roll and
+    pitch up to 30 deg), then POSCTL keeps every tilt servo within its rate (no report) and
+    the vehicle within 5 cm and 3 deg of the set-point."""
+    rng = random.Random(f"sticks-{vehicle}")
+    for case in range(6):
+        f = Flight(vehicle, (0.0, 0.0, 15.0))
+        c = f.pipe.commander
+        if case % 2:  # entered at a tilted attitude the vehicle holds
+            q0 = q_exp((math.radians(rng.uniform(-30, 30)), math.radians(rng.uniform(-30, 30)),
+                        0.0))
+            assert c.offboard_position(0.0, 1, POSITION_ONLY, enu_to_ned((0.0, 0.0, 15.0)),
+                                       (0.0,) * 3, (0.0,) * 3, 0.0)[0]
+            assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q0),
+                                       (0.0,) * 3)[0]
+            assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
+            for _ in range(round((c.offboard_sp.plan.duration_s + 0.5) * 500)
+                           if c.offboard_sp and c.offboard_sp.plan else 500):
+                f.step()
+        c.manual_input(0.0, 0, 0, 500, 0)
+        assert c.set_mode(Mode.POSCTL, 0.0)[0] == 0
+        t_next, sticks = 0.0, (0, 0, 500, 0)
+        for k in range(6 * 500):
+            t = k * 0.002
+            if t >= t_next:
+                sticks = (rng.randint(-1000, 1000), rng.randint(-1000, 1000),
+                          rng.randint(0, 1000), rng.randint(-1000, 1000))
+                t_next = t + rng.uniform(0.2, 1.5)
+            c.manual_input(t, *sticks)
+            f.step()
+        what = (case, f.limited_s, f.reports(), f.track_m, f.track_rad, c.manual_limits)
+        assert f.pipe.armed and c.mode == Mode.POSCTL and f.pipe.saturated_steps == 0, what
+        assert f.limited_s < LIMIT_S and not f.reports(), what
+        assert f.track_m < 0.05 and f.track_rad < math.radians(3.0), what
