@@ -1,12 +1,11 @@
 """The console scripts `fcu`, `sitl` and `gcs`: each imports its program, then runs it.
 
 Importing a program loads numpy, numba and its compiled kernels, which takes a while on a
-busy machine; a Ctrl-C (SIGINT) in that time would otherwise end it with a KeyboardInterrupt
-traceback and exit 130 before its own `main` could say anything. Here it says
-"<prog>: stopped while starting" and exits 0, as each `main` does for a stop while it starts;
-`fcu` and `sitl` stop their loops on SIGINT themselves, so one that reaches here from their
-`main` came before the loop ran: the same line and exit 0. From `gcs` (an import inside
-`main`, say) it is "gcs: interrupted", exit 130, the shell's code for SIGINT.
+busy machine. For `fcu` and `sitl` a Ctrl-C or SIGTERM in that time is only recorded
+(`common.startup`; raised, it could be lost inside numba's ctypes callbacks), and after the
+import, or in `main` before its loop, the program says "<prog>: stopped while starting" and
+exits 0; their loops stop on SIGINT and SIGTERM themselves. From `gcs` a Ctrl-C is a
+KeyboardInterrupt: "gcs: interrupted", exit 130, the shell's code for SIGINT.
 """
 
 from __future__ import annotations
@@ -14,11 +13,18 @@ from __future__ import annotations
 import importlib
 import sys
 
+from common import startup
+
 
 def _run(prog: str, module: str, *, loop_handles_sigint: bool) -> int:
+    if loop_handles_sigint:
+        startup.guard()
     try:
         main = importlib.import_module(module).main
     except KeyboardInterrupt:
+        print(f"{prog}: stopped while starting", file=sys.stderr, flush=True)
+        return 0
+    if startup.stop_requested():
         print(f"{prog}: stopped while starting", file=sys.stderr, flush=True)
         return 0
     try:

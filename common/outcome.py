@@ -26,6 +26,9 @@ CRASH_SPEED_M_S = 1.0  # touching the ground faster than this is a crash (LAND: 
 
 # Event kinds: what a runner reads from the FCU's events besides their text.
 INFO, FAILSAFE, CRASH, DIVERGED = "info", "failsafe", "crash", "diverged"
+# How the FCU's STATUSTEXT begins when OFFBOARD holds its attitude instead of a target's
+# (fcu/offboard.py); `gcs goto` ends on it with the vehicle's reason.
+ATTITUDE_NOT_FLOWN = "attitude not flown"
 
 
 class Event(NamedTuple):

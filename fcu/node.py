@@ -27,6 +27,7 @@ import sys
 import time
 from pathlib import Path
 
+from common import startup
 from common.cliargs import OneLineParser, check_output_path
 from common.config import ConfigError, load_gains, load_vehicle
 from common.jit import compile_time_s
@@ -415,10 +416,7 @@ def main(argv: list[str] | None = None) -> int:
     stop_with_parent()
     args = build_parser().parse_args(argv)
 
-    def interrupted(_signum, _frame):  # a stop while starting (loading the kernels, say)
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, interrupted)
+    startup.guard()  # a stop while starting (loading the kernels, say) is looked at below
     try:
         for url in (args.sim, *(args.gcs or ())):  # every URL, before anything is opened
             parse_url(url)
@@ -449,6 +447,11 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # a file that cannot be written: one line
         print(f"fcu: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
+
+    if startup.stop_requested():  # Ctrl-C or SIGTERM while it started: nothing flown
+        fc.close()
+        print("fcu: stopped while starting", file=sys.stderr, flush=True)
+        return 0
 
     def stop(_signum, _frame):
         fc.running = False

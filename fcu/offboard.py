@@ -50,6 +50,7 @@ import math
 from dataclasses import replace
 from typing import NamedTuple
 
+from common.outcome import ATTITUDE_NOT_FLOWN
 from fcu import approach
 from fcu.approach import Approach, Offset, Setpoint, right_jacobian_inv
 from fcu.dualquat import Quat, Vec3, q_angle, q_conj, q_exp, q_log, q_mul, q_rotate_inv
@@ -204,9 +205,9 @@ def _anchor(s: Shaped, target: Target, lim: StickSettings, env: Envelope | None)
         # the attitude cannot be reached along its geodesic in any time the planner tries:
         # hold the one flown (braked), fly the rest (STATUSTEXT's 50 characters)
         n = plan.excess.number
-        refused = f"attitude not flown: tilt servo {n} would flip" \
+        refused = f"{ATTITUDE_NOT_FLOWN}: tilt servo {n} would flip" \
             if plan.excess.kind == approach.FLIP else \
-            f"attitude not flown: tilt servo {n} needs {plan.excess.need:.1f} rad/s"
+            f"{ATTITUDE_NOT_FLOWN}: tilt servo {n} needs {plan.excess.need:.1f} rad/s"
         asked = target._replace(seq=0)
         sp = sp._replace(q=ref.q_enu_flu, w=_ZERO)
         free = (free[0], True)

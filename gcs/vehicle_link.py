@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from common.mavlink import MAV
+from common.outcome import ATTITUDE_NOT_FLOWN
 from common.quaternion import q_angle, q_conj, q_exp, q_mul
 from gcs import param_wire
 from gcs.autopilot import ARDUPILOT, Autopilot, ModeTarget, autopilot_of
@@ -584,8 +585,9 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
     position and attitude targets, then OFFBOARD (it needs the stream first). ArduPilot:
     GUIDED, then the position and yaw alone (an attitude target would replace the
     position target); the attitude error is then the yaw's. GcsError when refused, not
-    confirmed, not reached within `timeout`, or when the vehicle leaves the mode meanwhile
-    (a failsafe, another ground station), with its reason."""
+    confirmed, not reached within `timeout`, when the vehicle leaves the mode meanwhile
+    (a failsafe, another ground station), or when it says it holds its attitude instead
+    of the target's (this FCU: a tilt would flip), with its reason."""
     s = session
     ap = _autopilot(s)
     full = ap.attitude_targets
@@ -599,6 +601,9 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
             msg = s.recv(None, timeout=min(0.05, left))
             if msg is not None and msg.get_srcSystem() == s.target_system:
                 snap.update(msg)
+                if msg.get_type() == "STATUSTEXT" and time.monotonic() > accepted_at and \
+                        str(msg.text).startswith(ATTITUDE_NOT_FLOWN):
+                    raise GcsError(f"the vehicle does not fly this attitude: {msg.text}")
             hb = snap.get("HEARTBEAT")
             if hb is not None and snap.heard["HEARTBEAT"] > accepted_at and \
                     not ap.same_mode(mode.custom_mode, hb.custom_mode):

@@ -38,6 +38,7 @@ import time
 from pathlib import Path
 from typing import Any, Protocol
 
+from common import startup
 from common.cliargs import OneLineParser, check_output_path
 from common.config import (
     ConfigError,
@@ -434,6 +435,8 @@ class FirmwareServer(Protocol):
 
     def run(self) -> None: ...
 
+    def close(self) -> None: ...
+
     def stats(self) -> dict[str, Any]: ...
 
     def summary(self) -> str:
@@ -510,10 +513,7 @@ def main(argv: list[str] | None = None) -> int:
     stop_with_parent()
     args = build_parser().parse_args(argv)
 
-    def interrupted(_signum, _frame):  # a stop while starting (loading the kernels, say)
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, interrupted)
+    startup.guard()  # a stop while starting (loading the kernels, say) is looked at below
     try:
         _check_protocol_options(args)
         parse_url(args.link)  # before anything is opened
@@ -566,6 +566,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sitl: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2
 
+    if startup.stop_requested():  # Ctrl-C or SIGTERM while it started: nothing flown
+        server.close()
+        print("sitl: stopped while starting", file=sys.stderr, flush=True)
+        return 0
+
     def stop(_signum, _frame):
         server.running = False
 
@@ -598,6 +603,11 @@ def _serve_firmware(args: argparse.Namespace, scenario: Scenario, end_s: float |
     except (ConfigError, ULogError) as exc:
         print(f"sitl: {exc}", file=sys.stderr)
         return 2
+
+    if startup.stop_requested():  # Ctrl-C or SIGTERM while it started: nothing flown
+        server.close()
+        print("sitl: stopped while starting", file=sys.stderr, flush=True)
+        return 0
 
     def stop(_signum: int, _frame: object) -> None:
         server.running = False

@@ -216,6 +216,24 @@ def test_goto_reaches_a_six_dof_pose(vehicle):
     assert abs(roll - 20) < 2 and abs(pitch) < 2 and abs(yaw - 60) < 2
 
 
+def test_goto_a_roll_that_would_flip_tilts_ends_with_the_vehicles_reason(vehicle):
+    """Given the vehicle level at a heading of 60 deg, when goto asks for a 170 deg roll
+    there (about the body's forward axis: two tilts would flip half a turn), then the FCU
+    holds its attitude and says why, and goto exits 1 at once with that reason instead of
+    waiting for a pose that will not come; the vehicle stays level where it was."""
+    assert vehicle.gcs("goto", "1", "-2", "-3", "--yaw", "60", "--arm", "--tolerance", "0.05",
+                       "--tolerance-deg", "1").returncode == 0
+    t0 = time.monotonic()
+    out = vehicle.gcs("goto", "1", "-2", "-3", "--roll", "170", "--yaw", "60",
+                      "--timeout", "60")
+    assert out.returncode == 1, out
+    assert "attitude not flown: tilt servo" in out.stderr and "flip" in out.stderr, out.stderr
+    assert time.monotonic() - t0 < 30.0
+    status = json.loads(vehicle.gcs("status", "--json").stdout)
+    roll, pitch, yaw = status["roll_pitch_yaw_deg"]
+    assert abs(roll) < 2 and abs(pitch) < 2 and abs(yaw - 60) < 2
+
+
 def test_watch_in_a_terminal_quits_on_q(vehicle):
     """watch draws a live view in a pseudo-terminal and quits cleanly on q."""
     pid, fd = pty.fork()
