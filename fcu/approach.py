@@ -1,5 +1,5 @@
 """An approach planned to fit every actuator: the offset between a reference and the set-point
-it joins, brought to zero by a quintic in the shortest duration the vehicle flies (pure).
+it joins, brought to zero smoothly in the shortest duration the vehicle flies (pure).
 
 OFFBOARD and HOLD (`fcu.offboard`) fly a set-point (p, v, a, q, omega: a pose with its
 feed-forward, extrapolated from its anchor) plus an offset that keeps the reference continuous
@@ -8,12 +8,15 @@ where the set-point jumps:
     p_ref = p_sp + e                           q_ref = q_sp (x) exp(eps)
 
 e in ENU, eps a rotation vector in the set-point's body frame (FLU). Each of their six
-components goes from its value, rate and acceleration when the plan starts to rest at zero in
-D seconds along the quintic that meets those six conditions (`quintic_to_rest`; from rest, the
-minimum-jerk 1 - 10 s^3 + 15 s^4 - 6 s^5). Position, velocity and acceleration are then
+components x goes from its value, rate and acceleration when the plan starts to rest at zero
+in D seconds as x0 (1 - B(t / D)) plus the quintic that takes its starting rate and
+acceleration to rest from zero (`quintic_to_rest`, `_component`). B is `blend`: the
+minimum-jerk 10 s^3 - 15 s^4 + 6 s^5, or, on a long step, a cruise between minimum-jerk
+ramps of share r (`cruise_share`: the ramps reach the speed limit at the acceleration
+limit); both are tried and the shorter kept. Position, velocity and acceleration are then
 continuous at both ends, so the accelerations the wrench follows never step (a step in them
-is a step in the tilt angles, which a rate-limited servo cannot take: an acceleration shaper
-without a jerk limit had OFFBOARD's 170 deg roll rate-limit a tilt servo for 0.23 s).
+is a step in the tilt angles, which a rate-limited servo cannot take: the shaper without a
+jerk limit that this replaced rate-limited tilt servos for 0.9 s and more on a 170 deg roll).
 
 The reference's body rate is exp(eps)^-1 omega_sp exp(eps) + J_r(eps) d eps/dt (J_r: the
 right Jacobian of SO(3)'s exponential), its derivative taken as J_r(eps) d^2 eps/dt^2 (exact
