@@ -27,9 +27,10 @@ Topics (ULog, read with pyulog); PX4's layouts are in `common.px4_topics`:
   parameters: `dq_gravity_m_s2` (the estimator's gravity, as text: exact) and
   `dq_control_period_us` (the estimate is taken at IMU samples on multiples of it).
 
-Parameters are in the definitions (their values when the log opened) and as changes in the
-data; everything the vehicle says (events and STATUSTEXT) is a logged string at its flight
-time. The same logger runs in the FCU process and in the in-process runner.
+Parameters are in the definitions (their values when the log opened, with MAV_TYPE,
+MAV_SYS_ID and SYS_AUTOSTART: `identity_params`) and as changes in the data; everything the
+vehicle says (events and STATUSTEXT) is a logged string at its flight time. The same logger
+runs in the FCU process and in the in-process runner.
 """
 
 from __future__ import annotations
@@ -67,6 +68,13 @@ NAV_STATE = {Mode.HOLD: px4.NAVIGATION_STATE_AUTO_LOITER,
              Mode.RTL: px4.NAVIGATION_STATE_AUTO_RTL,
              Mode.POSCTL: px4.NAVIGATION_STATE_POSCTL}
 CRITICAL_FAILSAFES = ("diverged", "non-finite command")
+def identity_params(system_id: int) -> dict[str, int]:
+    """The int32 parameters a PX4 log carries that Flight Review and pyulog read for what
+    the vehicle is: MAV_TYPE (`PX4ULog.get_mav_type`: "Hexarotor"), MAV_SYS_ID, and
+    SYS_AUTOSTART 0 (no PX4 airframe: none describes a tilt-rotor hexarotor)."""
+    return {"MAV_TYPE": MAV_TYPE_HEXAROTOR, "MAV_SYS_ID": system_id, "SYS_AUTOSTART": 0}
+
+
 class OnboardLog(ULogWriter):
     """Append-only onboard log of a pipeline; `step` after each control step, `flush` after
     it (the process) or whenever convenient (in-process)."""
@@ -83,7 +91,8 @@ class OnboardLog(ULogWriter):
         self.params = dict(params)
         super().__init__(sink, ONBOARD_TOPICS, info={
             "sys_name": "dqflight", "ver_hw": "SITL", "ver_sw": "0.1.0",
-            "sys_mcu": "python", "sys_toolchain": "CPython"}, params=self.params)
+            "sys_mcu": "python", "sys_toolchain": "CPython"},
+            params={**self.params, **identity_params(system_id)})
         self.px4_period_us = 1_000_000 // PX4_HZ
         self.status_period_us = 1_000_000 // STATUS_HZ
         self.next_px4_us = 0

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pyulog.px4 import PX4ULog
 
 from common.config import load_scenario
 from common.ulog import open_ulog, read_topic, tail_record
@@ -180,6 +181,9 @@ def test_parameters_and_messages_are_in_the_onboard_log(run_dir):
     u = open_ulog(run_dir / "onboard.ulg")
     params = u.initial_parameters
     assert params["DQ_KPR_X"] == 5.0 and "COM_DIV_POS" in params
+    # what Flight Review reads for the vehicle (it showed "unknown type" without)
+    assert params["MAV_TYPE"] == 13 and isinstance(params["MAV_TYPE"], int)
+    assert PX4ULog(u).get_mav_type() == "Hexarotor" and params["MAV_SYS_ID"] == 1
     texts = [m.message for m in u.logged_messages]
     assert "armed" in texts and "mission started" in texts
     metrics = json.loads((run_dir / "metrics.json").read_text())
