@@ -35,7 +35,7 @@ AMSL_FRAMES = frozenset({MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_INT})
 RELATIVE_ALT_FRAMES = frozenset({MAV_FRAME_GLOBAL_RELATIVE_ALT,
                                  MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
 GEO_FRAMES = AMSL_FRAMES | RELATIVE_ALT_FRAMES
-# The commands of fcu.mission and what their x, y, z hold (README, section Missions):
+# The commands of fcu.mission and what their x, y, z hold (docs/autopilot.md, section Missions):
 # NAV_WAYPOINT, NAV_LOITER_TIME and the pose keyframe fly to x, y, z; NAV_TAKEOFF climbs to
 # z and NAV_LAND ignores it (an altitude all the same); the figure-infinity's z is an axis
 # component. x, y of takeoff, land and the figure are unused.

@@ -235,7 +235,7 @@ def _item_table(it: MissionItem) -> dict[str, Any]:
 def format_toml(items: Sequence[MissionItem], home: HomePosition | None = None) -> str:
     """The TOML form; `home` (ArduPilot's seq 0) as a `[home]` table when given."""
     out = ["# Mission: local NED (metres), times in seconds, yaw in degrees (nan: keep the",
-           "# attitude). Item types and their MAVLink slots: README, section Missions.",
+           "# attitude). Item types and their MAVLink slots: docs/autopilot.md, section Missions.",
            'format = "dqflight-mission-1"', ""]
     if home is not None:
         out += ["# The vehicle's home (ArduPilot's mission seq 0): degrees, metres AMSL.",
