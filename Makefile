@@ -24,7 +24,7 @@ test: venv
 	$(PY) -m pytest -q -n auto --dist loadgroup tests
 
 test-fast: venv
-	$(PY) -m pytest -q -m "not slow" tests
+	$(PY) -m pytest -q -n auto --dist loadgroup -m "not slow and not process" tests
 
 bench: venv
 	$(PY) benchmarks/run_all.py

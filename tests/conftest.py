@@ -1,6 +1,11 @@
 """Suite-wide set-up: the flight core's kernels are compiled (a clean clone) or loaded once
 in the controlling process before any worker starts, so that the workers and the `fcu` and
-`sitl` processes the tests start load them from the cache instead of each compiling them."""
+`sitl` processes the tests start load them from the cache instead of each compiling them.
+
+Tiers: every test that starts a program (`sitl`, `fcu`, `gcs`, a writer to kill) is marked
+`process`: all of tests/sitl/, the README and docs blocks that run, tests using the module
+fixtures that fly through `gcs` (PROCESS_FIXTURES), and the few marked by hand. `make
+test-fast` runs the rest (`-m "not slow and not process"`); `make test` runs everything."""
 
 from __future__ import annotations
 
@@ -9,6 +14,18 @@ from pathlib import Path
 import pytest
 
 CASE1 = Path(__file__).resolve().parents[1] / "config" / "scenarios" / "case1_figure8.toml"
+TESTS = Path(__file__).resolve().parent
+PROCESS_FIXTURES = {"est_run", "truth_run"}  # tests/unit/test_estimator_logs.py: `gcs run`
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark the tests that start programs `process` (module docstring)."""
+    for item in items:
+        path = Path(str(item.fspath))
+        if (TESTS / "sitl") in path.parents or \
+                item.name.startswith("test_block_runs_as_written") or \
+                PROCESS_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.process)
 
 
 def pytest_configure(config: pytest.Config) -> None:

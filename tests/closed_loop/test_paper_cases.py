@@ -65,6 +65,7 @@ def test_case2_pid_beats_pd_on_rmse(name, ideal):
         assert not ideal and pd["status"] == "diverged"
 
 
+@pytest.mark.process
 def test_gcs_run_writes_metrics_for_a_completed_run(tmp_path):
     """Given `gcs run --in-process --duration`, then metrics.json has the DESIGN keys,
     status completed, and the logs are written beside it."""
@@ -84,6 +85,7 @@ def test_gcs_run_writes_metrics_for_a_completed_run(tmp_path):
     assert (out / "scenario.toml").read_text() == (SCENARIOS / "case1_figure8.toml").read_text()
 
 
+@pytest.mark.process
 def test_gcs_run_reports_divergence_with_finite_figures(tmp_path):
     """Given the PD baseline under the sinusoidal disturbance with rate-limited tilt servos,
     then the vehicle is lost: status diverged, figures finite up to that instant."""
@@ -101,6 +103,7 @@ def test_gcs_run_reports_divergence_with_finite_figures(tmp_path):
     assert _all_finite(m)
 
 
+@pytest.mark.process
 def test_gcs_overrides_and_bad_config(tmp_path):
     """--controller and --ideal-actuators override the scenario; a broken file is refused."""
     out = tmp_path / "pd"

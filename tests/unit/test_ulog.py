@@ -100,6 +100,7 @@ def test_record_conversions_to_ned_frd():
     assert px4.angular_velocity_record(1, 1, (0.1, 0.2, 0.3))[2:] == (0.1, -0.2, -0.3)
 
 
+@pytest.mark.process
 def test_records_survive_sigkill_of_the_writer(tmp_path):
     """Given a writer killed with SIGKILL mid-stream, then pyulog reads every record it had
     flushed, in order, without a torn record, and `tail_record` finds the same last one."""
@@ -286,6 +287,7 @@ print(w.failed, i)
 """
 
 
+@pytest.mark.process
 def test_a_write_that_fails_stops_the_log_at_its_last_complete_record(tmp_path):
     """A full disk (here the file size limit) in the middle of a flush: the writer says why,
     cuts the torn record off and writes nothing more; pyulog reads every complete record."""
