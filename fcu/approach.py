@@ -363,6 +363,17 @@ def _instants(sp: Setpoint, x: Offset, d: float, r: float = 0.0) -> np.ndarray:
     return np.linspace(0.0, d, int(min(SAMPLES_MAX, n)))
 
 
+def _allocated(env: Envelope, sp: Setpoint, k: np.ndarray, d: float, taus: np.ndarray
+               ) -> np.ndarray:
+    """Omega = A^+ [f_b; tau_b] of the nominal wrench along the reference at each tau
+    (samples x 2n, contiguous)."""
+    qs, acc, rate, rate_dot = _rows(*floats(sp), k, d, taus)
+    v = env.vehicle
+    wrench = _nominal_wrench_rows(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, qs, acc,
+                                  rate, rate_dot)
+    return np.ascontiguousarray(wrench.T @ env.pinv_t)
+
+
 def check(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset, d: float,
           r: float = 0.0) -> tuple[float, Excess | None]:
     """(ratio, excess) of the approach of offset x to set-point sp in d seconds: the largest
@@ -374,11 +385,7 @@ def check(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset, d: 
         return ratio, None
     n = len(taus)
     all_taus = np.concatenate([taus, taus - DIFF_S, taus + DIFF_S])
-    qs, acc, rate, rate_dot = _rows(*floats(sp), k, d, all_taus)
-    v = env.vehicle
-    wrench = _nominal_wrench_rows(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, qs, acc,
-                                  rate, rate_dot)
-    om = np.ascontiguousarray(wrench.T @ env.pinv_t)
+    om = _allocated(env, sp, k, d, all_taus)
     om0 = np.ascontiguousarray(om[:n])
     dom = np.ascontiguousarray((om[2 * n:] - om[n:2 * n]) / (2.0 * DIFF_S))
     zero = np.zeros_like(om0)
@@ -394,11 +401,7 @@ def flip(env: Envelope, sp: Setpoint, x: Offset, d: float) -> Excess | None:
     by pi between two samples, at any duration; None when there is none."""
     k = coefficients(x, d)
     taus = _instants(sp, x, d)
-    qs, acc, rate, rate_dot = _rows(*floats(sp), k, d, taus)
-    v = env.vehicle
-    wrench = _nominal_wrench_rows(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, qs, acc,
-                                  rate, rate_dot)
-    om = wrench.T @ env.pinv_t
+    om = _allocated(env, sp, k, d, taus)
     tilt = np.arctan2(om[:, 0::2], om[:, 1::2])
     step = np.abs(np.angle(np.exp(1j * np.diff(tilt, axis=0))))
     if not step.size or float(step.max()) < FLIP_RAD:

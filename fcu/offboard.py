@@ -60,8 +60,11 @@ from fcu.tracker import Reference
 
 ROTATION_RATE_DEG_S = 90.0  # a rotation's approach rate, about any axis
 ROTATION_ACC_DEG_S2 = 180.0
-SAME_M = 1e-6  # a sample within this (m, m/s, m/s^2) of the set-point before continues it
-SAME_RAD = 1e-6  # ... and within this (rad, rad/s)
+# A sample within this (m, m/s, m/s^2) of the set-point before continues it, and within this
+# (rad, rad/s): above the float32 rounding of MAVLink's fields (3.8e-6 m at 100 m), so a
+# stream re-sent through the wire does not re-plan at every sample.
+SAME_M = 2e-5
+SAME_RAD = 2e-5
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 

@@ -224,3 +224,24 @@ def test_a_moving_reference_brakes_to_its_hold_pose_without_overshoot(v):
     assert max(map(abs, (*refs[-1].v_enu_m_s, *refs[-1].omega_flu_rad_s))) < 1e-6
     assert offboard.settled(s)
     assert q_angle(q_mul(q_conj(Q0), q_stop)) == pytest.approx(1.0 * d / 2, abs=1e-9)
+
+
+def test_a_resent_target_rounded_to_float32_keeps_the_approach_under_way():
+    """Given a 10 m step under way, when the same target keeps arriving as MAVLink's float32
+    fields carry it (rounded differently each time: 60 m away, 100 m up), then the approach
+    is not re-planned (it keeps its start), and it ends on the target."""
+    import struct
+
+    def f32(x: float, k: int) -> float:  # the float32 value, nudged by k ulps
+        (i,) = struct.unpack("<i", struct.pack("<f", x))
+        return struct.unpack("<f", struct.pack("<i", i + k))[0]
+
+    target = (60.0, 10.0, 100.0)
+    s = offboard.start(0, pose_ref((60.0, 0.0, 100.0), Q0), LIM)
+    s, _ = offboard.advance(s, 0, Target(1, target, Z, Z, Q0, Z), LIM)
+    first = s.plan_us
+    for k in range(1, 6000):
+        p = tuple(f32(c, (k % 3) - 1) for c in target)
+        s, ref = offboard.advance(s, k * DT_US, Target(k + 1, p, Z, Z, Q0, Z), LIM)
+        assert s.plan_us == first, k
+    assert math.dist(ref.p_enu_m, target) < 1e-4
