@@ -207,14 +207,17 @@ def _anchor(s: Shaped, target: Target, lim: StickSettings, env: Envelope | None)
             plan.excess.kind in (approach.FLIP, TILT):
         # the attitude cannot be reached along its geodesic in any time the planner tries:
         # hold the one flown (braked), fly the rest (STATUSTEXT's 50 characters)
-        n = plan.excess.number
-        refused = f"{ATTITUDE_NOT_FLOWN}: tilt servo {n} would flip" \
-            if plan.excess.kind == approach.FLIP else \
-            f"{ATTITUDE_NOT_FLOWN}: tilt servo {n} needs {plan.excess.need:.1f} rad/s"
-        asked = target._replace(seq=0)
-        sp = sp._replace(q=ref.q_enu_flu, w=_ZERO)
-        free = (free[0], True)
-        plan = approach.plan(env, lim, sp, _offset(ref, sp), free)
+        held_sp = sp._replace(q=ref.q_enu_flu, w=_ZERO)
+        held_free = (free[0], True)
+        held = approach.plan(env, lim, held_sp, _offset(ref, held_sp), held_free)
+        if held is None or held.fits or plan.excess.kind == approach.FLIP:
+            # the attitude is what does not fit (holding it, the rest does, or a flip)
+            n = plan.excess.number
+            refused = f"{ATTITUDE_NOT_FLOWN}: tilt servo {n} would flip" \
+                if plan.excess.kind == approach.FLIP else \
+                f"{ATTITUDE_NOT_FLOWN}: tilt servo {n} needs {plan.excess.need:.1f} rad/s"
+            asked = target._replace(seq=0)
+            sp, free, plan = held_sp, held_free, held
     return s._replace(seq=target.seq, anchor_us=s.t_us, sp=_shifted(sp, ref, plan)
                       if any(free) else sp, plan=plan, plan_us=s.t_us, refused=refused,
                       asked=asked)
