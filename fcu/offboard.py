@@ -31,11 +31,11 @@ the vehicle on the ground.
 
 A sample whose attitude can only be reached with a tilt flipping half a turn, or with one
 turning faster than its servo however slowly the approach goes (up to `approach.D_MAX_S`),
-(a rotor's thrust passing through zero on the way, `approach.flip`: a roll about the body's
-forward axis of 55 deg or more on the tilted preset, 90 deg or more on the planar) is not
-flown in attitude: the attitude flown is braked and held, the rest of the sample flown, and
-`Shaped.refused` says why (the commander sends it as a STATUSTEXT warning). Flown, such a
-roll rate-limited tilt servos 2 and 5 for 0.9 to 3.5 s and lost the vehicle when stretched.
+(a rotor's thrust passing through zero on the way, `approach.flip`: a large roll about the
+body's forward axis on both presets) is not flown in attitude: the attitude flown is braked
+and held, the rest of the sample flown, and `Shaped.refused` says why (the commander sends
+it as a STATUSTEXT warning). Flown, such a roll rate-limits tilt servos 2 and 5 while they
+turn half a revolution; stretched, it lost the vehicle.
 
 HOLD brakes a moving reference with the same approach, its end free (`stop`): the vehicle
 holds where the braking ends.
