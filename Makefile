@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= runs/demo
 
-.PHONY: venv demo test test-fast bench lint clean
+.PHONY: venv demo test test-fast test-under-load bench lint clean
 
 venv: $(STAMP)
 
@@ -25,6 +25,10 @@ test: venv
 
 test-fast: venv
 	$(PY) -m pytest -q -n auto --dist loadgroup -m "not slow and not process" tests
+
+# The whole suite twice in a row beside two busy processes at nice 19 (a shared machine).
+test-under-load: venv
+	$(PY) benchmarks/suite_under_load.py --times 2 --busy 2
 
 bench: venv
 	$(PY) benchmarks/run_all.py

@@ -1,0 +1,73 @@
+"""The whole suite beside a CPU load: two busy processes at nice 19, as on a shared machine.
+
+    .venv/bin/python benchmarks/suite_under_load.py [--times N] [--busy K] [-- pytest args]
+
+Runs `make test`'s two steps (mypy, then pytest over tests/ with xdist) N times in a row
+beside K busy-looping children at nice 19, prints each run's wall time and result, stops at
+the first failure, and exits with that run's code (0 when all passed). The busy children are
+this script's own and are stopped on every way out, Ctrl-C included.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BUSY = "while True:\n    pass\n"
+
+
+def _busy_children(count: int) -> list[subprocess.Popen[bytes]]:
+    return [subprocess.Popen([sys.executable, "-c", BUSY], preexec_fn=lambda: os.nice(19),
+                             stdin=subprocess.DEVNULL) for _ in range(count)]
+
+
+def _suite(pytest_args: list[str]) -> int:
+    steps = [[sys.executable, "-m", "mypy"],
+             [sys.executable, "-m", "pytest", "-q", "-n", "auto", "--dist", "loadgroup",
+              *(pytest_args or ["tests"])]]
+    for step in steps:
+        code = subprocess.call(step, cwd=ROOT)
+        if code != 0:
+            return code
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--times", type=int, default=2, help="runs in a row (default 2)")
+    parser.add_argument("--busy", type=int, default=2,
+                        help="busy processes at nice 19 beside the suite (default 2)")
+    parser.add_argument("pytest_args", nargs="*", help="after --: pytest's arguments")
+    args = parser.parse_args(argv)
+    if args.times < 1 or args.busy < 0:
+        parser.error("--times must be at least 1 and --busy at least 0")
+    busy = _busy_children(args.busy)
+    code = 0
+    try:
+        for run in range(1, args.times + 1):
+            start = time.monotonic()
+            code = _suite(args.pytest_args)
+            minutes, seconds = divmod(time.monotonic() - start, 60)
+            result = "passed" if code == 0 else f"failed (exit {code})"
+            print(f"run {run}/{args.times} beside {args.busy} busy at nice 19: {result} "
+                  f"in {int(minutes)} min {seconds:.0f} s", flush=True)
+            if code != 0:
+                break
+    except KeyboardInterrupt:
+        code = 130
+    finally:
+        for child in busy:
+            child.send_signal(signal.SIGTERM)
+        for child in busy:
+            child.wait()
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())
