@@ -17,7 +17,9 @@ import time
 
 import numpy as np
 
-from fcu.estimator import Estimator, EstimatorSettings, ImuInput, PoseInput
+from fcu.estimator.ekf import Estimator
+from fcu.estimator.inputs import ImuInput, PoseInput
+from fcu.estimator.settings import EstimatorSettings
 
 
 def _stream(seconds: float, seed: int = 1) -> list[list[ImuInput | PoseInput]]:

@@ -37,7 +37,7 @@ from common.mission_items import HomePosition
 from common.outcome import Event
 from common.parent import stop_with_parent
 from common.ulog import ULogError
-from fcu.estimator import ImuInput, PoseInput
+from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.gcs_server import COMPONENT, GcsServer
 from fcu.mission_protocol import MissionServer
 from fcu.onboard_log import OnboardLog

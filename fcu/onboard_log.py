@@ -44,7 +44,7 @@ from common.outcome import Event
 from common.quaternion import q_rotate
 from common.ulog import Topic, ULogWriter, info_message
 from fcu.core import ONBOARD_COLUMNS, onboard_row
-from fcu.estimator import ImuInput, PoseInput
+from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.failsafe import state_lost
 from fcu.pipeline import Pipeline, StepOutput
 from fcu.telemetry import Home

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 from common.config import ConfigError, Gains, VehicleConfig, check_stability
 from fcu.commander import FlightSettings
-from fcu.estimator import EstimatorSettings
+from fcu.estimator.settings import EstimatorSettings
 from fcu.failsafe import FailsafeSettings
 from fcu.manual import StickSettings
 from fcu.mission import MissionLimits
@@ -103,7 +103,7 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("MPC_MAN_Y_MAX", 90.0, 0.0, 400.0, "deg/s", "POSCTL: yaw rate at full stick"),
     ParamSpec("MPC_JERK_MAX", 8.0, 0.5, 500.0, "m/s^3",
               "POSCTL: jerk limit (lower where the tilt servos need it)"),
-    # The estimator (fcu/estimator.py); EKF2's names and defaults where EKF2 has the figure.
+    # The estimator (fcu/estimator/); EKF2's names and defaults where EKF2 has the figure.
     ParamSpec("EKF_EN", 0.0, 0.0, 1.0, "enum",
               "state source: 0 = ODOMETRY as the exact state, 1 = the estimator from "
               "HIL_SENSOR and the external pose (ODOMETRY, motion capture)"),

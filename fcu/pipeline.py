@@ -6,7 +6,7 @@
 
 The state is either the exact state from the simulator link (ODOMETRY; parameter
 EKF_EN = 0) or the estimator's output at the newest IMU sample, with the bias-corrected
-rate (EKF_EN = 1: `on_imu`, `on_pose`; fcu/estimator.py).
+rate (EKF_EN = 1: `on_imu`, `on_pose`; fcu/estimator/).
 
 Pure and I/O-free: the flight clock `t_us` and the period `dt_s` come in as arguments (the
 process shell passes simulated time in lockstep and the measured, clamped period in real
@@ -35,7 +35,9 @@ from fcu.commander import (
 )
 from fcu.core import FlightCore, StepResult
 from fcu.dualquat import q_normalize, q_rotate
-from fcu.estimator import Estimator, EstimatorSettings, ImuInput, PoseInput
+from fcu.estimator.ekf import Estimator
+from fcu.estimator.inputs import ImuInput, PoseInput
+from fcu.estimator.settings import EstimatorSettings
 from fcu.failsafe import (
     FailsafeSettings,
     GcsLinkMonitor,

@@ -37,7 +37,7 @@ from common.simlink import (
     unpack_odometry,
     unpack_timesync,
 )
-from fcu.estimator import ImuInput, PoseInput
+from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.pipeline import StepOutput
 from fcu.tracker import VehicleState
 

@@ -15,7 +15,7 @@ from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_
 from common.mavlink import MAV
 from common.modes import MAIN_POSCTL
 from common.simlink import pose_covariance
-from fcu.estimator import Estimator
+from fcu.estimator.ekf import Estimator
 from fcu.pipeline import StepOutput
 from fcu.tracker import Reference, VehicleState
 

@@ -43,7 +43,9 @@ from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.quaternion import Quat, Vec3
 from common.ulog import ULogError, open_ulog, topic_rows
 from fcu.dualquat import q_normalize
-from fcu.estimator import Estimator, EstimatorSettings, ImuInput, PoseInput
+from fcu.estimator.ekf import Estimator
+from fcu.estimator.inputs import ImuInput, PoseInput
+from fcu.estimator.settings import EstimatorSettings
 from fcu.params import BY_NAME, estimator_settings
 from fcu.rate_filter import ImuRateFilter
 

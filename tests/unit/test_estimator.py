@@ -21,7 +21,9 @@ from scipy.stats import chi2
 
 from common.quaternion import q_conj, q_log, q_mul
 from common.sensors_config import load_sensor_profile
-from fcu.estimator import Estimator, EstimatorSettings, ImuInput, PoseInput
+from fcu.estimator.ekf import Estimator
+from fcu.estimator.inputs import ImuInput, PoseInput
+from fcu.estimator.settings import EstimatorSettings
 
 ROOT = Path(__file__).resolve().parents[2]
 PROFILE = load_sensor_profile(ROOT / "config" / "sensors" / "mocap-indoor.toml")

@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 
 from common.config import load_gains, load_vehicle
-from fcu.estimator import ImuInput, PoseInput
+from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
 

@@ -1,8 +1,9 @@
-"""The estimator's state transition F (fcu/estimator.py `_cov_step`) against a central-
-difference Jacobian of its own strapdown (`_strapdown`) over the same IMU samples, in the
-error state it defines: dx = [dp, dv, dtheta, db_g, db_a] with q = q_hat exp(dtheta). A
-flipped sign or a dropped term in any block keeps P positive definite and passes every other
-test; here it differs from the derivative by as much as the block itself."""
+"""The estimator's state transition F (`fcu.estimator.strapdown.transition_entries`)
+against a central-difference Jacobian of its own strapdown (`strapdown`) over the same IMU
+samples, in the error state it defines: dx = [dp, dv, dtheta, db_g, db_a] with
+q = q_hat exp(dtheta). A flipped sign or a dropped term in any block keeps P positive
+definite and passes every other test; here it differs from the derivative by as much as the
+block itself."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ import numpy as np
 import pytest
 
 from common.quaternion import q_conj, q_exp, q_log, q_mul
-from fcu.estimator import Estimator, _strapdown
+from fcu.estimator.ekf import Estimator
+from fcu.estimator.strapdown import strapdown
 
 DT = 0.0025  # 400 Hz, four samples: EKF2's 10 ms prediction interval
 EPS = 1e-6
@@ -44,7 +46,7 @@ def _error(x: tuple, ref: tuple) -> np.ndarray:
 
 def _propagate(x: tuple, samples, g: float) -> tuple:
     for w, f in samples:
-        x = _strapdown(x, w, f, DT, g)
+        x = strapdown(x, w, f, DT, g)
     return x
 
 
