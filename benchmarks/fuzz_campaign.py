@@ -110,7 +110,7 @@ from common.simlink import (  # noqa: E402
     pack_odometry,
 )
 from fcu.gcs_server import HANDLED  # noqa: E402
-from fcu.mission import SUPPORTED_COMMANDS as MISSION_COMMANDS  # noqa: E402
+from fcu.mission.codes import SUPPORTED_COMMANDS as MISSION_COMMANDS  # noqa: E402
 from fcu.params import SPECS as PARAM_SPECS  # noqa: E402
 from fcu.telemetry import (  # noqa: E402
     DEFAULT_INTERVALS_S,

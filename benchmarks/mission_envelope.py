@@ -18,7 +18,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from common.config import load_scenario, load_vehicle
 from common.mission_items import MissionItem, local_xy
 from fcu.feasibility import MARGIN, envelope
-from fcu.mission import MissionExecutor, MissionLimits, _Move, check_mission
+from fcu.mission.executor import MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.mission.segments import Move as _Move
+from fcu.mission.validation import check_mission
 from fcu.tracker import pose_ref
 from fcu.trajectory import make_trajectory
 

@@ -54,7 +54,9 @@ from benchmarks.random_mission_gen import (
 from common.config import Scenario, TrajectoryConfig, load_scenario, load_vehicle
 from common.mission_items import MissionItem
 from fcu.core import ONBOARD_COLUMNS
-from fcu.mission import MissionExecutor, MissionLimits, check_mission
+from fcu.mission.executor import MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.mission.validation import check_mission
 from gcs.inprocess import (
     apply_overrides,
     fcu_home,

@@ -37,7 +37,9 @@ from fcu import approach, manual, offboard
 from fcu.dualquat import Q_IDENTITY, Quat, Vec3, norm3
 from fcu.feasibility import Envelope, envelope
 from fcu.manual import ManualSetpoint, StickSettings
-from fcu.mission import MissionEvent, MissionExecutor, MissionLimits, level_attitude
+from fcu.mission.executor import MissionEvent, MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.mission.segments import level_attitude
 from fcu.tracker import Reference, VehicleState, pose_ref
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)

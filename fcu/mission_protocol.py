@@ -34,7 +34,8 @@ from dataclasses import dataclass, field
 
 from common.mavlink import MAV
 from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
-from fcu.mission import MissionLimits, check_mission, localize
+from fcu.mission.limits import MissionLimits
+from fcu.mission.validation import check_mission, localize
 
 M = MAV
 MISSION = M.MAV_MISSION_TYPE_MISSION

@@ -17,7 +17,7 @@ from fcu.commander import FlightSettings
 from fcu.estimator.settings import EstimatorSettings
 from fcu.failsafe import FailsafeSettings
 from fcu.manual import StickSettings
-from fcu.mission import MissionLimits
+from fcu.mission.limits import MissionLimits
 from fcu.pipeline import Pipeline
 
 AXES = "XYZ"

@@ -47,7 +47,7 @@ from fcu.failsafe import (
     pose_loss_level,
     state_lost,
 )
-from fcu.mission import MissionLimits
+from fcu.mission.limits import MissionLimits
 from fcu.rate_filter import ImuRateFilter
 from fcu.supervisor import Supervisor
 from fcu.tracker import VehicleState

@@ -37,7 +37,7 @@ from common.simlink import (
     through_wire_odometry,
 )
 from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
-from fcu.mission import check_mission, localize
+from fcu.mission.validation import check_mission, localize
 from fcu.onboard_log import OnboardLog
 from fcu.params import ParamError, ParamStore, apply_params
 from fcu.pipeline import Pipeline, StepOutput

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from common.config import load_vehicle
-from fcu.mission import MissionExecutor, MissionLimits
+from fcu.mission.executor import MissionExecutor
+from fcu.mission.limits import MissionLimits
 from gcs.inprocess import fcu_pipeline, run_scenario
 from gcs.scenario_mission import scenario_mission
 

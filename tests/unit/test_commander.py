@@ -22,7 +22,7 @@ from fcu.commander import (
 )
 from fcu.failsafe import FailsafeSettings
 from fcu.manual import StickSettings
-from fcu.mission import MissionLimits
+from fcu.mission.limits import MissionLimits
 from fcu.pipeline import Pipeline
 from fcu.tracker import VehicleState
 

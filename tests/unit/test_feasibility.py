@@ -1,4 +1,4 @@
-"""Missions the vehicle can fly (fcu/feasibility.py, fcu/mission.py): nominal wrench, rotor
+"""Missions the vehicle can fly (fcu/feasibility.py, fcu/mission/): nominal wrench, rotor
 speed envelope, time scaling, stretching of speed-timed items, refusal of user-timed ones."""
 
 from __future__ import annotations
@@ -19,15 +19,11 @@ from common.mission_items import MissionItem, local_xy
 from fcu.allocation import Allocator
 from fcu.dualquat import q_exp, q_rotate_inv
 from fcu.feasibility import KINDS, MARGIN, Envelope, envelope, excess_kernel, nominal_wrench
-from fcu.mission import (
-    MissionCheck,
-    MissionExecutor,
-    MissionLimits,
-    _Figure,
-    _Move,
-    check_mission,
-    validate_mission,
-)
+from fcu.mission.executor import MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.mission.segments import Figure as _Figure
+from fcu.mission.segments import Move as _Move
+from fcu.mission.validation import MissionCheck, check_mission, validate_mission
 from fcu.tracker import DualQuaternionTracker, Reference, VehicleState
 from gcs.scenario_mission import scenario_mission
 

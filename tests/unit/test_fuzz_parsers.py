@@ -34,7 +34,8 @@ from common.simlink import (
     unpack_hil_sensor,
     unpack_odometry,
 )
-from fcu.mission import MissionLimits, validate_mission
+from fcu.mission.limits import MissionLimits
+from fcu.mission.validation import validate_mission
 from fcu.mission_protocol import MissionServer, item_from_message
 from gcs.mission_files import MissionFileError, parse_toml, parse_wpl, read_mission
 

@@ -1,6 +1,6 @@
 """Missions in global frames: the geodetic <-> local conversion (common/frames.py), items
 converted through the home (common/mission_items.py), the vehicle's acceptance of global
-items and its refusal of local items that MAVProxy scaled by 1e7 (fcu/mission.py,
+items and its refusal of local items that MAVProxy scaled by 1e7 (fcu/mission/,
 fcu/mission_protocol.py)."""
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ from common.mission_items import (
     to_global,
     to_local,
 )
-from fcu.mission import MissionLimits, check_mission, localize
+from fcu.mission.limits import MissionLimits
+from fcu.mission.validation import check_mission, localize
 from fcu.mission_protocol import MissionServer
 from gcs.mission_files import format_wpl
 

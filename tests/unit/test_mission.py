@@ -1,4 +1,4 @@
-"""Mission executor (fcu/mission.py): analytic derivatives, Case I equivalence, events,
+"""Mission executor (fcu/mission/): analytic derivatives, Case I equivalence, events,
 validation, set_current, right-hand limits at segment boundaries."""
 
 from __future__ import annotations
@@ -11,19 +11,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import fcu.mission as mission_mod
+import fcu.mission.codes as mission_mod
 from common.config import load_scenario
 from common.frames import enu_to_ned, ned_to_enu, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
 from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
 from common.mission_items import MissionItem, local_xy
 from fcu.dualquat import q_angle, q_conj, q_exp, q_mul, q_norm, q_rotate_inv
-from fcu.mission import (
-    MissionEvent,
-    MissionExecutor,
-    MissionLimits,
-    level_attitude,
-    validate_mission,
-)
+from fcu.mission.executor import MissionEvent, MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.mission.segments import level_attitude
+from fcu.mission.validation import validate_mission
 from fcu.trajectory import FigureEight, make_trajectory
 from gcs.scenario_mission import scenario_mission
 

@@ -17,7 +17,8 @@ import common.mavlink  # noqa: F401  (MAVLink 2 before mavutil)
 from common.config import load_scenario, load_vehicle
 from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME, encoder, pack, parser
 from common.mission_items import MissionItem, local_xy
-from fcu.mission import MissionLimits, check_mission
+from fcu.mission.limits import MissionLimits
+from fcu.mission.validation import check_mission
 from fcu.mission_protocol import MissionServer, statustext_chunks
 from gcs.mission_client import (
     MissionError,

@@ -11,7 +11,9 @@ import pytest
 from common.config import load_scenario, load_vehicle
 from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME, encoder, pack, parser
 from common.mission_items import MissionItem, local_xy
-from fcu.mission import MissionExecutor, MissionLimits, check_mission
+from fcu.mission.executor import MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.mission.validation import check_mission
 from fcu.mission_protocol import MissionServer, statustext_chunks
 from gcs.scenario_mission import scenario_mission
 

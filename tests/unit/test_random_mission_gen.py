@@ -91,7 +91,8 @@ def test_every_kind_appears_and_yaw_both_ways():
 def test_keyframe_turns_at_most_180_deg_from_the_attitude_before():
     """The generator's attitude bookkeeping matches the executor's: the keyframe's turn from
     the previous item's planned attitude is the drawn one, <= 180 deg, and not always 0."""
-    from fcu.mission import MissionExecutor, MissionLimits
+    from fcu.mission.executor import MissionExecutor
+    from fcu.mission.limits import MissionLimits
 
     turns = []
     for items in _missions(1, 60):

@@ -1,0 +1,144 @@
+"""The mission executor: a fixed timeline of planned segments and its events."""
+
+from __future__ import annotations
+
+import bisect
+from collections.abc import Sequence
+from typing import NamedTuple
+
+from common.mission_items import MissionItem
+from fcu.dualquat import Quat, Vec3
+from fcu.mission.codes import MAV_MISSION_ACCEPTED
+from fcu.mission.limits import MissionLimits
+from fcu.mission.planning import plan_item
+from fcu.mission.segments import Segment
+from fcu.mission.validation import check_items
+from fcu.tracker import Reference, pose_ref
+
+# Item ends are sums of float seconds; the flight clock is integer microseconds. An item
+# that ends at a step's instant ends at that step whatever the rounding of the sum.
+TIME_EPS_S = 1e-9
+
+
+class MissionEvent(NamedTuple):
+    kind: str  # "current" | "reached" | "completed"
+    seq: int
+
+
+
+class MissionExecutor:
+    """Plans a mission on a fixed timeline and samples its reference.
+
+    `start` (or `set_current`) plans every remaining item at once: item k starts at the
+    end time of item k - 1, from its desired end pose; with `limits.vehicle`, speed-timed
+    items are stretched as in validation (the `fcu.mission` docstring). An item is active on
+    [start, end), so at a boundary the sample is the next item's at tau = 0 (the right-hand
+    limit); zero-length items are passed through (their events still come). Before the start
+    the reference holds the start pose, after the end the final pose.
+    """
+
+    def __init__(self, items: Sequence[MissionItem], limits: MissionLimits) -> None:
+        self.items = tuple(items)
+        self.limits = limits
+        if not self.items:
+            raise ValueError("empty mission")
+        # The geofence and the item count are the uploader's business (the vehicle may have
+        # tightened its limits since); what cannot be flown is refused here.
+        result, seq, _ = check_items(self.items, limits, geofence=False)
+        if result != MAV_MISSION_ACCEPTED:
+            raise ValueError(f"mission item {seq}: not executable (MAV_MISSION_RESULT {result})")
+        self._segments: list[Segment] = []
+        self._ends: list[float] = []
+        self._start_ref: Reference | None = None
+        self._t_start = 0.0
+        self._announced = 0
+        self._reached = 0
+        self._completed = False
+        self.current_seq = 0
+
+    # ------------------------------------------------------------------ planning
+
+    def start(self, t_s: float, p_enu_m: Vec3, q_enu_flu: Quat) -> None:
+        """Plan the whole mission from item 0, starting at t_s from the given pose."""
+        self.set_current(0, t_s, p_enu_m, q_enu_flu)
+
+    def set_current(self, seq: int, t_s: float, p_enu_m: Vec3, q_enu_flu: Quat) -> None:
+        """Re-plan from item seq, starting at t_s from the given pose."""
+        if not 0 <= seq < len(self.items):
+            raise ValueError(f"no mission item {seq} (mission has {len(self.items)})")
+        p, q = tuple(p_enu_m), tuple(q_enu_flu)
+        self._start_ref = pose_ref(p, q)  # type: ignore[arg-type]
+        self._t_start = t_s
+        segments: list[Segment] = []
+        t = t_s
+        for item in self.items[seq:]:
+            seg = plan_item(item, t, p, q, self.limits)  # type: ignore[arg-type]
+            segments.append(seg)
+            t, p, q = seg.t1, seg.p_end, seg.q_end
+        self._segments = segments
+        self._ends = [seg.t1 for seg in segments]
+        self._announced = 0
+        self._reached = 0
+        self._completed = False
+        self.current_seq = seq
+
+    @property
+    def started(self) -> bool:
+        return self._start_ref is not None
+
+    @property
+    def completed(self) -> bool:
+        """True once `update` has seen the last item end."""
+        return self._completed
+
+    @property
+    def schedule(self) -> tuple[tuple[int, float, float], ...]:
+        """(seq, planned start, planned end) of each planned item."""
+        return tuple((seg.seq, seg.t0, seg.t1) for seg in self._segments)
+
+    @property
+    def end_time_s(self) -> float:
+        self._require_started()
+        return self._ends[-1]
+
+    def _require_started(self) -> None:
+        if self._start_ref is None:
+            raise RuntimeError("mission executor not started")
+
+    # ------------------------------------------------------------------ running
+
+    def update(self, t_s: float) -> list[MissionEvent]:
+        """Events since the last update: items that became current, were reached, the end."""
+        self._require_started()
+        segs = self._segments
+        events: list[MissionEvent] = []
+        while True:
+            if self._reached < self._announced:
+                seg = segs[self._reached]
+                if seg.t1 <= t_s + TIME_EPS_S:
+                    events.append(MissionEvent("reached", seg.seq))
+                    self._reached += 1
+                    continue
+                break
+            if self._announced < len(segs) and segs[self._announced].t0 <= t_s + TIME_EPS_S:
+                seg = segs[self._announced]
+                events.append(MissionEvent("current", seg.seq))
+                self.current_seq = seg.seq
+                self._announced += 1
+                continue
+            break
+        if self._reached == len(segs) and not self._completed:
+            self._completed = True
+            events.append(MissionEvent("completed", segs[-1].seq))
+        return events
+
+    def sample(self, t_s: float) -> Reference:
+        """The reference at t_s (any time: before the start, during, after the end)."""
+        self._require_started()
+        if t_s < self._t_start:
+            return self._start_ref  # type: ignore[return-value]
+        k = bisect.bisect_right(self._ends, t_s)
+        if k == len(self._segments):
+            return self._segments[-1].end_ref
+        seg = self._segments[k]
+        return seg.sample(t_s - seg.t0)

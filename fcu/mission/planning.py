@@ -1,0 +1,131 @@
+"""Planning one item: its segment from the start pose and time, stretched to what the vehicle can
+fly (speed-timed items), and why a user-timed item cannot be flown (`fcu.feasibility`).
+"""
+
+from __future__ import annotations
+
+import math
+
+from common.config import VehicleConfig
+from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
+from common.mission_items import MissionItem
+from fcu.dualquat import Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul
+from fcu.feasibility import envelope
+from fcu.mission.codes import (
+    MAV_CMD_FIGURE_EIGHT,
+    MAV_CMD_NAV_LAND,
+    MAV_CMD_NAV_LOITER_TIME,
+    MAV_CMD_NAV_TAKEOFF,
+    MAV_CMD_NAV_WAYPOINT,
+    MAV_CMD_POSE_KEYFRAME,
+)
+from fcu.mission.limits import MissionLimits
+from fcu.mission.segments import ZERO, Figure, Move, Segment, level_attitude
+
+POSITION_TOLERANCE_M = 1e-3  # well above the wire's resolution (1e-4 m for x, y; float32 z)
+ANGLE_TOLERANCE_RAD = 1e-4
+
+
+def _sub(a: Vec3, b: Vec3) -> Vec3:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+def _turn(q0: Quat, yaw_deg: float) -> Vec3 | None:
+    """Rotation vector from q0 to the level attitude at yaw_deg (None: keep the attitude)."""
+    if math.isnan(yaw_deg):
+        return None
+    phi = q_log(q_mul(q_conj(q0), level_attitude(yaw_deg)))
+    return phi if norm3(phi) > 0.0 else None
+
+
+def _stretched(seg: Move, vehicle: VehicleConfig | None) -> Move:
+    """A speed-timed move, its travel lengthened to the shortest flyable time if it is
+    shorter (`fcu.feasibility.TimeScaling.shortest`); as it is without a vehicle, when it does
+    not move, or when no duration helps."""
+    if vehicle is None or not seg.moves:
+        return seg
+    scaling = envelope(vehicle).scaling(seg)
+    shortest = scaling.shortest()
+    if math.isfinite(shortest) and shortest > seg.travel:
+        seg = seg.retimed(shortest)
+    seg.scaling = scaling
+    return seg
+
+
+# The parameter that gives the duration of user-timed items.
+_TIME_SLOT = {MAV_CMD_POSE_KEYFRAME: "p1", MAV_CMD_FIGURE_EIGHT: "p2", MAV_CMD_NAV_TAKEOFF: "p2"}
+
+
+def envelope_reason(item: MissionItem, seg: Segment, limits: MissionLimits) -> str:
+    """'' when the vehicle can fly the planned segment, else why not (for a person), naming
+    the actuator and its limit (`fcu.feasibility.Envelope.explain`)."""
+    if limits.vehicle is None or seg.duration <= 0.0 or (isinstance(seg, Move)
+                                                          and not seg.moves):
+        return ""
+    env = envelope(limits.vehicle)
+    scaling = seg.scaling if seg.scaling is not None else env.scaling(seg)
+    excess = scaling.excess(seg.duration)
+    if excess.ratio <= 1.0:  # flown as planned (a stretched move: at its shortest)
+        return ""
+    shortest = scaling.shortest()
+    slot = _TIME_SLOT.get(item.command)
+    if item.command == MAV_CMD_NAV_TAKEOFF and not item.param2 > 0.0:
+        slot = None  # timed by the takeoff speed
+    if not math.isfinite(shortest):
+        hint = "attitude too demanding at any speed"
+    elif slot is None:  # cannot happen: speed-timed items are stretched to `shortest`
+        hint = "not flyable"
+    else:
+        hint = f"lengthen {slot} to {math.ceil(shortest * 100.0) / 100.0:.2f} s"
+    return f"item {item.seq}: {env.explain(excess)}: {hint}"
+
+
+def plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
+               limits: MissionLimits) -> Segment:
+    cmd = item.command
+    turn_rate = math.radians(limits.turn_rate_deg_s)
+
+    def speed_timed(dp: Vec3, speed: float, phi: Vec3 | None) -> tuple[Vec3, Vec3 | None, float]:
+        """Drop moves below the tolerances; duration = max(distance / speed, turn time)."""
+        dist = norm3(dp)
+        if dist < POSITION_TOLERANCE_M:
+            dp, dist = ZERO, 0.0
+        angle = 0.0 if phi is None else norm3(phi)
+        if angle < ANGLE_TOLERANCE_RAD:
+            phi, angle = None, 0.0
+        travel = dist / speed if dist > 0.0 else 0.0
+        if angle > 0.0:
+            travel = max(travel, angle / turn_rate)
+        return dp, phi, travel
+
+    def move(dp: Vec3, phi: Vec3 | None, travel: float, hold: float) -> Move:
+        """A speed-timed move, stretched to what the vehicle can fly."""
+        return _stretched(Move(item.seq, t0, p0, dp, q0, phi, travel, hold), limits.vehicle)
+
+    if cmd == MAV_CMD_NAV_TAKEOFF:
+        dp = (0.0, 0.0, -item.z - p0[2])
+        phi = _turn(q0, item.param4)
+        if item.param2 > 0.0:
+            return Move(item.seq, t0, p0, dp, q0, phi, item.param2, 0.0)
+        dp, phi, travel = speed_timed(dp, limits.takeoff_speed_m_s, phi)
+        return move(dp, phi, travel, 0.0)
+    if cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME):
+        target = ned_to_enu((item.x_m, item.y_m, item.z))
+        phi = _turn(q0, item.param4) if cmd == MAV_CMD_NAV_WAYPOINT else None
+        dp, phi, travel = speed_timed(_sub(target, p0), limits.cruise_speed_m_s, phi)
+        return move(dp, phi, travel, item.param1)
+    if cmd == MAV_CMD_NAV_LAND:
+        dp, phi, travel = speed_timed((0.0, 0.0, -p0[2]), limits.land_speed_m_s,
+                                      _turn(q0, item.param4))
+        return move(dp, phi, travel, 0.0)
+    if cmd == MAV_CMD_POSE_KEYFRAME:
+        target = ned_to_enu((item.x_m, item.y_m, item.z))
+        q1 = q_ned_frd_to_enu_flu(q_exp((item.param2, item.param3, item.param4)))
+        phi = q_log(q_mul(q_conj(q0), q1))  # shortest path
+        return Move(item.seq, t0, p0, _sub(target, p0), q0,
+                     phi if norm3(phi) > 0.0 else None, item.param1, 0.0)
+    if cmd == MAV_CMD_FIGURE_EIGHT:
+        axis = ned_to_enu((item.param3, item.param4, item.z))
+        return Figure(item.seq, t0, p0, q0, item.param1, item.param2, axis)
+    raise ValueError(f"mission item {item.seq}: unsupported command {cmd}")
+
