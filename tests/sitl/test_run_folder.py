@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from pymavlink import mavutil
 
 from ..terminal import sigint_default
 
@@ -22,6 +23,21 @@ CASE1 = ROOT / "config" / "scenarios" / "case1_figure8.toml"
 def _gcs(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "gcs.cli", *args], cwd=ROOT,
                           capture_output=True, text=True, timeout=timeout, check=False)
+
+
+def _flown_s(tlog: Path) -> float:
+    """The newest flight-clock time (s) in the run's telemetry so far: LOCAL_POSITION_NED's
+    time_boot_ms, which stays 0 until the flight starts (lockstep)."""
+    if not tlog.exists():
+        return 0.0
+    log = mavutil.mavlink_connection(str(tlog), dialect="common")
+    newest = 0.0
+    try:
+        while (msg := log.recv_match(type="LOCAL_POSITION_NED")) is not None:
+            newest = max(newest, msg.time_boot_ms / 1000.0)
+    finally:
+        log.close()
+    return newest
 
 
 @pytest.mark.timeout(240)
@@ -62,10 +78,10 @@ def test_ctrl_c_leaves_an_aborted_run(tmp_path):
                             stderr=subprocess.PIPE, text=True,
                             preexec_fn=sigint_default)
     try:
-        deadline = time.monotonic() + 60.0
-        while time.monotonic() < deadline and not (out / "onboard.ulg").exists():
-            time.sleep(0.1)
-        time.sleep(2.0)
+        deadline = time.monotonic() + 90.0
+        while time.monotonic() < deadline and _flown_s(out / "flight.tlog") < 1.0:
+            time.sleep(0.2)  # the flight's start: simulated time stands still before it
+        assert _flown_s(out / "flight.tlog") >= 1.0, "the flight did not start in 90 s"
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     finally:
