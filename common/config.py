@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from common.vehicle_constants import N_ROTORS
+
 if TYPE_CHECKING:
     from common.sensors_config import SensorProfile
 
@@ -145,10 +147,6 @@ def _read_toml(path: Path) -> dict[str, Any]:
 # Vehicle (MODEL.md section 1)
 # ----------------------------------------------------------------------------------------
 
-
-# The truth and onboard logs, the actuator packing of the simulator link (six speeds, six
-# tilts) and the telemetry assume a hexarotor; the geometry code itself is general.
-N_ROTORS = 6
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,8 @@ numba checks a cached kernel against its own source file only, while a kernel in
 kernels it calls from other modules (the tracker's has the dual-quaternion algebra in it):
 an edit of `fcu/dualquat.py` would leave a stale tracker in the cache. So the cache lives in
 `__pycache__/numba-<hash>` at the project's root, the hash taken over every module that
-defines kernels (KERNEL_MODULES): any edit of one of them starts a fresh cache.
+defines kernels or the constants they freeze (KERNEL_MODULES: the array layouts of
+`common.layouts`): any edit of one of them starts a fresh cache.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from typing import Any, TypeVar, cast
 import numba
 
 ROOT = Path(__file__).resolve().parent.parent
-KERNEL_MODULES = ("common/jit.py", "common/quaternion.py", "fcu/dualquat.py",
+KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layouts.py",
+                  "common/quaternion.py", "fcu/dualquat.py",
                   "fcu/tracker.py", "fcu/allocation.py", "fcu/feasibility.py", "fcu/core.py",
                   "sitl/plant.py", "sitl/disturbance.py")
 

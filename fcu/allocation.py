@@ -20,22 +20,46 @@ import numpy as np
 from common.config import VehicleConfig
 from common.geometry import rotor_frames
 from common.jit import njit
+from common.layouts import (
+    A_HOLD,
+    A_PINV,
+    A_SIZE,
+    A_WMAX,
+    AO_OMEGA,
+    AO_SATURATED,
+    AO_SIZE,
+    AO_SPEED,
+    AO_TILT,
+    AO_TILT_RAW,
+    L_HOLD,
+    L_LEAD_MAX,
+    L_PINV,
+    L_SIZE,
+    L_TAU_DOWN,
+    L_TAU_UP,
+    L_TILT_RATE,
+    L_WMAX,
+    LS_A_LAST,
+    LS_BIAS,
+    LS_HAS_LAST,
+    LS_HAS_MODEL,
+    LS_MODEL,
+    LS_SIZE,
+    LS_W_LAST,
+    PINV_SIZE,
+)
+from common.vehicle_constants import N_ROTORS
 from fcu.dualquat import Vec3, cross
 
 TWO_PI = 2.0 * math.pi
-N_ROTORS = 6  # the hexarotor (common.config refuses other counts)
-ALLOC_PARAMS_SIZE = 74  # A^+ row-major (12 x 6), w_max, hold speed
-ALLOC_OUT_SIZE = 31  # Omega (12), speeds (6), raw tilts (6), tilts (6), saturated
-LAG_PARAMS_SIZE = 78  # A^+ (72), w_max, lead_max, hold speed, tau_up, tau_down, tilt rate
-LAG_STATE_SIZE = 26  # last nominal speeds (6), tilts (6), has_last, model (6), has_model,
-# mean bias (6)
+WRENCH_SIZE = 6  # [f; tau]: force xyz, torque xyz
 
 
 def allocation_matrix(vehicle: VehicleConfig) -> np.ndarray:
     """The 6 x 2n static allocation matrix A: [f; tau] = A Omega, Omega = [lat_1, ver_1, ...]."""
     cf, cd = vehicle.thrust_coeff, vehicle.drag_coeff
     frames = rotor_frames(vehicle)
-    a = np.zeros((6, 2 * len(frames)))
+    a = np.zeros((WRENCH_SIZE, 2 * len(frames)))
     for i, fr in enumerate(frames):
         for col, e in ((2 * i, fr.e_l_flu), (2 * i + 1, fr.e_v_flu)):
             moment = cross(fr.r_flu_m, e)
@@ -68,10 +92,11 @@ class AllocationResult(NamedTuple):
 
 @njit
 def solve_kernel(ap: np.ndarray, w6: np.ndarray, om: np.ndarray) -> None:
-    """Omega = A^+ [f; tau] (eq. 28), minimum-norm, into om (12)."""
+    """Omega = A^+ [f; tau] (eq. 28), minimum-norm, into om (2 n); A^+ row-major at the
+    start of `ap` (the allocator's or the compensator's parameters)."""
     fx, fy, fz, tx, ty, tz = w6[0], w6[1], w6[2], w6[3], w6[4], w6[5]
     for r in range(2 * N_ROTORS):
-        j = 6 * r
+        j = A_PINV + WRENCH_SIZE * r
         om[r] = (ap[j] * fx + ap[j + 1] * fy + ap[j + 2] * fz + ap[j + 3] * tx
                  + ap[j + 4] * ty + ap[j + 5] * tz)
 
@@ -79,34 +104,37 @@ def solve_kernel(ap: np.ndarray, w6: np.ndarray, om: np.ndarray) -> None:
 @njit
 def allocate_kernel(ap: np.ndarray, w6: np.ndarray, tilt: np.ndarray, out: np.ndarray) -> None:
     """Eqs. (28-29) with saturation and the corrected unwrap (Algorithm 1, MODEL.md 2) for
-    the wrench w6 = [f; tau]; `tilt` (6) is the unwrapped tilt, advanced in place; `out`
-    gets ALLOC_OUT_SIZE values."""
-    solve_kernel(ap, w6, out[0:12])
-    w_max, hold = ap[72], ap[73]
+    the wrench w6 = [f; tau]; `tilt` (n) is the unwrapped tilt, advanced in place; `out`
+    gets ALLOC_OUT (common.layouts), from the parameters ALLOC_PARAMS `ap`."""
+    solve_kernel(ap, w6, out[AO_OMEGA:AO_OMEGA + 2 * N_ROTORS])
+    w_max, hold = ap[A_WMAX], ap[A_HOLD]
     saturated = 0.0
     for i in range(N_ROTORS):
-        lat, ver = out[2 * i], out[2 * i + 1]
+        lat, ver = out[AO_OMEGA + 2 * i], out[AO_OMEGA + 2 * i + 1]
         w = math.sqrt(math.sqrt(lat * lat + ver * ver))
         raw = math.atan2(lat, ver)
-        out[18 + i] = raw
+        out[AO_TILT_RAW + i] = raw
         if w > w_max:
             w = w_max
             saturated = 1.0
         if w >= hold:
             tilt[i] += wrap_pi(raw - tilt[i])
-        out[12 + i] = w
-        out[24 + i] = tilt[i]
-    out[30] = saturated
+        out[AO_SPEED + i] = w
+        out[AO_TILT + i] = tilt[i]
+    out[AO_SATURATED] = saturated
 
 
 def allocation_result(out: list[float]) -> AllocationResult:
-    """AllocationResult of allocate_kernel's ALLOC_OUT_SIZE values (as Python floats)."""
-    return AllocationResult(tuple(out[0:12]), tuple(out[12:18]), tuple(out[18:24]),
-                            tuple(out[24:30]), out[30] != 0.0)
+    """AllocationResult of allocate_kernel's ALLOC_OUT values (as Python floats)."""
+    n = N_ROTORS
+    return AllocationResult(tuple(out[AO_OMEGA:AO_OMEGA + 2 * n]),
+                            tuple(out[AO_SPEED:AO_SPEED + n]),
+                            tuple(out[AO_TILT_RAW:AO_TILT_RAW + n]),
+                            tuple(out[AO_TILT:AO_TILT + n]), out[AO_SATURATED] != 0.0)
 
 
 def pinv_params(vehicle: VehicleConfig) -> np.ndarray:
-    """A^+ of the vehicle, row-major (72 values)."""
+    """A^+ of the vehicle, row-major (PINV_SIZE values)."""
     return np.ascontiguousarray(pseudo_inverse(allocation_matrix(vehicle))).reshape(-1)
 
 
@@ -125,7 +153,9 @@ class Allocator:
         self.pinv = pseudo_inverse(self.matrix)
         self.speed_max = vehicle.rotor_speed_max_rad_s
         self.hold_speed = hold_speed_rad_s
-        self.params = np.concatenate([pinv_params(vehicle), [self.speed_max, hold_speed_rad_s]])
+        self.params = np.zeros(A_SIZE)
+        self.params[A_PINV:A_PINV + PINV_SIZE] = pinv_params(vehicle)
+        self.params[A_WMAX], self.params[A_HOLD] = self.speed_max, hold_speed_rad_s
         self.tilt_array = np.array(initial_tilt_rad or (0.0,) * self.n, dtype=np.float64)
 
     @property
@@ -152,7 +182,7 @@ class Allocator:
 
     def allocate(self, force_flu_n: Vec3, torque_flu_nm: Vec3) -> AllocationResult:
         """Rotor speeds and continuous tilts for a desired body wrench (eqs. 28-29)."""
-        out = np.empty(ALLOC_OUT_SIZE)
+        out = np.empty(AO_SIZE)
         allocate_kernel(self.params,
                         np.array((*force_flu_n, *torque_flu_nm), dtype=np.float64),
                         self.tilt_array, out)
@@ -272,9 +302,11 @@ class LagCompensator:
         self.speed_max = vehicle.rotor_speed_max_rad_s
         self.lead_max = LEAD_MAX_SHARE * self.speed_max
         self.hold_speed = hold_speed_rad_s
-        self.params = np.concatenate([pinv_params(vehicle), [
-            self.speed_max, self.lead_max, hold_speed_rad_s, *self.figures]])
-        self.state = np.zeros(LAG_STATE_SIZE)
+        cp = self.params = np.zeros(L_SIZE)
+        cp[L_PINV:L_PINV + PINV_SIZE] = pinv_params(vehicle)
+        cp[L_WMAX], cp[L_LEAD_MAX], cp[L_HOLD] = self.speed_max, self.lead_max, hold_speed_rad_s
+        cp[L_TAU_UP], cp[L_TAU_DOWN], cp[L_TILT_RATE] = self.figures
+        self.state = np.zeros(LS_SIZE)
 
     def reset(self) -> None:
         """Forget the last nominal speeds and tilts (the next period is not led), the rotor
@@ -291,12 +323,13 @@ class LagCompensator:
     @property
     def model(self) -> list[float] | None:
         """The rotors' speeds by the internal model (None before the first command)."""
-        return self.state[13:19].tolist() if self.state[19] else None
+        cs = self.state
+        return cs[LS_MODEL:LS_MODEL + N_ROTORS].tolist() if cs[LS_HAS_MODEL] else None
 
     @property
     def mean_bias(self) -> list[float]:
         """The mean correction b_i."""
-        return list(self.state[20:26].tolist())
+        return list(self.state[LS_BIAS:LS_BIAS + N_ROTORS].tolist())
 
     def nominal(self, force_flu_n: Vec3,
                 torque_flu_nm: Vec3) -> tuple[tuple[float, ...], tuple[float, ...]]:
@@ -350,17 +383,19 @@ def lead_kernel(cp: np.ndarray, cs: np.ndarray, w6_ff: np.ndarray, dt_s: float,
     """LagCompensator.lead on the compensator's arrays (parameters cp, state cs)."""
     speeds, tilts = np.empty(N_ROTORS), np.empty(N_ROTORS)
     nominal_kernel(cp, w6_ff, speeds, tilts)
-    had_last = cs[12] != 0.0
-    w_last, a_last = cs[0:6].copy(), cs[6:12].copy()
-    cs[0:6] = speeds
-    cs[6:12] = tilts
-    cs[12] = 1.0
+    n = N_ROTORS
+    had_last = cs[LS_HAS_LAST] != 0.0
+    w_last = cs[LS_W_LAST:LS_W_LAST + n].copy()
+    a_last = cs[LS_A_LAST:LS_A_LAST + n].copy()
+    cs[LS_W_LAST:LS_W_LAST + n] = speeds
+    cs[LS_A_LAST:LS_A_LAST + n] = tilts
+    cs[LS_HAS_LAST] = 1.0
     if not had_last or not dt_s > 0.0:
         w_lead[:] = 0.0
         a_lead[:] = 0.0
         return
-    lim, hold = cp[73], cp[74]
-    fig = (cp[75], cp[76], cp[77])
+    lim, hold = cp[L_LEAD_MAX], cp[L_HOLD]
+    fig = (cp[L_TAU_UP], cp[L_TAU_DOWN], cp[L_TILT_RATE])
     for i in range(N_ROTORS):
         w, a, w0, a0 = speeds[i], tilts[i], w_last[i], a_last[i]
         lw = speed_lead((w - w0) / dt_s, fig)
@@ -374,16 +409,16 @@ def apply_kernel(cp: np.ndarray, cs: np.ndarray, plain_speeds: np.ndarray,
                  plain_tilts: np.ndarray, w_lead: np.ndarray, a_lead: np.ndarray, dt_s: float,
                  speeds: np.ndarray, tilts: np.ndarray) -> None:
     """LagCompensator.apply on the compensator's arrays: led speeds and tilts out."""
-    w_max, lim, hold = cp[72], cp[73], cp[74]
-    fig = (cp[75], cp[76], cp[77])
-    bias = cs[20:26]
-    model = cs[13:19]
+    w_max, lim, hold = cp[L_WMAX], cp[L_LEAD_MAX], cp[L_HOLD]
+    fig = (cp[L_TAU_UP], cp[L_TAU_DOWN], cp[L_TILT_RATE])
+    bias = cs[LS_BIAS:LS_BIAS + N_ROTORS]
+    model = cs[LS_MODEL:LS_MODEL + N_ROTORS]
     for i in range(N_ROTORS):
         c = plain_speeds[i] + w_lead[i] - bias[i]
         speeds[i] = 0.0 if c < 0.0 else (w_max if c > w_max else c)
-    if cs[19] == 0.0:
+    if cs[LS_HAS_MODEL] == 0.0:
         model[:] = speeds
-        cs[19] = 1.0
+        cs[LS_HAS_MODEL] = 1.0
     if dt_s > 0.0:
         gain = dt_s / MEAN_TAU_S
         for i in range(N_ROTORS):

@@ -21,6 +21,39 @@ import numpy as np
 
 from common.config import Gains, VehicleConfig
 from common.jit import njit, warm_up
+from common.layouts import (
+    AO_SPEED,
+    AO_TILT,
+    CI_DT,
+    CI_LAG_ON,
+    CI_R,
+    CI_SIZE,
+    CI_X,
+    CO_ALLOC,
+    CO_SIZE,
+    CO_TRACKER,
+    CP_ALLOC,
+    CP_LAG,
+    CP_SIZE,
+    CP_TRACKER,
+    CS_INTEGRAL,
+    CS_LAG,
+    CS_SIZE,
+    CS_TILT,
+    K_G,
+    K_J,
+    K_MASS,
+    R_A,
+    R_Q,
+    R_SIZE,
+    R_W,
+    R_WD,
+    T_FORCE,
+    T_WRENCH_END,
+    X_Q,
+    X_SIZE,
+)
+from common.vehicle_constants import N_ROTORS
 from fcu import allocation as al
 from fcu import tracker as tr
 from fcu.allocation import AllocationResult, Allocator, LagCompensator, allocation_result
@@ -33,18 +66,12 @@ from fcu.tracker import (
     tracker_output,
 )
 
-# The fused step's buffers. params: the tracker's, the allocator's, the compensator's;
-# state: the tracker's integral, the allocator's tilts, the compensator's state.
-_P_TR, _P_AL = 0, tr.PARAMS_SIZE
-_P_LAG = _P_AL + al.ALLOC_PARAMS_SIZE
-PARAMS_SIZE = _P_LAG + al.LAG_PARAMS_SIZE
-_S_TILT, _S_LAG = 6, 12
-STATE_SIZE = _S_LAG + al.LAG_STATE_SIZE
-# input: state (13), reference (19), dt, lag compensation on (1) or off (0)
-IN_SIZE = tr.STATE_SIZE + tr.REF_SIZE + 2
-# output: the tracker's (24), then the allocation's (31): Omega, speeds, raw tilts, tilts,
-# saturated (speeds and tilts led when lag compensation is on)
-OUT_SIZE = tr.OUT_SIZE + al.ALLOC_OUT_SIZE
+# The fused step's buffers (common.layouts): CORE_PARAMS holds the tracker's, the
+# allocator's and the compensator's parameters; CORE_STATE the tracker's integral, the
+# allocator's tilts and the compensator's state; CORE_IN the vehicle state, the reference,
+# dt and lag compensation on (1) or off (0); CORE_OUT the tracker's output, then the
+# allocation's (speeds and tilts led when lag compensation is on).
+PARAMS_SIZE, STATE_SIZE, IN_SIZE, OUT_SIZE = CP_SIZE, CS_SIZE, CI_SIZE, CO_SIZE
 
 
 @njit
@@ -52,25 +79,30 @@ def core_kernel(inp: np.ndarray, params: np.ndarray, state: np.ndarray,
                 out: np.ndarray) -> None:
     """One control period on flat arrays (layouts above): eq. (16/33), eqs. (28-29), and the
     lead for the actuators' lag from the reference's nominal wrench when it is on."""
-    x, r = inp[0:13], inp[13:32]
-    dt_s = inp[32]
-    k = params[_P_TR:_P_AL]
-    tr.tracker_kernel(x, r, k, state[0:_S_TILT], dt_s, out[0:24])
-    alloc = out[24:55]
-    al.allocate_kernel(params[_P_AL:_P_LAG], out[0:6], state[_S_TILT:_S_LAG], alloc)
-    if inp[33] != 0.0:
-        cp, cs = params[_P_LAG:PARAMS_SIZE], state[_S_LAG:STATE_SIZE]
-        f, t = nominal_wrench_kernel(k[18], k[22], (k[19], k[20], k[21]),
-                                     (r[3], r[4], r[5], r[6]), (r[10], r[11], r[12]),
-                                     (r[13], r[14], r[15]), (r[16], r[17], r[18]))
+    x, r = inp[CI_X:CI_X + X_SIZE], inp[CI_R:CI_R + R_SIZE]
+    dt_s = inp[CI_DT]
+    k = params[CP_TRACKER:CP_ALLOC]
+    tr.tracker_kernel(x, r, k, state[CS_INTEGRAL:CS_TILT], dt_s,
+                      out[CO_TRACKER:CO_ALLOC])
+    alloc = out[CO_ALLOC:CO_SIZE]
+    al.allocate_kernel(params[CP_ALLOC:CP_LAG],
+                       out[CO_TRACKER + T_FORCE:CO_TRACKER + T_WRENCH_END],
+                       state[CS_TILT:CS_LAG], alloc)
+    if inp[CI_LAG_ON] != 0.0:
+        cp, cs = params[CP_LAG:CP_SIZE], state[CS_LAG:CS_SIZE]
+        f, t = nominal_wrench_kernel(k[K_MASS], k[K_G], (k[K_J], k[K_J + 1], k[K_J + 2]),
+                                     (r[R_Q], r[R_Q + 1], r[R_Q + 2], r[R_Q + 3]),
+                                     (r[R_A], r[R_A + 1], r[R_A + 2]),
+                                     (r[R_W], r[R_W + 1], r[R_W + 2]),
+                                     (r[R_WD], r[R_WD + 1], r[R_WD + 2]))
         w6 = np.array((f[0], f[1], f[2], t[0], t[1], t[2]))
-        w_lead, a_lead = np.empty(al.N_ROTORS), np.empty(al.N_ROTORS)
+        w_lead, a_lead = np.empty(N_ROTORS), np.empty(N_ROTORS)
         al.lead_kernel(cp, cs, w6, dt_s, w_lead, a_lead)
-        speeds, tilts = np.empty(al.N_ROTORS), np.empty(al.N_ROTORS)
-        al.apply_kernel(cp, cs, alloc[12:18], alloc[24:30], w_lead, a_lead, dt_s, speeds,
-                        tilts)
-        alloc[12:18] = speeds
-        alloc[24:30] = tilts
+        speeds, tilts = np.empty(N_ROTORS), np.empty(N_ROTORS)
+        al.apply_kernel(cp, cs, alloc[AO_SPEED:AO_SPEED + N_ROTORS],
+                        alloc[AO_TILT:AO_TILT + N_ROTORS], w_lead, a_lead, dt_s, speeds, tilts)
+        alloc[AO_SPEED:AO_SPEED + N_ROTORS] = speeds
+        alloc[AO_TILT:AO_TILT + N_ROTORS] = tilts
 
 
 class StepResult(NamedTuple):
@@ -83,8 +115,8 @@ ONBOARD_COLUMNS = (
     "time_us", "px", "py", "pz", "qw", "qx", "qy", "qz", "vbx", "vby", "vbz", "wx", "wy", "wz",
     "pdx", "pdy", "pdz", "qdw", "qdx", "qdy", "qdz", "vdx", "vdy", "vdz", "wdx", "wdy", "wdz",
     "fx", "fy", "fz", "tx", "ty", "tz",
-    *(f"rotor_cmd{i}" for i in range(6)), *(f"tilt_cmd{i}" for i in range(6)),
-    *(f"tilt_raw{i}" for i in range(6)), "saturated", "armed", "step_us",
+    *(f"rotor_cmd{i}" for i in range(N_ROTORS)), *(f"tilt_cmd{i}" for i in range(N_ROTORS)),
+    *(f"tilt_raw{i}" for i in range(N_ROTORS)), "saturated", "armed", "step_us",
     # ln q_hat_e = 1/2 (theta_e n_e + eps p_e) (eq. 16) and the twist error xi_e (eq. 11)
     "lnqe_rx", "lnqe_ry", "lnqe_rz", "lnqe_dx", "lnqe_dy", "lnqe_dz",
     "xie_rx", "xie_ry", "xie_rz", "xie_dx", "xie_dy", "xie_dz")
@@ -128,9 +160,9 @@ class FlightCore:
         self.lag_compensation = lag_compensation
         self.params = np.zeros(PARAMS_SIZE)
         self.state = np.zeros(STATE_SIZE)
-        self.tracker.bind(self.params[_P_TR:_P_AL], self.state[0:_S_TILT])
-        self.allocator.bind(self.params[_P_AL:_P_LAG], self.state[_S_TILT:_S_LAG])
-        self.compensator.bind(self.params[_P_LAG:PARAMS_SIZE], self.state[_S_LAG:STATE_SIZE])
+        self.tracker.bind(self.params[CP_TRACKER:CP_ALLOC], self.state[CS_INTEGRAL:CS_TILT])
+        self.allocator.bind(self.params[CP_ALLOC:CP_LAG], self.state[CS_TILT:CS_LAG])
+        self.compensator.bind(self.params[CP_LAG:CP_SIZE], self.state[CS_LAG:CS_SIZE])
         self.inp = np.zeros(IN_SIZE)
         self.out = np.zeros(OUT_SIZE)
         warm_up("fcu.core", self._warm_up)
@@ -139,8 +171,8 @@ class FlightCore:
         """The fused step once, on copies of the buffers, at identity with lag compensation
         (compiles or loads the kernels before the first control period)."""
         inp = np.zeros(IN_SIZE)
-        inp[3] = inp[16] = 1.0  # q = q_d = identity
-        inp[32], inp[33] = self.dt_s, 1.0
+        inp[CI_X + X_Q] = inp[CI_R + R_Q] = 1.0  # q = q_d = identity
+        inp[CI_DT], inp[CI_LAG_ON] = self.dt_s, 1.0
         core_kernel(inp, self.params.copy(), self.state.copy(), np.zeros(OUT_SIZE))
 
     def set_lag_compensation(self, on: bool) -> None:
@@ -154,8 +186,8 @@ class FlightCore:
         """The step on `self.inp` (state and reference filled in by the caller; dt and the
         lag switch are set here): returns `self.out` (OUT_SIZE), overwritten next step."""
         inp = self.inp
-        inp[32] = dt_s
-        inp[33] = 1.0 if self.lag_compensation else 0.0
+        inp[CI_DT] = dt_s
+        inp[CI_LAG_ON] = 1.0 if self.lag_compensation else 0.0
         core_kernel(inp, self.params, self.state, self.out)
         return self.out
 
@@ -164,8 +196,9 @@ class FlightCore:
         """One control period of dt_s (default: the nominal period): desired wrench
         (eq. 16/33), then speeds and tilts (eq. 28-29), led for the actuators' lag when
         lag compensation is on."""
-        self.inp[0:32] = (*state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
+        self.inp[CI_X:CI_DT] = (*state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
                           *state.omega_flu_rad_s, *ref.p_enu_m, *ref.q_enu_flu, *ref.v_enu_m_s,
                           *ref.a_enu_m_s2, *ref.omega_flu_rad_s, *ref.omega_dot_flu_rad_s2)
         out = self.step_arrays(self.dt_s if dt_s is None else float(dt_s)).tolist()
-        return StepResult(ref, tracker_output(out), allocation_result(out[24:55]))
+        return StepResult(ref, tracker_output(out[CO_TRACKER:CO_ALLOC]),
+                          allocation_result(out[CO_ALLOC:CO_SIZE]))

@@ -16,6 +16,33 @@ import numpy as np
 
 from common.config import Gains, VehicleConfig
 from common.jit import njit
+from common.layouts import (
+    DUAL_VEC_SIZE,
+    K_D,
+    K_G,
+    K_I,
+    K_IS_PD,
+    K_J,
+    K_LOG_RATE,
+    K_MASS,
+    K_P,
+    K_SIZE,
+    R_A,
+    R_P,
+    R_Q,
+    R_V,
+    R_W,
+    R_WD,
+    T_FORCE,
+    T_LOG,
+    T_SIZE,
+    T_TORQUE,
+    T_XI,
+    X_P,
+    X_Q,
+    X_V,
+    X_W,
+)
 from fcu.dualquat import (
     DualVec,
     Quat,
@@ -29,12 +56,6 @@ from fcu.dualquat import (
     dual_cross,
     q_rotate_inv,
 )
-
-# Layouts of the kernel's flat arrays.
-STATE_SIZE = 13  # p_enu (3), q_enu_flu (4), v_flu (3), omega_flu (3): VehicleState
-REF_SIZE = 19  # p_enu, q_enu_flu, v_enu, a_enu, omega_flu, omega_dot_flu: Reference
-PARAMS_SIZE = 25  # kp (6), ki (6), kd (6) per dual part; m, J (3), g, is_pd, log_rate
-OUT_SIZE = 24  # force_flu (3), torque_flu (3), ln q_hat_e (6), xi_e (6)
 
 
 class VehicleState(NamedTuple):
@@ -110,17 +131,29 @@ def log_rate(log_e: DualVec, xi_e: DualVec) -> DualVec:
 
 
 @njit
+def desired_accel(j: int, ff: DualVec, cr: DualVec, k: np.ndarray, log_e: DualVec,
+                  integral: np.ndarray, rate: DualVec) -> float:
+    """Component j of the desired twist rate of eq. (16): xi_d' feed-forward (Ad of the
+    reference's, plus the cross term) minus the PID terms
+    2 k_p . ln q_hat_e + 2 k_i . int ln q_hat_e + D (D = k_d . rate)."""
+    return (ff[j] + cr[j] - 2.0 * k[K_P + j] * log_e[j] - 2.0 * k[K_I + j] * integral[j]
+            - k[K_D + j] * rate[j])
+
+
+@njit
 def tracker_kernel(x: np.ndarray, r: np.ndarray, k: np.ndarray, integral: np.ndarray,
                    dt_s: float, out: np.ndarray) -> None:
-    """Eq. (16) (or eq. 33) with the exact inverse dynamics of MODEL.md 4, on flat arrays:
-    state `x` (STATE_SIZE), reference `r` (REF_SIZE), parameters `k` (PARAMS_SIZE); the
-    integral of ln q_hat_e (6) advances in place unless PD; `out` gets OUT_SIZE values."""
-    p = (x[0], x[1], x[2])
-    q = (x[3], x[4], x[5], x[6])
-    v = (x[7], x[8], x[9])
-    w = (x[10], x[11], x[12])
-    ref = ((r[0], r[1], r[2]), (r[3], r[4], r[5], r[6]), (r[7], r[8], r[9]),
-           (r[10], r[11], r[12]), (r[13], r[14], r[15]), (r[16], r[17], r[18]))
+    """Eq. (16) (or eq. 33) with the exact inverse dynamics of MODEL.md 4, on flat arrays
+    (common.layouts): state `x` (VEHICLE_STATE), reference `r` (REFERENCE), parameters `k`
+    (TRACKER_PARAMS); the integral of ln q_hat_e (6) advances in place unless PD; `out`
+    gets TRACKER_OUT."""
+    p = (x[X_P], x[X_P + 1], x[X_P + 2])
+    q = (x[X_Q], x[X_Q + 1], x[X_Q + 2], x[X_Q + 3])
+    v = (x[X_V], x[X_V + 1], x[X_V + 2])
+    w = (x[X_W], x[X_W + 1], x[X_W + 2])
+    ref = ((r[R_P], r[R_P + 1], r[R_P + 2]), (r[R_Q], r[R_Q + 1], r[R_Q + 2], r[R_Q + 3]),
+           (r[R_V], r[R_V + 1], r[R_V + 2]), (r[R_A], r[R_A + 1], r[R_A + 2]),
+           (r[R_W], r[R_W + 1], r[R_W + 2]), (r[R_WD], r[R_WD + 1], r[R_WD + 2]))
     qh = dq_from_pose(q, p)
     qh_d = dq_from_pose(ref[1], ref[0])
     qh_e = dq_mul(dq_conj(qh_d), qh)  # eq. (9)
@@ -132,56 +165,57 @@ def tracker_kernel(x: np.ndarray, r: np.ndarray, k: np.ndarray, integral: np.nda
             v[0] - ad_xi_d[3], v[1] - ad_xi_d[4], v[2] - ad_xi_d[5])  # eq. (11)
     log_e = dq_log(qh_e)
 
-    if k[24] != 0.0:
+    if k[K_LOG_RATE] != 0.0:
         rate = log_rate(log_e, xi_e)  # D = 2 k_d . (ln q_hat_e)'
     else:
         rate = xi_e  # D = k_d . xi_e
     ff = dq_ad(qh_e_conj, xi_d_dot)
     cr = dual_cross(ad_xi_d, xi_e)
 
-    if k[23] == 0.0:  # PID: the integral of ln q_hat_e
-        for j in range(6):
+    if k[K_IS_PD] == 0.0:  # PID: the integral of ln q_hat_e
+        for j in range(DUAL_VEC_SIZE):
             integral[j] = integral[j] + log_e[j] * dt_s
-    des0 = ff[0] + cr[0] - 2.0 * k[0] * log_e[0] - 2.0 * k[6] * integral[0] - k[12] * rate[0]
-    des1 = ff[1] + cr[1] - 2.0 * k[1] * log_e[1] - 2.0 * k[7] * integral[1] - k[13] * rate[1]
-    des2 = ff[2] + cr[2] - 2.0 * k[2] * log_e[2] - 2.0 * k[8] * integral[2] - k[14] * rate[2]
-    des3 = ff[3] + cr[3] - 2.0 * k[3] * log_e[3] - 2.0 * k[9] * integral[3] - k[15] * rate[3]
-    des4 = ff[4] + cr[4] - 2.0 * k[4] * log_e[4] - 2.0 * k[10] * integral[4] - k[16] * rate[4]
-    des5 = ff[5] + cr[5] - 2.0 * k[5] * log_e[5] - 2.0 * k[11] * integral[5] - k[17] * rate[5]
+    des = (desired_accel(0, ff, cr, k, log_e, integral, rate),
+           desired_accel(1, ff, cr, k, log_e, integral, rate),
+           desired_accel(2, ff, cr, k, log_e, integral, rate),
+           desired_accel(3, ff, cr, k, log_e, integral, rate),
+           desired_accel(4, ff, cr, k, log_e, integral, rate),
+           desired_accel(5, ff, cr, k, log_e, integral, rate))
 
     # Exact inverse of xi' = J^-1(tau - w x Jw) + eps(f/m + R^T g_W - w x v).
-    m, jx, jy, jz = k[18], k[19], k[20], k[21]
+    m, jx, jy, jz = k[K_MASS], k[K_J], k[K_J + 1], k[K_J + 2]
     jwx, jwy, jwz = jx * w[0], jy * w[1], jz * w[2]
-    out[3] = jx * des0 + w[1] * jwz - w[2] * jwy
-    out[4] = jy * des1 + w[2] * jwx - w[0] * jwz
-    out[5] = jz * des2 + w[0] * jwy - w[1] * jwx
+    out[T_TORQUE] = jx * des[0] + w[1] * jwz - w[2] * jwy
+    out[T_TORQUE + 1] = jy * des[1] + w[2] * jwx - w[0] * jwz
+    out[T_TORQUE + 2] = jz * des[2] + w[0] * jwy - w[1] * jwx
     up_b = q_rotate_inv(q, (0.0, 0.0, 1.0))
-    mg = m * k[22]
-    out[0] = m * (des3 + w[1] * v[2] - w[2] * v[1]) + mg * up_b[0]
-    out[1] = m * (des4 + w[2] * v[0] - w[0] * v[2]) + mg * up_b[1]
-    out[2] = m * (des5 + w[0] * v[1] - w[1] * v[0]) + mg * up_b[2]
-    for j in range(6):
-        out[6 + j] = log_e[j]
-        out[12 + j] = xi_e[j]
+    mg = m * k[K_G]
+    out[T_FORCE] = m * (des[3] + w[1] * v[2] - w[2] * v[1]) + mg * up_b[0]
+    out[T_FORCE + 1] = m * (des[4] + w[2] * v[0] - w[0] * v[2]) + mg * up_b[1]
+    out[T_FORCE + 2] = m * (des[5] + w[0] * v[1] - w[1] * v[0]) + mg * up_b[2]
+    for j in range(DUAL_VEC_SIZE):
+        out[T_LOG + j] = log_e[j]
+        out[T_XI + j] = xi_e[j]
 
 
 def state_array(state: VehicleState) -> np.ndarray:
-    """A VehicleState as the kernels' flat array (STATE_SIZE)."""
+    """A VehicleState as the kernels' flat array (VEHICLE_STATE, its fields in order)."""
     return np.array((*state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
                      *state.omega_flu_rad_s), dtype=np.float64)
 
 
 def ref_array(ref: Reference) -> np.ndarray:
-    """A Reference as the kernels' flat array (REF_SIZE)."""
+    """A Reference as the kernels' flat array (REFERENCE, its fields in order)."""
     return np.array((*ref.p_enu_m, *ref.q_enu_flu, *ref.v_enu_m_s, *ref.a_enu_m_s2,
                      *ref.omega_flu_rad_s, *ref.omega_dot_flu_rad_s2), dtype=np.float64)
 
 
 def tracker_output(out: list[float]) -> TrackerOutput:
-    """TrackerOutput of the kernel's OUT_SIZE values (as Python floats)."""
-    return TrackerOutput((out[0], out[1], out[2]), (out[3], out[4], out[5]),
-                         (out[6], out[7], out[8], out[9], out[10], out[11]),
-                         (out[12], out[13], out[14], out[15], out[16], out[17]))
+    """TrackerOutput of the kernel's TRACKER_OUT values (as Python floats)."""
+    f, t, e, x = T_FORCE, T_TORQUE, T_LOG, T_XI
+    return TrackerOutput((out[f], out[f + 1], out[f + 2]), (out[t], out[t + 1], out[t + 2]),
+                         (out[e], out[e + 1], out[e + 2], out[e + 3], out[e + 4], out[e + 5]),
+                         (out[x], out[x + 1], out[x + 2], out[x + 3], out[x + 4], out[x + 5]))
 
 
 class DualQuaternionTracker:
@@ -191,9 +225,11 @@ class DualQuaternionTracker:
         self.mass = vehicle.mass_kg
         self.inertia = vehicle.inertia_diag_kg_m2
         self.gravity = vehicle.gravity_m_s2
-        self.params = np.zeros(PARAMS_SIZE)
-        self.params[18:23] = (self.mass, *self.inertia, self.gravity)
-        self.integral_array = np.zeros(6)  # the kernel's integral of ln q_hat_e
+        self.params = np.zeros(K_SIZE)
+        self.params[K_MASS] = self.mass
+        self.params[K_J:K_J + 3] = self.inertia
+        self.params[K_G] = self.gravity
+        self.integral_array = np.zeros(DUAL_VEC_SIZE)  # the kernel's integral of ln q_hat_e
         self.set_gains(gains)
 
     @property
@@ -211,10 +247,11 @@ class DualQuaternionTracker:
     def set_gains(self, gains: Gains) -> None:
         self.gains = gains
         k = self.params
-        k[0:18] = (*gains.kp_r, *gains.kp_d, *gains.ki_r, *gains.ki_d, *gains.kd_r,
-                   *gains.kd_d)
-        k[23] = 1.0 if gains.is_pd else 0.0
-        k[24] = 1.0 if gains.damping == "log_rate" else 0.0
+        k[K_P:K_P + DUAL_VEC_SIZE] = (*gains.kp_r, *gains.kp_d)
+        k[K_I:K_I + DUAL_VEC_SIZE] = (*gains.ki_r, *gains.ki_d)
+        k[K_D:K_D + DUAL_VEC_SIZE] = (*gains.kd_r, *gains.kd_d)
+        k[K_IS_PD] = 1.0 if gains.is_pd else 0.0
+        k[K_LOG_RATE] = 1.0 if gains.damping == "log_rate" else 0.0
 
     def bind(self, params: np.ndarray, integral: np.ndarray) -> None:
         """Keep parameters and integral in these arrays from now on (views of a fused
@@ -225,7 +262,7 @@ class DualQuaternionTracker:
 
     def update(self, state: VehicleState, ref: Reference, dt_s: float) -> TrackerOutput:
         """One control step: desired wrench in FLU for the state, the reference and dt."""
-        out = np.empty(OUT_SIZE)
+        out = np.empty(T_SIZE)
         tracker_kernel(state_array(state), ref_array(ref), self.params, self.integral_array,
                        float(dt_s), out)
         return tracker_output(out.tolist())
