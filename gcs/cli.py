@@ -402,7 +402,7 @@ def _print_error(m: dict) -> None:
 
 
 def cmd_table1(args: argparse.Namespace) -> int:
-    from gcs.table1 import run_table1
+    from gcs.table1_run import run_table1
 
     progress = Progress()
     progress(f"table1: {16 if args.lag_comp == 'both' else 8} runs ...")
@@ -552,7 +552,9 @@ def cmd_report(args: argparse.Namespace) -> int:
     """A run folder (metrics.json) or a table1 folder (table1.json). Exit status: 0 when
     everything was reported, 1 when a table1 folder's run folder is missing or could not be
     read (the rest is reported), 2 for a path that is neither kind of folder."""
-    from gcs.report import TABLE1_JSON, is_table1_dir, make_report, make_table1_report
+    from gcs.report.names import TABLE1_JSON
+    from gcs.report.run_report import make_report
+    from gcs.report.table1_report import is_table1_dir, make_table1_report
     from gcs.runio import RunDirError, check_run_dir
 
     if is_table1_dir(args.run_dir):

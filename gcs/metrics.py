@@ -78,19 +78,30 @@ def crash_time_us(truth_columns: Sequence[str], truth: np.ndarray) -> int | None
     return None
 
 
-def estimation_error(truth_columns: Sequence[str], truth_j: np.ndarray,
-                     onboard_columns: Sequence[str], onboard_j: np.ndarray) -> dict[str, Any]:
-    """The estimate (the state the FCU flew on) against the truth at the same steps: position
-    and world-frame velocity error norms, attitude error angle, each {max, mean, rmse}."""
+def estimation_error_rows(truth_columns: Sequence[str], truth_j: np.ndarray,
+                          onboard_columns: Sequence[str], onboard_j: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The estimate (the state the FCU flew on, dq_onboard) against the truth (dq_truth) at
+    the same steps (`join_logs` rows), per row: position error norm |p_est - p| in m,
+    world-frame (ENU) velocity error norm |R(q_est) v_est_flu - v| in m/s and attitude error
+    angle of q* q_est in rad."""
     p = log_columns(truth_columns, truth_j, "px", "py", "pz")
     v = log_columns(truth_columns, truth_j, "vx", "vy", "vz")
     q = log_columns(truth_columns, truth_j, "qw", "qx", "qy", "qz")
     p_e = log_columns(onboard_columns, onboard_j, "px", "py", "pz")
     q_e = log_columns(onboard_columns, onboard_j, "qw", "qx", "qy", "qz")
     v_e = rotate_rows(q_e, log_columns(onboard_columns, onboard_j, "vbx", "vby", "vbz"))
-    return {"position_m": error_stats(np.linalg.norm(p_e - p, axis=1)),
-            "velocity_m_s": error_stats(np.linalg.norm(v_e - v, axis=1)),
-            "attitude_rad": error_stats(attitude_error_rad(q_e, q))}
+    return (np.linalg.norm(p_e - p, axis=1), np.linalg.norm(v_e - v, axis=1),
+            attitude_error_rad(q_e, q))
+
+
+def estimation_error(truth_columns: Sequence[str], truth_j: np.ndarray,
+                     onboard_columns: Sequence[str], onboard_j: np.ndarray) -> dict[str, Any]:
+    """`estimation_error_rows` as metrics.json's estimation_error: position, velocity and
+    attitude, each {max, mean, rmse}."""
+    dp, dv, da = estimation_error_rows(truth_columns, truth_j, onboard_columns, onboard_j)
+    return {"position_m": error_stats(dp), "velocity_m_s": error_stats(dv),
+            "attitude_rad": error_stats(da)}
 
 
 def link_timing(metrics: dict[str, Any], fcu_stats: dict[str, Any],
