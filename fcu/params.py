@@ -4,13 +4,22 @@ One table with name (at most 16 characters, as MAVLink carries them), default, r
 and description, as PX4's *_params.yaml. Values are float32 (MAV_PARAM_TYPE_REAL32). A set
 that leaves the range, or a gain set that violates the Routh-Hurwitz condition, is refused
 and the old value stays.
+
+A parameter that sets a field of a settings dataclass (`FlightSettings`, `StickSettings`,
+`FailsafeSettings`, `EstimatorSettings`, `MissionLimits`, `Gains`) names it (`field`) and
+takes its default from the dataclass, so the two cannot disagree; the converters
+(`failsafe_settings`, ...) build each dataclass from its fields' parameters. The one
+deliberate difference is in `DEFAULT_OVERRIDES`, with its reason. docs/parameters.md is
+generated from this table (`fcu.params_doc`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from common.config import ConfigError, Gains, VehicleConfig, check_stability
 from fcu.commander import FlightSettings
@@ -19,6 +28,9 @@ from fcu.failsafe import FailsafeSettings
 from fcu.manual import StickSettings
 from fcu.mission.limits import MissionLimits
 from fcu.pipeline import Pipeline
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 AXES = "XYZ"
 DAMPING_CODES = ("log_rate", "twist")
@@ -32,10 +44,43 @@ class ParamSpec:
     hi: float
     unit: str
     description: str
+    field: str = ""  # "Class.field" of the settings dataclass it sets, "" for none
+
+
+_SETTINGS: dict[str, type[Any]] = {cls.__name__: cls for cls in (
+    FlightSettings, StickSettings, FailsafeSettings, EstimatorSettings, MissionLimits, Gains)}
+# Table defaults that differ from their dataclass's on purpose: name -> (default, reason).
+DEFAULT_OVERRIDES: dict[str, tuple[float, str]] = {
+    "EKF_ACC_B_NOISE": (2e-2, "EstimatorSettings keeps EKF2's 3e-3, on which the "
+                              "estimator's own tests are tuned"),
+}
+
+
+def field_default(path: str) -> float:
+    """The default of the dataclass field "Class.field" as a parameter value: a bool as 0 or
+    1, Gains.damping as its index in DAMPING_CODES."""
+    cls_name, name = path.split(".")
+    value: object = next(f.default for f in dataclasses.fields(_SETTINGS[cls_name])
+                         if f.name == name)
+    if path == "Gains.damping":
+        return float(DAMPING_CODES.index(str(value)))
+    if not isinstance(value, (int, float)):
+        raise TypeError(f"{path} has no numeric default")
+    return float(value)
+
+
+def _bound(name: str, path: str, lo: float, hi: float, unit: str,
+           description: str) -> ParamSpec:
+    """A parameter that sets the dataclass field `path`, its default read from there (or from
+    DEFAULT_OVERRIDES)."""
+    default = DEFAULT_OVERRIDES[name][0] if name in DEFAULT_OVERRIDES else field_default(path)
+    return ParamSpec(name, default, lo, hi, unit, description, path)
 
 
 def _f32(x: float) -> float:
-    return struct.unpack("<f", struct.pack("<f", x))[0]
+    """x rounded to float32 (MAV_PARAM_TYPE_REAL32)."""
+    value: float = struct.unpack("<f", struct.pack("<f", x))[0]
+    return value
 
 
 def _gain_specs() -> list[ParamSpec]:
@@ -50,89 +95,103 @@ def _gain_specs() -> list[ParamSpec]:
     return specs
 
 
-SPECS: tuple[ParamSpec, ...] = (
+# The table in groups (headings of docs/parameters.md); the order is the wire's param_index.
+GROUPS: tuple[tuple[str, tuple[ParamSpec, ...]], ...] = (("Controller", (
     *_gain_specs(),
-    ParamSpec("DQ_DAMPING", 0.0, 0.0, 1.0, "enum",
-              "damping D of eq. (16): 0 = 2 k_d.(ln q_e)', 1 = k_d.xi_e (eq. 33)"),
+    _bound("DQ_DAMPING", "Gains.damping", 0.0, 1.0, "enum",
+           "damping D of eq. (16): 0 = 2 k_d.(ln q_e)', 1 = k_d.xi_e (eq. 33)"),
+)), ("Allocation", (
     ParamSpec("CA_LAG_COMP", 1.0, 0.0, 1.0, "enum",
               "allocation: 1 = lead rotor speeds and tilts for the rotor lag (tau up/down) and "
               "the tilt rate limit, from the reference; 0 = plain eqs. (28-29)"),
-    ParamSpec("MIS_TKO_SPD", 1.0, 0.05, 10.0, "m/s", "takeoff climb speed when p2 is 0"),
-    ParamSpec("MIS_CRUISE_SPD", 2.0, 0.05, 20.0, "m/s", "waypoint travel speed"),
-    ParamSpec("MIS_LAND_SPD", 0.5, 0.05, 5.0, "m/s", "landing descent speed"),
+)), ("Missions", (
+    _bound("MIS_TKO_SPD", "MissionLimits.takeoff_speed_m_s", 0.05, 10.0, "m/s",
+           "takeoff climb speed when p2 is 0"),
+    _bound("MIS_CRUISE_SPD", "MissionLimits.cruise_speed_m_s", 0.05, 20.0, "m/s",
+           "waypoint travel speed"),
+    _bound("MIS_LAND_SPD", "MissionLimits.land_speed_m_s", 0.05, 5.0, "m/s",
+           "landing descent speed"),
     ParamSpec("MIS_ENV_CHK", 1.0, 0.0, 1.0, "enum",
               "mission envelope check: 1 = stretch speed-timed legs and refuse timed items "
               "the rotors cannot fly, 0 = off (accept any profile)"),
-    ParamSpec("GF_MAX_DIST", 1000.0, 1.0, 100000.0, "m",
-              "geofence: farthest mission point from the origin"),
+    _bound("GF_MAX_DIST", "MissionLimits.max_distance_m", 1.0, 100000.0, "m",
+           "geofence: farthest mission point from the origin"),
+)), ("Failsafes", (
     ParamSpec("COM_OF_LOSS_T", 1.0, 0.1, 60.0, "s", "offboard setpoint loss timeout (to HOLD)"),
-    ParamSpec("COM_DL_LOSS_T", 0.0, 0.0, 300.0, "s",
-              "GCS heartbeat loss: HOLD after this long without one (0: off)"),
-    ParamSpec("COM_DL_LAND_T", 0.0, 0.0, 600.0, "s",
-              "after GCS loss: LAND after this long in HOLD (0: never)"),
-    ParamSpec("COM_STATE_LOSS_T", 1.0, 0.05, 60.0, "s",
-              "state input loss: stop commanding motion and disarm after this long"),
-    ParamSpec("COM_SAT_T", 2.0, 0.01, 60.0, "s",
-              "rotor speed saturation for longer than this is reported"),
-    ParamSpec("COM_SAT_ACT", 0.0, 0.0, 1.0, "enum",
-              "on long saturation: 0 = report, 1 = abort the mission to HOLD"),
-    ParamSpec("COM_ACT_RATE_T", 0.1, 0.002, 60.0, "s",
-              "a tilt servo commanded faster than its rate limit (by a model of it) or a rotor "
-              "clamped at its speed limit for longer than this is reported"),
-    ParamSpec("COM_DIV_POS", 10.0, 0.1, 1000.0, "m",
-              "divergence: tracking error beyond this disarms"),
-    ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.1, 100.0, "m",
-              "TAKEOFF (MAV_CMD_NAV_TAKEOFF without altitude) climbs this much, then holds"),
-    ParamSpec("RTL_RETURN_ALT", 10.0, 0.0, 150.0, "m",
-              "RTL climbs to this height above home if lower, flies home, lands"),
-    ParamSpec("MPC_XY_CRUISE", 5.0, 0.1, 20.0, "m/s", "RTL travel speed (distance / time)"),
-    ParamSpec("COM_RC_LOSS_T", 0.5, 0.1, 35.0, "s",
-              "POSCTL: MANUAL_CONTROL loss timeout (to HOLD)"),
-    ParamSpec("MPC_VEL_MANUAL", 5.0, 0.1, 20.0, "m/s",
-              "POSCTL: horizontal speed at full stick; OFFBOARD: approach speed"),
-    ParamSpec("MPC_Z_VEL_MAX_UP", 3.0, 0.1, 8.0, "m/s",
-              "POSCTL: climb speed at full stick; OFFBOARD: approach climb speed"),
-    ParamSpec("MPC_Z_VEL_MAX_DN", 1.5, 0.1, 4.0, "m/s",
-              "POSCTL: descent speed at full stick; OFFBOARD: approach descent speed"),
-    ParamSpec("MPC_ACC_HOR", 3.0, 0.5, 15.0, "m/s^2",
-              "POSCTL, OFFBOARD: horizontal acceleration limit"),
-    ParamSpec("MPC_ACC_UP_MAX", 3.0, 0.5, 15.0, "m/s^2",
-              "POSCTL, OFFBOARD: upward acceleration limit"),
-    ParamSpec("MPC_ACC_DOWN_MAX", 3.0, 0.5, 15.0, "m/s^2",
-              "POSCTL, OFFBOARD: downward acceleration limit"),
-    ParamSpec("MPC_MAN_Y_MAX", 90.0, 0.0, 400.0, "deg/s", "POSCTL: yaw rate at full stick"),
-    ParamSpec("MPC_JERK_MAX", 8.0, 0.5, 500.0, "m/s^3",
-              "POSCTL: jerk limit (lower where the tilt servos need it)"),
-    # The estimator (fcu/estimator/); EKF2's names and defaults where EKF2 has the figure.
+    _bound("COM_DL_LOSS_T", "FailsafeSettings.gcs_loss_s", 0.0, 300.0, "s",
+           "GCS heartbeat loss: HOLD after this long without one (0: off)"),
+    _bound("COM_DL_LAND_T", "FailsafeSettings.gcs_loss_land_s", 0.0, 600.0, "s",
+           "after GCS loss: LAND after this long in HOLD (0: never)"),
+    _bound("COM_STATE_LOSS_T", "FailsafeSettings.state_loss_s", 0.05, 60.0, "s",
+           "state input loss: stop commanding motion and disarm after this long"),
+    _bound("COM_SAT_T", "FailsafeSettings.saturation_s", 0.01, 60.0, "s",
+           "rotor speed saturation for longer than this is reported"),
+    _bound("COM_SAT_ACT", "FailsafeSettings.saturation_hold", 0.0, 1.0, "enum",
+           "on long saturation: 0 = report, 1 = abort the mission to HOLD"),
+    _bound("COM_ACT_RATE_T", "FailsafeSettings.actuator_limit_s", 0.002, 60.0, "s",
+           "a tilt servo commanded faster than its rate limit (by a model of it) or a rotor "
+           "clamped at its speed limit for longer than this is reported"),
+    _bound("COM_DIV_POS", "FailsafeSettings.divergence_m", 0.1, 1000.0, "m",
+           "divergence: tracking error beyond this disarms"),
+)), ("Automatic modes", (
+    _bound("MIS_TAKEOFF_ALT", "FlightSettings.takeoff_alt_m", 0.1, 100.0, "m",
+           "TAKEOFF (MAV_CMD_NAV_TAKEOFF without altitude) climbs this much, then holds"),
+    _bound("RTL_RETURN_ALT", "FlightSettings.rtl_return_alt_m", 0.0, 150.0, "m",
+           "RTL climbs to this height above home if lower, flies home, lands"),
+    _bound("MPC_XY_CRUISE", "FlightSettings.rtl_cruise_m_s", 0.1, 20.0, "m/s",
+           "RTL travel speed (distance / time)"),
+)), ("POSCTL and OFFBOARD", (
+    _bound("COM_RC_LOSS_T", "FlightSettings.manual_timeout_s", 0.1, 35.0, "s",
+           "POSCTL: MANUAL_CONTROL loss timeout (to HOLD)"),
+    _bound("MPC_VEL_MANUAL", "StickSettings.speed_xy_m_s", 0.1, 20.0, "m/s",
+           "POSCTL: horizontal speed at full stick; OFFBOARD: approach speed"),
+    _bound("MPC_Z_VEL_MAX_UP", "StickSettings.speed_up_m_s", 0.1, 8.0, "m/s",
+           "POSCTL: climb speed at full stick; OFFBOARD: approach climb speed"),
+    _bound("MPC_Z_VEL_MAX_DN", "StickSettings.speed_down_m_s", 0.1, 4.0, "m/s",
+           "POSCTL: descent speed at full stick; OFFBOARD: approach descent speed"),
+    _bound("MPC_ACC_HOR", "StickSettings.acc_xy_m_s2", 0.5, 15.0, "m/s^2",
+           "POSCTL, OFFBOARD: horizontal acceleration limit"),
+    _bound("MPC_ACC_UP_MAX", "StickSettings.acc_up_m_s2", 0.5, 15.0, "m/s^2",
+           "POSCTL, OFFBOARD: upward acceleration limit"),
+    _bound("MPC_ACC_DOWN_MAX", "StickSettings.acc_down_m_s2", 0.5, 15.0, "m/s^2",
+           "POSCTL, OFFBOARD: downward acceleration limit"),
+    _bound("MPC_MAN_Y_MAX", "StickSettings.yaw_rate_deg_s", 0.0, 400.0, "deg/s",
+           "POSCTL: yaw rate at full stick"),
+    _bound("MPC_JERK_MAX", "StickSettings.jerk_m_s3", 0.5, 500.0, "m/s^3",
+           "POSCTL: jerk limit (lower where the tilt servos need it)"),
+)), ("Estimator", (
+    # fcu/estimator/; EKF2's names and defaults where EKF2 has the figure.
     ParamSpec("EKF_EN", 0.0, 0.0, 1.0, "enum",
               "state source: 0 = ODOMETRY as the exact state, 1 = the estimator from "
               "HIL_SENSOR and the external pose (ODOMETRY, motion capture)"),
-    ParamSpec("EKF_EV_DELAY", 0.02, 0.0, 0.3, "s",
-              "fusion horizon behind the newest IMU sample (EKF2_EV_DELAY)"),
-    ParamSpec("EKF_GYR_NOISE", 0.015, 1e-4, 1.0, "rad/s", "gyro noise (EKF2_GYR_NOISE)"),
-    ParamSpec("EKF_ACC_NOISE", 0.35, 1e-3, 10.0, "m/s^2",
-              "accelerometer noise (EKF2_ACC_NOISE)"),
-    ParamSpec("EKF_GYR_B_NOISE", 1e-3, 0.0, 1.0, "rad/s^2",
-              "gyro bias process noise (EKF2_GYR_B_NOISE)"),
-    ParamSpec("EKF_ACC_B_NOISE", 2e-2, 0.0, 1.0, "m/s^3",
-              "accelerometer bias process noise (ArduPilot EKF3's 2e-2: EKF2's 3e-3 "
-              "under-models a bias walking 6e-3 m/s^3/sqrt(Hz), and the velocity lags)"),
-    ParamSpec("EKF_EVP_NOISE", 0.001, 1e-5, 10.0, "m",
-              "least external position noise, when the pose's covariance says less"),
-    ParamSpec("EKF_EVA_NOISE", 0.002, 1e-5, 1.0, "rad",
-              "least external attitude noise, when the pose's covariance says less"),
-    ParamSpec("EKF_EV_GATE", 5.0, 1.0, 100.0, "SD",
-              "innovation gate of the external pose (EKF2_EV_POS_GATE)"),
-    ParamSpec("EKF_GATE_N", 20.0, 1.0, 10000.0, "count",
-              "poses refused by the gate in a row: estimator inconsistent, LAND"),
+    _bound("EKF_EV_DELAY", "EstimatorSettings.pose_delay_s", 0.0, 0.3, "s",
+           "fusion horizon behind the newest IMU sample (EKF2_EV_DELAY)"),
+    _bound("EKF_GYR_NOISE", "EstimatorSettings.gyro_noise_rad_s", 1e-4, 1.0, "rad/s",
+           "gyro noise (EKF2_GYR_NOISE)"),
+    _bound("EKF_ACC_NOISE", "EstimatorSettings.accel_noise_m_s2", 1e-3, 10.0, "m/s^2",
+           "accelerometer noise (EKF2_ACC_NOISE)"),
+    _bound("EKF_GYR_B_NOISE", "EstimatorSettings.gyro_bias_noise_rad_s2", 0.0, 1.0, "rad/s^2",
+           "gyro bias process noise (EKF2_GYR_B_NOISE)"),
+    _bound("EKF_ACC_B_NOISE", "EstimatorSettings.accel_bias_noise_m_s3", 0.0, 1.0, "m/s^3",
+           "accelerometer bias process noise (ArduPilot EKF3's 2e-2: EKF2's 3e-3 "
+           "under-models a bias walking 6e-3 m/s^3/sqrt(Hz), and the velocity lags)"),
+    _bound("EKF_EVP_NOISE", "EstimatorSettings.pose_pos_noise_m", 1e-5, 10.0, "m",
+           "least external position noise, when the pose's covariance says less"),
+    _bound("EKF_EVA_NOISE", "EstimatorSettings.pose_att_noise_rad", 1e-5, 1.0, "rad",
+           "least external attitude noise, when the pose's covariance says less"),
+    _bound("EKF_EV_GATE", "EstimatorSettings.pose_gate_sd", 1.0, 100.0, "SD",
+           "innovation gate of the external pose (EKF2_EV_POS_GATE)"),
+    _bound("EKF_GATE_N", "FailsafeSettings.gate_failures", 1.0, 10000.0, "count",
+           "poses refused by the gate in a row: estimator inconsistent, LAND"),
     ParamSpec("IMU_GYRO_CUTOFF", 40.0, 0.0, 1000.0, "Hz",
               "with the estimator: low-pass cut-off of the rate the controller damps with "
               "(second-order Butterworth; 0: none), as PX4's IMU_GYRO_CUTOFF"),
-    ParamSpec("COM_POS_LOSS_T", 1.0, 0.0, 60.0, "s",
-              "pose source lost: dead-reckon this long, then HOLD"),
-    ParamSpec("COM_POS_LAND_T", 2.0, 0.0, 600.0, "s",
-              "pose source lost: LAND after this long in HOLD"),
-)
+    _bound("COM_POS_LOSS_T", "FailsafeSettings.pose_loss_s", 0.0, 60.0, "s",
+           "pose source lost: dead-reckon this long, then HOLD"),
+    _bound("COM_POS_LAND_T", "FailsafeSettings.pose_loss_land_s", 0.0, 600.0, "s",
+           "pose source lost: LAND after this long in HOLD"),
+)))
+SPECS: tuple[ParamSpec, ...] = tuple(s for _, group in GROUPS for s in group)
 # Parameters that change the state source: refused while armed (PX4 asks for a reboot).
 LOCKED_WHEN_ARMED = frozenset(s.name for s in SPECS
                               if s.name.startswith("EKF_") or s.name == "IMU_GYRO_CUTOFF")
@@ -198,15 +257,28 @@ class ParamStore:
         return trial[name]
 
 
+_T = TypeVar("_T", bound="DataclassInstance")
+
+
+def _fields_of(cls: type[_T], values: dict[str, float], **given: Any) -> _T:
+    """An instance of the settings dataclass `cls` with every field a parameter sets (`field`)
+    taken from `values` (a bool field is value == 1, an int one rounded) and the rest from
+    `given` or the dataclass's defaults."""
+    defaults: dict[str, object] = {f.name: f.default for f in dataclasses.fields(cls)}
+    prefix = cls.__name__ + "."
+    for spec in SPECS:
+        if spec.field.startswith(prefix):
+            name = spec.field[len(prefix):]
+            value = values[spec.name]
+            default = defaults[name]
+            given[name] = (value == 1.0 if isinstance(default, bool)
+                           else round(value) if isinstance(default, int) else value)
+    return cls(**given)
+
+
 def failsafe_settings(values: dict[str, float]) -> FailsafeSettings:
-    """The COM_* parameters as the failsafe stage's settings."""
-    return FailsafeSettings(
-        gcs_loss_s=values["COM_DL_LOSS_T"], gcs_loss_land_s=values["COM_DL_LAND_T"],
-        state_loss_s=values["COM_STATE_LOSS_T"], saturation_s=values["COM_SAT_T"],
-        saturation_hold=values["COM_SAT_ACT"] == 1.0,
-        actuator_limit_s=values["COM_ACT_RATE_T"], divergence_m=values["COM_DIV_POS"],
-        pose_loss_s=values["COM_POS_LOSS_T"], pose_loss_land_s=values["COM_POS_LAND_T"],
-        gate_failures=round(values["EKF_GATE_N"]))
+    """The COM_* (and EKF_GATE_N) parameters as the failsafe stage's settings."""
+    return _fields_of(FailsafeSettings, values)
 
 
 def estimator_settings(values: dict[str, float], gravity_m_s2: float
@@ -214,37 +286,20 @@ def estimator_settings(values: dict[str, float], gravity_m_s2: float
     """The EKF_* parameters as the estimator's settings; None when EKF_EN is 0."""
     if values["EKF_EN"] != 1.0:
         return None
-    return EstimatorSettings(
-        gravity_m_s2=gravity_m_s2, gyro_noise_rad_s=values["EKF_GYR_NOISE"],
-        accel_noise_m_s2=values["EKF_ACC_NOISE"],
-        gyro_bias_noise_rad_s2=values["EKF_GYR_B_NOISE"],
-        accel_bias_noise_m_s3=values["EKF_ACC_B_NOISE"],
-        pose_pos_noise_m=values["EKF_EVP_NOISE"], pose_att_noise_rad=values["EKF_EVA_NOISE"],
-        pose_delay_s=values["EKF_EV_DELAY"], pose_gate_sd=values["EKF_EV_GATE"])
+    return _fields_of(EstimatorSettings, values, gravity_m_s2=gravity_m_s2)
 
 
 def mission_limits(values: dict[str, float], vehicle: VehicleConfig | None = None
                    ) -> MissionLimits:
     """The MIS_* and GF_* parameters as the mission's limits."""
-    return MissionLimits(max_distance_m=values["GF_MAX_DIST"],
-                         cruise_speed_m_s=values["MIS_CRUISE_SPD"],
-                         land_speed_m_s=values["MIS_LAND_SPD"],
-                         takeoff_speed_m_s=values["MIS_TKO_SPD"],
-                         vehicle=vehicle if values["MIS_ENV_CHK"] == 1.0 else None)
+    return _fields_of(MissionLimits, values,
+                      vehicle=vehicle if values["MIS_ENV_CHK"] == 1.0 else None)
 
 
 def flight_settings(values: dict[str, float]) -> FlightSettings:
     """The automatic modes' (MIS_TAKEOFF_ALT, RTL_*, MPC_XY_CRUISE) and POSCTL's (MPC_*,
     COM_RC_LOSS_T) parameters."""
-    sticks = StickSettings(
-        speed_xy_m_s=values["MPC_VEL_MANUAL"], speed_up_m_s=values["MPC_Z_VEL_MAX_UP"],
-        speed_down_m_s=values["MPC_Z_VEL_MAX_DN"], acc_xy_m_s2=values["MPC_ACC_HOR"],
-        acc_up_m_s2=values["MPC_ACC_UP_MAX"], acc_down_m_s2=values["MPC_ACC_DOWN_MAX"],
-        yaw_rate_deg_s=values["MPC_MAN_Y_MAX"], jerk_m_s3=values["MPC_JERK_MAX"])
-    return FlightSettings(takeoff_alt_m=values["MIS_TAKEOFF_ALT"],
-                          rtl_return_alt_m=values["RTL_RETURN_ALT"],
-                          rtl_cruise_m_s=values["MPC_XY_CRUISE"],
-                          manual_timeout_s=values["COM_RC_LOSS_T"], sticks=sticks)
+    return _fields_of(FlightSettings, values, sticks=_fields_of(StickSettings, values))
 
 
 def apply_params(store: ParamStore, pipeline: Pipeline) -> MissionLimits:
