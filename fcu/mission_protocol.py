@@ -67,9 +67,10 @@ class _Finished:
     notes: tuple[MAV.MAVLink_message, ...] = ()  # STATUSTEXT sent before the ACK
 
 
-def _msg(cls: type, *args: object, opaque_id: int | None = None) -> MAV.MAVLink_message:
+def _msg(cls: type[MAV.MAVLink_message], *args: object,
+         opaque_id: int | None = None) -> MAV.MAVLink_message:
     """Build a message, adding opaque_id where this dialect version has the field."""
-    if opaque_id is not None and "opaque_id" in cls.fieldnames:  # type: ignore[attr-defined]
+    if opaque_id is not None and "opaque_id" in cls.fieldnames:
         return cls(*args, opaque_id=opaque_id)
     return cls(*args)
 

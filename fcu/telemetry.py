@@ -14,6 +14,7 @@ from typing import NamedTuple
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
 from common.mavlink import MAV
 from common.modes import MAIN_POSCTL
+from common.quaternion import Quat
 from common.simlink import pose_covariance
 from fcu.estimator.ekf import Estimator
 from fcu.pipeline import StepOutput
@@ -208,6 +209,15 @@ def sys_status(*, state_ok: bool, control_ok: bool, prearm_ok: bool,
         0, min(rejected, 65535), min(signing_rejects, 65535), 0, 0, 0, 0, 0, 0)
 
 
+def _euler_ned_frd(q_enu_flu: Quat) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (rad) of the NED/FRD attitude, as ATTITUDE carries them."""
+    w, x, y, z = q_enu_flu_to_ned_frd(q_enu_flu)
+    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - x * z))))
+    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return roll, pitch, yaw
+
+
 class Builders:
     """Telemetry messages from the FCU's latest state; `get` maps a message id to a builder."""
 
@@ -215,7 +225,7 @@ class Builders:
         self.source = source
         self.home = home
 
-    def build(self, msg_id: int) -> MAV.MAVLink_message | list | None:
+    def build(self, msg_id: int) -> MAV.MAVLink_message | list[MAV.MAVLink_message] | None:
         fn = self._table().get(msg_id)
         return fn(self.source()) if fn else None
 
@@ -239,7 +249,7 @@ class Builders:
     def _ms(src: Snapshot) -> int:
         return int(src.time_us // 1000) & 0xFFFFFFFF
 
-    def attitude_quaternion(self, src: Snapshot):
+    def attitude_quaternion(self, src: Snapshot) -> MAV.MAVLink_message | None:
         s = src.state
         if s is None:
             return None
@@ -247,25 +257,22 @@ class Builders:
         w = flu_to_frd(s.omega_flu_rad_s)
         return M.MAVLink_attitude_quaternion_message(self._ms(src), *q, *w, [0.0] * 4)
 
-    def attitude(self, src: Snapshot):
+    def attitude(self, src: Snapshot) -> MAV.MAVLink_message | None:
         s = src.state
         if s is None:
             return None
-        w, x, y, z = q_enu_flu_to_ned_frd(s.q_enu_flu)
-        roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-        pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - x * z))))
-        yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        roll, pitch, yaw = _euler_ned_frd(s.q_enu_flu)
         rates = flu_to_frd(s.omega_flu_rad_s)
         return M.MAVLink_attitude_message(self._ms(src), roll, pitch, yaw, *rates)
 
-    def local_position(self, src: Snapshot):
+    def local_position(self, src: Snapshot) -> MAV.MAVLink_message | None:
         s = src.state
         if s is None:
             return None
         return M.MAVLink_local_position_ned_message(self._ms(src), *enu_to_ned(s.p_enu_m),
                                                     *enu_to_ned(src.v_enu_m_s))
 
-    def global_position(self, src: Snapshot):
+    def global_position(self, src: Snapshot) -> MAV.MAVLink_message | None:
         s = src.state
         if s is None:
             return None
@@ -273,13 +280,13 @@ class Builders:
         lat, lon, alt = ned_to_geodetic(p_ned, self.home.lat_deg, self.home.lon_deg,
                                         self.home.alt_m)
         v = enu_to_ned(src.v_enu_m_s)
-        yaw = self.attitude(src).yaw
+        yaw = _euler_ned_frd(s.q_enu_flu)[2]
         hdg = round(math.degrees(yaw) % 360.0 * 100) % 36000
         return M.MAVLink_global_position_int_message(
             self._ms(src), _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000),
             _i32(-p_ned[2] * 1000), *(max(-32768, min(32767, round(c * 100))) for c in v), hdg)
 
-    def odometry(self, src: Snapshot):
+    def odometry(self, src: Snapshot) -> MAV.MAVLink_message | None:
         """The state the FCU flies on: the estimate (estimator_type AUTOPILOT, with its
         pose and velocity variances) or the external state passed through (MOCAP)."""
         s = src.state
@@ -306,7 +313,7 @@ class Builders:
             q_enu_flu_to_ned_frd(s.q_enu_flu), *flu_to_frd(s.v_flu_m_s),
             *flu_to_frd(s.omega_flu_rad_s), pose_cov, vel_cov, 0, kind, 100)
 
-    def estimator_status(self, src: Snapshot):
+    def estimator_status(self, src: Snapshot) -> MAV.MAVLink_message | None:
         """ESTIMATOR_STATUS as PX4 fills it: solution flags, test ratios (pose position in
         pos_horiz/vert_ratio, pose attitude in mag_ratio: the heading aid), accuracies."""
         est = src.estimator.status() if src.estimator is not None else None
@@ -325,7 +332,7 @@ class Builders:
             src.time_us, flags, 0.0, est.pos_test_ratio, est.pos_test_ratio,
             est.att_test_ratio, 0.0, 0.0, math.hypot(sx, sy), sz)
 
-    def actuators(self, src: Snapshot):
+    def actuators(self, src: Snapshot) -> MAV.MAVLink_message | None:
         out = src.output
         if out is None:
             return None
@@ -333,7 +340,7 @@ class Builders:
         return M.MAVLink_actuator_output_status_message(
             src.time_us, (1 << len(values)) - 1, values + [0.0] * (32 - len(values)))
 
-    def position_target(self, src: Snapshot):
+    def position_target(self, src: Snapshot) -> MAV.MAVLink_message | None:
         ref = src.ref
         if ref is None:
             return None
@@ -342,7 +349,7 @@ class Builders:
             *enu_to_ned(ref.p_enu_m), *enu_to_ned(ref.v_enu_m_s), *enu_to_ned(ref.a_enu_m_s2),
             0.0, 0.0)
 
-    def attitude_target(self, src: Snapshot):
+    def attitude_target(self, src: Snapshot) -> MAV.MAVLink_message | None:
         ref = src.ref
         if ref is None:
             return None
@@ -350,7 +357,7 @@ class Builders:
             self._ms(src), 0b0100_0000, q_enu_flu_to_ned_frd(ref.q_enu_flu),
             *flu_to_frd(ref.omega_flu_rad_s), 0.0)
 
-    def errors(self, src: Snapshot):
+    def errors(self, src: Snapshot) -> list[MAV.MAVLink_message] | None:
         errs = src.errors
         if errs is None:
             return None
@@ -358,13 +365,13 @@ class Builders:
         return [M.MAVLink_named_value_float_message(ms, b"ERR_POS", errs[0]),
                 M.MAVLink_named_value_float_message(ms, b"ERR_ATT", errs[1])]
 
-    def home_position(self, src: Snapshot):
+    def home_position(self, src: Snapshot) -> MAV.MAVLink_message:
         h = self.home
         return M.MAVLink_home_position_message(
             round(h.lat_deg * 1e7), round(h.lon_deg * 1e7), round(h.alt_m * 1000), 0.0, 0.0,
             0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, src.time_us)
 
-    def extended_sys_state(self, src: Snapshot):
+    def extended_sys_state(self, src: Snapshot) -> MAV.MAVLink_message:
         landed = (M.MAV_LANDED_STATE_ON_GROUND if src.landed
                   else M.MAV_LANDED_STATE_IN_AIR)
         return M.MAVLink_extended_sys_state_message(M.MAV_VTOL_STATE_UNDEFINED, landed)

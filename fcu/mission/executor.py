@@ -66,13 +66,14 @@ class MissionExecutor:
         """Re-plan from item seq, starting at t_s from the given pose."""
         if not 0 <= seq < len(self.items):
             raise ValueError(f"no mission item {seq} (mission has {len(self.items)})")
-        p, q = tuple(p_enu_m), tuple(q_enu_flu)
-        self._start_ref = pose_ref(p, q)  # type: ignore[arg-type]
+        p: Vec3 = (p_enu_m[0], p_enu_m[1], p_enu_m[2])
+        q: Quat = (q_enu_flu[0], q_enu_flu[1], q_enu_flu[2], q_enu_flu[3])
+        self._start_ref = pose_ref(p, q)
         self._t_start = t_s
         segments: list[Segment] = []
         t = t_s
         for item in self.items[seq:]:
-            seg = plan_item(item, t, p, q, self.limits)  # type: ignore[arg-type]
+            seg = plan_item(item, t, p, q, self.limits)
             segments.append(seg)
             t, p, q = seg.t1, seg.p_end, seg.q_end
         self._segments = segments
@@ -101,9 +102,11 @@ class MissionExecutor:
         self._require_started()
         return self._ends[-1]
 
-    def _require_started(self) -> None:
+    def _require_started(self) -> Reference:
+        """The start reference; raises if the mission has not been started."""
         if self._start_ref is None:
             raise RuntimeError("mission executor not started")
+        return self._start_ref
 
     # ------------------------------------------------------------------ running
 
@@ -134,9 +137,9 @@ class MissionExecutor:
 
     def sample(self, t_s: float) -> Reference:
         """The reference at t_s (any time: before the start, during, after the end)."""
-        self._require_started()
+        start = self._require_started()
         if t_s < self._t_start:
-            return self._start_ref  # type: ignore[return-value]
+            return start
         k = bisect.bisect_right(self._ends, t_s)
         if k == len(self._segments):
             return self._segments[-1].end_ref
