@@ -15,7 +15,7 @@ starve the caller's loop:
 - the deque holds at most `max_queue` samples (MAX_QUEUE, 1024, by default); beyond that the
   OLDEST are dropped (the newest state is worth more than a stale one) and counted in
   `dropped_samples`;
-- `recv()` returns at most RECV_BATCH (common/links.py) samples per call, oldest first, and
+- `recv()` returns at most RECV_BATCH (common/links/base.py) samples per call, oldest first, and
   leaves the rest for the next call;
 - the pipe is readable exactly when samples are waiting (or a liveliness change is to be
   reported): a callback writes one byte only when the pipe is empty (so a flood costs no
@@ -31,27 +31,16 @@ import os
 import socket
 import threading
 from collections.abc import Callable
+from typing import Protocol
 
 import zenoh
 
-from common.links import RECV_BATCH, Link, LinkError, LinkUnavailable, LinkUrl
+from common.links.base import RECV_BATCH, Link
+from common.links.errors import LinkError, LinkUnavailable
+from common.links.url import DEFAULT_ROUTER, LinkUrl, parse_zenoh
 
-DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 ROLES = ("vehicle", "gcs", "sim_server", "sim_client")
 MAX_QUEUE = 1024  # samples waiting for recv(); the oldest are dropped beyond it
-
-
-def parse_zenoh(rest: str) -> tuple[str, list[str]]:
-    """'PREFIX@EP1,EP2' -> (prefix, endpoints); defaults 'mavlink' and the local router."""
-    prefix, _, endpoints = rest.partition("@")
-    prefix = prefix.strip("/") or "mavlink"
-    if any(c in prefix for c in "*$#?") or "//" in prefix:
-        raise LinkError(f"zenoh prefix '{prefix}': no wildcards or empty chunks")
-    eps = [e for e in endpoints.split(",") if e] or [DEFAULT_ROUTER]
-    for e in eps:
-        if "/" not in e:
-            raise LinkError(f"zenoh endpoint '{e}': expected PROTO/ADDRESS, e.g. {DEFAULT_ROUTER}")
-    return prefix, eps
 
 
 def client_config(endpoints: list[str], mode: str = "client") -> zenoh.Config:
@@ -82,6 +71,26 @@ def router_running(endpoint: str = DEFAULT_ROUTER, timeout: float = 0.5) -> bool
             return True
     except OSError:
         return False
+
+
+class _Declared(Protocol):
+    """A Zenoh entity as this module uses it (zenoh's stubs leave `undeclare` untyped)."""
+
+    def undeclare(self) -> None: ...
+
+
+class _Closable(Protocol):
+    """A Zenoh session as this module closes it (zenoh's stubs leave `close` untyped)."""
+
+    def close(self) -> None: ...
+
+
+def _undeclare(entity: _Declared) -> None:
+    entity.undeclare()
+
+
+def _close(session: _Closable) -> None:
+    session.close()
 
 
 class ZenohLink(Link):
@@ -184,7 +193,7 @@ class ZenohLink(Link):
         """GCS: send to this vehicle's `in` key from now on."""
         with self._pub_lock:
             if self._pub is not None:
-                self._pub.undeclare()
+                _undeclare(self._pub)
             self._pub = self.session.declare_publisher(f"{self.prefix}/{system_id}/in",
                                                        express=True)
 
@@ -243,7 +252,7 @@ class ZenohLink(Link):
                     entity.undeclare()
                 except zenoh.ZError:
                     pass
-        self.session.close()
+        _close(self.session)
         self.close_fds()
 
 
@@ -253,4 +262,4 @@ def run_router(listen: list[str], stop: threading.Event) -> None:
     try:
         stop.wait()
     finally:
-        session.close()
+        _close(session)

@@ -491,7 +491,8 @@ def cmd_router(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from common.zenoh_link import DEFAULT_ROUTER, run_router
+    from common.links.url import DEFAULT_ROUTER
+    from common.zenoh_link import run_router
 
     listen = args.listen or [DEFAULT_ROUTER]
     for endpoint in listen:

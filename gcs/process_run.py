@@ -439,7 +439,8 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
 
 def start_router_if_needed(zenoh_url: str, out: Path) -> Children | None:
     """Start `gcs router` on the first endpoint of `zenoh_url` when nothing listens there."""
-    from common.zenoh_link import parse_zenoh, router_running
+    from common.links.url import parse_zenoh
+    from common.zenoh_link import router_running
 
     _, endpoints = parse_zenoh(zenoh_url.partition(":")[2])
     if router_running(endpoints[0]):

@@ -1,4 +1,4 @@
-"""UDP links (common/links.py) facing senders they should not serve: a udpout link reads
+"""UDP links (common/links/udp.py) facing senders they should not serve: a udpout link reads
 only its target's replies, and a udpin link answers a bounded number of peers."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""tcp: client links (common/links.py) never block their caller: connecting, failing to
-connect, losing the server and reconnecting all happen while the caller's loop keeps
-running. Everything stays on 127.0.0.1."""
+"""tcp: client links (common/links/tcp_client.py) never block their caller: connecting,
+failing to connect, losing the server and reconnecting all happen while the caller's loop
+keeps running. Everything stays on 127.0.0.1."""
 
 from __future__ import annotations
 

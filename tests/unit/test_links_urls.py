@@ -1,4 +1,4 @@
-"""Link URLs (common/links.py): the one parser of `gcs`, `fcu` and `sitl`. Every spelling
+"""Link URLs (common/links/url.py): the one parser of `gcs`, `fcu` and `sitl`. Every spelling
 users bring (ours, MAVSDK's, pymavlink's) parses to the right transport, host and port;
 every bad one is one line naming what is wrong; a port another process holds is refused,
 never shared; a refused TCP connect is told apart (exit status 1) from bad input (2);
