@@ -16,7 +16,7 @@ from fcu.estimator.align import AlignWindow
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.output import corrected_output, propagate
 from fcu.estimator.settings import EstimatorSettings
-from fcu.estimator.status import EstimatorHealth, EstimatorStatus
+from fcu.estimator.status import EstimatorHealth, EstimatorStatus, sd_verdict, variance_verdict
 from fcu.estimator.strapdown import F_IDX, N, State, strapdown, transition_entries
 from fcu.estimator.update import (
     H_ATT,
@@ -411,50 +411,18 @@ class Estimator:
         """What the failsafes and arming need each control period, without status()'s
         Cholesky test (the covariance is kept positive definite by construction; status()
         checks it for telemetry and logs): finite state, the standard deviations."""
-        st = self.settings
-        if not self._aligned:
-            return EstimatorHealth(False, False, False, self._rejected_in_row,
-                                   self._last_fusion_us)
-        d = self._P.diagonal().tolist()
-        if not (math.isfinite(sum(d)) and math.isfinite(sum(self._o_x)) and min(d) > 0.0):
-            return EstimatorHealth(True, False, False, self._rejected_in_row,
-                                   self._last_fusion_us)
-        pos_var, vel_var, att_var = max(d[0:3]), max(d[3:6]), max(d[6:9])
-        healthy = (pos_var < st.healthy_pos_sd_max_m ** 2
-                   and vel_var < st.healthy_vel_sd_max_m_s ** 2
-                   and att_var < st.healthy_att_sd_max_rad ** 2)
-        converged = (healthy and pos_var < st.converged_pos_sd_m ** 2
-                     and vel_var < st.converged_vel_sd_m_s ** 2
-                     and att_var < st.converged_att_sd_rad ** 2)
-        return EstimatorHealth(True, converged, healthy, self._rejected_in_row,
+        converged, healthy = variance_verdict(self.settings, self._P, self._o_x,
+                                              self._aligned)
+        return EstimatorHealth(self._aligned, converged, healthy, self._rejected_in_row,
                                self._last_fusion_us)
 
     def status(self) -> EstimatorStatus:
-        st = self.settings
         x = self._o_x
-        if self._aligned:
-            P = self._P
-            d = P.diagonal()
-            finite = bool(np.isfinite(P).all()) and all(math.isfinite(v) for v in x)
-            sd = np.sqrt(np.maximum(d, 0.0)).tolist() if finite else [math.inf] * N
-            spd = finite
-            if finite:
-                try:
-                    np.linalg.cholesky(0.5 * (P + P.T))
-                except np.linalg.LinAlgError:
-                    spd = False
-        else:
-            sd = [math.nan] * N
-            spd = False
+        sd, converged, healthy = sd_verdict(self.settings, self._P, x, self._aligned)
 
         def v3(i: int) -> Vec3:
             return (sd[i], sd[i + 1], sd[i + 2])
 
-        pos_sd, vel_sd, att_sd = max(sd[0:3]), max(sd[3:6]), max(sd[6:9])
-        healthy = (spd and pos_sd < st.healthy_pos_sd_max_m
-                   and vel_sd < st.healthy_vel_sd_max_m_s and att_sd < st.healthy_att_sd_max_rad)
-        converged = (healthy and pos_sd < st.converged_pos_sd_m
-                     and vel_sd < st.converged_vel_sd_m_s and att_sd < st.converged_att_sd_rad)
         return EstimatorStatus(
             t_us=self._o_t if self._aligned else self._last_t,
             aligned=self._aligned, converged=converged,

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class EstimatorSettings:
+    """The filter's noises, gates, alignment and health thresholds (checked on creation)."""
+
     gravity_m_s2: float = 9.81
     gyro_noise_rad_s: float = 0.015  # EKF2_GYR_NOISE: per-sample sigma, angle var (sigma dt)^2
     accel_noise_m_s2: float = 0.35  # EKF2_ACC_NOISE: per-sample sigma, dv var (sigma dt)^2
@@ -66,4 +68,3 @@ class EstimatorSettings:
                 raise ValueError(f"EstimatorSettings.{name} must be finite and >= 0, got {v!r}")
         if self.pose_queue_max < 1:
             raise ValueError("EstimatorSettings.pose_queue_max must be >= 1")
-
