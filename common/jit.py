@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parent.parent
 KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layouts.py",
                   "common/quaternion.py", "fcu/dualquat.py",
                   "fcu/tracker.py", "fcu/allocation.py", "fcu/feasibility.py", "fcu/core.py",
-                  "sitl/plant.py", "sitl/disturbance.py")
+                  "sitl/plant_kernels.py", "sitl/disturbance.py")
 
 
 def _sources_hash() -> str:

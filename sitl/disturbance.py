@@ -12,21 +12,32 @@ import numpy as np
 
 from common.config import DisturbanceTerm
 from common.jit import njit
+from common.layouts import (
+    D_AMPLITUDE,
+    D_END,
+    D_OMEGA,
+    D_PART,
+    D_PHASE,
+    D_PULSE,
+    D_SIZE,
+    D_START,
+    DISTURBANCE_TERM,
+)
 
 Vec3 = tuple[float, float, float]
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
-# One row per term: part (0 force, 1 torque), pulse (1) or sine (0), start_s, end_s,
-# omega_rad_s, phase_rad, amplitude x, y, z.
-TERM_SIZE = 9
 
 
 def terms_table(force_terms: tuple[DisturbanceTerm, ...],
                 torque_terms: tuple[DisturbanceTerm, ...]) -> np.ndarray:
-    """The kernel's table of the terms, force terms first, each part in its order."""
+    """The kernel's table of the terms (one DISTURBANCE_TERM row each, its fields in order),
+    force terms first, each part in its order."""
+    assert DISTURBANCE_TERM.names() == ("part", "pulse", "start_s", "end_s", "omega_rad_s",
+                                        "phase_rad", "amplitude")
     rows = [(float(part), 1.0 if term.kind == "pulse" else 0.0, term.start_s, term.end_s,
              term.omega_rad_s, term.phase_rad, *term.amplitude)
             for part, terms in ((0, force_terms), (1, torque_terms)) for term in terms]
-    return np.array(rows, dtype=np.float64).reshape(-1, TERM_SIZE)
+    return np.array(rows, dtype=np.float64).reshape(-1, D_SIZE)
 
 
 @njit
@@ -36,17 +47,18 @@ def disturbance_kernel(terms: np.ndarray, t_s: float) -> tuple[Vec3, Vec3]:
     fx = fy = fz = tx = ty = tz = 0.0
     for j in range(terms.shape[0]):
         row = terms[j]
-        if t_s < row[2] or t_s >= row[3]:
+        if t_s < row[D_START] or t_s >= row[D_END]:
             continue
-        k = 1.0 if row[1] != 0.0 else math.sin(row[4] * t_s + row[5])
-        if row[0] == 0.0:
-            fx += k * row[6]
-            fy += k * row[7]
-            fz += k * row[8]
+        k = 1.0 if row[D_PULSE] != 0.0 else math.sin(row[D_OMEGA] * t_s + row[D_PHASE])
+        a = D_AMPLITUDE
+        if row[D_PART] == 0.0:
+            fx += k * row[a]
+            fy += k * row[a + 1]
+            fz += k * row[a + 2]
         else:
-            tx += k * row[6]
-            ty += k * row[7]
-            tz += k * row[8]
+            tx += k * row[a]
+            ty += k * row[a + 1]
+            tz += k * row[a + 2]
     return (fx, fy, fz), (tx, ty, tz)
 
 
