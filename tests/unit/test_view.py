@@ -12,22 +12,18 @@ import pytest
 from common.config import load_vehicle
 from common.geometry import rotor_frames
 from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate
-from gcs.view import (
-    BASE_HZ,
-    DEFAULT_VEHICLE,
-    RATES_HZ,
+from gcs.view.replay import ReplayLog
+from gcs.view.sample import (
     PathBuffer,
     Pose,
-    ReplayLog,
     Sample,
     arm_mounts,
     arm_transform,
-    due_topics,
     pose_from_ned,
-    replay_ticks,
     state_message,
     transforms,
 )
+from gcs.view.settings import BASE_HZ, DEFAULT_VEHICLE, RATES_HZ, due_topics, replay_ticks
 
 VEHICLE = DEFAULT_VEHICLE
 H = math.sqrt(0.5)
