@@ -41,10 +41,9 @@ def q_enu_flu_to_ned_frd(q: Quat) -> Quat:
 
 
 def q_ned_frd_to_enu_flu(q: Quat) -> Quat:
-    """Inverse of `q_enu_flu_to_ned_frd` (both fixed rotations are their own inverses up to
-    sign), sign chosen with w >= 0."""
-    r = q_mul(q_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
-    return r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
+    """Inverse of `q_enu_flu_to_ned_frd`, which is the same map (both fixed rotations are
+    their own inverses up to sign), sign chosen with w >= 0."""
+    return q_enu_flu_to_ned_frd(q)
 
 
 # Geodetic home: a local tangent plane (flat-earth) approximation around the home point,

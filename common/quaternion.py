@@ -7,7 +7,9 @@ Conventions: Hamilton product, scalar first (w, x, y, z); q rotates body vectors
 world frame. Scalar code on float tuples, compiled by numba (`common.jit.njit`): the flight
 core's kernels (tracker, allocation) call these at machine speed, and Python callers get
 tuples back. Written with indexing only, so tuples, lists and arrays of floats all work.
-`angle_between_rows` is the vectorised attitude error for logs.
+`angle_between_rows` is the vectorised attitude error for logs. Z-Y-X (yaw-pitch-roll)
+Euler angles, which the flight code never uses, are here for displays and reports
+(`zyx_euler`, `zyx_yaw`, `zyx_euler_rows`).
 """
 
 from __future__ import annotations
@@ -146,3 +148,32 @@ def rotate_rows(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     w, u = q[:, :1], q[:, 1:]
     t = 2.0 * np.cross(u, v)
     return np.asarray(v + w * t + np.cross(u, t))
+
+
+# ----------------------------------------------------------------------------------------
+# Z-Y-X Euler angles (displays, reports, headings on the wire)
+# ----------------------------------------------------------------------------------------
+
+
+def zyx_yaw(q: Quat) -> float:
+    """The Z-Y-X yaw of q in (-pi, pi], rad (a heading: q_ned_frd gives the NED yaw)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def zyx_euler(q: Quat) -> Vec3:
+    """(roll, pitch, yaw) of q in rad, Z-Y-X order: q = Rz(yaw) Ry(pitch) Rx(roll); the
+    pitch's sine is clipped to [-1, 1] (rounding at gimbal lock)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - x * z))))
+    return roll, pitch, zyx_yaw(q)
+
+
+def zyx_euler_rows(q: np.ndarray) -> np.ndarray:
+    """`zyx_euler` of rows (w, x, y, z): rows (roll, pitch, yaw) in rad."""
+    w, x, y, z = q.T
+    roll = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2.0 * (w * y - x * z), -1.0, 1.0))
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return np.column_stack([roll, pitch, yaw])

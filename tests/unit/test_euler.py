@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from common import quaternion as quat
 from common.config import load_scenario
+from common.quaternion import zyx_euler_rows
 from fcu.dualquat import q_exp
 from fcu.trajectory import make_trajectory
 from gcs.euler import zyx_euler, zyx_events
@@ -41,3 +43,20 @@ def test_case1_reference_has_four_yaw_wraps_and_no_gimbal_lock():
     events = zyx_events(t, q)
     assert [k for _, k in events] == ["jump"] * 4
     np.testing.assert_allclose([x for x, _ in events], [50.24, 73.55, 94.33, 122.85], atol=0.02)
+
+
+def test_scalar_and_row_euler_angles_agree():
+    """Given random attitudes, then common.quaternion's scalar Z-Y-X angles (and its yaw)
+    equal its row form and the report's, and compose back to the attitude."""
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(200, 4))
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    rows = zyx_euler_rows(q)
+    scalar = np.array([quat.zyx_euler(tuple(r)) for r in q.tolist()])
+    np.testing.assert_allclose(scalar, rows, rtol=0.0, atol=1e-15)
+    np.testing.assert_array_equal(rows, zyx_euler(q))
+    np.testing.assert_array_equal(scalar[:, 2], [quat.zyx_yaw(tuple(r)) for r in q.tolist()])
+    for r, (roll, pitch, yaw) in zip(q.tolist(), scalar.tolist(), strict=True):
+        back = quat.q_mul(q_exp((0.0, 0.0, yaw)),
+                          quat.q_mul(q_exp((0.0, pitch, 0.0)), q_exp((roll, 0.0, 0.0))))
+        assert quat.q_angle(quat.q_mul(quat.q_conj(back), tuple(r))) < 1e-9
