@@ -14,7 +14,7 @@ from typing import NamedTuple
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
 from common.mavlink import MAV
 from common.modes import MAIN_POSCTL
-from common.quaternion import Quat
+from common.quaternion import zyx_euler, zyx_yaw
 from common.simlink import pose_covariance
 from fcu.estimator.ekf import Estimator
 from fcu.pipeline import StepOutput
@@ -209,15 +209,6 @@ def sys_status(*, state_ok: bool, control_ok: bool, prearm_ok: bool,
         0, min(rejected, 65535), min(signing_rejects, 65535), 0, 0, 0, 0, 0, 0)
 
 
-def _euler_ned_frd(q_enu_flu: Quat) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (rad) of the NED/FRD attitude, as ATTITUDE carries them."""
-    w, x, y, z = q_enu_flu_to_ned_frd(q_enu_flu)
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - x * z))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return roll, pitch, yaw
-
-
 class Builders:
     """Telemetry messages from the FCU's latest state; `get` maps a message id to a builder."""
 
@@ -261,7 +252,7 @@ class Builders:
         s = src.state
         if s is None:
             return None
-        roll, pitch, yaw = _euler_ned_frd(s.q_enu_flu)
+        roll, pitch, yaw = zyx_euler(q_enu_flu_to_ned_frd(s.q_enu_flu))
         rates = flu_to_frd(s.omega_flu_rad_s)
         return M.MAVLink_attitude_message(self._ms(src), roll, pitch, yaw, *rates)
 
@@ -280,7 +271,7 @@ class Builders:
         lat, lon, alt = ned_to_geodetic(p_ned, self.home.lat_deg, self.home.lon_deg,
                                         self.home.alt_m)
         v = enu_to_ned(src.v_enu_m_s)
-        yaw = _euler_ned_frd(s.q_enu_flu)[2]
+        yaw = zyx_yaw(q_enu_flu_to_ned_frd(s.q_enu_flu))
         hdg = round(math.degrees(yaw) % 360.0 * 100) % 36000
         return M.MAVLink_global_position_int_message(
             self._ms(src), _i32(lat * 1e7), _i32(lon * 1e7), _i32(alt * 1000),
