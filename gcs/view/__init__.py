@@ -46,5 +46,6 @@ from gcs.view.settings import ViewError
 # `gcs view`'s interface (gcs/cli.py); the parts: settings.py (ports, channels, rates,
 # schedule), sample.py (the pure model), mavlink_input.py (live telemetry -> sample),
 # replay.py (run folder -> samples), scenes.py (Foxglove messages), publisher.py (channels
-# and sinks), run.py (the loops).
+# and sinks), ws_front.py (the loopback front accepting both names of the WebSocket
+# protocol), run.py (the loops).
 __all__ = ["ViewError", "view_live", "view_replay"]

@@ -1,5 +1,6 @@
 """The view's outputs: the five channels on one Foxglove context (`Publisher`), and the
-context's sinks (`Outputs`): the WebSocket server on 127.0.0.1 and the optional MCAP file."""
+context's sinks (`Outputs`): the WebSocket server on 127.0.0.1 (behind its front, which
+accepts both names of the protocol) and the optional MCAP file."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from common.config import VehicleConfig
 from gcs.view.sample import ViewState, arm_mounts, state_message, transforms
 from gcs.view.scenes import airframe_scene, frame_transforms, path_scene
 from gcs.view.settings import HOST, RATES_HZ, STATE_SCHEMA, ViewError, due_topics
+from gcs.view.ws_front import WebSocketFront
 
 if TYPE_CHECKING:
     import foxglove
@@ -63,8 +65,9 @@ class Publisher:
 
 
 class Outputs:
-    """The Foxglove context with its sinks: the WebSocket server on 127.0.0.1 and the
-    optional MCAP writer; closed (MCAP finalised) by `close`."""
+    """The Foxglove context with its sinks: the WebSocket server on 127.0.0.1 (the SDK's on
+    a free port, reached through the front on `port`) and the optional MCAP writer; closed
+    (MCAP finalised) by `close`."""
 
     def __init__(self, port: int, mcap: Path | None) -> None:
         try:
@@ -75,28 +78,39 @@ class Outputs:
             raise ViewError(f"{mcap} exists; not overwriting a recording")
         self.context = foxglove.Context()
         self.mcap_path = mcap
+        # The SDK's server on a free loopback port, behind the front on `port` that also
+        # accepts the spec's name of the protocol (gcs/view/ws_front.py).
         try:
-            self.server = foxglove.start_server(name="dqflight gcs view", host=HOST, port=port,
+            self.server = foxglove.start_server(name="dqflight gcs view", host=HOST, port=0,
                                                 context=self.context)
         except (RuntimeError, OSError, ValueError, OverflowError) as exc:
             raise ViewError(f"cannot serve on {HOST}:{port}: "
                             f"{str(exc).removeprefix('FoxgloveError: ')}") from None
+        try:
+            self.front = WebSocketFront(port, self.server.port)
+        except (OSError, OverflowError) as exc:
+            self.server.stop()
+            why = (f"Failed to bind port: {exc.strerror} (os error {exc.errno})"
+                   if isinstance(exc, OSError) and exc.strerror else str(exc))
+            raise ViewError(f"cannot serve on {HOST}:{port}: {why}") from None
         self.writer = None
         if mcap is not None:
             try:
                 self.writer = foxglove.open_mcap(mcap, context=self.context)
             except OSError as exc:
+                self.front.stop()
                 self.server.stop()
                 raise ViewError(f"{mcap}: {exc.strerror or exc}") from None
 
     @property
     def url(self) -> str:
-        return f"ws://{HOST}:{self.server.port}"
+        return f"ws://{HOST}:{self.front.port}"
 
     def close(self) -> None:
         if self.writer is not None:
             self.writer.close()
             self.writer = None
+        self.front.stop()
         self.server.stop()
 
 

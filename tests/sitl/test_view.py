@@ -42,7 +42,7 @@ M = MAV
 TOPICS = {"/tf": "foxglove.FrameTransforms", "/airframe": "foxglove.SceneUpdate",
           "/path/flown": "foxglove.SceneUpdate", "/path/desired": "foxglove.SceneUpdate",
           "/vehicle/state": "dqflight.VehicleState"}
-SUBPROTOCOL = "foxglove.sdk.v1"  # what foxglove-sdk's server accepts
+SUBPROTOCOL = "foxglove.sdk.v1"  # foxglove-sdk's name (the spec's: tests/unit/test_view_front.py)
 
 
 # ------------------------------------------------------------------ helpers
