@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from common.config import N_ROTORS
+from common.vehicle_constants import N_ROTORS
 from gcs.metrics import estimation_error_rows, join_logs, log_columns
 from gcs.runio import check_run_dir, read_run_logs
 

@@ -10,7 +10,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from common.config import N_ROTORS
+from common.vehicle_constants import N_ROTORS
 from gcs.report.names import CASE1
 from gcs.report.plot import (
     AXIS_COLORS,
