@@ -3,10 +3,21 @@
 Used by the FCU's supervisor (divergence disarms), by the metrics (where the figures stop)
 and by every runner (the status of a run), so that each question has one answer.
 
+Divergence has two bounds. Position: the error |p - p_d| beyond the scenario's limit
+(`divergence_position_m`, COM_DIV_POS; DIVERGENCE_M by default), judged at every sample, by
+the FCU too (`diverged`: it disarms). Attitude: the error angle of q_d* q above
+DIVERGENCE_ATTITUDE_RAD held for DIVERGENCE_ATTITUDE_HOLD_S without a break, judged on the
+logs (`diverged_rows`, which the metrics of in-process and process runs alike use); a
+momentary peak, such as Case II's impulse response (2.2 rad for under 0.6 s, the paper's
+Table I: 2.14 rad), is flown through, an attitude that is not tracked at all (Case II's
+sinusoidal disturbance: 1.43 rad on average, above 2 rad for 2.1 s at a time) is a
+divergence. The FCU does not judge attitude: such a run flies on, armed, to its end.
+
 Statuses, exactly one per run:
     completed  the run reached its end with no failsafe reaction, divergence, crash, timeout
     failsafe   a failsafe reacted (HOLD, LAND or disarm), even one that later cleared
-    diverged   position error beyond the limit or a state that is not finite
+    diverged   position error beyond the limit, attitude error above its limit held for its
+               hold time, or a state that is not finite
     crashed    a disarm in the air, or ground contact faster than CRASH_SPEED_M_S
     timeout    the run did not reach its end within its wall-clock allowance
     aborted    the run was stopped (interrupt, a process died, a refused step)
@@ -20,8 +31,12 @@ from typing import NamedTuple
 
 import numpy as np
 
+from common.quaternion import angle_between_rows
+
 STATUSES = ("completed", "failsafe", "diverged", "crashed", "timeout", "aborted")
 DIVERGENCE_M = 10.0  # default limit of the position error (COM_DIV_POS, scenario key)
+DIVERGENCE_ATTITUDE_RAD = 2.0  # attitude error angle limit (115 deg) ...
+DIVERGENCE_ATTITUDE_HOLD_S = 1.0  # ... held this long without a break: a divergence
 CRASH_SPEED_M_S = 1.0  # touching the ground faster than this is a crash (LAND: 0.5 m/s)
 
 # Event kinds: what a runner reads from the FCU's events besides their text.
@@ -51,12 +66,35 @@ def diverged(position_error_m: float, state_finite: bool, limit_m: float) -> boo
 
 
 def diverged_rows(p: np.ndarray, q: np.ndarray, p_d: np.ndarray, q_d: np.ndarray,
-                  limit_m: float) -> np.ndarray:
-    """`diverged` for rows of truth (p, q) joined with desired (p_d, q_d)."""
+                  limit_m: float, *, t_us: np.ndarray,
+                  attitude_limit_rad: float = DIVERGENCE_ATTITUDE_RAD,
+                  attitude_hold_s: float = DIVERGENCE_ATTITUDE_HOLD_S) -> np.ndarray:
+    """Rows of truth (p ENU m, q (w, x, y, z)) joined with desired (p_d, q_d) at times t_us
+    that have diverged: `diverged` (a state that is not finite, a position error beyond
+    limit_m) or `attitude_held` (the error angle of q_d* q above attitude_limit_rad for
+    attitude_hold_s)."""
     with np.errstate(invalid="ignore", over="ignore"):
         finite = np.all(np.isfinite(np.hstack([p, q, p_d, q_d])), axis=1)
         err = np.linalg.norm(p - p_d, axis=1)
-        return np.asarray(~finite | ~np.isfinite(err) | (err > limit_m))
+        att = angle_between_rows(q, q_d)
+        held = attitude_held(t_us, att, attitude_limit_rad, attitude_hold_s)
+        return np.asarray(~finite | ~np.isfinite(err) | (err > limit_m) | held)
+
+
+def attitude_held(t_us: np.ndarray, error_rad: np.ndarray, limit_rad: float,
+                  hold_s: float) -> np.ndarray:
+    """Rows where the attitude error has stayed above limit_rad, on every row, for at least
+    hold_s since the first row of that stretch (NaN counts as a break: `diverged_rows` flags
+    a non-finite state by itself)."""
+    with np.errstate(invalid="ignore"):
+        above = np.asarray(error_rad > limit_rad)
+    if not above.size:
+        return above
+    rows = np.arange(len(above))
+    starts = np.where(above & ~np.concatenate([[False], above[:-1]]), rows, 0)
+    stretch_start = np.maximum.accumulate(starts)  # first row of the stretch a row is in
+    t = np.asarray(t_us, dtype=np.int64)
+    return np.asarray(above & (t - t[stretch_start] >= round(hold_s * 1e6)))
 
 
 def touchdowns(landed: np.ndarray, speed_m_s: np.ndarray) -> list[tuple[int, float]]:
@@ -76,11 +114,13 @@ class Outcome(NamedTuple):
 
 
 def classify(*, reached_end: bool, events: Iterable[Event], divergence_t_us: int | None,
-             crash_t_us: int | None = None, stopped: str = "") -> Outcome:
+             crash_t_us: int | None = None, stopped: str = "",
+             divergence_cause: str = "") -> Outcome:
     """The status of a run from what happened to the vehicle.
 
-    `divergence_t_us`: first instant of divergence by `diverged` in the logs (None: never);
-    the FCU's own divergence events count too (the earlier wins);
+    `divergence_t_us`: first instant of divergence by `diverged_rows` in the logs (None:
+    never); the FCU's own divergence events count too (the earlier wins); `divergence_cause`
+    (when the logs' instant is the one): what diverged, added to the reason;
     `crash_t_us`: first ground contact faster than CRASH_SPEED_M_S (None: never);
     `stopped`: "timeout" or "aborted" when the runner could not finish the run.
     A disarm in the air caused by the divergence rule counts as divergence, not as a crash.
@@ -88,13 +128,17 @@ def classify(*, reached_end: bool, events: Iterable[Event], divergence_t_us: int
     events = list(events)
     in_air = [e.t_us for e in events if e.kind == CRASH]
     flagged = [e.t_us for e in events if e.kind == DIVERGED]  # the FCU's own judgement
+    logs_t_us = divergence_t_us
     divergence_t_us = min([t for t in (divergence_t_us, *flagged) if t is not None],
                           default=None)
     crash = min([t for t in (crash_t_us, *in_air) if t is not None], default=None)
     reactions = [e for e in events if e.kind == FAILSAFE]
     first = reactions[0].text if reactions else ""
     if divergence_t_us is not None and (crash is None or divergence_t_us <= crash):
-        return Outcome("diverged", first, f"diverged at t = {divergence_t_us * 1e-6:.3f} s")
+        cause = f": {divergence_cause}" if divergence_cause and logs_t_us == divergence_t_us \
+            else ""
+        return Outcome("diverged", first,
+                       f"diverged at t = {divergence_t_us * 1e-6:.3f} s{cause}")
     if crash is not None:
         return Outcome("crashed", first, f"crashed at t = {crash * 1e-6:.3f} s")
     if stopped:

@@ -13,7 +13,15 @@ from typing import Any
 import numpy as np
 
 from common.config import Scenario
-from common.outcome import CRASH_SPEED_M_S, Event, classify, diverged_rows, touchdowns
+from common.outcome import (
+    CRASH_SPEED_M_S,
+    DIVERGENCE_ATTITUDE_HOLD_S,
+    DIVERGENCE_ATTITUDE_RAD,
+    Event,
+    classify,
+    diverged_rows,
+    touchdowns,
+)
 from common.quaternion import angle_between_rows, rotate_rows
 
 
@@ -147,20 +155,30 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
     seconds its process spent compiling or loading the numba kernels, outside wall_time_s.
 
     Errors compare the plant's true pose with the desired pose the FCU computed for the same
-    control step (`join_logs`). A run diverges at the first joined sample that `diverged`
-    flags, and its figures cover the run up to that instant (never inf or NaN).
+    control step (`join_logs`). A run diverges at the first joined sample that
+    `diverged_rows` flags (position beyond the scenario's limit, attitude error above
+    DIVERGENCE_ATTITUDE_RAD held for DIVERGENCE_ATTITUDE_HOLD_S, or a non-finite state), and
+    its figures cover the run up to that instant (never inf or NaN).
     """
     common_t, truth_j, onboard_j = join_logs(truth_columns, truth, onboard_columns, onboard)
     p = log_columns(truth_columns, truth_j, "px", "py", "pz")
     q = log_columns(truth_columns, truth_j, "qw", "qx", "qy", "qz")
     p_d = log_columns(onboard_columns, onboard_j, "pdx", "pdy", "pdz")
     q_d = log_columns(onboard_columns, onboard_j, "qdw", "qdx", "qdy", "qdz")
-    bad = diverged_rows(p, q, p_d, q_d, scenario.divergence_position_m)
+    bad = diverged_rows(p, q, p_d, q_d, scenario.divergence_position_m, t_us=common_t,
+                        attitude_limit_rad=DIVERGENCE_ATTITUDE_RAD,
+                        attitude_hold_s=DIVERGENCE_ATTITUDE_HOLD_S)
     end = len(common_t)
     divergence_t_us = None
+    cause = ""
     if np.any(bad):
         first = int(np.argmax(bad))
         divergence_t_us = int(common_t[first])
+        if not diverged_rows(p[first:first + 1], q[first:first + 1], p_d[first:first + 1],
+                             q_d[first:first + 1], scenario.divergence_position_m,
+                             t_us=common_t[first:first + 1])[0]:
+            cause = (f"attitude error above {DIVERGENCE_ATTITUDE_RAD:g} rad for "
+                     f"{DIVERGENCE_ATTITUDE_HOLD_S:g} s")
         # Keep the first divergent sample when it is finite: the figures reach that instant.
         end = first + 1 if np.all(np.isfinite(np.hstack([p[first], q[first], p_d[first],
                                                           q_d[first]]))) else first
@@ -170,7 +188,8 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
             int(t_truth[-1]) >= flight_start_us + round(scenario.duration_s * 1e6)
     outcome = classify(reached_end=reached_end, events=events,
                        divergence_t_us=divergence_t_us,
-                       crash_t_us=crash_time_us(truth_columns, truth), stopped=stopped)
+                       crash_t_us=crash_time_us(truth_columns, truth), stopped=stopped,
+                       divergence_cause=cause)
     sim_time_s = float((t_truth[-1] - flight_start_us) * 1e-6) if len(t_truth) else 0.0
     steps = onboard_j[:end, list(onboard_columns).index("step_us")]
     sat = onboard_j[:end, list(onboard_columns).index("saturated")]

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from common.outcome import DIVERGENCE_ATTITUDE_HOLD_S, DIVERGENCE_ATTITUDE_RAD
 from gcs.euler import zyx_events
 from gcs.report.disturbance_figures import fig78_disturbance
 from gcs.report.estimation_figures import estimation_figures
@@ -98,9 +99,10 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
         lines.append("")
     if data.diverged:
         lines += [f"**The run diverged at t = {fmt(m.get('divergence_t_s'))} s** "
-                  "(position error "
-                  "beyond the scenario's limit or a non-finite state). The error statistics "
-                  "below and the plots cover the run up to that instant only.", ""]
+                  "(position error beyond the scenario's limit, attitude error above "
+                  f"{DIVERGENCE_ATTITUDE_RAD:g} rad for {DIVERGENCE_ATTITUDE_HOLD_S:g} s, or a "
+                  "non-finite state). The error statistics below and the plots cover the run "
+                  "up to that instant only.", ""]
     lines += [f"_{n}_" for n in data.notes]
     if data.notes:
         lines.append("")

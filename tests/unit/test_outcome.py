@@ -3,26 +3,34 @@ and the pipeline's failsafe reactions that feed it (fcu/pipeline.py)."""
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from common.config import load_gains, load_vehicle
+from common.config import load_gains, load_scenario, load_vehicle
 from common.outcome import (
     CRASH,
     DIVERGED,
+    DIVERGENCE_ATTITUDE_HOLD_S,
+    DIVERGENCE_ATTITUDE_RAD,
     FAILSAFE,
     INFO,
     STATUSES,
     Event,
+    attitude_held,
     classify,
     diverged,
     diverged_rows,
     touchdowns,
 )
+from fcu.core import ONBOARD_COLUMNS
 from fcu.pipeline import Pipeline
 from fcu.tracker import VehicleState
+from gcs.metrics import build_metrics
+from sitl.plant import TRUTH_COLUMNS
 
 ROOT = Path(__file__).resolve().parents[2]
 HOVER_STATE = VehicleState((0.0, 0.0, 5.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
@@ -68,7 +76,70 @@ def test_one_divergence_rule_scalar_and_rows():
     assert diverged(0.0, False, 10.0) and diverged(float("nan"), True, 10.0)
     p = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 10.5], [np.nan, 0.0, 0.0]])
     q = np.tile([1.0, 0.0, 0.0, 0.0], (3, 1))
-    assert diverged_rows(p, q, np.zeros((3, 3)), q, 10.0).tolist() == [False, True, True]
+    t_us = np.array([0, 2000, 4000])
+    assert diverged_rows(p, q, np.zeros((3, 3)), q, 10.0, t_us=t_us).tolist() == \
+        [False, True, True]
+
+
+def _about_z(angle_rad: np.ndarray) -> np.ndarray:
+    return np.column_stack([np.cos(angle_rad / 2), np.zeros((len(angle_rad), 2)),
+                            np.sin(angle_rad / 2)])
+
+
+def test_attitude_bound_needs_its_hold_time():
+    """Given an attitude error above the limit, then rows diverge only once it has stayed
+    above for the hold time without a break (a peak is flown through); the position is
+    exact throughout."""
+    t_us = np.arange(0, 4_000_001, 2000)
+    t = t_us * 1e-6
+    limit, hold = DIVERGENCE_ATTITUDE_RAD, DIVERGENCE_ATTITUDE_HOLD_S
+    err = np.where((t >= 1.0) & (t < 1.0 + 0.9 * hold), limit + 0.5, 0.0)  # a peak
+    err = np.where(t >= 2.0, limit + 0.5, err)  # held from 2 s on
+    err[np.searchsorted(t, 2.0 + 0.5 * hold)] = limit - 0.1  # a break: the clock restarts
+    q_d = _about_z(np.zeros(len(t)))
+    p = np.zeros((len(t), 3))
+    rows = diverged_rows(p, _about_z(err), p, q_d, 10.0, t_us=t_us)
+    first = int(np.argmax(rows))
+    assert t[first] == pytest.approx(2.0 + 0.5 * hold + 0.002 + hold)
+    assert np.all(rows[first:]) and not np.any(rows[:first])
+    assert np.array_equal(rows, attitude_held(t_us, err, limit, hold))
+    assert not np.any(diverged_rows(p, _about_z(err), p, q_d, 10.0, t_us=t_us,
+                                    attitude_limit_rad=math.pi))
+
+
+def _logs(t_s: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Truth and onboard logs of a hover at the origin, desired attitude level, truth
+    attitude q: the position tracks exactly."""
+    truth = np.zeros((len(t_s), len(TRUTH_COLUMNS)))
+    onboard = np.zeros((len(t_s), len(ONBOARD_COLUMNS)))
+    for log, columns in ((truth, TRUTH_COLUMNS), (onboard, ONBOARD_COLUMNS)):
+        log[:, columns.index("time_us")] = np.round(t_s * 1e6)
+    truth[:, [TRUTH_COLUMNS.index(c) for c in ("qw", "qx", "qy", "qz")]] = q
+    onboard[:, ONBOARD_COLUMNS.index("qw")] = 1.0
+    onboard[:, ONBOARD_COLUMNS.index("qdw")] = 1.0
+    return truth, onboard
+
+
+@pytest.mark.parametrize(("excursion_s", "status"), [(0.5, "completed"), (2.0, "diverged")])
+def test_good_position_wrong_attitude_is_not_completed(excursion_s, status):
+    """Given a run whose position tracks exactly but whose attitude is 2.5 rad off the
+    desired one from 1 s on for `excursion_s`, then metrics.json's status is completed for a
+    peak shorter than the hold time and diverged, on attitude, when the error is held: the
+    status judges attitude as well as position."""
+    scenario = dataclasses.replace(load_scenario(ROOT / "config/scenarios/case2_sine.toml"),
+                                   duration_s=4.0)
+    t = np.arange(0.0, 4.0 + 1e-9, 0.002)
+    off = np.where((t >= 1.0) & (t < 1.0 + excursion_s), 2.5, 0.0)
+    truth, onboard = _logs(t, _about_z(off))
+    m = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard, events=[],
+                      wall_time_s=1.0, transport="in-process", lockstep=True)
+    assert m["position_error_m"]["max"] == 0.0
+    assert m["status"] == status
+    if status == "diverged":
+        assert m["divergence_t_s"] == pytest.approx(1.0 + DIVERGENCE_ATTITUDE_HOLD_S)
+        assert m["status_reason"] == (f"diverged at t = {1.0 + DIVERGENCE_ATTITUDE_HOLD_S:.3f}"
+                                      f" s: attitude error above {DIVERGENCE_ATTITUDE_RAD:g} "
+                                      f"rad for {DIVERGENCE_ATTITUDE_HOLD_S:g} s")
 
 
 def test_touchdown_speed_is_the_speed_before_contact():
