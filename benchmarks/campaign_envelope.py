@@ -23,7 +23,8 @@ import time
 from pathlib import Path
 
 from common.links import free_port
-from gcs.campaign import load_campaign, run_campaign
+from gcs.campaign.load import load_campaign
+from gcs.campaign.run import run_campaign
 
 HERE = Path(__file__).resolve().parent
 CAMPAIGN = HERE / "case2_envelope_1000.toml"

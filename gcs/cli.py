@@ -427,7 +427,11 @@ def cmd_table1(args: argparse.Namespace) -> int:
 def cmd_campaign(args: argparse.Namespace) -> int:
     """Exit 0 when every run is recorded (whatever its status), 1 when runs could not be
     executed, 2 for bad input."""
-    from gcs.campaign import CampaignError, expand, load_campaign, read_journal, run_campaign
+    from gcs.campaign.journal import read_journal
+    from gcs.campaign.load import load_campaign
+    from gcs.campaign.model import CampaignError
+    from gcs.campaign.run import run_campaign
+    from gcs.campaign.runs import expand
 
     try:
         campaign = load_campaign(args.campaign)

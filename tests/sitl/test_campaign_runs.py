@@ -19,8 +19,10 @@ import pytest
 
 from common.config import scenario_from_data
 from common.links import free_port
-from gcs import campaign as campaign_mod
-from gcs.campaign import expand, load_campaign, run_campaign
+from gcs.campaign import run as run_mod
+from gcs.campaign.load import load_campaign
+from gcs.campaign.run import run_campaign
+from gcs.campaign.runs import RunSpec, expand
 from gcs.cli import main
 from gcs.inprocess import run_scenario
 
@@ -170,21 +172,21 @@ def test_runs_that_cannot_be_executed_exit_1_and_are_flown_on_resume(
     path = campaign_file(tmp_path, "[set]\nduration_s = 0.5\n[[axis]]\nkey = \"seed\"\n"
                                    "values = [1, 2, 3]\n")
     out = tmp_path / "out"
-    real_expand = campaign_mod.expand
+    real_expand = run_mod.expand
 
     def broken(c, o):  # run 1's scenario names a mission file that has gone meanwhile
         specs = real_expand(c, o)
         data = json.loads(json.dumps(specs[1].data))
         data["trajectory"] = {"kind": "mission", "mission": str(tmp_path / "gone.toml")}
-        specs[1] = campaign_mod.RunSpec(**{**specs[1].__dict__, "data": data})
+        specs[1] = RunSpec(**{**specs[1].__dict__, "data": data})
         return specs
 
-    monkeypatch.setattr(campaign_mod, "expand", broken)
+    monkeypatch.setattr(run_mod, "expand", broken)
     outcome = run_campaign(load_campaign(path), out, workers=1, dashboard=None, report=False)
     assert outcome.exit_code == 1 and list(outcome.failed) == [1]
     assert "gone.toml" in outcome.failed[1]
     assert len(table(out)) == 2 and sum(journal_ids(out).values()) == 2
-    monkeypatch.setattr(campaign_mod, "expand", real_expand)
+    monkeypatch.setattr(run_mod, "expand", real_expand)
     outcome = run_campaign(load_campaign(path), out, workers=1, dashboard=None, report=False)
     assert outcome.exit_code == 0 and outcome.flown == 1 and outcome.recorded_before == 2
     assert [r["seed"] for r in table(out)] == ["1", "2", "3"]

@@ -17,19 +17,13 @@ from common.config import (
     resolved_scenario_data,
     scenario_from_data,
 )
-from gcs.campaign import (
-    CampaignError,
-    Journal,
-    expand,
-    flatten,
-    key_path,
-    load_campaign,
-    read_journal,
-    run_id,
-    set_key,
-    write_table,
-)
-from gcs.campaign_report import envelope, per_value
+from gcs.campaign.journal import Journal, read_journal, write_table
+from gcs.campaign.keys import key_path, set_key
+from gcs.campaign.load import load_campaign
+from gcs.campaign.model import CampaignError
+from gcs.campaign.report import envelope, per_value
+from gcs.campaign.runs import expand, run_id
+from gcs.campaign.worker import flatten
 from sitl.actuator_faults import ActuatorFaults
 from sitl.plant import ActuatorCommand, Plant, initial_state
 
