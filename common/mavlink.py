@@ -9,6 +9,8 @@ from __future__ import annotations
 import hashlib
 import hmac
 import os
+import types
+from typing import Any
 
 os.environ["MAVLINK20"] = "1"
 
@@ -42,37 +44,41 @@ def parser() -> mavlink.MAVLink:
     return encoder(0, 0)
 
 
-class _SignedParser(mavlink.MAVLink):
-    """A parser that refuses unsigned and wrongly signed frames, and records a stream's
-    timestamp only once the signature is right: pymavlink records it before comparing, so
-    one forged frame with a far timestamp would lock the real sender out of its stream."""
-
-    def check_signature(self, msgbuf: bytearray, srcSystem: int,
-                        srcComponent: int) -> bool:
-        signing = self.signing
-        key = signing.secret_key
-        if key is None or len(msgbuf) < 13:
-            return False
-        digest = hashlib.sha256(bytes(key) + bytes(msgbuf[:-6])).digest()[:6]
-        if not hmac.compare_digest(digest, bytes(msgbuf[-6:])):
-            return False
-        tlow, thigh = self.mav_sign_unpacker.unpack(msgbuf[-12:-6])
-        timestamp = tlow + (thigh << 32)
-        stream = (msgbuf[-13], srcSystem, srcComponent)
-        last = signing.stream_timestamps.get(stream)
-        if last is not None and timestamp <= last:
-            return False  # replayed or old
-        if last is None and timestamp + 6000 * 1000 < signing.timestamp:
-            return False  # a new stream more than a minute behind our clock
-        signing.stream_timestamps[stream] = timestamp
-        signing.timestamp = max(signing.timestamp, timestamp)
-        return True
+SignatureStream = tuple[int, int, int]  # (link id, system id, component id) of a signed stream
 
 
-def signed_parser(key: bytes, stream_timestamps: dict | None = None) -> mavlink.MAVLink:
+def _check_signature(mav: Any, msgbuf: bytearray, srcSystem: int, srcComponent: int) -> bool:
+    """MAVLink.check_signature that refuses unsigned and wrongly signed frames, and records
+    a stream's timestamp only once the signature is right: pymavlink records it before
+    comparing, so one forged frame with a far timestamp would lock the real sender out of
+    its stream. (`mav` is a pymavlink MAVLink, untyped.)"""
+    signing = mav.signing
+    key = signing.secret_key
+    if key is None or len(msgbuf) < 13:
+        return False
+    digest = hashlib.sha256(bytes(key) + bytes(msgbuf[:-6])).digest()[:6]
+    if not hmac.compare_digest(digest, bytes(msgbuf[-6:])):
+        return False
+    tlow, thigh = mav.mav_sign_unpacker.unpack(msgbuf[-12:-6])
+    timestamp = tlow + (thigh << 32)
+    stream = (msgbuf[-13], srcSystem, srcComponent)
+    last = signing.stream_timestamps.get(stream)
+    if last is not None and timestamp <= last:
+        return False  # replayed or old
+    if last is None and timestamp + 6000 * 1000 < signing.timestamp:
+        return False  # a new stream more than a minute behind our clock
+    signing.stream_timestamps[stream] = timestamp
+    signing.timestamp = max(signing.timestamp, timestamp)
+    return True
+
+
+def signed_parser(key: bytes,
+                  stream_timestamps: dict[SignatureStream, int] | None = None) -> mavlink.MAVLink:
     """A decoder that accepts only frames signed with `key` (MAVLink 2 signing), sharing
-    replay protection through `stream_timestamps` with other parsers of the same links."""
-    p = _SignedParser(_Sink(), srcSystem=0, srcComponent=0, use_native=False)
+    replay protection through `stream_timestamps` with other parsers of the same links.
+    Its check_signature is `_check_signature`, bound to this parser alone."""
+    p = mavlink.MAVLink(_Sink(), srcSystem=0, srcComponent=0, use_native=False)
+    p.check_signature = types.MethodType(_check_signature, p)
     p.robust_parsing = True
     p.signing.secret_key = key
     p.signing.timestamp = signing_timestamp()
@@ -83,7 +89,7 @@ def signed_parser(key: bytes, stream_timestamps: dict | None = None) -> mavlink.
 
 def pack(mav: mavlink.MAVLink, msg: mavlink.MAVLink_message) -> bytes:
     """Encode a message with `mav`'s identity and next sequence number (as MAVLink.send)."""
-    data = msg.pack(mav)
+    data: bytes = msg.pack(mav)
     mav.seq = (mav.seq + 1) % 256
     return data
 

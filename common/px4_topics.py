@@ -268,7 +268,9 @@ SOL_PRED_POS_HORIZ_REL = 8
 
 
 def _f32(x: float) -> float:
-    return struct.unpack("<f", struct.pack("<f", x))[0]
+    """x rounded to float32 (as the log stores it)."""
+    (rounded,) = struct.unpack("<f", struct.pack("<f", x))
+    return float(rounded)
 
 
 def _bits(q: Quat) -> bytes:

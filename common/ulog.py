@@ -55,7 +55,7 @@ class Topic:
         for f in self.fields:
             if f[0] not in _CODES:
                 raise ValueError(f"topic {self.name}: unknown type {f[0]}")
-            count = f[2] if len(f) == 3 else 1  # type: ignore[misc]
+            count = f[2] if len(f) == 3 else 1
             codes.append(_code(f[0], count))
         object.__setattr__(self, "_struct", struct.Struct("<" + "".join(codes)))
 
@@ -64,7 +64,7 @@ class Topic:
         """The format message's text: `name:type field;type[n] field;...`."""
         parts = []
         for f in self.fields:
-            kind = f"{f[0]}[{f[2]}]" if len(f) == 3 else f[0]  # type: ignore[misc]
+            kind = f"{f[0]}[{f[2]}]" if len(f) == 3 else f[0]
             parts.append(f"{kind} {f[1]}")
         return f"{self.name}:" + ";".join(parts) + ";"
 
@@ -75,7 +75,7 @@ class Topic:
     @property
     def width(self) -> int:
         """Number of values a record takes (arrays flattened; a char[n] is one bytes)."""
-        return sum(f[2] if len(f) == 3 and f[0] != "char" else 1  # type: ignore[misc]
+        return sum(f[2] if len(f) == 3 and f[0] != "char" else 1
                    for f in self.fields)
 
 
