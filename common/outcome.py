@@ -60,7 +60,8 @@ class Event(NamedTuple):
 
 
 def diverged(position_error_m: float, state_finite: bool, limit_m: float) -> bool:
-    """The one divergence rule: a state that is not finite, or an error beyond the limit."""
+    """The divergence rule at one step, the FCU's: a state that is not finite, or a position
+    error beyond the limit (`diverged_rows` adds the attitude bound, which takes a time)."""
     return not state_finite or not math.isfinite(position_error_m) or \
         position_error_m > limit_m
 
