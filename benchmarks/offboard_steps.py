@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common.frames import enu_to_ned, q_enu_flu_to_ned_frd
 from common.modes import Mode
+from fcu.setpoint_wire import attitude_target, position_target
 from tests.pipeline_flight import (
     ATTITUDE_ONLY,
     LIMIT_S,
@@ -42,9 +43,10 @@ def campaign(vehicle: str, count: int, seed: int) -> dict[str, float]:
         p_t, q_t = random_step(rng)
         f = Flight(vehicle, (0.0, 0.0, 15.0))
         c = f.pipe.commander
-        c.offboard_position(0.0, 1, POSITION_ONLY, enu_to_ned(p_t), (0.0,) * 3, (0.0,) * 3,
-                            0.0)
-        c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q_t), (0.0,) * 3)
+        c.offboard_position(0.0, position_target(1, POSITION_ONLY, enu_to_ned(p_t), (0.0,) * 3,
+                                                 (0.0,) * 3, 0.0))
+        c.offboard_attitude(0.0, attitude_target(ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q_t),
+                                                 (0.0,) * 3))
         c.set_mode(Mode.OFFBOARD, 0.0)
         t_plan = time.perf_counter()
         f.step()  # the step that sees the sample plans the approach

@@ -279,13 +279,15 @@ def _limits(lim: StickSettings, x: Offset) -> np.ndarray:
                      max(math.radians(lim.yaw_acc_deg_s2), _norm(x.ddeps))])
 
 
-def _f(v: tuple[float, ...]) -> tuple[float, ...]:
-    return tuple(float(c) for c in v)
+def _f3(v: Vec3) -> Vec3:
+    return float(v[0]), float(v[1]), float(v[2])
 
 
 def floats(sp: Setpoint) -> tuple[Vec3, Vec3, Vec3, Quat, Vec3]:
     """The set-point's parts as floats (the kernels are compiled for floats only)."""
-    return _f(sp.p), _f(sp.v), _f(sp.a), _f(sp.q), _f(sp.w)  # type: ignore[return-value]
+    q = sp.q
+    return (_f3(sp.p), _f3(sp.v), _f3(sp.a), (float(q[0]), float(q[1]), float(q[2]),
+                                              float(q[3])), _f3(sp.w))
 
 
 def _norm(x: Vec3) -> float:

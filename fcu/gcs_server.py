@@ -8,6 +8,9 @@ answer can carry, a SET_MESSAGE_INTERVAL changes only the link it came on, and e
 streams together stay within its message budget (`fcu.telemetry.LINK_BUDGET_MSG_S`); every
 refusal is explained by STATUSTEXT. An exception that still reaches the boundary is counted
 in `internal_errors` and reported, never raised.
+
+Commands are executed in `fcu.gcs_commands`, parameters served by `fcu.gcs_params`, offboard
+and manual set-points decoded by `fcu.setpoint_wire`; telemetry is built by `fcu.telemetry`.
 """
 
 from __future__ import annotations
@@ -16,18 +19,26 @@ import math
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from common.links import Link
-from common.mavlink import MAV, encoder, pack, parser, signed_parser
-from common.modes import Mode, decode, decode_custom
+from common.mav_enums import MAV_COMPONENT, MAV_RESULT, MAV_SEVERITY, MAV_TYPE, MISSION_STATE
+from common.mavlink import MAV, encoder, pack, parser, signed_parser, signing_timestamp
+from common.modes import decode_custom
 from common.outcome import Event
-from fcu.commander import FORCE_DISARM_MAGIC
 from fcu.dualquat import q_angle, q_conj, q_mul, q_rotate
+from fcu.gcs_commands import MAX_PEERS, CommandService
+from fcu.gcs_params import ParamService
 from fcu.mission_protocol import MissionServer
-from fcu.params import SPECS, ParamError, ParamStore
+from fcu.params import ParamStore
 from fcu.pipeline import Pipeline
+from fcu.setpoint_wire import (
+    SetpointRefused,
+    attitude_target,
+    position_target,
+    sticks_from_manual_control,
+)
 from fcu.telemetry import (
-    REQUESTABLE,
     Builders,
     Home,
     Schedule,
@@ -38,12 +49,12 @@ from fcu.telemetry import (
 )
 
 M = MAV
-COMPONENT = M.MAV_COMP_ID_AUTOPILOT1
+WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
+COMPONENT = MAV_COMPONENT.MAV_COMP_ID_AUTOPILOT1
 STATUSTEXT_LEN = 50
-MAX_PARSERS = 64  # one per (link, peer); peers cycling source ports cannot grow it
+MAX_PARSERS = MAX_PEERS  # one per (link, peer); peers cycling source ports cannot grow it
 STATUSTEXT_BURST = 20.0
 STATUSTEXT_RATE = 10.0  # per second and link
-RETRY_WINDOW_S = 5.0  # a COMMAND_LONG with confirmation > 0 this soon after is a retry
 # Every message type a ground station can send that the server acts on (the rest are
 # ignored); the dispatch property test and the fuzz campaign send each of them.
 HANDLED = ("HEARTBEAT", "COMMAND_LONG", "COMMAND_INT", "MISSION_COUNT", "MISSION_ITEM_INT",
@@ -53,11 +64,6 @@ HANDLED = ("HEARTBEAT", "COMMAND_LONG", "COMMAND_INT", "MISSION_COUNT", "MISSION
            "PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET",
            "SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET", "SET_MODE",
            "MANUAL_CONTROL")
-_ALWAYS_REQUESTABLE = (M.MAVLINK_MSG_ID_MISSION_CURRENT, M.MAVLINK_MSG_ID_HEARTBEAT,
-                       M.MAVLINK_MSG_ID_SYS_STATUS)
-# NAV_TAKEOFF's altitude: COMMAND_LONG p7 is AMSL (as PX4 reads it); COMMAND_INT's z by frame
-_AMSL_FRAMES = (M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_INT)
-_RELATIVE_FRAMES = (M.MAV_FRAME_GLOBAL_RELATIVE_ALT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 
 
 @dataclass
@@ -71,21 +77,6 @@ class GcsLink:
     text_refill_s: float = 0.0
 
 
-def _command_key(msg: MAV.MAVLink_message) -> bytes:
-    """A command's identity for retries: its id and parameters, bit for bit (NaN too)."""
-    params = [getattr(msg, f"param{i}") for i in range(1, 8)] if msg.get_type() == \
-        "COMMAND_LONG" else [*(getattr(msg, f"param{i}") for i in range(1, 5)), msg.x, msg.y,
-                             msg.z, msg.frame]
-    return struct.pack("<I", msg.command) + struct.pack(f"<{len(params)}d", *params)
-
-
-def _as_int(x: float, lo: int, hi: int) -> int | None:
-    """A float parameter as an integer in [lo, hi], or None."""
-    if not math.isfinite(x) or x != round(x) or not lo <= x <= hi:
-        return None
-    return int(x)
-
-
 class GcsServer:
     def __init__(self, links: list[Link], pipeline: Pipeline, params: ParamStore,
                  missions: MissionServer, *, system_id: int, home: Home,
@@ -96,10 +87,10 @@ class GcsServer:
         self.missions = missions
         self.system_id = system_id
         self.signing_key = signing_key
-        self.on_params = on_params
         self.links = [GcsLink(link, self._encoder(i)) for i, link in enumerate(links)]
         self.parsers: dict[tuple[int, object], MAV.MAVLink] = {}
-        self._stream_timestamps: dict = {}  # replay protection shared by every parser
+        # replay protection shared by every parser: (link id, system, component) -> timestamp
+        self._stream_timestamps: dict[tuple[int, int, int], int] = {}
         self.home = home
         self.builders = Builders(self.snapshot, home)
         self.gcs_seen_s = -math.inf
@@ -118,16 +109,13 @@ class GcsServer:
         self.on_text: Callable[[int, str], None] | None = None
         self.v_enu_m_s = (0.0, 0.0, 0.0)
         self.announced: tuple[bool, int] | None = None  # (armed, custom_mode) last sent
-        # The last command each sender had executed, for its retries (command protocol:
-        # a re-send carries confirmation > 0 and is answered, never executed again).
-        self._executed: dict[tuple[int, int, int], tuple[bytes, float, int, str]] = {}
-        self.repeated_commands = 0
+        self.commands = CommandService(self)
+        self.param_service = ParamService(params, self.send, self.say, lambda: pipeline.armed,
+                                          on_params)
 
     def _encoder(self, index: int) -> MAV.MAVLink:
         mav = encoder(self.system_id, COMPONENT)
         if self.signing_key is not None:
-            from common.mavlink import signing_timestamp
-
             mav.signing.secret_key = self.signing_key
             mav.signing.sign_outgoing = True
             mav.signing.link_id = index & 0xFF
@@ -173,10 +161,6 @@ class GcsServer:
         for ev in events:
             self._text(ev.severity, ev.text.encode(), None)
 
-    def _ack(self, index: int, msg: MAV.MAVLink_message, command: int, result: int) -> None:
-        self.send(M.MAVLink_command_ack_message(command, result, 0, 0, msg.get_srcSystem(),
-                                                msg.get_srcComponent()), index)
-
     # ------------------------------------------------------------------ receiving
 
     def on_datagram(self, index: int, peer: object, data: bytes, now_s: float) -> None:
@@ -217,20 +201,21 @@ class GcsServer:
         except Exception as exc:  # a bug, not an input error: count, report, keep flying
             self.internal_errors += 1
             self.ignored_messages += 1
-            self.say(M.MAV_SEVERITY_ERROR,
+            self.say(MAV_SEVERITY.MAV_SEVERITY_ERROR,
                      f"internal error on {msg.get_type()}: {type(exc).__name__}", index)
 
     def _handle(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
         kind = msg.get_type()
         if kind == "HEARTBEAT":
-            if msg.type == M.MAV_TYPE_GCS:
+            if msg.type == MAV_TYPE.MAV_TYPE_GCS:
                 self.gcs_seen_s = now_s
             return
         if kind == "MANUAL_CONTROL":  # its target field is `target`
             if msg.target not in (0, self.system_id):
                 self.ignored_messages += 1
                 return
-            self.pipeline.commander.manual_input(now_s, msg.x, msg.y, msg.z, msg.r)
+            self.pipeline.commander.manual_input(
+                now_s, sticks_from_manual_control(msg.x, msg.y, msg.z, msg.r))
             return
         target = getattr(msg, "target_system", 0)
         if target not in (0, self.system_id):
@@ -238,7 +223,7 @@ class GcsServer:
             return
         cmd = self.pipeline.commander
         if kind in ("COMMAND_LONG", "COMMAND_INT"):
-            self._command(index, msg, now_s)
+            self.commands.handle(index, msg, now_s)
         elif kind.startswith("MISSION_"):
             for reply in self.missions.handle(msg, now_s):
                 if reply.get_type() == "STATUSTEXT":
@@ -248,203 +233,54 @@ class GcsServer:
                     self.mission_link = index  # an upload began: its re-requests go here
                 self.send(reply, index)
         elif kind == "PARAM_REQUEST_LIST":
-            for i in range(len(SPECS)):
-                self._send_param(i, index)
+            self.param_service.request_list(index)
         elif kind == "PARAM_REQUEST_READ":
-            self._param_read(index, msg)
+            self.param_service.param_read(index, msg)
         elif kind == "PARAM_SET":
-            self._param_set(index, msg)
-        elif kind == "SET_POSITION_TARGET_LOCAL_NED":
-            ok, why = cmd.offboard_position(
-                now_s, msg.coordinate_frame, msg.type_mask, (msg.x, msg.y, msg.z),
-                (msg.vx, msg.vy, msg.vz), (msg.afx, msg.afy, msg.afz), msg.yaw)
-            if not ok:
-                self.say(M.MAV_SEVERITY_WARNING, why, index)
-        elif kind == "SET_ATTITUDE_TARGET":
-            ok, why = cmd.offboard_attitude(
-                now_s, msg.type_mask, tuple(msg.q),
-                (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate))
-            if not ok:
-                self.say(M.MAV_SEVERITY_WARNING, why, index)
+            self.param_service.param_set(index, msg)
+        elif kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET"):
+            self._setpoint(index, msg, now_s)
         elif kind == "SET_MODE":
             mode = decode_custom(msg.custom_mode)
             if mode is not None:
                 result, text = cmd.set_mode(mode, now_s)
-                if result != M.MAV_RESULT_ACCEPTED and text:
-                    self.say(M.MAV_SEVERITY_WARNING, text, index)
+                if result != MAV_RESULT.MAV_RESULT_ACCEPTED and text:
+                    self.say(WARNING, text, index)
+
+    def _setpoint(self, index: int, msg: Any, now_s: float) -> None:
+        """An offboard target decoded (`fcu.setpoint_wire`) and given to the commander; a
+        refusal, by the wire or by the commander, is said to the link it came on."""
+        cmd = self.pipeline.commander
+        try:
+            if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+                ok, why = cmd.offboard_position(now_s, position_target(
+                    msg.coordinate_frame, msg.type_mask, (msg.x, msg.y, msg.z),
+                    (msg.vx, msg.vy, msg.vz), (msg.afx, msg.afy, msg.afz), msg.yaw))
+            else:
+                ok, why = cmd.offboard_attitude(now_s, attitude_target(
+                    msg.type_mask, tuple(msg.q),
+                    (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate)))
+        except SetpointRefused as exc:
+            ok, why = False, str(exc)
+        if not ok:
+            self.say(WARNING, why, index)
 
     # ------------------------------------------------------------------ commands
 
-    def _command(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
-        """Execute a COMMAND_LONG/INT and ACK it; a COMMAND_LONG re-sent by its sender
-        (confirmation > 0, the same command and parameters, within RETRY_WINDOW_S of the
-        first) gets the first answer again: a retry after a lost or late ACK must not start
-        a mission, a landing or an RTL a second time, mid-flight."""
-        sender = (index, msg.get_srcSystem(), msg.get_srcComponent())
-        key = _command_key(msg)
-        last = self._executed.get(sender)
-        if getattr(msg, "confirmation", 0) > 0 and last is not None and last[0] == key \
-                and now_s - last[1] <= RETRY_WINDOW_S:
-            self.repeated_commands += 1
-            self._ack(index, msg, msg.command, last[2])
-            if last[3] and last[2] != M.MAV_RESULT_ACCEPTED:
-                self.say(M.MAV_SEVERITY_WARNING, last[3], index)
-            return
-        result, text = self._execute(index, msg, now_s)
-        if result is None:
-            return  # answered with its message (requests): a retry asks again
-        if len(self._executed) >= MAX_PARSERS and sender not in self._executed:
-            del self._executed[next(iter(self._executed))]
-        self._executed[sender] = (key, now_s, result, text)
-        self._ack(index, msg, msg.command, result)
-        if text and result != M.MAV_RESULT_ACCEPTED:
-            self.say(M.MAV_SEVERITY_WARNING, text, index)
+    @property
+    def repeated_commands(self) -> int:
+        """Retried commands answered without executing them again."""
+        return self.commands.repeated_commands
 
-    def _execute(self, index: int, msg: MAV.MAVLink_message,
-                 now_s: float) -> tuple[int | None, str]:
-        """(MAV_RESULT, reason) of a command, or (None, "") when it was answered here."""
-        cmd = msg.command
-        p = (msg.param1, msg.param2, msg.param3, msg.param4)
-        pipe = self.pipeline
-        c = pipe.commander
-        result, text = M.MAV_RESULT_ACCEPTED, ""
-        if cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
-            if p[0] == 1.0:
-                result, text = pipe.arm()
-            elif p[0] == 0.0:
-                result, text = c.disarm(force=p[1] == FORCE_DISARM_MAGIC)
-            else:
-                result, text = M.MAV_RESULT_DENIED, "arm: p1 must be 0 or 1"
-        elif cmd == M.MAV_CMD_DO_SET_MODE:
-            base = _as_int(p[0], 0, 255)
-            main = _as_int(p[1], 0, 255)
-            sub = _as_int(p[2], 0, 255) if math.isfinite(p[2]) else 0
-            mode = decode(main, sub or 0) if base is not None and main is not None and \
-                base & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED else None
-            if mode is None:
-                result, text = M.MAV_RESULT_DENIED, "unsupported mode"
-            else:
-                result, text = c.set_mode(mode, now_s)
-        elif cmd == M.MAV_CMD_MISSION_START:
-            first = _as_int(p[0], 0, 0xFFFF) if p[0] != 0 else 0
-            if first is None:
-                result, text = M.MAV_RESULT_DENIED, f"no mission item {p[0]:g}"
-            else:
-                result, text = c.mission_start(first)
-        elif cmd == M.MAV_CMD_DO_SET_MISSION_CURRENT:
-            seq = _as_int(p[0], 0, 0xFFFF)
-            ok = seq is not None and self.set_mission_current(seq)
-            result = M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_DENIED
-            text = f"no mission item {p[0]:g}"
-        elif cmd == M.MAV_CMD_NAV_LAND:
-            result, text = c.set_mode(Mode.LAND, now_s)
-        elif cmd == M.MAV_CMD_NAV_TAKEOFF:
-            result, text = self._takeoff(msg)
-        elif cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            result, text = c.set_mode(Mode.RTL, now_s)
-        elif cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            msg_id = _as_int(p[0], 0, 0xFFFFFF)
-            if msg_id is None:
-                result, text = M.MAV_RESULT_DENIED, f"no message id {p[0]:g}"
-            else:
-                ok, text = self.links[index].schedule.set_interval(msg_id, p[1])
-                result = M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_DENIED
-        elif cmd == M.MAV_CMD_GET_MESSAGE_INTERVAL:
-            msg_id = _as_int(p[0], 0, 0xFFFF)
-            if msg_id is None:
-                result, text = M.MAV_RESULT_DENIED, f"no message id {p[0]:g}"
-            else:
-                self._ack(index, msg, cmd, M.MAV_RESULT_ACCEPTED)
-                self.send(M.MAVLink_message_interval_message(
-                    msg_id, self.links[index].schedule.interval_us(msg_id)), index)
-                return None, ""
-        elif cmd in (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            msg_id = M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if cmd != M.MAV_CMD_REQUEST_MESSAGE \
-                else _as_int(p[0], 0, 0xFFFFFF)
-            if msg_id is None or (msg_id not in REQUESTABLE
-                                  and msg_id not in _ALWAYS_REQUESTABLE):
-                self._ack(index, msg, cmd, M.MAV_RESULT_UNSUPPORTED)
-                return None, ""
-            self._ack(index, msg, cmd, M.MAV_RESULT_ACCEPTED)
-            self.send_message(msg_id, index)
-            return None, ""
-        else:
-            result = M.MAV_RESULT_UNSUPPORTED
-        return result, text
-
-    def _takeoff(self, msg: MAV.MAVLink_message) -> tuple[int, str]:
-        """MAV_CMD_NAV_TAKEOFF: altitude NaN (MAVSDK's, QGC's) -> MIS_TAKEOFF_ALT above the
-        vehicle; else the altitude AMSL (COMMAND_LONG p7, as PX4; COMMAND_INT z in a global
-        frame) or above home (COMMAND_INT z in a relative-altitude frame)."""
-        c = self.pipeline.commander
-        if msg.get_type() == "COMMAND_INT":
-            alt, frame = msg.z, msg.frame
-        else:
-            alt, frame = msg.param7, M.MAV_FRAME_GLOBAL
-        if math.isnan(alt):
-            return c.takeoff()
-        if not math.isfinite(alt):
-            return M.MAV_RESULT_DENIED, "takeoff: altitude not finite"
-        if frame in _AMSL_FRAMES:
-            return c.takeoff(alt - self.home.alt_m)
-        if frame in _RELATIVE_FRAMES:
-            return c.takeoff(alt)
-        return M.MAV_RESULT_DENIED, f"takeoff: frame {frame} not supported"
+    def schedule(self, index: int) -> Schedule:
+        """The streams of link `index`."""
+        return self.links[index].schedule
 
     def set_mission_current(self, seq: int) -> bool:
         result, _ = self.pipeline.commander.set_mission_current(seq)
-        if result == M.MAV_RESULT_ACCEPTED:
+        if result == MAV_RESULT.MAV_RESULT_ACCEPTED:
             self.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # the spec's confirmation
-        return result == M.MAV_RESULT_ACCEPTED
-
-    # ------------------------------------------------------------------ parameters
-
-    def _send_param(self, i: int, index: int | None = None) -> None:
-        name = SPECS[i].name
-        self.send(M.MAVLink_param_value_message(name.encode(), self.params.values[name],
-                                                M.MAV_PARAM_TYPE_REAL32, len(SPECS), i), index)
-
-    @staticmethod
-    def _param_name(msg: MAV.MAVLink_message) -> str:
-        name = msg.param_id if isinstance(msg.param_id, str) else \
-            msg.param_id.decode("ascii", "replace")
-        return name.rstrip("\x00")
-
-    def _param_read(self, index: int, msg: MAV.MAVLink_message) -> None:
-        if msg.param_index >= 0:
-            if msg.param_index < len(SPECS):
-                self._send_param(msg.param_index, index)
-            return
-        name = self._param_name(msg)
-        if name in self.params.values:
-            self._send_param(self.params.index(name), index)
-
-    def _param_set(self, index: int, msg: MAV.MAVLink_message) -> None:
-        """A set in force is echoed (PARAM_VALUE) to every link. A refusal answers the link
-        that asked: PARAM_ERROR first (MAVSDK reports its error code: DOES_NOT_EXIST,
-        VALUE_OUT_OF_RANGE, instead of a timeout), a STATUSTEXT with the reason, and for a
-        known parameter the unchanged value (PARAM_VALUE, what older clients wait for)."""
-        name = self._param_name(msg)
-        raw_id = msg.param_id.encode() if isinstance(msg.param_id, str) else msg.param_id
-        if name not in self.params.values:
-            self.send(M.MAVLink_param_error_message(
-                msg.get_srcSystem(), msg.get_srcComponent(), raw_id[:16], -1,
-                M.MAV_PARAM_ERROR_DOES_NOT_EXIST), index)
-            self.say(M.MAV_SEVERITY_WARNING, f"unknown parameter {name}", index)
-            return
-        i = self.params.index(name)
-        try:
-            self.params.set(name, float(msg.param_value), armed=self.pipeline.armed)
-        except ParamError as exc:
-            self.send(M.MAVLink_param_error_message(
-                msg.get_srcSystem(), msg.get_srcComponent(), name.encode(), i,
-                M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE), index)
-            self.say(M.MAV_SEVERITY_WARNING, str(exc), index)
-            self._send_param(i, index)  # the unchanged value
-            return
-        if self.on_params is not None:
-            self.on_params()
-        self._send_param(i)  # the value now in force, to every link
+        return result == MAV_RESULT.MAV_RESULT_ACCEPTED
 
     # ------------------------------------------------------------------ telemetry
 
@@ -465,13 +301,13 @@ class GcsServer:
         c = self.pipeline.commander
         total = len(c.mission)
         if not total:
-            state = M.MISSION_STATE_NO_MISSION
+            state = MISSION_STATE.MISSION_STATE_NO_MISSION
         elif c.mission_done:
-            state = M.MISSION_STATE_COMPLETE
+            state = MISSION_STATE.MISSION_STATE_COMPLETE
         elif c.mission_running:
-            state = M.MISSION_STATE_ACTIVE
+            state = MISSION_STATE.MISSION_STATE_ACTIVE
         else:
-            state = M.MISSION_STATE_NOT_STARTED
+            state = MISSION_STATE.MISSION_STATE_NOT_STARTED
         seq = total if c.mission_done else c.mission_current
         return M.MAVLink_mission_current_message(min(seq, 0xFFFF), min(total, 0xFFFF), state, 0)
 

@@ -1,11 +1,10 @@
 """POSCTL: a pilot's sticks (MANUAL_CONTROL) move the position and yaw set-point; pure, no I/O.
 
-MANUAL_CONTROL as QGroundControl's virtual joystick sends it to PX4: x = forward (pitch
-stick), y = right (roll stick), r = yaw clockwise, each -1000..1000, and z = throttle
-0..1000 with 500 at the centre (PX4's convention for position and altitude modes: the centre
-holds the altitude); INT16_MAX marks an axis that is not given (taken as centred). After a
-dead zone of `DEADZONE` at the centre, deflection d (-1..1) maps linearly to a set-point
-velocity, as PX4's position mode does without its expo curve:
+The sticks come as deflections (`Sticks`: forward, right, up from the throttle's centre, yaw
+clockwise, each -1..1), decoded from MANUAL_CONTROL by the FCU's MAVLink edge
+(`fcu.setpoint_wire.sticks_from_manual_control`). After a dead zone of `DEADZONE` at the
+centre, deflection d (-1..1) maps linearly to a set-point velocity, as PX4's position mode
+does without its expo curve:
 
     horizontal: (forward, right) d * speed_xy_m_s along the set-point's heading (a diagonal
                 deflection is scaled back to at most speed_xy_m_s)
@@ -42,6 +41,7 @@ JERK_FLOOR_M_S3 or YAW_FLOOR_DEG_S, the accelerations are halved again.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
@@ -53,9 +53,6 @@ from fcu.dualquat import Quat, Vec3, q_exp, q_mul, q_rotate, q_rotate_inv
 from fcu.feasibility import envelope
 from fcu.tracker import Reference
 
-STICK_MAX = 1000  # MANUAL_CONTROL x, y, r: -1000..1000
-THROTTLE_CENTRE = 500  # MANUAL_CONTROL z: 0..1000, 500 holds the altitude (PX4)
-INVALID_AXIS = 32767  # INT16_MAX: the axis is not given
 DEADZONE = 0.05  # share of the deflection around the centre that commands nothing
 LEAD_M = 1.0  # the set-point stays within this distance of the vehicle
 MAX_DT_S = 0.1  # a longer gap between two samples integrates as this long
@@ -79,19 +76,6 @@ class Sticks(NamedTuple):
 
 
 CENTRED = Sticks()
-
-
-def sticks_from_manual_control(x: int, y: int, z: int, r: int) -> Sticks:
-    """MANUAL_CONTROL's x, y, z, r as deflections (module docstring); values beyond the
-    ranges are clamped, INT16_MAX is a centred axis."""
-    def axis(v: int) -> float:
-        if v == INVALID_AXIS:
-            return 0.0
-        return max(-1.0, min(1.0, v / STICK_MAX))
-
-    up = 0.0 if z == INVALID_AXIS else \
-        max(-1.0, min(1.0, (z - THROTTLE_CENTRE) / (STICK_MAX - THROTTLE_CENTRE)))
-    return Sticks(axis(x), axis(y), up, axis(r))
 
 
 @dataclass(frozen=True)
@@ -246,6 +230,12 @@ def advance(sp: ManualSetpoint, t_us: int, sticks: Sticks, s: StickSettings,
     return new, Reference(p_new, q_new, v_new, a_new, omega, omega_dot)
 
 
+def _columns(rows: Sequence[tuple[float, ...]], n: int) -> Any:
+    """Samples (rows of n components) as n arrays, one per component: the envelope's kernels
+    take such a tuple of arrays where a `Reference` holds a Vec3 or a Quat (hence Any)."""
+    return tuple(np.array([r[i] for r in rows]) for i in range(n))
+
+
 def _fits(vehicle: VehicleConfig, q0: Quat, s: StickSettings) -> bool:
     """Every corner of the acceleration and yaw limits, at q0 turned to any of 12 yaws."""
     env = envelope(vehicle)
@@ -260,7 +250,7 @@ def _fits(vehicle: VehicleConfig, q0: Quat, s: StickSettings) -> bool:
                 acc.append((s.acc_xy_m_s2 * math.cos(ang), s.acc_xy_m_s2 * math.sin(ang), az))
                 rate.append(sign * wz)
                 rate_dot.append(sign * wdz)
-    a: Any = tuple(np.array([x[i] for x in acc]) for i in range(3))
+    a = _columns(acc, 3)
     zero: Any = (0.0, 0.0, 0.0)
     for j in range(12):
         q = yawed(q0, j * math.pi / 6.0)
@@ -278,9 +268,7 @@ def _tilts(vehicle: VehicleConfig, qs: list[Quat], acc: list[Vec3], yaw_acc: lis
     world accelerations acc and NED yaw accelerations yaw_acc (a turn about the vertical)."""
     wd = [q_rotate_inv(q, (0.0, 0.0, -y)) for q, y in zip(qs, yaw_acc, strict=True)]
     zero: Any = (0.0, 0.0, 0.0)
-    ref = Reference(zero, tuple(np.array([q[i] for q in qs]) for i in range(4)),  # type: ignore[arg-type]
-                    zero, tuple(np.array([a[i] for a in acc]) for i in range(3)),  # type: ignore[arg-type]
-                    zero, tuple(np.array([w[i] for w in wd]) for i in range(3)))  # type: ignore[arg-type]
+    ref = Reference(zero, _columns(qs, 4), zero, _columns(acc, 3), zero, _columns(wd, 3))
     om = envelope(vehicle).omega_sq(ref)
     return np.asarray(np.arctan2(om[:, 0::2], om[:, 1::2]))
 

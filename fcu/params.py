@@ -22,11 +22,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from common.config import ConfigError, Gains, VehicleConfig, check_stability
-from fcu.commander import FlightSettings
 from fcu.estimator.settings import EstimatorSettings
 from fcu.failsafe import FailsafeSettings
 from fcu.manual import StickSettings
 from fcu.mission.limits import MissionLimits
+from fcu.mode_references import FlightSettings
 from fcu.pipeline import Pipeline
 
 if TYPE_CHECKING:

@@ -24,15 +24,7 @@ from common.config import Gains, VehicleConfig
 from common.modes import Mode
 from common.outcome import DIVERGED, FAILSAFE, Event, diverged
 from fcu.actuator_monitor import ActuatorMonitor, unclamped_speeds
-from fcu.commander import (
-    MAV_RESULT_ACCEPTED,
-    SEVERITY_CRITICAL,
-    SEVERITY_EMERGENCY,
-    SEVERITY_INFO,
-    SEVERITY_WARNING,
-    Commander,
-    FlightSettings,
-)
+from fcu.commander import Commander
 from fcu.core import FlightCore, StepResult
 from fcu.dualquat import q_normalize, q_rotate
 from fcu.estimator.ekf import Estimator
@@ -48,6 +40,14 @@ from fcu.failsafe import (
     state_lost,
 )
 from fcu.mission.limits import MissionLimits
+from fcu.mode_references import (
+    MAV_RESULT_ACCEPTED,
+    SEVERITY_CRITICAL,
+    SEVERITY_EMERGENCY,
+    SEVERITY_INFO,
+    SEVERITY_WARNING,
+    FlightSettings,
+)
 from fcu.rate_filter import ImuRateFilter
 from fcu.supervisor import Supervisor
 from fcu.tracker import VehicleState

@@ -13,6 +13,7 @@ from common.config import load_scenario
 from common.frames import ned_to_enu, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
 from common.modes import Mode
 from common.quaternion import q_angle, q_conj, q_mul
+from fcu.setpoint_wire import attitude_target, position_target
 from gcs.inprocess import (
     actuator_controls,
     command_from_controls,
@@ -42,9 +43,10 @@ def fly_offboard(start_enu_m, target: PoseTarget, seconds: float) -> dict:
     c = pipe.commander
     pipe.on_state(0, state_for_fcu(state), 0)
     assert pipe.arm()[0] == 0
-    assert c.offboard_position(0.0, 1, POSITION_ONLY, target.p_ned_m, (0.0,) * 3, (0.0,) * 3,
-                               0.0)[0]
-    assert c.offboard_attitude(0.0, ATTITUDE_ONLY, target.q_ned_frd, (0.0,) * 3)[0]
+    assert c.offboard_position(0.0, position_target(1, POSITION_ONLY, target.p_ned_m, (0.0,) * 3,
+                                                    (0.0,) * 3, 0.0))[0]
+    assert c.offboard_attitude(0.0, attitude_target(ATTITUDE_ONLY, target.q_ned_frd,
+                                                    (0.0,) * 3))[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
     p_t, q_t = ned_to_enu(target.p_ned_m), q_ned_frd_to_enu_flu(target.q_ned_frd)
     track_m = track_rad = 0.0
@@ -110,10 +112,10 @@ def test_hold_at_cruise_speed_brakes_then_holds_where_it_stopped():
     pipe.on_state(0, state_for_fcu(state), 0)
     assert pipe.arm()[0] == 0
     # 5 m/s north (a velocity set-point, the attitude held level)
-    assert c.offboard_position(0.0, 1, 0b0000_1101_1100_0111, (0.0,) * 3, (5.0, 0.0, 0.0),
-                               (0.0,) * 3, math.nan)[0]
-    assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd(state.q_enu_flu),
-                               (0.0,) * 3)[0]
+    assert c.offboard_position(0.0, position_target(1, 0b0000_1101_1100_0111, (0.0,) * 3,
+                                                    (5.0, 0.0, 0.0), (0.0,) * 3, math.nan))[0]
+    assert c.offboard_attitude(0.0, attitude_target(
+        ATTITUDE_ONLY, q_enu_flu_to_ned_frd(state.q_enu_flu), (0.0,) * 3))[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
     track_m, at_hold = 0.0, None
     for k in range(5000):

@@ -16,6 +16,7 @@ import pytest
 from common.frames import enu_to_ned, q_enu_flu_to_ned_frd
 from common.modes import Mode
 from common.quaternion import q_angle, q_conj, q_exp, q_mul
+from fcu.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
 
 from ..pipeline_flight import (
     ATTITUDE_ONLY,
@@ -31,9 +32,10 @@ from ..pipeline_flight import (
 def _step_attitude(f: Flight, axis) -> tuple:
     c = f.pipe.commander
     q_t = q_exp(tuple(math.radians(170.0) * a for a in axis))
-    assert c.offboard_position(0.0, 1, POSITION_ONLY, enu_to_ned((0.0, 0.0, 5.0)),
-                               (0.0,) * 3, (0.0,) * 3, 0.0)[0]
-    assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q_t), (0.0,) * 3)[0]
+    assert c.offboard_position(0.0, position_target(1, POSITION_ONLY, enu_to_ned((0.0, 0.0, 5.0)),
+                               (0.0,) * 3, (0.0,) * 3, 0.0))[0]
+    assert c.offboard_attitude(0.0, attitude_target(ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q_t),
+                                                    (0.0,) * 3))[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
     f.step()
     assert c.offboard_sp is not None
@@ -96,12 +98,12 @@ def test_hold_at_ten_metres_per_second_fits_every_actuator(vehicle):
 
     def stream(k: int) -> None:
         if k % 25 == 0:
-            assert c.offboard_position(k * 0.002, 1, VELOCITY_ONLY, (0.0,) * 3,
-                                       enu_to_ned((10.0, 0.0, 0.0)), (0.0,) * 3, 0.0)[0]
+            assert c.offboard_position(k * 0.002, position_target(1, VELOCITY_ONLY, (0.0,) * 3,
+                                       enu_to_ned((10.0, 0.0, 0.0)), (0.0,) * 3, 0.0))[0]
 
     stream(0)  # with the attitude held level (OFFBOARD needs a position or an attitude)
-    assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd((1.0, 0.0, 0.0, 0.0)),
-                               (0.0,) * 3)[0]
+    assert c.offboard_attitude(0.0, attitude_target(
+        ATTITUDE_ONLY, q_enu_flu_to_ned_frd((1.0, 0.0, 0.0, 0.0)), (0.0,) * 3))[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
     k = 0
     while k < 10 * 500:
@@ -140,13 +142,13 @@ def test_posctl_sticks_fit_every_actuator(vehicle):
     still, the vehicle within 1 cm of it)."""
     f = Flight(vehicle, (0.0, 0.0, 5.0))
     c = f.pipe.commander
-    c.manual_input(0.0, 0, 0, 500, 0)
+    c.manual_input(0.0, sticks_from_manual_control(0, 0, 500, 0))
     assert c.set_mode(Mode.POSCTL, 0.0)[0] == 0
     for k in range(8 * 500):
         t = k * 0.002
         x, y, z, r = (1000, 1000, 1000, 1000) if t < 2.0 else \
             (-1000, 0, 500, 0) if t < 3.0 else (0, 0, 500, 0)
-        c.manual_input(t, x, y, z, r)
+        c.manual_input(t, sticks_from_manual_control(x, y, z, r))
         f.step()
     assert f.pipe.armed and c.mode == Mode.POSCTL and f.pipe.saturated_steps == 0
     assert f.limited_s < LIMIT_S and not f.reports(), (f.limited_s, f.reports())
@@ -168,10 +170,10 @@ def test_random_offboard_steps_are_flown_in_the_envelope_or_refused_in_attitude(
         p_t, q_t = random_step(rng)
         f = Flight(vehicle, (0.0, 0.0, 15.0))
         c = f.pipe.commander
-        assert c.offboard_position(0.0, 1, POSITION_ONLY, enu_to_ned(p_t), (0.0,) * 3,
-                                   (0.0,) * 3, 0.0)[0]
-        assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q_t),
-                                   (0.0,) * 3)[0]
+        assert c.offboard_position(0.0, position_target(1, POSITION_ONLY, enu_to_ned(p_t),
+                                                        (0.0,) * 3, (0.0,) * 3, 0.0))[0]
+        assert c.offboard_attitude(0.0, attitude_target(ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q_t),
+                                   (0.0,) * 3))[0]
         assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
         f.step()
         sp = c.offboard_sp
@@ -203,15 +205,15 @@ def test_random_stick_sequences_fit_every_actuator(vehicle):
         if case % 2:  # entered at a tilted attitude the vehicle holds
             q0 = q_exp((math.radians(rng.uniform(-30, 30)), math.radians(rng.uniform(-30, 30)),
                         0.0))
-            assert c.offboard_position(0.0, 1, POSITION_ONLY, enu_to_ned((0.0, 0.0, 15.0)),
-                                       (0.0,) * 3, (0.0,) * 3, 0.0)[0]
-            assert c.offboard_attitude(0.0, ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q0),
-                                       (0.0,) * 3)[0]
+            assert c.offboard_position(0.0, position_target(
+                1, POSITION_ONLY, enu_to_ned((0.0, 0.0, 15.0)), (0.0,) * 3, (0.0,) * 3, 0.0))[0]
+            assert c.offboard_attitude(0.0, attitude_target(ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q0),
+                                       (0.0,) * 3))[0]
             assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
             for _ in range(round((c.offboard_sp.plan.duration_s + 0.5) * 500)
                            if c.offboard_sp and c.offboard_sp.plan else 500):
                 f.step()
-        c.manual_input(0.0, 0, 0, 500, 0)
+        c.manual_input(0.0, sticks_from_manual_control(0, 0, 500, 0))
         assert c.set_mode(Mode.POSCTL, 0.0)[0] == 0
         t_next, sticks = 0.0, (0, 0, 500, 0)
         for k in range(6 * 500):
@@ -220,7 +222,7 @@ def test_random_stick_sequences_fit_every_actuator(vehicle):
                 sticks = (rng.randint(-1000, 1000), rng.randint(-1000, 1000),
                           rng.randint(0, 1000), rng.randint(-1000, 1000))
                 t_next = t + rng.uniform(0.2, 1.5)
-            c.manual_input(t, *sticks)
+            c.manual_input(t, sticks_from_manual_control(*sticks))
             f.step()
         what = (case, f.limited_s, f.reports(), f.track_m, f.track_rad, c.manual_limits)
         assert f.pipe.armed and c.mode == Mode.POSCTL and f.pipe.saturated_steps == 0, what

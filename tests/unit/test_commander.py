@@ -13,18 +13,14 @@ import pytest
 from common.config import load_gains, load_vehicle
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE
-from fcu.commander import (
-    LANDED_STILL_S,
-    MAV_RESULT_DENIED,
-    TOUCHDOWN_DEPTH_M,
-    FlightSettings,
-    pose_ref,
-)
 from fcu.failsafe import FailsafeSettings
+from fcu.landing import LANDED_STILL_S, TOUCHDOWN_DEPTH_M
 from fcu.manual import StickSettings
 from fcu.mission.limits import MissionLimits
+from fcu.mode_references import MAV_RESULT_DENIED, FlightSettings
 from fcu.pipeline import Pipeline
-from fcu.tracker import VehicleState
+from fcu.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
+from fcu.tracker import VehicleState, pose_ref
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -138,8 +134,8 @@ def test_saturation_is_monitored_in_the_step():
     pipe.on_state(0, _state(5.0), 0)
     pipe.arm()
     c = pipe.commander
-    assert c.offboard_position(0.0, 1, 0, (30.0, 0.0, -5.0), (0.0, 0.0, 0.0),
-                               (0.0, 0.0, 0.0), 0.0)[0]
+    assert c.offboard_position(0.0, position_target(1, 0, (30.0, 0.0, -5.0), (0.0, 0.0, 0.0),
+                               (0.0, 0.0, 0.0), 0.0))[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
     for t in range(0, 4_000_000, 2000):
         pipe.on_state(t, _state(5.0), t)
@@ -161,7 +157,8 @@ def _kinematic(pipe: Pipeline, t0: int, seconds: float, sticks=None, now_s=None,
     for _ in range(round(seconds * 500)):
         t += 2000
         if sticks is not None:
-            c.manual_input(now_s(t) if now_s else 0.0, *sticks(t * 1e-6))
+            c.manual_input(now_s(t) if now_s else 0.0,
+                           sticks_from_manual_control(*sticks(t * 1e-6)))
         pipe.step(t)
         ref = c.last_ref if pipe.armed and c.last_ref is not None else None
         p = ref.p_enu_m if ref is not None else pipe.state.p_enu_m
@@ -261,7 +258,7 @@ def test_posctl_needs_manual_control_and_falls_back_to_hold():
     pipe.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
                                   (0.0, 0.0, 0.0)), 0)
     assert c.set_mode(Mode.POSCTL, 10.0)[0] == MAV_RESULT_DENIED
-    c.manual_input(10.0, 0, 0, 500, 0)
+    c.manual_input(10.0, sticks_from_manual_control(0, 0, 500, 0))
     assert c.set_mode(Mode.POSCTL, 10.2)[0] == 0
     pipe.arm()
     assert c.flight_started
@@ -295,9 +292,9 @@ def test_offboard_approaches_a_pose_from_the_reference_flown_without_a_yaw_stick
                                   (0.0, 0.0, 0.0)), 0)
     assert pipe.arm()[0] == 0
     q_ned_frd = (0.5, 0.0, 0.0, math.sqrt(0.75))  # 120 deg clockwise seen from above
-    assert c.offboard_position(0.0, 1, 0b0000_1101_1111_1000, (10.0, 0.0, -3.0),
-                               (0.0,) * 3, (0.0,) * 3, 0.0)[0]
-    assert c.offboard_attitude(0.0, 0b0100_0111, q_ned_frd, (0.0,) * 3)[0]
+    assert c.offboard_position(0.0, position_target(1, 0b0000_1101_1111_1000, (10.0, 0.0, -3.0),
+                               (0.0,) * 3, (0.0,) * 3, 0.0))[0]
+    assert c.offboard_attitude(0.0, attitude_target(0b0100_0111, q_ned_frd, (0.0,) * 3))[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
     track = _kinematic(pipe, 0, 12.0, ground=False)
     p = [x[1] for x in track]
@@ -308,7 +305,7 @@ def test_offboard_approaches_a_pose_from_the_reference_flown_without_a_yaw_stick
     assert math.dist(p[-1], (0.0, 10.0, 3.0)) < 1e-6  # NED north is ENU y
     q_want = q_exp((0.0, 0.0, math.radians(90.0 - 120.0)))  # ENU yaw = 90 deg - NED yaw
     assert q_angle(q_mul(q_conj(q_want), c.last_ref.q_enu_flu)) < 1e-5
-    assert c.offboard_position(0.0, 1, 0b0000_1101_1111_1000, (12.0, 0.0, -3.0),
-                               (0.0,) * 3, (0.0,) * 3, 0.0)[0]
+    assert c.offboard_position(0.0, position_target(1, 0b0000_1101_1111_1000, (12.0, 0.0, -3.0),
+                               (0.0,) * 3, (0.0,) * 3, 0.0))[0]
     more = [x[1] for x in _kinematic(pipe, track[-1][0], 6.0, ground=False)]
     assert math.dist(more[0], p[-1]) < 1e-4 and math.dist(more[-1], (0.0, 12.0, 3.0)) < 1e-3

@@ -28,8 +28,8 @@ from fcu.manual import (
     fit_envelope,
     heading_ned,
     stick_velocity,
-    sticks_from_manual_control,
 )
+from fcu.setpoint_wire import sticks_from_manual_control
 from fcu.tracker import Reference
 
 M = MAV

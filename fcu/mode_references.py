@@ -1,0 +1,288 @@
+"""The commander's state and the reference each mode flies at each step (mission, offboard,
+hold, land and its touchdown, takeoff and return, position control), on the flight clock;
+pure, no I/O, no MAVLink. `fcu.commander` changes the modes; this module flies them.
+
+OFFBOARD flies the streamed targets (`fcu.offboard_stream`) through the approach shaper
+(`fcu.offboard`), HOLD brakes with the same shaper to where the reference comes to rest,
+POSCTL moves the set-point as the sticks say (`fcu.manual`), MISSION, TAKEOFF, RTL and LAND
+sample their mission executors, and a landing ends in the touchdown and the land detector
+(`fcu.landing`). The offboard and manual streams' freshness is judged on the wall clock.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from common.mav_enums import MAV_CMD, MAV_RESULT, MAV_SEVERITY
+from common.mission_items import MissionItem
+from common.modes import Mode
+from common.outcome import INFO, Event
+from fcu import approach, manual, offboard
+from fcu.dualquat import Q_IDENTITY, Vec3
+from fcu.feasibility import Envelope, envelope
+from fcu.landing import (
+    LANDED_STILL_S,
+    Touchdown,
+    held_up_and_still,
+    landed_state,
+    touchdown_ref,
+)
+from fcu.manual import ManualSetpoint, Sticks, StickSettings
+from fcu.mission.executor import MissionEvent, MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.offboard_stream import AttitudeTarget, OffboardSetpoint, PositionTarget
+from fcu.tracker import Reference, VehicleState, pose_ref
+
+_ZERO: Vec3 = (0.0, 0.0, 0.0)
+# The results and severities the commander answers with (the pipeline's too).
+MAV_RESULT_ACCEPTED = MAV_RESULT.MAV_RESULT_ACCEPTED
+MAV_RESULT_DENIED = MAV_RESULT.MAV_RESULT_DENIED
+SEVERITY_EMERGENCY = MAV_SEVERITY.MAV_SEVERITY_EMERGENCY
+SEVERITY_CRITICAL = MAV_SEVERITY.MAV_SEVERITY_CRITICAL
+SEVERITY_WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
+SEVERITY_INFO = MAV_SEVERITY.MAV_SEVERITY_INFO
+
+
+@dataclass(frozen=True)
+class FlightSettings:
+    """The automatic modes' and POSCTL's parameters (PX4's names)."""
+
+    takeoff_alt_m: float = 2.5  # MIS_TAKEOFF_ALT: TAKEOFF climbs this much
+    rtl_return_alt_m: float = 10.0  # RTL_RETURN_ALT: RTL climbs to this height above home
+    rtl_cruise_m_s: float = 5.0  # MPC_XY_CRUISE: RTL's travel speed
+    manual_timeout_s: float = 0.5  # COM_RC_LOSS_T: POSCTL without MANUAL_CONTROL -> HOLD
+    sticks: StickSettings = field(default_factory=StickSettings)
+
+
+class ModeReferences:
+    """The commander's state, and the reference of the mode in force (`reference`)."""
+
+    def __init__(self, limits: MissionLimits, offboard_timeout_s: float = 1.0,
+                 flight: FlightSettings | None = None) -> None:
+        self.limits = limits
+        self.offboard_timeout_s = offboard_timeout_s
+        self.flight = flight or FlightSettings()
+        approach.warm()  # OFFBOARD's and HOLD's planner: compiled before the first period
+        self.armed = False
+        self.mode = Mode.HOLD
+        self.flight_started = False  # lockstep: simulated time runs once this latches
+        self.mission: tuple[MissionItem, ...] = ()
+        self.mission_current = 0  # the one home of the current mission item
+        self.executor: MissionExecutor | None = None
+        self.mission_running = False
+        self.mission_done = False
+        self.hold: Reference | None = None
+        self.land: MissionExecutor | None = None
+        self.auto: MissionExecutor | None = None  # TAKEOFF's or RTL's plan
+        self.touchdown: Touchdown | None = None
+        self.offboard = OffboardSetpoint()
+        self.sticks = manual.CENTRED  # the latest MANUAL_CONTROL
+        self.sticks_received_s = -math.inf  # wall clock; -inf: never
+        self.manual_sp: ManualSetpoint | None = None  # POSCTL's set-point (None: from here)
+        self.manual_limits: StickSettings = self.flight.sticks  # fitted to the vehicle
+        self.offboard_sp: offboard.Shaped | None = None  # OFFBOARD's shaper (None: from here)
+        self._offboard_refused = ""  # the last refusal said
+        # HOLD brakes to `hold` (where the reference stops) with the same shaper
+        self.hold_sp: offboard.Shaped | None = None
+        self._hold_shaped: Reference | None = None  # the hold that hold_sp brakes to
+        self.state: VehicleState | None = None
+        self.last_ref: Reference | None = None
+        self.clock_us = 0  # the flight clock at the latest input (events are stamped with it)
+        self.events: list[Event] = []
+        self.mission_events: list[MissionEvent] = []
+        self.still_since_us: int | None = None
+        self.on_ground = True  # the landed state (`update_landed`)
+
+    # ------------------------------------------------------------------ outputs
+
+    def say(self, severity: int, text: str, kind: str = INFO) -> None:
+        self.events.append(Event(self.clock_us, severity, text[:50], kind))
+
+    @property
+    def landed(self) -> bool:
+        """On the ground, as the landed state machine (`update_landed`) last concluded."""
+        return self.on_ground
+
+    def update_landed(self) -> None:
+        """The landed state at each new state (PX4's land detector, simplified): a disarmed
+        vehicle at rest at ground level is on the ground; an armed one leaves it when it
+        rises or moves, and comes back to it only through `land_detector` (a touchdown with
+        the vehicle still, held up and lifting little), never from its altitude alone: with
+        no ground below (Case II) a hover at z = 0 is not a landing."""
+        if self.state is not None:
+            self.on_ground = landed_state(self.armed, self.on_ground, self.state)
+
+    def _current_pose_ref(self) -> Reference:
+        """Where the vehicle should be now: the last desired pose in flight, else the state."""
+        if self.armed and self.last_ref is not None:
+            return pose_ref(self.last_ref.p_enu_m, self.last_ref.q_enu_flu)
+        if self.state is None:
+            return pose_ref(_ZERO, Q_IDENTITY)
+        return pose_ref(self.state.p_enu_m, self.state.q_enu_flu)
+
+    # ------------------------------------------------------------------ streamed targets
+
+    def offboard_position(self, now_s: float, target: PositionTarget) -> tuple[bool, str]:
+        """A position target (SET_POSITION_TARGET_LOCAL_NED, decoded by `fcu.setpoint_wire`)
+        received at `now_s` (wall clock); (kept, why not)."""
+        refused = self.offboard.take_position(now_s, target, self.limits.max_distance_m)
+        return not refused, refused
+
+    def offboard_attitude(self, now_s: float, target: AttitudeTarget) -> tuple[bool, str]:
+        """An attitude target (SET_ATTITUDE_TARGET, decoded by `fcu.setpoint_wire`)
+        received at `now_s` (wall clock); (kept, why not)."""
+        refused = self.offboard.take_attitude(now_s, target)
+        return not refused, refused
+
+    def manual_input(self, now_s: float, sticks: Sticks) -> None:
+        """The sticks of a MANUAL_CONTROL received at `now_s` (wall clock), as deflections
+        (decoded by `fcu.setpoint_wire.sticks_from_manual_control`)."""
+        self.sticks = sticks
+        self.sticks_received_s = now_s
+
+    def manual_fresh(self, now_s: float) -> bool:
+        """MANUAL_CONTROL heard within COM_RC_LOSS_T (wall clock)."""
+        return now_s - self.sticks_received_s <= self.flight.manual_timeout_s
+
+    def _manual_ref(self, t_us: int) -> Reference:
+        sp = self.manual_sp
+        if sp is None:
+            start = self._current_pose_ref()
+            sp = manual.start(t_us, start.p_enu_m, start.q_enu_flu)
+            self.manual_limits = lim = manual.fit_envelope(self.flight.sticks,
+                                                           self.limits.vehicle,
+                                                           start.q_enu_flu)
+            if lim.acc_xy_m_s2 < self.flight.sticks.acc_xy_m_s2:  # said, as it is unusual
+                self.say(SEVERITY_INFO, f"POSCTL: acc {lim.acc_xy_m_s2:.2g} m/s2, jerk "
+                                        f"{lim.jerk_m_s3:.2g} m/s3 here")
+        p_vehicle = self.state.p_enu_m if self.state is not None else None
+        self.manual_sp, ref = manual.advance(sp, t_us, self.sticks, self.manual_limits,
+                                             p_vehicle)
+        return ref
+
+    def _offboard_ref(self, t_us: int) -> Reference:
+        """The streamed target approached within POSCTL's limits and the vehicle's envelope
+        (`fcu.offboard`), from the reference flown when OFFBOARD began (its velocity,
+        acceleration and body rate too)."""
+        sp = self.offboard_sp
+        lim = offboard.limits(self.flight.sticks)
+        if sp is None:
+            start = self.last_ref if self.armed and self.last_ref is not None \
+                else self._current_pose_ref()
+            sp = offboard.start(t_us, start, lim, self._envelope())
+        self.offboard_sp, ref = offboard.advance(sp, t_us, self.offboard.target(), lim,
+                                                 self._envelope())
+        refused = self.offboard_sp.refused
+        if refused and refused != self._offboard_refused:
+            self.say(SEVERITY_WARNING, refused)
+        self._offboard_refused = refused
+        return ref
+
+    def _envelope(self) -> Envelope | None:
+        vehicle = self.limits.vehicle
+        return envelope(vehicle) if vehicle is not None else None
+
+    # ------------------------------------------------------------------ references
+
+    def reference(self, t_us: int) -> Reference:
+        """The desired pose, twist and acceleration at t_us (flight clock)."""
+        self.clock_us = t_us
+        t_s = t_us * 1e-6
+        if self.touchdown is not None:
+            return self._touchdown_ref(t_us)
+        if self.mode == Mode.MISSION and self.mission_running and self.executor is not None:
+            return self._mission_ref(t_s)
+        if self.mode == Mode.OFFBOARD:
+            return self._offboard_ref(t_us)
+        if self.mode == Mode.LAND and self.land is not None:
+            self.land.update(t_s)
+            ref = self.land.sample(t_s)
+            if self.land.completed:
+                self._begin_touchdown(t_us, ref)
+            return ref
+        if self.mode in (Mode.TAKEOFF, Mode.RTL) and self.auto is not None:
+            return self._auto_ref(t_us)
+        if self.mode == Mode.POSCTL:
+            return self._manual_ref(t_us)
+        return self._hold_ref(t_us)
+
+    def _hold_ref(self, t_us: int) -> Reference:
+        """HOLD: a reference that was moving brakes within OFFBOARD's limits to where it
+        comes to rest, and `hold` becomes that pose (PX4's and ArduPilot's hold); one at
+        rest is held as it is. A new `hold` (a mode change, a failsafe) brakes afresh."""
+        if self.hold is None:
+            self.hold = self._current_pose_ref()
+        if self._hold_shaped is not self.hold:
+            start = self.last_ref if self.armed and self.last_ref is not None else self.hold
+            self.hold_sp, self.hold = offboard.brake(t_us, start,
+                                                     offboard.limits(self.flight.sticks),
+                                                     self._envelope())
+            self._hold_shaped = self.hold
+        assert self.hold_sp is not None
+        if offboard.settled(self.hold_sp):
+            return self.hold
+        self.hold_sp, ref = offboard.advance(self.hold_sp, t_us, None,
+                                             offboard.limits(self.flight.sticks))
+        return ref
+
+    def _mission_ref(self, t_s: float) -> Reference:
+        executor = self.executor
+        assert executor is not None
+        events = executor.update(t_s)
+        self.mission_events.extend(events)
+        for ev in events:
+            if ev.kind == "current":
+                self.mission_current = ev.seq
+        ref = executor.sample(t_s)
+        if executor.completed:
+            self.mission_running = False
+            self.mission_done = True
+            self.say(SEVERITY_INFO, "mission complete")
+            last = self.mission[-1].command if self.mission else None
+            if last == MAV_CMD.MAV_CMD_NAV_LAND:
+                self._begin_touchdown(round(t_s * 1e6), ref)
+            else:
+                self.mode = Mode.HOLD
+                self.hold = pose_ref(ref.p_enu_m, ref.q_enu_flu)
+        return ref
+
+    def _auto_ref(self, t_us: int) -> Reference:
+        """TAKEOFF's or RTL's plan; at its end TAKEOFF holds, RTL touches down."""
+        auto = self.auto
+        assert auto is not None
+        t_s = t_us * 1e-6
+        auto.update(t_s)
+        ref = auto.sample(t_s)
+        if auto.completed:
+            self.auto = None
+            if self.mode == Mode.RTL:
+                self._begin_touchdown(t_us, ref)
+            else:
+                self.mode = Mode.HOLD
+                self.hold = pose_ref(ref.p_enu_m, ref.q_enu_flu)
+                self.say(SEVERITY_INFO, "takeoff complete: mode HOLD")
+        return ref
+
+    def _begin_touchdown(self, t_us: int, ref: Reference) -> None:
+        self.touchdown = Touchdown(t_us, ref.p_enu_m, ref.q_enu_flu)
+        self.still_since_us = None
+        self.on_ground = False  # from here on only the land detector's evidence counts
+
+    def _touchdown_ref(self, t_us: int) -> Reference:
+        assert self.touchdown is not None
+        return touchdown_ref(self.touchdown, t_us, self.limits.land_speed_m_s)
+
+    def land_detector(self, t_us: int, lift_n: float, weight_n: float) -> bool:
+        """During a touchdown: True once the vehicle is on the ground (then disarm): held up
+        and still for LANDED_STILL_S (`held_up_and_still`)."""
+        if self.touchdown is None or self.state is None:
+            return False
+        if not held_up_and_still(self.state, self.last_ref, lift_n, weight_n):
+            self.still_since_us = None
+        elif self.still_since_us is None:
+            self.still_since_us = t_us
+        if self.still_since_us is not None and \
+                (t_us - self.still_since_us) * 1e-6 >= LANDED_STILL_S:
+            self.on_ground = True
+        return self.on_ground
