@@ -11,11 +11,11 @@ import math
 import pytest
 
 from common.config import Gains
-from fcu.commander import FlightSettings
 from fcu.estimator.settings import EstimatorSettings
 from fcu.failsafe import FailsafeSettings
 from fcu.manual import StickSettings
 from fcu.mission.limits import MissionLimits
+from fcu.mode_references import FlightSettings
 from fcu.params import (
     DAMPING_CODES,
     DEFAULT_OVERRIDES,
