@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from common.config import VehicleConfig
+from common.vehicle_config import VehicleConfig
 
 Vec3 = tuple[float, float, float]
 
@@ -32,6 +32,7 @@ def rotor_frames(vehicle: VehicleConfig) -> tuple[RotorFrame, ...]:
         arm = (cb * cg, cb * sg, -sb)
         e_v = (sb * cg, sb * sg, cb)
         e_l = (sg, -cg, 0.0)
-        r = tuple(vehicle.arm_length_m * a for a in arm)
-        frames.append(RotorFrame(r, arm, e_v, e_l, spin))  # type: ignore[arg-type]
+        length = vehicle.arm_length_m
+        r = (length * arm[0], length * arm[1], length * arm[2])
+        frames.append(RotorFrame(r, arm, e_v, e_l, spin))
     return tuple(frames)

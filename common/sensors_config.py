@@ -1,7 +1,8 @@
 """Typed sensor profiles (IMU, barometer, magnetometer, motion capture) loaded from TOML.
 
-Same rules as `common.config`: every key is required and checked (type, finite, range),
-unknown keys are refused, and errors are `ConfigError` naming the file and the key.
+Same rules as `common.config` (the reader of `common.config_reader`): every key is required
+and checked (type, finite, range), unknown keys are refused, and errors are `ConfigError`
+naming the file and the key.
 Units are SI and in the key names; frames are in the key names (NED earth field).
 `kind = "truth"` declares a perfect profile and then requires every noise, bias, latency
 and dropout figure to be zero.
@@ -20,7 +21,7 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
-from common.config import ConfigError, _read_toml, _Table
+from common.config_reader import ConfigError, Table, read_toml
 
 Vec3 = tuple[float, float, float]
 
@@ -115,11 +116,11 @@ def period_us(rate_hz: float) -> Fraction:
     return Fraction(1_000_000) / Fraction(rate_hz)
 
 
-def _rate(t: _Table, lo: float = RATE_MIN_HZ) -> float:
+def _rate(t: Table, lo: float = RATE_MIN_HZ) -> float:
     return t.number("rate_hz", lo=lo, hi=RATE_MAX_HZ)
 
 
-def _jitter(t: _Table, rate_hz: float) -> float:
+def _jitter(t: Table, rate_hz: float) -> float:
     """`jitter_s` (optional, 0): at least 0 and below half the period, so that the samples
     keep their order."""
     jitter = t.number("jitter_s", 0.0, lo=0.0)
@@ -130,11 +131,11 @@ def _jitter(t: _Table, rate_hz: float) -> float:
     return jitter
 
 
-def _nonneg(t: _Table, key: str, default: Any = ...) -> float:
+def _nonneg(t: Table, key: str, default: Any = ...) -> float:
     return t.number(key, default, lo=0.0)
 
 
-def _parse_imu(t: _Table) -> ImuConfig:
+def _parse_imu(t: Table) -> ImuConfig:
     rate = _rate(t, IMU_RATE_MIN_HZ)
     vib = _nonneg(t, "vibration_factor")
     g = t.table("gyro")
@@ -157,7 +158,7 @@ def _parse_imu(t: _Table) -> ImuConfig:
                      jitter_s=jitter)
 
 
-def _parse_baro(t: _Table) -> BaroConfig:
+def _parse_baro(t: Table) -> BaroConfig:
     rate = _rate(t)
     out = BaroConfig(rate_hz=rate, noise_m=_nonneg(t, "noise_m"),
                      bias_m=t.number("bias_m", 0.0), jitter_s=_jitter(t, rate))
@@ -165,7 +166,7 @@ def _parse_baro(t: _Table) -> BaroConfig:
     return out
 
 
-def _parse_mag(t: _Table) -> MagConfig:
+def _parse_mag(t: Table) -> MagConfig:
     field_ned = t.numbers("field_ned_gauss", 3)
     rate = _rate(t)
     out = MagConfig(rate_hz=rate, field_ned_gauss=(field_ned[0], field_ned[1], field_ned[2]),
@@ -174,7 +175,7 @@ def _parse_mag(t: _Table) -> MagConfig:
     return out
 
 
-def _parse_mocap(t: _Table) -> MocapConfig:
+def _parse_mocap(t: Table) -> MocapConfig:
     rate = _rate(t)
     out = MocapConfig(
         rate_hz=rate,
@@ -248,7 +249,7 @@ def _check_truth(p: SensorProfile, source: str) -> None:
 
 
 def parse_sensor_profile(data: dict[str, Any], source: str) -> SensorProfile:
-    t = _Table(data, source)
+    t = Table(data, source)
     profile = SensorProfile(
         name=t.string("name"),
         kind=t.string("kind", choices=KINDS),
@@ -267,7 +268,7 @@ def parse_sensor_profile(data: dict[str, Any], source: str) -> SensorProfile:
 def load_sensor_profile(path: str | Path) -> SensorProfile:
     """Read and validate a sensor profile (config/sensors/*.toml)."""
     path = Path(path)
-    return parse_sensor_profile(_read_toml(path), str(path))
+    return parse_sensor_profile(read_toml(path), str(path))
 
 
 SHIPPED_PROFILES = Path(__file__).resolve().parents[1] / "config" / "sensors"

@@ -17,7 +17,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from common.config import VehicleConfig
 from common.geometry import rotor_frames
 from common.jit import njit
 from common.layouts import (
@@ -48,6 +47,7 @@ from common.layouts import (
     LS_W_LAST,
     PINV_SIZE,
 )
+from common.vehicle_config import VehicleConfig
 from common.vehicle_constants import N_ROTORS
 from fcu.dualquat import Vec3, cross
 

@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from common.config import Gains, VehicleConfig
+from common.gains_config import Gains
 from common.jit import njit, warm_up
 from common.layouts import (
     AO_SPEED,
@@ -53,6 +53,7 @@ from common.layouts import (
     X_Q,
     X_SIZE,
 )
+from common.vehicle_config import VehicleConfig
 from common.vehicle_constants import N_ROTORS
 from fcu import allocation as al
 from fcu import tracker as tr

@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from common.config import Gains, VehicleConfig
+from common.gains_config import Gains
 from common.jit import njit
 from common.layouts import (
     DUAL_VEC_SIZE,
@@ -43,6 +43,7 @@ from common.layouts import (
     X_V,
     X_W,
 )
+from common.vehicle_config import VehicleConfig
 from fcu.dualquat import (
     DualVec,
     Quat,

@@ -10,7 +10,6 @@ import math
 
 import numpy as np
 
-from common.config import DisturbanceTerm
 from common.jit import njit
 from common.layouts import (
     D_AMPLITUDE,
@@ -23,6 +22,7 @@ from common.layouts import (
     D_START,
     DISTURBANCE_TERM,
 )
+from common.scenario_terms import DisturbanceTerm
 
 Vec3 = tuple[float, float, float]
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
