@@ -35,12 +35,13 @@ finishes (flushed; a line cut short by a kill is ignored); DIR/results.csv is re
 it atomically, a row per run: its id (a hash of its full configuration), its axis values,
 status and every metric. A run whose id is in the journal is not flown again, so a stopped
 campaign resumes where it stopped and a finished one flies nothing. DIR/summary.md and its
-figures are written at the end (gcs/campaign_report.py).
+figures are written at the end (gcs/campaign/report.py).
 
 Execution: Dask distributed. By default a LocalCluster on 127.0.0.1 (worker processes, one
 thread each, one per CPU) with its dashboard; `--scheduler tcp://HOST:8786` submits to a
 running cluster. A worker lost mid-run (killed, out of memory) has its run re-executed on
 another worker by the scheduler; a run is recorded once, when its result first arrives.
+
 The parts, one job each: `model` (the campaign, its axes and draws), `keys` (paths into the
 scenario's TOML), `load` (reading and checking the file), `runs` (the grid and draws as
 runs, their ids), `worker` (one run, on a worker), `journal` (runs.jsonl and results.csv),

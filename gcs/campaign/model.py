@@ -17,15 +17,19 @@ class CampaignError(ValueError):
     """A campaign file or a run it describes is invalid (exit status 2)."""
 
 
-
 @dataclass(frozen=True)
 class Axis:
+    """One [[axis]]: its keys moving together and their values, one tuple per grid value."""
+
     keys: tuple[str, ...]
     values: tuple[tuple[Any, ...], ...]  # one tuple per grid value, one entry per key
 
 
 @dataclass(frozen=True)
 class Draw:
+    """One [[monte_carlo.draw]]: a key and the distribution (with its arguments) it is drawn
+    from."""
+
     key: str
     distribution: str
     args: dict[str, Any]
@@ -33,6 +37,8 @@ class Draw:
 
 @dataclass(frozen=True)
 class Campaign:
+    """A checked campaign file: the base scenario (inlined), [set], the axes, the draws."""
+
     name: str
     source: str
     base: Path
