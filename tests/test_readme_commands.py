@@ -156,7 +156,7 @@ def long_running(argv: list[str]) -> bool:
 
 def _parser(prog: str):
     if prog == "gcs":
-        from gcs.cli import build_parser
+        from gcs.cli.parser import build_parser
     elif prog == "fcu":
         from fcu.node import build_parser
     else:

@@ -1,7 +1,7 @@
 """The files other ground stations read and write: QGroundControl's `.plan`, QGC WPL 110 in
 global frames (what MAVProxy loads unchanged), QGC's `.params`; empty and broken files; the
 CLI refusing a bad file before any network wait (gcs/mission_files.py, gcs/param_files.py,
-gcs/cli.py)."""
+gcs/cli/)."""
 
 from __future__ import annotations
 

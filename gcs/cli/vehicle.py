@@ -1,0 +1,114 @@
+"""The commands against a vehicle: `gcs status`, `arm`, `disarm`, `mode`, `takeoff`,
+`goto`, `watch`, `vehicles`, and the dispatch to `mission` and `param`."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import TYPE_CHECKING
+
+from gcs.cli.connection import heartbeat_wait, open_session, print_result
+from gcs.cli.console import InputError, Progress
+from gcs.cli.inputs import read_files
+from gcs.cli.missions import mission_command
+from gcs.cli.params import param_command
+
+if TYPE_CHECKING:
+    from gcs.session import Session
+
+
+def cmd_vehicle(args: argparse.Namespace) -> int:
+    from gcs import vehicle_link as vl
+
+    read_files(args)  # a bad file is refused before any network wait
+    session = open_session(args)
+    try:
+        if args.command == "status":
+            if args.json:
+                import json
+
+                print(json.dumps(vl.status(session), allow_nan=False))
+            else:
+                print("\n".join(vl.format_status(vl.status(session))))
+            return 0
+        if args.command == "arm":
+            return print_result("arm", vl.arm(session, True), session)
+        if args.command == "disarm":
+            return print_result("disarm", vl.arm(session, False, force=args.force), session)
+        if args.command == "mode":
+            return _mode(args, session)
+        if args.command == "takeoff":
+            return _takeoff(args, session)
+        if args.command == "mission":
+            return mission_command(args, session)
+        if args.command == "param":
+            return param_command(args, session)
+        if args.command == "goto":
+            return _goto(args, session)
+        if args.command == "watch":
+            from gcs.watch import watch
+
+            return watch(session, refresh_hz=args.rate, duration=args.duration,
+                         all_vehicles=args.all)
+        if args.command == "vehicles":
+            for sysid in vl.vehicles(session, heartbeat_wait(args)):
+                print(sysid)
+            return 0
+        raise AssertionError(args.command)
+    finally:
+        session.close()
+
+
+def _mode(args: argparse.Namespace, session: Session) -> int:
+    """Exit 0 once a HEARTBEAT shows the mode; 1 refused or not confirmed; 2 a name the
+    autopilot does not have (with its names)."""
+    from gcs import vehicle_link as vl
+    from gcs.autopilot import UnknownMode
+
+    confirm = 3.0 if args.wait is None else args.wait
+    try:
+        result = vl.set_mode(session, args.name, confirm_s=confirm)
+    except UnknownMode as exc:
+        raise InputError(str(exc)) from None
+    return print_result(f"mode {args.name.upper()}", result, session)
+
+
+def _takeoff(args: argparse.Namespace, session: Session) -> int:
+    from gcs import vehicle_link as vl
+
+    progress = Progress()
+    confirm = 3.0 if args.wait is None else args.wait
+    result, height = vl.takeoff(session, args.alt, reach_s=None if args.no_wait else
+                                args.timeout, tolerance_m=args.tolerance, confirm_s=confirm,
+                                report=lambda h: progress(f"takeoff: {h:.2f} m above home"))
+    progress.done()
+    code = print_result(f"takeoff to {args.alt:g} m", result, session)
+    if code == 0 and height is not None:
+        print(f"reached: {height:.2f} m above home")
+    return code
+
+
+def _goto(args: argparse.Namespace, session: Session) -> int:
+    from gcs import vehicle_link as vl
+    from gcs.autopilot import ARDUPILOT
+
+    if session.autopilot is not None and session.autopilot.kind == ARDUPILOT and \
+            (args.roll or args.pitch):
+        raise InputError("--roll and --pitch must be 0 on ArduPilot: it flies a position and "
+                         "a yaw in GUIDED (an attitude target there replaces the position "
+                         "target)")
+
+    target = vl.PoseTarget.from_euler_deg((args.x, args.y, args.z), args.roll, args.pitch,
+                                          args.yaw)
+    progress = Progress()
+
+    def report(errs: tuple[float, float]) -> None:
+        progress(f"goto: position error {errs[0]:.3f} m, attitude error "
+                 f"{math.degrees(errs[1]):.2f} deg")
+
+    dp, da = vl.goto(session, target, arm_first=args.arm, tolerance_m=args.tolerance,
+                     tolerance_rad=math.radians(args.tolerance_deg), timeout=args.timeout,
+                     hold_s=args.hold, report=report)
+    progress.done()
+    print(f"reached: position error {dp:.4f} m, attitude error {math.degrees(da):.3f} deg")
+    return 0
