@@ -26,6 +26,7 @@ import signal
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from common import startup
 from common.cliargs import OneLineParser, check_output_path
@@ -33,12 +34,13 @@ from common.config import ConfigError, load_gains, load_vehicle
 from common.jit import compile_time_s
 from common.links import LinkError, open_link, parse_url
 from common.mavlink import MAV, SigningKeyError, encoder, pack, read_signing_key
-from common.mission_items import HomePosition
 from common.outcome import Event
 from common.parent import stop_with_parent
 from common.ulog import ULogError
+from fcu.compose import fcu_pipeline, param_store, published_home
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.gcs_server import COMPONENT, GcsServer
+from fcu.mission.limits import MissionLimits
 from fcu.mission_protocol import MissionServer
 from fcu.onboard_log import OnboardLog
 from fcu.params import ParamStore, apply_params
@@ -63,15 +65,17 @@ class FlightController:
     def __init__(self, pipeline: Pipeline, sim_url: str, gcs_urls: list[str], *,
                  system_id: int, lockstep: bool, home: Home, onboard_log: Path | None,
                  stats_path: Path | None, signing_key: bytes | None = None,
-                 rtt_probes: int = 0) -> None:
+                 rtt_probes: int = 0, params: ParamStore | None = None) -> None:
+        """`params`: the parameters `pipeline` was built with (fcu.compose); default: the
+        FCU's defaults, put in force here."""
         self.pipeline = pipeline
         self.system_id = system_id
         self.lockstep = lockstep
         vehicle = pipeline.vehicle
-        self.params = ParamStore(pipeline.core.tracker.gains)
+        self.params = params if params is not None else \
+            param_store(pipeline, pipeline.core.tracker.gains)
         self.missions = MissionServer(system_id, COMPONENT, pipeline.commander.limits,
-                                      home=HomePosition.published(home.lat_deg, home.lon_deg,
-                                                                  home.alt_m))
+                                      home=published_home(home))
         self.missions.on_mission_changed = lambda items: pipeline.commander.set_mission(
             tuple(items))
         sim = open_link(sim_url, role="sim_client", system_id=system_id)
@@ -106,13 +110,13 @@ class FlightController:
         # TIMESYNC round trips at the simulator's first word; lockstep only (in real time the
         # control loop must not stop for them)
         self.rtt_probes = rtt_probes if lockstep else 0
-        self.rtt: dict | None = None
+        self.rtt: dict[str, Any] | None = None
         self.sim_heard = False
         self.stage_ns = dict.fromkeys(STAGES, 0)
         self.timed_steps = 0
         self.rx_ns = 0  # when the datagram being handled was read
         self.done_ns = 0  # when the last control step's work (answer, log records) was done
-        self._apply_params()
+        self._params_in_force(pipeline.commander.limits)
 
     def _flush_log(self) -> None:
         """Write the queued records; a log that cannot be written any more (full disk, I/O
@@ -134,7 +138,12 @@ class FlightController:
     # ------------------------------------------------------------------ parameters
 
     def _apply_params(self) -> None:
-        self.missions.limits = apply_params(self.params, self.pipeline)
+        self._params_in_force(apply_params(self.params, self.pipeline))
+
+    def _params_in_force(self, limits: MissionLimits) -> None:
+        """What follows the parameters in force: the mission limits, the simulator link's
+        inputs (the estimator's or the exact state), the onboard log's copy."""
+        self.missions.limits = limits
         self.sim.use_estimator = self.pipeline.estimator is not None
         if self.log is not None:
             self.log.set_params(self.params.values)
@@ -333,7 +342,7 @@ class FlightController:
         self.stage_ns["housekeeping"] += spent
         self.done_ns += spent  # not waiting meanwhile
 
-    def stats(self) -> dict:
+    def stats(self) -> dict[str, Any]:
         pipe, server, sim = self.pipeline, self.server, self.sim
         return {"steps": self.steps, "deadline_misses": self.deadline_misses,
                 "compile_time_s": compile_time_s(),
@@ -428,13 +437,14 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(f"--rtt-probes: expected 0..100000, got {args.rtt_probes}")
         if not 1 <= args.sysid <= 254:
             raise ConfigError(f"--sysid: expected 1..254, got {args.sysid}")
-        pipeline = Pipeline(load_vehicle(args.vehicle), load_gains(args.gains), args.rate)
+        pipeline, params = fcu_pipeline(load_vehicle(args.vehicle), load_gains(args.gains),
+                                        args.rate)
         key = read_signing_key(args.signing_key) if args.signing_key else None
         fc = FlightController(pipeline, args.sim, args.gcs or list(DEFAULT_GCS),
                               system_id=args.sysid, lockstep=not args.realtime,
                               home=args.home, onboard_log=args.onboard_log,
                               stats_path=args.stats, signing_key=key,
-                              rtt_probes=args.rtt_probes)
+                              rtt_probes=args.rtt_probes, params=params)
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the loop ran: nothing flown
         print("fcu: stopped while starting", file=sys.stderr, flush=True)
         return 0
@@ -453,7 +463,7 @@ def main(argv: list[str] | None = None) -> int:
         print("fcu: stopped while starting", file=sys.stderr, flush=True)
         return 0
 
-    def stop(_signum, _frame):
+    def stop(_signum: int, _frame: object) -> None:
         fc.running = False
 
     signal.signal(signal.SIGTERM, stop)

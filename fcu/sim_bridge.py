@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.links import Link
+from common.quaternion import Quat, Vec3
 from common.simlink import (
     HIL_SENSOR_ID,
     LOCKSTEP_FLAG,
@@ -69,17 +70,24 @@ class Resent(NamedTuple):
     t_us: int
 
 
-def state_from_odometry(odo: Odometry) -> VehicleState | None:
-    """ENU/FLU state of an ODOMETRY, or None when no vehicle can be in it."""
-    p, q, v, w = odo.p_ned_m, odo.q_ned_frd, odo.v_frd_m_s, odo.omega_frd_rad_s
+def valid_state(p: Vec3, q: Quat, v: Vec3, w: Vec3) -> bool:
+    """Whether a vehicle can be in this state (position, attitude, body velocity and rate,
+    in any frame: the checks do not depend on it): all finite, a unit quaternion, not
+    absurdly far or fast."""
     # One sum for the finiteness of all 13 values: NaN and inf propagate through it, and a
     # sum that overflows needs values far beyond the limits checked below anyway.
     if not math.isfinite(sum(p) + sum(q) + sum(v) + sum(w)):
-        return None
+        return False
     qw, qx, qy, qz = q
-    if abs(math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz) - 1.0) > 0.01 or \
-            max(abs(p[0]), abs(p[1]), abs(p[2])) > MAX_POSITION_M or \
-            max(abs(v[0]), abs(v[1]), abs(v[2]), abs(w[0]), abs(w[1]), abs(w[2])) > MAX_RATE:
+    return not (abs(math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz) - 1.0) > 0.01 or
+                max(abs(p[0]), abs(p[1]), abs(p[2])) > MAX_POSITION_M or
+                max(abs(v[0]), abs(v[1]), abs(v[2]), abs(w[0]), abs(w[1]),
+                    abs(w[2])) > MAX_RATE)
+
+
+def state_from_odometry(odo: Odometry) -> VehicleState | None:
+    """ENU/FLU state of an ODOMETRY, or None when no vehicle can be in it."""
+    if not valid_state(odo.p_ned_m, odo.q_ned_frd, odo.v_frd_m_s, odo.omega_frd_rad_s):
         return None
     return VehicleState(ned_to_enu(odo.p_ned_m), q_ned_frd_to_enu_flu(odo.q_ned_frd),
                         frd_to_flu(odo.v_frd_m_s), frd_to_flu(odo.omega_frd_rad_s))

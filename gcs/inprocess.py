@@ -1,21 +1,19 @@
-"""In-process runner: the FCU's pipeline and the plant composed in one process (DESIGN.md 1).
+"""In-process runner: the FCU's pipeline and the simulated world composed in one process
+(DESIGN.md 1).
 
 `run_scenario` flies a scenario exactly as `gcs run` does through processes, with only
-MAVLink and the processes taken away: the same pipeline (commander with the mission executor
-fed with the scenario's mission items, tracker, allocator, supervisor, failsafes) with the
-parameters the FCU process would have, the same sequence (mission accepted, armed, mission
-started at t = 0), and the simulator link's float32 rounding applied to the state and to the
-actuator commands, so both ways give the same status, events and figures.
-
-`fly_reference` is the control law alone (tracker and allocator on a given reference), for
-tests of the closed-loop error dynamics; it is not a flight.
+MAVLink and the processes taken away: the FCU built as the FCU process builds it
+(`fcu.compose`: the pipeline with the parameters the run sets, the scenario's mission taken
+as the mission protocol takes it, armed, the mission started at t = 0), the world the
+simulator process steps (`sitl.world`: plant, disturbances, faults, sensors, standing still
+before the flight), and the simulator link's float32 rounding applied to the state and to
+the actuator commands in the code's frames (`common.wire_round`), so both ways give the same
+status, events and figures.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-import struct
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -23,52 +21,28 @@ from typing import Any
 
 import numpy as np
 
-from common.config import Scenario, check_sensor_faults
+from common.config import Scenario, VehicleConfig, check_sensor_faults
 from common.jit import compile_time_s
 from common.mavlink import encoder, pack, parser
-from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
-from common.outcome import Event, diverged
+from common.mission_items import MissionItem, item_from_message, item_message
+from common.outcome import Event
 from common.sensors_config import check_servable, resolve_sensor_profile
-from common.simlink import (
-    HilSensor,
-    Odometry,
-    through_wire_controls,
-    through_wire_hil_sensor,
-    through_wire_odometry,
-)
-from fcu.core import ONBOARD_COLUMNS, FlightCore, onboard_row
-from fcu.mission.validation import check_mission, localize
+from common.simlink import HilSensor, Odometry, through_wire_hil_sensor, through_wire_odometry
+from common.wire_round import f32_vec3, f32s, q_enu_flu_as_wire, rotor_speeds_as_wire
+from fcu import compose
+from fcu.compose import accept_mission, arm_and_start, published_home
+from fcu.core import ONBOARD_COLUMNS, onboard_row
 from fcu.onboard_log import OnboardLog
-from fcu.params import ParamError, ParamStore, apply_params
+from fcu.params import ParamError, ParamStore
 from fcu.pipeline import Pipeline, StepOutput
-from fcu.sim_bridge import (
-    actuator_controls,
-    imu_from_hil_sensor,
-    pose_from_odometry,
-    state_from_odometry,
-)
+from fcu.sim_bridge import imu_from_hil_sensor, pose_from_odometry, valid_state
 from fcu.telemetry import Home
 from fcu.tracker import VehicleState
-from fcu.trajectory import Trajectory
 from gcs.metrics import build_metrics
 from gcs.scenario_mission import scenario_mission
-from sitl.actuator_faults import ActuatorFaults
-from sitl.disturbance import Disturbance
-from sitl.node import command_from_controls, odometry
-from sitl.plant import (
-    TRUTH_COLUMNS,
-    ActuatorCommand,
-    Plant,
-    PlantState,
-    command_row,
-    initial_state,
-    rotate_inv,
-    state_of_row,
-    state_row,
-    truth_row,
-)
-from sitl.sensor_feed import SensorFeed
+from sitl.plant import TRUTH_COLUMNS, ActuatorCommand, PlantState, rotate_inv, truth_row
 from sitl.truth_log import TruthLog
+from sitl.world import World, obeyed_command
 
 
 class InProcessError(RuntimeError):
@@ -145,22 +119,11 @@ def scenario_params(scenario: Scenario) -> dict[str, float]:
 
 def fcu_pipeline(scenario: Scenario) -> tuple[Pipeline, ParamStore]:
     """The pipeline as the FCU process builds it, with the run's parameters in force."""
-    pipeline = Pipeline(scenario.vehicle, scenario.gains, scenario.control_rate_hz)
-    store = ParamStore(scenario.gains)
-    for name, value in scenario_params(scenario).items():
-        try:
-            store.set(name, value)
-        except ParamError as exc:
-            raise InProcessError(f"the vehicle refused a parameter: {exc}") from None
-    apply_params(store, pipeline)
-    return pipeline, store
-
-
-def fcu_home() -> HomePosition:
-    """The home the FCU process converts global-frame items through (its default --home,
-    as HOME_POSITION publishes it)."""
-    home = Home()
-    return HomePosition.published(home.lat_deg, home.lon_deg, home.alt_m)
+    try:
+        return compose.fcu_pipeline(scenario.vehicle, scenario.gains, scenario.control_rate_hz,
+                                    scenario_params(scenario))
+    except ParamError as exc:
+        raise InProcessError(f"the vehicle refused a parameter: {exc}") from None
 
 
 def through_wire_item(item: MissionItem) -> MissionItem:
@@ -170,21 +133,25 @@ def through_wire_item(item: MissionItem) -> MissionItem:
     return item_from_message(msg)
 
 
-_ODOMETRY_FLOATS = struct.Struct("<13f")  # ODOMETRY's x .. yawspeed fields, as on the wire
-
-
 def state_for_fcu(s: PlantState) -> VehicleState:
-    """What the FCU sees: the state as ODOMETRY carries it, float32 and all (the fields the
-    state is read from, rounded as through_wire_odometry rounds them)."""
-    odo = odometry(s)
-    v = _ODOMETRY_FLOATS.unpack(_ODOMETRY_FLOATS.pack(*odo.p_ned_m, *odo.q_ned_frd,
-                                                      *odo.v_frd_m_s, *odo.omega_frd_rad_s))
-    state = state_from_odometry(odo._replace(p_ned_m=v[0:3], q_ned_frd=v[3:7],
-                                             v_frd_m_s=v[7:10], omega_frd_rad_s=v[10:13]))
-    if state is None:
+    """What the FCU sees: the state as ODOMETRY carries it, each field float32 (rounded in
+    ENU/FLU, the same bits; the attitude in the wire's frame), refused as the FCU refuses a
+    state no vehicle can be in."""
+    state = VehicleState(f32_vec3(s.p_enu_m), q_enu_flu_as_wire(s.q_enu_flu),
+                         f32_vec3(rotate_inv(s.q_enu_flu, s.v_enu_m_s)),
+                         f32_vec3(s.omega_flu_rad_s))
+    if not valid_state(*state):
         raise InProcessError(f"t = {s.time_us * 1e-6:.3f} s: the plant's state is not one "
                              "the FCU accepts")
     return state
+
+
+def command_for_plant(out: StepOutput, vehicle: VehicleConfig,
+                      state: PlantState) -> ActuatorCommand:
+    """A step's output as the plant obeys it through HIL_ACTUATOR_CONTROLS: the rotor
+    speeds and tilts rounded as the wire rounds them, then `obeyed_command`."""
+    return obeyed_command(rotor_speeds_as_wire(out.speed_rad_s, vehicle.rotor_speed_max_rad_s),
+                          f32s(out.tilt_rad), out.armed, state)
 
 
 def feed_fcu(pipeline: Pipeline, messages: list[HilSensor | Odometry]) -> float:
@@ -207,57 +174,45 @@ def feed_fcu(pipeline: Pipeline, messages: list[HilSensor | Odometry]) -> float:
     return spent
 
 
-def align(pipeline: Pipeline, plant: Plant, feed: SensorFeed, state: PlantState,
-          substeps: int, dt_s: float, record: Callable[[PlantState], None],
-          logged: Callable[[StepOutput], None]) -> PlantState:
-    """Before the flight: the world stands still while time and the sensors run, and the
-    FCU answers disarmed, until its estimator is aligned and converged or gives up
-    (pipeline.ALIGN_MAX_S; arming is then refused), as sitl/node.py.
+def align(pipeline: Pipeline, world: World, dt_s: float,
+          record: Callable[[PlantState], None], logged: Callable[[StepOutput], None]) -> None:
+    """Before the flight (a sensor feed): the world stands still while time and the sensors
+    run, and the FCU answers disarmed, until its estimator is aligned and converged or gives
+    up (pipeline.ALIGN_MAX_S; arming is then refused), as with the two processes.
     `record` gets each state sent but the last, `logged` each step's output."""
-    feed_fcu(pipeline, feed.period([state]))
+    assert world.feed is not None
+    feed_fcu(pipeline, world.feed.period([world.state]))
     while pipeline.needs_time:
-        record(state)
-        logged(pipeline.step(state.time_us, dt_s))
-        states = []
-        for _ in range(substeps):
-            state = state._replace(time_us=state.time_us + plant.dt_us)
-            states.append(state)
-        feed_fcu(pipeline, feed.period(states))
-    return state
+        record(world.state)
+        out = pipeline.step(world.state.time_us, dt_s)
+        logged(out)
+        states = world.advance(command_for_plant(out, world.scenario.vehicle, world.state))
+        feed_fcu(pipeline, world.feed.period(states))
 
 
 def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
                  logs: bool = True) -> RunResult:
-    """Fly a scenario's mission to its end; deterministic for a given scenario. With `logs`,
-    the result carries truth.ulg and onboard.ulg as the two processes would write them."""
+    """Fly a scenario's mission to its end from `initial` (default: the scenario's start);
+    deterministic for a given scenario. With `logs`, the result carries truth.ulg and
+    onboard.ulg as the two processes would write them."""
     vehicle = scenario.vehicle
-    physics_dt_us = 1_000_000 // scenario.physics_rate_hz
     control_dt_us = 1_000_000 // scenario.control_rate_hz
-    substeps = control_dt_us // physics_dt_us
-    plant = Plant(vehicle, dt_us=physics_dt_us, ideal_actuators=scenario.ideal_actuators,
-                  ground_enabled=scenario.ground_enabled,
-                  disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
-    state = initial if initial is not None else initial_state(scenario, plant)
+    world = World(scenario, control_dt_us, sensors=scenario.sensors, seed=scenario.seed,
+                  initial=initial)
     pipeline, store = fcu_pipeline(scenario)
     cmd = pipeline.commander
     truth_buf, onboard_buf = bytearray(), bytearray()
     truth_log = TruthLog(truth_buf, scenario.name) if logs else None
     onboard_log = OnboardLog(onboard_buf, pipeline, store.values) if logs else None
     items = tuple(through_wire_item(item) for item in scenario_mission(scenario))
-    home = fcu_home()
-    check = check_mission(items, cmd.limits, home)
-    if check.result != 0:
-        raise InProcessError(f"mission refused: MAV_MISSION_RESULT {check.result}: "
-                             f"{check.reason}")
-    cmd.set_mission(localize(items, home))
+    refused = accept_mission(pipeline, items, published_home(Home()))
+    if refused:
+        raise InProcessError(f"mission refused: {refused}")
     dt_s = control_dt_us * 1e-6
     truth_rows: list[tuple[float, ...]] = []
     onboard_rows: list[tuple[float, ...]] = []
-    feed = None
-    if scenario.uses_sensors:
-        assert scenario.sensors is not None
-        feed = SensorFeed(scenario.sensors, scenario.seed, plant, control_dt_us)
-
+    feed = world.feed
+    if feed is not None:
         def record(s: PlantState) -> None:
             truth_rows.append(truth_row(s))
             if truth_log is not None:
@@ -267,29 +222,25 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
             if onboard_log is not None:
                 onboard_log.step(out, 0.0, out.t_us)
 
-        state = align(pipeline, plant, feed, state, substeps, dt_s, record, logged)
+        align(pipeline, world, dt_s, record, logged)
     else:
-        pipeline.on_state(state.time_us, state_for_fcu(state), state.time_us)
-    for what, (code, text) in (("arming", pipeline.arm()),
-                               ("mission start", cmd.mission_start(0))):
-        if code != 0:
-            raise InProcessError(f"{what} refused: {text}")
-    start_us = state.time_us  # the flight's start: the scenario's clock counts from it
-    plant.disturbance = plant.disturbance.from_time(start_us * 1e-6)
-    if feed is not None:
-        feed.start_flight(start_us, scenario.sensor_faults)
-    faults = ActuatorFaults(scenario.actuator_faults, start_us)
+        t_us = world.state.time_us
+        pipeline.on_state(t_us, state_for_fcu(world.state), t_us)
+    refused = arm_and_start(pipeline)
+    if refused:
+        raise InProcessError(refused)
+    world.start_flight()  # the flight's start: the scenario's clock counts from it
+    start_us = world.state.time_us
     end_us = start_us + round(scenario.duration_s * 1e6)
     clock = time.perf_counter
     logged_events = 0
     input_us = 0.0  # the estimator's work on the period's inputs
-    row = state_row(state)  # the plant's state as its kernels keep it (a truth row)
-    substates = np.empty((substeps, len(TRUTH_COLUMNS)))
     rows: list[np.ndarray] = []
     wall0 = clock()
     while True:
+        state = world.state
         t_us = state.time_us
-        rows.append(row)
+        rows.append(world.row)
         if truth_log is not None:
             truth_log.record(state)
         if feed is None:
@@ -307,23 +258,9 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
                 logged_events = len(cmd.events)
         if t_us >= end_us:
             break
-        wire = through_wire_controls(actuator_controls(out, vehicle.rotor_speed_max_rad_s,
-                                                       lockstep=True))
-        command = command_from_controls(wire.controls, wire.mode, vehicle, state)
-        if faults.active:  # a failed actuator is told what it is told at each physics step
-            for k in range(substeps):
-                applied = faults.apply(command, state_of_row(row.tolist()))
-                plant.step_rows(row, command_row(applied), substates[k:k + 1])
-                row = substates[k].copy()
-        else:
-            plant.step_rows(row, command_row(command), substates)
-            row = substates[-1].copy()
+        states = world.advance(command_for_plant(out, vehicle, state))
         if feed is not None:
-            states = [state_of_row(r) for r in substates.tolist()]
-            state = states[-1]
             input_us = feed_fcu(pipeline, feed.period(states))
-        else:
-            state = state_of_row(row.tolist())
     wall = clock() - wall0
 
     if truth_log is not None and onboard_log is not None:
@@ -341,43 +278,3 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
     metrics["fcu_params"] = scenario_params(scenario)
     return RunResult(metrics, truth, onboard, events,
                      bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None)
-
-
-def fly_reference(scenario: Scenario, trajectory: Trajectory,
-                  initial: PlantState | None = None) -> RunResult:
-    """The control law alone on `trajectory`: tracker and allocator over the plant, every
-    control period, until the scenario's end or divergence (tests of eqs. 18-21)."""
-    vehicle = scenario.vehicle
-    physics_dt_us = 1_000_000 // scenario.physics_rate_hz
-    control_dt_us = 1_000_000 // scenario.control_rate_hz
-    plant = Plant(vehicle, dt_us=physics_dt_us, ideal_actuators=scenario.ideal_actuators,
-                  ground_enabled=scenario.ground_enabled,
-                  disturbance=Disturbance(scenario.force_terms, scenario.torque_terms))
-    state = initial if initial is not None else initial_state(scenario, plant)
-    core = FlightCore(vehicle, scenario.gains, scenario.control_rate_hz, state.tilt_rad)
-    end_us = round(scenario.duration_s * 1e6)
-    truth_rows: list[tuple[float, ...]] = []
-    onboard_rows: list[tuple[float, ...]] = []
-    wall0 = time.perf_counter()
-    while state.time_us <= end_us:
-        seen = VehicleState(state.p_enu_m, state.q_enu_flu,
-                            rotate_inv(state.q_enu_flu, state.v_enu_m_s), state.omega_flu_rad_s)
-        ref = trajectory.sample(state.time_us * 1e-6)
-        result = core.step(seen, ref)
-        alloc = result.allocation
-        truth_rows.append(truth_row(state))
-        onboard_rows.append(onboard_row(state.time_us, seen, result, alloc.speed_rad_s,
-                                        alloc.tilt_rad, True, 0.0))
-        finite = all(math.isfinite(c) for c in (*alloc.speed_rad_s, *alloc.tilt_rad))
-        if diverged(math.dist(state.p_enu_m, ref.p_enu_m), finite,
-                    scenario.divergence_position_m) or state.time_us >= end_us:
-            break
-        command = ActuatorCommand(alloc.speed_rad_s, alloc.tilt_rad)
-        for _ in range(control_dt_us // physics_dt_us):
-            state = plant.step(state, command)
-    truth = np.array(truth_rows, dtype=float)
-    onboard = np.array(onboard_rows, dtype=float)
-    metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
-                            events=[], wall_time_s=time.perf_counter() - wall0,
-                            transport="in-process", lockstep=True, mission_completed=False)
-    return RunResult(metrics, truth, onboard, [])

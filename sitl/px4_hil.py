@@ -64,7 +64,6 @@ from common.simlink import (
     unpack_actuator_controls,
 )
 from sitl.actuator_faults import ActuatorFaults
-from sitl.node import LOG_BATCH, SITL_COMPONENT, start_flight
 from sitl.plant import ActuatorCommand, PlantState, initial_state, scenario_plant
 from sitl.px4_wire import (
     LOCKSTEP_FLAG,
@@ -77,7 +76,9 @@ from sitl.px4_wire import (
     state_fields,
 )
 from sitl.sensor_feed import SensorFeed
+from sitl.server import LOG_BATCH, SITL_COMPONENT
 from sitl.truth_log import TruthLog
+from sitl.world import start_flight
 
 # PX4's simulators' rates where the scenario names no sensor profile (Gazebo classic:
 # lockstep pinned at 250 Hz; magnetometer and barometer plugins' defaults).

@@ -12,13 +12,7 @@ from pathlib import Path
 
 from common.config import load_scenario, load_vehicle
 from common.quaternion import q_angle, q_conj, q_exp, q_mul
-from gcs.inprocess import (
-    actuator_controls,
-    command_from_controls,
-    fcu_pipeline,
-    state_for_fcu,
-    through_wire_controls,
-)
+from gcs.inprocess import command_for_plant, fcu_pipeline, state_for_fcu
 from sitl.plant import Plant, hover_speeds_and_tilts
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,9 +53,7 @@ class Flight:
         self.track_rad = max(self.track_rad,
                              q_angle(q_mul(q_conj(ref.q_enu_flu), state.q_enu_flu)))
         self.limited_s = max(self.limited_s, *pipe.actuators.limited_s)
-        wire = through_wire_controls(actuator_controls(out, self.vehicle.rotor_speed_max_rad_s,
-                                                       lockstep=True))
-        command = command_from_controls(wire.controls, wire.mode, self.vehicle, state)
+        command = command_for_plant(out, self.vehicle, state)
         for _ in range(2):
             state = self.plant.step(state, command)
         self.state = state

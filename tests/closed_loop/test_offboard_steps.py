@@ -13,16 +13,13 @@ from common.config import load_scenario
 from common.frames import ned_to_enu, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
 from common.modes import Mode
 from common.quaternion import q_angle, q_conj, q_mul
+from common.simlink import through_wire_controls
 from fcu.setpoint_wire import attitude_target, position_target
-from gcs.inprocess import (
-    actuator_controls,
-    command_from_controls,
-    fcu_pipeline,
-    state_for_fcu,
-    through_wire_controls,
-)
+from fcu.sim_bridge import actuator_controls
+from gcs.inprocess import fcu_pipeline, state_for_fcu
 from gcs.vehicle_link import PoseTarget
 from sitl.plant import Plant, hover_speeds_and_tilts
+from sitl.world import command_from_controls
 
 from .conftest import SCENARIOS
 
