@@ -15,20 +15,23 @@ flags bit 0 = lockstep.
 from __future__ import annotations
 
 import struct
-from typing import NamedTuple
+from typing import TYPE_CHECKING, Literal, NamedTuple, overload
 
 from common.mavlink import MAV
+
+if TYPE_CHECKING:
+    from _typeshed import ReadableBuffer
 
 try:
     from fastcrc.crc16 import mcrf4xx as _crc
 except ImportError:  # pragma: no cover - pymavlink depends on fastcrc; keep a fallback
     from pymavlink.generator.mavcrc import x25crc_slow
 
-    def _crc(data: bytes, init: int = 0xFFFF) -> int:  # type: ignore[misc]
+    def _crc(data: ReadableBuffer, initial: int | None = None) -> int:
         c = x25crc_slow()
-        c.crc = init
-        c.accumulate(data)
-        return c.crc
+        c.crc = 0xFFFF if initial is None else initial
+        c.accumulate(bytes(data))
+        return int(c.crc)
 
 _ODO = MAV.MAVLink_odometry_message
 _HAC = MAV.MAVLink_hil_actuator_controls_message
@@ -190,6 +193,14 @@ _SIGNED = 0x01  # MAVLINK_IFLAG_SIGNED, the only incompatibility flag defined
 _SIGNATURE_LEN = 13
 
 
+@overload
+def split_frames(data: bytes, *, stream: Literal[False] = False) -> tuple[list[Frame], int]: ...
+
+
+@overload
+def split_frames(data: bytes, *, stream: Literal[True]) -> tuple[list[Frame], int, bytes]: ...
+
+
 def split_frames(data: bytes, *, stream: bool = False) -> tuple[list[Frame], int] | tuple[
         list[Frame], int, bytes]:
     """Valid MAVLink 2 frames of the dialect in a datagram, and the count of rejected bytes.
@@ -261,9 +272,8 @@ class FrameReader:
 
     def feed(self, peer: object, data: bytes) -> tuple[list[Frame], int]:
         if not self.stream:
-            return split_frames(data)  # type: ignore[return-value]
-        frames, rejected, tail = split_frames(  # type: ignore[misc]
-            self.tails.pop(peer, b"") + data, stream=True)
+            return split_frames(data)
+        frames, rejected, tail = split_frames(self.tails.pop(peer, b"") + data, stream=True)
         if tail:
             self.tails[peer] = tail[-512:]
         return frames, rejected
