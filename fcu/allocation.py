@@ -173,13 +173,6 @@ class Allocator:
         tilt[:] = self.tilt_array
         self.params, self.tilt_array = params, tilt
 
-    def solve(self, force_flu_n: Vec3, torque_flu_nm: Vec3) -> tuple[float, ...]:
-        """Omega = A^+ [f; tau] (eq. 28), minimum-norm."""
-        om = np.empty(2 * self.n)
-        solve_kernel(self.params, np.array((*force_flu_n, *torque_flu_nm), dtype=np.float64),
-                     om)
-        return tuple(om.tolist())
-
     def allocate(self, force_flu_n: Vec3, torque_flu_nm: Vec3) -> AllocationResult:
         """Rotor speeds and continuous tilts for a desired body wrench (eqs. 28-29)."""
         out = np.empty(AO_SIZE)

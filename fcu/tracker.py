@@ -137,8 +137,8 @@ def desired_accel(j: int, ff: DualVec, cr: DualVec, k: np.ndarray, log_e: DualVe
     """Component j of the desired twist rate of eq. (16): xi_d' feed-forward (Ad of the
     reference's, plus the cross term) minus the PID terms
     2 k_p . ln q_hat_e + 2 k_i . int ln q_hat_e + D (D = k_d . rate)."""
-    return (ff[j] + cr[j] - 2.0 * k[K_P + j] * log_e[j] - 2.0 * k[K_I + j] * integral[j]
-            - k[K_D + j] * rate[j])
+    kp, ki, kd = float(k[K_P + j]), float(k[K_I + j]), float(k[K_D + j])
+    return ff[j] + cr[j] - 2.0 * kp * log_e[j] - 2.0 * ki * float(integral[j]) - kd * rate[j]
 
 
 @njit

@@ -217,10 +217,10 @@ def test_tilt_unwrapping_through_pi_both_directions(preset, turns):
         phis += [start + math.copysign(2.0 * math.pi, n) * j / steps_per_turn
                  for j in range(1, k + 1)]
     # Winding direction of each rotor's (lat, ver) ellipse: sign of det[o_vertical, o_lateral].
-    o_ver = alloc.solve((0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
-    o_lat = alloc.solve((1.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    o_ver = Allocator(vehicle).allocate((0.0, 0.0, 1.0), (0.0, 0.0, 0.0)).omega_sq
+    o_lat = Allocator(vehicle).allocate((1.0, 0.0, 0.0), (0.0, 0.0, 0.0)).omega_sq
     dets = [o_ver[2 * i] * o_lat[2 * i + 1] - o_ver[2 * i + 1] * o_lat[2 * i]
-            for i in range(6)]
+            for i in range(vehicle.n_rotors)]
     winding = [0 if abs(d) < 1e-3 * max(map(abs, dets)) else (1 if d < 0 else -1) for d in dets]
     assert sum(1 for s in winding if s) >= 2
 
