@@ -24,6 +24,7 @@ from common.layouts import (
     A_PINV,
     A_SIZE,
     A_WMAX,
+    ALLOC_OUT,
     AO_OMEGA,
     AO_SATURATED,
     AO_SIZE,
@@ -88,6 +89,9 @@ class AllocationResult(NamedTuple):
     tilt_raw_rad: tuple[float, ...]  # atan2 of eq. (29), in [-pi, pi]
     tilt_rad: tuple[float, ...]  # continuous tilt after unwrapping
     saturated: bool
+
+
+assert ALLOC_OUT.names() == AllocationResult._fields  # allocation_result reads them in order
 
 
 @njit

@@ -33,11 +33,14 @@ from common.layouts import (
     R_V,
     R_W,
     R_WD,
+    REFERENCE,
     T_FORCE,
     T_LOG,
     T_SIZE,
     T_TORQUE,
     T_XI,
+    TRACKER_OUT,
+    VEHICLE_STATE,
     X_P,
     X_Q,
     X_V,
@@ -90,6 +93,13 @@ class TrackerOutput(NamedTuple):
     torque_flu_nm: Vec3
     log_error: DualVec  # ln q_hat_e = 1/2 (theta_e n_e + eps p_e)
     twist_error: DualVec  # xi_e (eq. 11)
+
+
+# The kernels' arrays hold these tuples' fields in order (state_array, ref_array,
+# tracker_output).
+assert VEHICLE_STATE.names() == VehicleState._fields
+assert REFERENCE.names() == Reference._fields
+assert TRACKER_OUT.names()[:len(TrackerOutput._fields)] == TrackerOutput._fields
 
 
 @njit

@@ -38,6 +38,7 @@ from common.geometry import rotor_frames
 from common.jit import warm_up
 from common.layouts import (
     PC_SIZE,
+    PLANT_COMMAND,
     PLANT_STATE,
     PP_DECAY_DOWN,
     PP_DECAY_HALF_DOWN,
@@ -118,6 +119,11 @@ def truth_row(s: PlantState) -> tuple[float, ...]:
 class ActuatorCommand(NamedTuple):
     rotor_speed_rad_s: tuple[float, ...]
     tilt_rad: tuple[float, ...]
+
+
+# The kernels' rows hold these tuples' fields in order (truth_row, command_row).
+assert PLANT_STATE.names() == PlantState._fields
+assert PLANT_COMMAND.names() == ActuatorCommand._fields
 
 
 def state_row(s: PlantState) -> np.ndarray:
