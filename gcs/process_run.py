@@ -35,7 +35,7 @@ from gcs.mission_client import MissionError, upload_detailed
 from gcs.runio import ONBOARD_LOG, ONBOARD_TOPIC, TRUTH_LOG, TRUTH_TOPIC, write_metrics
 from gcs.scenario_mission import scenario_mission
 from gcs.session import GcsError, Session
-from gcs.vehicle_link import param_set
+from gcs.vehicle_link.params import param_set
 from sitl.plant import TRUTH_COLUMNS
 
 M = MAV

@@ -21,7 +21,8 @@ from common.mavlink import MAV
 from gcs.autopilot.health import format_readiness, readiness
 from gcs.autopilot.health import health as health_text
 from gcs.session import Session
-from gcs.vehicle_link import Snapshot, heartbeat_mode, landed_name, link_quality
+from gcs.vehicle_link.snapshot import Snapshot, link_quality
+from gcs.vehicle_link.status import heartbeat_mode, landed_name
 
 M = MAV
 STALE_S = 2.0  # no HEARTBEAT for longer than this: the link is lost

@@ -28,7 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     run time), 2 bad input (arguments, URLs, files, busy ports), 130 interrupted."""
     from common.mavlink import SigningKeyError
     from gcs.mission_client import MissionError
-    from gcs.mission_files import MissionFileError
+    from gcs.mission_files.items import MissionFileError
     from gcs.session import GcsError
 
     args = build_parser().parse_args(argv)

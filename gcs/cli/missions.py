@@ -18,7 +18,8 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
     from common.mavlink import MAV
     from gcs.autopilot import autopilot_of
     from gcs.mission_client import clear, download, home_position, result_name, upload_detailed
-    from gcs.mission_files import file_format, format_mission, to_frame
+    from gcs.mission_files import file_format, format_mission
+    from gcs.mission_files.frames import to_frame
     from gcs.mission_home import HomeError, WireMission, for_ardupilot, split_home
 
     t, c, send = session.target_system, session.target_component, session.send

@@ -13,8 +13,8 @@ if TYPE_CHECKING:
 
 
 def param_command(args: argparse.Namespace, session: Session) -> int:
-    from gcs import vehicle_link as vl
     from gcs.param_wire import ParamValueError, intended
+    from gcs.vehicle_link import params as vl
 
     if args.action == "list":
         for name, p in vl.param_values(session).items():
@@ -46,8 +46,8 @@ def param_command(args: argparse.Namespace, session: Session) -> int:
 
 def _param_save(args: argparse.Namespace, session: Session) -> int:
     from common.mavlink import MAV
-    from gcs import vehicle_link as vl
     from gcs.param_files import ParamEntry, format_params
+    from gcs.vehicle_link import params as vl
 
     values = vl.param_values(session)
     t, c = session.target_system, session.target_component
@@ -76,9 +76,9 @@ def _param_save(args: argparse.Namespace, session: Session) -> int:
 
 
 def _param_load(args: argparse.Namespace, session: Session) -> int:
-    from gcs import vehicle_link as vl
     from gcs.param_wire import ParamValueError, intended
     from gcs.session import GcsError
+    from gcs.vehicle_link import params as vl
 
     t, c = session.target_system, session.target_component
     refused = 0

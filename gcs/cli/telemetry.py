@@ -13,7 +13,7 @@ from gcs.cli.parser import DEFAULT_CONNECT
 
 
 def cmd_log(args: argparse.Namespace) -> int:
-    from gcs.vehicle_link import Snapshot, collect
+    from gcs.vehicle_link.snapshot import Snapshot, collect
 
     session = open_session(args, tlog=args.file)
     progress = Progress()

@@ -18,7 +18,8 @@ if TYPE_CHECKING:
 
 
 def cmd_vehicle(args: argparse.Namespace) -> int:
-    from gcs import vehicle_link as vl
+    from gcs.vehicle_link.actions import arm
+    from gcs.vehicle_link.status import format_status, status, vehicles
 
     read_files(args)  # a bad file is refused before any network wait
     session = open_session(args)
@@ -27,14 +28,14 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
             if args.json:
                 import json
 
-                print(json.dumps(vl.status(session), allow_nan=False))
+                print(json.dumps(status(session), allow_nan=False))
             else:
-                print("\n".join(vl.format_status(vl.status(session))))
+                print("\n".join(format_status(status(session))))
             return 0
         if args.command == "arm":
-            return print_result("arm", vl.arm(session, True), session)
+            return print_result("arm", arm(session, True), session)
         if args.command == "disarm":
-            return print_result("disarm", vl.arm(session, False, force=args.force), session)
+            return print_result("disarm", arm(session, False, force=args.force), session)
         if args.command == "mode":
             return _mode(args, session)
         if args.command == "takeoff":
@@ -51,7 +52,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
             return watch(session, refresh_hz=args.rate, duration=args.duration,
                          all_vehicles=args.all)
         if args.command == "vehicles":
-            for sysid in vl.vehicles(session, heartbeat_wait(args)):
+            for sysid in vehicles(session, heartbeat_wait(args)):
                 print(sysid)
             return 0
         raise AssertionError(args.command)
@@ -62,23 +63,23 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
 def _mode(args: argparse.Namespace, session: Session) -> int:
     """Exit 0 once a HEARTBEAT shows the mode; 1 refused or not confirmed; 2 a name the
     autopilot does not have (with its names)."""
-    from gcs import vehicle_link as vl
     from gcs.autopilot import UnknownMode
+    from gcs.vehicle_link.actions import set_mode
 
     confirm = 3.0 if args.wait is None else args.wait
     try:
-        result = vl.set_mode(session, args.name, confirm_s=confirm)
+        result = set_mode(session, args.name, confirm_s=confirm)
     except UnknownMode as exc:
         raise InputError(str(exc)) from None
     return print_result(f"mode {args.name.upper()}", result, session)
 
 
 def _takeoff(args: argparse.Namespace, session: Session) -> int:
-    from gcs import vehicle_link as vl
+    from gcs.vehicle_link.actions import takeoff
 
     progress = Progress()
     confirm = 3.0 if args.wait is None else args.wait
-    result, height = vl.takeoff(session, args.alt, reach_s=None if args.no_wait else
+    result, height = takeoff(session, args.alt, reach_s=None if args.no_wait else
                                 args.timeout, tolerance_m=args.tolerance, confirm_s=confirm,
                                 report=lambda h: progress(f"takeoff: {h:.2f} m above home"))
     progress.done()
@@ -89,8 +90,9 @@ def _takeoff(args: argparse.Namespace, session: Session) -> int:
 
 
 def _goto(args: argparse.Namespace, session: Session) -> int:
-    from gcs import vehicle_link as vl
     from gcs.autopilot import ARDUPILOT
+    from gcs.vehicle_link.goto import goto
+    from gcs.vehicle_link.pose import PoseTarget
 
     if session.autopilot is not None and session.autopilot.kind == ARDUPILOT and \
             (args.roll or args.pitch):
@@ -98,7 +100,7 @@ def _goto(args: argparse.Namespace, session: Session) -> int:
                          "a yaw in GUIDED (an attitude target there replaces the position "
                          "target)")
 
-    target = vl.PoseTarget.from_euler_deg((args.x, args.y, args.z), args.roll, args.pitch,
+    target = PoseTarget.from_euler_deg((args.x, args.y, args.z), args.roll, args.pitch,
                                           args.yaw)
     progress = Progress()
 
@@ -106,7 +108,7 @@ def _goto(args: argparse.Namespace, session: Session) -> int:
         progress(f"goto: position error {errs[0]:.3f} m, attitude error "
                  f"{math.degrees(errs[1]):.2f} deg")
 
-    dp, da = vl.goto(session, target, arm_first=args.arm, tolerance_m=args.tolerance,
+    dp, da = goto(session, target, arm_first=args.arm, tolerance_m=args.tolerance,
                      tolerance_rad=math.radians(args.tolerance_deg), timeout=args.timeout,
                      hold_s=args.hold, report=report)
     progress.done()

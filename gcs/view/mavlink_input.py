@@ -8,7 +8,7 @@ from typing import Any
 from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
 from common.mavlink import MAV
 from common.quaternion import Q_IDENTITY
-from gcs.vehicle_link import mode_name
+from gcs.vehicle_link.status import mode_name
 from gcs.view.sample import Pose, Sample
 
 

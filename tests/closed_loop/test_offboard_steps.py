@@ -17,7 +17,7 @@ from common.simlink import through_wire_controls
 from fcu.setpoint_wire import attitude_target, position_target
 from fcu.sim_bridge import actuator_controls
 from gcs.inprocess import fcu_pipeline, state_for_fcu
-from gcs.vehicle_link import PoseTarget
+from gcs.vehicle_link.pose import PoseTarget
 from sitl.plant import Plant, hover_speeds_and_tilts
 from sitl.world import command_from_controls
 

@@ -22,7 +22,8 @@ from common.links import free_port
 from common.mavlink import MAV_CMD_POSE_KEYFRAME
 from common.mission_items import MissionItem, local_xy
 from fcu.params import SPECS
-from gcs.mission_files import format_toml, format_wpl
+from gcs.mission_files.toml import format_toml
+from gcs.mission_files.wpl import format_wpl
 from gcs.scenario_mission import scenario_mission
 
 from .conftest import PID, ROOT, SCENARIOS, VEHICLE, start, stop

@@ -40,7 +40,7 @@ from fcu.core import ONBOARD_COLUMNS
 from gcs.inprocess import RunResult, apply_overrides, run_scenario
 from gcs.metrics import attitude_error_rad, join_logs
 from gcs.session import Session
-from gcs.vehicle_link import param_set
+from gcs.vehicle_link.params import param_set
 from sitl.plant import TRUTH_COLUMNS, Plant, initial_state
 from sitl.sensor_feed import SensorFeed
 

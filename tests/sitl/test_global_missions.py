@@ -26,9 +26,13 @@ from common.mavlink import MAV
 from common.mission_items import HomePosition
 from common.ulog import read_topic
 from fcu.params import SPECS
-from gcs import vehicle_link as vl
 from gcs.mission_client import download, home_position
-from gcs.mission_files import format_plan, parse_plan, parse_toml, parse_wpl, read_mission
+from gcs.mission_files import read_mission
+from gcs.mission_files.plan import format_plan, parse_plan
+from gcs.mission_files.toml import parse_toml
+from gcs.mission_files.wpl import parse_wpl
+from gcs.vehicle_link.actions import arm
+from gcs.vehicle_link.params import param_get, param_set
 
 from .conftest import ROOT, Stack, launch, stop
 
@@ -199,10 +203,10 @@ def test_global_wpl_through_mavproxy_is_flown_to_the_intended_points(rig):
     assert [(h.frame, h.command, h.x, h.y, h.z) for h in held] == \
         [(w.frame, w.command, w.x, w.y, w.z) for w in written]
 
-    value, _ = vl.param_set(s, "MIS_CRUISE_SPD", 0.5)  # gentle legs: holds settle in time
+    value, _ = param_set(s, "MIS_CRUISE_SPD", 0.5)  # gentle legs: holds settle in time
     assert value == 0.5
     assert s.command(M.MAV_CMD_MISSION_START) == M.MAV_RESULT_ACCEPTED
-    assert vl.arm(s, True) == M.MAV_RESULT_ACCEPTED
+    assert arm(s, True) == M.MAV_RESULT_ACCEPTED
     done = rig.stack.wait_for(
         ["MISSION_CURRENT"], lambda m: m.mission_state == M.MISSION_STATE_COMPLETE,
         timeout=120.0)
@@ -295,7 +299,7 @@ def test_params_save_and_load_in_qgc_format(rig):
         out.stdout, out.stdout
     assert f"loaded {len(SPECS) - 1} of {len(SPECS)}" in out.stdout, out.stdout
     s = rig.stack.session
-    assert vl.param_get(s, "MIS_CRUISE_SPD") == 3.5
-    assert vl.param_get(s, "GF_MAX_DIST") == 1000.0
+    assert param_get(s, "MIS_CRUISE_SPD") == 3.5
+    assert param_get(s, "GF_MAX_DIST") == 1000.0
     assert rig.gcs("param", "load", str(saved)).returncode == 0
-    assert vl.param_get(s, "MIS_CRUISE_SPD") == 2.0
+    assert param_get(s, "MIS_CRUISE_SPD") == 2.0

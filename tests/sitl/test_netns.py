@@ -14,7 +14,7 @@ from collections.abc import Iterator
 import pytest
 
 from common.config import load_scenario
-from gcs.mission_files import format_toml
+from gcs.mission_files.toml import format_toml
 from gcs.scenario_mission import scenario_mission
 
 from .conftest import PID, ROOT, SCENARIOS, VEHICLE

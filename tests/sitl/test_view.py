@@ -33,7 +33,8 @@ from common.geometry import rotor_frames
 from common.links import free_port
 from common.mavlink import MAV
 from common.quaternion import q_rotate
-from gcs.vehicle_link import PoseTarget, arm, set_mode
+from gcs.vehicle_link.actions import arm, set_mode
+from gcs.vehicle_link.pose import PoseTarget
 
 from ..terminal import sigint_default
 from .conftest import ROOT, SCENARIOS, VEHICLE, launch, stop

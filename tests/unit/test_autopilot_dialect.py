@@ -13,10 +13,13 @@ from pymavlink import mavutil
 
 from common import modes as px4_modes
 from common.mavlink import encoder, parser
-from gcs import vehicle_link as vl
 from gcs.autopilot import PORTABLE_NAMES, UnknownMode, autopilot_of, commands, health, streams
 from gcs.autopilot.dialect import STATION_DIALECT as A
 from gcs.session import GcsError
+from gcs.vehicle_link.actions import set_mode
+from gcs.vehicle_link.pose import PoseTarget, pose_errors
+from gcs.vehicle_link.snapshot import Snapshot
+from gcs.vehicle_link.status import heartbeat_mode, mode_name
 
 M = A  # the station's dialect: common and ArduPilot's messages
 ARDUCOPTER = autopilot_of(SimpleNamespace(autopilot=M.MAV_AUTOPILOT_ARDUPILOTMEGA,
@@ -213,7 +216,7 @@ def test_a_mode_is_confirmed_only_by_a_heartbeat_showing_it():
     with pytest.raises(commands.NotConfirmed, match="not confirmed: the vehicle is in LOITER"):
         commands.set_mode(other, guided, confirm_s=0.2)
     with pytest.raises(GcsError, match="not confirmed: the vehicle is in LOITER"):
-        vl.set_mode(Vehicle(on_command=engages(5)), "guided", confirm_s=0.2)
+        set_mode(Vehicle(on_command=engages(5)), "guided", confirm_s=0.2)
     silent = Vehicle()
     with pytest.raises(commands.NotConfirmed, match=r"no HEARTBEAT within 0\.2 s"):
         commands.set_mode(silent, guided, confirm_s=0.2)
@@ -308,7 +311,7 @@ def test_takeoff_refused_disarmed_or_in_the_air(armed, landed, rel_mm, why):
 
 
 def test_goto_on_ardupilot_streams_position_and_yaw_only():
-    target = vl.PoseTarget.from_euler_deg((10.0, 0.0, -10.0), 0.0, 0.0, 90.0)
+    target = PoseTarget.from_euler_deg((10.0, 0.0, -10.0), 0.0, 0.0, 90.0)
     session = SimpleNamespace(target_system=1, target_component=1)
     (pos,) = target.messages(session, attitude=False)
     assert pos.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
@@ -322,13 +325,13 @@ def test_goto_on_ardupilot_streams_position_and_yaw_only():
 
 
 def test_yaw_error_without_attitude_targets():
-    target = vl.PoseTarget.from_euler_deg((0.0, 0.0, -10.0), 0.0, 0.0, 179.0)
-    snap = vl.Snapshot()
+    target = PoseTarget.from_euler_deg((0.0, 0.0, -10.0), 0.0, 0.0, 179.0)
+    snap = Snapshot()
     snap.update(_decoded(M.MAVLink_local_position_ned_message(0, 0.0, 0.0, -10.0, 0, 0, 0)))
     half = math.radians(-179.0) / 2  # yaw -179 deg: 2 deg from the target, across +-180
     snap.update(_decoded(M.MAVLink_attitude_quaternion_message(
         0, math.cos(half), 0.0, 0.0, math.sin(half), 0, 0, 0)))
-    dp, dyaw = vl.pose_errors(snap, target, attitude=False)
+    dp, dyaw = pose_errors(snap, target, attitude=False)
     assert dp == pytest.approx(0.0) and dyaw == pytest.approx(math.radians(2.0), abs=1e-6)
 
 
@@ -440,10 +443,10 @@ def test_ekf_state():
 
 
 def test_status_names_modes_in_the_autopilots_spelling():
-    assert vl.heartbeat_mode(_heartbeat(17)) == "BRAKE"
-    assert vl.heartbeat_mode(_heartbeat(px4_modes.Mode.HOLD.custom_mode,
+    assert heartbeat_mode(_heartbeat(17)) == "BRAKE"
+    assert heartbeat_mode(_heartbeat(px4_modes.Mode.HOLD.custom_mode,
                                         autopilot=M.MAV_AUTOPILOT_PX4)) == "HOLD"
-    assert vl.mode_name(px4_modes.Mode.OFFBOARD.custom_mode, M.MAV_AUTOPILOT_GENERIC) == \
+    assert mode_name(px4_modes.Mode.OFFBOARD.custom_mode, M.MAV_AUTOPILOT_GENERIC) == \
         "OFFBOARD"
-    assert vl.mode_name(5, M.MAV_AUTOPILOT_ARDUPILOTMEGA, M.MAV_TYPE_HEXAROTOR) == "LOITER"
+    assert mode_name(5, M.MAV_AUTOPILOT_ARDUPILOTMEGA, M.MAV_TYPE_HEXAROTOR) == "LOITER"
     assert PX4.mode_name(1 << 16) == "MANUAL"

@@ -37,7 +37,10 @@ from common.simlink import (
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import validate_mission
 from fcu.mission_protocol import MissionServer, item_from_message
-from gcs.mission_files import MissionFileError, parse_toml, parse_wpl, read_mission
+from gcs.mission_files import read_mission
+from gcs.mission_files.items import MissionFileError
+from gcs.mission_files.toml import parse_toml
+from gcs.mission_files.wpl import parse_wpl
 
 M = MAV
 FAST = settings(max_examples=300, deadline=None,

@@ -27,7 +27,7 @@ from common.mission_items import (
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission, localize
 from fcu.mission_protocol import MissionServer
-from gcs.mission_files import format_wpl
+from gcs.mission_files.wpl import format_wpl
 
 from ..closed_loop.conftest import ROOT
 

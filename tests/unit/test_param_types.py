@@ -1,4 +1,4 @@
-"""Parameters in their real types (gcs/param_wire.py, gcs/vehicle_link.py param_*, the
+"""Parameters in their real types (gcs/param_wire.py, gcs/vehicle_link/params.py, the
 `gcs param` commands): `param save` writes each parameter's MAV_PARAM_TYPE, integer values
 ride as the vehicle carries them (ArduPilot casts, PX4 sends bytes) and survive a save/load
 round trip, and a set the vehicle clamps is exit 1 "not taken: the vehicle keeps 127"."""

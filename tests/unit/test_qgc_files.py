@@ -1,6 +1,6 @@
 """The files other ground stations read and write: QGroundControl's `.plan`, QGC WPL 110 in
 global frames (what MAVProxy loads unchanged), QGC's `.params`; empty and broken files; the
-CLI refusing a bad file before any network wait (gcs/mission_files.py, gcs/param_files.py,
+CLI refusing a bad file before any network wait (gcs/mission_files/, gcs/param_files.py,
 gcs/cli/)."""
 
 from __future__ import annotations
@@ -19,20 +19,17 @@ from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
 from common.mission_items import GLOBAL_SCALE, HomePosition, MissionItem, local_xy, to_local
 from gcs import cli
 from gcs.mission_files import (
-    MissionFileError,
     file_format,
     format_mission,
-    format_plan,
-    format_toml,
-    format_wpl,
     parse_mission,
-    parse_plan,
-    parse_toml,
-    parse_wpl,
     read_mission,
-    to_frame,
     write_mission,
 )
+from gcs.mission_files.frames import to_frame
+from gcs.mission_files.items import MissionFileError
+from gcs.mission_files.plan import format_plan, parse_plan
+from gcs.mission_files.toml import format_toml, parse_toml
+from gcs.mission_files.wpl import format_wpl, parse_wpl
 from gcs.param_files import ParamEntry, ParamFileError, format_params, parse_params
 
 M = MAV

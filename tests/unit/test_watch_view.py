@@ -1,5 +1,5 @@
 """`gcs watch`'s view (gcs/watch.py) from given messages: link lost, the active failsafe
-with its reason, the landed state, health; `gcs status`'s formatting (gcs/vehicle_link.py):
+with its reason, the landed state, health; `gcs status`'s formatting (gcs/vehicle_link/status.py):
 no Python notation, sensible digits, JSON-ready values."""
 
 from __future__ import annotations
@@ -8,7 +8,8 @@ import json
 import math
 
 from common.mavlink import MAV as M
-from gcs.vehicle_link import Snapshot, _f32, format_status
+from gcs.vehicle_link.snapshot import Snapshot
+from gcs.vehicle_link.status import _f32, format_status
 from gcs.watch import ALERT, STALE_S, render, view_lines
 
 QUALITY = (0.0, 100, 0)
