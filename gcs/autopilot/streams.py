@@ -18,13 +18,24 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 from common.mavlink import MAV
-from gcs.autopilot.dialect import ARDUPILOT, STATION_DIALECT
+from gcs.autopilot.dialect import ARDUPILOT, STATION_DIALECT, Autopilot
 
-if TYPE_CHECKING:
-    from gcs.session import Session
+
+class SessionLink(Protocol):
+    """What the stream requests use of a `gcs.session.Session` (which calls them)."""
+
+    @property
+    def target_system(self) -> int: ...
+    @property
+    def target_component(self) -> int: ...
+    @property
+    def autopilot(self) -> Autopilot | None: ...
+    def send(self, msg: Any) -> None: ...
+    def recv(self, types: list[str] | None = None, timeout: float = 1.0) -> Any: ...
+
 
 M = MAV
 ANSWER_S = 1.0  # how long to wait for the answers to the GETs and SETs
@@ -76,7 +87,7 @@ class Streams:
     groups: dict[int, float] = field(default_factory=dict)
 
 
-def _commands(session: Session, command: int, params: list[tuple[float, ...]]
+def _commands(session: SessionLink, command: int, params: list[tuple[float, ...]]
               ) -> tuple[list[int], dict[int, int]]:
     """Send COMMAND_LONGs of one kind together; (their results in order of arrival, the
     MESSAGE_INTERVAL answers heard: id -> interval_us)."""
@@ -101,7 +112,7 @@ def _commands(session: Session, command: int, params: list[tuple[float, ...]]
     return results, intervals
 
 
-def request(session: Session, wanted: dict[str, float]) -> Streams:
+def request(session: SessionLink, wanted: dict[str, float]) -> Streams:
     """Make the link bring `wanted` (name -> Hz); what was changed, for `restore`."""
     streams = Streams()
     if not wanted:
@@ -140,7 +151,7 @@ def request(session: Session, wanted: dict[str, float]) -> Streams:
     return streams
 
 
-def restore(session: Session, streams: Streams) -> None:
+def restore(session: SessionLink, streams: Streams) -> None:
     """Put back what `request` changed: each interval as it was read (the default rate
     where it was not read), and stop the stream groups it started."""
     if streams.changed:
