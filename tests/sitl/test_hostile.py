@@ -14,7 +14,9 @@ from collections import Counter
 
 import pytest
 
-from benchmarks.fuzz_campaign import PORTS, Attack, Flight, Traffic, blast
+from benchmarks.fuzz.config import PORTS
+from benchmarks.fuzz.flight import Attack, Flight
+from benchmarks.fuzz.traffic import Traffic, blast
 
 INPUTS = 20_000
 RATE = 2_500.0  # per port and second: the three ports together, 7,500 inputs/s
