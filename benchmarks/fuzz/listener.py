@@ -115,19 +115,22 @@ class LinkListener:
         gap, gap_at = max(gaps)
         seconds = range(int(t0) + 1, int(t1))  # whole seconds only
         span = max(t1 - t0, 1e-9)
-        total = sum(n for s, n in self.per_second.items() if t0 <= s + 0.5 <= t1)
-        streams = sum(n for s, n in self.streams_per_second.items() if t0 <= s + 0.5 <= t1)
+        # snapshots (one C-level copy each): the listener thread keeps counting meanwhile
+        per_second, streams_per_second = dict(self.per_second), dict(self.streams_per_second)
+        by_type = Counter(dict(self.by_type))
+        total = sum(n for s, n in per_second.items() if t0 <= s + 0.5 <= t1)
+        streams = sum(n for s, n in streams_per_second.items() if t0 <= s + 0.5 <= t1)
         names = {}
-        for msgid, n in self.by_type.most_common(6):
+        for msgid, n in by_type.most_common(6):
             cls = M.mavlink_map.get(msgid) if msgid is not None else None
             names[cls.msgname if cls else "not MAVLink 2"] = round(n / span, 1)
         arms = sum(1 for a, b in itertools.pairwise(self.states) if a[1] != b[1])
         modes = sorted({m.name for _, _, c in self.states for m in Mode if m.custom_mode == c})
         return {"seconds": span, "heartbeats": len(beats), "gap_max_s": gap,
                 "gap_at_s": gap_at - t0, "msg_s": total / span,
-                "msg_s_max": max((self.per_second[s] for s in seconds), default=0),
+                "msg_s_max": max((per_second.get(s, 0) for s in seconds), default=0),
                 "stream_msg_s": streams / span,
-                "stream_msg_s_max": max((self.streams_per_second[s] for s in seconds),
+                "stream_msg_s_max": max((streams_per_second.get(s, 0) for s in seconds),
                                         default=0),
                 "top_msg_s": names, "arm_changes": arms, "modes": modes,
                 "internal_error_texts": sum(1 for _, x in self.texts if "internal error" in x)}
