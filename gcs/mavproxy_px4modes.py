@@ -15,10 +15,19 @@ it; everything else is left as it was. `module unload px4modes` restores pymavli
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from MAVProxy.modules.lib import mp_module  # type: ignore[import-untyped]
 from pymavlink import mavutil
+
+if TYPE_CHECKING:
+    class _MPModule:
+        """What this module takes from MAVProxy's MPModule (MAVProxy has no type hints)."""
+
+        def __init__(self, mpstate: Any, name: str, description: str | None = None,
+                     public: bool = False, multi_instance: bool = False,
+                     multi_vehicle: bool = False) -> None: ...
+else:
+    from MAVProxy.modules.lib.mp_module import MPModule as _MPModule
 
 _ORIGINAL = "_set_mode_before_px4modes"
 
@@ -44,7 +53,7 @@ def uninstall() -> None:
         delattr(mavutil.mavfile, _ORIGINAL)
 
 
-class PX4ModesModule(mp_module.MPModule):  # type: ignore[misc]
+class PX4ModesModule(_MPModule):
     def __init__(self, mpstate: Any) -> None:
         super().__init__(mpstate, "px4modes", "set PX4 modes by name")
         install()

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple, Protocol
 
 import common.mavlink  # noqa: F401  (pins MAVLink 2 before anything imports mavutil)
 from common.mavlink import MAV
@@ -52,6 +52,16 @@ _ITEM_RESULTS = {M.MAV_MISSION_UNSUPPORTED_FRAME, M.MAV_MISSION_UNSUPPORTED,
 Progress = Callable[[int, int], None]
 
 
+class Connection(Protocol):
+    """What the mission client uses of a pymavlink connection (`mavutil.mavfile`, or
+    `gcs.session.LinkFile`): its encoder (`mav`: srcSystem, send) and `recv_match`."""
+
+    mav: Any
+
+    def recv_match(self, condition: str | None = None, type: str | list[str] | None = None,
+                   blocking: bool = False, timeout: float | None = None) -> Any: ...
+
+
 class MissionError(RuntimeError):
     """A mission transaction that could not be completed (no answer, protocol error)."""
 
@@ -64,12 +74,12 @@ def result_name(result: int) -> str:
 Send = Callable[[MAV.MAVLink_message], None]
 
 
-def _sender(conn, send: Send | None) -> Send:
+def _sender(conn: Connection, send: Send | None) -> Send:
     """`send` if given (e.g. a session's locked send), else the connection's own."""
     return send if send is not None else conn.mav.send
 
 
-def _drain(conn, target_system: int, quiet_s: float, limit_s: float = 0.5) -> None:
+def _drain(conn: Connection, target_system: int, quiet_s: float, limit_s: float = 0.5) -> None:
     """Drop the input waiting on `conn`, then keep dropping until no mission answer from
     `target_system` to us has come for `quiet_s` (at most `limit_s`): late duplicates of an
     earlier transaction's answers, within the link's reordering time, must not be taken for
@@ -88,8 +98,8 @@ def _drain(conn, target_system: int, quiet_s: float, limit_s: float = 0.5) -> No
             quiet_until = time.monotonic() + quiet_s
 
 
-def _recv(conn, types: list[str], target_system: int, target_component: int,
-          timeout_s: float):
+def _recv(conn: Connection, types: list[str], target_system: int, target_component: int,
+          timeout_s: float) -> Any:
     """The next message of `types` from the target about missions, or None on timeout."""
     deadline = time.monotonic() + timeout_s
     me = conn.mav.srcSystem
@@ -111,7 +121,12 @@ def _recv(conn, types: list[str], target_system: int, target_component: int,
         return msg
 
 
-def _item_from(msg) -> MissionItem:
+def _is_item(seq: int) -> Callable[[Any], bool]:
+    """Whether a mission item message is item `seq`."""
+    return lambda msg: bool(msg.seq == seq)
+
+
+def _item_from(msg: Any) -> MissionItem:
     item = item_from_message(msg)
     if not item.xy_fit_int32:  # a legacy MISSION_ITEM with a non-finite or huge x or y
         raise MissionError(f"mission download: item {msg.seq} has an x or y that is not "
@@ -137,7 +152,7 @@ class StatusTexts:
         text = " ".join(text.split())
         return [*texts, text] if text and (not texts or texts[-1] != text) else texts
 
-    def add(self, msg) -> None:
+    def add(self, msg: Any) -> None:
         text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
         text = text.split("\0", 1)[0]
         text_id = getattr(msg, "id", 0)
@@ -168,7 +183,7 @@ class UploadResult(NamedTuple):
 
     @property
     def accepted(self) -> bool:
-        return self.result == M.MAV_MISSION_ACCEPTED
+        return bool(self.result == M.MAV_MISSION_ACCEPTED)
 
     @property
     def about_item(self) -> bool:
@@ -181,7 +196,8 @@ class UploadResult(NamedTuple):
         return ": ".join([result_name(self.result), *self.notes])
 
 
-def upload(conn, target_system: int, target_component: int, items: Sequence[MissionItem],
+def upload(conn: Connection, target_system: int, target_component: int,
+           items: Sequence[MissionItem],
            progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
            item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = RETRIES,
            send: Send | None = None, settle_s: float = SETTLE_S,
@@ -201,7 +217,7 @@ def upload(conn, target_system: int, target_component: int, items: Sequence[Miss
     return answer.result
 
 
-def upload_detailed(conn, target_system: int, target_component: int,
+def upload_detailed(conn: Connection, target_system: int, target_component: int,
                     items: Sequence[MissionItem], progress: Progress | None = None, *,
                     timeout_s: float = TIMEOUT_S, item_timeout_s: float = ITEM_TIMEOUT_S,
                     retries: int = RETRIES, send: Send | None = None,
@@ -272,7 +288,7 @@ def upload_detailed(conn, target_system: int, target_component: int,
         deadline = time.monotonic() + wait
 
 
-def download(conn, target_system: int, target_component: int,
+def download(conn: Connection, target_system: int, target_component: int,
              progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
              item_timeout_s: float = ITEM_TIMEOUT_S,
              retries: int = RETRIES, send: Send | None = None,
@@ -283,7 +299,8 @@ def download(conn, target_system: int, target_component: int,
     _drain(conn, target_system, settle_s)
     counts: list[int] = []
 
-    def exchange(request, types: list[str], wait: float, accept, what: str):
+    def exchange(request: Any, types: list[str], wait: float, accept: Callable[[Any], bool],
+                 what: str) -> Any:
         for _ in range(retries + 1):
             _send(request)
             deadline = time.monotonic() + wait
@@ -320,7 +337,7 @@ def download(conn, target_system: int, target_component: int,
                                                   MISSION),
             ["MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK", "MISSION_COUNT"],
             item_timeout_s,
-            lambda m, seq=seq: m.seq == seq, f"the request for item {seq} of {count}")
+            _is_item(seq), f"the request for item {seq} of {count}")
         items.append(_item_from(msg))
         if progress is not None:
             progress(seq + 1, count)
@@ -329,8 +346,9 @@ def download(conn, target_system: int, target_component: int,
     return items
 
 
-def clear(conn, target_system: int, target_component: int, *, timeout_s: float = TIMEOUT_S,
-          retries: int = RETRIES, send: Send | None = None, settle_s: float = SETTLE_S) -> int:
+def clear(conn: Connection, target_system: int, target_component: int, *,
+          timeout_s: float = TIMEOUT_S, retries: int = RETRIES, send: Send | None = None,
+          settle_s: float = SETTLE_S) -> int:
     """Clear the vehicle's mission; its MAV_MISSION_RESULT. MissionError if it is silent."""
     _send = _sender(conn, send)
     _drain(conn, target_system, settle_s)
@@ -339,12 +357,12 @@ def clear(conn, target_system: int, target_component: int, *, timeout_s: float =
         _send(request)
         msg = _recv(conn, ["MISSION_ACK"], target_system, target_component, timeout_s)
         if msg is not None:
-            return msg.type
+            return int(msg.type)
     raise MissionError(f"mission clear on system {target_system}: no MISSION_ACK after "
                        f"{retries + 1} tries ({timeout_s * 1e3:.0f} ms each)")
 
 
-def home_position(conn, target_system: int, target_component: int, *,
+def home_position(conn: Connection, target_system: int, target_component: int, *,
                   timeout_s: float = 1.0, retries: int = 2,
                   send: Send | None = None) -> HomePosition | None:
     """The vehicle's home (HOME_POSITION: the origin that global mission items are converted

@@ -118,22 +118,17 @@ def raw_value(msg: MAV.MAVLink_message) -> bytes:
     return _FLOAT.pack(msg.param_value)
 
 
-class _ParamSet(MAV.MAVLink_param_set_message):  # type: ignore[misc]
-    """PARAM_SET whose param_value goes as the given four bytes."""
-
-    def __init__(self, target_system: int, target_component: int, name: bytes, raw: bytes,
-                 param_type: int) -> None:
-        super().__init__(target_system, target_component, name, _FLOAT.unpack(raw)[0],
-                         param_type)
-        self._raw = raw
-
-    def pack(self, mav: MAV.MAVLink, force_mavlink1: bool = False) -> bytes:
-        body = self._raw + _SET_TAIL.pack(self.target_system, self.target_component,
-                                          self._param_id_raw, self.param_type)
-        return bytes(self._pack(mav, self.crc_extra, body, force_mavlink1=force_mavlink1))
-
-
 def param_set_message(target_system: int, target_component: int, name: str, raw: bytes,
                       param_type: int) -> MAV.MAVLink_message:
-    """PARAM_SET of `name` with `param_value`'s four bytes `raw` (`encode`)."""
-    return _ParamSet(target_system, target_component, name.encode(), raw, param_type)
+    """PARAM_SET of `name` with `param_value`'s four bytes `raw` (`encode`): pymavlink's
+    message, its `pack` bound to one that sends those bytes as they are."""
+    msg = MAV.MAVLink_param_set_message(target_system, target_component, name.encode(),
+                                        _FLOAT.unpack(raw)[0], param_type)
+
+    def pack(mav: MAV.MAVLink, force_mavlink1: bool = False) -> bytes:
+        body = raw + _SET_TAIL.pack(msg.target_system, msg.target_component,
+                                    msg._param_id_raw, msg.param_type)
+        return bytes(msg._pack(mav, msg.crc_extra, body, force_mavlink1=force_mavlink1))
+
+    msg.pack = pack
+    return msg

@@ -56,7 +56,7 @@ class Children:
     """The sitl and fcu child processes of one run, each logging to its own file."""
 
     out: Path
-    procs: dict[str, subprocess.Popen] = field(default_factory=dict)
+    procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
 
     def start(self, name: str, argv: list[str]) -> None:
         log = (self.out / f"{name}.log").open("wb")
@@ -97,12 +97,15 @@ class Progress:
     messages: list[str] = field(default_factory=list)
 
 
+Report = Callable[[Progress], None]  # called with the run's progress as it goes
+
+
 class RunTimeout(RunError):
     """The run did not reach its end within its wall-clock allowance."""
 
 
 def _watch(session: Session, children: Children, progress: Progress, end_s: float,
-           total: int, wall_timeout_s: float, report=None) -> None:
+           total: int, wall_timeout_s: float, report: Report | None = None) -> None:
     """Follow the flight until the vehicle's clock reaches end_s (a diverged or crashed
     vehicle too: the simulator runs to the end, as in-process)."""
     end_ms = round(end_s * 1000)
@@ -192,7 +195,7 @@ class _Flight:
     """The children and the ground-station side of one vehicle's run."""
 
     def __init__(self, plan: VehiclePlan, *, realtime: bool, wall_timeout_s: float,
-                 report=None, signing_key_file: str | None = None) -> None:
+                 report: Report | None = None, signing_key_file: str | None = None) -> None:
         self.plan = plan
         self.signing_key_file = signing_key_file
         self.realtime = realtime
@@ -378,7 +381,7 @@ def _read_or_empty(path: Path, topic: str, columns: tuple[str, ...]
 
 
 def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
-                  wall_timeout_s: float | None = None, report=None,
+                  wall_timeout_s: float | None = None, report: Report | None = None,
                   sim_route: Callable[[int], int] | None = None,
                   transport: str = "udp", fleet: int = 1, spacing_m: float = 0.0,
                   zenoh_url: str = "zenoh:mavlink",

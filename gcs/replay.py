@@ -90,7 +90,7 @@ class Replay:
 
 
 def _f32(x: float) -> float:
-    return struct.unpack("<f", struct.pack("<f", x))[0]
+    return float(struct.unpack("<f", struct.pack("<f", x))[0])
 
 
 def parse_params(items: list[str]) -> dict[str, float]:
@@ -235,7 +235,8 @@ def replay(path: str | Path, overrides: dict[str, float] | None = None) -> Repla
 
 def _attitude_angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
     dot = np.clip(np.abs(np.sum(qa * qb, axis=1)), 0.0, 1.0)
-    return 2.0 * np.arccos(dot)
+    angle: np.ndarray = 2.0 * np.arccos(dot)
+    return angle
 
 
 def write_estimate(path: Path, r: Replay) -> None:

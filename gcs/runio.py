@@ -97,7 +97,7 @@ def write_metrics(out: Path, metrics: dict[str, Any]) -> None:
 def check_run_dir(run_dir: Path) -> dict[str, Any]:
     """metrics.json of a run folder whose logs are the ones it was computed from."""
     try:
-        metrics = json.loads((run_dir / "metrics.json").read_text())
+        metrics: dict[str, Any] = json.loads((run_dir / "metrics.json").read_text())
     except (OSError, ValueError) as exc:
         raise RunDirError(f"{run_dir}: no readable metrics.json ({exc})") from None
     for name, expected in metrics.get("logs", {}).items():

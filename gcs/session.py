@@ -22,7 +22,9 @@ import select
 import struct
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from pymavlink import mavutil
 
@@ -38,6 +40,33 @@ TCP_CONNECT_S = 3.0  # a tcp: link that has not connected by then is reported, e
 REFUSAL_TEXT_S = 0.3  # after a refusal, how long to listen for the STATUSTEXT saying why
 MAX_PARSERS = 64  # one parser per peer (byte stream); the oldest goes beyond this
 
+if TYPE_CHECKING:
+    class _MavFile:
+        """What LinkFile and its users take from pymavlink's untyped `mavfile` (messages
+        are pymavlink's, Any); any other attribute is Any too."""
+
+        mav: Any
+        messages: dict[str, Any]
+        mav_count: int
+        mav_loss: int
+        post_message: Callable[[Any], None]
+
+        def __init__(self, fd: int | None, address: str, source_system: int = 255,
+                     source_component: int = 0, notimestamps: bool = False,
+                     input: bool = True, use_native: bool = False) -> None: ...
+        def pre_message(self) -> None: ...
+        def recv_match(self, condition: str | None = None,
+                       type: str | list[str] | None = None, blocking: bool = False,
+                       timeout: float | None = None) -> Any: ...
+        def setup_signing(self, secret_key: bytes, sign_outgoing: bool = True,
+                          allow_unsigned_callback: Callable[..., bool] | None = None,
+                          initial_timestamp: int | None = None,
+                          link_id: int | None = None) -> None: ...
+        def packet_loss(self) -> float: ...
+        def __getattr__(self, name: str) -> Any: ...
+else:
+    _MavFile = mavutil.mavfile
+
 
 class GcsError(RuntimeError):
     """A vehicle that does not answer, refuses a command, or a link that fails."""
@@ -52,7 +81,7 @@ class Tlog:
         self.fh = path.open("wb", buffering=0)
         self.lock = threading.Lock()
 
-    def write(self, msg) -> None:
+    def write(self, msg: Any) -> None:
         if msg.get_type() == "BAD_DATA":
             return
         usec = int(time.time() * 1e6) & ~3
@@ -63,7 +92,7 @@ class Tlog:
         self.fh.close()
 
 
-class LinkFile(mavutil.mavfile):
+class LinkFile(_MavFile):
     """pymavlink's connection interface over a `common.links.Link`: each peer (a TCP
     client, a UDP sender) has its own parser, so that streams never mix; sends and reads
     are serialised (the heartbeat thread sends while the caller reads)."""
@@ -71,10 +100,10 @@ class LinkFile(mavutil.mavfile):
     def __init__(self, link: Link, source_system: int, source_component: int) -> None:
         self.link = link
         self._io = threading.Lock()
-        self._queue: collections.deque = collections.deque()
+        self._queue: collections.deque[Any] = collections.deque()
         self._parsers: dict[object, DIALECT.MAVLink] = {}
         fd = link.fileno()
-        mavutil.mavfile.__init__(self, fd if fd >= 0 else None, str(link.url),
+        _MavFile.__init__(self, fd if fd >= 0 else None, str(link.url),
                                  source_system=source_system,
                                  source_component=source_component, use_native=False)
         # MAVLink 2, ardupilotmega (common and more), whatever mavutil's default is
@@ -101,7 +130,7 @@ class LinkFile(mavutil.mavfile):
             if msgs:
                 self._queue.extend(msgs)
 
-    def recv_msg(self):
+    def recv_msg(self) -> Any:
         self.pre_message()
         if not self._queue:
             self._fill()
@@ -111,7 +140,7 @@ class LinkFile(mavutil.mavfile):
         self.post_message(msg)
         return msg
 
-    def recv(self, n=None) -> bytes:
+    def recv(self, n: int | None = None) -> bytes:
         raise NotImplementedError("LinkFile decodes per peer: use recv_msg/recv_match")
 
     def select(self, timeout: float) -> bool:
@@ -137,8 +166,9 @@ class LinkFile(mavutil.mavfile):
         return hasattr(self.link, "set_target")
 
     def set_target(self, system_id: int) -> None:
-        if self.needs_target:
-            self.link.set_target(system_id)  # type: ignore[attr-defined]
+        set_target = getattr(self.link, "set_target", None)  # Zenoh links have it
+        if set_target is not None:
+            set_target(system_id)
 
     @property
     def vehicles(self) -> set[int] | None:
@@ -183,7 +213,8 @@ class Session:
         if self.tlog is not None:
             received = self.conn.post_message
 
-            def post_message(msg, _received=received, _log=self.tlog):
+            def post_message(msg: Any, _received: Callable[[Any], None] = received,
+                             _log: Tlog = self.tlog) -> None:
                 _log.write(msg)  # every message heard, whatever the caller waits for
                 _received(msg)
 
@@ -192,7 +223,7 @@ class Session:
         self.target_system = 0
         self.target_component = 0
         self.last_texts: list[str] = []  # STATUSTEXTs that came with the last command's ACK
-        self.heartbeat_msg = None  # the vehicle heartbeat that wait_vehicle took
+        self.heartbeat_msg: Any = None  # the vehicle heartbeat that wait_vehicle took
         self.heartbeat_at = 0.0  # and when (monotonic seconds)
         self.autopilot: Autopilot | None = None  # which autopilot that heartbeat came from
         self._streams = _streams.Streams()  # what request_streams changed on the link
@@ -214,13 +245,13 @@ class Session:
             self.heartbeat()
             self._stop.wait(self._period)
 
-    def send(self, msg) -> None:
+    def send(self, msg: Any) -> None:
         with self.lock:
             self.conn.mav.send(msg)
         if self.tlog is not None:
             self.tlog.write(msg)
 
-    def recv(self, types: list[str] | None = None, timeout: float = 1.0):
+    def recv(self, types: list[str] | None = None, timeout: float = 1.0) -> Any:
         return self.conn.recv_match(type=types, blocking=True, timeout=timeout)
 
     def wait_vehicle(self, timeout: float = 10.0, system_id: int | None = None) -> None:
@@ -264,7 +295,7 @@ class Session:
                 elif msg.command == command:
                     if msg.result not in (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_IN_PROGRESS):
                         self._texts_after(REFUSAL_TEXT_S)
-                    return msg.result
+                    return int(msg.result)
         raise GcsError(f"no COMMAND_ACK for command {command} after {retries + 1} tries")
 
     def _texts_after(self, quiet_s: float) -> None:

@@ -176,7 +176,7 @@ def watch(session: Session, refresh_hz: float = 5.0, duration: float | None = No
             pass
         return 0
 
-    def loop(screen) -> None:
+    def loop(screen: curses.window) -> None:
         curses.curs_set(0)
         screen.nodelay(True)
         styles = {TITLE: curses.A_BOLD, "stale": curses.A_DIM}

@@ -30,6 +30,7 @@ mode (exit 2 with its list).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega
@@ -66,7 +67,7 @@ _PORTABLE: dict[tuple[str, str], dict[str, str]] = {
 }
 
 # PX4's own modes beyond the ones this project flies, as pymavlink names them
-_PX4_OTHERS = {name: (main << 16) | (sub << 24) for name, (_base, main, sub)
+_PX4_OTHERS: dict[str, int] = {name: (main << 16) | (sub << 24) for name, (_base, main, sub)
                in mavutil.px4_map.items() if px4_modes.by_name(name) is None}
 
 
@@ -153,7 +154,7 @@ class Autopilot:
             main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
             return f"custom {main}.{sub}"
         table = mavutil.mode_mapping_bynumber(self.mav_type) or {}
-        return table.get(custom_mode, f"Mode({custom_mode})")
+        return str(table.get(custom_mode, f"Mode({custom_mode})"))
 
     def same_mode(self, wanted: int, custom_mode: int) -> bool:
         """Whether a HEARTBEAT's custom_mode is the mode `wanted` (PX4: the sub-mode counts
@@ -202,7 +203,7 @@ def _vehicle(mav_type: int) -> str:
     return next((name for name, t in _TABLES.items() if t is table), "")
 
 
-def autopilot_of(heartbeat) -> Autopilot:
+def autopilot_of(heartbeat: Any) -> Autopilot:
     """The autopilot behind a HEARTBEAT (its `autopilot` and `type`)."""
     mav_type = int(heartbeat.type)
     if int(heartbeat.autopilot) == M.MAV_AUTOPILOT_ARDUPILOTMEGA:

@@ -37,7 +37,7 @@ def sensor_names(bits: int) -> list[str]:
     return [name for bit, name in _SENSORS.items() if bits & bit]
 
 
-def health(sys_status) -> str:
+def health(sys_status: Any) -> str:
     """"ok" when every enabled sensor is healthy, else "unhealthy sensors: A, B". The
     PREARM_CHECK bit is readiness, not health (`readiness`)."""
     enabled = sys_status.onboard_control_sensors_enabled & \
@@ -55,7 +55,7 @@ def ekf_state(flags: int) -> str:
     return "; ".join(([f"no {', '.join(lacking)}"] if lacking else []) + wrong)
 
 
-def readiness(sys_status, ekf_status, texts: list[str]) -> dict[str, Any]:
+def readiness(sys_status: Any, ekf_status: Any, texts: list[str]) -> dict[str, Any]:
     """{"ready_to_arm": bool or None (unknown), "ekf": ArduPilot's estimator state (where
     reported), "reasons": the autopilot's latest why-not texts}."""
     out: dict[str, Any] = {"ready_to_arm": None}
