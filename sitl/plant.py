@@ -75,8 +75,9 @@ from common.layouts import (
 )
 from common.vehicle_constants import N_ROTORS
 from sitl.disturbance import Disturbance
+from sitl.plant_kernels import rotate as rotate
+from sitl.plant_kernels import rotate_inv as rotate_inv
 from sitl.plant_kernels import (
-    derivative_kernel,
     rotor_lag_kernel,
     rotor_wrench_kernel,
     step_kernel,
@@ -84,8 +85,6 @@ from sitl.plant_kernels import (
     tilt_servo_kernel,
     with_disturbance,
 )
-from sitl.plant_kernels import rotate as rotate
-from sitl.plant_kernels import rotate_inv as rotate_inv
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -242,11 +241,6 @@ class Plant:
         return (r[0], r[1], r[2]), (r[3], r[4], r[5])
 
     # ------------------------------------------------------------------ rigid body
-
-    def derivative(self, x: Sequence[float], wrench: Sequence[float]) -> tuple[float, ...]:
-        """d/dt of (p, v, q, w) in ENU/FLU under a body wrench (f, tau)."""
-        return derivative_kernel(self.params, tuple(float(c) for c in x),
-                                 tuple(float(c) for c in wrench))
 
     def step(self, s: PlantState, cmd: ActuatorCommand) -> PlantState:
         """Advance one step of dt_us with the command held (zero-order hold); see

@@ -12,6 +12,7 @@ from common.config import DisturbanceTerm, load_scenario, load_vehicle
 from fcu.allocation import hover_command
 from sitl.disturbance import Disturbance
 from sitl.plant import ActuatorCommand, Plant, PlantState
+from sitl.plant_kernels import derivative_kernel
 
 ROOT = Path(__file__).resolve().parents[2]
 ZERO6 = (0.0,) * 6
@@ -387,10 +388,10 @@ def reference_step(plant: Plant, s: PlantState, cmd: ActuatorCommand,
     for k in range(substeps):
         a = k * hs
         wa, wm, wb = wrench(a), wrench(a + 0.5 * hs), wrench(a + hs)
-        k1 = np.array(plant.derivative(tuple(x), wa))
-        k2 = np.array(plant.derivative(tuple(x + 0.5 * hs * k1), wm))
-        k3 = np.array(plant.derivative(tuple(x + 0.5 * hs * k2), wm))
-        k4 = np.array(plant.derivative(tuple(x + hs * k3), wb))
+        k1 = np.array(derivative_kernel(plant.params, tuple(x), wa))
+        k2 = np.array(derivative_kernel(plant.params, tuple(x + 0.5 * hs * k1), wm))
+        k3 = np.array(derivative_kernel(plant.params, tuple(x + 0.5 * hs * k2), wm))
+        k4 = np.array(derivative_kernel(plant.params, tuple(x + hs * k3), wb))
         x = x + hs / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
     return x
 

@@ -1,10 +1,10 @@
 """The tracker's closed loop obeys the error dynamics of eqs. (16)-(18) exactly.
 
 With the wrench the tracker outputs held, the independent rigid-body model of the plant
-(`sitl.plant.Plant.derivative`, world ENU / body FLU, no dual quaternions) is integrated a small
-step h forward and backward; the reference is sampled at t - h, t, t + h; xi_e and ln q_hat_e
-are formed at the three instants with the tracker's own algebra; and the central difference
-of xi_e must equal
+(`sitl.plant_kernels.derivative_kernel`, world ENU / body FLU, no dual quaternions) is
+integrated a small step h forward and backward; the reference is sampled at t - h, t, t + h;
+xi_e and ln q_hat_e are formed at the three instants with the tracker's own algebra; and the
+central difference of xi_e must equal
 
     -2 k_p . ln q_hat_e - 2 k_i . I - D,   D = 2 k_d . d/dt(ln q_hat_e)  ("log_rate"),
                                            D = k_d . xi_e                ("twist"),
@@ -28,7 +28,8 @@ from common.config import TrajectoryConfig, load_gains, load_vehicle
 from fcu.dualquat import dq_ad, dq_conj, dq_from_pose, dq_log, dq_mul, q_exp, q_mul
 from fcu.tracker import DualQuaternionTracker, VehicleState, reference_twist
 from fcu.trajectory import FigureEight
-from sitl.plant import Plant, rotate, rotate_inv
+from sitl.plant import Plant
+from sitl.plant_kernels import derivative_kernel, rotate, rotate_inv
 
 ROOT = Path(__file__).resolve().parents[2]
 H = 1e-4  # finite-difference step, s
@@ -56,7 +57,7 @@ def plant(vehicle):
 def rk4(plant: Plant, x: np.ndarray, wrench: tuple[float, ...], h: float) -> np.ndarray:
     """One RK4 step of the plant's rigid-body model (p, v_world, q, omega), wrench held."""
     def f(y):
-        return np.array(plant.derivative(tuple(y), wrench))
+        return np.array(derivative_kernel(plant.params, tuple(y), wrench))
     k1 = f(x)
     k2 = f(x + 0.5 * h * k1)
     k3 = f(x + 0.5 * h * k2)
