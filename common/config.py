@@ -13,12 +13,14 @@ faults (`common.scenario_terms`) and the sensor profiles (`common.sensors_config
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from common.config_reader import ConfigError, Table, read_toml
 from common.gains_config import Gains, check_stability, load_gains, parse_gains
+from common.outcome import DIVERGENCE_ATTITUDE_HOLD_S, DIVERGENCE_ATTITUDE_RAD
 from common.scenario_terms import (
     ACTUATOR_FAULT_KINDS,
     SENSOR_FAULT_KINDS,
@@ -87,6 +89,10 @@ class Scenario:
     torque_terms: tuple[DisturbanceTerm, ...] = ()
     seed: int = 0
     divergence_position_m: float = 10.0
+    # the run status's attitude rule (common.outcome.diverged_rows): an attitude error above
+    # divergence_attitude_rad held for divergence_attitude_hold_s without a break
+    divergence_attitude_rad: float = DIVERGENCE_ATTITUDE_RAD
+    divergence_attitude_hold_s: float = DIVERGENCE_ATTITUDE_HOLD_S
     source: str = ""
     files: dict[str, str] = field(default_factory=dict)
     # The simulated sensors (config/sensors/): None or a kind "truth" profile means the
@@ -257,6 +263,10 @@ def scenario_from_data(data: dict[str, Any], path: str | Path) -> Scenario:
         seed=t.integer("seed", 0, lo=0),
         # the range of the FCU's parameter COM_DIV_POS, which a run sets from this key
         divergence_position_m=t.number("divergence_position_m", 10.0, lo=0.1, hi=1000.0),
+        divergence_attitude_rad=t.number("divergence_attitude_rad", DIVERGENCE_ATTITUDE_RAD,
+                                         lo=0.1, hi=math.pi),
+        divergence_attitude_hold_s=t.number("divergence_attitude_hold_s",
+                                            DIVERGENCE_ATTITUDE_HOLD_S, lo=0.0, hi=60.0),
         source=source,
         files={"scenario": str(path.resolve()), "vehicle": vehicle_path,
                "gains_pid": pid_path, "gains_pd": pd_path},

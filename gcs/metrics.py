@@ -15,8 +15,6 @@ import numpy as np
 from common.config import Scenario
 from common.outcome import (
     CRASH_SPEED_M_S,
-    DIVERGENCE_ATTITUDE_HOLD_S,
-    DIVERGENCE_ATTITUDE_RAD,
     Event,
     classify,
     diverged_rows,
@@ -156,8 +154,9 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
 
     Errors compare the plant's true pose with the desired pose the FCU computed for the same
     control step (`join_logs`). A run diverges at the first joined sample that
-    `diverged_rows` flags (position beyond the scenario's limit, attitude error above
-    DIVERGENCE_ATTITUDE_RAD held for DIVERGENCE_ATTITUDE_HOLD_S, or a non-finite state), and
+    `diverged_rows` flags (position beyond the scenario's limit, attitude error above the
+    scenario's divergence_attitude_rad held for its divergence_attitude_hold_s, or a
+    non-finite state), and
     its figures cover the run up to that instant (never inf or NaN).
     """
     common_t, truth_j, onboard_j = join_logs(truth_columns, truth, onboard_columns, onboard)
@@ -166,8 +165,8 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
     p_d = log_columns(onboard_columns, onboard_j, "pdx", "pdy", "pdz")
     q_d = log_columns(onboard_columns, onboard_j, "qdw", "qdx", "qdy", "qdz")
     bad = diverged_rows(p, q, p_d, q_d, scenario.divergence_position_m, t_us=common_t,
-                        attitude_limit_rad=DIVERGENCE_ATTITUDE_RAD,
-                        attitude_hold_s=DIVERGENCE_ATTITUDE_HOLD_S)
+                        attitude_limit_rad=scenario.divergence_attitude_rad,
+                        attitude_hold_s=scenario.divergence_attitude_hold_s)
     end = len(common_t)
     divergence_t_us = None
     cause = ""
@@ -177,8 +176,8 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
         if not diverged_rows(p[first:first + 1], q[first:first + 1], p_d[first:first + 1],
                              q_d[first:first + 1], scenario.divergence_position_m,
                              t_us=common_t[first:first + 1])[0]:
-            cause = (f"attitude error above {DIVERGENCE_ATTITUDE_RAD:g} rad for "
-                     f"{DIVERGENCE_ATTITUDE_HOLD_S:g} s")
+            cause = (f"attitude error above {scenario.divergence_attitude_rad:g} rad for "
+                     f"{scenario.divergence_attitude_hold_s:g} s")
         # Keep the first divergent sample when it is finite: the figures reach that instant.
         end = first + 1 if np.all(np.isfinite(np.hstack([p[first], q[first], p_d[first],
                                                           q_d[first]]))) else first

@@ -98,9 +98,11 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
                   f"{e['text']} |" for e in run_events]
         lines.append("")
     if data.diverged:
+        limit_rad = data.scenario.get("divergence_attitude_rad", DIVERGENCE_ATTITUDE_RAD)
+        hold_s = data.scenario.get("divergence_attitude_hold_s", DIVERGENCE_ATTITUDE_HOLD_S)
         lines += [f"**The run diverged at t = {fmt(m.get('divergence_t_s'))} s** "
                   "(position error beyond the scenario's limit, attitude error above "
-                  f"{DIVERGENCE_ATTITUDE_RAD:g} rad for {DIVERGENCE_ATTITUDE_HOLD_S:g} s, or a "
+                  f"{limit_rad:g} rad for {hold_s:g} s, or a "
                   "non-finite state). The error statistics below and the plots cover the run "
                   "up to that instant only.", ""]
     lines += [f"_{n}_" for n in data.notes]

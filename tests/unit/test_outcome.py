@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import load_gains, load_scenario, load_vehicle
+from common.config import ConfigError, load_gains, load_scenario, load_vehicle
 from common.outcome import (
     CRASH,
     DIVERGED,
@@ -194,3 +194,29 @@ def test_divergence_disarms_as_divergence_not_crash():
     kinds = [e.kind for e in pipe.events]
     assert DIVERGED in kinds and CRASH not in kinds
     assert pipe.failsafe == "diverged"
+
+
+def test_the_scenarios_attitude_rule_is_the_one_judged(tmp_path):
+    """Given a scenario that sets divergence_attitude_rad = 3 and a hold of 0.5 s, then a
+    2.5 rad excursion held 2 s completes, a 3.1 rad one held 0.6 s diverges 0.5 s after it
+    starts and says the scenario's figures; out-of-range keys are refused at load."""
+    source = (ROOT / "config/scenarios/case2_sine.toml").read_text()
+    path = tmp_path / "case2_sine.toml"
+    source = source.replace('"../', f'"{ROOT}/config/')
+    path.write_text("divergence_attitude_rad = 3.0\ndivergence_attitude_hold_s = 0.5\n"
+                    + source)
+    scenario = dataclasses.replace(load_scenario(path), duration_s=4.0)
+    assert (scenario.divergence_attitude_rad, scenario.divergence_attitude_hold_s) == (3.0, 0.5)
+    t = np.arange(0.0, 4.0 + 1e-9, 0.002)
+    for size, length, status in ((2.5, 2.0, "completed"), (3.1, 0.6, "diverged")):
+        off = np.where((t >= 1.0) & (t < 1.0 + length), size, 0.0)
+        truth, onboard = _logs(t, _about_z(off))
+        m = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard, events=[],
+                          wall_time_s=1.0, transport="in-process", lockstep=True)
+        assert m["status"] == status, (size, length)
+    assert m["divergence_t_s"] == pytest.approx(1.5)
+    assert m["status_reason"].endswith("attitude error above 3 rad for 0.5 s")
+    for key, value in (("divergence_attitude_rad", "3.5"), ("divergence_attitude_hold_s", "-1")):
+        path.write_text(f"{key} = {value}\n" + source)
+        with pytest.raises(ConfigError, match=key):
+            load_scenario(path)
