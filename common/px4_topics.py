@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
-from common.quaternion import Quat, Vec3, q_rotate
+from common.quaternion import Quat, Vec3, q_rotate, zyx_yaw
 from common.ulog import Topic
 
 _T = ("uint64_t", "timestamp")
@@ -107,12 +107,6 @@ MISSION_RESULT = Topic("mission_result", (
 # Records: the one conversion from the code's ENU/FLU values to these topics' NED/FRD fields
 # ---------------------------------------------------------------------------------------------
 
-def yaw_ned(q_ned_frd: Quat) -> float:
-    """Heading of an FRD->NED attitude (Z-Y-X yaw), rad."""
-    w, x, y, z = q_ned_frd
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
 def local_position_record(t_us: int, stamp_us: int, p_enu_m: Vec3, v_enu_m_s: Vec3,
                           q_enu_flu: Quat, valid: bool,
                           ref: tuple[int, float, float, float] | None
@@ -122,7 +116,7 @@ def local_position_record(t_us: int, stamp_us: int, p_enu_m: Vec3, v_enu_m_s: Ve
     origin has no global position (xy_global and z_global false)."""
     origin = ref is not None
     return (t_us, stamp_us, valid, valid, valid, valid, *enu_to_ned(p_enu_m),
-            *enu_to_ned(v_enu_m_s), yaw_ned(q_enu_flu_to_ned_frd(q_enu_flu)), origin, origin,
+            *enu_to_ned(v_enu_m_s), zyx_yaw(q_enu_flu_to_ned_frd(q_enu_flu)), origin, origin,
             *(ref if ref is not None else (0, 0.0, 0.0, 0.0)))
 
 
@@ -152,7 +146,7 @@ def trajectory_setpoint_record(t_us: int, p_enu_m: Vec3, v_enu_m_s: Vec3, a_enu_
     """trajectory_setpoint: NED position, velocity, acceleration (jerk NaN: not set), yaw and
     yaw rate of the reference."""
     return (t_us, *enu_to_ned(p_enu_m), *enu_to_ned(v_enu_m_s), *enu_to_ned(a_enu_m_s2),
-            _NAN, _NAN, _NAN, yaw_ned(q_enu_flu_to_ned_frd(q_enu_flu)),
+            _NAN, _NAN, _NAN, zyx_yaw(q_enu_flu_to_ned_frd(q_enu_flu)),
             _yawspeed(q_enu_flu, omega_flu_rad_s))
 
 
@@ -161,7 +155,7 @@ def local_position_setpoint_record(t_us: int, p_enu_m: Vec3, v_enu_m_s: Vec3,
                                    ) -> tuple[float | int, ...]:
     """vehicle_local_position_setpoint: the same reference, PX4's older layout."""
     return (t_us, *enu_to_ned(p_enu_m), *enu_to_ned(v_enu_m_s), *enu_to_ned(a_enu_m_s2),
-            yaw_ned(q_enu_flu_to_ned_frd(q_enu_flu)), _yawspeed(q_enu_flu, omega_flu_rad_s))
+            zyx_yaw(q_enu_flu_to_ned_frd(q_enu_flu)), _yawspeed(q_enu_flu, omega_flu_rad_s))
 
 
 def attitude_setpoint_record(t_us: int, q_enu_flu: Quat, omega_flu_rad_s: Vec3

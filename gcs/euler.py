@@ -9,19 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def zyx_euler(q: np.ndarray) -> np.ndarray:
-    """Rows (w, x, y, z) of q_enu_flu -> rows (roll, pitch, yaw) in rad, Z-Y-X order."""
-    w, x, y, z = q.T
-    roll = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = np.arcsin(np.clip(2.0 * (w * y - x * z), -1.0, 1.0))
-    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return np.column_stack([roll, pitch, yaw])
+from common.quaternion import zyx_euler_rows
 
 
 def zyx_events(t_s: np.ndarray, q: np.ndarray, tol: float = 1e-3) -> list[tuple[float, str]]:
     """Sorted (time, kind) pairs, kind in {"singular", "jump"}; runs of samples collapse."""
-    euler = zyx_euler(q)
+    euler = zyx_euler_rows(q)
     events: list[tuple[float, str]] = []
     near = np.abs(np.abs(euler[:, 1]) - np.pi / 2) < tol
     starts = np.flatnonzero(near & ~np.concatenate([[False], near[:-1]]))

@@ -7,9 +7,10 @@ import numpy as np
 from common import quaternion as quat
 from common.config import load_scenario
 from common.quaternion import zyx_euler_rows
+from common.quaternion import zyx_euler_rows as zyx_euler
 from fcu.dualquat import q_exp
 from fcu.trajectory import make_trajectory
-from gcs.euler import zyx_euler, zyx_events
+from gcs.euler import zyx_events
 
 from ..closed_loop.conftest import SCENARIOS
 
