@@ -27,6 +27,7 @@ from gcs.mission_files.wpl import format_wpl
 from gcs.scenario_mission import scenario_mission
 
 from .conftest import PID, ROOT, SCENARIOS, VEHICLE, start, stop
+from .waits import until
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -185,7 +186,8 @@ def test_mission_start_flies_the_mission(vehicle, tmp_path):
     assert vehicle.gcs("mission", "start").returncode == 0  # MISSION mode, waiting to arm
     assert "MISSION_STATE_NOT_STARTED" in vehicle.gcs("status").stdout
     assert vehicle.gcs("arm").returncode == 0
-    time.sleep(1.0)
+    until(lambda: "MISSION_STATE_ACTIVE" in vehicle.gcs("status").stdout,
+          "the mission active after arming")
     status = vehicle.gcs("status").stdout
     assert "mode: MISSION" in status and "MISSION_STATE_ACTIVE" in status
 
@@ -250,7 +252,7 @@ def test_watch_in_a_terminal_quits_on_q(vehicle):
             if select.select([fd], [], [], 0.2)[0]:
                 screen += os.read(fd, 65536)
         assert b"mode" in screen and b"HOLD" in screen and b"link" in screen
-        time.sleep(1.0)
+        time.sleep(1.0)  # deliberate: a few redraws, so that q comes to a running view
         os.write(fd, b"q")
         deadline = time.monotonic() + 10
         status = None
@@ -468,6 +470,26 @@ def test_refusal_prints_the_vehicles_reason(tmp_path):
         stop(procs)
 
 
+def _watch_until_alive(watch: subprocess.Popen, at_s: float) -> str:
+    """What a piped `gcs watch` printed until a snapshot at `at_s` s or later of its own
+    clock (the title's "(  4.0 s)", counted from when it found the vehicle: its start-up
+    on a loaded machine does not count) showed a live vehicle on the ground, healthy."""
+    assert watch.stdout is not None
+    text, frame = "", ""
+    for line in watch.stdout:  # snapshots: "system 1   (  t s) ..." lines, then a blank one
+        text += line
+        frame += line
+        if line != "\n":
+            continue
+        if frame.startswith("system 1 "):
+            t_s = float(frame.split("(", 1)[1].split(" s)", 1)[0])
+            if t_s >= at_s and "position NED" in frame and "on ground" in frame and \
+                    "health        ok" in frame and "LINK LOST" not in frame:
+                return text
+        frame = ""
+    raise AssertionError(f"watch ended before a live snapshot at {at_s:g} s: {text[-2000:]}")
+
+
 def test_watch_shows_link_lost_when_the_fcu_dies(vehicle):
     """Piped, watch prints plain snapshots: landed state and health while the FCU lives,
     then "LINK LOST for N s" with the values marked stale once it is killed."""
@@ -475,9 +497,12 @@ def test_watch_shows_link_lost_when_the_fcu_dies(vehicle):
                               vehicle.connect, "--rate", "4", "--duration", "9"], cwd=ROOT,
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        time.sleep(4.0)
+        out = _watch_until_alive(watch, 4.0)
         vehicle.procs["fcu"].kill()
-        out, err = watch.communicate(timeout=30)
+        assert watch.stdout is not None and watch.stderr is not None
+        out += watch.stdout.read()  # to the end of its 9 s (the pipe's buffered part too)
+        err = watch.stderr.read()
+        watch.wait(timeout=30)
     finally:
         if watch.poll() is None:
             watch.kill()

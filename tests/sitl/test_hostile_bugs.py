@@ -74,8 +74,16 @@ class FakeSimulator:
         self.sock.sendto(pack_odometry(odo, 0, sysid, M.MAV_COMP_ID_PERIPHERAL), self.fcu_addr)
 
     def fcu_alive_after(self, seconds: float) -> bool:
-        time.sleep(seconds)
-        return self.stack.procs["fcu"].poll() is None
+        """Whether the FCU lives on after a state sent just before: `seconds` in which its
+        telemetry (several messages a second) would have packed that state, then a valid
+        state with a position of its own, which the FCU reads after the first (one socket,
+        in order) and must report in LOCAL_POSITION_NED."""
+        time.sleep(seconds)  # deliberate: the window for the crash at the next telemetry
+        marker = (0.25, 0.5, -0.75)
+        self.state(1_000_000, p_ned=marker)
+        heard = self.stack.wait_for(["LOCAL_POSITION_NED"], lambda m: math.dist(
+            (m.x, m.y, m.z), marker) < 1e-3, 30.0)
+        return heard is not None and self.stack.procs["fcu"].poll() is None
 
     def close(self) -> None:
         self.stack.session.close()
@@ -98,7 +106,10 @@ def test_get_message_interval_beyond_uint16_does_not_kill_the_fcu(stack):
     Expected: an answer (DENIED, or MESSAGE_INTERVAL with -1) and the FCU alive."""
     s = stack.session
     s.command(M.MAV_CMD_GET_MESSAGE_INTERVAL, 70000.0)
-    time.sleep(0.5)
+    # The FCU answers commands one after the other: an answer to the next one shows it
+    # lived through the first.
+    assert s.command(M.MAV_CMD_GET_MESSAGE_INTERVAL, float(M.MAVLINK_MSG_ID_HEARTBEAT),
+                     timeout=10.0) == M.MAV_RESULT_ACCEPTED, stack.log("fcu")[-1500:]
     assert stack.procs["fcu"].poll() is None, stack.log("fcu")[-1500:]
     assert stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1, 3.0) is not None
 
@@ -214,5 +225,5 @@ def test_a_frame_cut_short_is_not_completed_by_the_next_datagram(stack, tmp_path
     with s.lock:
         s.conn.write(frame[:-1])
         s.conn.write(frame[-1:] + b"\x00" * 8)
-    time.sleep(0.5)
+    # no wait: the download's requests follow on the same socket, read by the FCU in order
     assert len(download(s.conn, 1, 1, send=s.send)) == len(items)
