@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 from common.mission_items import (
@@ -20,6 +20,7 @@ from common.mission_items import (
 )
 from fcu.dualquat import Q_IDENTITY, norm3
 from fcu.mission.codes import (
+    MAV_CMD_FIGURE_EIGHT,
     MAV_CMD_NAV_LAND,
     MAV_CMD_NAV_LOITER_TIME,
     MAV_CMD_NAV_TAKEOFF,
@@ -60,11 +61,18 @@ class MissionCheck(NamedTuple):
 
 
 def _finite(x: float) -> bool:
+    """A finite number."""
     return math.isfinite(x)
 
 
-def _time(x: float, positive: bool = False) -> bool:
-    return math.isfinite(x) and (x > 0.0 if positive else x >= 0.0)
+def _time_s(x: float) -> bool:
+    """A duration: finite and >= 0."""
+    return math.isfinite(x) and x >= 0.0
+
+
+def _positive_time_s(x: float) -> bool:
+    """A duration that must pass: finite and > 0."""
+    return math.isfinite(x) and x > 0.0
 
 
 def _yaw(x: float) -> bool:
@@ -72,7 +80,38 @@ def _yaw(x: float) -> bool:
     return math.isnan(x) or math.isfinite(x)
 
 
+def _int32(v: int) -> bool:
+    """An x or y that fits MISSION_ITEM_INT's int32."""
+    return isinstance(v, int) and INT32_MIN <= v <= INT32_MAX
+
+
+# The parameters each command uses, in the order they are checked (the first failing one is
+# the result): (MissionItem field, its rule, the refusal).
+_PARAM_RULES: dict[int, tuple[tuple[str, Callable[[float], bool], int], ...]] = {
+    MAV_CMD_NAV_TAKEOFF: (("param2", _time_s, MAV_MISSION_INVALID_PARAM2),
+                          ("param4", _yaw, MAV_MISSION_INVALID_PARAM4),
+                          ("z", _finite, MAV_MISSION_INVALID_PARAM7)),
+    MAV_CMD_NAV_WAYPOINT: (("param1", _time_s, MAV_MISSION_INVALID_PARAM1),
+                           ("param4", _yaw, MAV_MISSION_INVALID_PARAM4),
+                           ("z", _finite, MAV_MISSION_INVALID_PARAM7)),
+    MAV_CMD_NAV_LOITER_TIME: (("param1", _time_s, MAV_MISSION_INVALID_PARAM1),
+                              ("z", _finite, MAV_MISSION_INVALID_PARAM7)),
+    MAV_CMD_NAV_LAND: (("param4", _yaw, MAV_MISSION_INVALID_PARAM4),),
+    MAV_CMD_POSE_KEYFRAME: (("param1", _positive_time_s, MAV_MISSION_INVALID_PARAM1),
+                            ("param2", _finite, MAV_MISSION_INVALID_PARAM2),
+                            ("param3", _finite, MAV_MISSION_INVALID_PARAM3),
+                            ("param4", _finite, MAV_MISSION_INVALID_PARAM4),
+                            ("z", _finite, MAV_MISSION_INVALID_PARAM7)),
+    MAV_CMD_FIGURE_EIGHT: (("param1", _time_s, MAV_MISSION_INVALID_PARAM1),
+                           ("param2", _positive_time_s, MAV_MISSION_INVALID_PARAM2),
+                           ("param3", _finite, MAV_MISSION_INVALID_PARAM3),
+                           ("param4", _finite, MAV_MISSION_INVALID_PARAM4),
+                           ("z", _finite, MAV_MISSION_INVALID_PARAM7)),
+}
+
+
 def _outside(seq: int, reach_m: float, r: float) -> tuple[int, str]:
+    """MAV_MISSION_DENIED for an item reaching `reach_m` from the origin, beyond radius r."""
     return MAV_MISSION_DENIED, f"item {seq}: beyond the geofence ({reach_m:.0f} m > {r:.0f} m)"
 
 
@@ -85,78 +124,91 @@ def _scaled(item: MissionItem, r: float) -> tuple[int, str]:
         f"({r:.0f} m): a local WPL file scaled by 1e7 (MAVProxy)? use a global frame")
 
 
-def _check_item(item: MissionItem, limits: MissionLimits, pos: list[float],
-                geofence: bool = True) -> tuple[int, str]:
-    """(MAV_MISSION_RESULT, reason) of one item's parameters and geofence; `pos` (planned NED
-    position) moves to its end."""
-    cmd = item.command
-    if cmd not in SUPPORTED_COMMANDS:
-        return MAV_MISSION_UNSUPPORTED, ""
+def _carried_result(item: MissionItem) -> int:
+    """MAV_MISSION_RESULT of the command, the frame and x, y (which must fit MISSION_ITEM_INT
+    even where the command ignores them)."""
+    if item.command not in SUPPORTED_COMMANDS:
+        return MAV_MISSION_UNSUPPORTED
     if item.frame != MAV_FRAME_LOCAL_NED:
-        return MAV_MISSION_UNSUPPORTED_FRAME, ""
-    # x, y must fit MISSION_ITEM_INT even where the command ignores them.
-    if not (isinstance(item.x, int) and INT32_MIN <= item.x <= INT32_MAX):
-        return MAV_MISSION_INVALID_PARAM5_X, ""
-    if not (isinstance(item.y, int) and INT32_MIN <= item.y <= INT32_MAX):
-        return MAV_MISSION_INVALID_PARAM6_Y, ""
-    p1, p2, p3, p4, z = item.param1, item.param2, item.param3, item.param4, item.z
-    r = limits.max_distance_m if geofence else math.inf
-    if cmd == MAV_CMD_NAV_TAKEOFF:
-        if not _time(p2):
-            return MAV_MISSION_INVALID_PARAM2, ""
-        if not _yaw(p4):
-            return MAV_MISSION_INVALID_PARAM4, ""
-        if not _finite(z):
-            return MAV_MISSION_INVALID_PARAM7, ""
-        target = [pos[0], pos[1], z]
-    elif cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME):
-        if not _time(p1):
-            return MAV_MISSION_INVALID_PARAM1, ""
-        if cmd == MAV_CMD_NAV_WAYPOINT and not _yaw(p4):
-            return MAV_MISSION_INVALID_PARAM4, ""
-        if not _finite(z):
-            return MAV_MISSION_INVALID_PARAM7, ""
-        target = [item.x_m, item.y_m, z]
-    elif cmd == MAV_CMD_NAV_LAND:
-        if not _yaw(p4):
-            return MAV_MISSION_INVALID_PARAM4, ""
-        pos[2] = 0.0
-        return MAV_MISSION_ACCEPTED, ""
-    elif cmd == MAV_CMD_POSE_KEYFRAME:
-        if not _time(p1, positive=True):
-            return MAV_MISSION_INVALID_PARAM1, ""
-        for value, code in ((p2, MAV_MISSION_INVALID_PARAM2), (p3, MAV_MISSION_INVALID_PARAM3),
-                            (p4, MAV_MISSION_INVALID_PARAM4)):
-            if not _finite(value):
-                return code, ""
-        if not _finite(z):
-            return MAV_MISSION_INVALID_PARAM7, ""
-        target = [item.x_m, item.y_m, z]
-    else:  # MAV_CMD_FIGURE_EIGHT
-        if not _time(p1):
-            return MAV_MISSION_INVALID_PARAM1, ""
-        if not _time(p2, positive=True):
-            return MAV_MISSION_INVALID_PARAM2, ""
-        if not _finite(p3):
-            return MAV_MISSION_INVALID_PARAM3, ""
-        if not _finite(p4):
-            return MAV_MISSION_INVALID_PARAM4, ""
-        if not _finite(z):
-            return MAV_MISSION_INVALID_PARAM7, ""
-        if p3 == 0.0 and p4 == 0.0 and z == 0.0:
-            return MAV_MISSION_INVALID_PARAM3, ""  # no axis
-        reach = norm3((pos[0], pos[1], pos[2])) + p1 * FIGURE_EXTENT
-        if reach > r:
-            return _outside(item.seq, reach, r)
-        return MAV_MISSION_ACCEPTED, ""  # ends where it started (T = 2 pi)
-    reach = norm3((target[0], target[1], target[2]))
+        return MAV_MISSION_UNSUPPORTED_FRAME
+    if not _int32(item.x):
+        return MAV_MISSION_INVALID_PARAM5_X
+    if not _int32(item.y):
+        return MAV_MISSION_INVALID_PARAM6_Y
+    return MAV_MISSION_ACCEPTED
+
+
+def _params_result(item: MissionItem) -> int:
+    """MAV_MISSION_RESULT of the parameters the item's command uses (`_PARAM_RULES`)."""
+    for field, rule, refusal in _PARAM_RULES[item.command]:
+        value: float = getattr(item, field)
+        if not rule(value):
+            return refusal
+    return MAV_MISSION_ACCEPTED
+
+
+def _fly_to(item: MissionItem, target_ned_m: list[float], pos: list[float],
+            r: float) -> tuple[int, str]:
+    """An item ending at `target_ned_m`: inside the geofence radius r, `pos` moves there."""
+    reach = norm3((target_ned_m[0], target_ned_m[1], target_ned_m[2]))
     if reach > r:
         if item.command in XY_COMMANDS and \
                 math.hypot(item.x_m, item.y_m) > max(r, SCALED_LOCAL_M):
             return _scaled(item, r)
         return _outside(item.seq, reach, r)
-    pos[:] = target
+    pos[:] = target_ned_m
     return MAV_MISSION_ACCEPTED, ""
+
+
+def _take_off(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+    """NAV_TAKEOFF: climbs to z over the planned x, y."""
+    return _fly_to(item, [pos[0], pos[1], item.z], pos, r)
+
+
+def _go_to(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+    """NAV_WAYPOINT, NAV_LOITER_TIME and the pose keyframe: fly to x, y, z."""
+    return _fly_to(item, [item.x_m, item.y_m, item.z], pos, r)
+
+
+def _land(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+    """NAV_LAND: down to z = 0 where it is (always inside the geofence)."""
+    pos[2] = 0.0
+    return MAV_MISSION_ACCEPTED, ""
+
+
+def _figure_eight(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+    """The figure-infinity: an axis (p3, p4, z) not zero, its reach (amplitude p1 times
+    FIGURE_EXTENT from the start) inside the geofence; it ends where it started (T = 2 pi)."""
+    if item.param3 == 0.0 and item.param4 == 0.0 and item.z == 0.0:
+        return MAV_MISSION_INVALID_PARAM3, ""  # no axis
+    reach = norm3((pos[0], pos[1], pos[2])) + item.param1 * FIGURE_EXTENT
+    if reach > r:
+        return _outside(item.seq, reach, r)
+    return MAV_MISSION_ACCEPTED, ""
+
+
+# Where each command's item goes, with its geofence check: (item, pos, radius r) -> result.
+_MOTIONS: dict[int, Callable[[MissionItem, list[float], float], tuple[int, str]]] = {
+    MAV_CMD_NAV_TAKEOFF: _take_off,
+    MAV_CMD_NAV_WAYPOINT: _go_to,
+    MAV_CMD_NAV_LOITER_TIME: _go_to,
+    MAV_CMD_POSE_KEYFRAME: _go_to,
+    MAV_CMD_NAV_LAND: _land,
+    MAV_CMD_FIGURE_EIGHT: _figure_eight,
+}
+
+
+def _check_item(item: MissionItem, limits: MissionLimits, pos: list[float],
+                geofence: bool = True) -> tuple[int, str]:
+    """(MAV_MISSION_RESULT, reason) of one item's parameters and geofence; `pos` (planned NED
+    position) moves to its end."""
+    result = _carried_result(item)
+    if result == MAV_MISSION_ACCEPTED:
+        result = _params_result(item)
+    if result != MAV_MISSION_ACCEPTED:
+        return result, ""
+    r = limits.max_distance_m if geofence else math.inf
+    return _MOTIONS[item.command](item, pos, r)
 
 
 def _localized(item: MissionItem, home: HomePosition | None,

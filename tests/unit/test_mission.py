@@ -17,6 +17,7 @@ from common.frames import enu_to_ned, ned_to_enu, q_enu_flu_to_ned_frd, q_ned_fr
 from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
 from common.mission_items import MissionItem, local_xy
 from fcu.dualquat import q_angle, q_conj, q_exp, q_mul, q_norm, q_rotate_inv
+from fcu.mission import validation
 from fcu.mission.executor import MissionEvent, MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import level_attitude
@@ -439,6 +440,27 @@ def test_validation_sequence_count_and_fence():
     too_big = fits._replace(param1=7.2)  # 14.14 + 16.10 > 30
     assert validate_mission([start, fits], limits) == (M.MAV_MISSION_ACCEPTED, None)
     assert validate_mission([start, too_big], limits) == (M.MAV_MISSION_DENIED, 1)
+
+
+def test_validation_tables_cover_every_command_and_the_first_failure_wins():
+    """Given the supported commands, then each has its parameter rules and its motion; given
+    an item failing several checks, then the earliest one (command, frame, x, y, parameters
+    in slot order, then the figure's axis) is the result."""
+    commands = mission_mod.SUPPORTED_COMMANDS
+    assert set(validation._PARAM_RULES) == set(validation._MOTIONS) == commands
+    bad_all = dict(p1=-1.0, p2=-1.0, p3=NAN, p4=math.inf, z=NAN)
+    first = [(item(0, 17, **bad_all), M.MAV_MISSION_UNSUPPORTED),
+             (item(0, WP, frame=M.MAV_FRAME_BODY_NED, **bad_all),
+              M.MAV_MISSION_UNSUPPORTED_FRAME),
+             (item(0, WP, **bad_all)._replace(x=2 ** 31, y=2 ** 31),
+              M.MAV_MISSION_INVALID_PARAM5_X),
+             (item(0, M.MAV_CMD_NAV_TAKEOFF, **bad_all), M.MAV_MISSION_INVALID_PARAM2),
+             (item(0, MAV_CMD_POSE_KEYFRAME, p1=1.0, p2=NAN, p4=NAN),
+              M.MAV_MISSION_INVALID_PARAM2),
+             (item(0, MAV_CMD_FIGURE_EIGHT, p1=1.0, p2=1.0, p4=NAN),
+              M.MAV_MISSION_INVALID_PARAM4)]
+    for bad, result in first:
+        assert validate_mission([bad], LIMITS) == (result, 0), bad
 
 
 def test_yaw_conversion_round_trip():
