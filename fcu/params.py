@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import struct
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
 from common.config import ConfigError, Gains, VehicleConfig, check_stability
+from common.wire_round import f32
 from fcu.estimator.settings import EstimatorSettings
 from fcu.failsafe import FailsafeSettings
 from fcu.manual import StickSettings
@@ -75,12 +75,6 @@ def _bound(name: str, path: str, lo: float, hi: float, unit: str,
     DEFAULT_OVERRIDES)."""
     default = DEFAULT_OVERRIDES[name][0] if name in DEFAULT_OVERRIDES else field_default(path)
     return ParamSpec(name, default, lo, hi, unit, description, path)
-
-
-def _f32(x: float) -> float:
-    """x rounded to float32 (MAV_PARAM_TYPE_REAL32)."""
-    value: float = struct.unpack("<f", struct.pack("<f", x))[0]
-    return value
 
 
 def _gain_specs() -> list[ParamSpec]:
@@ -208,14 +202,14 @@ class ParamStore:
     def __init__(self, gains: Gains) -> None:
         self.values: dict[str, float] = {}
         for spec in SPECS:
-            self.values[spec.name] = _f32(spec.default)
+            self.values[spec.name] = f32(spec.default)
         self._load_gains(gains)
 
     def _load_gains(self, gains: Gains) -> None:
         for spec in SPECS:
             if spec.name.startswith("DQ_K"):
                 key = spec.name[3:5].lower() + "_" + spec.name[5].lower()
-                self.values[spec.name] = _f32(getattr(gains, key)["XYZ".index(spec.name[-1])])
+                self.values[spec.name] = f32(getattr(gains, key)["XYZ".index(spec.name[-1])])
         self.values["DQ_DAMPING"] = float(DAMPING_CODES.index(gains.damping))
 
     @property
@@ -239,14 +233,14 @@ class ParamStore:
         spec = BY_NAME.get(name)
         if spec is None:
             raise ParamError(f"unknown parameter {name}")
-        if armed and name in LOCKED_WHEN_ARMED and _f32(value) != self.values[name]:
+        if armed and name in LOCKED_WHEN_ARMED and f32(value) != self.values[name]:
             raise ParamError(f"{name} refused: the estimator's settings change only disarmed")
         if not math.isfinite(value) or not spec.lo <= value <= spec.hi:
             raise ParamError(f"{name} refused: {value:g} not in [{spec.lo:g}, {spec.hi:g}]")
         if spec.unit == "enum" and value != round(value):
             raise ParamError(f"{name} refused: must be an integer in [{spec.lo:g}, {spec.hi:g}]")
         trial = dict(self.values)
-        trial[name] = _f32(value)
+        trial[name] = f32(value)
         if name.startswith("DQ_K"):
             try:
                 check_stability(self.gains(trial))
