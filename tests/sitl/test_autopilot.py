@@ -172,9 +172,10 @@ def test_arming_gate_no_rotor_output_when_disarmed(rt_stack):
     s = rt_stack.session
     out = rt_stack.wait_for(["ACTUATOR_OUTPUT_STATUS"], timeout=5.0)
     assert out is not None and out.actuator[:6] == [0.0] * 6
-    time.sleep(0.5)
-    pos = rt_stack.wait_for(["LOCAL_POSITION_NED"])
-    assert pos.z == pytest.approx(0.0, abs=1e-6)
+    # it stays put for 0.5 s of the vehicle's clock
+    pos = rt_stack.wait_for(["LOCAL_POSITION_NED"], lambda m: m.time_boot_ms >=
+                            out.time_usec // 1000 + 500, 30.0)
+    assert pos is not None and pos.z == pytest.approx(0.0, abs=1e-6)
     assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
     hb = rt_stack.wait_for(["HEARTBEAT"], lambda m: m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
     assert hb is not None

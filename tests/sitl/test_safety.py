@@ -20,6 +20,8 @@ from gcs.mission_client import download, upload
 from gcs.scenario_mission import scenario_mission
 
 from .conftest import ROOT, SCENARIOS, launch, stop
+from .test_run_folder import _flown_s
+from .waits import flown_to, until
 
 M = MAV
 pytestmark = pytest.mark.timeout(180)
@@ -120,7 +122,7 @@ def _kill_simulator_in_flight(stack, expect: str, within_s: float):
     """Fly a gentle keyframe, SIGKILL the SITL after 1 s, and wait for the FCU to say
     `expect`; the STATUSTEXT, which must come within `within_s` of the kill."""
     _fly_keyframe(stack, 0.5, 5.0)
-    time.sleep(1.0)
+    flown_to(stack, 1.0)
     stack.procs["sitl"].send_signal(signal.SIGKILL)
     killed = time.monotonic()
     text = _texts(stack, expect, 5.0)
@@ -206,7 +208,7 @@ def test_signed_link_flies_and_refuses_unsigned_wrong_and_replayed(tmp_path):
         for bad in (fresh(None), fresh(bytes(32))):
             for msg in (arm, count):
                 bad.mav.send(msg)
-            time.sleep(0.5)
+            time.sleep(0.5)  # deliberate: the window in which no answer may come
             assert not any(m.get_type() == "MISSION_REQUEST_INT" for m in _drain(bad))
             bad.close()
         assert stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1 and
@@ -326,15 +328,17 @@ def test_gcs_run_reports_a_dead_child_and_leaves_none_behind(tmp_path):
             fcu_pid = next((int(line.split()[0]) for line in listing.splitlines()
                             if "fcu.node" in line), None)
         assert fcu_pid is not None
-        time.sleep(1.0)
+        until(lambda: _flown_s(out / "flight.tlog") >= 1.0, "the flight's start", 90.0)
         os.kill(fcu_pid, signal.SIGKILL)  # a child of our own ground station
         _, err = proc.communicate(timeout=60)
         assert proc.returncode == 1
         assert "fcu exited with status -9" in err
-        time.sleep(0.5)
-        left = subprocess.run(["ps", "-o", "pid=,args=", "-g", str(proc.pid)],
-                              capture_output=True, text=True, check=False).stdout
-        assert "sitl.node" not in left
+
+        def left() -> str:
+            return subprocess.run(["ps", "-o", "pid=,args=", "-g", str(proc.pid)],
+                                  capture_output=True, text=True, check=False).stdout
+
+        until(lambda: "sitl.node" not in left(), f"sitl stopped (left: {left()})", 10.0)
     finally:
         try:
             os.killpg(proc.pid, signal.SIGKILL)

@@ -11,7 +11,6 @@ import math
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,7 @@ from gcs.runio import read_run_logs
 
 from .conftest import ROOT, SCENARIOS, launch, stop
 from .test_safety import _fly_keyframe
+from .waits import flown_to
 
 CASE1 = SCENARIOS / "case1_figure8.toml"
 DURATION_S = 6.0
@@ -247,7 +247,7 @@ def test_every_complete_record_survives_sigkill(tmp_path, victim):
     stack = launch(tmp_path)
     try:
         _fly_keyframe(stack, 0.5, 5.0)
-        time.sleep(1.5)
+        flown_to(stack, 1.5)  # mid-flight: hundreds of records in each log
         stack.procs[victim].send_signal(signal.SIGKILL)
         stack.procs[victim].wait(timeout=10)
     finally:
@@ -282,9 +282,8 @@ def test_a_full_disk_ends_the_log_not_the_flight(tmp_path):
         assert text is not None and text.severity == MAV.MAV_SEVERITY_WARNING
         assert "too large" in text.text
         first = stack.wait_for(["LOCAL_POSITION_NED"])
-        time.sleep(1.0)
         later = stack.wait_for(["LOCAL_POSITION_NED"], lambda m: m.time_boot_ms >
-                               first.time_boot_ms + 500, 10.0)
+                               first.time_boot_ms + 500, 60.0)
         assert later is not None  # simulated time goes on: the FCU still answers
         hb = stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1)
         assert hb is not None and hb.base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED
