@@ -260,6 +260,23 @@ def test_bad_campaigns_are_refused_with_the_reason(tmp_path: Path, text: str,
         expand(load_campaign(write(tmp_path, text)), tmp_path)
 
 
+def test_the_first_failing_section_is_the_reason(tmp_path: Path) -> None:
+    """Given a file wrong in several sections, then the reason names the first in the order
+    of checking: transport, [set], [[axis]], [monte_carlo], [keep]; within a section, its
+    first (an axis's keys before its values, draws before seed)."""
+    bad = {"transport": 'transport = "x"\n',
+           "set": "set = 1\n",
+           "axis": '[[axis]]\nkey = "a..b"\nvalues = []\n',
+           "monte_carlo": "[monte_carlo]\ndraws = 0\nseed = -1\n",
+           "keep": '[keep]\nrun_folders = "some"\n'}
+    reasons = ["key 'transport'", "key 'set'", "'a..b'", "key 'draws'", "key 'keep.run_folders'"]
+    sections = list(bad)
+    for i, reason in enumerate(reasons):
+        text = "".join(bad[k] for k in sections[i:])  # top-level keys before the tables
+        with pytest.raises(CampaignError, match=reason):
+            load_campaign(write(tmp_path, text, f"c{i}.toml"))
+
+
 def test_unreadable_campaign_files(tmp_path: Path) -> None:
     with pytest.raises(CampaignError, match="not found"):
         load_campaign(tmp_path / "nope.toml")
