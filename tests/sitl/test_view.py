@@ -38,6 +38,7 @@ from gcs.vehicle_link.pose import PoseTarget
 
 from ..terminal import sigint_default
 from .conftest import ROOT, SCENARIOS, VEHICLE, launch, stop
+from .waits import TlogTail, until
 
 M = MAV
 TOPICS = {"/tf": "foxglove.FrameTransforms", "/airframe": "foxglove.SceneUpdate",
@@ -227,6 +228,23 @@ class Flight(threading.Thread):
         self.stream(math.inf)
 
 
+def _lifted_and_tilted(tlog: TlogTail, timeout: float = 60.0) -> None:
+    """Wait until the test's own telemetry shows the vehicle 1 m up and a rotor tilted
+    more than 0.05 rad (the pose of `Flight` needs both)."""
+    up = tilted = False
+
+    def flying() -> bool:
+        nonlocal up, tilted
+        for m in tlog.new({"LOCAL_POSITION_NED", "ACTUATOR_OUTPUT_STATUS"}):
+            if m.get_type() == "LOCAL_POSITION_NED":
+                up = up or m.z < -1.0
+            else:
+                tilted = tilted or max(abs(_wrap(a)) for a in m.actuator[6:12]) > 0.05
+        return up and tilted
+
+    until(flying, "the vehicle 1 m up with its rotors tilted", timeout, poll_s=0.5)
+
+
 # ------------------------------------------------------------------ live
 
 
@@ -265,7 +283,7 @@ def test_live_view_serves_the_vehicle_and_records_it(tmp_path):
         while "mode" not in flight.results and time.monotonic() < deadline:
             time.sleep(0.1)
         assert flight.results == {"arm": M.MAV_RESULT_ACCEPTED, "mode": M.MAV_RESULT_ACCEPTED}
-        time.sleep(2.0)  # the vehicle lifts and tilts its rotors
+        _lifted_and_tilted(TlogTail(tmp_path / "flight.tlog"))
         window = 8.0
         got = asyncio.run(_collect(url, window))
         flight.halt.set()

@@ -6,7 +6,10 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from pathlib import Path
+from typing import Any, TypeVar
+
+from pymavlink.dialects.v20 import common as mavlink2
 
 T = TypeVar("T")
 
@@ -32,3 +35,34 @@ def flown_to(stack, t_s: float, timeout: float = 60.0):
                          timeout)
     assert msg is not None, f"the vehicle's clock did not reach {t_s:g} s in {timeout:g} s"
     return msg
+
+
+class TlogTail:
+    """The messages appended to a growing telemetry log (gcs.session.Tlog: each message
+    after its 8-byte time stamp, written whole) since the last call, read incrementally."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.offset = 0
+        self.parser = mavlink2.MAVLink(None)
+
+    def new(self, types: set[str]) -> list[Any]:
+        """The messages of `types` written since the last call."""
+        if not self.path.exists():
+            return []
+        with self.path.open("rb") as fh:
+            fh.seek(self.offset)
+            data = fh.read()
+        out, at = [], 0
+        while len(data) - at > 8 + 2:
+            start = at + 8
+            magic, length, flags = data[start], data[start + 1], data[start + 2]
+            size = (12 + length + (13 if flags & 1 else 0) if magic == 0xFD else 8 + length)
+            if len(data) - start < size:
+                break  # not written yet
+            msg = self.parser.decode(bytearray(data[start:start + size]))
+            if msg.get_type() in types:
+                out.append(msg)
+            at = start + size
+        self.offset += at
+        return out
