@@ -58,7 +58,7 @@ def observe(port: int, out: str) -> None:
             elif kind == "LOCAL_POSITION_NED":
                 rec.update(x=msg.x, y=msg.y, z=msg.z)
             elif kind == "GLOBAL_POSITION_INT":
-                rec.update(rel=msg.relative_alt * 1e-3)
+                rec.update(rel=msg.relative_alt * 1e-3, ms=msg.time_boot_ms)
             elif kind == "EXTENDED_SYS_STATE":
                 rec.update(landed=msg.landed_state)
             else:
@@ -278,7 +278,9 @@ def test_mode_takeoff_then_rtl(copter):
     hold = copter.gcs("mode", "HOLD")
     assert hold.returncode == 0 and copter.mode_after(time.time()) == BRAKE
     t1 = time.time()
-    time.sleep(1.0)  # 10 s of the vehicle's time
+    first = copter.wait_for("GLOBAL_POSITION_INT", lambda r: True, 10.0, t1)
+    copter.wait_for("GLOBAL_POSITION_INT", lambda r: r["ms"] >= first["ms"] + 10_000, 60.0,
+                    t1)  # it holds for 10 s of the vehicle's clock (1 s of ours at speedup 10)
     held = copter.records("GLOBAL_POSITION_INT", t1)
     assert held and all(9.0 < r["rel"] < 11.0 for r in held), held[-1:]
     t2 = time.time()

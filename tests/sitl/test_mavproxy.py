@@ -109,7 +109,13 @@ def test_mavproxy_names_and_changes_px4_modes(tmp_path):
     try:
         assert mp.wait_for("LOITER>", timeout=30), mp.text()
         assert "Mode LOITER" in mp.text()
-        time.sleep(3.0)  # several SYS_STATUS: the fence module would have spoken by now
+        # Deliberate: 3 s and at least three SYS_STATUS from the vehicle (the test's own link
+        # hears them as MAVProxy's does): the fence module would have spoken by then.
+        heard, quiet_until = 0, time.monotonic() + 3.0
+        while heard < 3 or time.monotonic() < quiet_until:
+            assert stack.wait_for(["SYS_STATUS"], timeout=30.0) is not None, \
+                "no SYS_STATUS from the vehicle in 30 s"
+            heard += 1
         assert "fence" not in mp.text().lower(), mp.text()
 
         mark = mp.send("mode MISSION")

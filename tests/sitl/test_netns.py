@@ -8,7 +8,6 @@ import os
 import shutil
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 
 import pytest
@@ -18,6 +17,7 @@ from gcs.mission_files.toml import format_toml
 from gcs.scenario_mission import scenario_mission
 
 from .conftest import PID, ROOT, SCENARIOS, VEHICLE
+from .waits import until
 
 pytestmark = pytest.mark.timeout(180)
 SUBNET = "10.231.{}.{}"
@@ -78,7 +78,9 @@ def test_ground_station_in_another_namespace_flies_the_vehicle(namespaces, tmp_p
 
     procs = [in_ns(ns_v, "router", "gcs.cli", "router", "--listen", router)]
     try:
-        time.sleep(1.0)
+        until(lambda: procs[0].poll() is not None or "listening on" in
+              (tmp_path / "router.log").read_text(), "the router listening")
+        assert procs[0].poll() is None, (tmp_path / "router.log").read_text()
         procs += [in_ns(ns_v, "sitl", "sitl.node", str(SCENARIOS / "case1_figure8.toml"),
                         "--link", url, "--end-time", "600"),
                   in_ns(ns_v, "fcu", "fcu.node", "--vehicle", str(VEHICLE), "--gains",
@@ -93,8 +95,12 @@ def test_ground_station_in_another_namespace_flies_the_vehicle(namespaces, tmp_p
         assert gcs("mission", "download", "--format", "toml").stdout == mission.read_text()
         assert gcs("arm").returncode == 0
         assert gcs("mission", "start").returncode == 0
-        time.sleep(2.0)
-        flying = gcs("status").stdout
+
+        def in_air() -> str:
+            out = gcs("status").stdout
+            return out if "landed: in air" in out else ""
+
+        flying = until(in_air, "the vehicle in the air after mission start")
         assert "mode: MISSION" in flying and "landed: in air" in flying
     finally:
         for proc in reversed(procs):
