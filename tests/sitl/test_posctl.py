@@ -73,6 +73,21 @@ def _latest(stack, kind: str, timeout: float = 2.0):
     return msg
 
 
+def _at_rest(stack, timeout: float = 30.0) -> None:
+    """Wait until the set-point has stopped (POSITION_TARGET_LOCAL_NED's velocity and
+    acceleration zero) and the vehicle with it (under 5 mm/s and 0.01 rad/s of yaw rate),
+    after the sticks are centred."""
+    deadline = time.monotonic() + timeout
+    while True:
+        sp = _latest(stack, "POSITION_TARGET_LOCAL_NED")
+        p = _latest(stack, "LOCAL_POSITION_NED")
+        att = _latest(stack, "ATTITUDE")
+        if max(abs(v) for v in (sp.vx, sp.vy, sp.vz, sp.afx, sp.afy, sp.afz)) < 1e-4 and \
+                math.hypot(p.vx, p.vy, p.vz) < 0.005 and abs(att.yawspeed) < 0.01:
+            return
+        assert time.monotonic() < deadline, f"not at rest in {timeout:g} s: {sp} {p} {att}"
+
+
 def test_posctl_sticks_move_the_vehicle_and_centred_it_holds(rt_stack):
     """Given the vehicle armed on the ground in POSCTL with centred sticks, when the throttle
     is held full up for 1 s, then it climbs as the jerk-limited set-point does (`_shaped`:
@@ -89,7 +104,9 @@ def test_posctl_sticks_move_the_vehicle_and_centred_it_holds(rt_stack):
     assert forward == pytest.approx(manual.deflection(0.5) * 5.0 * 2.0, rel=0.05)
     sticks = Sticks(s)
     try:
-        time.sleep(0.3)
+        heard = rt_stack.wait_for(["SYS_STATUS"], lambda m: m.onboard_control_sensors_health
+                                  & M.MAV_SYS_STATUS_SENSOR_RC_RECEIVER, 30.0)
+        assert heard is not None, "the FCU did not hear the sticks (RC_RECEIVER) in 30 s"
         assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1) == M.MAV_RESULT_ACCEPTED
         base = (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | M.MAV_MODE_FLAG_STABILIZE_ENABLED
                 | M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED)  # as pymavlink's px4_map["POSCTL"]
@@ -99,14 +116,14 @@ def test_posctl_sticks_move_the_vehicle_and_centred_it_holds(rt_stack):
         assert hb is not None and hb.base_mode & M.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
 
         sticks.hold(1.0, z=1000)  # full throttle: climb at MPC_Z_VEL_MAX_UP
-        time.sleep(3.0)
+        _at_rest(rt_stack)
         p0 = _latest(rt_stack, "LOCAL_POSITION_NED")
         sp = _latest(rt_stack, "POSITION_TARGET_LOCAL_NED")
         assert p0.z == pytest.approx(-climb, abs=0.3), (p0, sp)
         yaw = _latest(rt_stack, "ATTITUDE").yaw
 
         sticks.hold(2.0, x=500)  # half forward for 2 s
-        time.sleep(3.0)  # the jerk-limited braking takes about 2 s
+        _at_rest(rt_stack)  # the jerk-limited braking takes about 2 s
         p1 = _latest(rt_stack, "LOCAL_POSITION_NED")
         dn, de = p1.x - p0.x, p1.y - p0.y
         along = dn * math.cos(yaw) + de * math.sin(yaw)
@@ -124,7 +141,7 @@ def test_posctl_sticks_move_the_vehicle_and_centred_it_holds(rt_stack):
         assert max(math.dist(p, samples[0]) for p in samples) < 0.02  # holds
 
         sticks.hold(1.0, r=1000)  # full yaw right for 1 s: clockwise
-        time.sleep(2.0)  # the braking takes well under that
+        _at_rest(rt_stack)  # the braking takes well under 2 s
         turned = math.degrees(_latest(rt_stack, "ATTITUDE").yaw - yaw)
         assert (turned + 180.0) % 360.0 - 180.0 == pytest.approx(turn, abs=8.0)
 
