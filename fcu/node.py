@@ -45,7 +45,7 @@ from fcu.mission_protocol import MissionServer
 from fcu.onboard_log import OnboardLog
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
-from fcu.sim_bridge import Resent, SimBridge
+from fcu.sim_bridge import Resent, SimBridge, StateSample
 from fcu.telemetry import Home, heartbeat
 
 M = MAV
@@ -168,6 +168,10 @@ class FlightController:
         self.last_sim_rx_s = time.monotonic()
         pipe = self.pipeline
         for sample in self.sim.receive(peer, data):
+            if not self.lockstep and self.log is not None and \
+                    isinstance(sample, ImuInput | StateSample):
+                stamp = sample.t_us if isinstance(sample, ImuInput) else sample.stamp_us
+                self.log.set_source_clock(stamp, round((self.last_sim_rx_s - self.boot_s) * 1e6))
             if isinstance(sample, PoseInput):
                 t0 = time.perf_counter()
                 pipe.on_pose(sample)

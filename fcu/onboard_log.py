@@ -4,7 +4,9 @@ Topics (ULog, read with pyulog); PX4's layouts are in `common.px4_topics`:
 
 - `dq_onboard`, every control step in flight: ONBOARD_COLUMNS in float64, ENU/FLU (state,
   desired pose and twist, wrench, commands, raw and unwrapped tilts, dual-quaternion errors,
-  step time); every metric of the controller's side is computed from it.
+  step time), and `state_time_us`, the stamp of the state the step acted on as its source
+  (the simulator) sent it: the key that joins it to truth.ulg (`gcs.runio`); every metric
+  of the controller's side is computed from it.
 - At PX4_HZ (NED/FRD, float32): vehicle_local_position, vehicle_attitude,
   vehicle_angular_velocity (the state the controller used); in flight trajectory_setpoint,
   vehicle_local_position_setpoint, vehicle_attitude_setpoint, vehicle_rates_setpoint (the
@@ -26,6 +28,12 @@ Topics (ULog, read with pyulog); PX4's layouts are in `common.px4_topics`:
   With the first input, two information messages give what the replay needs beyond the
   parameters: `dq_gravity_m_s2` (the estimator's gravity, as text: exact) and
   `dq_control_period_us` (the estimate is taken at IMU samples on multiples of it).
+
+One clock per log (docs/clocks.md): every timestamp is the FCU's flight clock. In lockstep
+the simulator's stamps are that clock; in real time they come from another process's clock,
+and the stamps of samples (states, IMU samples, poses, the estimate) are moved onto the
+flight clock by `clock_offset_us`, set once from the first sample (a whole number of
+control periods, so samples on period multiples stay on them).
 
 Parameters are in the definitions (their values when the log opened, with MAV_TYPE,
 MAV_SYS_ID and SYS_AUTOSTART: `identity_params`) and as changes in the data; everything the
@@ -50,7 +58,8 @@ from fcu.pipeline import Pipeline, StepOutput
 from fcu.telemetry import Home
 
 DQ_ONBOARD = Topic("dq_onboard", (("uint64_t", "timestamp"),
-                                  *(("double", c) for c in ONBOARD_COLUMNS[1:])))
+                                  *(("double", c) for c in ONBOARD_COLUMNS[1:]),
+                                  ("uint64_t", "state_time_us")))
 ONBOARD_TOPICS = (
     DQ_ONBOARD, px4.VEHICLE_LOCAL_POSITION, px4.VEHICLE_ATTITUDE, px4.VEHICLE_ANGULAR_VELOCITY,
     px4.TRAJECTORY_SETPOINT, px4.VEHICLE_LOCAL_POSITION_SETPOINT,
@@ -108,8 +117,25 @@ class OnboardLog(ULogWriter):
         self.imu_t_us = -1  # the newest IMU sample logged
         self.imu_dt_us = 0
         self.poses_waiting: list[PoseInput] = []  # received after it: stamped with the next
+        # source (simulator) clock -> flight clock, for sample stamps; 0 in lockstep
+        self.clock_offset_us = 0
+        self.clock_offset_set = False
 
     # ------------------------------------------------------------------ records
+
+    def set_source_clock(self, stamp_us: int, flight_us: int) -> None:
+        """Real time: a sample stamped `stamp_us` by its source arrived at `flight_us` of the
+        flight clock; from the first call on, sample stamps are logged on the flight clock
+        (moved by a whole number of control periods). Later calls change nothing."""
+        if self.clock_offset_set:
+            return
+        self.clock_offset_set = True
+        period = self.pipeline.period_us
+        self.clock_offset_us = round((flight_us - stamp_us) / period) * period
+
+    def on_flight_clock(self, stamp_us: int) -> int:
+        """A source's sample stamp on the flight clock (never before its start)."""
+        return max(stamp_us + self.clock_offset_us, 0)
 
     def step(self, out: StepOutput, step_us: float, t_us: int) -> None:
         """Queue the records of one control step at flight time t_us."""
@@ -120,7 +146,7 @@ class OnboardLog(ULogWriter):
         if out.result is not None and state is not None:
             row = onboard_row(out.t_us, state, out.result, out.speed_rad_s, out.tilt_rad,
                               out.armed, step_us)
-            w.add("dq_onboard", (out.t_us, *row[1:]))
+            w.add("dq_onboard", (self.on_flight_clock(out.t_us), *row[1:], out.t_us))
         if t_us >= self.next_px4_us:
             self.next_px4_us = (t_us // self.px4_period_us + 1) * self.px4_period_us
             self._px4(out, t_us)
@@ -130,7 +156,7 @@ class OnboardLog(ULogWriter):
         pipe = self.pipeline
         state = pipe.state
         w = self
-        stamp = out.t_us
+        stamp = self.on_flight_clock(out.t_us)
         if state is not None:
             valid = not state_lost(t_us, pipe.state_rx_us, pipe.settings)
             v_enu = q_rotate(state.q_enu_flu, state.v_flu_m_s)
@@ -178,7 +204,7 @@ class OnboardLog(ULogWriter):
         inputs.clear()
 
     def _imu(self, m: ImuInput) -> None:
-        t = m.t_us
+        t = self.on_flight_clock(m.t_us)
         if self.imu_t_us >= 0:
             self.imu_dt_us = min(max(t - self.imu_t_us, 0), 0xFFFFFFFF)
         for pose in self.poses_waiting:
@@ -190,7 +216,8 @@ class OnboardLog(ULogWriter):
 
     def _pose(self, rx_us: int, m: PoseInput) -> None:
         self.add("vehicle_visual_odometry", px4.visual_odometry_record(
-            rx_us, m.capture_us, m.p_enu_m, m.q_enu_flu, m.pos_var_m2, m.att_var_rad2))
+            rx_us, self.on_flight_clock(m.capture_us), m.p_enu_m, m.q_enu_flu, m.pos_var_m2,
+            m.att_var_rad2))
 
     def _estimator(self, t_us: int) -> None:
         """The estimator's state, innovations, test ratios and status at flight time t_us."""
@@ -198,7 +225,7 @@ class OnboardLog(ULogWriter):
         est = pipe.estimator
         assert est is not None
         st = est.status()
-        stamp = max(st.t_us, 0)
+        stamp = self.on_flight_clock(max(st.t_us, 0))
         w = self
         if st.aligned:
             out = est.output()

@@ -56,6 +56,24 @@ def rank_key(metrics: dict[str, Any]) -> tuple[int, float]:
             float(metrics["position_error_m"]["rmse"]))
 
 
+STATE_TIME = "state_time_us"  # dq_onboard: the state's stamp on the simulator's clock
+
+
+def onboard_on_truth_clock(columns: tuple[str, ...], rows: np.ndarray
+                           ) -> tuple[tuple[str, ...], np.ndarray]:
+    """dq_onboard's rows keyed for the join with dq_truth: their `time_us` is the stamp of
+    the state each step acted on as the simulator sent it (`state_time_us`), not the FCU's
+    flight clock that stamps onboard.ulg (the same clock in lockstep, another in real time);
+    the column itself is dropped. A log without it (written before it) is keyed as it is."""
+    if STATE_TIME not in columns:
+        return columns, rows
+    i = columns.index(STATE_TIME)
+    keyed = np.delete(rows, i, axis=1) if rows.ndim == 2 else rows
+    if len(keyed):
+        keyed[:, 0] = rows[:, i]
+    return columns[:i] + columns[i + 1:], keyed
+
+
 def join_logs(truth_columns: Sequence[str], truth: np.ndarray, onboard_columns: Sequence[str],
               onboard: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The one join of the plant's truth log with the FCU's onboard log: rows of both at the

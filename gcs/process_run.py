@@ -30,7 +30,7 @@ from common.parent import child_env
 from common.ulog import ULogError, read_topic
 from fcu.core import ONBOARD_COLUMNS
 from gcs.inprocess import scenario_params
-from gcs.metrics import build_metrics, link_timing
+from gcs.metrics import build_metrics, link_timing, onboard_on_truth_clock
 from gcs.mission_client import MissionError, upload_detailed
 from gcs.runio import ONBOARD_LOG, ONBOARD_TOPIC, TRUTH_LOG, TRUTH_TOPIC, write_metrics
 from gcs.scenario_mission import scenario_mission
@@ -335,8 +335,8 @@ class _Flight:
         elif not stats:
             stopped = "aborted"  # the FCU did not stop cleanly: its events are unknown
         truth_cols, truth = _read_or_empty(out / TRUTH_LOG, TRUTH_TOPIC, TRUTH_COLUMNS)
-        onboard_cols, onboard = _read_or_empty(out / ONBOARD_LOG, ONBOARD_TOPIC,
-                                               ONBOARD_COLUMNS)
+        onboard_cols, onboard = onboard_on_truth_clock(
+            *_read_or_empty(out / ONBOARD_LOG, ONBOARD_TOPIC, ONBOARD_COLUMNS))
         events = [Event(round(e["t_s"] * 1e6), int(e["severity"]), str(e["text"]),
                         str(e.get("kind", "info"))) for e in stats.get("events", [])]
         metrics = build_metrics(sc, truth_cols, truth, onboard_cols, onboard, events=events,

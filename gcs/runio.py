@@ -20,6 +20,7 @@ import numpy as np
 from common.config import Scenario
 from common.ulog import ULogError, read_topic
 from gcs.inprocess import RunResult
+from gcs.metrics import onboard_on_truth_clock
 
 TRUTH_LOG = "truth.ulg"  # written by the simulator (sitl.truth_log)
 ONBOARD_LOG = "onboard.ulg"  # written by the FCU (fcu.onboard_log)
@@ -117,7 +118,7 @@ def read_run_logs(run_dir: Path) -> tuple[tuple[str, ...], np.ndarray, tuple[str
     topics `dq_truth` and `dq_onboard` of its ULogs, as the metrics read them."""
     try:
         tc, truth = read_topic(run_dir / TRUTH_LOG, TRUTH_TOPIC)
-        oc, onboard = read_topic(run_dir / ONBOARD_LOG, ONBOARD_TOPIC)
+        oc, onboard = onboard_on_truth_clock(*read_topic(run_dir / ONBOARD_LOG, ONBOARD_TOPIC))
     except ULogError as exc:
         raise RunDirError(str(exc)) from None
     return tc, truth, oc, onboard

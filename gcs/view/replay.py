@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from common.quaternion import Quat, Vec3
+from gcs.metrics import onboard_on_truth_clock
 from gcs.view.sample import Pose, Sample
 from gcs.view.settings import DEFAULT_VEHICLE, ViewError
 
@@ -129,7 +130,7 @@ def load_replay(run_dir: Path) -> ReplayLog:
         oc: tuple[str, ...] | None = None
         onboard = None
         if onboard_path.is_file():
-            oc, onboard = ulog.read_topic(onboard_path, "dq_onboard")
+            oc, onboard = onboard_on_truth_clock(*ulog.read_topic(onboard_path, "dq_onboard"))
     except (ulog.ULogError, OSError, ValueError) as exc:
         raise ViewError(str(exc)) from None
     log = ReplayLog.from_rows(tc, truth, oc, onboard)

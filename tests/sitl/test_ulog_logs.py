@@ -203,6 +203,36 @@ def test_metrics_from_the_ulogs_are_the_runs(run_dir):
 
 
 @pytest.mark.timeout(300)
+def test_one_clock_in_the_onboard_log_in_real_time(tmp_path):
+    """Given a real-time run (the simulator's stamps on another process's clock), then
+    every record of onboard.ulg is on the FCU's flight clock: a PX4 topic's timestamp_sample
+    is within transit of its timestamp (not the processes' start-up apart), dq_onboard is
+    moved by one offset, a whole number of control periods, from the states' own stamps
+    (state_time_us), and the metrics joined on those stamps are metrics.json's."""
+    out = tmp_path / "rt"
+    metrics = _gcs_run(out, "--realtime")
+    u = open_ulog(out / "onboard.ulg")
+    dq = u.get_dataset("dq_onboard").data
+    shift = dq["timestamp"].astype(np.int64) - dq["state_time_us"].astype(np.int64)
+    assert len(shift) > 500 and np.all(shift == shift[0]) and shift[0] % 2000 == 0
+    lp = u.get_dataset("vehicle_local_position").data
+    lag_s = (lp["timestamp"].astype(np.int64) - lp["timestamp_sample"].astype(np.int64)) * 1e-6
+    # transit and scheduling only: the processes start tens of ms to seconds apart
+    assert len(lag_s) > 100 and np.median(np.abs(lag_s)) < 0.02 and np.all(np.abs(lag_s) < 0.25), \
+        (np.median(lag_s), lag_s.min(), lag_s.max())
+    in_flight = lp["timestamp_sample"][lp["timestamp_sample"] >= dq["timestamp"][0]]
+    assert len(in_flight) > 100
+    assert set(in_flight.astype(np.int64)) <= set(dq["timestamp"].astype(np.int64))
+    scenario = apply_overrides(load_scenario(CASE1), duration_s=DURATION_S)
+    tc, truth, oc, onboard = read_run_logs(out)
+    again = build_metrics(scenario, tc, truth, oc, onboard, events=[], wall_time_s=0.0,
+                          transport="", lockstep=False, mission_completed=False)
+    assert metrics["samples"] > 500
+    for key in ("position_error_m", "attitude_error_rad", "samples"):
+        assert again[key] == metrics[key], key
+
+
+@pytest.mark.timeout(300)
 def test_in_process_figures_equal_those_before_the_ulog_logs():
     """Case I PID, 30 s and Case II impulse PD, 10 s: the figures the code gave before the
     logs became ULog (DQLOG2), to the last digit printed by json. That code had the paper's

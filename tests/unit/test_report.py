@@ -141,7 +141,9 @@ def test_non_finite_rows_are_dropped(diverged_dir, tmp_path):
     for log, topic in (("truth.ulg", "dq_truth"), ("onboard.ulg", "dq_onboard")):
         columns, rows = read_topic(out / log, topic)
         tail = np.full((5, rows.shape[1]), np.nan)
-        tail[:, 0] = rows[-1, 0] + 2000.0 * np.arange(1, 6)
+        for i, name in enumerate(columns):  # the times stay times (dq_onboard has two)
+            if i == 0 or name == "state_time_us":
+                tail[:, i] = rows[-1, i] + 2000.0 * np.arange(1, 6)
         layout = Topic(topic, (("uint64_t", "timestamp"), *(("double", c) for c in columns[1:])))
         writer = ULogWriter(out / log, [layout])
         for row in np.vstack([rows, tail]):
