@@ -53,13 +53,14 @@ from benchmarks.random_mission_gen import (
 )
 from common.config import Scenario, TrajectoryConfig, load_scenario, load_vehicle
 from common.mission_items import MissionItem
+from fcu.compose import published_home
 from fcu.core import ONBOARD_COLUMNS
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
+from fcu.telemetry import Home
 from gcs.inprocess import (
     apply_overrides,
-    fcu_home,
     fcu_pipeline,
     run_scenario,
     through_wire_item,
@@ -158,7 +159,7 @@ def prepare(base: Scenario, k: int, seed: int, workdir: Path, max_s: float,
         if planned[-1][2] <= max_s:
             break
         regenerated += 1
-    check = check_mission(items, lim, fcu_home())
+    check = check_mission(items, lim, published_home(Home()))
     nominal = schedule(items, dataclasses.replace(lim, vehicle=None), start)
     scenario = dataclasses.replace(scenario, duration_s=planned[-1][2] + TAIL_S)
     return Prepared(items, cruise, regenerated, check, planned, nominal, scenario)
