@@ -9,7 +9,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 import zenoh
@@ -62,27 +62,26 @@ def test_case1_over_zenoh_equals_udp_exactly(tmp_path, router):
         (tmp_path / "zenoh" / "truth.ulg").read_bytes()
 
 
-def _observer(router: str, prefix: str, seconds: float, seen: dict,
-              heard: threading.Event | None = None) -> None:
-    """A plain Zenoh subscriber decoding MAVLink with pymavlink only, for `seconds` from the
-    first sample it hears (at most 30 s of waiting for one: processes start slowly on a
-    loaded machine); `heard` is set at that first sample."""
+def _observer(router: str, prefix: str, seen: dict, done: Callable[[], bool],
+              clock_s: dict | None = None, timeout: float = 90.0) -> None:
+    """A plain Zenoh subscriber decoding MAVLink with pymavlink only, until `done()` (at most
+    `timeout` s: processes start slowly on a loaded machine); `clock_s` gets each out key's
+    newest flight clock (ATTITUDE_QUATERNION time_boot_ms, in s)."""
     session = zenoh.open(client_config([router]))
     parser = mavlink2.MAVLink(None)
     parser.robust_parsing = True
-    first = threading.Event()
 
     def on_sample(sample):
-        first.set()
-        if heard is not None:
-            heard.set()
         for msg in parser.parse_buffer(sample.payload.to_bytes()) or []:
             key = (str(sample.key_expr), msg.get_type())
             seen[key] = seen.get(key, 0) + 1
+            if clock_s is not None and key[1] == "ATTITUDE_QUATERNION":
+                clock_s[key[0]] = max(clock_s.get(key[0], 0.0), msg.time_boot_ms / 1000.0)
 
     sub = session.declare_subscriber(f"{prefix}/*/out", on_sample)
-    if first.wait(timeout=30.0):
-        time.sleep(seconds)
+    deadline = time.monotonic() + timeout
+    while not done() and time.monotonic() < deadline:
+        time.sleep(0.1)
     sub.undeclare()
     session.close()
 
@@ -96,16 +95,38 @@ def test_fleet_of_four_flies_like_one_with_observers(tmp_path, router):
     single = run_processes(sc, tmp_path / "single", transport="zenoh", zenoh_url=url)
     seen_early: dict = {}
     seen_late: dict = {}
-    fleet_up = threading.Event()
-    early = threading.Thread(target=_observer, args=(router, "fleet", 5.0, seen_early,
-                                                     fleet_up))
-    late = threading.Thread(target=lambda: (fleet_up.wait(timeout=30.0), time.sleep(4.0),
-                                            _observer(router, "fleet", 3.0, seen_late)))
+    # On the fleet's flight clock (8 s): the late observer joins at 2 s, the early one
+    # leaves at 4 s once it has heard every vehicle; both leave when the fleet has landed.
+    clock_s: dict = {}
+    ended = threading.Event()
+
+    def flown_s() -> float:
+        return min(clock_s.get(f"fleet/{n}/out", 0.0) for n in range(1, 5))
+
+    def early_done() -> bool:
+        return ended.is_set() or (flown_s() >= 4.0 and all(
+            seen_early.get((f"fleet/{n}/out", "HEARTBEAT"), 0) >= 1
+            and seen_early.get((f"fleet/{n}/out", "ATTITUDE_QUATERNION"), 0) >= 10
+            for n in range(1, 5)))
+
+    def late_observer() -> None:
+        deadline = time.monotonic() + 90.0
+        while flown_s() < 2.0 and not ended.is_set() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        _observer(router, "fleet", seen_late, lambda: ended.is_set() or bool(seen_late))
+
+    early = threading.Thread(target=_observer, args=(router, "fleet", seen_early, early_done,
+                                                     clock_s))
+    late = threading.Thread(target=late_observer)
     early.start()
     late.start()
-    fleet = run_processes(sc, tmp_path / "fleet", transport="zenoh", zenoh_url=url, fleet=4)
-    early.join()
-    late.join()
+    try:
+        fleet = run_processes(sc, tmp_path / "fleet", transport="zenoh", zenoh_url=url,
+                              fleet=4)
+    finally:
+        ended.set()
+        early.join()
+        late.join()
     assert fleet["all_completed"] and sorted(fleet["vehicles"]) == ["1", "2", "3", "4"]
     for n in range(1, 5):
         m = json.loads((tmp_path / "fleet" / f"vehicle{n}" / "metrics.json").read_text())
