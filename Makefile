@@ -21,6 +21,7 @@ demo: venv
 
 test: venv
 	$(PY) -m mypy
+	$(PY) -m mypy benchmarks tools
 	$(PY) -m pytest -q -n auto --dist loadgroup tests
 
 test-fast: venv

@@ -28,7 +28,7 @@ CASE1 = ROOT / "config" / "scenarios" / "case1_figure8.toml"
 def main() -> None:
     short = apply_overrides(load_scenario(CASE1), duration_s=20.0)
     steps = round(short.duration_s * short.control_rate_hz)
-    best = {}
+    best: dict[bool, float] = {}
     for logs in (False, True) * 3:
         t0 = time.perf_counter()
         run_scenario(short, logs=logs)

@@ -17,6 +17,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
 RATE_HZ = 2000
@@ -37,17 +38,17 @@ def lockstep(duration_s: float, router: str) -> dict[str, float]:
             "same_figures": udp["position_error_m"] == zen["position_error_m"]}
 
 
-def _subscriber(router: str, ready, results, seconds: float) -> None:
+def _subscriber(router: str, ready: Any, results: Any, seconds: float) -> None:
     import zenoh
 
     from common.mavlink import parser
     from common.zenoh_link import client_config
 
-    session = zenoh.open(client_config([router]))
+    session: Any = zenoh.open(client_config([router]))  # zenoh 1.x: partly annotated
     mav = parser()
     latencies: list[float] = []
 
-    def on_sample(sample):
+    def on_sample(sample: Any) -> None:
         now = time.time_ns() // 1000
         for msg in mav.parse_buffer(sample.payload.to_bytes()) or []:
             latencies.append(now - msg.time_unix_usec)
@@ -76,7 +77,7 @@ def fanout(router: str, subscribers: int) -> dict[str, float]:
     for r in readies:
         r.wait(30)
     time.sleep(0.5)
-    session = zenoh.open(client_config([router]))
+    session: Any = zenoh.open(client_config([router]))  # zenoh 1.x: partly annotated
     pub = session.declare_publisher("fanout/1/out", express=True)
     mav = encoder(1, 1)
     period = 1.0 / RATE_HZ

@@ -21,6 +21,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from common.links import free_port
 from gcs.campaign.load import load_campaign
@@ -37,7 +38,7 @@ def flight_table(out: Path) -> list[dict[str, str]]:
                 for r in csv.DictReader(fh)]
 
 
-def fly(out: Path, **kwargs) -> dict[str, float]:
+def fly(out: Path, **kwargs: Any) -> dict[str, float]:
     shutil.rmtree(out, ignore_errors=True)
     t0 = time.monotonic()
     outcome = run_campaign(load_campaign(CAMPAIGN), out, **kwargs)
@@ -49,10 +50,10 @@ def fly(out: Path, **kwargs) -> dict[str, float]:
             "throughput": outcome.sim_s / outcome.wall_s, "workers": float(outcome.workers)}
 
 
-def external_cluster(logs: Path) -> tuple[str, list[subprocess.Popen]]:
+def external_cluster(logs: Path) -> tuple[str, list[subprocess.Popen[bytes]]]:
     port = free_port(socket.SOCK_STREAM)
     address = f"tcp://127.0.0.1:{port}"
-    procs = []
+    procs: list[subprocess.Popen[bytes]] = []
     for name, argv in (("scheduler", ["scheduler", "--host", "127.0.0.1", "--port", str(port),
                                       "--no-dashboard"]),
                        ("worker0", ["worker", address, "--nthreads", "1", "--host",
@@ -65,7 +66,8 @@ def external_cluster(logs: Path) -> tuple[str, list[subprocess.Popen]]:
         time.sleep(1.0 if name == "scheduler" else 0.0)
     from dask.distributed import Client
 
-    with Client(address, timeout=30) as client:
+    connect: Any = Client  # distributed's constructors are not annotated
+    with connect(address, timeout=30) as client:
         client.wait_for_workers(2, timeout=60)
     return address, procs
 

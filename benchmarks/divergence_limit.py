@@ -11,22 +11,26 @@ import dataclasses
 import math
 from pathlib import Path
 
-from common.config import DisturbanceTerm, load_scenario
+from common.config import DisturbanceTerm, Scenario, load_scenario
+from common.quaternion import Vec3
 from gcs.inprocess import run_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
-DIRECTIONS = {"-z (down)": (0.0, 0.0, -1.0), "+x (forward)": (1.0, 0.0, 0.0),
-              "xyz (each axis)": (1.0 / math.sqrt(3),) * 3}
+DIRECTIONS: dict[str, Vec3] = {"-z (down)": (0.0, 0.0, -1.0), "+x (forward)": (1.0, 0.0, 0.0),
+              "xyz (each axis)": (1.0 / math.sqrt(3), 1.0 / math.sqrt(3), 1.0 / math.sqrt(3))}
 
 
-def survives(scenario, direction, ratio: float) -> bool:
+def survives(scenario: Scenario, direction: Vec3, ratio: float) -> bool:
     weight = scenario.vehicle.mass_kg * scenario.vehicle.gravity_m_s2
-    term = DisturbanceTerm("pulse", tuple(ratio * weight * d for d in direction), 1.0, 1e9)
+    force = (ratio * weight * direction[0], ratio * weight * direction[1],
+             ratio * weight * direction[2])
+    term = DisturbanceTerm("pulse", force, 1.0, 1e9)
     sc = dataclasses.replace(scenario, force_terms=(term,), torque_terms=(), duration_s=15.0)
-    return run_scenario(sc).metrics["status"] == "completed"
+    return bool(run_scenario(sc).metrics["status"] == "completed")
 
 
-def limit(scenario, direction, lo: float = 0.0, hi: float = 4.0, tol: float = 0.01) -> float:
+def limit(scenario: Scenario, direction: Vec3, lo: float = 0.0, hi: float = 4.0,
+          tol: float = 0.01) -> float:
     while hi - lo > tol:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if survives(scenario, direction, mid) else (lo, mid)

@@ -63,7 +63,7 @@ def noisy(seed: int) -> Any:
         v = tuple(x + VELOCITY_M_S * e for x, e in zip(st.v_flu_m_s, n[6:9], strict=True))
         w = tuple(x + RATE_RAD_S * e + RATE_BIAS_RAD_S
                   for x, e in zip(st.omega_flu_rad_s, n[9:12], strict=True))
-        return VehicleState(p, q, v, w)  # type: ignore[arg-type]
+        return VehicleState(p, q, v, w)
 
     return state_for_fcu
 

@@ -168,7 +168,8 @@ def prepare(base: Scenario, k: int, seed: int, workdir: Path, max_s: float,
 def _angle_deg(q: np.ndarray, qd: np.ndarray) -> np.ndarray:
     dot = np.abs(np.sum(q * qd, axis=1)) / (np.linalg.norm(q, axis=1)
                                            * np.linalg.norm(qd, axis=1))
-    return np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))
+    angle: np.ndarray = np.degrees(2.0 * np.arccos(np.clip(dot, 0.0, 1.0)))
+    return angle
 
 
 def tracking_errors(truth: np.ndarray, onboard: np.ndarray, t_from_us: float

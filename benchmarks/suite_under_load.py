@@ -2,7 +2,8 @@
 
     .venv/bin/python benchmarks/suite_under_load.py [--times N] [--busy K] [-- pytest args]
 
-Runs `make test`'s two steps (mypy, then pytest over tests/ with xdist) N times in a row
+Runs `make test`'s steps (mypy over the packages, then benchmarks/ and tools/, then pytest
+over tests/ with xdist) N times in a row
 beside K busy-looping children at nice 19, prints each run's wall time and result, stops at
 the first failure, and exits with that run's code (0 when all passed). The busy children are
 this script's own and are stopped on every way out, Ctrl-C included.
@@ -28,7 +29,7 @@ def _busy_children(count: int) -> list[subprocess.Popen[bytes]]:
 
 
 def _suite(pytest_args: list[str]) -> int:
-    steps = [[sys.executable, "-m", "mypy"],
+    steps = [[sys.executable, "-m", "mypy"], [sys.executable, "-m", "mypy", "benchmarks", "tools"],
              [sys.executable, "-m", "pytest", "-q", "-n", "auto", "--dist", "loadgroup",
               *(pytest_args or ["tests"])]]
     for step in steps:

@@ -11,7 +11,7 @@ import random
 from pathlib import Path
 
 from common.config import load_scenario, load_vehicle
-from common.quaternion import q_angle, q_conj, q_exp, q_mul
+from common.quaternion import Quat, Vec3, q_angle, q_conj, q_exp, q_mul
 from gcs.inprocess import command_for_plant, fcu_pipeline, state_for_fcu
 from sitl.plant import Plant, hover_speeds_and_tilts
 
@@ -28,7 +28,7 @@ class Flight:
     """The pipeline flying the plant from a hover at `start_enu_m`, armed; `step` runs one
     control period and keeps the figures."""
 
-    def __init__(self, vehicle_name: str, start_enu_m) -> None:
+    def __init__(self, vehicle_name: str, start_enu_m: Vec3) -> None:
         sc = dataclasses.replace(
             load_scenario(ROOT / "config" / "scenarios" / "case1_figure8.toml"),
             vehicle=load_vehicle(ROOT / "config" / "vehicles" / f"{vehicle_name}.toml"))
@@ -49,6 +49,7 @@ class Flight:
         pipe.on_state(t, state_for_fcu(state), t)
         out = pipe.step(t, 0.002)
         ref = pipe.commander.last_ref
+        assert ref is not None, "a flying pipeline has a reference"
         self.track_m = max(self.track_m, math.dist(ref.p_enu_m, state.p_enu_m))
         self.track_rad = max(self.track_rad,
                              q_angle(q_mul(q_conj(ref.q_enu_flu), state.q_enu_flu)))
@@ -63,11 +64,11 @@ class Flight:
                 if "rate-limited" in e.text or "speed limit" in e.text]
 
 
-def random_step(rng: random.Random) -> tuple:
+def random_step(rng: random.Random) -> tuple[Vec3, Quat]:
     """A random OFFBOARD step from a hover: up to 20 m away (and 0..10 m up or down), turned
     0..180 deg about a random axis."""
     axis = [rng.gauss(0.0, 1.0) for _ in range(3)]
     n = math.sqrt(sum(a * a for a in axis))
     angle = math.radians(rng.uniform(0.0, 180.0))
     p = (rng.uniform(-20.0, 20.0), rng.uniform(-20.0, 20.0), 15.0 + rng.uniform(-10.0, 10.0))
-    return p, q_exp(tuple(angle * a / n for a in axis))
+    return p, q_exp((angle * axis[0] / n, angle * axis[1] / n, angle * axis[2] / n))

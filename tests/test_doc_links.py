@@ -13,7 +13,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", ROOT / "CHANGELOG.md", *sorted((ROOT / "docs").glob("*.md"))]
 TOP = ("common", "fcu", "sitl", "gcs", "config", "benchmarks", "tests", "docs", "tools")
-PATH = re.compile(r"`((?:%s)/[A-Za-z0-9_./*-]*)" % "|".join(TOP))
+PATH = re.compile(r"`((?:" + "|".join(TOP) + r")/[A-Za-z0-9_./*-]*)")
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 
 

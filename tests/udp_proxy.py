@@ -38,7 +38,8 @@ class UdpProxy:
         self._thread = threading.Thread(target=self._run, name="udp-proxy", daemon=True)
         self._thread.start()
 
-    def _schedule(self, sock, data, addr) -> None:
+    def _schedule(self, sock: socket.socket, data: bytes,
+                  addr: tuple[str, int]) -> None:
         imp = self.imp
         if self.rng.random() < imp.drop:
             self.counts["dropped"] += 1
