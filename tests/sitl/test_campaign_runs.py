@@ -150,7 +150,7 @@ def test_separate_scheduler_and_workers_one_killed_give_the_same_table(
             except OSError:
                 if time.monotonic() > deadline:
                     raise
-                time.sleep(0.5)
+                time.sleep(0.5)  # pacing the retries of this poll
         remote = tmp_path / "remote"
         outcome = run_campaign(load_campaign(path), remote, scheduler=address,
                                report=False, on_result=kill_one,

@@ -24,6 +24,7 @@ import pytest
 from common.ulog import read_topic, tail_record
 
 from .conftest import ROOT, SCENARIOS
+from .waits import until
 
 CASE1 = SCENARIOS / "case1_figure8.toml"
 DURATION_S = 26.0  # lockstep runs: the climb, the hover and 6 s of the figure-infinity
@@ -243,6 +244,12 @@ def _hog(n: int = 2) -> list[subprocess.Popen]:
     return hogs
 
 
+def _cpu_s(pid: int) -> float:
+    """The CPU time (s, user and system) a process has used so far (/proc/PID/stat)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def _stop_hogs(hogs: list[subprocess.Popen]) -> None:
     for h in hogs:
         if h.poll() is None:
@@ -294,7 +301,8 @@ def test_lockstep_run_is_unchanged_by_starvation(quiet, tmp_path, starvation):
     try:
         if starvation == "cpu-hog":
             hogs = _hog(2)
-            time.sleep(0.5)  # spinning before the run starts
+            until(lambda: all(_cpu_s(h.pid) >= 0.2 for h in hogs),
+                  "the hogs spinning before the run starts", 30.0, poll_s=0.05)
         run = _start(out, "--duration", f"{DURATION_S:g}")
         if hogs:  # before it starts its sitl and fcu (they inherit the CPU)
             os.sched_setaffinity(run.proc.pid, _hog_cpu())

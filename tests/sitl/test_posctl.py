@@ -37,11 +37,11 @@ class Sticks:
         while self.running:
             x, y, z, r = self.values
             s.send(M.MAVLink_manual_control_message(s.target_system, x, y, z, r, 0))
-            time.sleep(1.0 / STREAM_HZ)
+            time.sleep(1.0 / STREAM_HZ)  # pacing the stream
 
     def hold(self, seconds: float, x: int = 0, y: int = 0, z: int = 500, r: int = 0) -> None:
         self.values = (x, y, z, r)
-        time.sleep(seconds)
+        time.sleep(seconds)  # deliberate: a pilot holds the sticks for wall-clock seconds
         self.values = (0, 0, 500, 0)
 
     def stop(self) -> None:

@@ -84,7 +84,7 @@ def test_udpin_answers_at_most_max_peers_and_keeps_the_first():
         socks[5].settimeout(0.05)
         with pytest.raises(TimeoutError):
             socks[5].recvfrom(100)
-        time.sleep(0.35)  # the first four go stale
+        time.sleep(0.35)  # deliberate: the first four go stale (peer_timeout_s 0.3)
         socks[5].sendto(b"y", ("127.0.0.1", port))
         _recv_all(link, 1)
         link.send(b"again")
