@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from common.config import Scenario, VehicleConfig
-from common.mavlink import MAV
+from common.mav_enums import MAV_MODE_FLAG
 from common.sensors_config import SensorProfile
 from sitl.actuator_faults import ActuatorFaults
 from sitl.plant import (
@@ -56,7 +56,7 @@ def command_from_controls(controls: tuple[float, ...], mode: int, vehicle: Vehic
     n = vehicle.n_rotors
     w_max = vehicle.rotor_speed_max_rad_s
     return obeyed_command(tuple([c * w_max for c in controls[:n]]), controls[n:2 * n],
-                          bool(mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED), state)
+                          bool(mode & MAV_MODE_FLAG.MAV_MODE_FLAG_SAFETY_ARMED), state)
 
 
 def start_flight(scenario: Scenario, plant: Plant, faults: ActuatorFaults,

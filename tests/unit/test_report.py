@@ -255,6 +255,7 @@ def _row(text: str, name: str) -> str:
     return rows[0]
 
 
+@pytest.mark.slow  # a table1 folder of 8 runs (about 25 s): make test, not test-fast
 @pytest.mark.xdist_group("table1_report")
 def test_table1_folder_report(table1_dir):
     """Given a table1 folder of 8 short runs, when `gcs report DIR` runs, then every run
@@ -317,6 +318,7 @@ def test_table1_folder_report(table1_dir):
         assert (table1_dir / link).is_file(), link
 
 
+@pytest.mark.slow  # a table1 folder of 8 runs (about 25 s): make test, not test-fast
 @pytest.mark.xdist_group("table1_report")
 def test_partial_table1_folder(table1_dir, tmp_path):
     """Given a table1 folder with one run folder removed and one whose log is not the one
@@ -366,6 +368,7 @@ def _data_lines(ax) -> list:
     return [ln for ln in ax.get_lines() if len(ln.get_xdata()) > 2]
 
 
+@pytest.mark.slow  # a table1 folder of 8 runs (about 25 s): make test, not test-fast
 @pytest.mark.xdist_group("table1_report")
 def test_fig7_8_rows_and_divergence(table1_dir):
     """Given the three Case II runs, then Figs. 7 and 8 have the rows impulse, sinusoidal,
@@ -417,6 +420,7 @@ def test_fig7_8_rows_and_divergence(table1_dir):
     assert not any("missing" in t for t in titles[:3] + titles[6:])
 
 
+@pytest.mark.slow  # a table1 folder of 8 runs (about 25 s): make test, not test-fast
 @pytest.mark.xdist_group("table1_report")
 def test_fig5_is_the_pd_errors(table1_dir):
     """Given the Case I runs, then Fig. 5 shows the PD run's attitude error and position
