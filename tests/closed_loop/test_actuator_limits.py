@@ -120,7 +120,6 @@ def test_divergence_still_ends_the_run_diverged(tmp_path):
     assert m["status"] == "diverged" and "failsafe: diverged (0.3 m)" in texts
 
 
-@pytest.mark.slow  # the whole 160 s of Case I
 @pytest.mark.xdist_group(reference_runs.GROUP)
 def test_case1_has_no_actuator_report():
     """Given Case I (160 s, default actuators), then no actuator is reported: 0 false
