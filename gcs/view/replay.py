@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from common.quaternion import Quat, Vec3
+from common.vehicle_constants import N_ROTORS
 from gcs.metrics import onboard_on_truth_clock
 from gcs.view.sample import Pose, Sample
 from gcs.view.settings import DEFAULT_VEHICLE, ViewError
@@ -59,8 +60,10 @@ class ReplayLog:
             truth_t_us=_cols(truth_cols, truth, ("time_us",), "dq_truth")[:, 0].astype(np.int64),
             truth_p=_cols(truth_cols, truth, ("px", "py", "pz"), "dq_truth"),
             truth_q=_cols(truth_cols, truth, ("qw", "qx", "qy", "qz"), "dq_truth"),
-            truth_rotors=_cols(truth_cols, truth, [f"rotor{i}" for i in range(6)], "dq_truth"),
-            truth_tilts=_cols(truth_cols, truth, [f"tilt{i}" for i in range(6)], "dq_truth"),
+            truth_rotors=_cols(truth_cols, truth, [f"rotor{i}" for i in range(N_ROTORS)],
+                               "dq_truth"),
+            truth_tilts=_cols(truth_cols, truth, [f"tilt{i}" for i in range(N_ROTORS)],
+                              "dq_truth"),
             onboard_t_us=ob_t.astype(np.int64),
             onboard_pd=(_cols(onboard_cols, onboard, ("pdx", "pdy", "pdz"), "dq_onboard")
                         if has_desired else np.zeros((0, 3))),
