@@ -47,7 +47,7 @@ def _tail(path: Path) -> tuple[tuple[str, ...], tuple[float, ...]] | None:
     return tail_record(path, "dq_truth")
 
 
-SETTLE_S = 0.5  # after a child is stopped, before simulated time is read
+SETTLE_S = 0.5  # after a child is stopped, at least, before simulated time is read
 
 
 def _sim_time_s(out: Path) -> float | None:
@@ -244,9 +244,18 @@ def _hog(n: int = 2) -> list[subprocess.Popen]:
     return hogs
 
 
+def _stat(pid: int) -> list[str]:
+    """/proc/PID/stat's fields after the command name: the state (R, S, T, ...) first."""
+    return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+
+
+def _state(pid: int) -> str:
+    return _stat(pid)[0]
+
+
 def _cpu_s(pid: int) -> float:
-    """The CPU time (s, user and system) a process has used so far (/proc/PID/stat)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    """The CPU time (s, user and system) a process has used so far."""
+    fields = _stat(pid)
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
@@ -313,11 +322,20 @@ def test_lockstep_run_is_unchanged_by_starvation(quiet, tmp_path, starvation):
                 _wait_until(run, f"{PAUSE_AT_S:g} s of simulated time",
                             lambda: (_sim_time_s(out) or 0.0) >= PAUSE_AT_S)
                 run.pause(name)
+                paused = time.monotonic()
                 # The simulator writes its truth log in batches and when it goes idle: the
-                # log's tail is the simulated time once the stop has taken hold.
-                time.sleep(SETTLE_S)
+                # log's tail is the simulated time once the stop has taken hold (a stopped
+                # simulator writes nothing; one waiting for the stopped FCU sleeps in select
+                # after its last write).
+                sitl, asleep = run.children["sitl"], [0]
+
+                def held() -> bool:
+                    asleep[0] = asleep[0] + 1 if _state(sitl) in "ST" else 0
+                    return time.monotonic() >= paused + SETTLE_S and asleep[0] >= 3
+
+                until(held, f"the stop of the {name} child taken hold", 30.0, poll_s=0.02)
                 paused_at = _sim_time_s(out)
-                time.sleep(PAUSE_S - SETTLE_S)
+                time.sleep(max(0.0, paused + PAUSE_S - time.monotonic()))  # the pause itself
                 resumed_at = _sim_time_s(out)
                 run.resume_all()
             code = run.wait()
@@ -372,7 +390,7 @@ def test_realtime_simulator_pause_in_the_air_is_a_state_input_loss(tmp_path):
                     lambda: (_height_m(out) or 0.0) > RT_PAUSE_ABOVE_M)
         height, at = _height_m(out), _sim_time_s(out)
         run.pause("sitl")
-        time.sleep(RT_PAUSE_S)
+        time.sleep(RT_PAUSE_S)  # deliberate: the state input lost for RT_PAUSE_S in the air
         run.resume_all()
         code = run.wait()
     finally:
