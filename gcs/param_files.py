@@ -27,10 +27,10 @@ from pathlib import Path
 from common.cliargs import read_text_file
 from gcs.param_wire import FLOAT_TYPES as _FLOAT_TYPES
 from gcs.param_wire import INT_RANGES as _INT_RANGES
-from gcs.param_wire import REAL32, float32
+from gcs.param_wire import REAL32
 
 HEADER = "# Vehicle-Id Component-Id Name Value Type"
-__all__ = ["HEADER", "REAL32", "ParamEntry", "ParamFileError", "float32", "format_params",
+__all__ = ["HEADER", "REAL32", "ParamEntry", "ParamFileError", "format_params",
            "parse_params", "read_params"]
 
 

@@ -19,6 +19,7 @@ import math
 import struct
 
 from common.mavlink import MAV
+from common.wire_round import f32
 
 M = MAV
 C_CAST, BYTEWISE = "c_cast", "bytewise"
@@ -61,18 +62,13 @@ def encoding_of(capabilities: int | None, ardupilot: bool) -> str:
     return C_CAST if ardupilot else BYTEWISE
 
 
-def float32(value: float) -> float:
-    """`value` as a float32 carries it."""
-    return float(_FLOAT.unpack(_FLOAT.pack(value))[0])
-
-
 def intended(name: str, value: float, param_type: int) -> float:
     """What the vehicle holds once it takes `value`: the float32 for float types, the
     integer for integer types; ParamValueError for a fraction given to an integer type, or
     a value no float32 carries."""
     if param_type in FLOAT_TYPES or param_type not in INT_RANGES:
         try:
-            return float32(value)
+            return f32(value)
         except OverflowError:
             raise ParamValueError(f"{name}: {value:g} does not fit a float32") from None
     if not (math.isfinite(value) and float(value).is_integer()):

@@ -31,7 +31,6 @@ import bisect
 import csv
 import json
 import math
-import struct
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +41,7 @@ import numpy as np
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.quaternion import Quat, Vec3
 from common.ulog import ULogError, open_ulog, topic_rows
+from common.wire_round import f32
 from fcu.dualquat import q_normalize
 from fcu.estimator.ekf import Estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
@@ -89,10 +89,6 @@ class Replay:
         return bool(np.all(d <= limit))  # NaN compares False: differ
 
 
-def _f32(x: float) -> float:
-    return float(struct.unpack("<f", struct.pack("<f", x))[0])
-
-
 def parse_params(items: list[str]) -> dict[str, float]:
     """NAME=VALUE pairs, checked against the FCU's parameter table (name, range), stored as
     the FCU stores them (float32)."""
@@ -111,7 +107,7 @@ def parse_params(items: list[str]) -> dict[str, float]:
             raise ReplayError(f"--param {item}: {text!r} is not a number") from None
         if not (math.isfinite(value) and spec.lo <= value <= spec.hi):
             raise ReplayError(f"--param {item}: not in [{spec.lo:g}, {spec.hi:g}]")
-        out[name] = _f32(value)
+        out[name] = f32(value)
     return out
 
 

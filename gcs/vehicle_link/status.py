@@ -5,13 +5,13 @@ link."""
 from __future__ import annotations
 
 import math
-import struct
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
 from common.mavlink import MAV
+from common.wire_round import f32
 from gcs.autopilot import autopilot_of
 from gcs.autopilot.health import format_readiness as _format_readiness
 from gcs.autopilot.health import health as _health
@@ -83,11 +83,12 @@ def status(session: Session, seconds: float = 1.5, patience: float = 3.0) -> dic
                                and not e.name.endswith("ENUM_END")]
     pos = snap.get("LOCAL_POSITION_NED")
     if pos is not None:
-        out["position_ned_m"] = [_f32(pos.x), _f32(pos.y), _f32(pos.z)]
-        out["velocity_ned_m_s"] = [_f32(pos.vx), _f32(pos.vy), _f32(pos.vz)]
+        out["position_ned_m"] = [_shortest_f32(pos.x), _shortest_f32(pos.y), _shortest_f32(pos.z)]
+        out["velocity_ned_m_s"] = [_shortest_f32(pos.vx), _shortest_f32(pos.vy),
+                                   _shortest_f32(pos.vz)]
     att = snap.get("ATTITUDE_QUATERNION")
     if att is not None:
-        out["q_ned_frd"] = [_f32(q) for q in (att.q1, att.q2, att.q3, att.q4)]
+        out["q_ned_frd"] = [_shortest_f32(q) for q in (att.q1, att.q2, att.q3, att.q4)]
     eul = snap.get("ATTITUDE")
     if eul is not None:
         out["roll_pitch_yaw_deg"] = [_round(math.degrees(a), 3)
@@ -118,14 +119,14 @@ def status(session: Session, seconds: float = 1.5, patience: float = 3.0) -> dic
     return out
 
 
-def _f32(value: float) -> float | None:
+def _shortest_f32(value: float) -> float | None:
     """A float32 field as the shortest decimal that is the same float32 (0.1, not
     0.10000000149011612); None for a value JSON cannot carry."""
     if not math.isfinite(value):
         return None
     for digits in range(1, 10):
         short = float(f"{value:.{digits}g}")
-        if struct.unpack("<f", struct.pack("<f", short))[0] == value:
+        if f32(short) == value:
             return short + 0.0  # no -0.0
     return value
 

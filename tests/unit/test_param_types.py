@@ -10,6 +10,7 @@ import struct
 import pytest
 
 from common.mavlink import MAV
+from common.wire_round import f32
 from gcs import cli
 from gcs import param_wire as pw
 from gcs.param_files import parse_params
@@ -20,11 +21,11 @@ pytestmark = pytest.mark.timeout(60)
 INT8, INT16, INT32, REAL32 = (M.MAV_PARAM_TYPE_INT8, M.MAV_PARAM_TYPE_INT16,
                               M.MAV_PARAM_TYPE_INT32, M.MAV_PARAM_TYPE_REAL32)
 ARDU_PARAMS = {"DISARM_DELAY": (10.0, INT8), "MAV_SYSID": (1.0, INT16),
-               "LOG_BITMASK": (180222.0, INT32), "ATC_RAT_RLL_P": (pw.float32(0.135), REAL32)}
+               "LOG_BITMASK": (180222.0, INT32), "ATC_RAT_RLL_P": (f32(0.135), REAL32)}
 # -1 is a NaN bit pattern, 2**24 + 1 is lost by a float cast, 0x7F800001 is a signalling
 # NaN pattern that a float round trip turns into another integer
 PX4_PARAMS = {"COM_FLTMODE1": (-1.0, INT32), "SYS_BIG": (16777217.0, INT32),
-              "SYS_SNAN": (2139095041.0, INT32), "MPC_XY_VEL_MAX": (pw.float32(12.5), REAL32)}
+              "SYS_SNAN": (2139095041.0, INT32), "MPC_XY_VEL_MAX": (f32(12.5), REAL32)}
 
 
 @pytest.fixture
@@ -62,7 +63,7 @@ def test_integer_encodings_round_trip(encoding, param_type, lo, hi):
             assert pw.decode(raw, param_type, encoding) == v
         else:  # the float: exact up to 2**24, as ArduPilot keeps it beyond
             assert raw == struct.pack("<f", float(v))
-            assert pw.decode(raw, param_type, encoding) == pw.float32(v)
+            assert pw.decode(raw, param_type, encoding) == f32(v)
 
 
 def test_value_checks_and_encoding_choice():

@@ -9,7 +9,7 @@ import math
 
 from common.mavlink import MAV as M
 from gcs.vehicle_link.snapshot import Snapshot
-from gcs.vehicle_link.status import _f32, format_status
+from gcs.vehicle_link.status import _shortest_f32, format_status
 from gcs.watch import ALERT, STALE_S, render, view_lines
 
 QUALITY = (0.0, 100, 0)
@@ -86,9 +86,10 @@ def test_float32_values_in_their_shortest_form():
     raw = f32.pack(M.MAVLink(None))
     packed = M.MAVLink(None).decode(bytearray(raw))
     assert packed.x != 0.1  # float32: 0.10000000149011612
-    assert _f32(packed.x) == 0.1 and _f32(packed.y) == -2.25 and _f32(packed.z) == 1e-7
-    assert _f32(-0.0) == 0.0 and math.copysign(1, _f32(-0.0)) == 1.0
-    assert _f32(math.nan) is None and _f32(math.inf) is None
+    assert _shortest_f32(packed.x) == 0.1 and _shortest_f32(packed.y) == -2.25 \
+        and _shortest_f32(packed.z) == 1e-7
+    assert _shortest_f32(-0.0) == 0.0 and math.copysign(1, _shortest_f32(-0.0)) == 1.0
+    assert _shortest_f32(math.nan) is None and _shortest_f32(math.inf) is None
 
 
 def test_status_lines_have_units_and_no_python_notation():
