@@ -24,6 +24,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from common.config import TrajectoryConfig
+from common.quaternion import q_exp_many
 from fcu.dualquat import Q_IDENTITY, Quat, Vec3, q_exp, q_mul, q_rotate_inv
 from fcu.tracker import Reference
 
@@ -111,17 +112,6 @@ def figure_path(amp: float, T: Any, dT: Any, ddT: Any,
            d2p_dT2[1] * dT * dT + dp_dT[1] * ddT,
            d2p_dT2[2] * dT * dT + dp_dT[2] * ddT)
     return off, v, acc
-
-
-def q_exp_many(rx: Any, ry: Any, rz: Any) -> Any:
-    """`fcu.dualquat.q_exp` of many rotation vectors at once (components as arrays).
-
-    The same function as q_exp, written with np.sinc where q_exp has its small-angle series
-    and sin(half) / half: about 5% of the components differ in the last bits, and the
-    envelope check's figures (`fcu.feasibility`) are those of this form."""
-    half = 0.5 * np.sqrt(rx * rx + ry * ry + rz * rz)
-    k = 0.5 * np.sinc(half / math.pi)  # sin(half) / (2 half), 1/2 at 0
-    return (np.cos(half), k * rx, k * ry, k * rz)
 
 
 class FigureInfinity:

@@ -13,10 +13,11 @@ from typing import Any
 import numpy as np
 
 from common.frames import q_ned_frd_to_enu_flu
+from common.quaternion import q_exp_many
 from fcu.dualquat import Quat, Vec3, norm3, q_exp, q_mul
 from fcu.feasibility import TimeScaling, figure_instants, move_instants
 from fcu.tracker import Reference, pose_ref
-from fcu.trajectory import FigureInfinity, q_exp_many, quintic, quintic_poly
+from fcu.trajectory import FigureInfinity, quintic, quintic_poly
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 
