@@ -32,7 +32,8 @@ class Stack:
     def log(self, name: str) -> str:
         return (self.logs / f"{name}.log").read_text(errors="replace")
 
-    def wait_for(self, types: list[str], predicate=lambda m: True, timeout: float = 5.0):
+    def wait_for(self, types: list[str], predicate=lambda m: True, timeout: float = 20.0):
+        # a deadline, not a pause: a state that comes comes late on a loaded machine
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             msg = self.session.recv(types, timeout=0.1)
