@@ -16,6 +16,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common.config import load_scenario, load_vehicle
+from common.mav_enums import MAV_CMD, MAV_FRAME
 from common.mission_items import MissionItem, local_xy
 from fcu.feasibility import MARGIN, envelope
 from fcu.mission.executor import MissionExecutor
@@ -26,8 +27,10 @@ from fcu.tracker import pose_ref
 from fcu.trajectory import make_trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
-WAYPOINT, TAKEOFF, LAND, LOCAL_NED = 16, 22, 21, 1
-KEYFRAME, FIGURE = 31000, 31001
+WAYPOINT, TAKEOFF, LAND = (MAV_CMD.MAV_CMD_NAV_WAYPOINT, MAV_CMD.MAV_CMD_NAV_TAKEOFF,
+                           MAV_CMD.MAV_CMD_NAV_LAND)
+KEYFRAME, FIGURE = MAV_CMD.MAV_CMD_WAYPOINT_USER_1, MAV_CMD.MAV_CMD_WAYPOINT_USER_2
+LOCAL_NED = MAV_FRAME.MAV_FRAME_LOCAL_NED
 
 
 def waypoints(n: int) -> tuple[MissionItem, ...]:

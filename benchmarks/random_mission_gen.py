@@ -35,12 +35,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.mav_enums import MAV_CMD, MAV_FRAME
 from common.mission_items import MissionItem, local_xy
 from fcu.dualquat import Quat, q_exp, q_log, q_mul
 
-LOCAL_NED = 1
-NAV_WAYPOINT, NAV_LOITER_TIME, NAV_LAND, NAV_TAKEOFF = 16, 19, 21, 22
-POSE_KEYFRAME, FIGURE_EIGHT = 31000, 31001
+LOCAL_NED = MAV_FRAME.MAV_FRAME_LOCAL_NED
+NAV_WAYPOINT, NAV_LOITER_TIME = MAV_CMD.MAV_CMD_NAV_WAYPOINT, MAV_CMD.MAV_CMD_NAV_LOITER_TIME
+NAV_LAND, NAV_TAKEOFF = MAV_CMD.MAV_CMD_NAV_LAND, MAV_CMD.MAV_CMD_NAV_TAKEOFF
+POSE_KEYFRAME, FIGURE_EIGHT = MAV_CMD.MAV_CMD_WAYPOINT_USER_1, MAV_CMD.MAV_CMD_WAYPOINT_USER_2
 KINDS = ("waypoint", "keyframe", "figure")
 MIN_HOLD_S = 0.05  # a keyframe's hold below this adds no loiter item
 _Q_ID: Quat = (1.0, 0.0, 0.0, 0.0)

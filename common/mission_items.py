@@ -18,30 +18,34 @@ import math
 from typing import Any, NamedTuple
 
 from common.frames import geodetic_to_ned, ned_to_geodetic
+from common.mav_enums import MAV_CMD, MAV_FRAME, MAV_MISSION_TYPE
 
 LOCAL_SCALE = 1e4  # MISSION_ITEM_INT x, y in local frames: metres x 1e4
 GLOBAL_SCALE = 1e7  # MISSION_ITEM_INT x, y in global frames: degrees x 1e7
 INT32_MIN, INT32_MAX = -(2 ** 31), 2 ** 31 - 1
-MAV_MISSION_TYPE_MISSION = 0
-# MAV_FRAME_GLOBAL, _GLOBAL_RELATIVE_ALT, _GLOBAL_INT, _GLOBAL_RELATIVE_ALT_INT,
-# _GLOBAL_TERRAIN_ALT, _GLOBAL_TERRAIN_ALT_INT (common.xml; checked against pymavlink).
-GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})
-MAV_FRAME_GLOBAL, MAV_FRAME_LOCAL_NED, MAV_FRAME_GLOBAL_RELATIVE_ALT = 0, 1, 3
-MAV_FRAME_GLOBAL_INT, MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 5, 6
+# The global frames: x, y in 1e-7 deg.
+GLOBAL_FRAMES = frozenset({
+    MAV_FRAME.MAV_FRAME_GLOBAL, MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    MAV_FRAME.MAV_FRAME_GLOBAL_INT, MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    MAV_FRAME.MAV_FRAME_GLOBAL_TERRAIN_ALT, MAV_FRAME.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT})
+MAV_FRAME_GLOBAL = MAV_FRAME.MAV_FRAME_GLOBAL  # imported by gcs.mission_home
+MAV_FRAME_LOCAL_NED = MAV_FRAME.MAV_FRAME_LOCAL_NED  # imported by gcs.mission_home
 # Global frames that a home position converts: altitude AMSL, altitude above home (the
 # non-INT ones as MAVProxy sends them in MISSION_ITEM_INT, x and y in 1e-7 deg all the same).
 # The terrain frames are not among them: the vehicle knows no terrain.
-AMSL_FRAMES = frozenset({MAV_FRAME_GLOBAL, MAV_FRAME_GLOBAL_INT})
-RELATIVE_ALT_FRAMES = frozenset({MAV_FRAME_GLOBAL_RELATIVE_ALT,
-                                 MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
+AMSL_FRAMES = frozenset({MAV_FRAME.MAV_FRAME_GLOBAL, MAV_FRAME.MAV_FRAME_GLOBAL_INT})
+RELATIVE_ALT_FRAMES = frozenset({MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                                 MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
 GEO_FRAMES = AMSL_FRAMES | RELATIVE_ALT_FRAMES
 # The commands of fcu.mission and what their x, y, z hold (docs/autopilot.md, section Missions):
-# NAV_WAYPOINT, NAV_LOITER_TIME and the pose keyframe fly to x, y, z; NAV_TAKEOFF climbs to
-# z and NAV_LAND ignores it (an altitude all the same); the figure-infinity's z is an axis
-# component. x, y of takeoff, land and the figure are unused.
-XY_COMMANDS = frozenset({16, 19, 31000})
-Z_ALTITUDE_COMMANDS = frozenset({16, 19, 21, 22, 31000})
-POSITION_COMMANDS = Z_ALTITUDE_COMMANDS | {31001}
+# NAV_WAYPOINT, NAV_LOITER_TIME and the pose keyframe (WAYPOINT_USER_1) fly to x, y, z;
+# NAV_TAKEOFF climbs to z and NAV_LAND ignores it (an altitude all the same); the
+# figure-infinity's (WAYPOINT_USER_2) z is an axis component. x, y of takeoff, land and the
+# figure are unused.
+XY_COMMANDS = frozenset({MAV_CMD.MAV_CMD_NAV_WAYPOINT, MAV_CMD.MAV_CMD_NAV_LOITER_TIME,
+                         MAV_CMD.MAV_CMD_WAYPOINT_USER_1})
+Z_ALTITUDE_COMMANDS = XY_COMMANDS | {MAV_CMD.MAV_CMD_NAV_LAND, MAV_CMD.MAV_CMD_NAV_TAKEOFF}
+POSITION_COMMANDS = Z_ALTITUDE_COMMANDS | {MAV_CMD.MAV_CMD_WAYPOINT_USER_2}
 
 
 class MissionItem(NamedTuple):
@@ -103,7 +107,8 @@ def item_from_message(msg: Any) -> MissionItem:
     return MissionItem(seq=msg.seq, frame=msg.frame, command=msg.command, current=msg.current,
                        autocontinue=msg.autocontinue, param1=msg.param1, param2=msg.param2,
                        param3=msg.param3, param4=msg.param4, x=x, y=y, z=msg.z,
-                       mission_type=getattr(msg, "mission_type", MAV_MISSION_TYPE_MISSION))
+                       mission_type=getattr(msg, "mission_type",
+                                            MAV_MISSION_TYPE.MAV_MISSION_TYPE_MISSION))
 
 
 def item_message(item: MissionItem, target_system: int, target_component: int,
@@ -161,7 +166,7 @@ def to_local(item: MissionItem, home: HomePosition) -> MissionItem:
     if item.command in XY_COMMANDS:
         x, y = _local_int(north), _local_int(east)
     z = down if item.command in Z_ALTITUDE_COMMANDS else item.z
-    return item._replace(frame=MAV_FRAME_LOCAL_NED, x=x, y=y, z=z)
+    return item._replace(frame=MAV_FRAME.MAV_FRAME_LOCAL_NED, x=x, y=y, z=z)
 
 
 def _local_int(metres: float) -> int:
@@ -170,7 +175,7 @@ def _local_int(metres: float) -> int:
 
 
 def to_global(item: MissionItem, home: HomePosition,
-              frame: int = MAV_FRAME_GLOBAL_RELATIVE_ALT) -> MissionItem:
+              frame: int = MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT) -> MissionItem:
     """`item` in `frame` (one of GEO_FRAMES) when it is a MAV_FRAME_LOCAL_NED item with a
     command of POSITION_COMMANDS, else unchanged: x, y the latitude and longitude of its
     north, east (1e-7 deg, rounded), z the altitude above home or AMSL (the figure's z, an
@@ -178,7 +183,7 @@ def to_global(item: MissionItem, home: HomePosition,
     a reader sees the item where it starts."""
     if frame not in GEO_FRAMES:
         raise ValueError(f"frame {frame} is not a global frame with an altitude")
-    if item.frame != MAV_FRAME_LOCAL_NED or item.command not in POSITION_COMMANDS:
+    if item.frame != MAV_FRAME.MAV_FRAME_LOCAL_NED or item.command not in POSITION_COMMANDS:
         return item
     base_alt = 0.0 if frame in RELATIVE_ALT_FRAMES else home.alt_m
     lat, lon, alt = ned_to_geodetic((item.x_m, item.y_m, item.z), home.lat_deg,

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
+from common.mav_enums import ATTITUDE_TARGET_TYPEMASK, MAV_FRAME, POSITION_TARGET_TYPEMASK
 from common.mavlink import MAV
 from common.modes import MAIN_POSCTL
 from common.quaternion import zyx_euler, zyx_yaw
@@ -48,6 +49,11 @@ MIN_INTERVAL_S = 0.002  # no stream faster than 500 Hz (the loop serves links ev
 MAX_INTERVAL_US = 2**31 - 1  # MESSAGE_INTERVAL.interval_us is an int32
 LINK_BUDGET_MSG_S = 1000.0  # all streams of one link together (defaults: about 264/s)
 _PER_SEND = {M.MAVLINK_MSG_ID_NAMED_VALUE_FLOAT: 2}  # builders that send several messages
+# The reference's targets: position, velocity, acceleration (no yaw, no yaw rate); attitude
+# and body rates (no thrust).
+_POSITION_TARGET_MASK = POSITION_TARGET_TYPEMASK.POSITION_TARGET_TYPEMASK_YAW_IGNORE | \
+    POSITION_TARGET_TYPEMASK.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+_ATTITUDE_TARGET_MASK = ATTITUDE_TARGET_TYPEMASK.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE
 
 
 class Snapshot(NamedTuple):
@@ -336,7 +342,7 @@ class Builders:
         if ref is None:
             return None
         return M.MAVLink_position_target_local_ned_message(
-            self._ms(src), M.MAV_FRAME_LOCAL_NED, 0b0000_1100_0000_0000,
+            self._ms(src), MAV_FRAME.MAV_FRAME_LOCAL_NED, _POSITION_TARGET_MASK,
             *enu_to_ned(ref.p_enu_m), *enu_to_ned(ref.v_enu_m_s), *enu_to_ned(ref.a_enu_m_s2),
             0.0, 0.0)
 
@@ -345,7 +351,7 @@ class Builders:
         if ref is None:
             return None
         return M.MAVLink_attitude_target_message(
-            self._ms(src), 0b0100_0000, q_enu_flu_to_ned_frd(ref.q_enu_flu),
+            self._ms(src), _ATTITUDE_TARGET_MASK, q_enu_flu_to_ned_frd(ref.q_enu_flu),
             *flu_to_frd(ref.omega_flu_rad_s), 0.0)
 
     def errors(self, src: Snapshot) -> list[MAV.MAVLink_message] | None:

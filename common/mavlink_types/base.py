@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import ClassVar, Protocol, TypeVar, cast
 
 
@@ -22,11 +23,15 @@ class Message(Protocol):
 M = TypeVar("M", bound=Message)
 
 
-def as_message(msg: object, view: type[M]) -> M:
+def as_message(msg: object, view: Callable[..., M]) -> M:
     """`msg` as the typed `view` of its message (common.mavlink_types.state / protocol),
-    after checking at run time that it is that message; a ValueError otherwise."""
+    after checking at run time that it is that message; a ValueError otherwise.
+
+    `view` is a view class; it is typed as a callable because mypy refuses a Protocol class
+    where `type[M]` is expected (type-abstract)."""
     get_type = getattr(msg, "get_type", None)
     kind = get_type() if callable(get_type) else type(msg).__name__
-    if kind != view.msgname:
-        raise ValueError(f"a {kind} message is not a {view.msgname}")
+    msgname: str = vars(view)["msgname"]  # the view class's own ClassVar
+    if kind != msgname:
+        raise ValueError(f"a {kind} message is not a {msgname}")
     return cast(M, msg)

@@ -11,10 +11,18 @@ import pytest
 
 from common.config import load_scenario
 from common.frames import ned_to_enu, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
+from common.mav_enums import ATTITUDE_TARGET_TYPEMASK as ATT
+from common.mav_enums import POSITION_TARGET_TYPEMASK as POS
 from common.modes import Mode
 from common.quaternion import q_angle, q_conj, q_mul
 from common.simlink import through_wire_controls
-from fcu.setpoint_wire import attitude_target, position_target
+from fcu.setpoint_wire import (
+    ACCELERATION_IGNORE,
+    RATES_IGNORE,
+    VELOCITY_IGNORE,
+    attitude_target,
+    position_target,
+)
 from fcu.sim_bridge import actuator_controls
 from gcs.inprocess import fcu_pipeline, state_for_fcu
 from gcs.vehicle_link.pose import PoseTarget
@@ -23,8 +31,11 @@ from sitl.world import command_from_controls
 
 from .conftest import SCENARIOS
 
-POSITION_ONLY = 0b0000_1101_1111_1000  # SET_POSITION_TARGET_LOCAL_NED: position and yaw
-ATTITUDE_ONLY = 0b0100_0111  # SET_ATTITUDE_TARGET: attitude, no rates, no thrust
+# SET_POSITION_TARGET_LOCAL_NED: the position only (no velocity, acceleration, yaw, yaw rate)
+POSITION_ONLY = VELOCITY_IGNORE | ACCELERATION_IGNORE | \
+    POS.POSITION_TARGET_TYPEMASK_YAW_IGNORE | POS.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+# SET_ATTITUDE_TARGET: the attitude, no rates, no thrust
+ATTITUDE_ONLY = RATES_IGNORE | ATT.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE
 
 
 def fly_offboard(start_enu_m, target: PoseTarget, seconds: float) -> dict:

@@ -17,6 +17,7 @@ import time
 import pytest
 
 from common.frames import ned_to_geodetic
+from common.mav_enums import MAV_CMD
 from gcs.param_files import parse_params
 from tests.arducopter import ROOT, namespace, needs_arducopter, start_arducopter, wait_port
 from tests.sitl.test_arducopter_gcs import Copter
@@ -31,7 +32,9 @@ ALT_M = 10.0
 LEGS_M = ((15.0, 0.0), (15.0, 15.0), (0.0, 15.0))
 WP_RADIUS_M = 2.0  # ArduCopter's WPNAV_RADIUS: a waypoint within it is reached
 RTL_ALT_M = 15.0  # ArduCopter's RTL_ALT: RTL climbs to it before it returns
-MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_RETURN_TO_LAUNCH = 22, 16, 20
+MAV_CMD_NAV_TAKEOFF = MAV_CMD.MAV_CMD_NAV_TAKEOFF
+MAV_CMD_NAV_WAYPOINT = MAV_CMD.MAV_CMD_NAV_WAYPOINT
+MAV_CMD_NAV_RETURN_TO_LAUNCH = MAV_CMD.MAV_CMD_NAV_RETURN_TO_LAUNCH
 INT8, INT16, INT32, REAL32 = 2, 4, 6, 9
 
 
