@@ -19,6 +19,10 @@ from typing import Any, NamedTuple
 
 from common.frames import geodetic_to_ned, ned_to_geodetic
 from common.mav_enums import MAV_CMD, MAV_FRAME, MAV_MISSION_TYPE
+from common.mavlink_types import as_message
+from common.mavlink_types.protocol import MissionItem as LegacyMissionItem
+from common.mavlink_types.protocol import MissionItemInt
+from common.mavlink_types.state import HomePosition as HomePositionMessage
 
 LOCAL_SCALE = 1e4  # MISSION_ITEM_INT x, y in local frames: metres x 1e4
 GLOBAL_SCALE = 1e7  # MISSION_ITEM_INT x, y in global frames: degrees x 1e7
@@ -97,13 +101,16 @@ def _xy_int(value: float, scale: float) -> int:
     return INT32_MAX + 1
 
 
-def item_from_message(msg: Any) -> MissionItem:
+def item_from_message(msg: MissionItemInt | LegacyMissionItem) -> MissionItem:
     """A MISSION_ITEM_INT (x, y as sent) or a legacy MISSION_ITEM (x, y floats in the frame's
     unit, scaled by `xy_scale`) as a MissionItem."""
-    x, y = msg.x, msg.y
     if msg.get_type() == "MISSION_ITEM":
-        scale = xy_scale(msg.frame)
-        x, y = _xy_int(x, scale), _xy_int(y, scale)
+        legacy = as_message(msg, LegacyMissionItem)
+        scale = xy_scale(legacy.frame)
+        x, y = _xy_int(legacy.x, scale), _xy_int(legacy.y, scale)
+    else:
+        item_int = as_message(msg, MissionItemInt)
+        x, y = item_int.x, item_int.y
     return MissionItem(seq=msg.seq, frame=msg.frame, command=msg.command, current=msg.current,
                        autocontinue=msg.autocontinue, param1=msg.param1, param2=msg.param2,
                        param3=msg.param3, param4=msg.param4, x=x, y=y, z=msg.z,
@@ -140,7 +147,7 @@ class HomePosition(NamedTuple):
                    round(lon_deg * GLOBAL_SCALE) / GLOBAL_SCALE, round(alt_m * 1000.0) / 1000.0)
 
     @classmethod
-    def from_message(cls, msg: Any) -> HomePosition:
+    def from_message(cls, msg: HomePositionMessage) -> HomePosition:
         """From a HOME_POSITION message."""
         return cls(msg.latitude / GLOBAL_SCALE, msg.longitude / GLOBAL_SCALE,
                    msg.altitude / 1000.0)

@@ -15,6 +15,8 @@ from typing import Any, Protocol
 
 from common.mav_enums import MAV_CMD, MAV_FRAME, MAV_MODE_FLAG, MAV_RESULT, MAV_SEVERITY
 from common.mavlink import MAV
+from common.mavlink_types import Message, as_message
+from common.mavlink_types.protocol import CommandInt, CommandLong
 from common.modes import Mode, decode
 from fcu.pipeline import Pipeline
 from fcu.telemetry import REQUESTABLE, Home, Schedule
@@ -51,11 +53,20 @@ class Server(Protocol):
     def set_mission_current(self, seq: int) -> bool: ...
 
 
-def command_key(msg: Any) -> bytes:
+Command = CommandLong | CommandInt
+
+
+def command_key(msg: Command) -> bytes:
     """A command's identity for retries: its id and parameters, bit for bit (NaN too)."""
-    params = [getattr(msg, f"param{i}") for i in range(1, 8)] if msg.get_type() == \
-        "COMMAND_LONG" else [*(getattr(msg, f"param{i}") for i in range(1, 5)), msg.x, msg.y,
-                             msg.z, msg.frame]
+    params: list[float]
+    if msg.get_type() == "COMMAND_LONG":
+        long = as_message(msg, CommandLong)
+        params = [long.param1, long.param2, long.param3, long.param4, long.param5,
+                  long.param6, long.param7]
+    else:
+        cint = as_message(msg, CommandInt)
+        params = [cint.param1, cint.param2, cint.param3, cint.param4, cint.x, cint.y, cint.z,
+                  cint.frame]
     return struct.pack("<I", msg.command) + struct.pack(f"<{len(params)}d", *params)
 
 
@@ -76,11 +87,11 @@ class CommandService:
         self.executed: dict[tuple[int, int, int], tuple[bytes, float, int, str]] = {}
         self.repeated_commands = 0
 
-    def ack(self, index: int, msg: Any, command: int, result: int) -> None:
+    def ack(self, index: int, msg: Message, command: int, result: int) -> None:
         self.server.send(M.MAVLink_command_ack_message(
             command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), index)
 
-    def handle(self, index: int, msg: Any, now_s: float) -> None:
+    def handle(self, index: int, msg: Command, now_s: float) -> None:
         """Execute a COMMAND_LONG/INT and ACK it; a COMMAND_LONG re-sent by its sender
         (confirmation > 0, the same command and parameters, within RETRY_WINDOW_S of the
         first) gets the first answer again: a retry after a lost or late ACK must not start
@@ -88,8 +99,8 @@ class CommandService:
         sender = (index, msg.get_srcSystem(), msg.get_srcComponent())
         key = command_key(msg)
         last = self.executed.get(sender)
-        if getattr(msg, "confirmation", 0) > 0 and last is not None and last[0] == key \
-                and now_s - last[1] <= RETRY_WINDOW_S:
+        retry = msg.get_type() == "COMMAND_LONG" and as_message(msg, CommandLong).confirmation > 0
+        if retry and last is not None and last[0] == key and now_s - last[1] <= RETRY_WINDOW_S:
             self.repeated_commands += 1
             self.ack(index, msg, msg.command, last[2])
             if last[3] and last[2] != ACCEPTED:
@@ -105,7 +116,7 @@ class CommandService:
         if text and result != ACCEPTED:
             self.server.say(WARNING, text, index)
 
-    def _execute(self, index: int, msg: Any, now_s: float) -> tuple[int | None, str]:
+    def _execute(self, index: int, msg: Command, now_s: float) -> tuple[int | None, str]:
         """(MAV_RESULT, reason) of a command, or (None, "") when it was answered here."""
         cmd = msg.command
         p = (msg.param1, msg.param2, msg.param3, msg.param4)
@@ -178,15 +189,16 @@ class CommandService:
             result = UNSUPPORTED
         return result, text
 
-    def _takeoff(self, msg: Any) -> tuple[int, str]:
+    def _takeoff(self, msg: Command) -> tuple[int, str]:
         """MAV_CMD_NAV_TAKEOFF: altitude NaN (MAVSDK's, QGC's) -> MIS_TAKEOFF_ALT above the
         vehicle; else the altitude AMSL (COMMAND_LONG p7, as PX4; COMMAND_INT z in a global
         frame) or above home (COMMAND_INT z in a relative-altitude frame)."""
         c = self.server.pipeline.commander
         if msg.get_type() == "COMMAND_INT":
-            alt, frame = msg.z, msg.frame
+            cint = as_message(msg, CommandInt)
+            alt, frame = cint.z, cint.frame
         else:
-            alt, frame = msg.param7, MAV_FRAME.MAV_FRAME_GLOBAL
+            alt, frame = as_message(msg, CommandLong).param7, MAV_FRAME.MAV_FRAME_GLOBAL
         if math.isnan(alt):
             return c.takeoff()
         if not math.isfinite(alt):

@@ -10,6 +10,7 @@ from typing import Any
 
 from common.mav_enums import MAV_PARAM_ERROR, MAV_PARAM_TYPE, MAV_SEVERITY
 from common.mavlink import MAV
+from common.mavlink_types.protocol import ParamRequestRead, ParamSet
 from fcu.params import SPECS, ParamError, ParamStore
 
 M = MAV
@@ -43,12 +44,18 @@ class ParamService:
                                                 len(SPECS), i), index)
 
     @staticmethod
-    def _param_name(msg: Any) -> str:
-        name = msg.param_id if isinstance(msg.param_id, str) else \
-            msg.param_id.decode("ascii", "replace")
+    def _param_id(msg: ParamRequestRead | ParamSet) -> bytes:
+        """param_id as sent: str when decoded from the wire, bytes when built in-process."""
+        raw: str | bytes = msg.param_id
+        return raw.encode() if isinstance(raw, str) else raw
+
+    @staticmethod
+    def _param_name(msg: ParamRequestRead | ParamSet) -> str:
+        raw: str | bytes = msg.param_id
+        name = raw if isinstance(raw, str) else raw.decode("ascii", "replace")
         return name.rstrip("\x00")
 
-    def param_read(self, index: int, msg: Any) -> None:
+    def param_read(self, index: int, msg: ParamRequestRead) -> None:
         """PARAM_REQUEST_READ: by index, or by name when the index is -1."""
         if msg.param_index >= 0:
             if msg.param_index < len(SPECS):
@@ -58,13 +65,13 @@ class ParamService:
         if name in self.params.values:
             self.send_param(self.params.index(name), index)
 
-    def param_set(self, index: int, msg: Any) -> None:
+    def param_set(self, index: int, msg: ParamSet) -> None:
         """A set in force is echoed (PARAM_VALUE) to every link. A refusal answers the link
         that asked: PARAM_ERROR first (MAVSDK reports its error code: DOES_NOT_EXIST,
         VALUE_OUT_OF_RANGE, instead of a timeout), a STATUSTEXT with the reason, and for a
         known parameter the unchanged value (PARAM_VALUE, what older clients wait for)."""
         name = self._param_name(msg)
-        raw_id = msg.param_id.encode() if isinstance(msg.param_id, str) else msg.param_id
+        raw_id = self._param_id(msg)
         if name not in self.params.values:
             self.send(M.MAVLink_param_error_message(
                 msg.get_srcSystem(), msg.get_srcComponent(), raw_id[:16], -1,

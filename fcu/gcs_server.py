@@ -19,11 +19,22 @@ import math
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 from common.links import Link
 from common.mav_enums import MAV_COMPONENT, MAV_RESULT, MAV_SEVERITY, MAV_TYPE, MISSION_STATE
 from common.mavlink import MAV, encoder, pack, parser, signed_parser, signing_timestamp
+from common.mavlink_types import as_message
+from common.mavlink_types.protocol import (
+    CommandInt,
+    CommandLong,
+    ManualControl,
+    ParamRequestRead,
+    ParamSet,
+    SetAttitudeTarget,
+    SetMode,
+    SetPositionTargetLocalNed,
+)
+from common.mavlink_types.state import Heartbeat
 from common.modes import decode_custom
 from common.outcome import Event
 from fcu.dualquat import q_angle, q_conj, q_mul, q_rotate
@@ -207,23 +218,26 @@ class GcsServer:
     def _handle(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
         kind = msg.get_type()
         if kind == "HEARTBEAT":
-            if msg.type == MAV_TYPE.MAV_TYPE_GCS:
+            if as_message(msg, Heartbeat).type == MAV_TYPE.MAV_TYPE_GCS:
                 self.gcs_seen_s = now_s
             return
         if kind == "MANUAL_CONTROL":  # its target field is `target`
-            if msg.target not in (0, self.system_id):
+            manual = as_message(msg, ManualControl)
+            if manual.target not in (0, self.system_id):
                 self.ignored_messages += 1
                 return
             self.pipeline.commander.manual_input(
-                now_s, sticks_from_manual_control(msg.x, msg.y, msg.z, msg.r))
+                now_s, sticks_from_manual_control(manual.x, manual.y, manual.z, manual.r))
             return
         target = getattr(msg, "target_system", 0)
         if target not in (0, self.system_id):
             self.ignored_messages += 1
             return
         cmd = self.pipeline.commander
-        if kind in ("COMMAND_LONG", "COMMAND_INT"):
-            self.commands.handle(index, msg, now_s)
+        if kind == "COMMAND_LONG":
+            self.commands.handle(index, as_message(msg, CommandLong), now_s)
+        elif kind == "COMMAND_INT":
+            self.commands.handle(index, as_message(msg, CommandInt), now_s)
         elif kind.startswith("MISSION_"):
             for reply in self.missions.handle(msg, now_s):
                 if reply.get_type() == "STATUSTEXT":
@@ -235,31 +249,33 @@ class GcsServer:
         elif kind == "PARAM_REQUEST_LIST":
             self.param_service.request_list(index)
         elif kind == "PARAM_REQUEST_READ":
-            self.param_service.param_read(index, msg)
+            self.param_service.param_read(index, as_message(msg, ParamRequestRead))
         elif kind == "PARAM_SET":
-            self.param_service.param_set(index, msg)
+            self.param_service.param_set(index, as_message(msg, ParamSet))
         elif kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET"):
             self._setpoint(index, msg, now_s)
         elif kind == "SET_MODE":
-            mode = decode_custom(msg.custom_mode)
+            mode = decode_custom(as_message(msg, SetMode).custom_mode)
             if mode is not None:
                 result, text = cmd.set_mode(mode, now_s)
                 if result != MAV_RESULT.MAV_RESULT_ACCEPTED and text:
                     self.say(WARNING, text, index)
 
-    def _setpoint(self, index: int, msg: Any, now_s: float) -> None:
+    def _setpoint(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
         """An offboard target decoded (`fcu.setpoint_wire`) and given to the commander; a
         refusal, by the wire or by the commander, is said to the link it came on."""
         cmd = self.pipeline.commander
         try:
             if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+                pos = as_message(msg, SetPositionTargetLocalNed)
                 ok, why = cmd.offboard_position(now_s, position_target(
-                    msg.coordinate_frame, msg.type_mask, (msg.x, msg.y, msg.z),
-                    (msg.vx, msg.vy, msg.vz), (msg.afx, msg.afy, msg.afz), msg.yaw))
+                    pos.coordinate_frame, pos.type_mask, (pos.x, pos.y, pos.z),
+                    (pos.vx, pos.vy, pos.vz), (pos.afx, pos.afy, pos.afz), pos.yaw))
             else:
+                att = as_message(msg, SetAttitudeTarget)
                 ok, why = cmd.offboard_attitude(now_s, attitude_target(
-                    msg.type_mask, tuple(msg.q),
-                    (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate)))
+                    att.type_mask, att.q,
+                    (att.body_roll_rate, att.body_pitch_rate, att.body_yaw_rate)))
         except SetpointRefused as exc:
             ok, why = False, str(exc)
         if not ok:

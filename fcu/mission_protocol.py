@@ -33,6 +33,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from common.mavlink import MAV
+from common.mavlink_types import as_message
+from common.mavlink_types.protocol import (
+    MissionCount,
+    MissionItemInt,
+    MissionRequest,
+    MissionRequestInt,
+    MissionSetCurrent,
+)
+from common.mavlink_types.protocol import MissionItem as LegacyMissionItem
 from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission, localize
@@ -180,7 +189,7 @@ class MissionServer:
         partner = (msg.get_srcSystem(), msg.get_srcComponent())
         mission_type = getattr(msg, "mission_type", MISSION)
         if kind == "MISSION_SET_CURRENT":
-            self._set_current(msg.seq)
+            self._set_current(as_message(msg, MissionSetCurrent).seq)
             return []
         if kind == "MISSION_ACK":
             if self._upload is not None and self._upload.partner == partner:
@@ -199,14 +208,19 @@ class MissionServer:
         if mission_type != MISSION:
             return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
         if kind == "MISSION_COUNT":
-            return self._on_count(partner, msg.count, now_s)
-        if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
-            return self._on_item(partner, item_from_message(msg), now_s)
+            return self._on_count(partner, as_message(msg, MissionCount).count, now_s)
+        if kind == "MISSION_ITEM_INT":
+            return self._on_item(partner, item_from_message(as_message(msg, MissionItemInt)),
+                                 now_s)
+        if kind == "MISSION_ITEM":
+            return self._on_item(partner, item_from_message(as_message(msg, LegacyMissionItem)),
+                                 now_s)
         if kind == "MISSION_REQUEST_LIST":
             return [_msg(M.MAVLink_mission_count_message, partner[0], partner[1],
                          len(self.mission), MISSION, opaque_id=self.version)]
         # MISSION_REQUEST_INT or MISSION_REQUEST: answered with MISSION_ITEM_INT either way.
-        seq = msg.seq
+        seq = as_message(msg, MissionRequestInt if kind == "MISSION_REQUEST_INT"
+                         else MissionRequest).seq
         if not 0 <= seq < len(self.mission):
             return [self._ack(partner, M.MAV_MISSION_INVALID_SEQUENCE)]
         return [item_message(self.mission[seq], partner[0], partner[1],

@@ -35,7 +35,8 @@ from fcu.offboard_stream import AttitudeTarget, OffboardSetpoint, PositionTarget
 from fcu.tracker import Reference, VehicleState, pose_ref
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
-# The results and severities the commander answers with (the pipeline's too).
+# Shorthands of the results and severities the commander answers with, used here and by
+# fcu.commander and fcu.pipeline (common.mav_enums' MAV_RESULT and MAV_SEVERITY members).
 MAV_RESULT_ACCEPTED = MAV_RESULT.MAV_RESULT_ACCEPTED
 MAV_RESULT_DENIED = MAV_RESULT.MAV_RESULT_DENIED
 SEVERITY_EMERGENCY = MAV_SEVERITY.MAV_SEVERITY_EMERGENCY

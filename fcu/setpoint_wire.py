@@ -20,6 +20,7 @@ holds the altitude); INT16_MAX marks an axis that is not given (taken as centred
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.mav_enums import ATTITUDE_TARGET_TYPEMASK as ATT
@@ -64,9 +65,11 @@ def position_target(frame: int, type_mask: int, p_ned_m: Vec3, v_ned_m_s: Vec3,
         level_attitude(math.degrees(yaw_ned_rad)) if yaw_given else None)
 
 
-def attitude_target(type_mask: int, q_ned_frd: Quat, rates_frd_rad_s: Vec3) -> AttitudeTarget:
-    """SET_ATTITUDE_TARGET's attitude (normalised, NED -> FRD) and body rates (FRD) as an
-    `AttitudeTarget` (ENU -> FLU, FLU); the thrust is not used."""
+def attitude_target(type_mask: int, q_ned_frd: Sequence[float],
+                    rates_frd_rad_s: Vec3) -> AttitudeTarget:
+    """SET_ATTITUDE_TARGET's attitude (w, x, y, z as the wire carries it; normalised,
+    NED -> FRD) and body rates (FRD) as an `AttitudeTarget` (ENU -> FLU, FLU); the thrust
+    is not used."""
     q: Quat | None = None
     if not type_mask & ATT.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE:
         n = math.sqrt(sum(c * c for c in q_ned_frd))
