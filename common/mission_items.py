@@ -28,28 +28,31 @@ LOCAL_SCALE = 1e4  # MISSION_ITEM_INT x, y in local frames: metres x 1e4
 GLOBAL_SCALE = 1e7  # MISSION_ITEM_INT x, y in global frames: degrees x 1e7
 INT32_MIN, INT32_MAX = -(2 ** 31), 2 ** 31 - 1
 # The global frames: x, y in 1e-7 deg.
-GLOBAL_FRAMES = frozenset({
+GLOBAL_FRAMES: frozenset[int] = frozenset({
     MAV_FRAME.MAV_FRAME_GLOBAL, MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT,
     MAV_FRAME.MAV_FRAME_GLOBAL_INT, MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
     MAV_FRAME.MAV_FRAME_GLOBAL_TERRAIN_ALT, MAV_FRAME.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT})
-MAV_FRAME_GLOBAL = MAV_FRAME.MAV_FRAME_GLOBAL  # imported by gcs.mission_home
-MAV_FRAME_LOCAL_NED = MAV_FRAME.MAV_FRAME_LOCAL_NED  # imported by gcs.mission_home
+MAV_FRAME_GLOBAL: int = MAV_FRAME.MAV_FRAME_GLOBAL  # imported by gcs.mission_home
+MAV_FRAME_LOCAL_NED: int = MAV_FRAME.MAV_FRAME_LOCAL_NED  # imported by gcs.mission_home
 # Global frames that a home position converts: altitude AMSL, altitude above home (the
 # non-INT ones as MAVProxy sends them in MISSION_ITEM_INT, x and y in 1e-7 deg all the same).
 # The terrain frames are not among them: the vehicle knows no terrain.
-AMSL_FRAMES = frozenset({MAV_FRAME.MAV_FRAME_GLOBAL, MAV_FRAME.MAV_FRAME_GLOBAL_INT})
-RELATIVE_ALT_FRAMES = frozenset({MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-                                 MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
-GEO_FRAMES = AMSL_FRAMES | RELATIVE_ALT_FRAMES
+AMSL_FRAMES: frozenset[int] = frozenset({MAV_FRAME.MAV_FRAME_GLOBAL,
+                                         MAV_FRAME.MAV_FRAME_GLOBAL_INT})
+RELATIVE_ALT_FRAMES: frozenset[int] = frozenset({MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                                                 MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
+GEO_FRAMES: frozenset[int] = AMSL_FRAMES | RELATIVE_ALT_FRAMES
 # The commands of fcu.mission and what their x, y, z hold (docs/autopilot.md, section Missions):
 # NAV_WAYPOINT, NAV_LOITER_TIME and the pose keyframe (WAYPOINT_USER_1) fly to x, y, z;
 # NAV_TAKEOFF climbs to z and NAV_LAND ignores it (an altitude all the same); the
 # figure-infinity's (WAYPOINT_USER_2) z is an axis component. x, y of takeoff, land and the
 # figure are unused.
-XY_COMMANDS = frozenset({MAV_CMD.MAV_CMD_NAV_WAYPOINT, MAV_CMD.MAV_CMD_NAV_LOITER_TIME,
-                         MAV_CMD.MAV_CMD_WAYPOINT_USER_1})
-Z_ALTITUDE_COMMANDS = XY_COMMANDS | {MAV_CMD.MAV_CMD_NAV_LAND, MAV_CMD.MAV_CMD_NAV_TAKEOFF}
-POSITION_COMMANDS = Z_ALTITUDE_COMMANDS | {MAV_CMD.MAV_CMD_WAYPOINT_USER_2}
+XY_COMMANDS: frozenset[int] = frozenset({MAV_CMD.MAV_CMD_NAV_WAYPOINT,
+                                         MAV_CMD.MAV_CMD_NAV_LOITER_TIME,
+                                         MAV_CMD.MAV_CMD_WAYPOINT_USER_1})
+Z_ALTITUDE_COMMANDS: frozenset[int] = XY_COMMANDS | {MAV_CMD.MAV_CMD_NAV_LAND,
+                                                     MAV_CMD.MAV_CMD_NAV_TAKEOFF}
+POSITION_COMMANDS: frozenset[int] = Z_ALTITUDE_COMMANDS | {MAV_CMD.MAV_CMD_WAYPOINT_USER_2}
 
 
 class MissionItem(NamedTuple):
