@@ -57,6 +57,9 @@ from fcu.failsafe import state_lost
 from fcu.pipeline import Pipeline, StepOutput
 from fcu.telemetry import Home
 
+# dq_onboard's columns as read back (`common.ulog.read_topic`): ONBOARD_COLUMNS, then the
+# stamp of the state each step acted on
+DQ_ONBOARD_COLUMNS = (*ONBOARD_COLUMNS, "state_time_us")
 DQ_ONBOARD = Topic("dq_onboard", (("uint64_t", "timestamp"),
                                   *(("double", c) for c in ONBOARD_COLUMNS[1:]),
                                   ("uint64_t", "state_time_us")))

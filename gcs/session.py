@@ -37,6 +37,7 @@ from gcs.autopilot.dialect import STATION_DIALECT as DIALECT
 
 M = MAV
 TCP_CONNECT_S = 3.0  # a tcp: link that has not connected by then is reported, exit 1
+TEXTS_KEPT = 256  # the latest STATUSTEXTs heard, with when (Session.texts)
 REFUSAL_TEXT_S = 0.3  # after a refusal, how long to listen for the STATUSTEXT saying why
 MAX_PARSERS = 64  # one parser per peer (byte stream); the oldest goes beyond this
 
@@ -210,15 +211,20 @@ class Session:
         except OSError:
             self.conn.close()
             raise
-        if self.tlog is not None:
-            received = self.conn.post_message
+        # (monotonic s, system id, text) of the latest STATUSTEXTs heard
+        self.texts: collections.deque[tuple[float, int, str]] = \
+            collections.deque(maxlen=TEXTS_KEPT)
+        received = self.conn.post_message
 
-            def post_message(msg: Any, _received: Callable[[Any], None] = received,
-                             _log: Tlog = self.tlog) -> None:
+        def post_message(msg: Any, _received: Callable[[Any], None] = received,
+                         _log: Tlog | None = self.tlog) -> None:
+            if _log is not None:
                 _log.write(msg)  # every message heard, whatever the caller waits for
-                _received(msg)
+            if msg.get_type() == "STATUSTEXT":  # kept whoever reads the link meanwhile
+                self.texts.append((time.monotonic(), msg.get_srcSystem(), str(msg.text)))
+            _received(msg)
 
-            self.conn.post_message = post_message
+        self.conn.post_message = post_message
         self.lock = threading.Lock()
         self.target_system = 0
         self.target_component = 0
@@ -306,6 +312,14 @@ class Session:
             if msg is not None and msg.get_srcSystem() == self.target_system:
                 self.last_texts.append(msg.text)
                 end = time.monotonic() + quiet_s
+
+    def text_since(self, t_monotonic: float, prefix: str) -> str | None:
+        """The first STATUSTEXT of the target starting with `prefix` heard at or after
+        `t_monotonic`, whichever call read it from the link; None if none."""
+        for at, system, text in list(self.texts):
+            if at >= t_monotonic and system == self.target_system and text.startswith(prefix):
+                return text
+        return None
 
     def describe(self, result: int) -> str:
         """'MAV_RESULT_DENIED: <the vehicle's reason>' for the last command's answer."""

@@ -36,6 +36,7 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
     mode = ap.resolve_mode(ap.guided_mode)
     snap = Snapshot()
     accepted_at = math.inf  # when the mode was confirmed (monotonic s)
+    streamed_at = math.inf  # when our targets began (monotonic s)
 
     def listen(seconds: float, until: Callable[[], bool] | None = None) -> bool:
         end = time.monotonic() + seconds
@@ -43,9 +44,9 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
             msg = s.recv(None, timeout=min(0.05, left))
             if msg is not None and msg.get_srcSystem() == s.target_system:
                 snap.update(msg)
-                if msg.get_type() == "STATUSTEXT" and time.monotonic() > accepted_at and \
-                        str(msg.text).startswith(ATTITUDE_NOT_FLOWN):
-                    raise GcsError(f"the vehicle does not fly this attitude: {msg.text}")
+            # said of our targets, whichever read took it (the mode's confirmation too)
+            if (refused := s.text_since(streamed_at, ATTITUDE_NOT_FLOWN)) is not None:
+                raise GcsError(f"the vehicle does not fly this attitude: {refused}")
             hb = snap.get("HEARTBEAT")
             if hb is not None and snap.heard["HEARTBEAT"] > accepted_at and \
                     not ap.same_mode(mode.custom_mode, hb.custom_mode):
@@ -58,6 +59,7 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
 
     with SetpointStream(s, target, rate_hz, attitude=full) as stream:
         if full:
+            streamed_at = time.monotonic()
             stream.start()
             listen(0.5)  # PX4 and this FCU need a setpoint stream before OFFBOARD is accepted
         # a vehicle arms only once it knows its state: wait for its position to be reported
@@ -65,6 +67,7 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
         if arm_first and (result := arm(s, True)) != M.MAV_RESULT_ACCEPTED:
             raise GcsError(f"arming refused: {s.describe(result)}")
         _set_mode_or_fail(s, mode)
+        streamed_at = min(streamed_at, time.monotonic())
         stream.start()  # ArduPilot: the targets count only once in GUIDED
         accepted_at = time.monotonic()
         snap.failsafe_text = ""  # a failsafe from before does not explain what follows

@@ -15,6 +15,7 @@ import pytest
 
 from common.config import load_scenario
 from fcu.core import ONBOARD_COLUMNS
+from fcu.onboard_log import DQ_ONBOARD_COLUMNS
 from sitl.plant import TRUTH_COLUMNS
 
 from .conftest import ROOT, SCENARIOS
@@ -50,7 +51,7 @@ def test_square_at_two_metres_per_second_is_stretched_and_flown(tmp_path, clock)
     assert z[after].min() > 2.9 and not truth[after, TRUTH_COLUMNS.index("landed")].any()
     assert t_s[-1] > 15.0  # stretched: 3 s takeoff + 4 x (1 s + 1 s) would end by 11 s
     ocols, onboard = read_topic(out / "onboard.ulg", "dq_onboard")
-    assert tuple(ocols) == ONBOARD_COLUMNS
+    assert tuple(ocols) == DQ_ONBOARD_COLUMNS
     airborne = onboard[onboard[:, 0] >= truth[climbed[0], 0]]
     tilt = airborne[:, [ONBOARD_COLUMNS.index(f"tilt_cmd{i}") for i in range(6)]]
     # Sustained rates: over every window of 0.1 s (50 control steps), as the monitor judges.
