@@ -29,20 +29,13 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from common.mav_enums import MAV_CMD
+from common.mav_enums import MAV_CMD, MAV_RESULT, MAV_SEVERITY
 from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE
 from fcu import auto_plans
 from fcu.mission.executor import MissionExecutor
-from fcu.mode_references import (
-    MAV_RESULT_ACCEPTED,
-    MAV_RESULT_DENIED,
-    SEVERITY_CRITICAL,
-    SEVERITY_INFO,
-    SEVERITY_WARNING,
-    ModeReferences,
-)
+from fcu.mode_references import ModeReferences
 
 
 class Commander(ModeReferences):
@@ -52,62 +45,64 @@ class Commander(ModeReferences):
 
     def arm(self) -> tuple[int, str]:
         if self.armed:
-            return MAV_RESULT_ACCEPTED, "already armed"
+            return MAV_RESULT.MAV_RESULT_ACCEPTED, "already armed"
         if self.state is None:
-            return MAV_RESULT_DENIED, "arming refused: no state input"
+            return MAV_RESULT.MAV_RESULT_DENIED, "arming refused: no state input"
         self.last_ref = None  # hold where the vehicle is, not where an old reference was
         self.armed = True
         self.hold = self._current_pose_ref()
         self.touchdown = None
         self.manual_sp = None  # POSCTL starts from where the vehicle is
-        self.say(SEVERITY_INFO, "armed")
+        self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "armed")
         if self.mode == Mode.MISSION and not self.mission_running and not self.mission_done:
             self._start_mission()  # MISSION_START came first: fly it now
         self._maybe_start_flight()
-        return MAV_RESULT_ACCEPTED, "armed"
+        return MAV_RESULT.MAV_RESULT_ACCEPTED, "armed"
 
     def disarm(self, force: bool = False, reason: str = "disarmed",
                record_in_air: bool = True) -> tuple[int, str]:
         """Disarm; in the air only with `force`, and then recorded as a crash unless the
         caller records the cause itself (`record_in_air=False`: divergence)."""
         if not self.armed:
-            return MAV_RESULT_ACCEPTED, "already disarmed"
+            return MAV_RESULT.MAV_RESULT_ACCEPTED, "already disarmed"
         landed = self.landed
         if not force and not landed:
-            return MAV_RESULT_DENIED, "disarm refused: in the air (force with p2 = 21196)"
+            return (MAV_RESULT.MAV_RESULT_DENIED,
+                    "disarm refused: in the air (force with p2 = 21196)")
         self.armed = False  # simulated time keeps running once the flight has started
         self.mission_running = False
         self.touchdown = None
         self.land = None
         self.auto = None
-        self.say(SEVERITY_INFO if not force else SEVERITY_WARNING, reason)
+        self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING if force else MAV_SEVERITY.MAV_SEVERITY_INFO,
+                 reason)
         if not landed and record_in_air:
-            self.say(SEVERITY_CRITICAL, "disarmed in the air", CRASH)
-        return MAV_RESULT_ACCEPTED, reason
+            self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, "disarmed in the air", CRASH)
+        return MAV_RESULT.MAV_RESULT_ACCEPTED, reason
 
     def set_mode(self, mode: Mode, now_s: float) -> tuple[int, str]:
         if mode == Mode.MISSION and not self.mission:
-            return MAV_RESULT_DENIED, "no mission"
+            return MAV_RESULT.MAV_RESULT_DENIED, "no mission"
         if mode == Mode.OFFBOARD and (
                 self.offboard.received_s + self.offboard_timeout_s < now_s
                 or (self.offboard.p_enu_m is None and self.offboard.q_enu_flu is None)):
-            return MAV_RESULT_DENIED, "offboard refused: no setpoint stream"
+            return MAV_RESULT.MAV_RESULT_DENIED, "offboard refused: no setpoint stream"
         if mode == Mode.LAND and not self.armed:
-            return MAV_RESULT_DENIED, "land: not armed"
+            return MAV_RESULT.MAV_RESULT_DENIED, "land: not armed"
         if mode in (Mode.TAKEOFF, Mode.RTL) and not self.armed:
-            return MAV_RESULT_DENIED, f"{mode.name.lower()}: not armed"
+            return MAV_RESULT.MAV_RESULT_DENIED, f"{mode.name.lower()}: not armed"
         if mode == Mode.POSCTL and not self.manual_fresh(now_s):
-            return MAV_RESULT_DENIED, "POSCTL refused: no MANUAL_CONTROL"
+            return MAV_RESULT.MAV_RESULT_DENIED, "POSCTL refused: no MANUAL_CONTROL"
         previous = self.mode
         idle = self.auto is None and self.touchdown is None  # e.g. landed, disarmed, re-armed
         if mode == Mode.TAKEOFF and (previous != Mode.TAKEOFF or idle):
             refused = self._start_takeoff(self.flight.takeoff_alt_m)
             if refused:
-                return MAV_RESULT_DENIED, refused
+                return MAV_RESULT.MAV_RESULT_DENIED, refused
         elif mode == Mode.RTL and (previous != Mode.RTL or idle):
             refused = self._start_rtl()
             if refused:
-                return MAV_RESULT_DENIED, refused
+                return MAV_RESULT.MAV_RESULT_DENIED, refused
         self.mode = mode
         if mode != Mode.LAND and not (mode == Mode.RTL and previous == Mode.RTL):
             self.touchdown = None  # RTL touches down only at the end of its own plan
@@ -131,8 +126,8 @@ class Commander(ModeReferences):
                 self.offboard_sp = None  # the approach starts from the reference flown
         self._maybe_start_flight()
         if previous != mode:
-            self.say(SEVERITY_INFO, f"mode {mode.name}")
-        return MAV_RESULT_ACCEPTED, f"mode {mode.name}"
+            self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"mode {mode.name}")
+        return MAV_RESULT.MAV_RESULT_ACCEPTED, f"mode {mode.name}"
 
     def takeoff(self, target_up_m: float | None = None) -> tuple[int, str]:
         """MAV_CMD_NAV_TAKEOFF: TAKEOFF, climbing straight up to `target_up_m` above home
@@ -140,18 +135,19 @@ class Commander(ModeReferences):
         target less than MIS_TAKEOFF_ALT above the vehicle is raised to that, with a
         warning."""
         if not self.armed:
-            return MAV_RESULT_DENIED, "takeoff: not armed"
+            return MAV_RESULT.MAV_RESULT_DENIED, "takeoff: not armed"
         climb = self.flight.takeoff_alt_m
         if target_up_m is not None:
             wanted = target_up_m - self._current_pose_ref().p_enu_m[2]
             if not math.isfinite(wanted):
-                return MAV_RESULT_DENIED, "takeoff: altitude not finite"
+                return MAV_RESULT.MAV_RESULT_DENIED, "takeoff: altitude not finite"
             if wanted < climb:
-                self.say(SEVERITY_WARNING, f"takeoff: using the minimum climb {climb:.1f} m")
+                self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
+                         f"takeoff: using the minimum climb {climb:.1f} m")
             climb = max(climb, wanted)
         refused = self._start_takeoff(climb)
         if refused:
-            return MAV_RESULT_DENIED, refused
+            return MAV_RESULT.MAV_RESULT_DENIED, refused
         previous = self.mode
         self.mode = Mode.TAKEOFF
         self.touchdown = None
@@ -159,8 +155,8 @@ class Commander(ModeReferences):
         self.mission_running = False
         self._maybe_start_flight()
         if previous != Mode.TAKEOFF:
-            self.say(SEVERITY_INFO, f"mode {Mode.TAKEOFF.name}")
-        return MAV_RESULT_ACCEPTED, f"takeoff: climbing {climb:.1f} m"
+            self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"mode {Mode.TAKEOFF.name}")
+        return MAV_RESULT.MAV_RESULT_ACCEPTED, f"takeoff: climbing {climb:.1f} m"
 
     def _start_takeoff(self, climb_m: float) -> str:
         """Plan TAKEOFF's climb (one NAV_TAKEOFF item); a reason if refused, else ""."""
@@ -183,14 +179,14 @@ class Commander(ModeReferences):
         limits = replace(self.limits, cruise_speed_m_s=self.flight.rtl_cruise_m_s)
         self.auto = MissionExecutor(items, limits)
         self.auto.start(self.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
-        self.say(SEVERITY_INFO, f"RTL: return at {-items[0].z:.1f} m, then land")
+        self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"RTL: return at {-items[0].z:.1f} m, then land")
         return ""
 
     def mission_start(self, first: int = 0) -> tuple[int, str]:
         if not self.mission:
-            return MAV_RESULT_DENIED, "no mission"
+            return MAV_RESULT.MAV_RESULT_DENIED, "no mission"
         if not 0 <= first < len(self.mission):
-            return MAV_RESULT_DENIED, f"no mission item {first}"
+            return MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {first}"
         self.mission_current = first
         self.mission_done = False
         self.mission_running = False
@@ -200,8 +196,8 @@ class Commander(ModeReferences):
         self.auto = None
         self._start_mission()
         self._maybe_start_flight()
-        self.say(SEVERITY_INFO, "mission started")
-        return MAV_RESULT_ACCEPTED, "mission started"
+        self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission started")
+        return MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started"
 
     def set_mission(self, items: tuple[MissionItem, ...]) -> None:
         """A new mission (already validated by the mission protocol)."""
@@ -213,16 +209,16 @@ class Commander(ModeReferences):
             self.mode = Mode.HOLD
             self.hold = self._current_pose_ref()
             self.mission_running = False
-            self.say(SEVERITY_INFO, "mission replaced: holding")
+            self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission replaced: holding")
 
     def set_mission_current(self, seq: int) -> tuple[int, str]:
         if not 0 <= seq < len(self.mission):
-            return MAV_RESULT_DENIED, f"no mission item {seq}"
+            return MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {seq}"
         self.mission_current = seq
         self.mission_done = False
         if self.mode == Mode.MISSION and self.mission_running:
             self._start_mission()
-        return MAV_RESULT_ACCEPTED, f"mission item {seq}"
+        return MAV_RESULT.MAV_RESULT_ACCEPTED, f"mission item {seq}"
 
     def _maybe_start_flight(self) -> None:
         if self.armed and self.mode in (Mode.MISSION, Mode.OFFBOARD, Mode.LAND, Mode.TAKEOFF,
@@ -266,11 +262,11 @@ class Commander(ModeReferences):
         self.touchdown = None
         self.land = None
         self.auto = None
-        self.say(SEVERITY_CRITICAL, reason, FAILSAFE)
+        self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, reason, FAILSAFE)
 
     def failsafe_land(self, reason: str) -> None:
         if self.mode != Mode.LAND:
             self.mode = Mode.LAND
             self.auto = None
             self._start_landing()
-        self.say(SEVERITY_CRITICAL, reason, FAILSAFE)
+        self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, reason, FAILSAFE)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from common.mav_enums import MAV_CMD, MAV_RESULT, MAV_SEVERITY
+from common.mav_enums import MAV_CMD, MAV_SEVERITY
 from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import INFO, Event
@@ -35,14 +35,6 @@ from fcu.offboard_stream import AttitudeTarget, OffboardSetpoint, PositionTarget
 from fcu.tracker import Reference, VehicleState, pose_ref
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
-# Shorthands of the results and severities the commander answers with, used here and by
-# fcu.commander and fcu.pipeline (common.mav_enums' MAV_RESULT and MAV_SEVERITY members).
-MAV_RESULT_ACCEPTED = MAV_RESULT.MAV_RESULT_ACCEPTED
-MAV_RESULT_DENIED = MAV_RESULT.MAV_RESULT_DENIED
-SEVERITY_EMERGENCY = MAV_SEVERITY.MAV_SEVERITY_EMERGENCY
-SEVERITY_CRITICAL = MAV_SEVERITY.MAV_SEVERITY_CRITICAL
-SEVERITY_WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
-SEVERITY_INFO = MAV_SEVERITY.MAV_SEVERITY_INFO
 
 
 @dataclass(frozen=True)
@@ -155,8 +147,9 @@ class ModeReferences:
                                                            self.limits.vehicle,
                                                            start.q_enu_flu)
             if lim.acc_xy_m_s2 < self.flight.sticks.acc_xy_m_s2:  # said, as it is unusual
-                self.say(SEVERITY_INFO, f"POSCTL: acc {lim.acc_xy_m_s2:.2g} m/s2, jerk "
-                                        f"{lim.jerk_m_s3:.2g} m/s3 here")
+                self.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
+                         f"POSCTL: acc {lim.acc_xy_m_s2:.2g} m/s2, jerk "
+                         f"{lim.jerk_m_s3:.2g} m/s3 here")
         p_vehicle = self.state.p_enu_m if self.state is not None else None
         self.manual_sp, ref = manual.advance(sp, t_us, self.sticks, self.manual_limits,
                                              p_vehicle)
@@ -176,7 +169,7 @@ class ModeReferences:
                                                  self._envelope())
         refused = self.offboard_sp.refused
         if refused and refused != self._offboard_refused:
-            self.say(SEVERITY_WARNING, refused)
+            self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, refused)
         self._offboard_refused = refused
         return ref
 
@@ -239,7 +232,7 @@ class ModeReferences:
         if executor.completed:
             self.mission_running = False
             self.mission_done = True
-            self.say(SEVERITY_INFO, "mission complete")
+            self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission complete")
             last = self.mission[-1].command if self.mission else None
             if last == MAV_CMD.MAV_CMD_NAV_LAND:
                 self._begin_touchdown(round(t_s * 1e6), ref)
@@ -262,7 +255,7 @@ class ModeReferences:
             else:
                 self.mode = Mode.HOLD
                 self.hold = pose_ref(ref.p_enu_m, ref.q_enu_flu)
-                self.say(SEVERITY_INFO, "takeoff complete: mode HOLD")
+                self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "takeoff complete: mode HOLD")
         return ref
 
     def _begin_touchdown(self, t_us: int, ref: Reference) -> None:

@@ -21,6 +21,7 @@ import math
 from typing import NamedTuple
 
 from common.config import Gains, VehicleConfig
+from common.mav_enums import MAV_RESULT, MAV_SEVERITY
 from common.modes import Mode
 from common.outcome import DIVERGED, FAILSAFE, Event, diverged
 from fcu.actuator_monitor import ActuatorMonitor, unclamped_speeds
@@ -40,14 +41,7 @@ from fcu.failsafe import (
     state_lost,
 )
 from fcu.mission.limits import MissionLimits
-from fcu.mode_references import (
-    MAV_RESULT_ACCEPTED,
-    SEVERITY_CRITICAL,
-    SEVERITY_EMERGENCY,
-    SEVERITY_INFO,
-    SEVERITY_WARNING,
-    FlightSettings,
-)
+from fcu.mode_references import FlightSettings
 from fcu.rate_filter import ImuRateFilter
 from fcu.supervisor import Supervisor
 from fcu.tracker import VehicleState
@@ -171,7 +165,7 @@ class Pipeline:
             return True
         if not self._align_timeout_said:
             self._align_timeout_said = True
-            self.commander.say(SEVERITY_CRITICAL,
+            self.commander.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL,
                                f"estimator not aligned in {ALIGN_MAX_S:g} s: waiting")
         return False
 
@@ -209,7 +203,7 @@ class Pipeline:
             if why:
                 return 1, f"arming refused: estimator {why}"  # MAV_RESULT_TEMPORARILY_REJECTED
         result = self.commander.arm()
-        if result[0] == MAV_RESULT_ACCEPTED and not was:
+        if result[0] == MAV_RESULT.MAV_RESULT_ACCEPTED and not was:
             self.core.tracker.reset()
             self.saturation = SaturationMonitor()
             self.actuators.reset(self.core.allocator.tilt)
@@ -242,7 +236,7 @@ class Pipeline:
             self._check_estimator(t_us)
         if cmd.armed and state_lost(t_us, self.state_rx_us, self.settings):
             self.failsafe = "state input lost"
-            cmd.say(SEVERITY_CRITICAL, "failsafe: state input lost", FAILSAFE)
+            cmd.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, "failsafe: state input lost", FAILSAFE)
             cmd.disarm(force=True, reason="state input lost: disarmed")
         state = self.state
         if state is None or not cmd.armed:
@@ -258,7 +252,8 @@ class Pipeline:
                                           *state.omega_flu_rad_s)))
         if diverged(err, finite, self.settings.divergence_m):
             self.failsafe = "diverged"
-            cmd.say(SEVERITY_EMERGENCY, f"failsafe: diverged ({err:.1f} m)", DIVERGED)
+            cmd.say(MAV_SEVERITY.MAV_SEVERITY_EMERGENCY, f"failsafe: diverged ({err:.1f} m)",
+                    DIVERGED)
             cmd.disarm(force=True, reason="diverged: disarmed", record_in_air=False)
             out = self.supervisor.gate(False, alloc.speed_rad_s, alloc.tilt_rad)
             return self._output(out.speed_rad_s, out.tilt_rad, result)
@@ -266,7 +261,8 @@ class Pipeline:
         if out.fault:
             self.core.allocator.reset(out.tilt_rad)
             self.failsafe = "non-finite command"
-            cmd.say(SEVERITY_EMERGENCY, "failsafe: non-finite actuator command", FAILSAFE)
+            cmd.say(MAV_SEVERITY.MAV_SEVERITY_EMERGENCY, "failsafe: non-finite actuator command",
+                    FAILSAFE)
             cmd.disarm(force=True, reason="non-finite command: disarmed")
             return self._output(out.speed_rad_s, out.tilt_rad, result)
         if alloc.saturated:
@@ -295,7 +291,7 @@ class Pipeline:
         cmd = self.commander
         if not st.healthy:
             self.failsafe = "estimator failed"
-            cmd.say(SEVERITY_EMERGENCY, "failsafe: estimator failed", FAILSAFE)
+            cmd.say(MAV_SEVERITY.MAV_SEVERITY_EMERGENCY, "failsafe: estimator failed", FAILSAFE)
             cmd.disarm(force=True, reason="estimator failed: disarmed")
             return
         if st.rejected_in_row >= self.settings.gate_failures and self.failsafe != \
@@ -312,7 +308,7 @@ class Pipeline:
         elif level == 0 and self.pose_level > 0:
             if self.failsafe == "pose source lost":
                 self.failsafe = ""
-            cmd.say(SEVERITY_INFO, "pose source regained")
+            cmd.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "pose source regained")
         self.pose_level = level
 
     def _check_actuators(self, dt_s: float, tilt_rad: tuple[float, ...],
@@ -323,7 +319,8 @@ class Pipeline:
         limit_s = self.settings.actuator_limit_s
         for notice in self.actuators.update(dt_s, tilt_rad, unclamped_speeds(omega_sq),
                                             limit_s):
-            severity = SEVERITY_INFO if notice.kind == "clear" else SEVERITY_WARNING
+            severity = MAV_SEVERITY.MAV_SEVERITY_INFO if notice.kind == "clear" else \
+                MAV_SEVERITY.MAV_SEVERITY_WARNING
             self.commander.say(severity, notice.text(limit_s))
         if any(self.actuators.tilt_limited):
             self.tilt_rate_limited_steps += 1
@@ -341,7 +338,7 @@ class Pipeline:
                 speeds = unclamped_speeds(omega_sq)
                 which = ",".join(str(i + 1) for i, w in enumerate(speeds)
                                  if w > self.vehicle.rotor_speed_max_rad_s)
-                cmd.say(SEVERITY_WARNING,
+                cmd.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
                         f"rotors saturated for over {self.settings.saturation_s:g} s: {which}")
         elif change == "clear" and self.failsafe == "rotor saturation":
             self.failsafe = ""
@@ -364,10 +361,10 @@ class Pipeline:
             if cmd.armed and not cmd.landing:
                 cmd.failsafe_hold("failsafe: GCS link lost: HOLD")
             else:
-                cmd.say(SEVERITY_CRITICAL, "failsafe: GCS link lost")
+                cmd.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, "failsafe: GCS link lost")
         elif change == "land" and cmd.armed and cmd.mode == Mode.HOLD:
             cmd.failsafe_land("failsafe: GCS link lost: LAND")
         elif change == "regained":
             if self.failsafe == "GCS link lost":
                 self.failsafe = ""
-            cmd.say(SEVERITY_INFO, "GCS link regained")
+            cmd.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "GCS link regained")

@@ -9,8 +9,8 @@ re-creates a trajectory (Case I, see `gcs.scenario_mission`) gives the trajector
 reference to rounding.
 
 Time comes in as arguments (seconds); nothing here reads a clock. The MAVLink numbers used
-(`fcu.mission.codes`) are those of common.xml, written out so that the package imports no
-MAVLink library (tests/unit/test_mission.py checks them against pymavlink).
+(`fcu.mission.codes`) are common.xml's, taken from `common.mav_enums`, so that the package
+imports no MAVLink library (tests/unit/test_mav_enums.py checks the enums against pymavlink).
 
 Item semantics (positions local NED, metres; yaw in degrees, NED; NaN yaw = keep attitude):
 
@@ -29,8 +29,8 @@ at both ends); attitudes move along the shortest rotation with the same profile.
 and the figure-infinity are those of `fcu.trajectory` (one copy of the maths). An item is
 active on [start, end): at a boundary the reference is the next item's at tau = 0, the
 right-hand limit that holds over the coming control period (at a figure's start, T'' = pi k^2
-at once). A move
-whose duration comes from a speed (not from a parameter) and whose distance is below
+at once). A move whose duration comes from a speed (not from a parameter) and whose distance
+is below
 `POSITION_TOLERANCE_M` (or whose turn is below `ANGLE_TOLERANCE_RAD`) is not made: the item
 keeps the start position (attitude), so a target equal to the previous item's end up to the
 wire's resolution costs no travel. A requested yaw change makes the move last at least

@@ -11,13 +11,14 @@ from pathlib import Path
 import pytest
 
 from common.config import load_gains, load_vehicle
+from common.mav_enums import MAV_RESULT
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE
 from fcu.failsafe import FailsafeSettings
 from fcu.landing import LANDED_STILL_S, TOUCHDOWN_DEPTH_M
 from fcu.manual import StickSettings
 from fcu.mission.limits import MissionLimits
-from fcu.mode_references import MAV_RESULT_DENIED, FlightSettings
+from fcu.mode_references import FlightSettings
 from fcu.pipeline import Pipeline
 from fcu.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
 from fcu.tracker import VehicleState, pose_ref
@@ -118,7 +119,7 @@ def test_an_armed_vehicle_leaves_the_ground_when_it_rises_or_moves():
         pipe.arm()
         pipe.on_state(2000, _state(z, vz), 2000)
         assert not pipe.commander.landed
-        assert pipe.commander.disarm()[0] == MAV_RESULT_DENIED
+        assert pipe.commander.disarm()[0] == MAV_RESULT.MAV_RESULT_DENIED
         pipe.commander.disarm(force=True)
         assert any(e.kind == CRASH for e in pipe.events)
 
@@ -187,7 +188,7 @@ def test_takeoff_climbs_mis_takeoff_alt_then_holds():
     MIS_TKO_SPD on average), and the mode becomes HOLD there; disarmed, it is refused."""
     pipe = _on_ground()
     c = pipe.commander
-    assert c.takeoff()[0] == MAV_RESULT_DENIED  # not armed
+    assert c.takeoff()[0] == MAV_RESULT.MAV_RESULT_DENIED  # not armed
     assert pipe.arm()[0] == 0
     assert c.takeoff()[0] == 0 and c.mode == Mode.TAKEOFF and c.flight_started
     trace = _kinematic(pipe, 0, 5.0)
@@ -224,7 +225,7 @@ def test_rtl_climbs_flies_home_and_touches_down():
     c = pipe.commander
     pipe.on_state(0, VehicleState((3.0, 2.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
                                   (0.0, 0.0, 0.0)), 0)
-    assert c.set_mode(Mode.RTL, 0.0)[0] == MAV_RESULT_DENIED  # not armed
+    assert c.set_mode(Mode.RTL, 0.0)[0] == MAV_RESULT.MAV_RESULT_DENIED  # not armed
     pipe.arm()
     assert c.set_mode(Mode.RTL, 0.0)[0] == 0 and c.mode == Mode.RTL and c.landing
     trace = _kinematic(pipe, 0, 30.0)
@@ -257,7 +258,7 @@ def test_posctl_needs_manual_control_and_falls_back_to_hold():
     c = pipe.commander
     pipe.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
                                   (0.0, 0.0, 0.0)), 0)
-    assert c.set_mode(Mode.POSCTL, 10.0)[0] == MAV_RESULT_DENIED
+    assert c.set_mode(Mode.POSCTL, 10.0)[0] == MAV_RESULT.MAV_RESULT_DENIED
     c.manual_input(10.0, sticks_from_manual_control(0, 0, 500, 0))
     assert c.set_mode(Mode.POSCTL, 10.2)[0] == 0
     pipe.arm()
