@@ -66,7 +66,7 @@ def stop(procs: dict[str, subprocess.Popen]) -> None:
 
 def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = False,
            sitl: bool = True, sim_port: int | None = None, fcu_args: tuple[str, ...] = (),
-           fcu_preexec: Callable[[], None] | None = None) -> Stack:
+           sitl_args: tuple[str, ...] = (), fcu_preexec: Callable[[], None] | None = None) -> Stack:
     sim_port = sim_port or free_port()
     gcs_port = free_port()
     procs: dict[str, subprocess.Popen] = {}
@@ -76,7 +76,8 @@ def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = 
         if sitl:
             procs["sitl"] = start("sitl", ["sitl.node", str(SCENARIOS / f"{scenario}.toml"),
                                            "--link", f"udpin:127.0.0.1:{sim_port}", *rt,
-                                           "--truth-log", str(tmp_path / "truth.ulg")],
+                                           "--truth-log", str(tmp_path / "truth.ulg"),
+                                           *sitl_args],
                                   tmp_path)
         procs["fcu"] = start("fcu", ["fcu.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
                                      "--sim", f"udpout:127.0.0.1:{sim_port}", "--gcs",

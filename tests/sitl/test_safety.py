@@ -58,9 +58,21 @@ def _mode(stack, mode_name: str, timeout: float = 5.0):
                           m.custom_mode == want, timeout)
 
 
-def test_gcs_link_loss_holds_then_lands(stack):
+@pytest.fixture
+def endless_stack(tmp_path):
+    """`stack` whose simulation does not end at the scenario's 60 s: the GCS link's timers
+    run on the FCU's wall clock, and a lockstep flight on an idle machine flies 60 s of
+    simulated time in the 2.5 s they take, after which no control step logs the LAND."""
+    s = launch(tmp_path, sitl_args=("--end-time", "3600"))
+    yield s
+    s.session.close()
+    stop(s.procs)
+
+
+def test_gcs_link_loss_holds_then_lands(endless_stack):
     """No GCS heartbeat for COM_DL_LOSS_T: HOLD (CRITICAL, announced); after COM_DL_LAND_T
     in HOLD: LAND; heartbeats back: announced."""
+    stack = endless_stack
     _set(stack, "COM_DL_LOSS_T", 1.0)
     _set(stack, "COM_DL_LAND_T", 1.5)
     s = stack.session

@@ -592,7 +592,7 @@ def test_position_only_aiding_observes_the_attitude():
 
 
 # ----------------------------------------------------------------------------------------
-# Consistency (NEES)
+# Consistency (NEES, NIS)
 # ----------------------------------------------------------------------------------------
 
 
@@ -642,3 +642,41 @@ def test_the_filter_is_consistent_nees_within_chi_square_bounds():
         inside = (values[:, column] > chi2.ppf(0.025, dof)) & \
             (values[:, column] < chi2.ppf(0.975, dof))
         assert inside.mean() >= 0.9, (dof, inside.mean())
+
+
+class _RecordingEstimator(Estimator):
+    """An Estimator that keeps, for every update of position and attitude together, the
+    normalised innovation squared y^T S^-1 y with S = H P H^T + R (6 degrees of freedom)."""
+
+    def __init__(self, settings: EstimatorSettings) -> None:
+        super().__init__(settings)
+        self.nis: list[tuple[int, float]] = []  # (horizon time in us, NIS)
+
+    def _update(self, H: np.ndarray, y: list[float], r: list[float]) -> None:
+        if len(y) == 6:
+            S = H @ self._P @ H.T + np.diag(r)
+            v = np.array(y)
+            self.nis.append((self._h_t, float(v @ np.linalg.solve(S, v))))
+        super()._update(H, y, r)
+
+
+def test_the_innovations_are_consistent_nis_within_chi_square_bounds():
+    """Given 3 seeded moving runs and the filter tuned to the sensors it gets, then the mean
+    NIS of the pose updates (every 5th, from 3 s after the motion starts) is inside its
+    two-sided 99 % chi-square bounds for 6 degrees of freedom, and at least 90 % of the
+    single values are inside their 95 % bounds: S, the spread the filter expects of each
+    pose, is the spread it sees (a fusion with twice the position variance it declares
+    gives 4.43 and fails). Measured: 5.90 over 1077 (bounds 5.73..6.28)."""
+    values = []
+    for seed in (200, 201, 202):
+        est = _RecordingEstimator(_matched())
+        run(make_data(seed), est)
+        values += [v for t_us, v in est.nis[::5] if t_us * 1e-6 >= T_MOVE + 3.0]
+    nis = np.array(values)
+    n = len(nis)
+    assert n >= 500
+    lo, hi = chi2.ppf(0.005, n * 6) / n, chi2.ppf(0.995, n * 6) / n
+    print(f"mean NIS {nis.mean():.3f} over {n} (bounds {lo:.3f}..{hi:.3f})")
+    assert lo <= nis.mean() <= hi, (nis.mean(), lo, hi)
+    inside = (nis > chi2.ppf(0.025, 6)) & (nis < chi2.ppf(0.975, 6))
+    assert inside.mean() >= 0.9, inside.mean()
