@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import select
 import struct
-import sys
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -48,7 +47,7 @@ from common.mavlink import MAV
 from sitl.actuator_faults import ActuatorFaults
 from sitl.plant import ActuatorCommand, Plant, PlantState, initial_state, scenario_plant
 from sitl.rotor_layout import rotors_for_outputs
-from sitl.truth_log import TruthLog
+from sitl.truth_log import TruthLog, flushed
 
 MAGIC_16 = 18458  # servo packet with 16 PWM channels
 MAGIC_32 = 29569  # with 32 (ArduPilot's SERVO_32_ENABLE = 1)
@@ -271,15 +270,8 @@ class Server:
                 and self.physics.log_state().time_us - self.first_time_us >= self.end_us)
 
     def _flush_log(self) -> None:
-        if self.log is None:
-            return
         self._unflushed = 0
-        self.log.flush()
-        if self.log.failed:  # a full disk, an I/O error: the log ends, the world goes on
-            print(f"sitl: truth log stopped at t = {self.state.time_us * 1e-6:.3f} s: "
-                  f"{self.log.failed}", file=sys.stderr, flush=True)
-            self.log.close()
-            self.log = None
+        self.log = flushed(self.log, self.state.time_us)
 
     def run(self) -> None:
         try:

@@ -77,7 +77,7 @@ from sitl.px4_wire import (
 )
 from sitl.sensor_feed import SensorFeed
 from sitl.server import LOG_BATCH, SITL_COMPONENT
-from sitl.truth_log import TruthLog
+from sitl.truth_log import TruthLog, flushed
 from sitl.world import start_flight
 
 # PX4's simulators' rates where the scenario names no sensor profile (Gazebo classic:
@@ -323,15 +323,8 @@ class Server:
                 self._flush_log()
 
     def _flush_log(self) -> None:
-        if self.log is None:
-            return
         self._unflushed = 0
-        self.log.flush()
-        if self.log.failed:
-            print(f"sitl: truth log stopped at t = {self.state.time_us * 1e-6:.3f} s: "
-                  f"{self.log.failed}", file=sys.stderr, flush=True)
-            self.log.close()
-            self.log = None
+        self.log = flushed(self.log, self.state.time_us)
 
     def _connected(self) -> None:
         self.client = True

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import os
 import select
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -53,7 +52,7 @@ from common.simlink import (
 )
 from sitl.plant import ActuatorCommand, PlantState, rotate_inv
 from sitl.sensor_feed import pressure_hpa
-from sitl.truth_log import TruthLog
+from sitl.truth_log import TruthLog, flushed
 from sitl.world import World, command_from_controls
 
 SITL_COMPONENT = MAV.MAV_COMP_ID_PERIPHERAL
@@ -179,15 +178,8 @@ class SimulatorServer:
             ns["log"] += t3 - t2
 
     def _flush_log(self) -> None:
-        if self.log is None:
-            return
         self._unflushed = 0
-        self.log.flush()
-        if self.log.failed:  # a full disk, an I/O error: the log ends, the world goes on
-            print(f"sitl: truth log stopped at t = {self.state.time_us * 1e-6:.3f} s: "
-                  f"{self.log.failed}", file=sys.stderr, flush=True)
-            self.log.close()
-            self.log = None
+        self.log = flushed(self.log, self.state.time_us)
 
     def _command_from(self, controls: tuple[float, ...], mode: int) -> ActuatorCommand:
         return command_from_controls(controls, mode, self.scenario.vehicle, self.state)

@@ -11,6 +11,7 @@ Topics (ULog, read with pyulog):
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from common import px4_topics as px4
@@ -46,3 +47,17 @@ class TruthLog(ULogWriter):
             w.add(px4.VEHICLE_ATTITUDE_GROUNDTRUTH.name, px4.attitude_record(t, t, s.q_enu_flu))
             w.add(px4.VEHICLE_ANGULAR_VELOCITY_GROUNDTRUTH.name,
                   px4.angular_velocity_record(t, t, s.omega_flu_rad_s))
+
+
+def flushed(log: TruthLog | None, time_us: int) -> TruthLog | None:
+    """`log` with what it queued written; None once it cannot be written any more (a full
+    disk, an I/O error): said once on stderr, closed, and the world goes on without it."""
+    if log is None:
+        return None
+    log.flush()
+    if not log.failed:
+        return log
+    print(f"sitl: truth log stopped at t = {time_us * 1e-6:.3f} s: {log.failed}",
+          file=sys.stderr, flush=True)
+    log.close()
+    return None

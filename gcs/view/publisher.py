@@ -112,11 +112,3 @@ class Outputs:
             self.writer = None
         self.front.stop()
         self.server.stop()
-
-
-def _announce(outputs: Outputs) -> None:
-    print(f"gcs view: {outputs.url}", flush=True)
-    print("gcs view: open it in Foxglove or Lichtblick (Open connection > Foxglove WebSocket); "
-          "display frame: world", flush=True)
-    if outputs.mcap_path is not None:
-        print(f"gcs view: recording to {outputs.mcap_path}", flush=True)
