@@ -216,7 +216,10 @@ def test_a_sensor_profile_sets_the_rates(tmp_path):
         side.close()
         stop(procs)
     s = json.loads((tmp_path / "stats.json").read_text())
-    assert (s["imu_hz"], s["physics_dt_us"], s["steps"]) == (1000.0, 1000, 1700)
+    assert (s["imu_hz"], s["physics_dt_us"]) == (1000.0, 1000)
+    # 2 s of 1 ms steps: on the wall clock until the scripted PX4's first answer (0.3 s,
+    # later when the machine is loaded and a paced step goes out before it), then lockstep
+    assert s["steps"] + s["paced_steps"] == 2000 and s["paced_steps"] >= 300
     t = np.array([smp.time_usec for smp in r.samples])
     assert t[0] == 1000 and np.all(np.diff(t) == 1000) and t[-1] == 2_000_000
     assert r.published["mag"] == 200 and r.published["baro"] == 100
