@@ -76,7 +76,12 @@ def _decoded(session: Session, raw: bytes, param_type: int) -> ParamValue:
 
 def param_values(session: Session, timeout: float = 5.0) -> dict[str, ParamValue]:
     """All parameters with their types (PARAM_REQUEST_LIST), re-reading missing indices
-    once; `timeout` without a new parameter ends it."""
+    once; `timeout` without a new parameter ends it.
+
+    Only a PARAM_VALUE whose param_index is within param_count fills the list: ArduPilot
+    also sends PARAM_VALUE with param_index 65535 (-1) for a parameter that changes or is
+    read by name (its GCS_Param), and counting such an echo as an index ended the list
+    one parameter short. The vehicle's latest param_count holds."""
     s = session
     s.send(M.MAVLink_param_request_list_message(s.target_system, s.target_component))
     values: dict[int, tuple[str, bytes, int]] = {}
@@ -97,10 +102,15 @@ def param_values(session: Session, timeout: float = 5.0) -> dict[str, ParamValue
             continue
         if msg.get_srcSystem() != s.target_system:
             continue
-        count = msg.param_count
-        if msg.param_index not in values:
+        if count != msg.param_count:  # the first, or the vehicle's count changed
+            count = msg.param_count
+            values = {i: v for i, v in values.items() if i < count}
+        index = msg.param_index
+        if not 0 <= index < count:  # 65535: an echo of a set or of a read by name
+            continue
+        if index not in values:
             deadline = max(deadline, time.monotonic() + timeout)
-        values[msg.param_index] = (msg.param_id, param_wire.raw_value(msg), msg.param_type)
+        values[index] = (msg.param_id, param_wire.raw_value(msg), msg.param_type)
         quiet_until = time.monotonic() + 0.3
         if len(values) == count:
             break
