@@ -123,3 +123,124 @@ def for_ardupilot(items: Sequence[MissionItem], fmt: str, file_home: HomePositio
                         "HOME_POSITION")
     return WireMission(with_home(items, vehicle_home), vehicle_home,
                        "the vehicle's HOME_POSITION")
+
+
+# ------------------------------------------------------------------ another firmware's plan
+
+FIRMWARE_NAMES = {0: "a generic autopilot", 3: "ArduPilot", 12: "PX4"}
+
+
+def firmware_name(firmware: int) -> str:
+    """'PX4', 'ArduPilot', ... as a plan's firmwareType (MAV_AUTOPILOT) names it."""
+    return FIRMWARE_NAMES.get(firmware, f"MAV_AUTOPILOT {firmware}")
+
+
+class Conversion(NamedTuple):
+    """What uploading another firmware's plan converts (`notice`), and why it cannot go
+    (`refusal`, empty when the conversion is exact)."""
+
+    notice: str
+    refusal: str = ""
+
+
+def plan_conversion(plan_firmware: int | None, vehicle_firmware: int,
+                    items: Sequence[MissionItem]) -> Conversion | None:
+    """The conversion a plan written for `plan_firmware` needs on a `vehicle_firmware`
+    vehicle (None when it was written for this firmware, or says none or generic).
+
+    For ArduPilot from another firmware: the home goes at seq 0, the items from seq 1 and
+    DO_JUMP targets one up (exact); local-frame items would go through the vehicle's home
+    in a global frame, rounded to 1e-7 deg: not exact, refused. For PX4 (and this FCU) from
+    ArduPilot: the planned home stays on the ground station (PX4 keeps home out of the
+    mission), the items go from seq 0 as they are (exact)."""
+    if plan_firmware in (None, 0, vehicle_firmware):
+        return None
+    head = (f"plan written for {firmware_name(plan_firmware)} (firmwareType "
+            f"{plan_firmware}), the vehicle is {firmware_name(vehicle_firmware)} "
+            f"({vehicle_firmware})")
+    if vehicle_firmware == 3:
+        local = [i + 1 for i, it in enumerate(items) if it.frame == MAV_FRAME_LOCAL_NED]
+        if local:
+            return Conversion(head, f"{head}: its local-frame item(s) {_ranges(local)} would "
+                              "go in a global frame through the vehicle's home, rounded to "
+                              "1e-7 deg: not an exact conversion; nothing sent")
+        jumps = any(it.command == MAV_CMD_DO_JUMP for it in items)
+        return Conversion(f"{head}: converted: home at seq 0, the plan's items from seq 1"
+                          + (", DO_JUMP targets one up" if jumps else ""))
+    return Conversion(f"{head}: converted: the planned home is not sent (the vehicle keeps "
+                      "home out of the mission), the items go from seq 0 as they are")
+
+
+# ------------------------------------------------------------------ after a refused upload
+
+
+def _ranges(seqs: Sequence[int]) -> str:
+    """'0-2, 5' of ascending numbers."""
+    runs: list[list[int]] = []
+    for s in seqs:
+        if runs and runs[-1][1] == s - 1:
+            runs[-1][1] = s
+        else:
+            runs.append([s, s])
+    return ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in runs)
+
+
+def same_item(a: MissionItem, b: MissionItem) -> bool:
+    """Whether two items are the same mission item (seq and current apart; NaN equals
+    NaN)."""
+    def fields(it: MissionItem) -> tuple[object, ...]:
+        return tuple("nan" if isinstance(v, float) and math.isnan(v) else v
+                     for v in (it.frame, it.command, it.autocontinue, it.param1, it.param2,
+                               it.param3, it.param4, it.x, it.y, it.z))
+    return fields(a) == fields(b)
+
+
+def after_refusal(held: Sequence[str], count: int, received: int, label: str) -> list[str]:
+    """Which mission an ArduPilot vehicle holds at each seq (labels, e.g. "new", "old")
+    after it refused an upload of `count` items labelled `label` once it had taken
+    `received` of them, over a mission labelled `held`: ArduPilot's GCS_MAVLink mission
+    protocol truncates its mission to the new count when the upload starts (MISSION_COUNT)
+    and writes each item as it comes."""
+    kept = list(held[:count])
+    return [label if s < received else kept[s] for s in range(max(received, len(kept)))]
+
+
+def describe_held(labels: Sequence[str], home_at_seq0: bool) -> str:
+    """'home (seq 0), new items 1-2 and its old items 3-11' of `labels` per seq ("new",
+    "old", anything else: neither)."""
+    if not labels:
+        return "no items"
+    parts = []
+    start = 0
+    if home_at_seq0:
+        parts.append("home (seq 0)")
+        start = 1
+    words = {"new": "new item", "old": "its old item"}
+    groups: list[tuple[str, list[int]]] = []
+    for seq in range(start, len(labels)):
+        label = labels[seq] if labels[seq] in words else "other"
+        if groups and groups[-1][0] == label:
+            groups[-1][1].append(seq)
+        else:
+            groups.append((label, [seq]))
+    for label, seqs in groups:
+        word = words.get(label, "item")
+        plural = "s" if len(seqs) > 1 else ""
+        tail = " of neither mission" if label == "other" else ""
+        parts.append(f"{word}{plural} {_ranges(seqs)}{tail}")
+    return parts[0] if len(parts) == 1 else ", ".join(parts[:-1]) + " and " + parts[-1]
+
+
+def label_held(held: Sequence[MissionItem], old: Sequence[MissionItem],
+               new: Sequence[MissionItem], expected: Sequence[str]) -> list[str]:
+    """Each seq of a mission read back as "new" or "old" (by its item; one equal to both
+    as `expected` says, ArduPilot's rule), else "other"."""
+    out = []
+    for seq, it in enumerate(held):
+        is_new = seq < len(new) and same_item(it, new[seq])
+        is_old = seq < len(old) and same_item(it, old[seq])
+        if is_new and is_old:
+            out.append(expected[seq] if seq < len(expected) else "new")
+        else:
+            out.append("new" if is_new else "old" if is_old else "other")
+    return out

@@ -1,5 +1,11 @@
 """`gcs mission upload`, `download`, `clear` and `start` against a vehicle (the file was
-read before the link was opened: `gcs.cli.inputs`)."""
+read before the link was opened: `gcs.cli.inputs`).
+
+An upload to ArduPilot is not atomic (ArduPilot's GCS_MAVLink mission protocol truncates
+its mission at MISSION_COUNT and writes each item as it comes): the upload first reads the
+mission the vehicle holds and, when the vehicle refuses an item, puts it back, or says what
+the vehicle now holds. PX4 and this project's FCU replace their mission only when the whole
+upload succeeds. A plan written for another firmware says so and what was converted."""
 
 from __future__ import annotations
 
@@ -11,16 +17,18 @@ from gcs.cli.connection import print_result
 from gcs.cli.console import Progress
 
 if TYPE_CHECKING:
+    from common.mission_items import MissionItem
+    from gcs.mission_client import UploadResult
     from gcs.session import Session
 
 
 def mission_command(args: argparse.Namespace, session: Session) -> int:
     from common.mavlink import MAV
     from gcs.autopilot import autopilot_of
-    from gcs.mission_client import clear, download, home_position, result_name, upload_detailed
+    from gcs.mission_client import clear, download, home_position, result_name
     from gcs.mission_files import file_format, format_mission
     from gcs.mission_files.frames import to_frame
-    from gcs.mission_home import HomeError, WireMission, for_ardupilot, split_home
+    from gcs.mission_home import split_home
 
     t, c, send = session.target_system, session.target_component, session.send
     progress = Progress()
@@ -31,34 +39,7 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
         progress(f"mission: {done}/{total} items")
 
     if args.action == "upload":
-        items = args.items
-        wire = WireMission(list(items))
-        if at_seq0:
-            need_home = args.mission.home is None or any(
-                it.frame == MAV.MAV_FRAME_LOCAL_NED for it in items)
-            vehicle_home = home_position(session.conn, t, c, send=send) if need_home \
-                else None
-            try:
-                wire = for_ardupilot(items, args.mission.fmt, args.mission.home, vehicle_home)
-            except HomeError as exc:
-                print(f"gcs mission: {exc}", file=sys.stderr)
-                return 1
-            h = wire.home
-            assert h is not None
-            print(f"home (seq 0): lat {h.lat_deg:.7f}, lon {h.lon_deg:.7f} deg, alt "
-                  f"{h.alt_m:.2f} m AMSL, from {wire.home_source}")
-        n = len(wire.items) - (1 if at_seq0 else 0)  # the plan's items, home not counted
-        answer = upload_detailed(session.conn, t, c, wire.items, progress=report, send=send)
-        progress.done()
-        if not answer.accepted:
-            where = ""
-            if answer.about_item and not answer.notes:  # the vehicle said not which
-                where = ": the home item (seq 0)" if at_seq0 and answer.asked == 0 else \
-                    f": item {answer.asked + (0 if at_seq0 else 1)} of {n}"
-            print(f"upload of {n} items refused: {answer.describe()}{where}")
-            return 1
-        print(f"upload of {n} items: {result_name(answer.result)}")
-        return 0
+        return _upload(args, session)
     if args.action == "download":
         items = download(session.conn, t, c, progress=report, send=send)
         progress.done()
@@ -92,3 +73,109 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
         print(f"clear: {result_name(result)}")
         return 0 if result == MAV.MAV_MISSION_ACCEPTED else 1
     return print_result("mission start", session.command(MAV.MAV_CMD_MISSION_START), session)
+
+
+def _upload(args: argparse.Namespace, session: Session) -> int:
+    """`gcs mission upload`: 0 accepted, 1 refused or failed at the vehicle, 2 a plan of
+    another firmware whose conversion is not exact (nothing sent)."""
+    from common.mavlink import MAV
+    from gcs.autopilot import ARDUPILOT, autopilot_of
+    from gcs.mission_client import (
+        MissionError,
+        download,
+        home_position,
+        result_name,
+        upload_detailed,
+    )
+    from gcs.mission_home import HomeError, WireMission, for_ardupilot, plan_conversion
+
+    t, c, send = session.target_system, session.target_component, session.send
+    pilot = autopilot_of(session.heartbeat_msg)
+    at_seq0 = pilot.mission_home_at_seq0  # ArduPilot: home is seq 0, the plan from seq 1
+    items, doc = args.items, args.mission
+    conversion = plan_conversion(doc.firmware, pilot.firmware_type, items) \
+        if doc.fmt == "plan" else None
+    if conversion is not None and conversion.refusal:
+        print(f"gcs mission: {conversion.refusal}", file=sys.stderr)
+        return 2
+    if conversion is not None:
+        print(conversion.notice)
+    wire = WireMission(list(items))
+    if at_seq0:
+        need_home = doc.home is None or any(it.frame == MAV.MAV_FRAME_LOCAL_NED for it in items)
+        vehicle_home = home_position(session.conn, t, c, send=send) if need_home else None
+        try:
+            wire = for_ardupilot(items, doc.fmt, doc.home, vehicle_home)
+        except HomeError as exc:
+            print(f"gcs mission: {exc}", file=sys.stderr)
+            return 1
+        h = wire.home
+        assert h is not None
+        print(f"home (seq 0): lat {h.lat_deg:.7f}, lon {h.lon_deg:.7f} deg, alt "
+              f"{h.alt_m:.2f} m AMSL, from {wire.home_source}")
+    progress = Progress()
+    old: list[MissionItem] | None = None
+    if pilot.kind == ARDUPILOT:  # not atomic: keep what it holds, to put it back
+        try:
+            old = download(session.conn, t, c, send=send, progress=lambda d, n: progress(
+                f"reading the vehicle's mission: {d}/{n} items"))
+        except MissionError as exc:
+            progress.done()
+            print(f"gcs mission: reading the mission the vehicle holds (to put it back if "
+                  f"the upload is refused) failed: {exc}; nothing uploaded", file=sys.stderr)
+            return 1
+    n = len(wire.items) - (1 if at_seq0 else 0)  # the plan's items, home not counted
+    answer = upload_detailed(session.conn, t, c, wire.items, send=send,
+                             progress=lambda d, total: progress(f"mission: {d}/{total} items"))
+    progress.done()
+    if answer.accepted:
+        print(f"upload of {n} items: {result_name(answer.result)}")
+        return 0
+    which = "the home item (seq 0)" if at_seq0 and answer.asked == 0 else \
+        f"item {answer.asked + (0 if at_seq0 else 1)} of {n}"
+    where = f": {which}" if answer.about_item and not answer.notes else ""
+    print(f"upload of {n} items refused: {answer.describe()}{where}")
+    if old is not None and answer.asked >= 0:  # it had begun to take the new items
+        _restore(session, old, wire.items, answer, f"vehicle refused {which} "
+                 f"({answer.describe()})", at_seq0)
+    return 1
+
+
+def _restore(session: Session, old: list[MissionItem], new: list[MissionItem],
+             refused: UploadResult, what: str, at_seq0: bool) -> None:
+    """Put back the mission `old` that a non-atomic vehicle held before it refused part of
+    `new`; say so, or say what it now holds (read back, else by ArduPilot's rule)."""
+    from common.mavlink import MAV
+    from gcs.mission_client import MissionError, clear, download, upload_detailed
+    from gcs.mission_home import after_refusal, describe_held, label_held
+
+    t, c, send = session.target_system, session.target_component, session.send
+    expected: list[str] | None = after_refusal(["old"] * len(old), len(new), refused.asked,
+                                               "new")
+    size = f"{len(old)}-item mission" + (
+        f" (home at seq 0 and {len(old) - 1} items)" if at_seq0 and old else "")
+    why = ""
+    try:
+        if old:
+            back = upload_detailed(session.conn, t, c, old, send=send)
+            if not back.accepted:
+                why = f"refused: {back.describe()}"
+                if back.asked >= 0 and expected is not None:
+                    expected = after_refusal(expected, len(old), back.asked, "old")
+        elif clear(session.conn, t, c, send=send) != MAV.MAV_MISSION_ACCEPTED:
+            why, expected = "MISSION_CLEAR_ALL refused", None
+    except MissionError as exc:
+        why, expected = str(exc), None
+    if not why:
+        print(f"{what}; restored the {size} it held before")
+        return
+    try:
+        held = download(session.conn, t, c, send=send)
+        labels, how = label_held(held, old, new, expected or []), ""
+    except MissionError as exc:
+        labels = expected or []
+        how = f" (by ArduPilot's rule; reading it back failed: {exc})" if expected is not None \
+            else ""
+    now = f"the vehicle now holds {describe_held(labels, at_seq0)}{how}" \
+        if labels or how else "what the vehicle now holds is unknown (it could not be read)"
+    print(f"{what}; putting back the {size} it held before failed: {why}; {now}")

@@ -27,6 +27,7 @@ class MissionDoc(NamedTuple):
     items: list[MissionItem]
     home: HomePosition | None = None
     fmt: str = ""  # plan, wpl or toml: the format it was read in
+    firmware: int | None = None  # a plan's firmwareType (MAV_AUTOPILOT); None: not said
 
 
 # What MISSION_ITEM_INT can carry: a file whose values do not fit would parse and then fail

@@ -180,4 +180,8 @@ def parse_plan_doc(text: str, source: str = "<mission>") -> MissionDoc:
             items[i] = it._replace(param1=float(target))
     planned = None if home is None or all(v == 0 for v in home) else \
         HomePosition(float(home[0]), float(home[1]), float(home[2]))
-    return MissionDoc(items, planned, "plan")
+    firmware = mission.get("firmwareType")
+    if firmware is not None and (isinstance(firmware, bool) or not isinstance(firmware, int)):
+        raise MissionFileError(f"{source}: mission: key 'firmwareType': expected an integer "
+                               "(MAV_AUTOPILOT)")
+    return MissionDoc(items, planned, "plan", firmware)
