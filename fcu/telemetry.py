@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
+from common.identity import FLIGHT_CUSTOM_VERSION
 from common.mav_enums import ATTITUDE_TARGET_TYPEMASK, MAV_FRAME, POSITION_TARGET_TYPEMASK
 from common.mavlink import MAV
 from common.modes import MAIN_POSCTL
@@ -166,9 +167,11 @@ def heartbeat(armed: bool, custom_mode: int, active: bool, failsafe: str = ""
 
 
 def autopilot_version(uid: int) -> MAV.MAVLink_message:
+    """AUTOPILOT_VERSION with this FCU's tag in flight_custom_version (`common.identity`:
+    it flies position and attitude targets together)."""
     return M.MAVLink_autopilot_version_message(
-        CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, uid,
-        [0] * 18)
+        CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, list(FLIGHT_CUSTOM_VERSION), [0] * 8,
+        [0] * 8, 0, 0, uid, [0] * 18)
 
 
 # What the simulated vehicle has (SYS_STATUS `present`): the plant's IMU and barometer

@@ -76,18 +76,28 @@ class GcsError(RuntimeError):
 class Tlog:
     """A telemetry log as MAVProxy and QGroundControl write it: each message preceded by its
     wall-clock time in microseconds (big-endian uint64). Unbuffered: every complete record
-    is in the file at once."""
+    is in the file at once. The stamps never go back: each is taken under the lock that
+    orders the writes (the heartbeat thread, the set-point stream and the reader all write),
+    from the wall clock at opening plus the monotonic time since, so a wall-clock step does
+    not reorder them. `records` counts the records written."""
 
     def __init__(self, path: Path) -> None:
         self.fh = path.open("wb", buffering=0)
         self.lock = threading.Lock()
+        self.records = 0
+        self._wall0_us = int(time.time() * 1e6)
+        self._mono0_ns = time.monotonic_ns()
+        self._last_us = 0
 
     def write(self, msg: Any) -> None:
         if msg.get_type() == "BAD_DATA":
             return
-        usec = int(time.time() * 1e6) & ~3
         with self.lock:
+            usec = self._wall0_us + (time.monotonic_ns() - self._mono0_ns) // 1000
+            usec = max(usec & ~3, self._last_us)
+            self._last_us = usec
             self.fh.write(struct.pack(">Q", usec) + msg.get_msgbuf())
+            self.records += 1
 
     def close(self) -> None:
         self.fh.close()

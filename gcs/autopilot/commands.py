@@ -13,14 +13,13 @@ from __future__ import annotations
 
 import math
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
 
 from common.mavlink import MAV
 from gcs.autopilot.dialect import Autopilot, ModeTarget
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
-
     from gcs.session import Session
 
 M = MAV
@@ -28,6 +27,20 @@ CONFIRM_S = 3.0  # how long a mode change waits for a HEARTBEAT that shows it
 DEFAULT_TAKEOFF_M = 10.0  # gcs takeoff and gcs mode TAKEOFF, metres above home
 STATE_S = 2.0  # how long takeoff waits for the landed state it asks for
 _GROUND = (M.MAV_LANDED_STATE_ON_GROUND,)
+HEIGHTS = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT")  # what an observer is shown
+SETTLE_S = 0.5  # after a confirmation, how long an observer's judgement may still take
+
+
+class Observer(Protocol):
+    """Sees each height message while a command waits, and raises to end the wait
+    (`gcs.vehicle_link.descent`)."""
+
+    def __call__(self, msg: Any) -> None: ...
+
+    def pending(self) -> bool:
+        """Whether a judgement is under way (a fast descent not yet long enough to call):
+        a confirmed mode is then reported only once it is decided."""
+        ...
 
 
 class NotConfirmed(RuntimeError):
@@ -40,32 +53,53 @@ def autopilot(session: Session) -> Autopilot:
     return session.autopilot
 
 
-def confirm_mode(session: Session, target: ModeTarget, timeout_s: float) -> None:
+def confirm_mode(session: Session, target: ModeTarget, timeout_s: float,
+                 observe: Observer | None = None) -> None:
     """Wait for a HEARTBEAT of the vehicle that shows `target`; NotConfirmed naming the
-    mode the last one showed, or that none came."""
+    mode the last one showed, or that none came. `observe` sees the vehicle's heights
+    meanwhile (`gcs.vehicle_link.descent`; it raises to end the wait)."""
     ap = autopilot(session)
     seen = None
+    kinds = ["HEARTBEAT", *HEIGHTS] if observe is not None else ["HEARTBEAT"]
     end = time.monotonic() + timeout_s
     while (left := end - time.monotonic()) > 0:
-        hb = session.recv(["HEARTBEAT"], timeout=left)
-        if hb is None or hb.get_srcSystem() != session.target_system or \
-                hb.get_srcComponent() != session.target_component:
+        hb = session.recv(kinds, timeout=left)
+        if hb is None or hb.get_srcSystem() != session.target_system:
+            continue
+        if hb.get_type() != "HEARTBEAT":
+            if observe is not None:
+                observe(hb)
+            continue
+        if hb.get_srcComponent() != session.target_component:
             continue
         seen = hb
         if ap.same_mode(target.custom_mode, hb.custom_mode):
+            _settle(session, observe)
             return
     if seen is None:
         raise NotConfirmed(f"not confirmed: no HEARTBEAT within {timeout_s:g} s")
     raise NotConfirmed(f"not confirmed: the vehicle is in {ap.mode_name(seen.custom_mode)}")
 
 
-def set_mode(session: Session, target: ModeTarget, confirm_s: float = CONFIRM_S) -> int:
+def _settle(session: Session, observe: Observer | None) -> None:
+    """Keep showing the observer the heights while its judgement is pending, SETTLE_S at
+    most: a mode confirmed while the vehicle falls is not reported as done."""
+    end = time.monotonic() + SETTLE_S
+    while observe is not None and observe.pending() and \
+            (left := end - time.monotonic()) > 0:
+        msg = session.recv(list(HEIGHTS), timeout=left)
+        if msg is not None and msg.get_srcSystem() == session.target_system:
+            observe(msg)
+
+
+def set_mode(session: Session, target: ModeTarget, confirm_s: float = CONFIRM_S,
+             observe: Observer | None = None) -> int:
     """DO_SET_MODE to `target` (not the takeoff procedure: `takeoff`); the vehicle's answer.
     ACCEPTED only once a HEARTBEAT showed the mode, else NotConfirmed."""
     ap = autopilot(session)
     result = session.command(M.MAV_CMD_DO_SET_MODE, *ap.set_mode_params(target.custom_mode))
     if result == M.MAV_RESULT_ACCEPTED:
-        confirm_mode(session, target, confirm_s)
+        confirm_mode(session, target, confirm_s, observe)
     return result
 
 
@@ -113,10 +147,12 @@ def takeoff_params(ap: Autopilot, height_m: float, home_alt_m: float | None
 def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
             reach_s: float | None = None, tolerance_m: float = 0.5,
             confirm_s: float = CONFIRM_S, report: Callable[[float], None] | None = None,
-            fail: type[Exception] = RuntimeError) -> tuple[int, float | None]:
+            fail: type[Exception] = RuntimeError, observe: Observer | None = None
+            ) -> tuple[int, float | None]:
     """Take off to `height_m` above home; (the vehicle's answer, the height reached when
     `reach_s` is given: waited for until within `tolerance_m`). `fail` (the caller's error
-    type) for a vehicle that is disarmed, in the air, without home, or does not climb."""
+    type) for a vehicle that is disarmed, in the air, without home, or does not climb.
+    `observe` sees the heights while it waits (and raises to end the wait)."""
     from gcs.mission_client import home_position
 
     s = session
@@ -130,7 +166,7 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
         raise fail("the vehicle is in the air (takeoff is from the ground)")
     if ap.takeoff_mode is not None:
         mode = ap.resolve_mode(ap.takeoff_mode)
-        result = set_mode(s, mode, confirm_s)
+        result = set_mode(s, mode, confirm_s, observe)
         if result != M.MAV_RESULT_ACCEPTED:
             raise fail(f"{mode.name} refused: {s.describe(result)}")
     home_alt = None
@@ -143,17 +179,18 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
     if result != M.MAV_RESULT_ACCEPTED:
         return result, None
     if ap.takeoff_mode is None:  # PX4: NAV_TAKEOFF engages its TAKEOFF mode
-        confirm_mode(s, ap.resolve_mode("TAKEOFF"), confirm_s)
+        confirm_mode(s, ap.resolve_mode("TAKEOFF"), confirm_s, observe)
     if reach_s is None:
         return result, None
-    reached = wait_height(s, height_m - tolerance_m, reach_s, report)
+    reached = wait_height(s, height_m - tolerance_m, reach_s, report, observe)
     if reached is None:
         raise fail(f"{height_m:g} m not reached within {reach_s:g} s")
     return result, reached
 
 
 def wait_height(session: Session, at_least_m: float, timeout_s: float,
-                report: Callable[[float], None] | None = None) -> float | None:
+                report: Callable[[float], None] | None = None,
+                observe: Observer | None = None) -> float | None:
     """Wait until the vehicle is at least `at_least_m` above home (GLOBAL_POSITION_INT's
     relative altitude, else LOCAL_POSITION_NED's -z); the height then, None on timeout or
     when it disarms."""
@@ -169,6 +206,8 @@ def wait_height(session: Session, at_least_m: float, timeout_s: float,
                     not msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
                 return None
             continue
+        if observe is not None:
+            observe(msg)
         height = msg.relative_alt * 1e-3 if kind == "GLOBAL_POSITION_INT" else -msg.z
         if report is not None:
             report(height)

@@ -191,12 +191,6 @@ class Autopilot:
         """NAV_TAKEOFF's p7: AMSL (PX4) or metres above home (ArduPilot)."""
         return self.kind == PX4
 
-    @property
-    def attitude_targets(self) -> bool:
-        """Whether a pose goto streams SET_ATTITUDE_TARGET beside the position: not on
-        ArduPilot, where in GUIDED an attitude target replaces the position target."""
-        return self.kind == PX4
-
 
 def _vehicle(mav_type: int) -> str:
     table = mavutil.mode_mapping_bynumber(mav_type)

@@ -55,11 +55,15 @@ def ekf_state(flags: int) -> str:
     return "; ".join(([f"no {', '.join(lacking)}"] if lacking else []) + wrong)
 
 
-def readiness(sys_status: Any, ekf_status: Any, texts: list[str]) -> dict[str, Any]:
+def readiness(sys_status: Any, ekf_status: Any, texts: list[str], *,
+              prearm_in_health: bool = False) -> dict[str, Any]:
     """{"ready_to_arm": bool or None (unknown), "ekf": ArduPilot's estimator state (where
-    reported), "reasons": the autopilot's latest why-not texts}."""
+    reported), "reasons": the autopilot's latest why-not texts}. The PREARM_CHECK bit is
+    read where the autopilot says it has one (`present`); PX4 sets it in `health` only
+    (its SYS_STATUS stream), so with `prearm_in_health` the health bit alone decides."""
     out: dict[str, Any] = {"ready_to_arm": None}
-    if sys_status is not None and sys_status.onboard_control_sensors_present & PREARM:
+    if sys_status is not None and (prearm_in_health or
+                                   sys_status.onboard_control_sensors_present & PREARM):
         out["ready_to_arm"] = bool(sys_status.onboard_control_sensors_health & PREARM)
     if ekf_status is not None:
         out["ekf"] = ekf_state(ekf_status.flags)

@@ -18,17 +18,21 @@ def cmd_log(args: argparse.Namespace) -> int:
     session = open_session(args, tlog=args.file)
     progress = Progress()
     snap = Snapshot()
+    tlog = session.tlog
+    assert tlog is not None  # opened with a tlog above
+
     try:
         end = time.monotonic() + (args.duration or float("inf"))
         while time.monotonic() < end:
             collect(session, snap, min(0.5, max(0.0, end - time.monotonic())))
-            progress(f"recording {args.file}: {sum(snap.counts.values())} messages")
+            progress(f"recording {args.file}: {tlog.records} messages")
     except KeyboardInterrupt:
         pass
     finally:
         session.close()
         progress.done()
-    print(f"recorded {sum(snap.counts.values())} messages to {args.file}")
+    # the records in the file: what was heard and what this station sent (its heartbeats)
+    print(f"recorded {tlog.records} messages to {args.file}")
     return 0
 
 

@@ -90,27 +90,34 @@ def _takeoff(args: argparse.Namespace, session: Session) -> int:
 
 
 def _goto(args: argparse.Namespace, session: Session) -> int:
-    from gcs.autopilot import ARDUPILOT
-    from gcs.vehicle_link.goto import goto
+    """Exit 0 once the pose is reached and held; 1 refused, not reached, unsafe (the
+    vehicle fell: hold commanded), a disarmed vehicle without --arm, an ArduPilot vehicle
+    on the ground; 2 a roll or a pitch for a vehicle that cannot fly one apart from its
+    position."""
+    from gcs.vehicle_link.goto import flies_pose, goto
     from gcs.vehicle_link.pose import PoseTarget
 
-    if session.autopilot is not None and session.autopilot.kind == ARDUPILOT and \
-            (args.roll or args.pitch):
-        raise InputError("--roll and --pitch must be 0 on ArduPilot: it flies a position and "
-                         "a yaw in GUIDED (an attitude target there replaces the position "
-                         "target)")
+    full = flies_pose(session)
+    if not full and (args.roll or args.pitch):
+        ap = session.autopilot
+        label = ap.label if ap is not None else "the vehicle"
+        raise InputError(f"--roll and --pitch must be 0 on {label}: it flies a position and a "
+                         "yaw (an attitude target there replaces the position target); only "
+                         "a vehicle that flies position and attitude together (this project's "
+                         "FCU, by its AUTOPILOT_VERSION) takes them")
 
     target = PoseTarget.from_euler_deg((args.x, args.y, args.z), args.roll, args.pitch,
-                                          args.yaw)
+                                       args.yaw)
     progress = Progress()
+    # "attitude error" on every vehicle (an interface): the yaw's where only the yaw is flown
 
     def report(errs: tuple[float, float]) -> None:
         progress(f"goto: position error {errs[0]:.3f} m, attitude error "
                  f"{math.degrees(errs[1]):.2f} deg")
 
     dp, da = goto(session, target, arm_first=args.arm, tolerance_m=args.tolerance,
-                     tolerance_rad=math.radians(args.tolerance_deg), timeout=args.timeout,
-                     hold_s=args.hold, report=report)
+                  tolerance_rad=math.radians(args.tolerance_deg), timeout=args.timeout,
+                  hold_s=args.hold, report=report, full_pose=full)
     progress.done()
     print(f"reached: position error {dp:.4f} m, attitude error {math.degrees(da):.3f} deg")
     return 0

@@ -6,35 +6,70 @@ import math
 import time
 from collections.abc import Callable
 
+from common.identity import flies_pose as identity_flies_pose
 from common.mavlink import MAV
 from common.outcome import ATTITUDE_NOT_FLOWN
-from gcs.autopilot import ModeTarget
+from gcs.autopilot import ARDUPILOT, PX4, Autopilot, ModeTarget, UnknownMode
 from gcs.autopilot import commands as _commands
 from gcs.session import GcsError, Session
 from gcs.vehicle_link.actions import arm
+from gcs.vehicle_link.descent import Unsafe, watch_for
+from gcs.vehicle_link.params import autopilot_version
 from gcs.vehicle_link.pose import PoseTarget, SetpointStream, pose_errors
 from gcs.vehicle_link.snapshot import Snapshot
 
 M = MAV
 
 
+def flies_pose(session: Session) -> bool:
+    """Whether the vehicle says it flies position and attitude targets together
+    (`common.identity`: this FCU's AUTOPILOT_VERSION). PX4 and ArduPilot do not: to them
+    goto sends the position and the yaw alone."""
+    ap = _commands.autopilot(session)
+    if ap.kind != PX4:
+        return False
+    ver = autopilot_version(session)
+    return ver is not None and identity_flies_pose(ver.flight_custom_version)
+
+
+def _check_can_fly(session: Session, arm_first: bool) -> None:
+    """GcsError at once for a goto the vehicle would not fly: disarmed without `--arm`, or
+    an ArduPilot vehicle on the ground (GUIDED does not climb to a position target)."""
+    ap = _commands.autopilot(session)
+    armed, landed, height = _commands.flight_state(session)
+    if not armed and not arm_first:
+        raise GcsError("the vehicle is disarmed: arm it first or give --arm")
+    if ap.kind == ARDUPILOT:
+        on_ground = landed == M.MAV_LANDED_STATE_ON_GROUND if landed not in (
+            None, M.MAV_LANDED_STATE_UNDEFINED) else (height is None or height < 0.5)
+        if on_ground or not armed:
+            raise GcsError(f"{ap.label} is on the ground: GUIDED does not climb to a position "
+                           "target (take off first: gcs takeoff)")
+
+
 def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: float,
          tolerance_rad: float, timeout: float, hold_s: float, rate_hz: float = 20.0,
-         report: Callable[[tuple[float, float]], None] | None = None
-         ) -> tuple[float, float]:
+         report: Callable[[tuple[float, float]], None] | None = None,
+         full_pose: bool | None = None) -> tuple[float, float]:
     """Fly to the pose in the autopilot's set-point mode (`Autopilot.guided_mode`), arming
-    if asked, and wait until reached and held for `hold_s`. PX4 and this FCU: stream the
-    position and attitude targets, then OFFBOARD (it needs the stream first). ArduPilot:
-    GUIDED, then the position and yaw alone (an attitude target would replace the
-    position target); the attitude error is then the yaw's. GcsError when refused, not
+    if asked, and wait until reached and held for `hold_s`. A vehicle that flies position
+    and attitude together (`flies_pose`: this FCU) gets both targets; PX4 and ArduPilot the
+    position and yaw alone (SET_POSITION_TARGET_LOCAL_NED: in PX4's OFFBOARD an attitude
+    target turns position control off, in ArduPilot's GUIDED it replaces the position
+    target), and the attitude error is then the yaw's. PX4 and this FCU need the stream
+    before OFFBOARD; ArduPilot takes the targets once in GUIDED. GcsError when refused, not
     confirmed, not reached within `timeout`, when the vehicle leaves the mode meanwhile
     (a failsafe, another ground station), or when it says it holds its attitude instead
-    of the target's (this FCU: a tilt would flip), with its reason."""
+    of the target's (this FCU: a tilt would flip), with its reason; Unsafe when it falls
+    (`gcs.vehicle_link.descent`): the stream stops and the autopilot's hold mode is
+    commanded."""
     s = session
     ap = _commands.autopilot(s)
-    full = ap.attitude_targets
+    full = flies_pose(s) if full_pose is None else full_pose
+    _check_can_fly(s, arm_first)
     mode = ap.resolve_mode(ap.guided_mode)
     snap = Snapshot()
+    watch = watch_for(s, ap, floor="start", floor_cap_m=-target.p_ned_m[2])
     accepted_at = math.inf  # when the mode was confirmed (monotonic s)
     streamed_at = math.inf  # when our targets began (monotonic s)
 
@@ -44,6 +79,7 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
             msg = s.recv(None, timeout=min(0.05, left))
             if msg is not None and msg.get_srcSystem() == s.target_system:
                 snap.update(msg)
+                watch.update(msg, time.monotonic())
             # said of our targets, whichever read took it (the mode's confirmation too)
             if (refused := s.text_since(streamed_at, ATTITUDE_NOT_FLOWN)) is not None:
                 raise GcsError(f"the vehicle does not fly this attitude: {refused}")
@@ -57,37 +93,60 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
                 return True
         return False
 
-    with SetpointStream(s, target, rate_hz, attitude=full) as stream:
-        if full:
-            streamed_at = time.monotonic()
-            stream.start()
-            listen(0.5)  # PX4 and this FCU need a setpoint stream before OFFBOARD is accepted
-        # a vehicle arms only once it knows its state: wait for its position to be reported
-        listen(10.0, until=lambda: snap.get("LOCAL_POSITION_NED") is not None)
-        if arm_first and (result := arm(s, True)) != M.MAV_RESULT_ACCEPTED:
-            raise GcsError(f"arming refused: {s.describe(result)}")
-        _set_mode_or_fail(s, mode)
-        streamed_at = min(streamed_at, time.monotonic())
-        stream.start()  # ArduPilot: the targets count only once in GUIDED
-        accepted_at = time.monotonic()
-        snap.failsafe_text = ""  # a failsafe from before does not explain what follows
+    stream = SetpointStream(s, target, rate_hz, attitude=full)
+    try:
+        with stream:
+            if ap.kind == PX4:  # PX4 and this FCU need a set-point stream before OFFBOARD
+                streamed_at = time.monotonic()
+                stream.start()
+                listen(0.5)
+            # a vehicle arms only once it knows its state: wait for its position
+            listen(10.0, until=lambda: snap.get("LOCAL_POSITION_NED") is not None)
+            if arm_first and (result := arm(s, True)) != M.MAV_RESULT_ACCEPTED:
+                raise GcsError(f"arming refused: {s.describe(result)}")
+            _set_mode_or_fail(s, mode)
+            streamed_at = min(streamed_at, time.monotonic())
+            stream.start()  # ArduPilot: the targets count only once in GUIDED
+            accepted_at = time.monotonic()
+            snap.failsafe_text = ""  # a failsafe from before does not explain what follows
 
-        def reached() -> bool:
-            errs = pose_errors(snap, target, full)
-            if report is not None and errs is not None:
-                report(errs)
-            return errs is not None and errs[0] <= tolerance_m and errs[1] <= tolerance_rad
+            def reached() -> bool:
+                errs = pose_errors(snap, target, full)
+                if report is not None and errs is not None:
+                    report(errs)
+                return errs is not None and errs[0] <= tolerance_m and \
+                    errs[1] <= tolerance_rad
 
-        if not listen(timeout, reached):
-            errs = pose_errors(snap, target, full)
-            what = "attitude" if full else "yaw"
-            where = "no position heard" if errs is None else \
-                f"position error {errs[0]:.3f} m, {what} error {math.degrees(errs[1]):.2f} deg"
-            raise GcsError(f"pose not reached within {timeout:g} s ({where})")
-        listen(hold_s)
-        held = pose_errors(snap, target, full)
-        assert held is not None  # reached: the position and attitude heard stay in `snap`
-        return held
+            if not listen(timeout, reached):
+                errs = pose_errors(snap, target, full)
+                what = "attitude" if full else "yaw"
+                where = "no position heard" if errs is None else \
+                    f"position error {errs[0]:.3f} m, {what} error " \
+                    f"{math.degrees(errs[1]):.2f} deg"
+                raise GcsError(f"pose not reached within {timeout:g} s ({where})")
+            listen(hold_s)
+            held = pose_errors(snap, target, full)
+            assert held is not None  # reached: the position and attitude stay in `snap`
+            return held
+    except Unsafe as exc:
+        stream.stop()
+        raise Unsafe(f"{str(exc).removeprefix('UNSAFE: ')}; {_hold(s, ap)}") from None
+
+
+def _hold(session: Session, ap: Autopilot) -> str:
+    """After a fall: the autopilot's hold mode (PX4 AUTO.LOITER, ArduCopter BRAKE), and
+    what came of it, in words."""
+    try:
+        mode = ap.resolve_mode("HOLD")
+    except UnknownMode:
+        return f"{ap.label} has no hold mode: nothing commanded"
+    try:
+        result = _commands.set_mode(session, mode)
+    except (_commands.NotConfirmed, GcsError) as exc:
+        return f"commanded {mode.name}: {exc}"
+    if result != M.MAV_RESULT_ACCEPTED:
+        return f"commanded {mode.name}: refused ({session.describe(result)})"
+    return f"commanded {mode.name}: confirmed"
 
 
 def _set_mode_or_fail(session: Session, mode: ModeTarget) -> None:

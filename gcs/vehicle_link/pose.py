@@ -40,9 +40,10 @@ class PoseTarget:
         return _yaw_rad(self.q_ned_frd)
 
     def messages(self, session: Session, attitude: bool = True) -> list[Any]:
-        """The set-points: the position (yaw ignored) and the attitude target; or, without
-        `attitude` (ArduPilot's GUIDED, where an attitude target replaces the position
-        target), the position with the yaw alone."""
+        """The set-points: the position (yaw ignored) and the attitude target, for a vehicle
+        that flies the two together (`common.identity`); or, without `attitude` (PX4's
+        OFFBOARD, where an attitude target turns position control off, and ArduPilot's
+        GUIDED, where it replaces the position target), the position with the yaw alone."""
         s = session
         if not attitude:
             return [M.MAVLink_set_position_target_local_ned_message(
@@ -111,7 +112,11 @@ class SetpointStream:
         it)."""
         return self
 
-    def __exit__(self, *_exc: object) -> None:
+    def stop(self) -> None:
+        """Stop sending, for good; the last message is out when this returns."""
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
+
+    def __exit__(self, *_exc: object) -> None:
+        self.stop()

@@ -20,6 +20,7 @@ from gcs.session import Session
 from gcs.vehicle_link.snapshot import Snapshot, collect_requested, link_quality
 
 M = MAV
+NO_MISSION = 65535  # MISSION_CURRENT.total: no mission uploaded
 _LANDED = {M.MAV_LANDED_STATE_ON_GROUND: "on ground", M.MAV_LANDED_STATE_IN_AIR: "in air",
            M.MAV_LANDED_STATE_TAKEOFF: "taking off", M.MAV_LANDED_STATE_LANDING: "landing",
            M.MAV_LANDED_STATE_UNDEFINED: "undefined"}
@@ -103,13 +104,16 @@ def status(session: Session, seconds: float = 1.5, patience: float = 3.0) -> dic
         out["health"] = _health(ss)
         out["link_errors"] = ss.errors_comm
     if ss is not None or snap.get("EKF_STATUS_REPORT") is not None:
-        out["readiness"] = _readiness(ss, snap.get("EKF_STATUS_REPORT"), snap.texts)
+        px4 = hb is not None and hb.autopilot == M.MAV_AUTOPILOT_PX4
+        out["readiness"] = _readiness(ss, snap.get("EKF_STATUS_REPORT"), snap.texts,
+                                      prearm_in_health=px4)
     ext = snap.get("EXTENDED_SYS_STATE")
     if ext is not None:
         out["landed"] = landed_name(ext.landed_state)
     mc = snap.get("MISSION_CURRENT")
     if mc is not None:
-        out["mission"] = {"current": mc.seq, "total": mc.total,
+        # total UINT16_MAX: no mission on the vehicle (MAVLink's MISSION_CURRENT), as 0
+        out["mission"] = {"current": mc.seq, "total": 0 if mc.total == NO_MISSION else mc.total,
                           "state": M.enums["MISSION_STATE"][mc.mission_state].name
                           if mc.mission_state in M.enums["MISSION_STATE"] else mc.mission_state}
     loss, received, lost = link_quality(session)

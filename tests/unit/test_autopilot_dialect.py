@@ -12,7 +12,9 @@ import pytest
 from pymavlink import mavutil
 
 from common import modes as px4_modes
+from common.identity import FLIGHT_CUSTOM_VERSION, flies_pose
 from common.mavlink import encoder, parser
+from fcu.telemetry import autopilot_version
 from gcs.autopilot import PORTABLE_NAMES, UnknownMode, autopilot_of, commands, health, streams
 from gcs.autopilot.dialect import STATION_DIALECT as A
 from gcs.session import GcsError
@@ -320,7 +322,11 @@ def test_goto_on_ardupilot_streams_position_and_yaw_only():
     assert pos.yaw == pytest.approx(math.pi / 2)
     assert [m.get_type() for m in target.messages(session)] == [
         "SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET"]
-    assert not ARDUCOPTER.attitude_targets and PX4.attitude_targets
+    # attitude targets only to a vehicle that says it flies both (this FCU's tag)
+    assert flies_pose(list(FLIGHT_CUSTOM_VERSION)) and flies_pose(bytes(FLIGHT_CUSTOM_VERSION))
+    assert not flies_pose([0] * 8) and not flies_pose(None)
+    assert not flies_pose(list(bytes.fromhex("f2471861a0b1c2d3")))  # PX4's git hash
+    assert autopilot_version(1).flight_custom_version == list(FLIGHT_CUSTOM_VERSION)
     assert (ARDUCOPTER.guided_mode, PX4.guided_mode) == ("GUIDED", "OFFBOARD")
 
 

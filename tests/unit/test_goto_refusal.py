@@ -12,6 +12,7 @@ import time
 import pytest
 from pymavlink import mavutil
 
+from common.identity import FLIGHT_CUSTOM_VERSION
 from common.mavlink import MAV
 from gcs.autopilot import autopilot_of
 from gcs.session import GcsError, Session
@@ -32,7 +33,9 @@ def _free_udp_port() -> int:
 
 
 class ScriptedVehicle:
-    """Heartbeats, position and attitude at 20 Hz (level, at the origin); DO_SET_MODE is
+    """This FCU as a ground station sees it (AUTOPILOT_VERSION with its 6-DoF tag, so that
+    goto sends attitude targets). Heartbeats, position and attitude at 20 Hz (level, at the
+    origin); DO_SET_MODE is
     ACCEPTED and answered with REFUSAL *before* the HEARTBEAT showing the new mode
     (`refuse_on_mode`), or REFUSAL comes with the first attitude target (`refuse_on_stream`,
     a vehicle already in OFFBOARD)."""
@@ -77,6 +80,11 @@ class ScriptedVehicle:
                         self._text()  # said at once, the new mode's HEARTBEAT after it
                     self.mode = OFFBOARD  # the only mode goto asks for here
                     next_at = time.monotonic() + 0.2
+                elif msg.command == MAV.MAV_CMD_REQUEST_MESSAGE and \
+                        msg.param1 == MAV.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+                    mav.command_ack_send(msg.command, MAV.MAV_RESULT_ACCEPTED)
+                    mav.autopilot_version_send(0, 0, 0, 0, 0, list(FLIGHT_CUSTOM_VERSION),
+                                               [0] * 8, [0] * 8, 0, 0, 1)
                 else:
                     mav.command_ack_send(msg.command, MAV.MAV_RESULT_ACCEPTED)
 
