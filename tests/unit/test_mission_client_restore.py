@@ -221,3 +221,23 @@ def test_inexact_conversion_is_exit_2_nothing_sent(vehicles, capsys, tmp_path):
     code, out, err = gcs(capsys, v, "mission", "upload",
                          str(plan_file(tmp_path, [NEW[0], local], firmware=3)))
     assert code == 0 and "written for" not in out, out + err
+
+
+class Unreadable(NonAtomicArduPilot):
+    """Answers no MISSION_REQUEST_LIST: its mission cannot be read before an upload."""
+
+    def _handle(self, msg) -> None:
+        if msg.get_type() != "MISSION_REQUEST_LIST":
+            super()._handle(msg)
+
+
+def test_unreadable_mission_is_exit_1_nothing_sent(vehicles, capsys, tmp_path):
+    """Given an ArduPilot-like vehicle whose mission cannot be read, then the upload is
+    exit 1 with the reason and no MISSION_COUNT is sent (nothing could be put back)."""
+    v = vehicles(Unreadable, refuse=REFUSE)
+    v.mission = list(OLD)
+    code, out, err = gcs(capsys, v, "mission", "upload", str(plan_file(tmp_path, NEW)))
+    assert code == 1 and v.counts == [] and key(v.mission) == key(OLD), out + err
+    assert "reading the mission the vehicle holds (to put it back if the upload is " \
+        "refused) failed: mission download from system 1: no answer to " \
+        "MISSION_REQUEST_LIST" in err and "nothing uploaded" in err
