@@ -42,6 +42,15 @@ AMSL_FRAMES: frozenset[int] = frozenset({MAV_FRAME.MAV_FRAME_GLOBAL,
 RELATIVE_ALT_FRAMES: frozenset[int] = frozenset({MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT,
                                                  MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT})
 GEO_FRAMES: frozenset[int] = AMSL_FRAMES | RELATIVE_ALT_FRAMES
+# The deprecated _INT global frames and the frame each means: MISSION_ITEM_INT carries
+# degE7 in either. Neither firmware keeps the difference: PX4 stores only whether the
+# altitude is relative and answers MISSION_REQUEST_INT in the _INT frames (its
+# mavlink_mission.cpp), ArduPilot answers in the plain ones (AP_Mission). A download reads
+# them as the plain frames, so that a file's 3 comes back 3 from either.
+PLAIN_FRAMES: dict[int, int] = {
+    MAV_FRAME.MAV_FRAME_GLOBAL_INT: MAV_FRAME.MAV_FRAME_GLOBAL,
+    MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    MAV_FRAME.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT: MAV_FRAME.MAV_FRAME_GLOBAL_TERRAIN_ALT}
 # The commands of fcu.mission and what their x, y, z hold (docs/autopilot.md, section Missions):
 # NAV_WAYPOINT, NAV_LOITER_TIME and the pose keyframe (WAYPOINT_USER_1) fly to x, y, z;
 # NAV_TAKEOFF climbs to z and NAV_LAND ignores it (an altitude all the same); the
@@ -201,3 +210,10 @@ def to_global(item: MissionItem, home: HomePosition,
     z = alt if item.command in Z_ALTITUDE_COMMANDS else item.z
     return item._replace(frame=frame, x=round(lat * GLOBAL_SCALE),
                          y=round(lon * GLOBAL_SCALE), z=z)
+
+
+def plain_frame(item: MissionItem) -> MissionItem:
+    """`item` in the plain global frame where it is in a deprecated _INT one (PLAIN_FRAMES;
+    the same numbers: MISSION_ITEM_INT's x, y are degE7 in both)."""
+    frame = PLAIN_FRAMES.get(item.frame)
+    return item if frame is None else item._replace(frame=frame)

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
 
 def mission_command(args: argparse.Namespace, session: Session) -> int:
     from common.mavlink import MAV
+    from common.mission_items import plain_frame
     from gcs.autopilot import autopilot_of
     from gcs.mission_client import clear, download, home_position, result_name
     from gcs.mission_files import file_format, format_mission
@@ -41,7 +42,9 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
     if args.action == "upload":
         return _upload(args, session)
     if args.action == "download":
-        items = download(session.conn, t, c, progress=report, send=send)
+        # the _INT frames as the plain ones: PX4 answers in them whatever was uploaded
+        items = [plain_frame(it) for it in
+                 download(session.conn, t, c, progress=report, send=send)]
         progress.done()
         fmt = file_format(args.file, args.format)
         frame = args.frame or ("global" if fmt == "plan" else None)  # QGC plans globally

@@ -4,7 +4,9 @@ mission and parameter commands (tests/unit/test_mission_home.py, test_param_type
 What it does is what the real ones do, written here from their behaviour, not from
 gcs/: ArduPilot keeps home at mission seq 0 (its own home, whatever was uploaded there),
 refuses local-frame items (MAV_MISSION_UNSUPPORTED_FRAME, no text), casts parameter values
-(the float is converted to the parameter's type and clamped to its range); PX4 numbers a
+(the float is converted to the parameter's type and clamped to its range) and answers a
+download in the plain global frames (0, 3, 10); PX4 answers one in the _INT frames (5, 6:
+it keeps only whether an altitude is relative), numbers a
 mission from 0, carries integer parameters bytewise and refuses a PARAM_SET whose type is
 not the parameter's.
 """
@@ -129,7 +131,7 @@ class ScriptedAutopilot:
                     lat, lon, alt = self.home  # its own home, whatever was uploaded
                     it = it._replace(frame=0, command=16, x=round(lat * 1e7),
                                      y=round(lon * 1e7), z=alt)
-                self._send(item_message(it, 255, 0))
+                self._send(item_message(self._as_stored(it), 255, 0))
         elif kind == "MISSION_CLEAR_ALL":
             self.mission = []
             self._send(M.MAVLink_mission_ack_message(255, 0, M.MAV_MISSION_ACCEPTED, 0))
@@ -160,6 +162,18 @@ class ScriptedAutopilot:
             self._send(M.MAVLink_autopilot_version_message(
                 caps, 0x04070000, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0))
         self._send(M.MAVLink_command_ack_message(msg.command, result))
+
+    def _as_stored(self, it: MissionItem) -> MissionItem:
+        """A global item as the firmware answers it: PX4 keeps only whether the altitude is
+        relative and answers MISSION_REQUEST_INT in the _INT frames (mavlink_mission.cpp,
+        format_mavlink_mission_item); ArduPilot answers in the plain frames (AP_Mission,
+        mission_cmd_to_mavlink_int)."""
+        plain = {5: 0, 6: 3, 11: 10}.get(it.frame, it.frame)
+        if self.kind == "px4" and plain in (0, 3):
+            return it._replace(frame={0: 5, 3: 6}[plain])
+        if self.kind == "ardupilot":
+            return it._replace(frame=plain)
+        return it
 
     def _request(self, seq: int) -> None:
         self._send(M.MAVLink_mission_request_int_message(255, 0, seq, 0))
