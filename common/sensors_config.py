@@ -10,7 +10,11 @@ and dropout figure to be zero.
 Timing: sensor k is sampled at k / rate_hz on the simulation clock (`period_us`, exact), each
 section may add a timing jitter (`jitter_s`, optional, below half its period), and what the
 plant cannot serve at a scenario's physics step and control period is refused by
-`check_servable` when the scenario and the profile meet, before anything runs.
+`check_servable` when the scenario and the profile meet, before anything runs. The loader
+takes an IMU from PROFILE_IMU_RATE_MIN_HZ (100 Hz, what PX4's simulator link serves);
+this project's own FCU link needs IMU_RATE_MIN_HZ (500 Hz), checked by `check_servable`.
+
+The `[gps]` section is optional (absent: an exact fix); only PX4's link sends GPS.
 """
 
 from __future__ import annotations
@@ -27,7 +31,8 @@ Vec3 = tuple[float, float, float]
 
 RATE_MIN_HZ = 1.0
 RATE_MAX_HZ = 10000.0
-IMU_RATE_MIN_HZ = 500.0
+PROFILE_IMU_RATE_MIN_HZ = 100.0  # what the loader takes (sitl --protocol px4-hil)
+IMU_RATE_MIN_HZ = 500.0  # what this project's FCU link needs (check_servable)
 KINDS = ("truth", "model")
 
 
@@ -49,7 +54,7 @@ class AccelConfig:
 
 @dataclass(frozen=True)
 class ImuConfig:
-    rate_hz: float  # 500..10000
+    rate_hz: float  # 100..10000 (this project's FCU: 500..10000)
     vibration_factor: float  # multiplies both white noise densities
     gyro: GyroConfig
     accel: AccelConfig
@@ -94,6 +99,21 @@ class MocapConfig:
 
 
 @dataclass(frozen=True)
+class GpsConfig:
+    """A GNSS fix's white noise per fix and the accuracy it reports (PX4's link only)."""
+
+    position_noise_m: float  # sigma per horizontal axis
+    altitude_noise_m: float
+    velocity_noise_ned_m_s: Vec3  # sigma per NED axis
+    eph_m: float  # the reported accuracies
+    epv_m: float
+    satellites: int
+
+
+EXACT_GPS = GpsConfig(0.0, 0.0, (0.0, 0.0, 0.0), 1.0, 1.0, 10)
+
+
+@dataclass(frozen=True)
 class SensorProfile:
     name: str
     kind: str  # "truth" or "model"
@@ -102,6 +122,7 @@ class SensorProfile:
     mag: MagConfig
     mocap: MocapConfig
     source: str = ""  # the file it was read from
+    gps: GpsConfig = EXACT_GPS
 
     @property
     def is_truth(self) -> bool:
@@ -136,7 +157,7 @@ def _nonneg(t: Table, key: str, default: Any = ...) -> float:
 
 
 def _parse_imu(t: Table) -> ImuConfig:
-    rate = _rate(t, IMU_RATE_MIN_HZ)
+    rate = _rate(t, PROFILE_IMU_RATE_MIN_HZ)
     vib = _nonneg(t, "vibration_factor")
     g = t.table("gyro")
     gyro = GyroConfig(
@@ -188,6 +209,21 @@ def _parse_mocap(t: Table) -> MocapConfig:
     return out
 
 
+def _parse_gps(t: Table) -> GpsConfig:
+    vel = t.numbers("velocity_noise_ned_m_s", 3, lo=0.0)
+    sats = t.number("satellites", lo=0.0, hi=255.0)
+    if sats != int(sats):
+        raise ConfigError(f"{t.source}: key '{t.prefix}satellites': expected a whole number, "
+                          f"got {sats!r}")
+    out = GpsConfig(position_noise_m=_nonneg(t, "position_noise_m"),
+                    altitude_noise_m=_nonneg(t, "altitude_noise_m"),
+                    velocity_noise_ned_m_s=(vel[0], vel[1], vel[2]),
+                    eph_m=t.number("eph_m", lo=0.0, hi=655.0),
+                    epv_m=t.number("epv_m", lo=0.0, hi=655.0), satellites=int(sats))
+    t.finish()
+    return out
+
+
 def _check_rates(p: SensorProfile, source: str) -> None:
     """Magnetometer and barometer ride on the IMU's HIL_SENSOR: not faster than the IMU."""
     for section in ("baro", "mag"):
@@ -198,15 +234,20 @@ def _check_rates(p: SensorProfile, source: str) -> None:
                               f"the IMU's)")
 
 
-def check_servable(p: SensorProfile, physics_dt_us: int, control_dt_us: int) -> None:
+def check_servable(p: SensorProfile, physics_dt_us: int, control_dt_us: int, *,
+                   imu_rate_min_hz: float = IMU_RATE_MIN_HZ) -> None:
     """Refuse (ConfigError naming the file and the key) what the plant cannot serve at this
-    physics step and control period: a sensor faster than the physics step, an IMU without a
-    sample at the end of every control period (its sample there drives the FCU's control
-    step and the lockstep), a jittered IMU (for the same reason). The truth profile is not
-    sampled (the exact state is sent): nothing to check."""
-    if p.is_truth:
-        return
+    physics step and control period: an IMU slower than `imu_rate_min_hz` (this project's
+    FCU link: 500 Hz), a sensor faster than the physics step, an IMU without a sample at
+    the end of every control period (its sample there drives the FCU's control step and
+    the lockstep), a jittered IMU (for the same reason). The truth profile is not sampled
+    by this project's link (the exact state is sent): nothing to check there."""
     src = p.source or repr(p.name)
+    if p.is_truth and imu_rate_min_hz == IMU_RATE_MIN_HZ:
+        return
+    if p.imu.rate_hz < imu_rate_min_hz:
+        raise ConfigError(f"{src}: imu.rate_hz = {p.imu.rate_hz:g} is below "
+                          f"{imu_rate_min_hz:g} Hz, the slowest IMU this link serves")
     for section in SECTIONS:
         rate = getattr(p, section).rate_hz
         if period_us(rate) < physics_dt_us:
@@ -246,6 +287,26 @@ def _check_truth(p: SensorProfile, source: str) -> None:
         if getattr(obj, key) != 0.0:
             raise ConfigError(f"{source}: key '{section}.{key}': expected 0 in a "
                               f"kind = \"truth\" profile, got {getattr(obj, key)!r}")
+    g = p.gps
+    if g.position_noise_m or g.altitude_noise_m or any(g.velocity_noise_ned_m_s):
+        raise ConfigError(f"{source}: section 'gps': expected no noise in a "
+                          f"kind = \"truth\" profile")
+
+
+def stale_sensors(p: SensorProfile) -> list[str]:
+    """The sensors whose samples repeat exactly at rest (no white noise), which PX4's
+    DataValidator declares stale (the same value within 1e-6 for 100 samples in a row,
+    1,000 for the magnetometer)."""
+    out = []
+    if p.imu.accel_sigma_m_s2 == 0.0:
+        out.append("accel")
+    if p.imu.gyro_sigma_rad_s == 0.0:
+        out.append("gyro")
+    if p.baro.noise_m == 0.0:
+        out.append("baro")
+    if p.mag.noise_gauss == 0.0:
+        out.append("mag")
+    return out
 
 
 def parse_sensor_profile(data: dict[str, Any], source: str) -> SensorProfile:
@@ -257,7 +318,8 @@ def parse_sensor_profile(data: dict[str, Any], source: str) -> SensorProfile:
         baro=_parse_baro(t.table("baro")),
         mag=_parse_mag(t.table("mag")),
         mocap=_parse_mocap(t.table("mocap")),
-        source=source)
+        source=source,
+        gps=_parse_gps(t.table("gps")) if t.has("gps") else EXACT_GPS)
     t.finish()
     if profile.is_truth:
         _check_truth(profile, source)

@@ -110,10 +110,12 @@ def rotor_speeds(pwm_us: tuple[int, ...], rotor_of_motor: tuple[int, ...],
     return tuple(speeds)
 
 
-def state_json(timestamp_s: float, plant: Plant, s: PlantState) -> bytes:
-    """The JSON line ArduPilot reads for the state `s`, between newlines, compact."""
+def state_json(timestamp_s: float, plant: Plant, s: PlantState,
+               prev: PlantState | None = None) -> bytes:
+    """The JSON line ArduPilot reads for the state `s`, between newlines, compact; with
+    `prev` (the state one step before) the accelerometer holds a touchdown's impulse."""
     gx, gy, gz = flu_to_frd(s.omega_flu_rad_s)
-    ax, ay, az = flu_to_frd(plant.specific_force_flu(s))
+    ax, ay, az = flu_to_frd(plant.specific_force_flu(s, prev))
     px, py, pz = enu_to_ned(s.p_enu_m)
     vx, vy, vz = enu_to_ned(s.v_enu_m_s)
     qw, qx, qy, qz = q_enu_flu_to_ned_frd(s.q_enu_flu)
@@ -178,10 +180,11 @@ class JsonPhysics:
         if self.flight_start_us is None and any(speeds):
             self._start_flight()
         cmd = self.faults.apply(ActuatorCommand(speeds, self._tilts), self.state)
+        prev = self.state
         self.state = plant.step(self.state, cmd)
         self.steps += 1
         self._session_steps += 1
-        self.last_answer = state_json(self.timestamp_s(), plant, self.state)
+        self.last_answer = state_json(self.timestamp_s(), plant, self.state, prev)
         return self.last_answer, True
 
     def _start_flight(self) -> None:

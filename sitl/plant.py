@@ -16,7 +16,11 @@ the actuator trajectory stays exact. `ideal_actuators` makes both follow their c
 instantly (the speed limits stay: they are physical).
 
 Ground (z = 0): a resting vehicle stays put while the net vertical force does not lift it;
-a vehicle reaching z < 0 stops there (inelastic contact, velocities zeroed).
+a vehicle reaching z < 0 stops there (inelastic contact, velocities zeroed). What an
+accelerometer reads (`specific_force_flu`) includes the ground's force: the normal reaction
+while resting, and in the physics step of a touchdown the contact's impulse, the velocity
+change it imposed divided by the step (`contact_dv_enu`), so that the reported specific
+force plus gravity integrates to the true velocity change.
 
 The step is a compiled kernel (`sitl.plant_kernels.step_kernel`, numba) on a flat state
 array laid out as TRUTH_COLUMNS (so a state is its truth-log row) and a flat parameter array
@@ -266,14 +270,39 @@ class Plant:
                           tuple(rotor_speed_rad_s or (0.0,) * n), tuple(tilt_rad or (0.0,) * n),
                           on_ground and self.ground)
 
-    def specific_force_flu(self, s: PlantState) -> Vec3:
-        """What an accelerometer at the CoM reads: (R^T (a - g_W)) = f_b / m."""
+    def contact_dv_enu(self, prev: PlantState, s: PlantState) -> Vec3:
+        """The velocity change the inelastic ground contact imposed in the physics step from
+        `prev` to `s` (one step apart): the step ended resting from flight (v_s - v_prev =
+        -v_prev); zero in every other step."""
+        if not s.landed or prev.landed:
+            return (0.0, 0.0, 0.0)
+        v0, v1 = prev.v_enu_m_s, s.v_enu_m_s
+        return (v1[0] - v0[0], v1[1] - v0[1], v1[2] - v0[2])
+
+    def specific_force_flu(self, s: PlantState, prev: PlantState | None = None, *,
+                           contact_dv_enu: Vec3 | None = None,
+                           interval_s: float | None = None) -> Vec3:
+        """What an accelerometer at the CoM reads at s, R^T (a - g_W): the rotor and
+        disturbance force per mass in flight, the normal reaction (R^T g up) resting, plus
+        a contact impulse per mass, dv / interval: the step's from `prev` (the state one
+        physics step before s) by default, or `contact_dv_enu` spread over `interval_s`
+        (an IMU sample's interval that holds the touchdown's step; default the step)."""
+        if contact_dv_enu is None:
+            contact_dv_enu = (0.0, 0.0, 0.0) if prev is None else \
+                self.contact_dv_enu(prev, s)
         if s.landed:
-            return rotate_inv(s.q_enu_flu, (0.0, 0.0, self.g))
-        r = rotor_wrench_kernel(self.params, _f64(s.rotor_speed_rad_s, N_ROTORS),
-                                _f64(s.tilt_rad, N_ROTORS))
-        w = with_disturbance(self.params, self._disturbance.table, r, s.time_us * 1e-6)
-        return (w[0] / self.mass, w[1] / self.mass, w[2] / self.mass)
+            f: Vec3 = rotate_inv(s.q_enu_flu, (0.0, 0.0, self.g))
+        else:
+            r = rotor_wrench_kernel(self.params, _f64(s.rotor_speed_rad_s, N_ROTORS),
+                                    _f64(s.tilt_rad, N_ROTORS))
+            w = with_disturbance(self.params, self._disturbance.table, r, s.time_us * 1e-6)
+            f = (w[0] / self.mass, w[1] / self.mass, w[2] / self.mass)
+        if contact_dv_enu == (0.0, 0.0, 0.0):
+            return f
+        h = self.dt_us * 1e-6 if interval_s is None else interval_s
+        j = rotate_inv(s.q_enu_flu, (contact_dv_enu[0] / h, contact_dv_enu[1] / h,
+                                     contact_dv_enu[2] / h))
+        return (f[0] + j[0], f[1] + j[1], f[2] + j[2])
 
     def energy(self, s: PlantState) -> float:
         """Kinetic plus potential energy (for conservation tests)."""

@@ -7,43 +7,56 @@ Out, all stamped with the simulation clock: HIL_SENSOR (sensor id 0, one per IMU
 FRD specific force in m/s^2 and rate in rad/s, `fields_updated` 0x3F; a magnetometer
 sample in gauss FRD adds 0x1C0, a barometer sample 0x1A00: abs_pressure in hPa,
 pressure_alt in m AMSL, temperature in degC, the bits PX4 needs all of to publish that
-sensor), HIL_GPS (degE7, mm AMSL, cm/s NED, cdeg, eph/epv cm, 3D fix, 10 satellites) and
-HIL_STATE_QUATERNION (ground truth: NED->FRD quaternion, FRD rates, degE7, mm, cm/s, mG),
-and with a sensor profile the motion-capture pose as ODOMETRY (PX4 publishes it as
-vehicle_mocap_odometry). The magnetometer and barometer ride on the IMU's HIL_SENSOR (PX4
-reads them only there); HIL_GPS and HIL_STATE_QUATERNION go out at the first IMU sample at
-or after they fall due, just before it, so PX4 has them when that sample starts its step.
-Rates: the scenario's sensor profile (`sensors`) when it has one, else PX4's simulators'
-(IMU 250 Hz, magnetometer 100 Hz, barometer 50 Hz); HIL_GPS 5 Hz (PX4's Gazebo GPS);
-HIL_STATE_QUATERNION at the interval PX4 asks with SET_MESSAGE_INTERVAL (200 Hz when it
-connects; that rate until it asks), answered with COMMAND_ACK. The physics step divides
-the IMU period (at most the scenario's step).
+sensor), HIL_GPS (degE7, mm AMSL, cm/s NED, cdeg, eph/epv cm, 3D fix, the profile's
+satellites) and HIL_STATE_QUATERNION (ground truth: NED->FRD quaternion, FRD rates, degE7,
+mm, cm/s, mG), and with a named sensor profile the motion-capture pose as ODOMETRY (PX4
+publishes it as vehicle_mocap_odometry). The magnetometer and barometer ride on the IMU's
+HIL_SENSOR (PX4 reads them only there); HIL_GPS and HIL_STATE_QUATERNION go out at the
+first IMU sample at or after they fall due, just before it.
+
+Sensors: the scenario's profile (`sensors`, `--sensors`) when it names one, else
+config/sensors/px4-default.toml: PX4's Gazebo classic plugins' noise at PX4's simulator
+rates (IMU 250 Hz, magnetometer 100 Hz, barometer 50 Hz) and PX4's simulated GNSS (5 Hz),
+seeded from the scenario's seed. Noise matters: PX4's DataValidator declares a sensor
+stale after 100 samples equal within 1e-6 (1,000 for the magnetometer), so a profile with
+an exact sensor (`--sensors truth`) is served with a one-line warning. Any IMU rate from
+100 Hz whose period is a whole number of microseconds; the physics step divides the IMU
+period (at most the scenario's step). HIL_STATE_QUATERNION at the interval PX4 asks with
+SET_MESSAGE_INTERVAL (200 Hz when it connects; that rate until it asks), answered with
+COMMAND_ACK.
 
 In: HIL_ACTUATOR_CONTROLS (motor outputs 0..1 on PX4's hexa X order, `sitl.px4_wire`).
 
-The samples start when the firmware's first packet on a connection arrives (PX4 sends a
-HEARTBEAT first, so that the simulator starts sending). Lockstep as PX4 runs it: PX4's
-clock is the time of the latest HIL_SENSOR, and once its outputs run it answers each sample
-with one HIL_ACTUATOR_CONTROLS (flags bit 0 set, stamped with that clock). Until its first
-answer (PX4 starting up, EKF aligning) the plant sends one IMU sample per IMU period of
-wall time, as Gazebo does, so that PX4's clock runs; from the first lockstep answer on
-(whichever sample it answers) it advances one IMU period per answer to its latest sample
-and never without one. An answer stamped before the latest
-sample (to an earlier one) and a second answer to the same sample are counted and ignored.
-Answers without the lockstep flag (PX4 on the wall clock) set the held command and the
-plant keeps the wall-clock pace.
+Lockstep as PX4 runs it. The samples start when the firmware's first packet on a
+connection arrives (PX4 sends a HEARTBEAT first). PX4's clock is the time of the latest
+HIL_SENSOR; it answers only when its outputs update, at its control rate (250 Hz in
+SITL), stamped with that clock. The rule (`sitl.px4_lockstep`):
+
+- until the answers' period is known (PX4 starting up, then three answers with two equal
+  intervals) the plant sends one IMU sample per IMU period of wall time, as Gazebo does,
+  and applies each lockstep answer as it comes;
+- then it steps on its own sensor clock without waiting up to the sample where the next
+  answer is due (the latest answer's stamp plus the period), waits there for it, and
+  applies it from the physics step that starts at that sample: deterministic for a
+  deterministic firmware, whatever the IMU rate and control rate;
+- an answer due that does not come within 1 s of wall time (Gazebo's poll timeout) is
+  reported in one line on stderr naming the sample and the period, once per stall, and
+  the plant advances (counted: `answer_waits`);
+- an answer stamped before the latest accepted one, or a second with its stamp, is counted
+  and ignored; one stamped before the latest sample (the plant ran past it: only while
+  the period is being learned) applies from the next step (`late_answers`). Answers
+  without the lockstep flag (PX4 on the wall clock) set the held command and the plant
+  keeps the wall-clock pace.
 
 Bad input, never a crash: bytes that are no MAVLink frame are counted and skipped; other
 messages are ignored (HEARTBEAT counted); an answer from another system id is ignored; a
 motor output that is not finite stops its rotor (counted). A firmware that disconnects
 leaves the world standing (no time passes, rotors commanded to zero) until one connects
-again, which starts over from the wall-clock pace with the world as it stood. No answer for
-a second of wall time is reported (once per wait) and waited for.
+again, which starts over from the wall-clock pace with the world as it stood.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import select
 import sys
@@ -54,7 +67,13 @@ from typing import Any
 from common.config import ConfigError, Scenario
 from common.links import LinkError, TcpServerLink, parse_url
 from common.mavlink import MAV, encoder, pack, parser
-from common.sensors_config import SensorProfile, period_us, resolve_sensor_profile
+from common.sensors_config import (
+    PROFILE_IMU_RATE_MIN_HZ,
+    SensorProfile,
+    period_us,
+    resolve_sensor_profile,
+    stale_sensors,
+)
 from common.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
     FrameReader,
@@ -65,6 +84,7 @@ from common.simlink import (
 )
 from sitl.actuator_faults import ActuatorFaults
 from sitl.plant import ActuatorCommand, PlantState, initial_state, scenario_plant
+from sitl.px4_lockstep import Answer, AnswerSchedule
 from sitl.px4_wire import (
     LOCKSTEP_FLAG,
     MODE_ARMED,
@@ -76,32 +96,34 @@ from sitl.px4_wire import (
     state_fields,
 )
 from sitl.sensor_feed import SensorFeed
+from sitl.sensors import GpsModel
 from sitl.server import LOG_BATCH, SITL_COMPONENT
 from sitl.truth_log import TruthLog, flushed
 from sitl.world import start_flight
 
-# PX4's simulators' rates where the scenario names no sensor profile (Gazebo classic:
-# lockstep pinned at 250 Hz; magnetometer and barometer plugins' defaults).
-PX4_IMU_HZ = 250.0
-PX4_MAG_HZ = 100.0
-PX4_BARO_HZ = 50.0
+PX4_PROFILE = "px4-default"  # the sensors where the scenario names none
 GPS_HZ = 5.0  # PX4's Gazebo GPS plugin
 STATE_DEFAULT_US = 5000  # HIL_STATE_QUATERNION: what PX4 asks on connecting (200 Hz)
 MAX_LAG_S = 0.05  # wall-clock pace: further behind than this, resume from now
-ANSWER_WARN_S = 1.0  # PX4's own poll timeout
+ANSWER_TIMEOUT_S = 1.0  # Gazebo's poll timeout: an answer due this long is given up
 POLL_S = 0.1
 
 
 def px4_sensor_profile(scenario: Scenario) -> SensorProfile:
-    """The scenario's sensor profile, or the exact sensors at PX4's simulators' rates."""
+    """The scenario's sensor profile, or PX4's simulators' noisy sensors (px4-default)."""
     if scenario.sensors is not None:
         return scenario.sensors
-    truth = resolve_sensor_profile("truth")
-    return dataclasses.replace(
-        truth, name="px4-sim", source="PX4's simulator rates",
-        imu=dataclasses.replace(truth.imu, rate_hz=PX4_IMU_HZ),
-        baro=dataclasses.replace(truth.baro, rate_hz=PX4_BARO_HZ),
-        mag=dataclasses.replace(truth.mag, rate_hz=PX4_MAG_HZ))
+    return resolve_sensor_profile(PX4_PROFILE)
+
+
+def stale_warning(profile: SensorProfile) -> str | None:
+    """The one-line warning for a profile with exact sensors, None when all are noisy."""
+    exact = stale_sensors(profile)
+    if not exact:
+        return None
+    return (f"sitl: warning: sensor profile '{profile.name}' has exact {', '.join(exact)}: "
+            "PX4 declares a sensor whose value repeats (100 samples, 1,000 for the "
+            "magnetometer) stale at rest")
 
 
 def physics_step_us(imu_us: int, physics_hz: int) -> int:
@@ -140,8 +162,14 @@ class Server:
         self.state: PlantState = initial_state(scenario, self.plant)
         self.faults = ActuatorFaults(scenario.actuator_faults)
         self.home = home
-        self.feed = SensorFeed(profile, scenario.seed, self.plant, self.imu_us, home.alt_m)
+        self.feed = SensorFeed(profile, scenario.seed, self.plant, self.imu_us, home.alt_m,
+                               imu_rate_min_hz=PROFILE_IMU_RATE_MIN_HZ)
+        self.gps = GpsModel(profile.gps, scenario.seed)
         self.profile = profile
+        self.warning = stale_warning(profile)
+        if self.warning is not None:
+            print(self.warning, file=sys.stderr, flush=True)
+        self.schedule = AnswerSchedule(self.imu_us)
         self.send_mocap = scenario.sensors is not None
         self.system_id = system_id
         self.link = TcpServerLink(url, max_clients=1)
@@ -156,8 +184,7 @@ class Server:
         # link and lockstep state
         self.client = False
         self.heard = False  # the firmware has spoken on this connection
-        self.locked = False  # a lockstep answer has come: one step per answer
-        self.answer: ActuatorCommand | None = None  # the answer to the latest sample
+        self.locked = False  # a lockstep answer has come
         self.command = ActuatorCommand((0.0,) * vehicle.n_rotors, (0.0,) * vehicle.n_rotors)
         self.sent_us = -1  # the latest HIL_SENSOR's time
         self.due_s = 0.0  # wall-clock pace: when the next step is due
@@ -170,11 +197,12 @@ class Server:
         # statistics
         self.counts = dict.fromkeys(("hil_sensor", "hil_gps", "hil_state_quaternion",
                                      "odometry", "command_ack"), 0)
-        self.steps = 0  # lockstep steps (each on an answer)
-        self.paced_steps = 0  # steps on the wall clock (before the first answer)
+        self.steps = 0  # lockstep steps (on the sensor clock, the answer period known)
+        self.paced_steps = 0  # steps on the wall clock (before the period is known)
         self.answers = 0
         self.stale_answers = 0
         self.extra_answers = 0
+        self.late_answers = 0  # stamped before the latest sample: applied from the next
         self.time_mismatches = 0  # accepted answers stamped later than their sample
         self.ignored_answers = 0  # from another system id
         self.nonfinite_outputs = 0
@@ -183,7 +211,8 @@ class Server:
         self.rejected_bytes = 0
         self.connects = 0
         self.disconnects = 0
-        self.answer_waits = 0  # waits of more than ANSWER_WARN_S
+        self.answer_waits = 0  # answers due that did not come within ANSWER_TIMEOUT_S
+        self.stall_reports = 0  # lines printed (one per run of such timeouts)
         self.locked_wall_s = 0.0
         self.locked_sim_us = 0
 
@@ -201,8 +230,10 @@ class Server:
         s = states[-1]
         t = s.time_us
         lead = []
+        samples = self.feed.period(states)
         if t >= self.next_gps_us:
-            g = gps_fields(s, self.home)
+            p, v = self.gps.sample(s.p_enu_m, s.v_enu_m_s)
+            g = gps_fields(s._replace(p_enu_m=p, v_enu_m_s=v), self.home, self.profile.gps)
             lead.append(pack(self.mav, MAV.MAVLink_hil_gps_message(
                 g.time_usec, g.fix_type, g.lat, g.lon, g.alt, g.eph, g.epv, g.vel, g.vn, g.ve,
                 g.vd, g.cog, g.satellites_visible, 0, 0)))
@@ -210,13 +241,13 @@ class Server:
             while self.next_gps_us <= t:
                 self.next_gps_us += self.gps_us
         if self.state_interval_us > 0 and t >= self.next_state_us:
-            h = state_fields(s, self.home, self.plant.specific_force_flu(s))
+            h = state_fields(s, self.home, self.feed.true_f_flu_m_s2)
             lead.append(pack(self.mav, MAV.MAVLink_hil_state_quaternion_message(*h)))
             self.counts["hil_state_quaternion"] += 1
             while self.next_state_us <= t:
                 self.next_state_us += self.state_interval_us
         imu = []
-        for m in self.feed.period(states):
+        for m in samples:
             if isinstance(m, HilSensor):
                 imu.append(pack_hil_sensor(m, self._seq(), self.system_id, SITL_COMPONENT))
                 self.counts["hil_sensor"] += 1
@@ -290,18 +321,20 @@ class Server:
         self.nonfinite_outputs += cmd.nonfinite
         if flags & LOCKSTEP_FLAG:
             self.locked = True  # from the first lockstep answer on, as Gazebo does
-            if time_usec < self.sent_us:
-                self.stale_answers += 1  # an answer to an earlier sample
+            kind = self.schedule.accept(time_usec, self.sent_us)
+            if kind is Answer.STALE:
+                self.stale_answers += 1  # before the latest accepted answer
                 return
-            if self.answer is not None:
-                self.extra_answers += 1  # the sample has its answer already
+            if kind is Answer.EXTRA:
+                self.extra_answers += 1  # that sample has its answer already
                 return
-            if time_usec != self.sent_us:
+            if time_usec > self.sent_us:
                 self.time_mismatches += 1
-            self.answer = cmd.command
+            if kind is Answer.LATE:
+                self.late_answers += 1
         else:
             self.locked = False
-            self.command = cmd.command
+        self.command = cmd.command
         if mode & MODE_ARMED and self.flight_start_us is None:
             self.flight_start_us = self.state.time_us
             start_flight(self.scenario, self.plant, self.faults, self.feed, self.state.time_us)
@@ -332,7 +365,7 @@ class Server:
         self.reader = FrameReader(True)
         self.decoder = parser()
         self.locked = False
-        self.answer = None
+        self.schedule.reset()
         self.due_s = time.monotonic()
         if not self.started:
             self.started = True
@@ -344,7 +377,7 @@ class Server:
         self.heard = False
         self.disconnects += 1
         self.locked = False
-        self.answer = None
+        self.schedule.reset()
         n = self.scenario.vehicle.n_rotors
         self.command = ActuatorCommand((0.0,) * n, (0.0,) * n)  # the firmware is gone
         self._flush_log()
@@ -362,7 +395,8 @@ class Server:
         link = self.link
         imu_s = self.imu_us * 1e-6
         last_step_s: float | None = None  # wall time of the latest lockstep step
-        warned = False
+        wait_s: float | None = None  # when the wait for the answer due began
+        stalled = False  # an answer due has timed out since the latest accepted one
         while self.running and not self._at_end():
             if not link.clients:
                 if self.client:
@@ -377,7 +411,7 @@ class Server:
                 if select.select(link.filenos(), [], [], POLL_S)[0]:
                     self._receive()
                 continue
-            if not self.locked:  # the wall-clock pace
+            if not (self.locked and self.schedule.learned):  # the wall-clock pace
                 last_step_s = None
                 wait = self.due_s - time.monotonic()
                 if wait > 0.0:
@@ -390,26 +424,38 @@ class Server:
                 self.paced_steps += 1
                 self.due_s += imu_s
                 continue
-            if self.answer is None:  # lockstep: wait for the answer to the latest sample
-                if select.select(link.filenos(), [], [], POLL_S)[0]:
-                    self._receive()
-                elif last_step_s is not None and not warned and \
-                        time.monotonic() - last_step_s >= ANSWER_WARN_S:
-                    warned = True
-                    self.answer_waits += 1
-                    self._flush_log()
-                    print(f"sitl: no answer to t = {self.sent_us * 1e-6:.3f} s for "
-                          f"{ANSWER_WARN_S:g} s: waiting for the firmware",
-                          file=sys.stderr, flush=True)
+            if select.select(link.filenos(), [], [], 0.0)[0]:
+                self._receive()  # what came meanwhile, without waiting
                 continue
-            self.command, self.answer = self.answer, None
+            answered = self.schedule.last_us == self.sent_us
+            if self.schedule.waits_at(self.sent_us) and not answered:
+                now = time.monotonic()
+                wait_s = now if wait_s is None else wait_s
+                if now - wait_s < ANSWER_TIMEOUT_S:
+                    if select.select(link.filenos(), [], [], POLL_S)[0]:
+                        self._receive()
+                    continue
+                self.answer_waits += 1  # given up: advance, as Gazebo's poll timeout does
+                self.schedule.skip()
+                if not stalled:
+                    stalled = True
+                    self.stall_reports += 1
+                    self._flush_log()
+                    print(f"sitl: no answer to the sample at t = {self.sent_us * 1e-6:.3f} s "
+                          f"within {ANSWER_TIMEOUT_S:g} s (the firmware answers every "
+                          f"{self.schedule.period} samples, "
+                          f"{(self.schedule.period or 0) * self.imu_us} us): advancing "
+                          "without it", file=sys.stderr, flush=True)
+            elif answered:
+                stalled = False
+            wait_s = None
             self._step()
             self.steps += 1
             now = time.monotonic()
             if last_step_s is not None:
                 self.locked_wall_s += now - last_step_s
                 self.locked_sim_us += self.imu_us
-            last_step_s, warned = now, False
+            last_step_s = now
         self._flush_log()
 
     # ------------------------------------------------------------------ results
@@ -429,7 +475,9 @@ class Server:
                 "other_messages": self.other_messages, "rejected_bytes": self.rejected_bytes,
                 "connects": self.connects, "disconnects": self.disconnects,
                 "refused_clients": self.link.refused_clients,
-                "answer_waits": self.answer_waits,
+                "answer_waits": self.answer_waits, "stall_reports": self.stall_reports,
+                "late_answers": self.late_answers,
+                "answer_period_samples": self.schedule.period,
                 "state_interval_us": self.state_interval_us,
                 "lockstep_wall_s": wall,
                 "real_time_factor": self.locked_sim_us * 1e-6 / wall if wall > 0 else None}

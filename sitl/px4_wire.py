@@ -10,8 +10,10 @@
   output (pwm_out_sim) scales a non-reversible motor to 0..1; rotor speed = output x
   w_max (linear; thrust ~ output^2, PX4's THR_MDL_FAC = 1). Zero unless SAFETY_ARMED; a
   value that is not finite stops that rotor; the tilts are held at 0 (a planar hexa).
-- `gps_fields`, `state_fields`: HIL_GPS and HIL_STATE_QUATERNION from the exact state, in
-  the units SimulatorMavlink.cpp reads (degE7, mm, cm/s, cdeg, mG).
+- `gps_fields`, `state_fields`: HIL_GPS (from the fix, `sitl.sensors.GpsModel`) and
+  HIL_STATE_QUATERNION (the exact state), in the units SimulatorMavlink.cpp reads (degE7,
+  mm, cm/s, cdeg, mG). HIL_GPS carries eph/epv and satellites; it has no velocity
+  accuracy field (PX4 sets its own s_variance_m_s on reading it).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import NamedTuple
 
 from common.config import VehicleConfig
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
+from common.sensors_config import EXACT_GPS, GpsConfig
 from sitl.plant import ActuatorCommand, PlantState
 from sitl.rotor_layout import rotors_for_outputs
 
@@ -124,9 +127,6 @@ class StateFields(NamedTuple):
 
 
 GPS_FIX_3D = 3
-GPS_SATELLITES = 10
-GPS_EPH_CM = 100  # 1 m, as PX4's Gazebo GPS plugin reports
-GPS_EPV_CM = 100
 COG_MIN_SPEED_M_S = 0.1  # below this the course over ground is unknown (65535)
 G0_M_S2 = 9.80665
 
@@ -144,16 +144,17 @@ def _geodetic(s: PlantState, home: Home) -> tuple[int, int, int]:
     return round(lat * 1e7), round(lon * 1e7), round(alt * 1e3)
 
 
-def gps_fields(s: PlantState, home: Home) -> GpsFields:
-    """An exact GPS fix of the state (3D fix, 10 satellites, 1 m accuracy)."""
+def gps_fields(s: PlantState, home: Home, gps: GpsConfig = EXACT_GPS) -> GpsFields:
+    """The GPS fix of the state (its position and velocity as the fix has them), 3D, with
+    the accuracies and satellites of `gps` (default: 1 m, 10 satellites)."""
     lat, lon, alt = _geodetic(s, home)
     vn, ve, vd = enu_to_ned(s.v_enu_m_s)
     speed = math.hypot(vn, ve)
     cog = 65535 if speed < COG_MIN_SPEED_M_S else \
         round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0) % 36000
-    return GpsFields(s.time_us, GPS_FIX_3D, lat, lon, alt, GPS_EPH_CM, GPS_EPV_CM,
-                     _u16(speed * 100.0), _i16(vn * 100.0), _i16(ve * 100.0),
-                     _i16(vd * 100.0), cog, GPS_SATELLITES)
+    return GpsFields(s.time_us, GPS_FIX_3D, lat, lon, alt, _u16(gps.eph_m * 100.0),
+                     _u16(gps.epv_m * 100.0), _u16(speed * 100.0), _i16(vn * 100.0),
+                     _i16(ve * 100.0), _i16(vd * 100.0), cog, gps.satellites)
 
 
 def state_fields(s: PlantState, home: Home, f_flu_m_s2: tuple[float, float, float]

@@ -10,6 +10,11 @@ samples at its own rate and jitter, on or off the physics grid (`SampleClock`, `
 The process (`sitl/node.py`) and the in-process runner share it, so both send the same
 samples.
 
+The accelerometer reads the plant's specific force at the sample's instant plus the ground
+contact's impulse (`Plant.specific_force_flu`): a touchdown's velocity change counts at the
+end of its physics step, in the first IMU sample at or after it, spread over that sample's
+interval, so that the samples integrate to the true velocity change whatever the IMU rate.
+
 Injected faults (the scenario's [[sensor_fault]], `start_flight`) act on what the models
 return, never on their draws: every sensor draws as without the fault and the fault then
 overrides the value, so a run with a fault is the run without it up to the fault.
@@ -25,7 +30,7 @@ from common.config import SENSOR_FAULT_KINDS, ConfigError, SensorFault
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
 from common.mavlink import MAV
 from common.quaternion import Vec3, q_conj, q_exp, q_log, q_mul, q_normalize
-from common.sensors_config import SensorProfile, check_servable
+from common.sensors_config import IMU_RATE_MIN_HZ, SensorProfile, check_servable
 from common.simlink import HilSensor, Odometry, pose_covariance
 from sitl.plant import Plant, PlantState
 from sitl.sensors import ImuSample, SampleClock, SensorSuite, sensor_rng
@@ -73,8 +78,9 @@ class SensorFeed:
     would add a latency the estimator is not told of; on the grid the step itself)."""
 
     def __init__(self, profile: SensorProfile, seed: int, plant: Plant, control_dt_us: int,
-                 home_alt_m: float = 0.0) -> None:
-        check_servable(profile, plant.dt_us, control_dt_us)
+                 home_alt_m: float = 0.0, *,
+                 imu_rate_min_hz: float = IMU_RATE_MIN_HZ) -> None:
+        check_servable(profile, plant.dt_us, control_dt_us, imu_rate_min_hz=imu_rate_min_hz)
         self.profile = profile
         self.plant = plant
         self.suite = SensorSuite.from_profile(profile, seed)
@@ -93,6 +99,8 @@ class SensorFeed:
         self._prev: PlantState | None = None
         self._mag: Vec3 | None = None  # a magnetometer sample for the next HIL_SENSOR
         self._baro_alt_m: float | None = None  # likewise the barometer's
+        self._contact_dv: Vec3 = (0.0, 0.0, 0.0)  # ground impulse since the last IMU sample
+        self.true_f_flu_m_s2: Vec3 = (0.0, 0.0, 0.0)  # the last IMU sample's, before noise
         self.flight_start_us: int | None = None
         # The faults as windows on the simulation clock [start_us, end_us) (end None: open).
         self._faults: list[tuple[str, int, int | None, Vec3]] = []
@@ -159,8 +167,11 @@ class SensorFeed:
         barometer samples not sent yet."""
         t, dt_us = self.imu_clock.take()
         t_s = t * 1e-6
-        imu = self.suite.imu.sample(t_s, dt_us * 1e-6, s.omega_flu_rad_s,
-                                    self.plant.specific_force_flu(s))
+        f = self.plant.specific_force_flu(s, contact_dv_enu=self._contact_dv,
+                                          interval_s=dt_us * 1e-6)
+        self._contact_dv = (0.0, 0.0, 0.0)
+        self.true_f_flu_m_s2 = f
+        imu = self.suite.imu.sample(t_s, dt_us * 1e-6, s.omega_flu_rad_s, f)
         if self._faults:
             imu = self._imu_faults(t, imu)
         fields = IMU_FIELDS
@@ -175,6 +186,10 @@ class SensorFeed:
             fields |= BARO_FIELDS
         return HilSensor(t, flu_to_frd(imu.f_flu_m_s2), flu_to_frd(imu.omega_flu_rad_s), mag,
                          pressure, alt, TEMPERATURE_C, fields)
+
+    def _add_contact(self, dv: Vec3) -> None:
+        c = self._contact_dv
+        self._contact_dv = (c[0] + dv[0], c[1] + dv[1], c[2] + dv[2])
 
     def period(self, states: Sequence[PlantState]) -> list[HilSensor | Odometry]:
         """The messages for these physics-step states (times increasing, each once): the
@@ -194,6 +209,7 @@ class SensorFeed:
             elif t <= prev.time_us:
                 raise ValueError(f"sensor feed: time {t} us after {prev.time_us} us")
             self._prev = s
+            dv = (0.0, 0.0, 0.0) if prev is None else self.plant.contact_dv_enu(prev, s)
             while True:
                 te = min(imu_c.due_us, baro_c.due_us, mag_c.due_us, mocap_c.due_us)
                 if te > t:
@@ -208,7 +224,11 @@ class SensorFeed:
                     self._baro_alt_m = self.home_alt_m + suite.baro.sample(
                         baro_c.take()[0] * 1e-6, at.p_enu_m).alt_m
                 if imu_c.due_us == te:
+                    if te == t:  # the step's impulse, at its end
+                        self._add_contact(dv)
+                        dv = (0.0, 0.0, 0.0)
                     self._deliver(te, out)
                     out.append(self._hil_sensor(at))
+            self._add_contact(dv)
             self._deliver(t, out)
         return out

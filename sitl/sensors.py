@@ -10,6 +10,7 @@ the instants a `SampleClock` gives (exact multiples of the period, optionally ji
     baro:        h = z_enu + bias + s n
     mag:         m_flu = R(q_enu_flu)^T ned_to_enu(B_ned) + s n
     mocap:       p = p_enu + s_p n,  q = q_enu_flu * exp(s_a n),  delivered at t + latency
+    gps:         p = p_enu + (s_h n, s_h n, s_v n),  v = v_enu + s_vel n  (one fix)
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from common.quaternion import Quat, Vec3, q_exp, q_mul, q_rotate_inv
 from common.sensors_config import (
     AccelConfig,
     BaroConfig,
+    GpsConfig,
     GyroConfig,
     ImuConfig,
     MagConfig,
@@ -267,6 +269,24 @@ class MocapModel:
         while self.queue and self.queue[0].delivered_s <= t_s:
             out.append(self.queue.popleft())
         return out
+
+
+class GpsModel:
+    """A GNSS fix: white noise on position (horizontal, altitude) and NED velocity."""
+
+    def __init__(self, cfg: GpsConfig, seed: int) -> None:
+        self.cfg = cfg
+        self.rng = sensor_rng(seed, "gps")
+
+    def sample(self, p_enu_m: Vec3, v_enu_m_s: Vec3) -> tuple[Vec3, Vec3]:
+        """The fix's position and velocity (ENU), six draws per fix."""
+        n = self.rng.normal(0.0, 1.0, 6)
+        c = self.cfg
+        vn, ve, vd = c.velocity_noise_ned_m_s
+        h, z = c.position_noise_m, c.altitude_noise_m
+        return ((p_enu_m[0] + h * n[0], p_enu_m[1] + h * n[1], p_enu_m[2] + z * n[2]),
+                (v_enu_m_s[0] + ve * n[3], v_enu_m_s[1] + vn * n[4],
+                 v_enu_m_s[2] + vd * n[5]))
 
 
 @dataclass

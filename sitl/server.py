@@ -147,7 +147,11 @@ class SimulatorServer:
         return data
 
     def _hil_sensor(self, s: PlantState) -> bytes:
-        acc = flu_to_frd(self.plant.specific_force_flu(s))
+        """The exact state's HIL_SENSOR; the specific force holds the ground contact's
+        impulse since the previous one, spread over the interval between them."""
+        interval_s = self.sensor_every * self.control_dt_us * 1e-6
+        acc = flu_to_frd(self.plant.specific_force_flu(
+            s, contact_dv_enu=self.world.take_contact_dv(), interval_s=interval_s))
         gyro = flu_to_frd(s.omega_flu_rad_s)
         alt = self.home_alt_m + s.p_enu_m[2]
         self.seq = (self.seq + 1) & 0xFF

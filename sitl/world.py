@@ -33,6 +33,8 @@ from sitl.plant import (
 )
 from sitl.sensor_feed import SensorFeed
 
+_LANDED = TRUTH_COLUMNS.index("landed")
+
 
 def obeyed_command(speeds_rad_s: tuple[float, ...], tilts_rad: tuple[float, ...], armed: bool,
                    state: PlantState) -> ActuatorCommand:
@@ -88,6 +90,27 @@ class World:
         self.flight_start_us: int | None = None  # the first armed answer's state stamp
         self._row: np.ndarray | None = None  # the state as the kernels keep it, in flight
         self._substates = np.empty((self.substeps, len(TRUTH_COLUMNS)))
+        self._contact_dv = (0.0, 0.0, 0.0)  # ground impulses since `take_contact_dv`
+
+    def _contacts(self, before: np.ndarray, rows: np.ndarray) -> None:
+        """Add the touchdowns' velocity changes (`Plant.contact_dv_enu`) of these steps."""
+        landed = rows[:, _LANDED] != 0.0
+        if not landed.any() or (before[_LANDED] != 0.0 and landed.all()):
+            return
+        for k in range(len(rows)):
+            a = before if k == 0 else rows[k - 1]
+            if landed[k] and a[_LANDED] == 0.0:
+                dv = self.plant.contact_dv_enu(state_of_row(a.tolist()),
+                                               state_of_row(rows[k].tolist()))
+                c = self._contact_dv
+                self._contact_dv = (c[0] + dv[0], c[1] + dv[1], c[2] + dv[2])
+
+    def take_contact_dv(self) -> tuple[float, float, float]:
+        """The ground contact's velocity change since the last call (ENU, m/s): what an
+        accelerometer sampled now over that interval adds to the specific force (the exact
+        state's HIL_SENSOR; a sensor feed keeps its own)."""
+        dv, self._contact_dv = self._contact_dv, (0.0, 0.0, 0.0)
+        return dv
 
     @property
     def row(self) -> np.ndarray:
@@ -121,6 +144,7 @@ class World:
                 row = out[k]
         else:
             self.plant.step_rows(row, command_row(command), out)
+        self._contacts(row, out)
         self._row = out[-1].copy()
         if self.feed is not None:
             states = [state_of_row(r) for r in out.tolist()]
@@ -131,6 +155,10 @@ class World:
 
     def physics_step(self, command: ActuatorCommand) -> PlantState:
         """One physics step under `command` (real time: the world never stands still)."""
+        before = self.state
         self.state = self.plant.step(self.state, self.faults.apply(command, self.state))
         self._row = None
+        dv = self.plant.contact_dv_enu(before, self.state)
+        c = self._contact_dv
+        self._contact_dv = (c[0] + dv[0], c[1] + dv[1], c[2] + dv[2])
         return self.state

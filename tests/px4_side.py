@@ -9,9 +9,14 @@ tested without a PX4 build. It does what that module does and checks what it rel
   SensorSource: ACCEL 0b111, GYRO 0b111000, MAG 0b111000000, BARO 0b1101000000000),
   reads HIL_GPS in degE7, mm, cm, cm/s and HIL_STATE_QUATERNION in degE7, mm, cm/s;
 - answers nothing while it "starts up" (PX4 sends HIL_ACTUATOR_CONTROLS only once its
-  outputs are published), then answers every HIL_SENSOR with exactly one
-  HIL_ACTUATOR_CONTROLS stamped with its clock (flags bit 0: lockstep; mode 1 | 128 when
-  armed; motors 0..1 on the hexa X outputs, zero when disarmed);
+  outputs are published), then answers at its control rate (`control_hz`, PX4's SITL 250
+  Hz): a HIL_SENSOR gets one HIL_ACTUATOR_CONTROLS, stamped with its clock, only when that
+  clock has reached the next control tick (a multiple of the control period), as PX4's
+  sender thread sends only when actuator_outputs update (flags bit 0: lockstep; mode
+  1 | 128 when armed; motors 0..1 on the hexa X outputs, zero when disarmed);
+- flags stale sensors as PX4's DataValidator does (src/modules/sensors/data_validator/
+  DataValidator.cpp): a sensor whose every axis repeats within 1e-6 for more than 100
+  samples in a row (1,000 for the magnetometer) is reported in `Report.stale`;
 - flies: a hover and position controller on the ground truth (HIL_STATE_QUATERNION), mixed
   onto PX4's hexa X outputs with PX4's allocation geometry (airframe 6001_hexa_x), so a
   wrong motor order, spin or axis in the plant shows as a vehicle that does not hold.
@@ -74,8 +79,33 @@ class Report:
         ("accel", "gyro", "mag", "baro", "diff_press"), 0))
     violations: list[str] = field(default_factory=list)
     stalls: int = 0  # answers held back and checked
+    stale: dict[str, int] = field(default_factory=dict)  # sensor -> clock when flagged
     closed_by_plant: bool = False
     wall_s: float = 0.0
+
+
+STALE_LIMIT = {"accel": 100, "gyro": 100, "baro": 100, "mag": 1000}  # DataValidator
+STALE_EPS = 1e-6
+
+
+class StaleCheck:
+    """PX4's DataValidator stale rule: more than `limit` samples in a row equal to the
+    previous within 1e-6 on every axis."""
+
+    def __init__(self) -> None:
+        self.last: dict[str, tuple[float, ...]] = {}
+        self.equal: dict[str, int] = dict.fromkeys(STALE_LIMIT, 0)
+
+    def put(self, name: str, value: tuple[float, ...], t_us: int, report: Report) -> None:
+        prev = self.last.get(name)
+        self.last[name] = value
+        if prev is not None and all(abs(a - b) < STALE_EPS
+                                    for a, b in zip(prev, value, strict=True)):
+            self.equal[name] += 1
+            if self.equal[name] > STALE_LIMIT[name] and name not in report.stale:
+                report.stale[name] = t_us
+        else:
+            self.equal[name] = 0
 
 
 class HoverController:
@@ -133,7 +163,8 @@ class ScriptedPX4:
     def __init__(self, port: int, vehicle: VehicleConfig, *, sysid: int = 1,
                  answer_after_s: float = 0.3, arm_at_s: float = 1.0,
                  waypoints: tuple[tuple[float, tuple[float, float, float]], ...] = (),
-                 stall_every: int = 0, stall_s: float = 0.03) -> None:
+                 stall_every: int = 0, stall_s: float = 0.03, control_hz: float = 250.0,
+                 withhold_at_s: float | None = None) -> None:
         self.port = port
         self.sysid = sysid
         self.answer_after_us = round(answer_after_s * 1e6)
@@ -141,6 +172,12 @@ class ScriptedPX4:
         self.waypoints = waypoints  # (from time s, NED target); before the first: on ground
         self.stall_every = stall_every
         self.stall_s = stall_s
+        self.control_us = round(1e6 / control_hz)
+        self.next_tick_us = 0  # answer the first sample at or after it
+        # the one answer never sent (the first control tick at or after this time)
+        self.withhold_us = None if withhold_at_s is None else round(withhold_at_s * 1e6)
+        self.withheld: int | None = None  # the sample whose answer was withheld
+        self.stale_check = StaleCheck()
         self.controller = HoverController(vehicle)
         self.mav = encoder(sysid, MAV.MAV_COMP_ID_AUTOPILOT1)
         self.decoder = parser()
@@ -215,11 +252,21 @@ class ScriptedPX4:
                                          f"{smp.time_usec} us")
             self.clock_us = smp.time_usec
         report.samples.append(smp)
+        values = {"accel": smp.acc, "gyro": smp.gyro, "mag": smp.mag,
+                  "baro": (smp.abs_pressure * 100.0,)}  # PX4 validates pressure in Pa
         for name, mask in (("accel", ACCEL), ("gyro", GYRO), ("mag", MAG), ("baro", BARO),
                            ("diff_press", DIFF_PRESS)):
             if f & mask == mask:
                 report.published[name] += 1
-        if smp.sensor_id == 0 and self.clock_us >= self.answer_after_us:
+                if name in values:
+                    self.stale_check.put(name, values[name], smp.time_usec, report)
+        if smp.sensor_id == 0 and self.clock_us >= max(self.answer_after_us,
+                                                        self.next_tick_us):
+            self.next_tick_us = (self.clock_us // self.control_us + 1) * self.control_us
+            if self.withhold_us is not None and self.withheld is None and \
+                    self.clock_us >= self.withhold_us:
+                self.withheld = self.clock_us  # this answer never comes
+                return
             self._answer(report)
 
     def _handle(self, data: bytes, report: Report) -> None:

@@ -6,6 +6,7 @@ outputs, stale answers, another system, a second client, a disconnect and a reco
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import socket
@@ -23,6 +24,7 @@ import pytest
 from common.config import load_scenario
 from common.links import free_port
 from common.mavlink import MAV, encoder, pack, parser
+from common.sensors_config import resolve_sensor_profile
 from common.ulog import read_topic
 from sitl.px4_hil import Server
 from tests.px4_side import ACCEL, BARO, DIFF_PRESS, GYRO, MAG, ScriptedPX4
@@ -33,7 +35,8 @@ PX4_HEXA = SCENARIOS / "px4_hexa.toml"
 IMU_US = 4000  # PX4's simulators' 250 Hz, the lockstep rate
 FLIGHT_S = 30.0
 ALT_M, NORTH_M = 3.0, 2.0
-FIELD_NED = (0.216, 0.012, 0.425)  # config/sensors/truth.toml
+FIELD_NED = (0.2174, 0.0126, 0.4302)  # config/sensors/px4-default.toml
+DEFAULT = resolve_sensor_profile("px4-default")
 
 
 def _isa_hpa(alt_m: float) -> float:
@@ -125,29 +128,56 @@ def test_fields_updated_bits_as_px4_reads_them(flight):
     assert r.published["baro"] == pytest.approx(n * 50 / 250, abs=1)
 
 
+def _equal_run(values: np.ndarray) -> int:
+    """The longest run of samples equal to the one before within 1e-6 on every axis."""
+    same = np.all(np.abs(np.diff(values, axis=0)) < 1e-6, axis=1)
+    best = run = 0
+    for s in same:
+        run = run + 1 if s else 0
+        best = max(best, run)
+    return best
+
+
 def test_units_and_frames_at_rest(flight):
-    """Given the vehicle on the ground facing east (yaw +90 deg in NED) before it arms,
-    then accel (0, 0, -9.81) m/s^2 FRD, gyro 0, mag the NED field seen in FRD, pressure ISA
-    at 488 m in hPa, GPS at PX4's home (degE7, mm), ground truth facing east at home."""
+    """Given the vehicle on the ground facing east (yaw +90 deg in NED) before it arms, with
+    the default profile (px4-default), then accel (0, 0, -9.81) m/s^2 FRD, gyro 0, mag the
+    home's NED field seen in FRD, pressure ISA at 488 m in hPa, each as a mean within its
+    noise and turn-on bias, each with the declared white noise, no sensor ever repeating
+    100 samples in a row (the scripted PX4 flags nothing stale); GPS at PX4's home with the
+    profile's accuracies; ground truth facing east at home."""
     r = flight["report"]
+    assert r.stale == {}
     rest = [smp for smp in r.samples if smp.time_usec < 0.9e6]
-    for smp in rest:
-        assert smp.acc == pytest.approx((0.0, 0.0, -9.81), abs=1e-4)
-        assert smp.gyro == pytest.approx((0.0, 0.0, 0.0), abs=1e-6)
-    mags = [smp for smp in rest if smp.fields & MAG]
-    n, e, d = FIELD_NED
-    for smp in mags:
-        assert smp.mag == pytest.approx((e, -n, d), abs=1e-5)  # x_b east, y_b south
-    baros = [smp for smp in rest if smp.fields & BARO]
-    assert baros
-    for smp in baros:
-        assert smp.abs_pressure == pytest.approx(_isa_hpa(488.0), abs=0.01)
-        assert smp.pressure_alt == pytest.approx(488.0, abs=0.01)
-        assert smp.temperature == pytest.approx(15.0)
+    acc = np.array([smp.acc for smp in rest])
+    gyro = np.array([smp.gyro for smp in rest])
+    imu = DEFAULT.imu
+    n = len(rest)
+    bias_a = 4 * imu.accel.turn_on_bias_sigma_m_s2 + 4 * imu.accel_sigma_m_s2 / math.sqrt(n)
+    assert acc.mean(axis=0) == pytest.approx((0.0, 0.0, -9.81), abs=bias_a)
+    assert acc.std(axis=0) == pytest.approx([imu.accel_sigma_m_s2] * 3, rel=0.25)
+    bias_g = 4 * imu.gyro.turn_on_bias_sigma_rad_s + 4 * imu.gyro_sigma_rad_s / math.sqrt(n)
+    assert np.abs(gyro.mean(axis=0)).max() < bias_g
+    assert gyro.std(axis=0) == pytest.approx([imu.gyro_sigma_rad_s] * 3, rel=0.25)
+    mags = np.array([smp.mag for smp in r.samples if smp.fields & MAG
+                     and smp.time_usec < 0.9e6])
+    fn, fe, fd = FIELD_NED
+    assert mags.mean(axis=0) == pytest.approx((fe, -fn, fd), abs=0.004)  # x_b east, y_b south
+    assert mags.std(axis=0) == pytest.approx([DEFAULT.mag.noise_gauss] * 3, rel=0.3)
+    baros = [smp for smp in r.samples if smp.fields & BARO and smp.time_usec < 0.9e6]
+    alt = np.array([smp.pressure_alt for smp in baros])
+    hpa = np.array([smp.abs_pressure for smp in baros])
+    assert alt.mean() == pytest.approx(488.0, abs=0.1)
+    assert alt.std() == pytest.approx(DEFAULT.baro.noise_m, rel=0.35)
+    assert hpa.mean() == pytest.approx(_isa_hpa(488.0), abs=0.012)
+    assert {smp.temperature for smp in baros} == {15.0}
+    for values in (acc, gyro, mags, hpa[:, None]):
+        assert _equal_run(values) < 100
     _, g = r.gps[0]
-    assert (g.lat, g.lon, g.alt) == (473977420, 85455940, 488000)
-    assert (g.fix_type, g.satellites_visible, g.vel, g.vn, g.ve, g.vd) == (3, 10, 0, 0, 0, 0)
-    assert g.eph == g.epv == 100
+    assert abs(g.lat - 473977420) < 5 * 0.2 / 6_378_137 * 180 / math.pi * 1e7
+    assert abs(g.alt - 488000) < 5 * 500
+    assert (g.fix_type, g.satellites_visible, g.eph, g.epv) == (3, 10, 90, 178)
+    vn = np.array([m.vn for _, m in r.gps if m.time_usec < 0.9e6])
+    assert np.abs(vn).max() <= 30 and len(set(vn)) > 1  # cm/s, sigma 6 cm/s
     _, h = r.states[0]
     assert h.attitude_quaternion == pytest.approx([math.sqrt(0.5), 0, 0, math.sqrt(0.5)],
                                                   abs=1e-6)
@@ -155,9 +185,10 @@ def test_units_and_frames_at_rest(flight):
 
 
 def test_lockstep_held_over_the_flight(flight):
-    """Then from PX4's first answer on the plant advanced one IMU period per answer and
-    never without one (it stayed silent through every held-back answer), no answer was
-    stale or extra, and each answer was stamped with the sample it answered."""
+    """Then (250 Hz IMU, PX4 answering at its 250 Hz control rate: every sample) once the
+    answers' period was learned the plant advanced one IMU period per answer and never
+    without one (it stayed silent through every held-back answer), no answer was stale,
+    extra or late, and each answer was stamped with the sample it answered."""
     r, s = flight["report"], flight["stats"]
     assert r.violations == []
     assert r.stalls >= 25
@@ -165,11 +196,11 @@ def test_lockstep_held_over_the_flight(flight):
     assert first == 300_000  # the scripted PX4 starts answering at 0.3 s
     after = [smp.time_usec for smp in r.samples if smp.time_usec >= first]
     assert r.answers == after[:len(r.answers)]
-    used = [t for t in r.answers if t < FLIGHT_S * 1e6]  # the last one came after the end
-    assert s["steps"] == len(used)
-    assert s["answers"] in (len(used), len(r.answers))
-    assert s["paced_steps"] == first // IMU_US
+    assert s["answer_period_samples"] == 1
+    assert s["steps"] + s["paced_steps"] == FLIGHT_S * 1e6 // IMU_US
+    assert s["paced_steps"] >= first // IMU_US + 2  # the period: two equal intervals
     assert (s["stale_answers"], s["extra_answers"], s["time_mismatches"]) == (0, 0, 0)
+    assert (s["late_answers"], s["stall_reports"]) == (0, 0)
     assert s["sent"]["hil_sensor"] == len(r.samples)
     assert (s["rejected_bytes"], s["other_messages"], s["answer_waits"]) == (0, 0, 0)
     print(f"px4-hil lockstep: {s['steps']} steps, {s['sent']['hil_sensor']} HIL_SENSOR, "
@@ -302,6 +333,15 @@ def _until(predicate, timeout_s: float = 5.0) -> None:
         time.sleep(0.005)
 
 
+def lock_in(px4: Peer, server: Server, controls=(0.0,) * 16, mode: int = 1) -> int:
+    """Answer three samples in a row (the period learned: one sample), then the latest
+    sample, where the plant now waits."""
+    for _ in range(3):
+        px4.answer(px4.next_sample(), controls, mode=mode)
+    _until(lambda: server.schedule.learned)
+    return px4.latest_sample()
+
+
 def test_bad_input_gets_safe_reactions(tmp_path):
     """Given garbage, a message the plant does not take, an answer from another system, a
     stale answer, a second answer, non-finite motor outputs and a second client, then each
@@ -317,19 +357,18 @@ def test_bad_input_gets_safe_reactions(tmp_path):
             t, [0.5] * 16, 129, 1)))
         _until(lambda: server.ignored_answers == 1 and server.other_messages == 1)
         assert server.rejected_bytes > 0
-        # the first lockstep answer locks the plant in, whichever sample it answers; then
-        # the answer to its latest sample, motors NaN and 2.0 while armed, steps it
-        px4.answer(px4.latest_sample(), (math.nan, 2.0) + (0.0,) * 14, mode=129)
-        _until(lambda: server.locked)
-        t = px4.latest_sample()
+        # three lockstep answers, one per sample (two equal intervals: the period is one
+        # sample), lock the plant in; then the answer to its latest sample, motors NaN and
+        # 2.0 while armed, steps it
+        t = lock_in(px4, server, (math.nan, 2.0) + (0.0,) * 14, mode=129)
         px4.answer(t, (math.nan, 2.0) + (0.0,) * 14, mode=129)
         t1 = px4.next_sample()
         assert t1 == t + IMU_US
-        assert server.nonfinite_outputs == 2
+        assert server.nonfinite_outputs == 4
         rotors = server.command.rotor_speed_rad_s
         assert rotors[server.order[0]] == 0.0 and rotors[server.order[1]] == 1700.0
         stale = server.stale_answers
-        px4.answer(t)  # stale: answers the sample before
+        px4.answer(t - IMU_US)  # stale: before the latest answer accepted
         px4.answer(t1)
         px4.answer(t1)  # a second answer to the same sample
         t2 = px4.next_sample()
@@ -351,10 +390,9 @@ def test_disconnect_and_reconnect(tmp_path):
     world stood (time never goes back) and locks in again on its answers."""
     with serving(tmp_path) as (server, port):
         px4 = Peer(port)
-        t = px4.next_sample()
-        px4.answer(t, (0.6,) * 6 + (0.0,) * 10, mode=129)
-        t = px4.next_sample()
-        assert server.locked
+        t = lock_in(px4, server, (0.6,) * 6 + (0.0,) * 10, mode=129)
+        time.sleep(0.05)
+        assert server.locked and server.state.time_us == t  # waiting for its answer
         px4.close()
         _until(lambda: server.disconnects == 1)
         stood = server.state.time_us
@@ -366,6 +404,7 @@ def test_disconnect_and_reconnect(tmp_path):
         t_back = back.next_sample()
         assert t_back == stood + IMU_US
         assert server.connects == 2 and not server.locked
+        assert not server.schedule.learned  # learned again on this connection
         back.answer(t_back)
         assert back.next_sample() == t_back + IMU_US
         _until(lambda: server.locked)
@@ -394,3 +433,89 @@ def test_vehicle_px4_cannot_fly_exit_2():
                           cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
     assert proc.returncode == 2
     assert "rotor 4 (PX4's hexa X motor 1) is tilted out of the body plane" in proc.stderr
+
+
+# ------------------------------------------------------------------ PX4's cadence, in-process
+
+
+def _profile(rate_hz: float, base: str = "px4-default"):
+    p = resolve_sensor_profile(base)
+    return dataclasses.replace(p, imu=dataclasses.replace(p.imu, rate_hz=rate_hz),
+                               mag=dataclasses.replace(p.mag, rate_hz=min(100.0, rate_hz)))
+
+
+def _fly(tmp_path: Path, profile, end_s: float, **side_options):
+    """The plant in-process with `profile` against the scripted PX4 until `end_s`: (its
+    report, the server, the truth rows and columns, the scripted PX4)."""
+    scenario = load_scenario(PX4_HEXA)
+    if profile is not None:
+        scenario = dataclasses.replace(scenario, sensors=profile)
+    port = free_port(socket.SOCK_STREAM)
+    server = Server(scenario, f"tcpin:127.0.0.1:{port}", truth_log=tmp_path / "truth.ulg",
+                    end_time_s=end_s, system_id=1)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    side = ScriptedPX4(port, scenario.vehicle, **side_options)
+    try:
+        side.connect()
+        report = side.run(end_s + 5.0, wall_timeout_s=90.0)
+    finally:
+        side.close()
+        server.running = False
+        thread.join(timeout=10)
+    cols, rows = read_topic(tmp_path / "truth.ulg", "dq_truth")
+    return report, server, rows, {name: i for i, name in enumerate(cols)}, side
+
+
+TAKEOFF_HOLD_LAND = ((1.0, (0.0, 0.0, -1.5)), (5.0, (0.0, 0.0, 0.5)))
+
+
+@pytest.mark.parametrize(("imu_hz", "period"), [(100.0, 1), (250.0, 1), (500.0, 2),
+                                                (1000.0, 4)])
+def test_imu_rates_fly_takeoff_hold_land(tmp_path, imu_hz, period):
+    """Given the default profile's IMU at 100, 250, 500 or 1,000 Hz and the scripted PX4
+    answering at its 250 Hz control rate (every 1, 1, 2 or 4 samples), then the plant
+    learns that period, never waits where no answer comes (no stall), applies each
+    answer from its own sample, and the takeoff to 1.5 m, the hold and the landing fly;
+    no sensor goes stale."""
+    r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
+                              waypoints=TAKEOFF_HOLD_LAND)
+    s = server.stats()
+    assert r.violations == [] and r.stale == {}
+    assert (s["answer_period_samples"], s["answer_waits"], s["stall_reports"]) == (period, 0, 0)
+    assert (s["late_answers"], s["stale_answers"], s["extra_answers"]) == (0, 0, 0)
+    assert s["sim_time_s"] == 8.0
+    assert np.all(np.diff(r.answers) % (period * round(1e6 / imu_hz)) == 0)
+    t, z = rows[:, c["time_us"]], rows[:, c["pz"]]
+    assert np.all(np.abs(z[(t >= 3.5e6) & (t < 5e6)] - 1.5) < 0.1)
+    assert np.all(rows[t >= 7.5e6, c["landed"]] == 1.0)
+
+
+def test_an_answer_that_never_comes_is_one_stall_line(tmp_path, capfd):
+    """Given 1 kHz samples, PX4 answering at 250 Hz and one answer (at 2 s) never sent,
+    then after 1 s of wall time the plant says so in one line naming the sample and the
+    period, advances, and flies on to the end with the answers that follow."""
+    r, server, rows, _, side = _fly(tmp_path, _profile(1000.0), 4.0, waypoints=TAKEOFF_HOLD_LAND,
+                              withhold_at_s=2.0)
+    s = server.stats()
+    lines = [line for line in capfd.readouterr().err.splitlines() if "no answer" in line]
+    assert side.withheld == 2_000_000
+    assert lines == ["sitl: no answer to the sample at t = 2.000 s within 1 s (the firmware "
+                     "answers every 4 samples, 4000 us): advancing without it"]
+    assert (s["answer_waits"], s["stall_reports"], s["sim_time_s"]) == (1, 1, 4.0)
+    assert s["answer_period_samples"] == 4 and r.violations == []
+    assert rows[-1, 0] == 4_000_000
+
+
+def test_the_exact_profile_is_flagged_stale(tmp_path, capfd):
+    """Given `--sensors truth` (exact), then the plant warns in one line, and the scripted
+    PX4's DataValidator check flags accel, gyro and baro after 100 equal samples and the
+    magnetometer after 1,000 (the default profile flags nothing: the flights above)."""
+    r, _, _, _, _ = _fly(tmp_path, resolve_sensor_profile("truth"), 11.0)
+    warning = [line for line in capfd.readouterr().err.splitlines() if "warning" in line]
+    assert warning == ["sitl: warning: sensor profile 'truth' has exact accel, gyro, baro, "
+                       "mag: PX4 declares a sensor whose value repeats (100 samples, 1,000 "
+                       "for the magnetometer) stale at rest"]
+    assert set(r.stale) == {"accel", "gyro", "baro", "mag"}
+    assert r.stale["accel"] == r.stale["gyro"] == 102_000  # 1 kHz: 101 equal after the 1st
+    assert r.stale["mag"] == 10_020_000  # 100 Hz: 1,001 equal after the 1st

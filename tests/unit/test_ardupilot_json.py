@@ -321,3 +321,20 @@ def test_sensor_profiles_are_refused(scenario) -> None:
         JsonPhysics(noisy)
     truth = dataclasses.replace(scenario, sensors=resolve_sensor_profile("truth"))
     assert JsonPhysics(truth).frame(frame(0))[1]
+
+
+def test_a_touchdown_is_in_the_accelerometer():
+    """Given the state before a touchdown step, then accel_body holds the contact's impulse
+    (the velocity change over the step), without it the resting g."""
+    from sitl.ardupilot_json import state_json
+    from sitl.plant import ActuatorCommand, Plant
+
+    plant = Plant(load_scenario(ROOT / "config" / "scenarios" / "px4_hexa.toml").vehicle)
+    a = plant.initial_state((0.0, 0.0, 0.0005), on_ground=False)._replace(
+        v_enu_m_s=(0.0, 0.0, -1.0))
+    b = plant.step(a, ActuatorCommand((0.0,) * 6, (0.0,) * 6))
+    assert b.landed
+    with_impulse = json.loads(state_json(0.0, plant, b, a).strip())["imu"]["accel_body"]
+    resting = json.loads(state_json(0.0, plant, b).strip())["imu"]["accel_body"]
+    assert resting == pytest.approx([0.0, 0.0, -plant.g])
+    assert with_impulse == pytest.approx([0.0, 0.0, -plant.g - 1.0 / (plant.dt_us * 1e-6)])

@@ -11,7 +11,7 @@ import pytest
 from common.config import DisturbanceTerm, load_scenario, load_vehicle
 from fcu.allocation import hover_command
 from sitl.disturbance import Disturbance
-from sitl.plant import ActuatorCommand, Plant, PlantState
+from sitl.plant import ActuatorCommand, Plant, PlantState, rotate, rotate_inv
 from sitl.plant_kernels import derivative_kernel
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -461,3 +461,47 @@ def test_step_splits_only_at_kinks(vehicle):
     assert s1.tilt_rad == mid_step_targets(plant, (0.1, 0.2, 0.3, 0.4, 0.5, 0.6))
     plant.step(s1, ActuatorCommand(SPEED0, s1.tilt_rad))
     assert plant.last_rk4_steps == 1
+
+
+def _drop(plant: Plant, steps: int, speed: float = 300.0) -> list[PlantState]:
+    """A vehicle falling from 0.5 m, rolled 0.2 rad and moving sideways, rotors below
+    hover, onto the ground and resting there: every state."""
+    q = (math.cos(0.1), math.sin(0.1), 0.0, 0.0)
+    s = plant.initial_state((0.0, 0.0, 0.5), on_ground=False, q_enu_flu=q,
+                            rotor_speed_rad_s=(speed,) * 6)
+    s = s._replace(v_enu_m_s=(0.4, 0.0, -1.0))
+    out = [s]
+    for _ in range(steps):
+        out.append(plant.step(out[-1], ActuatorCommand((speed,) * 6, ZERO6)))
+    return out
+
+
+def test_a_touchdown_shows_in_the_specific_force(vehicle):
+    """Given a vehicle falling onto the ground (inelastic contact: its velocity zeroed in one
+    step), then the specific force the IMU is told, rotated to ENU plus gravity and
+    integrated over the touchdown, gives the true velocity change: the contact's impulse
+    (its velocity change over the step) is in the step where it happens; resting, the
+    normal reaction (g up) is read; without the previous state no impulse is added."""
+    plant = Plant(vehicle)
+    states = _drop(plant, 600)
+    hit = next(k for k, s in enumerate(states) if s.landed)
+    assert 0 < hit < 500 and not states[hit - 1].landed
+    dt = plant.dt_us * 1e-6
+    dv = [0.0, 0.0, 0.0]
+    for a, b in zip(states[hit - 50:hit + 50], states[hit - 49:hit + 51], strict=True):
+        f = rotate(b.q_enu_flu, plant.specific_force_flu(b, a))
+        for i in range(3):
+            dv[i] += (f[i] - (0.0, 0.0, plant.g)[i]) * dt
+    true = [states[hit + 50].v_enu_m_s[i] - states[hit - 50].v_enu_m_s[i] for i in range(3)]
+    assert dv == pytest.approx(true, abs=0.02)
+    assert abs(true[2]) > 0.9  # the impulse carries most of it
+    impulse = plant.contact_dv_enu(states[hit - 1], states[hit])
+    assert impulse == pytest.approx(tuple(-v for v in states[hit - 1].v_enu_m_s))
+    f_hit = plant.specific_force_flu(states[hit], states[hit - 1])
+    assert math.hypot(*f_hit) > 500.0  # about 1 m/s in 1 ms
+    rest = states[hit + 10]
+    assert plant.specific_force_flu(rest, states[hit + 9]) == pytest.approx(
+        rotate_inv(rest.q_enu_flu, (0.0, 0.0, plant.g)))
+    assert plant.specific_force_flu(states[hit]) == pytest.approx(
+        rotate_inv(states[hit].q_enu_flu, (0.0, 0.0, plant.g)))
+    assert plant.contact_dv_enu(states[hit], states[hit + 1]) == (0.0, 0.0, 0.0)

@@ -8,12 +8,20 @@ import dataclasses
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from common.config import ConfigError, load_scenario, load_vehicle
 from common.frames import flu_to_frd
+from common.sensors_config import (
+    PROFILE_IMU_RATE_MIN_HZ,
+    check_servable,
+    resolve_sensor_profile,
+    stale_sensors,
+)
 from sitl.plant import Plant
-from sitl.px4_hil import physics_step_us, px4_sensor_profile
+from sitl.px4_hil import physics_step_us, px4_sensor_profile, stale_warning
+from sitl.px4_lockstep import Answer, AnswerSchedule
 from sitl.px4_wire import (
     MODE_ARMED,
     PX4_HOME,
@@ -22,6 +30,7 @@ from sitl.px4_wire import (
     motor_order,
     state_fields,
 )
+from sitl.sensors import GpsModel
 from tests.px4_side import HEXA_X
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -139,13 +148,89 @@ def test_physics_step_divides_the_imu_period(imu_us, physics_hz, dt):
     assert physics_step_us(imu_us, physics_hz) == dt
 
 
-def test_rates_from_the_profile_else_px4s(scenario):
-    """Given no sensor profile, then PX4's simulator rates; given one, then its own."""
+def test_the_default_profile_is_px4s_noisy_one(scenario):
+    """Given no sensor profile, then px4-default: PX4's simulator rates and every sensor
+    with white noise (none stale, no warning); given one, then its own; given the exact
+    one, then a one-line warning naming the exact sensors."""
     p = px4_sensor_profile(scenario)
+    assert p.name == "px4-default" and not p.is_truth
     assert (p.imu.rate_hz, p.mag.rate_hz, p.baro.rate_hz) == (250.0, 100.0, 50.0)
-    assert p.is_truth
-    from common.sensors_config import resolve_sensor_profile
-
+    assert stale_sensors(p) == [] and stale_warning(p) is None
+    assert p.imu.gyro.noise_density_rad_s_sqrt_hz == pytest.approx(
+        2.0 * 35.0 / 3600.0 / 180.0 * math.pi, rel=1e-4)  # gazebo_imu_plugin.h
+    assert p.imu.accel.noise_density_m_s2_sqrt_hz == 4.0e-3
+    assert p.mag.noise_gauss == pytest.approx(0.4e-3 * math.sqrt(p.mag.rate_hz))
+    assert p.baro.noise_m == pytest.approx(1.0 / (1.17 * 9.80665), rel=0.02)  # 1 Pa
+    assert (p.gps.position_noise_m, p.gps.altitude_noise_m) == (0.2, 0.5)
     mocap = resolve_sensor_profile("mocap-indoor")
     own = px4_sensor_profile(dataclasses.replace(scenario, sensors=mocap))
     assert own is mocap
+    truth = resolve_sensor_profile("truth")
+    assert stale_sensors(truth) == ["accel", "gyro", "baro", "mag"]
+    line = stale_warning(truth)
+    assert line is not None and "\n" not in line and "stale" in line
+
+
+def test_the_home_field_is_px4s_table_at_its_home():
+    """Given px4-default's earth field, then declination 3.33 deg, inclination 63.15 deg
+    and strength 0.482 gauss: PX4's WMM table bilinearly interpolated at its SITL home
+    (the corners of 40-50 N, 0-10 E in geo_magnetic_tables.hpp)."""
+    n, e, d = resolve_sensor_profile("px4-default").mag.field_ned_gauss
+    fy, fx = (PX4_HOME.lat_deg - 40.0) / 10.0, PX4_HOME.lon_deg / 10.0
+
+    def table(v00: float, v01: float, v10: float, v11: float) -> float:
+        return (1 - fy) * ((1 - fx) * v00 + fx * v01) + fy * ((1 - fx) * v10 + fx * v11)
+
+    decl, incl = table(227, 587, 168, 670) * 1e-4, table(9581, 9747, 11387, 11494) * 1e-4
+    strength = table(4514, 4595, 4861, 4913) * 1e-4
+    assert math.atan2(e, n) == pytest.approx(decl, abs=2e-3)
+    assert math.atan2(d, math.hypot(n, e)) == pytest.approx(incl, abs=2e-3)
+    assert math.sqrt(n * n + e * e + d * d) == pytest.approx(strength, abs=5e-4)
+
+
+def test_gps_noise_and_accuracy_as_declared():
+    """Given px4-default's GNSS, then each fix is white noise of the declared sigmas around
+    the truth (seeded: the same seed, the same fixes) and reports eph 90 cm, epv 178 cm,
+    10 satellites, 3D."""
+    cfg = resolve_sensor_profile("px4-default").gps
+    fixes = [GpsModel(cfg, 3).sample((1.0, 2.0, 3.0), (0.0, 0.0, 0.0)) for _ in range(1)]
+    m = GpsModel(cfg, 3)
+    got = np.array([sum(m.sample((1.0, 2.0, 3.0), (0.0, 0.0, 0.0)), ()) for _ in range(4000)])
+    assert got[0].tolist() == list(sum(fixes[0], ()))
+    assert got.mean(axis=0) == pytest.approx((1.0, 2.0, 3.0, 0.0, 0.0, 0.0), abs=0.03)
+    assert got.std(axis=0) == pytest.approx((0.2, 0.2, 0.5, 0.077, 0.06, 0.158), rel=0.05)
+    g = gps_fields(_state(), PX4_HOME, cfg)
+    assert (g.fix_type, g.eph, g.epv, g.satellites_visible) == (3, 90, 178, 10)
+
+
+def test_px4s_imu_floor_is_not_the_fcus():
+    """Given a 250 Hz or 100 Hz IMU, then the loader and PX4's link take it, this project's
+    FCU link (500 Hz at least) refuses it."""
+    p = resolve_sensor_profile("px4-default")
+    check_servable(p, 1000, 4000, imu_rate_min_hz=PROFILE_IMU_RATE_MIN_HZ)
+    slow = dataclasses.replace(p, imu=dataclasses.replace(p.imu, rate_hz=100.0))
+    check_servable(slow, 1000, 10000, imu_rate_min_hz=PROFILE_IMU_RATE_MIN_HZ)
+    with pytest.raises(ConfigError, match=r"imu\.rate_hz = 250 is below 500 Hz"):
+        check_servable(p, 1000, 4000)
+
+
+def test_the_schedule_learns_px4s_answer_period():
+    """Given 1 kHz samples and answers every 4 samples, then the period is learned from two
+    equal intervals; the plant waits only at the samples where an answer is due; an
+    answer that does not come moves the due sample a period on, the period unchanged;
+    stale and second answers are told apart."""
+    s = AnswerSchedule(1000)
+    assert s.accept(300_000, 300_000) is Answer.ON_TIME and not s.learned
+    assert s.accept(304_000, 305_000) is Answer.LATE and not s.learned  # paced: ran past
+    assert s.accept(308_000, 308_000) is Answer.ON_TIME and s.period == 4
+    assert s.due_us == 312_000
+    assert next(t for t in range(308_000, 320_001, 1000) if s.waits_at(t)) == 312_000
+    assert not s.waits_at(311_000)
+    assert s.accept(308_000, 312_000) is Answer.EXTRA
+    assert s.accept(304_000, 312_000) is Answer.STALE
+    s.skip()  # the answer due at 312 ms never came
+    assert (s.due_us, s.period) == (316_000, 4)
+    assert s.accept(316_000, 316_000) is Answer.ON_TIME  # interval 8: not learned
+    assert (s.period, s.due_us) == (4, 320_000)
+    s.reset()
+    assert not s.learned and s.due_us is None

@@ -265,7 +265,7 @@ GOOD = (PROFILES / "mocap-indoor.toml").read_text()
     ("noise_gauss = 0.002", "", "mag.noise_gauss"),
     ("latency_s = 0.005", 'latency_s = "5 ms"', "mocap.latency_s"),
     ("dropout_probability = 0.0", "dropout_probability = 1.5", "mocap.dropout_probability"),
-    ("[imu]\nrate_hz = 1000.0", "[imu]\nrate_hz = 200.0", "imu.rate_hz"),
+    ("[imu]\nrate_hz = 1000.0", "[imu]\nrate_hz = 50.0", "imu.rate_hz"),
     ("[mocap]\nrate_hz = 200.0", "[mocap]\nrate_hz = 20000.0", "mocap.rate_hz"),
     ("[baro]\nrate_hz = 50.0", "[baro]\nrate_hz = 0.5", "baro.rate_hz"),
     ("vibration_factor = 10.0", "vibration_factor = inf", "imu.vibration_factor"),
