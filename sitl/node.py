@@ -109,6 +109,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write run statistics (JSON: counts, per-step stage times) here at exit")
     p.add_argument("--position", metavar="X,Y,Z",
                    help="start position in ENU metres (default: the scenario's)")
+    p.add_argument("--speed-factor", type=float, metavar="X",
+                   help="px4-hil only: pace the lockstep at X times the wall clock (1: real "
+                        "time, as PX4's Gazebo runs by default; default: as fast as PX4 "
+                        "answers). PX4's timers run on simulated time, a ground station's on "
+                        "the wall clock: with a person or a script at `gcs`, use 1")
     return p
 
 
@@ -120,6 +125,12 @@ def _check_protocol_options(args: argparse.Namespace) -> None:
             flag = "--" + given[0].replace("_", "-")
             raise ConfigError(f"{flag} does not apply to --protocol {args.protocol}: the "
                               "firmware sets the rates and drives simulated time")
+    if args.speed_factor is not None:
+        if args.protocol != "px4-hil":
+            raise ConfigError("--speed-factor applies to --protocol px4-hil only (dqflight: "
+                              "--realtime; ArduPilot paces itself: its --speedup)")
+        if not (math.isfinite(args.speed_factor) and args.speed_factor > 0.0):
+            raise ConfigError(f"--speed-factor {args.speed_factor:g}: a positive number")
     if args.link is None:
         args.link = DEFAULT_LINKS[args.protocol]
     if args.hil_sensor_hz is None:
@@ -214,8 +225,9 @@ def _serve_firmware(args: argparse.Namespace, scenario: Scenario, end_s: float |
     Ctrl-C (or `end_s` of simulated time after the firmware's first packet)."""
     module = importlib.import_module(FIRMWARE_MODULES[args.protocol])
     try:
+        pace = {} if args.speed_factor is None else {"speed_factor": args.speed_factor}
         server: FirmwareServer = module.Server(scenario, args.link, truth_log=args.truth_log,
-                                               end_time_s=end_s, system_id=args.sysid)
+                                               end_time_s=end_s, system_id=args.sysid, **pace)
     except LinkError as exc:
         print(f"sitl: {exc}", file=sys.stderr)
         return exc.exit_code

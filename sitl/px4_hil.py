@@ -69,10 +69,7 @@ from common.links import LinkError, TcpServerLink, parse_url
 from common.mavlink import MAV, encoder, pack, parser
 from common.sensors_config import (
     PROFILE_IMU_RATE_MIN_HZ,
-    SensorProfile,
     period_us,
-    resolve_sensor_profile,
-    stale_sensors,
 )
 from common.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
@@ -85,6 +82,7 @@ from common.simlink import (
 from sitl.actuator_faults import ActuatorFaults
 from sitl.plant import ActuatorCommand, PlantState, initial_state, scenario_plant
 from sitl.px4_lockstep import Answer, AnswerSchedule
+from sitl.px4_profile import physics_step_us, px4_sensor_profile, stale_warning
 from sitl.px4_wire import (
     LOCKSTEP_FLAG,
     MODE_ARMED,
@@ -101,7 +99,6 @@ from sitl.server import LOG_BATCH, SITL_COMPONENT
 from sitl.truth_log import TruthLog, flushed
 from sitl.world import start_flight
 
-PX4_PROFILE = "px4-default"  # the sensors where the scenario names none
 GPS_HZ = 5.0  # PX4's Gazebo GPS plugin
 STATE_DEFAULT_US = 5000  # HIL_STATE_QUATERNION: what PX4 asks on connecting (200 Hz)
 MAX_LAG_S = 0.05  # wall-clock pace: further behind than this, resume from now
@@ -109,38 +106,13 @@ ANSWER_TIMEOUT_S = 1.0  # Gazebo's poll timeout: an answer due this long is give
 POLL_S = 0.1
 
 
-def px4_sensor_profile(scenario: Scenario) -> SensorProfile:
-    """The scenario's sensor profile, or PX4's simulators' noisy sensors (px4-default)."""
-    if scenario.sensors is not None:
-        return scenario.sensors
-    return resolve_sensor_profile(PX4_PROFILE)
-
-
-def stale_warning(profile: SensorProfile) -> str | None:
-    """The one-line warning for a profile with exact sensors, None when all are noisy."""
-    exact = stale_sensors(profile)
-    if not exact:
-        return None
-    return (f"sitl: warning: sensor profile '{profile.name}' has exact {', '.join(exact)}: "
-            "PX4 declares a sensor whose value repeats (100 samples, 1,000 for the "
-            "magnetometer) stale at rest")
-
-
-def physics_step_us(imu_us: int, physics_hz: int) -> int:
-    """The longest physics step that divides the IMU period and is not longer than the
-    scenario's step."""
-    n = max(1, math.ceil(imu_us * physics_hz / 1_000_000))
-    while imu_us % n:
-        n += 1
-    return imu_us // n
-
-
 class Server:
     """The plant behind PX4's simulator MAVLink API; physics in `Plant`, samples in
     `SensorFeed`, the wire in `sitl.px4_wire`."""
 
     def __init__(self, scenario: Scenario, link_url: str, *, truth_log: Path | None,
-                 end_time_s: float | None, system_id: int, home: Home = PX4_HOME) -> None:
+                 end_time_s: float | None, system_id: int, home: Home = PX4_HOME,
+                 speed_factor: float | None = None) -> None:
         url = parse_url(link_url)
         if url.scheme != "tcpin":
             raise LinkError(f"--link {link_url}: PX4's simulator interface connects over TCP "
@@ -188,6 +160,8 @@ class Server:
         self.command = ActuatorCommand((0.0,) * vehicle.n_rotors, (0.0,) * vehicle.n_rotors)
         self.sent_us = -1  # the latest HIL_SENSOR's time
         self.due_s = 0.0  # wall-clock pace: when the next step is due
+        self.speed_factor = speed_factor  # lockstep paced at this x the wall clock, or free
+        self.pace_due_s = 0.0  # paced lockstep: when the next step is due
         self.flight_start_us: int | None = None
         self.state_interval_us = STATE_DEFAULT_US
         self.next_state_us = 0
@@ -449,6 +423,8 @@ class Server:
             elif answered:
                 stalled = False
             wait_s = None
+            if self._pace_wait(imu_s):
+                continue
             self._step()
             self.steps += 1
             now = time.monotonic()
@@ -457,6 +433,21 @@ class Server:
                 self.locked_sim_us += self.imu_us
             last_step_s = now
         self._flush_log()
+
+    def _pace_wait(self, imu_s: float) -> bool:
+        """With `speed_factor`: whether the next lockstep step is not yet due on the wall
+        clock (no faster than X x real time; then waited for, briefly, taking in what
+        arrives); False once it is due, with the step after it scheduled."""
+        if self.speed_factor is None:
+            return False
+        wait = self.pace_due_s - time.monotonic()
+        if wait > 0.0:
+            if select.select(self.link.filenos(), [], [], wait)[0]:
+                self._receive()
+            return True
+        self.pace_due_s = max(self.pace_due_s, time.monotonic() - MAX_LAG_S) + \
+            imu_s / self.speed_factor
+        return False
 
     # ------------------------------------------------------------------ results
 
@@ -476,6 +467,7 @@ class Server:
                 "connects": self.connects, "disconnects": self.disconnects,
                 "refused_clients": self.link.refused_clients,
                 "answer_waits": self.answer_waits, "stall_reports": self.stall_reports,
+                "speed_factor": self.speed_factor,
                 "late_answers": self.late_answers,
                 "answer_period_samples": self.schedule.period,
                 "state_interval_us": self.state_interval_us,

@@ -62,7 +62,8 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
     (a failsafe, another ground station), or when it says it holds its attitude instead
     of the target's (this FCU: a tilt would flip), with its reason; Unsafe when it falls
     (`gcs.vehicle_link.descent`): the stream stops and the autopilot's hold mode is
-    commanded."""
+    commanded. On PX4 the pose reached is then held in HOLD (AUTO.LOITER) before the stream
+    stops: PX4 takes a stream that stops in OFFBOARD as a failsafe."""
     s = session
     ap = _commands.autopilot(s)
     full = flies_pose(s) if full_pose is None else full_pose
@@ -127,6 +128,14 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
             listen(hold_s)
             held = pose_errors(snap, target, full)
             assert held is not None  # reached: the position and attitude stay in `snap`
+            if ap.kind == PX4 and not full:
+                # PX4 takes a stream that stops in OFFBOARD as a failsafe (COM_OF_LOSS_T,
+                # then COM_OBL_RC_ACT: position mode, which without sticks cannot run):
+                # hold the pose reached in its hold mode while the stream still runs
+                accepted_at = math.inf  # leaving OFFBOARD now is ours
+                hold = _hold(s, ap)
+                if not hold.endswith("confirmed"):
+                    raise GcsError(f"reached, but {hold}")
             return held
     except Unsafe as exc:
         stream.stop()

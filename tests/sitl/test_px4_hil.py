@@ -414,6 +414,8 @@ def test_disconnect_and_reconnect(tmp_path):
 @pytest.mark.parametrize(("argv", "message"), [
     (["--link", "udpin:127.0.0.1:4560"], "expected tcpin:HOST:PORT"),
     (["--realtime"], "--realtime does not apply to --protocol px4-hil"),
+    (["--speed-factor", "0"], "--speed-factor 0: a positive number"),
+    (["--speed-factor", "nan"], "--speed-factor nan: a positive number"),
 ])
 def test_bad_options_exit_2(argv, message):
     """Given a link PX4 cannot use or a dqflight-only option, then exit 2, one line."""
@@ -444,7 +446,8 @@ def _profile(rate_hz: float, base: str = "px4-default"):
                                mag=dataclasses.replace(p.mag, rate_hz=min(100.0, rate_hz)))
 
 
-def _fly(tmp_path: Path, profile, end_s: float, **side_options):
+def _fly(tmp_path: Path, profile, end_s: float, speed_factor: float | None = None,
+         **side_options):
     """The plant in-process with `profile` against the scripted PX4 until `end_s`: (its
     report, the server, the truth rows and columns, the scripted PX4)."""
     scenario = load_scenario(PX4_HEXA)
@@ -452,7 +455,7 @@ def _fly(tmp_path: Path, profile, end_s: float, **side_options):
         scenario = dataclasses.replace(scenario, sensors=profile)
     port = free_port(socket.SOCK_STREAM)
     server = Server(scenario, f"tcpin:127.0.0.1:{port}", truth_log=tmp_path / "truth.ulg",
-                    end_time_s=end_s, system_id=1)
+                    end_time_s=end_s, system_id=1, speed_factor=speed_factor)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     side = ScriptedPX4(port, scenario.vehicle, **side_options)
@@ -519,3 +522,19 @@ def test_the_exact_profile_is_flagged_stale(tmp_path, capfd):
     assert set(r.stale) == {"accel", "gyro", "baro", "mag"}
     assert r.stale["accel"] == r.stale["gyro"] == 102_000  # 1 kHz: 101 equal after the 1st
     assert r.stale["mag"] == 10_020_000  # 100 Hz: 1,001 equal after the 1st
+
+
+def test_a_speed_factor_paces_the_lockstep(tmp_path):
+    """Given --speed-factor 2, then PX4's simulated time runs at most twice as fast as the
+    wall clock once locked (PX4's timers run on simulated time, a ground station's on the wall
+    clock), still one answer per answer period and the same flight."""
+    r, server, rows, c, _ = _fly(tmp_path, _profile(250.0), 3.0, speed_factor=2.0,
+                                 waypoints=TAKEOFF_HOLD_LAND)
+    s = server.stats()
+    assert r.violations == [] and s["speed_factor"] == 2.0
+    assert s["sim_time_s"] == 3.0 and s["answer_waits"] == 0
+    # no faster than 2x once locked (a slow machine only makes it slower); the pace may
+    # catch up 50 ms it fell behind, which the 2.1 allows over these 2.7 s
+    assert 1.0 < s["real_time_factor"] <= 2.1, s
+    t, z = rows[:, c["time_us"]], rows[:, c["pz"]]
+    assert z[t <= 3e6][-1] > 0.5  # climbing to 1.5 m as without pacing
