@@ -119,10 +119,14 @@ class Scenario:
 INLINE = "<inline>"  # Scenario.files entry of a vehicle or gain table given in the scenario
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Load a scenario and the vehicle and gain files it names (paths relative to it)."""
+def load_scenario(path: str | Path, *, firmware: bool = False) -> Scenario:
+    """Load a scenario and the vehicle and gain files it names (paths relative to it).
+    `firmware`: served to ArduPilot or PX4 (`sitl --protocol ardupilot-json|px4-hil`), whose
+    own sensor rates the plant checks when it serves them; otherwise its sensor profile must
+    be servable to this project's FCU (`check_servable`: 500 Hz IMU and more, a sample at
+    the end of every control period)."""
     path = Path(path)
-    return scenario_from_data(read_toml(path), path)
+    return scenario_from_data(read_toml(path), path, firmware=firmware)
 
 
 def resolved_scenario_data(path: str | Path) -> dict[str, Any]:
@@ -156,7 +160,8 @@ def resolved_scenario_data(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def scenario_from_data(data: dict[str, Any], path: str | Path) -> Scenario:
+def scenario_from_data(data: dict[str, Any], path: str | Path, *,
+                       firmware: bool = False) -> Scenario:
     """A scenario from its TOML data; file names are relative to `path`'s folder, and the
     vehicle and each gain set may be a file name or an inline table."""
     path = Path(path)
@@ -232,7 +237,7 @@ def scenario_from_data(data: dict[str, Any], path: str | Path) -> Scenario:
 
     sensors = resolve_sensor_profile(t.string("sensors", "truth"), base) \
         if t.has("sensors") else None
-    if sensors is not None:  # what the plant cannot serve at these rates: refused here
+    if sensors is not None and not firmware:  # what this FCU's link cannot take: refused
         check_servable(sensors, 1_000_000 // physics_hz, 1_000_000 // control_hz)
     params_t = t.table("params", {})
     params: dict[str, float] = {}

@@ -149,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
         parse_url(args.link)  # before anything is opened
         check_output_path("--truth-log", args.truth_log)
         check_output_path("--stats", args.stats)
-        scenario = load_scenario(args.scenario)
+        scenario = load_scenario(args.scenario, firmware=args.protocol != DQFLIGHT)
         if args.ideal_actuators:
             scenario = dataclasses.replace(scenario, ideal_actuators=True)
         if args.position is not None:

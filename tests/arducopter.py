@@ -56,6 +56,11 @@ def skip_reason() -> str | None:
     if missing:
         return (f"{default_params()} lacks {', '.join(missing)} (ArduPilot's "
                 "Tools/autotest/default_params/)")
+    return namespace_reason()
+
+
+def namespace_reason() -> str | None:
+    """Why a private network namespace cannot be made here, or None."""
     for tool in ("unshare", "nsenter", "ip"):
         if shutil.which(tool) is None:
             return f"needs {tool} for a private network namespace"

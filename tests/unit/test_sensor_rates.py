@@ -300,3 +300,19 @@ def test_shipped_profiles_load_and_the_120_hz_one_is_off_the_grid():
     assert p.mocap.rate_hz == 120.0 and p.mocap.jitter_s == 0.0
     assert Fraction(1_000_000) / Fraction(p.mocap.rate_hz) % 1000 != 0
     check_servable(p, 1000, 2000)
+
+
+def test_a_firmware_scenario_takes_the_firmwares_rates(tmp_path):
+    """A scenario naming PX4's 250 Hz profile loads for a firmware protocol (the plant checks
+    what the firmware gets when it serves it), and is refused for this project's FCU link,
+    which needs 500 Hz and a sample at the end of every control period."""
+    px4 = ROOT / "config" / "scenarios" / "px4_hexa.toml"
+    text = px4.read_text().replace('seed = 0\n', 'seed = 0\nsensors = "px4-default"\n')
+    text = text.replace('vehicle = "../', f'vehicle = "{px4.parent.parent}/')
+    for key in ("pid", "pd"):
+        text = text.replace(f'{key} = "../', f'{key} = "{px4.parent.parent}/')
+    path = tmp_path / "px4_noisy.toml"
+    path.write_text(text)
+    assert load_scenario(path, firmware=True).sensors.imu.rate_hz == 250.0
+    with pytest.raises(ConfigError, match="imu.rate_hz = 250 is below 500 Hz"):
+        load_scenario(path)
