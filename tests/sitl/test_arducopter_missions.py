@@ -184,3 +184,33 @@ def test_the_mission_flies_and_lands(copter, tmp_path):
     assert math.hypot(where["x"], where["y"]) < 2.0, where  # back home (RTL)
     peak = max(r["rel"] for r in copter.records("GLOBAL_POSITION_INT", t0))
     assert peak < RTL_ALT_M + 1.5, peak  # RTL climbs to RTL_ALT first
+
+
+@pytest.mark.timeout(90)
+def test_a_refused_upload_leaves_the_mission_the_vehicle_had(copter, tmp_path):
+    """Given ArduCopter holding the 5-item plan, when a 6-item WPL whose item 3 is a command
+    ArduCopter has no mission item for (MAV_CMD_MISSION_START, 300: refused with
+    MAV_MISSION_UNSUPPORTED, items 1-2 already written over its old mission) is uploaded,
+    then the CLI says the
+    vehicle refused it and that it put the old mission back, exit 1, and the vehicle holds
+    the 5-item plan again, item for item."""
+    plan = tmp_path / "square.plan"
+    plan.write_text(json.dumps(qgc_plan(), indent=4))
+    assert copter.gcs("mission", "upload", str(plan)).returncode == 0
+    before = copter.gcs("mission", "download", "--format", "wpl")
+    assert before.returncode == 0, before.stderr
+    lines = before.stdout.splitlines()
+    header, home, items = lines[0], lines[1], lines[2:]
+    odd = items[1].split("\t")
+    odd[3] = "300"  # MAV_CMD_MISSION_START: a command, not a mission item
+    bad = [header, home, items[0], items[1], "\t".join(odd), *items[2:]]
+    bad = [bad[0]] + [f"{n}\t" + line.split("\t", 1)[1] for n, line in enumerate(bad[1:])]
+    wpl = tmp_path / "bad.waypoints"
+    wpl.write_text("\n".join(bad) + "\n")
+    up = copter.gcs("mission", "upload", str(wpl))
+    assert up.returncode == 1, up.stdout + up.stderr
+    said = up.stdout + up.stderr
+    assert "refused" in said and "restored the" in said, said
+    after = copter.gcs("mission", "download", "--format", "wpl")
+    assert after.returncode == 0, after.stderr
+    assert after.stdout.splitlines()[2:] == items  # the plan's 5 items, as before
