@@ -21,6 +21,7 @@ import time
 
 from common.mavlink import MAV, encoder, pack, parser
 from common.mission_items import MissionItem, item_from_message, item_message
+from gcs import cli  # imported before any test captures the output (gcs.cli.console)
 
 M = MAV
 ARDUPILOT_CAPS = 0xFBEF  # what ArduCopter 4.7 announces (neither PARAM_ENCODE bit)
@@ -235,3 +236,11 @@ class ScriptedAutopilot:
                 value = float(min(max(int(value), lo), hi))
         self.params[name] = (value, param_type)
         self._param_value(self.names.index(name))
+
+
+def gcs(capsys, vehicle: ScriptedAutopilot, *args: str) -> tuple[int, str, str]:
+    """`gcs ARGS` against `vehicle` through the real entry point: (exit code, stdout,
+    stderr)."""
+    code = cli.main([*args, "--connect", vehicle.url, "--wait", "5"])
+    out = capsys.readouterr()
+    return code, out.out, out.err

@@ -16,10 +16,9 @@ import pytest
 
 from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
 from common.mission_items import HomePosition, MissionItem
-from gcs import cli
 from gcs.mission_files import read_mission
 from gcs.mission_home import after_refusal, describe_held, home_item
-from tests.unit.scripted_autopilot import HOME, ScriptedAutopilot
+from tests.unit.scripted_autopilot import HOME, ScriptedAutopilot, gcs
 
 M = MAV
 pytestmark = pytest.mark.timeout(60)
@@ -118,10 +117,6 @@ def vehicles():
         v.close()
 
 
-def gcs(capsys, vehicle: ScriptedAutopilot, *args: str) -> tuple[int, str, str]:
-    code = cli.main([*args, "--connect", vehicle.url, "--wait", "5"])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 REFUSE = {MAV_CMD_POSE_KEYFRAME: (M.MAV_MISSION_UNSUPPORTED, "")}

@@ -16,9 +16,8 @@ import pytest
 
 from common.mavlink import MAV
 from common.mission_items import HomePosition, MissionItem
-from gcs import cli
 from gcs.mission_files import format_mission, parse_mission
-from tests.unit.scripted_autopilot import HOME, ScriptedAutopilot
+from tests.unit.scripted_autopilot import HOME, ScriptedAutopilot, gcs
 
 M = MAV
 pytestmark = pytest.mark.timeout(60)
@@ -65,10 +64,6 @@ def vehicles():
         v.close()
 
 
-def gcs(capsys, vehicle: ScriptedAutopilot, *args: str) -> tuple[int, str, str]:
-    code = cli.main([*args, "--connect", vehicle.url, "--wait", "5"])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def plan_items(path: Path) -> list[dict]:

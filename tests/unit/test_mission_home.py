@@ -14,14 +14,13 @@ import pytest
 
 from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
 from common.mission_items import HomePosition, MissionItem, local_xy, to_local
-from gcs import cli
 from gcs.mission_client import MissionError, upload_detailed
 from gcs.mission_files import read_mission
 from gcs.mission_files.plan import parse_plan_doc
 from gcs.mission_files.toml import format_toml, parse_toml_doc
 from gcs.mission_files.wpl import format_wpl, parse_wpl
 from gcs.mission_home import HomeError, for_ardupilot, home_item, split_home, with_home
-from tests.unit.scripted_autopilot import HOME, ScriptedAutopilot
+from tests.unit.scripted_autopilot import HOME, ScriptedAutopilot, gcs
 
 M = MAV
 pytestmark = pytest.mark.timeout(60)
@@ -58,10 +57,6 @@ def vehicles():
         v.close()
 
 
-def gcs(capsys, vehicle: ScriptedAutopilot, *args: str) -> tuple[int, str, str]:
-    code = cli.main([*args, "--connect", vehicle.url, "--wait", "5"])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 # ------------------------------------------------------------------ pure

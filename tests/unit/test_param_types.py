@@ -11,10 +11,9 @@ import pytest
 
 from common.mavlink import MAV
 from common.wire_round import f32
-from gcs import cli
 from gcs import param_wire as pw
 from gcs.param_files import parse_params
-from tests.unit.scripted_autopilot import ScriptedAutopilot
+from tests.unit.scripted_autopilot import ScriptedAutopilot, gcs
 
 M = MAV
 pytestmark = pytest.mark.timeout(60)
@@ -42,10 +41,6 @@ def vehicles():
         v.close()
 
 
-def gcs(capsys, vehicle: ScriptedAutopilot, *args: str) -> tuple[int, str, str]:
-    code = cli.main([*args, "--connect", vehicle.url, "--wait", "5"])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 @pytest.mark.parametrize("encoding", [pw.C_CAST, pw.BYTEWISE])

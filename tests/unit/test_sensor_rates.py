@@ -314,5 +314,5 @@ def test_a_firmware_scenario_takes_the_firmwares_rates(tmp_path):
     path = tmp_path / "px4_noisy.toml"
     path.write_text(text)
     assert load_scenario(path, firmware=True).sensors.imu.rate_hz == 250.0
-    with pytest.raises(ConfigError, match="imu.rate_hz = 250 is below 500 Hz"):
+    with pytest.raises(ConfigError, match=r"imu\.rate_hz = 250 is below 500 Hz"):
         load_scenario(path)
