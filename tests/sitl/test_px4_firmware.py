@@ -36,9 +36,12 @@ PROFILE = Path(__file__).resolve().parents[2] / "config" / "sensors" / "px4-defa
 NAV_OFFBOARD, NAV_TAKEOFF, NAV_LOITER, NAV_RTL, NAV_LAND, NAV_MISSION = 14, 17, 4, 5, 18, 3
 ARMED = 2
 HOME_LAT, HOME_LON = 47.397742, 8.545594
-# A sensor failure or an estimator reset said by PX4 (console or logged messages).
-FAILURE = re.compile(r"stale|fail|timeout|timed out|fault|reset|unhealthy|lost.*(imu|gyro|"
-                     r"accel|baro|mag|gps)", re.IGNORECASE)
+# A sensor failure, an estimator reset or a battery failsafe said by PX4 (its console, its
+# logged messages); not the SITL's own missing devices ("LED: open /dev/led0 failed").
+SENSOR = r"(accel|gyro|baro|mag|gps|gnss|imu|sensor|height|hgt|ekf|estimator|battery)"
+FAILURE = re.compile(rf"stale|{SENSOR}.*(fail|timeout|timed out|lost|reset|fault)|"
+                     rf"(fail|timeout|reset|fault).*{SENSOR}|unhealthy|failsafe",
+                     re.IGNORECASE)
 
 
 def ok(done) -> str:
@@ -68,11 +71,19 @@ def at(tr: dict, t_us: float) -> np.ndarray:
 
 
 def touchdowns(tr: dict) -> list[tuple[int, float]]:
-    """(time us, vertical speed m/s) of each first ground contact after flight."""
+    """(time us, vertical speed m/s) of each touchdown after flight: the vertical speed at
+    the last instant above the ground (1 cm) before the plant's landed flag comes back."""
     landed = tr["landed"].astype(bool)
+    above = tr["pz"] > 0.01
     out = []
-    for i in np.nonzero(landed[1:] & ~landed[:-1])[0]:
-        out.append((int(tr["timestamp"][i + 1]), float(tr["vz"][i])))
+    for i in np.nonzero(landed[1:] & ~landed[:-1])[0] + 1:
+        before = np.nonzero(above[:i])[0]
+        if len(before) == 0 or (tr["timestamp"][i] - tr["timestamp"][before[-1]]) > 5e6:
+            continue  # no flight since the previous contact (a hop at spool-up)
+        j = before[-1]
+        if out and out[-1][0] >= tr["timestamp"][j]:
+            continue  # a bounce of the same touchdown
+        out.append((int(tr["timestamp"][j]), float(tr["vz"][j])))
     return out
 
 
