@@ -161,7 +161,7 @@ def test_the_default_profile_is_px4s_noisy_one(scenario):
     assert p.imu.accel.noise_density_m_s2_sqrt_hz == 4.0e-3
     assert p.mag.noise_gauss == pytest.approx(0.4e-3 * math.sqrt(p.mag.rate_hz))
     assert p.baro.noise_m == pytest.approx(1.0 / (1.17 * 9.80665), rel=0.02)  # 1 Pa
-    assert (p.gps.position_noise_m, p.gps.altitude_noise_m) == (0.2, 0.5)
+    assert (p.gps.position_noise_m, p.gps.altitude_noise_m) == (0.0028, 0.0056)
     mocap = resolve_sensor_profile("mocap-indoor")
     own = px4_sensor_profile(dataclasses.replace(scenario, sensors=mocap))
     assert own is mocap
@@ -190,17 +190,18 @@ def test_the_home_field_is_px4s_table_at_its_home():
 
 def test_gps_noise_and_accuracy_as_declared():
     """Given px4-default's GNSS, then each fix is white noise of the declared sigmas around
-    the truth (seeded: the same seed, the same fixes) and reports eph 90 cm, epv 178 cm,
-    10 satellites, 3D."""
+    the truth (seeded: the same seed, the same fixes) and reports eph 100 cm, epv 100 cm,
+    10 satellites, 3D (Gazebo classic's gps plugin, as PX4 meets it through HIL_GPS)."""
     cfg = resolve_sensor_profile("px4-default").gps
     fixes = [GpsModel(cfg, 3).sample((1.0, 2.0, 3.0), (0.0, 0.0, 0.0)) for _ in range(1)]
     m = GpsModel(cfg, 3)
     got = np.array([sum(m.sample((1.0, 2.0, 3.0), (0.0, 0.0, 0.0)), ()) for _ in range(4000)])
     assert got[0].tolist() == list(sum(fixes[0], ()))
-    assert got.mean(axis=0) == pytest.approx((1.0, 2.0, 3.0, 0.0, 0.0, 0.0), abs=0.03)
-    assert got.std(axis=0) == pytest.approx((0.2, 0.2, 0.5, 0.077, 0.06, 0.158), rel=0.05)
+    assert got.mean(axis=0) == pytest.approx((1.0, 2.0, 3.0, 0.0, 0.0, 0.0), abs=0.002)
+    assert got.std(axis=0) == pytest.approx((0.0028, 0.0028, 0.0056, 0.0126, 0.0126, 0.0253),
+                                          rel=0.05)
     g = gps_fields(_state(), PX4_HOME, cfg)
-    assert (g.fix_type, g.eph, g.epv, g.satellites_visible) == (3, 90, 178, 10)
+    assert (g.fix_type, g.eph, g.epv, g.satellites_visible) == (3, 100, 100, 10)
 
 
 def test_px4s_imu_floor_is_not_the_fcus():
