@@ -67,11 +67,31 @@ def _mode(args: argparse.Namespace, session: Session) -> int:
     from gcs.vehicle_link.actions import set_mode
 
     confirm = 3.0 if args.wait is None else args.wait
+    _refuse_bare_offboard(session, args.name)
     try:
         result = set_mode(session, args.name, confirm_s=confirm)
     except UnknownMode as exc:
         raise InputError(str(exc)) from None
     return print_result(f"mode {args.name.upper()}", result, session)
+
+
+def _refuse_bare_offboard(session: Session, name: str) -> None:
+    """InputError for OFFBOARD asked of PX4 by `gcs mode`, which streams no set-points:
+    PX4 refuses it in the air, and on the ground it accepts it and then outputs nothing
+    (with PX4 SITL in lockstep its simulated clock stops). `gcs goto` streams first."""
+    from gcs.autopilot import PX4, UnknownMode
+    from gcs.vehicle_link.goto import flies_pose
+
+    ap = session.autopilot
+    if ap is None or ap.kind != PX4:
+        return
+    try:
+        target = ap.resolve_mode(name)
+    except UnknownMode:
+        return  # said by set_mode, with the names
+    if target.name == "OFFBOARD" and not flies_pose(session):
+        raise InputError("OFFBOARD on PX4 needs a set-point stream before and during it, "
+                         "which gcs mode does not send: use gcs goto X Y Z")
 
 
 def _takeoff(args: argparse.Namespace, session: Session) -> int:

@@ -191,3 +191,14 @@ def test_the_floors():
     w = _watch()  # no floor: LAND descends by design
     w.sample(10.0, -1.0, 0.0)
     w.sample(0.0, -1.0, 10.0)
+
+
+def test_mode_offboard_on_px4_is_refused_before_anything_is_sent(px4, capsys):
+    """`gcs mode OFFBOARD` streams no set-points: PX4 takes OFFBOARD on the ground without
+    them and then outputs nothing (in lockstep its clock stops), so the CLI says so, exit 2,
+    and sends no DO_SET_MODE; `gcs goto` is the way."""
+    vehicle, link = px4()
+    assert main(["mode", "OFFBOARD", *link]) == 2
+    assert "use gcs goto" in capsys.readouterr().err
+    assert OFFBOARD not in vehicle.got.modes
+    assert vehicle.got.count("COMMAND_LONG") <= 2  # AUTOPILOT_VERSION asked, nothing else
