@@ -42,6 +42,9 @@ class GyroConfig:
     turn_on_bias_sigma_rad_s: float  # sigma of the constant drawn at start
     bias_random_walk_rad_s2_sqrt_hz: float  # sigma_rw: bias += sigma_rw sqrt(dt) n
     range_rad_s: float  # saturation, per axis
+    # The bias's correlation time (optional key): None, an unbounded random walk; else a
+    # first-order Gauss-Markov process of that time constant driven by sigma_rw (sitl.sensors).
+    bias_correlation_time_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,11 @@ class AccelConfig:
     turn_on_bias_sigma_m_s2: float
     bias_random_walk_m_s3_sqrt_hz: float
     range_m_s2: float
+    bias_correlation_time_s: float | None = None  # as the gyro's
+    # The ground contact's impulse as the accelerometer reports it (optional key): 0, within
+    # the IMU sample that holds the touchdown's physics step (its size may exceed the range
+    # and clip); > 0, spread evenly over this long from that sample on, the integral kept.
+    contact_spread_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -156,6 +164,13 @@ def _nonneg(t: Table, key: str, default: Any = ...) -> float:
     return t.number(key, default, lo=0.0)
 
 
+def _correlation_time(t: Table) -> float | None:
+    """`bias_correlation_time_s` (optional; absent: an unbounded random walk), > 0."""
+    if not t.has("bias_correlation_time_s"):
+        return None
+    return t.number("bias_correlation_time_s", lo=0.0, lo_open=True)
+
+
 def _parse_imu(t: Table) -> ImuConfig:
     rate = _rate(t, PROFILE_IMU_RATE_MIN_HZ)
     vib = _nonneg(t, "vibration_factor")
@@ -164,14 +179,17 @@ def _parse_imu(t: Table) -> ImuConfig:
         noise_density_rad_s_sqrt_hz=_nonneg(g, "noise_density_rad_s_sqrt_hz"),
         turn_on_bias_sigma_rad_s=_nonneg(g, "turn_on_bias_sigma_rad_s"),
         bias_random_walk_rad_s2_sqrt_hz=_nonneg(g, "bias_random_walk_rad_s2_sqrt_hz"),
-        range_rad_s=g.number("range_rad_s", lo=0.0, lo_open=True))
+        range_rad_s=g.number("range_rad_s", lo=0.0, lo_open=True),
+        bias_correlation_time_s=_correlation_time(g))
     g.finish()
     a = t.table("accel")
     accel = AccelConfig(
         noise_density_m_s2_sqrt_hz=_nonneg(a, "noise_density_m_s2_sqrt_hz"),
         turn_on_bias_sigma_m_s2=_nonneg(a, "turn_on_bias_sigma_m_s2"),
         bias_random_walk_m_s3_sqrt_hz=_nonneg(a, "bias_random_walk_m_s3_sqrt_hz"),
-        range_m_s2=a.number("range_m_s2", lo=0.0, lo_open=True))
+        range_m_s2=a.number("range_m_s2", lo=0.0, lo_open=True),
+        bias_correlation_time_s=_correlation_time(a),
+        contact_spread_s=a.number("contact_spread_s", 0.0, lo=0.0, hi=1.0))
     a.finish()
     jitter = _jitter(t, rate)
     t.finish()

@@ -14,6 +14,11 @@ The accelerometer reads the plant's specific force at the sample's instant plus 
 contact's impulse (`Plant.specific_force_flu`): a touchdown's velocity change counts at the
 end of its physics step, in the first IMU sample at or after it, spread over that sample's
 interval, so that the samples integrate to the true velocity change whatever the IMU rate.
+A profile's `imu.accel.contact_spread_s` > 0 spreads each touchdown's impulse evenly over
+that long instead, from that sample on (the integral unchanged, the plant's dynamics
+untouched): a landing gear's compliance stretches a real touchdown's deceleration over tens
+of milliseconds, and a 0.7 m/s touchdown within one 4 ms sample (175 m/s^2) would clip at a
++-16 g accelerometer's range, losing part of the velocity change the estimator integrates.
 
 Injected faults (the scenario's [[sensor_fault]], `start_flight`) act on what the models
 return, never on their draws: every sensor draws as without the fault and the fault then
@@ -100,6 +105,9 @@ class SensorFeed:
         self._mag: Vec3 | None = None  # a magnetometer sample for the next HIL_SENSOR
         self._baro_alt_m: float | None = None  # likewise the barometer's
         self._contact_dv: Vec3 = (0.0, 0.0, 0.0)  # ground impulse since the last IMU sample
+        # Impulses being spread (contact_spread_s > 0): [dv, us still to report].
+        self._spreading: list[tuple[Vec3, int]] = []
+        self._spread_us = round(profile.imu.accel.contact_spread_s * 1e6)
         self.true_f_flu_m_s2: Vec3 = (0.0, 0.0, 0.0)  # the last IMU sample's, before noise
         self.flight_start_us: int | None = None
         # The faults as windows on the simulation clock [start_us, end_us) (end None: open).
@@ -167,9 +175,11 @@ class SensorFeed:
         barometer samples not sent yet."""
         t, dt_us = self.imu_clock.take()
         t_s = t * 1e-6
-        f = self.plant.specific_force_flu(s, contact_dv_enu=self._contact_dv,
-                                          interval_s=dt_us * 1e-6)
+        dv = self._contact_dv
         self._contact_dv = (0.0, 0.0, 0.0)
+        if self._spread_us > 0:
+            dv = self._spread(dv, dt_us)
+        f = self.plant.specific_force_flu(s, contact_dv_enu=dv, interval_s=dt_us * 1e-6)
         self.true_f_flu_m_s2 = f
         imu = self.suite.imu.sample(t_s, dt_us * 1e-6, s.omega_flu_rad_s, f)
         if self._faults:
@@ -186,6 +196,22 @@ class SensorFeed:
             fields |= BARO_FIELDS
         return HilSensor(t, flu_to_frd(imu.f_flu_m_s2), flu_to_frd(imu.omega_flu_rad_s), mag,
                          pressure, alt, TEMPERATURE_C, fields)
+
+    def _spread(self, dv: Vec3, dt_us: int) -> Vec3:
+        """The part of the impulses being spread that falls in a sample of dt_us (a new
+        impulse dv starts with it): dv x min(dt, left) / spread each, summing to dv."""
+        if dv != (0.0, 0.0, 0.0):
+            self._spreading.append((dv, self._spread_us))
+        out = [0.0, 0.0, 0.0]
+        left = []
+        for whole, rest_us in self._spreading:
+            part = min(dt_us, rest_us) / self._spread_us
+            for i in range(3):
+                out[i] += whole[i] * part
+            if rest_us > dt_us:
+                left.append((whole, rest_us - dt_us))
+        self._spreading = left
+        return (out[0], out[1], out[2])
 
     def _add_contact(self, dv: Vec3) -> None:
         c = self._contact_dv

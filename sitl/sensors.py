@@ -6,7 +6,10 @@ from (seed, sensor name), so its draws do not depend on which other sensors were
 The caller samples each sensor at its own period (`period_s`), passing time explicitly, at
 the instants a `SampleClock` gives (exact multiples of the period, optionally jittered).
 
-    gyro/accel:  y = sat(x + b0 + b_rw(t) + k_vib N sqrt(rate) n),  b_rw += s_rw sqrt(dt) n
+    gyro/accel:  y = sat(x + b0 + b_rw(t) + k_vib N sqrt(rate) n),  b_rw += s_rw sqrt(dt) n,
+                 or with a correlation time tau (Gauss-Markov, as Gazebo classic's IMU plugin,
+                 gazebo_imu_plugin.cpp addNoise, Maybeck 4-114):
+                 b_rw = exp(-dt/tau) b_rw + s_rw sqrt(tau/2 (1 - exp(-2 dt/tau))) n
     baro:        h = z_enu + bias + s n
     mag:         m_flu = R(q_enu_flu)^T ned_to_enu(B_ned) + s n
     mocap:       p = p_enu + s_p n,  q = q_enu_flu * exp(s_a n),  delivered at t + latency
@@ -105,14 +108,17 @@ def _vec3(a: np.ndarray) -> Vec3:
 
 
 class _Triad:
-    """One three-axis inertial sensor: turn-on bias, bias random walk, white noise, range."""
+    """One three-axis inertial sensor: turn-on bias, bias random walk (unbounded, or
+    Gauss-Markov with a correlation time), white noise, range."""
 
     def __init__(self, rng: np.random.Generator, *, white_sigma: float, turn_on_sigma: float,
-                 random_walk: float, limit: float) -> None:
+                 random_walk: float, limit: float,
+                 correlation_time_s: float | None = None) -> None:
         self.rng = rng
         self.white_sigma = white_sigma
         self.random_walk = random_walk
         self.limit = limit
+        self.correlation_time_s = correlation_time_s
         self.turn_on_bias = rng.normal(0.0, 1.0, 3) * turn_on_sigma
         self.walk = np.zeros(3)
 
@@ -124,7 +130,12 @@ class _Triad:
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
         draws = self.rng.normal(0.0, 1.0, 6)  # always six draws: the stream stays aligned
-        self.walk = self.walk + self.random_walk * math.sqrt(dt_s) * draws[3:]
+        tau = self.correlation_time_s
+        if tau is None:
+            self.walk = self.walk + self.random_walk * math.sqrt(dt_s) * draws[3:]
+        else:  # the exact discretisation of db/dt = -b/tau + s_rw w over dt
+            sigma = self.random_walk * math.sqrt(-0.5 * tau * math.expm1(-2.0 * dt_s / tau))
+            self.walk = math.exp(-dt_s / tau) * self.walk + sigma * draws[3:]
         y = np.asarray(truth, dtype=float) + self.turn_on_bias + self.walk
         if self.white_sigma > 0.0:
             y = y + self.white_sigma * draws[:3]
@@ -160,13 +171,15 @@ class ImuModel:
 def _gyro(g: GyroConfig, imu: ImuConfig, rng: np.random.Generator) -> _Triad:
     return _Triad(rng, white_sigma=imu.gyro_sigma_rad_s,
                   turn_on_sigma=g.turn_on_bias_sigma_rad_s,
-                  random_walk=g.bias_random_walk_rad_s2_sqrt_hz, limit=g.range_rad_s)
+                  random_walk=g.bias_random_walk_rad_s2_sqrt_hz, limit=g.range_rad_s,
+                  correlation_time_s=g.bias_correlation_time_s)
 
 
 def _accel(a: AccelConfig, imu: ImuConfig, rng: np.random.Generator) -> _Triad:
     return _Triad(rng, white_sigma=imu.accel_sigma_m_s2,
                   turn_on_sigma=a.turn_on_bias_sigma_m_s2,
-                  random_walk=a.bias_random_walk_m_s3_sqrt_hz, limit=a.range_m_s2)
+                  random_walk=a.bias_random_walk_m_s3_sqrt_hz, limit=a.range_m_s2,
+                  correlation_time_s=a.bias_correlation_time_s)
 
 
 @dataclass(frozen=True)

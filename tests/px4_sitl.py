@@ -153,6 +153,12 @@ def topic(logs: Sequence[Path], name: str, instance: int = 0) -> dict[str, np.nd
     return {k: np.concatenate([p[k] for p in parts]) for k in keys}
 
 
+def parameter(logs: Sequence[Path], name: str) -> float:
+    """A PX4 parameter's value as the first ULog recorded it (its initial parameters)."""
+    from pyulog import ULog
+    return float(ULog(str(logs[0]), []).initial_params[name])
+
+
 def logged_messages(logs: Sequence[Path]) -> list[tuple[float, str]]:
     """PX4's logged messages (time in s, text) from its ULogs."""
     from pyulog import ULog

@@ -274,13 +274,15 @@ def test_the_command_line_cannot_drop_a_scenario_s_faults(tmp_path):
     assert apply_overrides(sc, sensors="degraded").sensor_faults == sc.sensor_faults
 
 
+@pytest.mark.parametrize("spread_s", [0.0, 0.05])
 @pytest.mark.parametrize("imu_hz", [100.0, 250.0, 1000.0])
-def test_the_accelerometer_integrates_to_the_touchdowns_velocity_change(imu_hz):
+def test_the_accelerometer_integrates_to_the_touchdowns_velocity_change(imu_hz, spread_s):
     """Given exact sensors at 100, 250 or 1,000 Hz on a 1 ms physics step and a vehicle
     falling onto the ground, then the IMU samples' specific force (FRD on the wire) in ENU
     plus gravity, times each sample's interval, sums to the true velocity change over the
     touchdown: the contact's impulse rides in the first sample at or after its step,
-    spread over that sample's interval."""
+    spread over that sample's interval, or with contact_spread_s over that long (then no
+    sample reads more than the resting g plus the impulse over the spread)."""
     import dataclasses
 
     from common.frames import frd_to_flu
@@ -292,6 +294,8 @@ def test_the_accelerometer_integrates_to_the_touchdowns_velocity_change(imu_hz):
     profile = dataclasses.replace(truth, imu=dataclasses.replace(truth.imu, rate_hz=imu_hz),
                                   mag=dataclasses.replace(truth.mag, rate_hz=imu_hz),
                                   baro=dataclasses.replace(truth.baro, rate_hz=50.0))
+    profile = dataclasses.replace(profile, imu=dataclasses.replace(
+        profile.imu, accel=dataclasses.replace(profile.imu.accel, contact_spread_s=spread_s)))
     plant = Plant(scenario.vehicle, dt_us=1000)
     imu_us = round(1e6 / imu_hz)
     feed = SensorFeed(profile, 0, plant, imu_us, imu_rate_min_hz=PROFILE_IMU_RATE_MIN_HZ)
@@ -301,10 +305,12 @@ def test_the_accelerometer_integrates_to_the_touchdowns_velocity_change(imu_hz):
     v0 = s.v_enu_m_s
     dv = [0.0, 0.0, 0.0]
     feed.period([s])
-    samples = 0
+    samples, peak, v_impact = 0, 0.0, v0
     for _ in range(round(0.6e6 / imu_us)):
         states = []
         for _ in range(imu_us // 1000):
+            if not s.landed:
+                v_impact = s.v_enu_m_s
             s = plant.step(s, cmd)
             states.append(s)
         for m in feed.period(states):
@@ -313,8 +319,15 @@ def test_the_accelerometer_integrates_to_the_touchdowns_velocity_change(imu_hz):
                 for i in range(3):
                     dv[i] += (f[i] - (0.0, 0.0, plant.g)[i]) * imu_us * 1e-6
                 samples += 1
+                if s.landed:  # the impulse and the resting reaction
+                    peak = max(peak, math.dist(f, (0.0, 0.0, 0.0)))
     assert s.landed and samples > 50
     # to one sample's worth of the point sampling (the sample after the touchdown reads the
     # resting g for the part of its interval still in flight); the impulse is 1.2 m/s
     one_sample = plant.g * imu_us * 1e-6 + 0.01
     assert dv == pytest.approx([s.v_enu_m_s[i] - v0[i] for i in range(3)], abs=one_sample)
+    impulse = math.dist(v_impact, (0.0, 0.0, 0.0))  # the contact's velocity change
+    if spread_s:
+        assert peak <= plant.g + impulse / spread_s + 0.5, peak
+    else:
+        assert peak >= impulse / (imu_us * 1e-6), peak

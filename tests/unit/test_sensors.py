@@ -90,6 +90,42 @@ def test_bias_random_walk_variance_grows_linearly():
     assert np.var(paths[:, 399]) > 3.0 * np.var(paths[:, 99])
 
 
+def test_gauss_markov_bias_is_bounded_with_its_correlation_time():
+    """Given a correlation time tau (Gazebo classic's IMU plugin: 300 s accel, 1000 s
+    gyro), the bias is first-order Gauss-Markov: from 0 its variance is
+    s^2 tau/2 (1 - exp(-2t/tau)), below the random walk's s^2 t and bounded by s^2 tau/2;
+    with tau the walk is unchanged for t << tau and the same draws are used."""
+    rw, tau, dt, steps, seeds = 1e-3, 0.1, 1e-3, 400, 1000
+    cfg = _imu(rw_gyro=rw)
+    cfg = dataclasses.replace(cfg, gyro=dataclasses.replace(cfg.gyro,
+                                                             bias_correlation_time_s=tau))
+    paths = np.array([_gyro_errors(cfg, s, steps)[:, 0] for s in range(seeds)])
+    for k in (49, 199, 399):
+        t = (k + 1) * dt
+        expect = rw * rw * tau / 2.0 * (1.0 - math.exp(-2.0 * t / tau))
+        assert np.var(paths[:, k]) == pytest.approx(expect, rel=0.15), k
+    assert np.var(paths[:, 399]) < 0.5 * rw * rw * 0.4  # the random walk's at 0.4 s
+    # lag-one correlation of the stationary part: exp(-dt / tau)
+    a, b = paths[:, 300:399].ravel(), paths[:, 301:400].ravel()
+    assert np.corrcoef(a, b)[0, 1] == pytest.approx(math.exp(-dt / tau), abs=0.01)
+    slow = dataclasses.replace(cfg, gyro=dataclasses.replace(cfg.gyro,
+                                                              bias_correlation_time_s=1e9))
+    assert _gyro_errors(slow, 3, 50) == pytest.approx(_gyro_errors(_imu(rw_gyro=rw), 3, 50),
+                                                      rel=1e-6, abs=1e-15)
+
+
+def test_px4_default_biases_are_gazebo_s_gauss_markov():
+    p = load_sensor_profile(PROFILES / "px4-default.toml")
+    assert p.imu.accel.bias_correlation_time_s == 300.0
+    assert p.imu.gyro.bias_correlation_time_s == 1000.0
+    assert p.imu.accel.contact_spread_s == 0.05
+    for name in ("mocap-indoor", "degraded", "truth"):  # no key: unbounded, one sample
+        other = load_sensor_profile(PROFILES / f"{name}.toml")
+        assert other.imu.accel.bias_correlation_time_s is None
+        assert other.imu.gyro.bias_correlation_time_s is None
+        assert other.imu.accel.contact_spread_s == 0.0
+
+
 def test_saturation_clips_each_axis():
     m = ImuModel(_imu(range_gyro=math.radians(2000.0), range_acc=16 * 9.80665), 0)
     s = m.sample(0.0, 1e-3, (100.0, -100.0, 1.0), (0.0, 200.0, -200.0))
@@ -270,6 +306,12 @@ GOOD = (PROFILES / "mocap-indoor.toml").read_text()
     ("[baro]\nrate_hz = 50.0", "[baro]\nrate_hz = 0.5", "baro.rate_hz"),
     ("vibration_factor = 10.0", "vibration_factor = inf", "imu.vibration_factor"),
     ("range_rad_s = 34.906585", "range_rad_s = 0.0", "imu.gyro.range_rad_s"),
+    ("range_rad_s = 34.906585", "range_rad_s = 34.906585\nbias_correlation_time_s = 0.0",
+     "imu.gyro.bias_correlation_time_s"),
+    ("range_m_s2 = 156.9064", "range_m_s2 = 156.9064\nbias_correlation_time_s = -300.0",
+     "imu.accel.bias_correlation_time_s"),
+    ("range_m_s2 = 156.9064", "range_m_s2 = 156.9064\ncontact_spread_s = -0.05",
+     "imu.accel.contact_spread_s"),
     ("field_ned_gauss = [0.216, 0.012, 0.425]", "field_ned_gauss = [0.2, 0.4]",
      "mag.field_ned_gauss"),
     ("bias_m = 0.0", "bias_m = 0.0\nbias_ft = 1.0", "baro.bias_ft"),
