@@ -41,10 +41,13 @@ SITL), stamped with that clock. The rule (`sitl.px4_lockstep`):
   deterministic firmware, whatever the IMU rate and control rate;
 - an answer due that does not come within 1 s of wall time (Gazebo's poll timeout) is
   reported in one line on stderr naming the sample and the period, once per stall, and
-  the plant advances (counted: `answer_waits`);
+  the plant goes back to the wall-clock pace and learns the cadence again (counted:
+  `answer_waits`): a firmware that stops answering (PX4 publishes no outputs in OFFBOARD
+  without set-points) keeps its clock running at real time, not one sample a second;
 - an answer stamped before the latest accepted one, or a second with its stamp, is counted
-  and ignored; one stamped before the latest sample (the plant ran past it: only while
-  the period is being learned) applies from the next step (`late_answers`). Answers
+  and ignored; one stamped before the latest sample (the plant ran past it: on the
+  wall-clock pace, or a shorter interval than the longest) applies from the next step
+  (counted as `late_answers` once the cadence is learned). Answers
   without the lockstep flag (PX4 on the wall clock) set the held command and the plant
   keeps the wall-clock pace.
 
@@ -295,6 +298,7 @@ class Server:
         self.nonfinite_outputs += cmd.nonfinite
         if flags & LOCKSTEP_FLAG:
             self.locked = True  # from the first lockstep answer on, as Gazebo does
+            learned = self.schedule.learned  # late only against a known cadence
             kind = self.schedule.accept(time_usec, self.sent_us)
             if kind is Answer.STALE:
                 self.stale_answers += 1  # before the latest accepted answer
@@ -304,7 +308,7 @@ class Server:
                 return
             if time_usec > self.sent_us:
                 self.time_mismatches += 1
-            if kind is Answer.LATE:
+            if kind is Answer.LATE and learned:
                 self.late_answers += 1
         else:
             self.locked = False
@@ -409,17 +413,18 @@ class Server:
                     if select.select(link.filenos(), [], [], POLL_S)[0]:
                         self._receive()
                     continue
-                self.answer_waits += 1  # given up: advance, as Gazebo's poll timeout does
-                self.schedule.skip()
+                self.answer_waits += 1  # given up, as Gazebo's poll timeout does
+                every = self.schedule.longest or 0
+                self.schedule.skip()  # the wall-clock pace until the cadence is learned
                 if not stalled:
                     stalled = True
                     self.stall_reports += 1
                     self._flush_log()
                     print(f"sitl: no answer to the sample at t = {self.sent_us * 1e-6:.3f} s "
                           f"within {ANSWER_TIMEOUT_S:g} s (the firmware answers every "
-                          f"{self.schedule.period} samples, "
-                          f"{(self.schedule.period or 0) * self.imu_us} us): advancing "
-                          "without it", file=sys.stderr, flush=True)
+                          f"{every} samples, {every * self.imu_us} us): advancing "
+                          "without it, on the wall clock until it answers again",
+                          file=sys.stderr, flush=True)
             elif answered:
                 stalled = False
             wait_s = None
@@ -470,6 +475,9 @@ class Server:
                 "speed_factor": self.speed_factor,
                 "late_answers": self.late_answers,
                 "answer_period_samples": self.schedule.period,
+                "answer_interval_longest": self.schedule.longest,
+                "answer_intervals": {str(k): n for k, n in
+                                     sorted(self.schedule.intervals.items())},
                 "state_interval_us": self.state_interval_us,
                 "lockstep_wall_s": wall,
                 "real_time_factor": self.locked_sim_us * 1e-6 / wall if wall > 0 else None}

@@ -1,23 +1,36 @@
 """Where the plant waits for PX4's lockstep answers (pure: sample times in, decisions out).
 
-PX4 answers only when its outputs update, at its control rate, not at every HIL_SENSOR
-(SimulatorMavlink.cpp's sender thread polls actuator_outputs), and stamps each answer with
-its clock, the latest HIL_SENSOR time it processed. So the answers fall every `period`
-samples (1 at 250 Hz IMU and control, 4 at a 1 kHz IMU). The schedule learns that period
-from the stamps of the accepted answers (two equal intervals in a row, in samples) and then
-says where the next answer is due: the plant steps on its own sensor clock without waiting
-up to that sample, and there waits for the answer, which it applies from the physics step
-that starts at the answer's stamp. For a deterministic firmware every answer then lands
-where it is due, and the run repeats exactly.
+PX4 answers only when its outputs update, not at every HIL_SENSOR (SimulatorMavlink.cpp's
+sender thread polls actuator_outputs), and stamps each answer with its clock, the latest
+HIL_SENSOR time it processed. Its outputs follow its angular velocity, whose publication
+is rate-limited (IMU_GYRO_RATEMAX, 400 Hz by default, in VehicleAngularVelocity): with an
+IMU faster than that, the answers do not fall at a fixed period in samples but every 2 or
+3 samples at a 1 kHz IMU, every 1 or 2 at 500 Hz, as the rate limit's phase comes round.
 
-An answer that does not come (`skip`: the caller's 1 s of wall time, as Gazebo's poll
-timeout) moves the due sample one period on, the period unchanged; intervals that change
-for good (two equal new ones in a row) are learned again.
+The rule, in samples between the stamps of accepted answers (`intervals`, a histogram):
+
+- learning: the schedule waits for 2 x LEARN_WINDOW intervals whose two halves have the
+  same longest interval (a cadence that has settled, PX4's start-up gaps past), and takes
+  that longest interval as `period` and `longest`;
+- then the plant steps on its own sensor clock without waiting up to the sample `longest`
+  samples after the latest answer (`due_us`) and waits there. An answer stamped at the
+  sample it waits at applies from the physics step that starts there; one that comes
+  earlier (a shorter interval) applies from the step after it arrives. With a fixed
+  cadence the longest interval is the period, every answer lands where it is due and a
+  deterministic firmware gives the same run every time;
+- an answer due that does not come (`skip`: the caller's 1 s of wall time, as Gazebo's
+  poll timeout) drops what was learned: the plant paces by the wall clock, as while PX4
+  starts, and learns the cadence again from the answers that follow. A cadence learned
+  too early (PX4's start-up) costs one such wait; a firmware that stops answering
+  (no outputs to publish) keeps running on the wall clock until it answers again.
+  Within a learned cadence the longest interval only grows.
 """
 
 from __future__ import annotations
 
 from enum import Enum
+
+LEARN_WINDOW = 8  # intervals in each half of the learning window
 
 
 class Answer(Enum):
@@ -28,19 +41,21 @@ class Answer(Enum):
 
 
 class AnswerSchedule:
-    """The firmware's answer period in samples, learned from its answers' stamps."""
+    """The longest interval in samples between the firmware's answers, from their stamps."""
 
     def __init__(self, imu_us: int) -> None:
         if imu_us <= 0:
             raise ValueError("imu_us must be positive")
         self.imu_us = imu_us
+        self.intervals: dict[int, int] = {}  # samples between accepted answers -> count
         self.reset()
 
     def reset(self) -> None:
-        """A new connection: nothing learned."""
+        """A new connection: nothing learned (the histogram is kept: it is statistics)."""
         self.last_us: int | None = None  # the latest accepted answer's stamp
-        self.period: int | None = None  # samples between answers, once learned
-        self._interval: int | None = None  # the latest interval seen, in samples
+        self.period: int | None = None  # the longest interval when learned
+        self.longest: int | None = None  # the longest interval since, in samples
+        self._recent: list[int] = []  # the latest intervals, while learning
         self.due_us: int | None = None  # the sample the next answer is due at
 
     @property
@@ -56,19 +71,29 @@ class AnswerSchedule:
         if last is not None and stamp_us == last:
             return Answer.EXTRA
         if last is not None:
-            interval = (stamp_us - last) // self.imu_us
-            if interval > 0 and interval == self._interval:
-                self.period = interval  # two equal intervals in a row
-            self._interval = interval
+            self._interval((stamp_us - last) // self.imu_us)
         self.last_us = stamp_us
-        if self.period is not None:
+        if self.longest is not None:
             self.due_us = self._next_due(stamp_us, sent_us)
         return Answer.ON_TIME if stamp_us == sent_us else Answer.LATE
 
+    def _interval(self, interval: int) -> None:
+        self.intervals[interval] = self.intervals.get(interval, 0) + 1
+        if self.longest is not None:
+            self.longest = max(self.longest, interval)
+            return
+        recent = self._recent
+        recent.append(interval)
+        del recent[:-2 * LEARN_WINDOW]
+        if len(recent) == 2 * LEARN_WINDOW and \
+                max(recent[:LEARN_WINDOW]) == max(recent[LEARN_WINDOW:]) > 0:
+            self.period = self.longest = max(recent)
+
     def _next_due(self, stamp_us: int, sent_us: int) -> int:
-        """The first sample a period after `stamp_us`, not before the latest sent."""
-        assert self.period is not None
-        step = self.period * self.imu_us
+        """The first sample `longest` samples after `stamp_us`, at or after the latest
+        sent (a whole number of `longest` steps on)."""
+        assert self.longest is not None
+        step = self.longest * self.imu_us
         due = stamp_us + step
         if due < sent_us:
             due += -(-(sent_us - due) // step) * step
@@ -79,6 +104,8 @@ class AnswerSchedule:
         return self.due_us is not None and sent_us >= self.due_us
 
     def skip(self) -> None:
-        """The answer due did not come: the next one is due a period later."""
-        if self.due_us is not None and self.period is not None:
-            self.due_us += self.period * self.imu_us
+        """The answer due did not come: learn the cadence again (the plant paces by the
+        wall clock meanwhile), keeping the latest accepted stamp."""
+        last = self.last_us
+        self.reset()
+        self.last_us = last

@@ -13,7 +13,9 @@ tested without a PX4 build. It does what that module does and checks what it rel
   Hz): a HIL_SENSOR gets one HIL_ACTUATOR_CONTROLS, stamped with its clock, only when that
   clock has reached the next control tick (a multiple of the control period), as PX4's
   sender thread sends only when actuator_outputs update (flags bit 0: lockstep; mode
-  1 | 128 when armed; motors 0..1 on the hexa X outputs, zero when disarmed);
+  1 | 128 when armed; motors 0..1 on the hexa X outputs, zero when disarmed); or, with
+  `rate_max_hz`, at PX4's rate-limited angular velocity publication (IMU_GYRO_RATEMAX in
+  VehicleAngularVelocity), whose intervals in samples vary (2 or 3 at a 1 kHz IMU);
 - flags stale sensors as PX4's DataValidator does (src/modules/sensors/data_validator/
   DataValidator.cpp): a sensor whose every axis repeats within 1e-6 for more than 100
   samples in a row (1,000 for the magnetometer) is reported in `Report.stale`;
@@ -164,7 +166,7 @@ class ScriptedPX4:
                  answer_after_s: float = 0.3, arm_at_s: float = 1.0,
                  waypoints: tuple[tuple[float, tuple[float, float, float]], ...] = (),
                  stall_every: int = 0, stall_s: float = 0.03, control_hz: float = 250.0,
-                 withhold_at_s: float | None = None) -> None:
+                 withhold_at_s: float | None = None, rate_max_hz: float | None = None) -> None:
         self.port = port
         self.sysid = sysid
         self.answer_after_us = round(answer_after_s * 1e6)
@@ -174,6 +176,9 @@ class ScriptedPX4:
         self.stall_s = stall_s
         self.control_us = round(1e6 / control_hz)
         self.next_tick_us = 0  # answer the first sample at or after it
+        # PX4's rate-limited angular velocity instead of control ticks: IMU_GYRO_RATEMAX
+        self.rate_min_us = None if rate_max_hz is None else round(1e6 / rate_max_hz)
+        self.last_publish_us = 0
         # the one answer never sent (the first control tick at or after this time)
         self.withhold_us = None if withhold_at_s is None else round(withhold_at_s * 1e6)
         self.withheld: int | None = None  # the sample whose answer was withheld
@@ -262,12 +267,25 @@ class ScriptedPX4:
                     self.stale_check.put(name, values[name], smp.time_usec, report)
         if smp.sensor_id == 0 and self.clock_us >= max(self.answer_after_us,
                                                         self.next_tick_us):
-            self.next_tick_us = (self.clock_us // self.control_us + 1) * self.control_us
+            self.next_tick_us = self._next_tick()
             if self.withhold_us is not None and self.withheld is None and \
                     self.clock_us >= self.withhold_us:
                 self.withheld = self.clock_us  # this answer never comes
                 return
             self._answer(report)
+
+    def _next_tick(self) -> int:
+        """The first clock the next answer may come at: the next control tick, or with
+        `rate_max_hz` VehicleAngularVelocity::CalibrateAndPublish's rule (publish when the
+        minimum interval has passed since `_last_publish`, then shift that on by the
+        interval, no further behind the sample than one interval): at 400 Hz, every 3 or
+        2 samples at a 1 kHz IMU, 1 or 2 at 500 Hz."""
+        if self.rate_min_us is None:
+            return (self.clock_us // self.control_us + 1) * self.control_us
+        step = self.rate_min_us
+        self.last_publish_us = min(max(self.last_publish_us + step, self.clock_us - step),
+                                   self.clock_us)
+        return self.last_publish_us + step
 
     def _handle(self, data: bytes, report: Report) -> None:
         for m in self.decoder.parse_buffer(data) or []:

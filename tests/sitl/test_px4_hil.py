@@ -27,6 +27,7 @@ from common.mavlink import MAV, encoder, pack, parser
 from common.sensors_config import resolve_sensor_profile
 from common.ulog import read_topic
 from sitl.px4_hil import Server
+from sitl.px4_lockstep import LEARN_WINDOW
 from tests.px4_side import ACCEL, BARO, DIFF_PRESS, GYRO, MAG, ScriptedPX4
 
 from .conftest import ROOT, SCENARIOS, start, stop
@@ -334,9 +335,9 @@ def _until(predicate, timeout_s: float = 5.0) -> None:
 
 
 def lock_in(px4: Peer, server: Server, controls=(0.0,) * 16, mode: int = 1) -> int:
-    """Answer three samples in a row (the period learned: one sample), then the latest
-    sample, where the plant now waits."""
-    for _ in range(3):
+    """Answer 2 x LEARN_WINDOW + 1 samples in a row (the period learned: one sample), then
+    the latest sample, where the plant now waits."""
+    for _ in range(2 * LEARN_WINDOW + 1):
         px4.answer(px4.next_sample(), controls, mode=mode)
     _until(lambda: server.schedule.learned)
     return px4.latest_sample()
@@ -357,14 +358,14 @@ def test_bad_input_gets_safe_reactions(tmp_path):
             t, [0.5] * 16, 129, 1)))
         _until(lambda: server.ignored_answers == 1 and server.other_messages == 1)
         assert server.rejected_bytes > 0
-        # three lockstep answers, one per sample (two equal intervals: the period is one
+        # lockstep answers, one per sample (the longest interval learned: one
         # sample), lock the plant in; then the answer to its latest sample, motors NaN and
         # 2.0 while armed, steps it
         t = lock_in(px4, server, (math.nan, 2.0) + (0.0,) * 14, mode=129)
         px4.answer(t, (math.nan, 2.0) + (0.0,) * 14, mode=129)
         t1 = px4.next_sample()
         assert t1 == t + IMU_US
-        assert server.nonfinite_outputs == 4
+        assert server.nonfinite_outputs == 2 * LEARN_WINDOW + 2
         rotors = server.command.rotor_speed_rad_s
         assert rotors[server.order[0]] == 0.0 and rotors[server.order[1]] == 1700.0
         stale = server.stale_answers
@@ -494,17 +495,41 @@ def test_imu_rates_fly_takeoff_hold_land(tmp_path, imu_hz, period):
     assert np.all(rows[t >= 7.5e6, c["landed"]] == 1.0)
 
 
+@pytest.mark.parametrize(("imu_hz", "intervals"), [(500.0, {1, 2}), (1000.0, {2, 3})])
+def test_rate_limited_answers_fly_takeoff_hold_land(tmp_path, imu_hz, intervals):
+    """Given the IMU at 500 or 1,000 Hz and the scripted PX4 answering as PX4's angular
+    velocity is published, rate-limited to 400 Hz (IMU_GYRO_RATEMAX: every 1 or 2, every 2
+    or 3 samples), then the plant learns the longest interval, waits only there, never
+    where no answer comes (no stall), and the takeoff to 1.5 m, the hold and the landing
+    fly."""
+    r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
+                                 waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0)
+    s = server.stats()
+    assert r.violations == [] and r.stale == {}
+    assert (s["answer_waits"], s["stall_reports"], s["sim_time_s"]) == (0, 0, 8.0)
+    longest = max(intervals)
+    assert (s["answer_period_samples"], s["answer_interval_longest"]) == (longest, longest)
+    assert set(np.diff(r.answers[2:]) // round(1e6 / imu_hz)) == intervals
+    assert set(s["answer_intervals"]) >= {str(i) for i in intervals}
+    assert s["steps"] > 0.85 * 8.0 * imu_hz  # in lockstep, not on the wall clock
+    t, z = rows[:, c["time_us"]], rows[:, c["pz"]]
+    assert np.all(np.abs(z[(t >= 3.5e6) & (t < 5e6)] - 1.5) < 0.1)
+    assert np.all(rows[t >= 7.5e6, c["landed"]] == 1.0)
+
+
 def test_an_answer_that_never_comes_is_one_stall_line(tmp_path, capfd):
     """Given 1 kHz samples, PX4 answering at 250 Hz and one answer (at 2 s) never sent,
     then after 1 s of wall time the plant says so in one line naming the sample and the
-    period, advances, and flies on to the end with the answers that follow."""
+    period, paces by the wall clock while it learns the cadence again, and flies on to the
+    end with the answers that follow, in lockstep again."""
     r, server, rows, _, side = _fly(tmp_path, _profile(1000.0), 4.0, waypoints=TAKEOFF_HOLD_LAND,
                               withhold_at_s=2.0)
     s = server.stats()
     lines = [line for line in capfd.readouterr().err.splitlines() if "no answer" in line]
     assert side.withheld == 2_000_000
     assert lines == ["sitl: no answer to the sample at t = 2.000 s within 1 s (the firmware "
-                     "answers every 4 samples, 4000 us): advancing without it"]
+                     "answers every 4 samples, 4000 us): advancing without it, on the wall "
+                     "clock until it answers again"]
     assert (s["answer_waits"], s["stall_reports"], s["sim_time_s"]) == (1, 1, 4.0)
     assert s["answer_period_samples"] == 4 and r.violations == []
     assert rows[-1, 0] == 4_000_000

@@ -21,7 +21,7 @@ from common.sensors_config import (
 )
 from sitl.plant import Plant
 from sitl.px4_hil import physics_step_us, px4_sensor_profile, stale_warning
-from sitl.px4_lockstep import Answer, AnswerSchedule
+from sitl.px4_lockstep import LEARN_WINDOW, Answer, AnswerSchedule
 from sitl.px4_wire import (
     MODE_ARMED,
     PX4_HOME,
@@ -216,22 +216,45 @@ def test_px4s_imu_floor_is_not_the_fcus():
 
 
 def test_the_schedule_learns_px4s_answer_period():
-    """Given 1 kHz samples and answers every 4 samples, then the period is learned from two
-    equal intervals; the plant waits only at the samples where an answer is due; an
-    answer that does not come moves the due sample a period on, the period unchanged;
-    stale and second answers are told apart."""
+    """Given 1 kHz samples and answers every 4 samples, then the period is learned once two
+    windows of 8 intervals have the same longest one; the plant waits only at the samples
+    where an answer is due; an answer that does not come moves the due sample a period on,
+    and the interval of the answer after it (8) becomes the longest; stale and second
+    answers are told apart."""
     s = AnswerSchedule(1000)
     assert s.accept(300_000, 300_000) is Answer.ON_TIME and not s.learned
-    assert s.accept(304_000, 305_000) is Answer.LATE and not s.learned  # paced: ran past
-    assert s.accept(308_000, 308_000) is Answer.ON_TIME and s.period == 4
-    assert s.due_us == 312_000
-    assert next(t for t in range(308_000, 320_001, 1000) if s.waits_at(t)) == 312_000
-    assert not s.waits_at(311_000)
-    assert s.accept(308_000, 312_000) is Answer.EXTRA
-    assert s.accept(304_000, 312_000) is Answer.STALE
-    s.skip()  # the answer due at 312 ms never came
-    assert (s.due_us, s.period) == (316_000, 4)
-    assert s.accept(316_000, 316_000) is Answer.ON_TIME  # interval 8: not learned
-    assert (s.period, s.due_us) == (4, 320_000)
+    assert s.accept(302_000, 303_000) is Answer.LATE and not s.learned  # paced: ran past
+    for n in range(1, 2 * LEARN_WINDOW):
+        assert s.accept(302_000 + 4000 * n, 302_000 + 4000 * n) is Answer.ON_TIME
+        assert s.learned == (n == 2 * LEARN_WINDOW - 1)
+    last = 302_000 + 4000 * (2 * LEARN_WINDOW - 1)
+    assert (s.period, s.longest, s.due_us) == (4, 4, last + 4000)
+    assert next(t for t in range(last, last + 12_001, 1000) if s.waits_at(t)) == last + 4000
+    assert not s.waits_at(last + 3000)
+    assert s.accept(last, last + 4000) is Answer.EXTRA
+    assert s.accept(last - 4000, last + 4000) is Answer.STALE
+    s.skip()  # the answer due at last + 4 ms never came: learned again, on the wall clock
+    assert not s.learned and s.due_us is None and s.last_us == last
+    assert s.accept(last + 8000, last + 8000) is Answer.ON_TIME and not s.learned
+    for n in range(1, 2 * LEARN_WINDOW + 1):
+        assert s.accept(last + 8000 + 4000 * n, last + 8000 + 4000 * n) is Answer.ON_TIME
+    assert (s.period, s.longest) == (4, 4)  # the 8 of the stall is not the cadence
+    assert s.intervals == {2: 1, 4: 4 * LEARN_WINDOW - 1, 8: 1}
     s.reset()
-    assert not s.learned and s.due_us is None
+    assert not s.learned and s.due_us is None and s.longest is None
+
+
+def test_the_schedule_waits_at_the_longest_of_varying_intervals():
+    """Given a 1 kHz IMU and PX4's rate-limited answers every 3 or 2 samples, then the
+    schedule learns the longest (3) and waits 3 samples after each answer; an answer after
+    2 samples comes before that and applies from the step after it arrives (LATE once the
+    plant ran past it); an answer that does not come makes it learn again."""
+    s = AnswerSchedule(1000)
+    t = 0
+    for k in range(2 * LEARN_WINDOW + 1):
+        t += 3000 if k % 2 else 2000
+        s.accept(t, t)
+    assert (s.period, s.longest, s.due_us) == (3, 3, t + 3000)
+    assert s.accept(t + 2000, t + 3000) is Answer.LATE and s.due_us == t + 5000
+    s.skip()  # a longer gap than learned: the cadence is learned again
+    assert not s.learned and s.accept(t + 6000, t + 6000) is Answer.ON_TIME
