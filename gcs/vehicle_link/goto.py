@@ -132,30 +132,29 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
                 # PX4 takes a stream that stops in OFFBOARD as a failsafe (COM_OF_LOSS_T,
                 # then COM_OBL_RC_ACT: position mode, which without sticks cannot run):
                 # hold the pose reached in its hold mode while the stream still runs
-                accepted_at = math.inf  # leaving OFFBOARD now is ours
-                hold = _hold(s, ap)
-                if not hold.endswith("confirmed"):
-                    raise GcsError(f"reached, but {hold}")
+                held_mode, said = _hold(s, ap)
+                if not held_mode:
+                    raise GcsError(f"reached, but {said}")
             return held
     except Unsafe as exc:
         stream.stop()
-        raise Unsafe(f"{str(exc).removeprefix('UNSAFE: ')}; {_hold(s, ap)}") from None
+        raise Unsafe(f"{str(exc).removeprefix('UNSAFE: ')}; {_hold(s, ap)[1]}") from None
 
 
-def _hold(session: Session, ap: Autopilot) -> str:
-    """After a fall: the autopilot's hold mode (PX4 AUTO.LOITER, ArduCopter BRAKE), and
-    what came of it, in words."""
+def _hold(session: Session, ap: Autopilot) -> tuple[bool, str]:
+    """The autopilot's hold mode (PX4 AUTO.LOITER, ArduCopter BRAKE): whether a HEARTBEAT
+    confirmed it, and what came of it in words."""
     try:
         mode = ap.resolve_mode("HOLD")
     except UnknownMode:
-        return f"{ap.label} has no hold mode: nothing commanded"
+        return False, f"{ap.label} has no hold mode: nothing commanded"
     try:
         result = _commands.set_mode(session, mode)
     except (_commands.NotConfirmed, GcsError) as exc:
-        return f"commanded {mode.name}: {exc}"
+        return False, f"commanded {mode.name}: {exc}"
     if result != M.MAV_RESULT_ACCEPTED:
-        return f"commanded {mode.name}: refused ({session.describe(result)})"
-    return f"commanded {mode.name}: confirmed"
+        return False, f"commanded {mode.name}: refused ({session.describe(result)})"
+    return True, f"commanded {mode.name}: confirmed"
 
 
 def _set_mode_or_fail(session: Session, mode: ModeTarget) -> None:
