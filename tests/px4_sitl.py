@@ -114,6 +114,18 @@ class Px4Run:
         assert done.returncode == 0, done.stdout + done.stderr
         return done.stdout
 
+    def wait_ready(self, timeout: float = 60.0) -> str:
+        """Until `gcs status` says `readiness: ready to arm` (PX4's pre-arm checks pass, as
+        a pilot waits for them); that status."""
+        deadline = time.monotonic() + timeout
+        while True:
+            done = self.gcs("status", timeout=60)
+            if done.returncode == 0 and "readiness: ready to arm" in done.stdout:
+                return done.stdout
+            assert time.monotonic() < deadline, f"not ready to arm after {timeout:g} s:\n" \
+                + done.stdout + done.stderr
+            time.sleep(1.0)
+
     def wait_disarmed(self, timeout: float = 240.0) -> None:
         """Until `gcs status` says `armed: no` (wall-clock seconds)."""
         deadline = time.monotonic() + timeout
@@ -156,7 +168,7 @@ def topic(logs: Sequence[Path], name: str, instance: int = 0) -> dict[str, np.nd
 def parameter(logs: Sequence[Path], name: str) -> float:
     """A PX4 parameter's value as the first ULog recorded it (its initial parameters)."""
     from pyulog import ULog
-    return float(ULog(str(logs[0]), []).initial_params[name])
+    return float(ULog(str(logs[0]), []).initial_parameters[name])
 
 
 def logged_messages(logs: Sequence[Path]) -> list[tuple[float, str]]:

@@ -167,12 +167,7 @@ def without_bias_drift(folder: Path) -> Path:
 
 
 @pytest.mark.timeout(1800)
-@pytest.mark.parametrize("profile", [
-    pytest.param("px4-default", marks=pytest.mark.xfail(strict=True, reason=(
-        "measured 2026-12-03: 1.08 / 0.61 / 0.88 m worst per flight: Gazebo classic's "
-        "accelerometer bias drift (6e-3 m/s^3/sqrt(Hz), Gauss-Markov 300 s) is twice what "
-        "PX4's EKF2_ACC_B_NOISE (3e-3) expects, and EKF2 trails the bias"))),
-    "no-bias-drift"])
+@pytest.mark.parametrize("profile", ["px4-default", "no-bias-drift"])
 def test_five_minutes_three_landings_height_within_20_cm(tmp_path: Path, profile: str) -> None:
     """Three takeoffs to 6 m, 90 s hovers and landings (300 s and more of PX4's time) at
     PX4's default parameters: no sensor-failure message; PX4's height estimate within
@@ -196,6 +191,12 @@ def test_five_minutes_three_landings_height_within_20_cm(tmp_path: Path, profile
     assert all(abs(vz) < 1.0 for _, vz in contacts), contacts
     assert not failures, "\n".join(failures)
     worst = int(np.argmax(np.abs(errors)))
+    if profile == "px4-default" and abs(errors[worst]) > 0.2:
+        # measured 2026-12-03: 1.08 / 0.61 / 0.88 m worst per flight. Gazebo classic's
+        # accelerometer bias drift (6e-3 m/s^3/sqrt(Hz), Gauss-Markov 300 s) is twice what
+        # PX4's EKF2_ACC_B_NOISE (3e-3) expects, and EKF2 trails the bias
+        pytest.xfail(f"PX4's height estimate off by {errors[worst]:+.3f} m at t = "
+                     f"{t[worst] * 1e-6:.1f} s with Gazebo's IMU bias drift")
     assert abs(errors[worst]) <= 0.2, (
         f"PX4's height estimate off the truth by {errors[worst]:+.3f} m at "
         f"t = {t[worst] * 1e-6:.1f} s (mean {errors.mean():+.3f} m, sd {errors.std():.3f} m)")
@@ -276,6 +277,7 @@ def test_qgc_plan_uploads_downloads_and_flies(tmp_path: Path) -> None:
     with px4_on_plant(tmp_path / "run", sitl_args=SPEED) as run:
         ok(run.gcs("mission", "upload", str(path)))
         ok(run.gcs("mission", "download", str(back)))
+        run.wait_ready()  # a mission checked, PX4's health checks run again
         ok(run.gcs("arm"))
         ok(run.gcs("mission", "start"))
         run.wait_disarmed(timeout=300)
