@@ -26,6 +26,7 @@ M = MAV
 CONFIRM_S = 3.0  # how long a mode change waits for a HEARTBEAT that shows it
 DEFAULT_TAKEOFF_M = 10.0  # gcs takeoff and gcs mode TAKEOFF, metres above home
 STATE_S = 2.0  # how long takeoff waits for the landed state it asks for
+FRESH_HEARTBEAT_S = 1.5  # a HEARTBEAT this recent tells the armed state without waiting
 _GROUND = (M.MAV_LANDED_STATE_ON_GROUND,)
 HEIGHTS = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT")  # what an observer is shown
 SETTLE_S = 0.5  # after a confirmation, how long an observer's judgement may still take
@@ -108,6 +109,11 @@ def flight_state(session: Session) -> tuple[bool, int | None, float | None]:
     asked for (MAV_CMD_REQUEST_MESSAGE) and waited for up to STATE_S."""
     s = session
     armed = landed = height = None
+    last = s.conn.messages.get("HEARTBEAT")  # the link's latest: armed now, if it is fresh
+    if last is not None and last.get_srcSystem() == s.target_system and \
+            last.get_srcComponent() == s.target_component and \
+            time.time() - getattr(last, "_timestamp", 0.0) < FRESH_HEARTBEAT_S:
+        armed = bool(last.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
     asked = {M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: "EXTENDED_SYS_STATE",
              M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "GLOBAL_POSITION_INT"}
     for msg_id in asked:
