@@ -145,6 +145,23 @@ def state_of_row(row: Sequence[float]) -> PlantState:
                       tuple(row[PS_TILT:PS_TILT + N_ROTORS]), row[PS_LANDED] != 0.0)
 
 
+class ContactImpulses:
+    """The ground contact's velocity changes (`Plant.contact_dv_enu`, ENU m/s) summed until
+    an accelerometer sample takes them."""
+
+    def __init__(self) -> None:
+        self._dv: Vec3 = (0.0, 0.0, 0.0)
+
+    def add(self, dv_enu: Vec3) -> None:
+        c = self._dv
+        self._dv = (c[0] + dv_enu[0], c[1] + dv_enu[1], c[2] + dv_enu[2])
+
+    def take(self) -> Vec3:
+        """The sum since the last take, and start again from zero."""
+        dv, self._dv = self._dv, (0.0, 0.0, 0.0)
+        return dv
+
+
 class Plant:
     """Fixed-step simulator; `step` is a pure function of (state, command)."""
 

@@ -37,7 +37,7 @@ from common.mavlink import MAV
 from common.quaternion import Vec3, q_conj, q_exp, q_log, q_mul, q_normalize
 from common.sensors_config import IMU_RATE_MIN_HZ, SensorProfile, check_servable
 from common.simlink import HilSensor, Odometry, pose_covariance
-from sitl.plant import Plant, PlantState
+from sitl.plant import ContactImpulses, Plant, PlantState
 from sitl.sensors import ImuSample, SampleClock, SensorSuite, sensor_rng
 
 SEA_LEVEL_HPA = 1013.25
@@ -104,7 +104,7 @@ class SensorFeed:
         self._prev: PlantState | None = None
         self._mag: Vec3 | None = None  # a magnetometer sample for the next HIL_SENSOR
         self._baro_alt_m: float | None = None  # likewise the barometer's
-        self._contact_dv: Vec3 = (0.0, 0.0, 0.0)  # ground impulse since the last IMU sample
+        self._contacts = ContactImpulses()  # ground impulses since the last IMU sample
         # Impulses being spread (contact_spread_s > 0): [dv, us still to report].
         self._spreading: list[tuple[Vec3, int]] = []
         self._spread_us = round(profile.imu.accel.contact_spread_s * 1e6)
@@ -175,8 +175,7 @@ class SensorFeed:
         barometer samples not sent yet."""
         t, dt_us = self.imu_clock.take()
         t_s = t * 1e-6
-        dv = self._contact_dv
-        self._contact_dv = (0.0, 0.0, 0.0)
+        dv = self._contacts.take()
         if self._spread_us > 0:
             dv = self._spread(dv, dt_us)
         f = self.plant.specific_force_flu(s, contact_dv_enu=dv, interval_s=dt_us * 1e-6)
@@ -213,10 +212,6 @@ class SensorFeed:
         self._spreading = left
         return (out[0], out[1], out[2])
 
-    def _add_contact(self, dv: Vec3) -> None:
-        c = self._contact_dv
-        self._contact_dv = (c[0] + dv[0], c[1] + dv[1], c[2] + dv[2])
-
     def period(self, states: Sequence[PlantState]) -> list[HilSensor | Odometry]:
         """The messages for these physics-step states (times increasing, each once): the
         samples due since the previous state, in time order; at one instant a pose delivered
@@ -251,10 +246,10 @@ class SensorFeed:
                         baro_c.take()[0] * 1e-6, at.p_enu_m).alt_m
                 if imu_c.due_us == te:
                     if te == t:  # the step's impulse, at its end
-                        self._add_contact(dv)
+                        self._contacts.add(dv)
                         dv = (0.0, 0.0, 0.0)
                     self._deliver(te, out)
                     out.append(self._hil_sensor(at))
-            self._add_contact(dv)
+            self._contacts.add(dv)
             self._deliver(t, out)
         return out

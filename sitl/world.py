@@ -23,6 +23,7 @@ from sitl.actuator_faults import ActuatorFaults
 from sitl.plant import (
     TRUTH_COLUMNS,
     ActuatorCommand,
+    ContactImpulses,
     Plant,
     PlantState,
     command_row,
@@ -90,7 +91,7 @@ class World:
         self.flight_start_us: int | None = None  # the first armed answer's state stamp
         self._row: np.ndarray | None = None  # the state as the kernels keep it, in flight
         self._substates = np.empty((self.substeps, len(TRUTH_COLUMNS)))
-        self._contact_dv = (0.0, 0.0, 0.0)  # ground impulses since `take_contact_dv`
+        self._impulses = ContactImpulses()  # ground impulses since `take_contact_dv`
 
     def _contacts(self, before: np.ndarray, rows: np.ndarray) -> None:
         """Add the touchdowns' velocity changes (`Plant.contact_dv_enu`) of these steps."""
@@ -100,17 +101,14 @@ class World:
         for k in range(len(rows)):
             a = before if k == 0 else rows[k - 1]
             if landed[k] and a[_LANDED] == 0.0:
-                dv = self.plant.contact_dv_enu(state_of_row(a.tolist()),
-                                               state_of_row(rows[k].tolist()))
-                c = self._contact_dv
-                self._contact_dv = (c[0] + dv[0], c[1] + dv[1], c[2] + dv[2])
+                self._impulses.add(self.plant.contact_dv_enu(state_of_row(a.tolist()),
+                                                             state_of_row(rows[k].tolist())))
 
     def take_contact_dv(self) -> tuple[float, float, float]:
         """The ground contact's velocity change since the last call (ENU, m/s): what an
         accelerometer sampled now over that interval adds to the specific force (the exact
         state's HIL_SENSOR; a sensor feed keeps its own)."""
-        dv, self._contact_dv = self._contact_dv, (0.0, 0.0, 0.0)
-        return dv
+        return self._impulses.take()
 
     @property
     def row(self) -> np.ndarray:
@@ -158,7 +156,5 @@ class World:
         before = self.state
         self.state = self.plant.step(self.state, self.faults.apply(command, self.state))
         self._row = None
-        dv = self.plant.contact_dv_enu(before, self.state)
-        c = self._contact_dv
-        self._contact_dv = (c[0] + dv[0], c[1] + dv[1], c[2] + dv[2])
+        self._impulses.add(self.plant.contact_dv_enu(before, self.state))
         return self.state
