@@ -85,7 +85,9 @@ class DescentWatch:
 
     def update(self, msg: Any, t_s: float) -> None:
         """Take one message (others than the height's are ignored); Unsafe when the vehicle
-        falls."""
+        falls. Durations are on the vehicle's clock (the message's time_boot_ms) where it
+        gives one, so that a burst of late messages, or a simulated vehicle faster than
+        real time, is judged by the time it flew; else on `t_s`, the receiving clock."""
         kind = msg.get_type()
         if kind not in HEIGHT_MESSAGES or (self.source is not None and kind != self.source):
             return
@@ -93,7 +95,8 @@ class DescentWatch:
         if sample is None:
             return
         self.source = kind
-        self.sample(sample[0], sample[1], t_s)
+        boot_ms = getattr(msg, "time_boot_ms", 0)
+        self.sample(sample[0], sample[1], boot_ms * 1e-3 if boot_ms > 0 else t_s)
 
     def sample(self, height_m: float, climb_m_s: float, t_s: float) -> None:
         """One height (m, up) and climb rate (m/s, up) at `t_s`; Unsafe when falling."""

@@ -202,3 +202,19 @@ def test_mode_offboard_on_px4_is_refused_before_anything_is_sent(px4, capsys):
     assert "use gcs goto" in capsys.readouterr().err
     assert OFFBOARD not in vehicle.got.modes
     assert vehicle.got.count("COMMAND_LONG") <= 2  # AUTOPILOT_VERSION asked, nothing else
+
+
+def test_the_sustain_is_judged_on_the_vehicles_clock():
+    """Messages that arrive together are as far apart as their time_boot_ms says: 0.1 s of
+    the vehicle's flight past the limit is no fall, whatever the receiving clock; 0.3 s is."""
+    from pymavlink.dialects.v20 import common
+
+    def pos(ms: int, z: float, vz: float):
+        return common.MAVLink_local_position_ned_message(ms, 0.0, 0.0, z, 0.0, 0.0, vz)
+
+    w = _watch()
+    w.update(pos(1000, -10.0, 2.5), 50.0)
+    w.update(pos(1100, -9.75, 2.5), 50.0)  # received at the same instant: 0.1 s apart
+    w.update(pos(1150, -9.6, 2.5), 99.0)  # received 49 s later: still 0.15 s of flight
+    with pytest.raises(Unsafe, match=r"for 0\.30 s"):
+        w.update(pos(1300, -9.25, 2.5), 99.0)
