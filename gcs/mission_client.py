@@ -26,6 +26,7 @@ chunked texts (MAVLink 2 `id`, `chunk_seq`) are put back together.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple, Protocol
@@ -39,6 +40,10 @@ MISSION = M.MAV_MISSION_TYPE_MISSION
 TIMEOUT_S = 1.5
 ITEM_TIMEOUT_S = 0.25
 RETRIES = 5
+# After the last item a vehicle may check the whole mission before its MISSION_ACK (this
+# FCU's envelope check, ArduPilot's and PX4's storage): the station keeps asking, every
+# try's wait, for up to this long in all before it gives up on the answer.
+FINAL_ACK_S = 10.0
 SETTLE_S = 0.05  # a transaction starts after this long without a stale mission answer
 _ANSWERS = {"MISSION_ACK", "MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_COUNT",
             "MISSION_ITEM", "MISSION_ITEM_INT"}
@@ -245,7 +250,8 @@ def upload_detailed(conn: Connection, target_system: int, target_component: int,
             continue
         if msg is None:
             attempts += 1
-            if attempts > retries:
+            limit = retries if done < count - 1 else max(retries, math.ceil(FINAL_ACK_S / wait))
+            if attempts > limit:
                 _send(M.MAVLink_mission_ack_message(
                     target_system, target_component, M.MAV_MISSION_OPERATION_CANCELLED,
                     MISSION))
@@ -259,7 +265,7 @@ def upload_detailed(conn: Connection, target_system: int, target_component: int,
                 said = "".join(f"; the vehicle said: {t}" for t in texts.texts)
                 raise MissionError(
                     f"mission upload to system {target_system}: no {what} after "
-                    f"{retries + 1} tries ({wait * 1e3:.0f} ms each){said}")
+                    f"{limit + 1} tries ({wait * 1e3:.0f} ms each){said}")
             _send(last)
             deadline = time.monotonic() + wait
             continue

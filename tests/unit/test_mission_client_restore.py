@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 from pathlib import Path
 
 import pytest
@@ -236,3 +237,48 @@ def test_unreadable_mission_is_exit_1_nothing_sent(vehicles, capsys, tmp_path):
     assert "reading the mission the vehicle holds (to put it back if the upload is " \
         "refused) failed: mission download from system 1: no answer to " \
         "MISSION_REQUEST_LIST" in err and "nothing uploaded" in err
+
+
+class SlowChecker(ScriptedAutopilot):
+    """PX4-like; it checks the whole mission for `check_s` after the last item before its
+    MISSION_ACK (and answers a repeated last item by checking on)."""
+
+    def __init__(self, check_s: float) -> None:
+        self.check_s = check_s
+        super().__init__("px4")
+
+    def _item(self, item) -> None:
+        if self._upload is not None and item.seq == self._count - 1 and \
+                item.seq == len(self._upload):
+            self._upload.append(item)
+            mission, self._upload = self._upload, None
+            threading.Timer(self.check_s, self._accept, (mission,)).start()
+            return
+        super()._item(item)
+
+    def _accept(self, mission) -> None:
+        self.mission = mission
+        self._send(M.MAVLink_mission_ack_message(255, 0, M.MAV_MISSION_ACCEPTED, 0))
+
+
+def test_a_vehicle_that_checks_the_mission_before_its_ack_is_waited_for(tmp_path):
+    """Given a vehicle that takes 3 s after the last item to check the mission, then the
+    upload waits for its MISSION_ACK (FINAL_ACK_S) instead of giving up after the item
+    retries (6 x 250 ms), and the vehicle holds the mission."""
+    from gcs.mission_client import upload_detailed
+    from gcs.session import Session
+
+    v = SlowChecker(3.0)
+    session = Session(v.url)
+    try:
+        session.wait_vehicle(timeout=5.0)
+        items = [MissionItem(i, 1, 16, int(i == 0), 1, 0, 0, 0, 0, 0, 0, -2.0)
+                 for i in range(3)]
+        answer = upload_detailed(session.conn, session.target_system,
+                                 session.target_component, items, timeout_s=0.25,
+                                 send=session.send)
+        assert answer.result == M.MAV_MISSION_ACCEPTED
+        assert len(v.mission) == 3
+    finally:
+        session.close()
+        v.close()
