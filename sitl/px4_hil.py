@@ -32,13 +32,18 @@ connection arrives (PX4 sends a HEARTBEAT first). PX4's clock is the time of the
 HIL_SENSOR; it answers only when its outputs update, at its control rate (250 Hz in
 SITL), stamped with that clock. The rule (`sitl.px4_lockstep`):
 
-- until the answers' period is known (PX4 starting up, then three answers with two equal
-  intervals) the plant sends one IMU sample per IMU period of wall time, as Gazebo does,
-  and applies each lockstep answer as it comes;
+- until the answers' cadence is learned (PX4 starting up, then 16 intervals between
+  answers whose two halves share their longest interval) the plant sends one IMU sample
+  per IMU period of wall time, as Gazebo does, and applies each lockstep answer as it
+  comes;
 - then it steps on its own sensor clock without waiting up to the sample where the next
-  answer is due (the latest answer's stamp plus the period), waits there for it, and
+  answer is due (the latest answer's stamp plus the longest interval), waits there for it, and
   applies it from the physics step that starts at that sample: deterministic for a
   deterministic firmware, whatever the IMU rate and control rate;
+- an answer due that has not come after GRACE_S (50 ms) of wall time lets the plant step
+  one sample on and wait at the next (counted: `grace_steps`): a firmware whose cadence
+  grew, as PX4's does after its start-up, where it answers every sample, needs that
+  sample to answer, and its answer lengthens the interval waited for;
 - an answer due that does not come within 1 s of wall time (Gazebo's poll timeout) is
   reported in one line on stderr naming the sample and the period, once per stall, and
   the plant goes back to the wall-clock pace and learns the cadence again (counted:
@@ -106,6 +111,7 @@ GPS_HZ = 5.0  # PX4's Gazebo GPS plugin
 STATE_DEFAULT_US = 5000  # HIL_STATE_QUATERNION: what PX4 asks on connecting (200 Hz)
 MAX_LAG_S = 0.05  # wall-clock pace: further behind than this, resume from now
 ANSWER_TIMEOUT_S = 1.0  # Gazebo's poll timeout: an answer due this long is given up
+GRACE_S = 0.05  # an answer due this long: step one sample on and wait there (step_past)
 POLL_S = 0.1
 
 
@@ -165,6 +171,10 @@ class Server:
         self.due_s = 0.0  # wall-clock pace: when the next step is due
         self.speed_factor = speed_factor  # lockstep paced at this x the wall clock, or free
         self.pace_due_s = 0.0  # paced lockstep: when the next step is due
+        self._wait_s: float | None = None  # when the wait for the answer due began
+        self._wait_from_us: int | None = None  # the latest accepted answer then
+        self._grace_s = 0.0  # when the plant last stepped on without the answer due
+        self._stalled = False  # an answer due timed out since the latest one on time
         self.flight_start_us: int | None = None
         self.state_interval_us = STATE_DEFAULT_US
         self.next_state_us = 0
@@ -190,6 +200,7 @@ class Server:
         self.disconnects = 0
         self.answer_waits = 0  # answers due that did not come within ANSWER_TIMEOUT_S
         self.stall_reports = 0  # lines printed (one per run of such timeouts)
+        self.grace_steps = 0  # steps taken past an answer due within GRACE_S (step_past)
         self.locked_wall_s = 0.0
         self.locked_sim_us = 0
 
@@ -344,6 +355,7 @@ class Server:
         self.decoder = parser()
         self.locked = False
         self.schedule.reset()
+        self._wait_s = None
         self.due_s = time.monotonic()
         if not self.started:
             self.started = True
@@ -373,8 +385,6 @@ class Server:
         link = self.link
         imu_s = self.imu_us * 1e-6
         last_step_s: float | None = None  # wall time of the latest lockstep step
-        wait_s: float | None = None  # when the wait for the answer due began
-        stalled = False  # an answer due has timed out since the latest accepted one
         while self.running and not self._at_end():
             if not link.clients:
                 if self.client:
@@ -405,30 +415,7 @@ class Server:
             if select.select(link.filenos(), [], [], 0.0)[0]:
                 self._receive()  # what came meanwhile, without waiting
                 continue
-            answered = self.schedule.last_us == self.sent_us
-            if self.schedule.waits_at(self.sent_us) and not answered:
-                now = time.monotonic()
-                wait_s = now if wait_s is None else wait_s
-                if now - wait_s < ANSWER_TIMEOUT_S:
-                    if select.select(link.filenos(), [], [], POLL_S)[0]:
-                        self._receive()
-                    continue
-                self.answer_waits += 1  # given up, as Gazebo's poll timeout does
-                every = self.schedule.longest or 0
-                self.schedule.skip()  # the wall-clock pace until the cadence is learned
-                if not stalled:
-                    stalled = True
-                    self.stall_reports += 1
-                    self._flush_log()
-                    print(f"sitl: no answer to the sample at t = {self.sent_us * 1e-6:.3f} s "
-                          f"within {ANSWER_TIMEOUT_S:g} s (the firmware answers every "
-                          f"{every} samples, {every * self.imu_us} us): advancing "
-                          "without it, on the wall clock until it answers again",
-                          file=sys.stderr, flush=True)
-            elif answered:
-                stalled = False
-            wait_s = None
-            if self._pace_wait(imu_s):
+            if self._awaiting_answer() or self._pace_wait(imu_s):
                 continue
             self._step()
             self.steps += 1
@@ -438,6 +425,52 @@ class Server:
                 self.locked_sim_us += self.imu_us
             last_step_s = now
         self._flush_log()
+
+    def _awaiting_answer(self) -> bool:
+        """In lockstep: whether the plant still waits for the answer due (having waited
+        briefly for what arrives); False once it may step: no answer is due, or GRACE_S
+        passed (`step_past`), or ANSWER_TIMEOUT_S passed since the wait began (`skip`,
+        reported in one line per run of such timeouts)."""
+        schedule = self.schedule
+        answered = schedule.last_us == self.sent_us
+        if self._wait_s is not None and schedule.last_us != self._wait_from_us:
+            self._wait_s = None  # an answer came since the wait began
+        if answered:
+            self._stalled = False
+        if answered or not schedule.waits_at(self.sent_us):
+            return False
+        now = time.monotonic()
+        if self._wait_s is None:
+            self._wait_s = self._grace_s = now
+            self._wait_from_us = schedule.last_us
+        if now - self._wait_s >= ANSWER_TIMEOUT_S:
+            self._give_up()
+            return False
+        if now - self._grace_s >= GRACE_S:
+            schedule.step_past()  # it may need the next sample to answer
+            self.grace_steps += 1
+            self._grace_s = now
+            return False
+        if select.select(self.link.filenos(), [], [], self._grace_s + GRACE_S - now)[0]:
+            self._receive()
+        return True
+
+    def _give_up(self) -> None:
+        """The answer due did not come within ANSWER_TIMEOUT_S: as Gazebo's poll timeout,
+        step on without it, on the wall clock until the cadence is learned again."""
+        self.answer_waits += 1
+        every = self.schedule.longest or 0
+        self.schedule.skip()
+        self._wait_s = None
+        if self._stalled:
+            return
+        self._stalled = True
+        self.stall_reports += 1
+        self._flush_log()
+        print(f"sitl: no answer to the sample at t = {self.sent_us * 1e-6:.3f} s within "
+              f"{ANSWER_TIMEOUT_S:g} s (the firmware answers every {every} samples, "
+              f"{every * self.imu_us} us): advancing without it, on the wall clock until "
+              "it answers again", file=sys.stderr, flush=True)
 
     def _pace_wait(self, imu_s: float) -> bool:
         """With `speed_factor`: whether the next lockstep step is not yet due on the wall
@@ -472,6 +505,7 @@ class Server:
                 "connects": self.connects, "disconnects": self.disconnects,
                 "refused_clients": self.link.refused_clients,
                 "answer_waits": self.answer_waits, "stall_reports": self.stall_reports,
+                "grace_steps": self.grace_steps,
                 "speed_factor": self.speed_factor,
                 "late_answers": self.late_answers,
                 "answer_period_samples": self.schedule.period,

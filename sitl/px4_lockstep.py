@@ -4,8 +4,9 @@ PX4 answers only when its outputs update, not at every HIL_SENSOR (SimulatorMavl
 sender thread polls actuator_outputs), and stamps each answer with its clock, the latest
 HIL_SENSOR time it processed. Its outputs follow its angular velocity, whose publication
 is rate-limited (IMU_GYRO_RATEMAX, 400 Hz by default, in VehicleAngularVelocity): with an
-IMU faster than that, the answers do not fall at a fixed period in samples but every 2 or
-3 samples at a 1 kHz IMU, every 1 or 2 at 500 Hz, as the rate limit's phase comes round.
+IMU faster than that, the answers do not fall at a fixed period in samples (measured
+with PX4 at a 1 kHz IMU: every 1 to 7 samples, mostly 4), and while PX4 starts it answers
+every sample.
 
 The rule, in samples between the stamps of accepted answers (`intervals`, a histogram):
 
@@ -18,11 +19,17 @@ The rule, in samples between the stamps of accepted answers (`intervals`, a hist
   earlier (a shorter interval) applies from the step after it arrives. With a fixed
   cadence the longest interval is the period, every answer lands where it is due and a
   deterministic firmware gives the same run every time;
-- an answer due that does not come (`skip`: the caller's 1 s of wall time, as Gazebo's
-  poll timeout) drops what was learned: the plant paces by the wall clock, as while PX4
-  starts, and learns the cadence again from the answers that follow. A cadence learned
-  too early (PX4's start-up) costs one such wait; a firmware that stops answering
-  (no outputs to publish) keeps running on the wall clock until it answers again.
+- an answer due that does not come soon (`step_past`: the caller's GRACE_S of wall
+  time) lets the plant step one sample on and wait at the next: a firmware whose
+  cadence has grown (PX4 answers every sample while it starts, then settles on its
+  rate-limited cadence) needs that sample before it answers, and its answer, stamped
+  where it came, lengthens `longest`. A firmware that was only slow answers with the
+  earlier stamp, which applies from the next step and leaves `longest` as it was;
+- an answer that does not come at all (`skip`: the caller's 1 s of wall time since the
+  wait began, as Gazebo's poll timeout) drops what was learned: the plant paces by the
+  wall clock, as while PX4 starts, and learns the cadence again from the answers that
+  follow. A firmware that stops answering (no outputs to publish) keeps running on the
+  wall clock until it answers again.
   Within a learned cadence the longest interval only grows.
 """
 
@@ -102,6 +109,11 @@ class AnswerSchedule:
     def waits_at(self, sent_us: int) -> bool:
         """Whether the plant must wait for an answer before stepping past `sent_us`."""
         return self.due_us is not None and sent_us >= self.due_us
+
+    def step_past(self) -> None:
+        """The answer due has not come yet: wait for it one sample later."""
+        assert self.due_us is not None
+        self.due_us += self.imu_us
 
     def skip(self) -> None:
         """The answer due did not come: learn the cadence again (the plant paces by the

@@ -23,8 +23,11 @@ tested without a PX4 build. It does what that module does and checks what it rel
   onto PX4's hexa X outputs with PX4's allocation geometry (airframe 6001_hexa_x), so a
   wrong motor order, spin or axis in the plant shows as a vehicle that does not hold.
 
-Every few hundred samples it holds its answer back for a while and looks whether the plant
-sent anything meanwhile (a plant that steps without the answer would have).
+Every few hundred samples it holds its answer back for a while (`stall_s`, shorter than the
+plant's GRACE_S) and looks whether the plant sent anything meanwhile (a plant that steps
+without the answer would have). Options model what PX4 was measured doing beside that:
+an answer to every sample while it starts (`every_sample_until_s`), one answer never
+sent (`withhold_at_s`), and no answers at all for a while (`mute_at_s`, `mute_wall_s`).
 """
 
 from __future__ import annotations
@@ -165,8 +168,10 @@ class ScriptedPX4:
     def __init__(self, port: int, vehicle: VehicleConfig, *, sysid: int = 1,
                  answer_after_s: float = 0.3, arm_at_s: float = 1.0,
                  waypoints: tuple[tuple[float, tuple[float, float, float]], ...] = (),
-                 stall_every: int = 0, stall_s: float = 0.03, control_hz: float = 250.0,
-                 withhold_at_s: float | None = None, rate_max_hz: float | None = None) -> None:
+                 stall_every: int = 0, stall_s: float = 0.02, control_hz: float = 250.0,
+                 withhold_at_s: float | None = None, rate_max_hz: float | None = None,
+                 every_sample_until_s: float = 0.0, mute_at_s: float | None = None,
+                 mute_wall_s: float = 1.5) -> None:
         self.port = port
         self.sysid = sysid
         self.answer_after_us = round(answer_after_s * 1e6)
@@ -182,6 +187,14 @@ class ScriptedPX4:
         # the one answer never sent (the first control tick at or after this time)
         self.withhold_us = None if withhold_at_s is None else round(withhold_at_s * 1e6)
         self.withheld: int | None = None  # the sample whose answer was withheld
+        # PX4's start-up, as measured: an answer to every sample until this clock
+        self.every_sample_until_us = round(every_sample_until_s * 1e6)
+        # no answers at all for `mute_wall_s` of wall time from the first sample at or
+        # after this clock (a firmware that publishes no outputs for a while)
+        self.mute_us = None if mute_at_s is None else round(mute_at_s * 1e6)
+        self.mute_wall_s = mute_wall_s
+        self.muted_s: float | None = None  # wall time the silence began
+        self.muted_samples = 0
         self.stale_check = StaleCheck()
         self.controller = HoverController(vehicle)
         self.mav = encoder(sysid, MAV.MAV_COMP_ID_AUTOPILOT1)
@@ -265,8 +278,16 @@ class ScriptedPX4:
                 report.published[name] += 1
                 if name in values:
                     self.stale_check.put(name, values[name], smp.time_usec, report)
-        if smp.sensor_id == 0 and self.clock_us >= max(self.answer_after_us,
-                                                        self.next_tick_us):
+        if smp.sensor_id == 0 and self.mute_us is not None and self.clock_us >= self.mute_us:
+            now = time.monotonic()
+            if self.muted_s is None:
+                self.muted_s = now
+            if now - self.muted_s < self.mute_wall_s:
+                self.muted_samples += 1
+                return
+        starting = self.clock_us < self.every_sample_until_us
+        if smp.sensor_id == 0 and self.clock_us >= self.answer_after_us and \
+                (starting or self.clock_us >= self.next_tick_us):
             self.next_tick_us = self._next_tick()
             if self.withhold_us is not None and self.withheld is None and \
                     self.clock_us >= self.withhold_us:

@@ -258,3 +258,25 @@ def test_the_schedule_waits_at_the_longest_of_varying_intervals():
     assert s.accept(t + 2000, t + 3000) is Answer.LATE and s.due_us == t + 5000
     s.skip()  # a longer gap than learned: the cadence is learned again
     assert not s.learned and s.accept(t + 6000, t + 6000) is Answer.ON_TIME
+
+
+def test_a_cadence_learned_too_short_grows_one_sample_at_a_time():
+    """Given PX4's start-up (an answer every sample, learned as a cadence of 1) and then its
+    settled cadence of 4 samples, then each `step_past` moves the wait one sample on, the
+    answer that needed those samples lengthens the interval waited for to 4, and a slow
+    answer at the sample due (stamped before the latest sent) leaves it as it was."""
+    s = AnswerSchedule(2000)
+    t = 0
+    for _ in range(2 * LEARN_WINDOW + 1):
+        t += 2000
+        s.accept(t, t)
+    assert (s.longest, s.due_us) == (1, t + 2000)
+    for k in range(1, 4):  # the answer due does not come: one sample on each time
+        assert s.waits_at(t + 2000 * k)
+        s.step_past()
+        assert s.due_us == t + 2000 * (k + 1) and not s.waits_at(t + 2000 * k)
+    assert s.accept(t + 8000, t + 8000) is Answer.ON_TIME
+    assert (s.longest, s.due_us) == (4, t + 16_000)
+    s.step_past()  # slow, not longer: its answer is stamped at the sample it was due at
+    assert s.accept(t + 16_000, t + 18_000) is Answer.LATE
+    assert (s.longest, s.due_us) == (4, t + 24_000)
