@@ -18,6 +18,15 @@ MODEL.md section 2). The actuators' models (MODEL.md 2, as the plant has them) l
   ends at rest with an acceleration (a figure-infinity), the tilt step there within what the
   servo turns in TILT_STEP_S ("tilt step").
 
+FLOOR = 0.15: no rotor may be slowed below 15 % of its speed limit (`ROTOR_FLOOR`; 2 % of its
+thrust, 5-7 % of what it takes in level hover on the presets), so that the feedback can still
+lower a thrust without reversing it; a braking climb on planar rotors may then decelerate at
+about 0.9 g. Hovering at some attitudes of a figure already takes a rotor to a third of its
+level-hover speed (333 rad/s on the planar preset), so the floor cannot be much higher. A
+reversal itself, where a rotor's thrust passes through zero and its tilt turns half a
+revolution between two samples, is caught by each tilt's mean rate from one sample to the
+next (`excess_kernel`).
+
 MARGIN = 0.85: the feed-forward may use at most 85 % of the rotor speed limit (72 % of the
 thrust), leaving the rest for the feedback that corrects tracking errors, disturbances and the
 rotor lag on top of it. It cannot be much lower: hovering at the worst attitude takes 1215 rad/s
@@ -72,6 +81,7 @@ from fcu.tracker import Reference
 
 MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
 TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may use
+FLOOR = 0.15  # share of w_max below which the feed-forward may not slow a rotor
 TILT_STEP_S = 0.05  # a tilt step at a path's end may take the servo this long at its rate
 DIFF_STEP = 1e-6  # sigma step of the central differences of a 1 s path
 GRID_RATIO = 1.1  # `TimeScaling.shortest`: durations tried from the speed bound up
@@ -215,6 +225,7 @@ class Envelope:
         self.margin = margin
         self.speed_max = vehicle.rotor_speed_max_rad_s
         self.limit = margin * self.speed_max
+        self.floor = FLOOR * self.speed_max
         self.tilt_margin = tilt_margin
         self.tilt_rate_max = vehicle.tilt_rate_max_rad_s
         self.tilt_limit = tilt_margin * self.tilt_rate_max
@@ -254,7 +265,12 @@ class Envelope:
         om1, lo1, hi1 = om1_all[:n], om1_all[n:2 * n], om1_all[2 * n:]
         h2 = 2.0 * DIFF_STEP
         ends = np.flatnonzero((sigma == 0.0) | (sigma == 1.0))
-        return TimeScaling(self, om0, om1, (hi0 - lo0) / h2, (hi1 - lo1) / h2, ends)
+        order = np.argsort(sigma, kind="stable")
+        after = np.full(n, -1, dtype=np.int64)
+        after[order[:-1]] = order[1:]
+        gap = np.where(after >= 0, sigma[after] - sigma, 0.0)
+        return TimeScaling(self, om0, om1, (hi0 - lo0) / h2, (hi1 - lo1) / h2, ends,
+                           after, gap)
 
     def describe(self, speed_rad_s: float) -> str:
         return (f"needs {speed_rad_s:.0f} rad/s > {self.limit:.0f} "
@@ -270,6 +286,10 @@ class Envelope:
             return (f"tilt servo {excess.number} steps {excess.need:.2f} rad at a start or end, "
                     f"limit {excess.limit:.2f} ({TILT_STEP_S * 1e3:.0f} ms at "
                     f"{self.tilt_rate_max:.1f} rad/s)")
+        if excess.kind == ROTOR_FLOOR:
+            return (f"rotor {excess.number} slows to {excess.need:.0f} rad/s, floor "
+                    f"{excess.limit:.0f} ({FLOOR * 100:.0f}% of {self.speed_max:.0f}: its "
+                    "thrust would near zero or reverse)")
         if excess.kind == ROTOR_DOWN:
             return (f"rotor {excess.number} must slow at {excess.need:.0f} rad/s^2, its lag "
                     f"allows {excess.limit:.0f}")
@@ -283,25 +303,45 @@ ROTOR_LAG = "rotor lag"
 ROTOR_DOWN = "rotor slowing"
 TILT = "tilt servo"
 TILT_STEP = "tilt step"
-KINDS = (ROTOR, ROTOR_LAG, ROTOR_DOWN, TILT, TILT_STEP)  # `excess_kernel`'s kind codes
+ROTOR_FLOOR = "rotor floor"
+KINDS = (ROTOR, ROTOR_LAG, ROTOR_DOWN, TILT, TILT_STEP, ROTOR_FLOOR)  # `excess_kernel`'s codes
 _TINY = 1e-12
 
 
 @njit
 def excess_kernel(om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray, dom1: np.ndarray,
                   is_end: np.ndarray, duration: float, limit: float, tau_up: float,
-                  tau_down: float, tilt_limit: float,
-                  step_limit: float) -> tuple[float, int, int, int, float, float]:
+                  tau_down: float, tilt_limit: float, step_limit: float,
+                  after: np.ndarray | None = None, gap: np.ndarray | None = None,
+                  floor: float = 0.0) -> tuple[float, int, int, int, float, float]:
     """The largest need / limit over samples and rotors of a path flown in `duration` s
     (module docstring): (ratio, kind code of KINDS, rotor 0..n-1, sample, need, limit). The
-    tilt step is judged at the path's ends only (`is_end`), against its pose at rest."""
+    tilt step is judged at the path's ends only (`is_end`), against its pose at rest. With
+    `after` (the index of the next sample in time, -1 for none) and `gap` (the normalised
+    time to it), each tilt's turn from one sample to the next counts too, at its mean rate:
+    where a rotor's thrust reverses (a braking climb on planar rotors: lateral part zero,
+    vertical part through zero) the tilt's derivative is zero at every sample, yet it turns
+    half a revolution between two. A rotor slower than `floor` counts as floor / speed
+    (the feedback's room below the feed-forward: it cannot lower a thrust that is
+    already near zero without reversing it)."""
     u = 1.0 / (duration * duration)
     inv_d = 1.0 / duration
     best, kind, rotor, sample, need, lim = -1.0, 0, 0, 0, 0.0, 0.0
     for k in range(om0.shape[0]):
+        j = -1 if after is None else after[k]
         for i in range(om0.shape[1] // 2):
             lat = om0[k, 2 * i] + u * om1[k, 2 * i]
             ver = om0[k, 2 * i + 1] + u * om1[k, 2 * i + 1]
+            if j >= 0 and gap is not None and gap[k] > 0.0:
+                lat_j = om0[j, 2 * i] + u * om1[j, 2 * i]
+                ver_j = om0[j, 2 * i + 1] + u * om1[j, 2 * i + 1]
+                if lat * lat + ver * ver > _TINY and lat_j * lat_j + ver_j * ver_j > _TINY:
+                    turn = abs(math.atan2(lat * ver_j - ver * lat_j, lat * lat_j + ver * ver_j))
+                    mean_rate = turn / (gap[k] * duration)
+                    if mean_rate / tilt_limit > best:
+                        best, kind, need, lim = mean_rate / tilt_limit, 3, mean_rate, \
+                            tilt_limit
+                        rotor, sample = i, k
             dlat = dom0[k, 2 * i] + u * dom1[k, 2 * i]
             dver = dom0[k, 2 * i + 1] + u * dom1[k, 2 * i + 1]
             sq = lat * lat + ver * ver
@@ -310,6 +350,9 @@ def excess_kernel(om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray, dom1: np.n
             if sq > _TINY:
                 w_rate = (lat * dlat + ver * dver) / (2.0 * w * sq) * inv_d
                 tilt_rate = (ver * dlat - lat * dver) / sq * inv_d
+            if floor > 0.0 and floor / max(w, _TINY) > best:
+                best, kind, need, lim = floor / max(w, _TINY), 5, w, floor
+                rotor, sample = i, k
             c = w + tau_up * w_rate if w_rate > 0.0 else w
             if c / limit > best:
                 best, kind, need, lim = c / limit, 1 if w <= limit < c else 0, c, limit
@@ -336,13 +379,19 @@ class TimeScaling:
     docstring)."""
 
     def __init__(self, env: Envelope, om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray,
-                 dom1: np.ndarray, ends: np.ndarray | None = None) -> None:
+                 dom1: np.ndarray, ends: np.ndarray | None = None,
+                 after: np.ndarray | None = None, gap: np.ndarray | None = None) -> None:
         self.env, self.limit = env, env.limit
         self.om0, self.om1, self.dom0, self.dom1 = (np.ascontiguousarray(x, dtype=np.float64)
                                                     for x in (om0, om1, dom0, dom1))
         self.is_end = np.zeros(len(om0), dtype=np.bool_)
         if ends is not None:
             self.is_end[ends] = True
+        n = len(om0)
+        # the next sample in time and the normalised time to it (`excess_kernel`)
+        self.after = np.full(n, -1, dtype=np.int64) if after is None else \
+            np.ascontiguousarray(after, dtype=np.int64)
+        self.gap = np.zeros(n) if gap is None else np.ascontiguousarray(gap, dtype=np.float64)
         self._shortest: float | None = None
 
     def _omega(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
@@ -375,7 +424,8 @@ class TimeScaling:
         env = self.env
         ratio, kind, rotor, sample, need, limit = excess_kernel(
             self.om0, self.om1, self.dom0, self.dom1, self.is_end, float(duration), env.limit,
-            env.tau_up, env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S)
+            env.tau_up, env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S,
+            self.after, self.gap, env.floor)
         return Excess(ratio, KINDS[kind], rotor + 1, need, limit, sample)
 
     def fits(self, duration: float) -> bool:

@@ -387,3 +387,51 @@ def test_fast_figure_is_refused_naming_a_tilt_servo(vehicle):
     # inside the item (its end's step into the hold is the step check's)
     assert dense_tilt_rate(envelope(vehicle), ex, t0 + 1e-3, t1 - 4e-3, dt=2e-3) <= \
         envelope(vehicle).tilt_limit * 1.01
+
+
+# ----------------------------------------------------------------------------------------
+# Thrust reversal: a braking climb on planar rotors
+# ----------------------------------------------------------------------------------------
+
+LEVEL = (1.0, 0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("height_m", [0.2, 0.3, 0.5])
+def test_a_climb_that_brakes_beyond_g_does_not_fit_on_planar_rotors(height_m):
+    """Given a vertical climb of 0.2-0.5 m at the default take-off speed (1 m/s) on the planar
+    preset, whose quintic brakes at 5.77 h / D^2 > g (the thrust must reverse: every tilt turns
+    half a revolution between two samples, though its derivative is zero at each), then it does
+    not fit, naming a tilt servo; the shortest duration that fits brakes at under g and keeps
+    every rotor above the floor; and judged without the sample-to-sample turns (the check of
+    before) the reversing climb is taken for flyable."""
+    from fcu.feasibility import FLOOR, TILT_STEP_S
+    env = envelope(PLANAR)
+    seg = _Move(0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, height_m), LEVEL, None, height_m / 1.0, 0.0)
+    sc = env.scaling(seg)
+    excess = sc.excess(seg.travel)
+    assert excess.ratio > 10.0 and excess.kind == "tilt servo", excess
+    assert 5.77 * height_m / seg.travel ** 2 > PLANAR.gravity_m_s2
+    shortest = sc.shortest()
+    assert math.isfinite(shortest) and shortest > seg.travel
+    assert 5.7735 * height_m / shortest ** 2 < 0.95 * PLANAR.gravity_m_s2
+    assert sc.speeds(shortest).min() >= FLOOR * PLANAR.rotor_speed_max_rad_s * (1 - 1e-3)
+    ratio, *_ = excess_kernel(sc.om0, sc.om1, sc.dom0, sc.dom1, sc.is_end, seg.travel,
+                              env.limit, env.tau_up, env.tau_down, env.tilt_limit,
+                              env.tilt_rate_max * TILT_STEP_S)
+    assert ratio < 2.0  # blind to the reversal without the neighbours
+
+
+def test_a_rotor_slowed_below_the_floor_is_named():
+    """Given the planar climb of 0.5 m flown 1 % faster than its shortest duration, then the
+    excess is the rotor floor (15 % of 1700 rad/s), explained with the speed it would slow
+    to; 10 % faster the thrust reverses and a tilt servo is named."""
+    env = envelope(PLANAR)
+    seg = _Move(0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.5), LEVEL, None, 0.5, 0.0)
+    sc = env.scaling(seg)
+    excess = sc.excess(sc.shortest() * 0.99)
+    assert excess.kind == "rotor floor" and 1.0 < excess.ratio < 1.5, excess
+    assert excess.limit == pytest.approx(255.0) and excess.need < 255.0
+    assert env.explain(excess) == (f"rotor {excess.number} slows to {excess.need:.0f} rad/s, "
+                                   "floor 255 (15% of 1700: its thrust would near zero or "
+                                   "reverse)")
+    assert sc.excess(sc.shortest() * 0.9).kind == "tilt servo"
