@@ -15,12 +15,21 @@ divergence. The FCU does not judge attitude: such a run flies on, armed, to its 
 
 Statuses, exactly one per run:
     completed  the run reached its end with no failsafe reaction, divergence, crash, timeout
+               or actuator limit
+    limited    the run reached its end, but the FCU's actuator monitor reported an actuator
+               at its limit on the way (a tilt servo rate-limited, a rotor at its speed
+               limit: events of kind LIMIT): the flight ended, not as planned
     failsafe   a failsafe reacted (HOLD, LAND or disarm), even one that later cleared
     diverged   position error beyond the limit, attitude error above its limit held for its
                hold time, or a state that is not finite
     crashed    a disarm in the air, or ground contact faster than CRASH_SPEED_M_S
     timeout    the run did not reach its end within its wall-clock allowance
     aborted    the run was stopped (interrupt, a process died, a refused step)
+
+Precedence, first match wins: diverged or crashed (whichever came first), a stopped run
+(timeout, aborted), failsafe, a run that ended before its end (aborted), limited, completed.
+A limit reported on the way to a divergence, a crash or a failsafe is in the events, the
+status is the graver one.
 """
 
 from __future__ import annotations
@@ -33,14 +42,15 @@ import numpy as np
 
 from common.quaternion import angle_between_rows
 
-STATUSES = ("completed", "failsafe", "diverged", "crashed", "timeout", "aborted")
+STATUSES = ("completed", "limited", "failsafe", "diverged", "crashed", "timeout", "aborted")
 DIVERGENCE_M = 10.0  # default limit of the position error (COM_DIV_POS, scenario key)
 DIVERGENCE_ATTITUDE_RAD = 2.0  # attitude error angle limit (115 deg) ...
 DIVERGENCE_ATTITUDE_HOLD_S = 1.0  # ... held this long without a break: a divergence
 CRASH_SPEED_M_S = 1.0  # touching the ground faster than this is a crash (LAND: 0.5 m/s)
 
-# Event kinds: what a runner reads from the FCU's events besides their text.
-INFO, FAILSAFE, CRASH, DIVERGED = "info", "failsafe", "crash", "diverged"
+# Event kinds: what a runner reads from the FCU's events besides their text. LIMIT: the
+# actuator monitor's report of an actuator at its limit (a WARNING, no reaction).
+INFO, FAILSAFE, CRASH, DIVERGED, LIMIT = "info", "failsafe", "crash", "diverged", "limit"
 # How the FCU's STATUSTEXT begins when OFFBOARD holds its attitude instead of a target's
 # (fcu/offboard.py); `gcs goto` ends on it with the vehicle's reason.
 ATTITUDE_NOT_FLOWN = "attitude not flown"
@@ -52,7 +62,8 @@ class Event(NamedTuple):
     t_us: int
     severity: int  # MAV_SEVERITY
     text: str
-    kind: str = INFO  # INFO, FAILSAFE (a reaction), CRASH (disarm in the air), DIVERGED
+    kind: str = INFO  # INFO, FAILSAFE (a reaction), CRASH (disarm in the air), DIVERGED,
+    # LIMIT (an actuator at its limit, reported)
 
     def as_json(self) -> dict[str, object]:
         return {"t_s": self.t_us * 1e-6, "severity": self.severity, "text": self.text,
@@ -125,6 +136,8 @@ def classify(*, reached_end: bool, events: Iterable[Event], divergence_t_us: int
     `crash_t_us`: first ground contact faster than CRASH_SPEED_M_S (None: never);
     `stopped`: "timeout" or "aborted" when the runner could not finish the run.
     A disarm in the air caused by the divergence rule counts as divergence, not as a crash.
+    Events of kind LIMIT make a run that reached its end `limited` (the precedence is the
+    module's).
     """
     events = list(events)
     in_air = [e.t_us for e in events if e.kind == CRASH]
@@ -149,4 +162,9 @@ def classify(*, reached_end: bool, events: Iterable[Event], divergence_t_us: int
                        f"{first}")
     if not reached_end:
         return Outcome("aborted", "", "the run ended before its end time")
+    limits = [e for e in events if e.kind == LIMIT]
+    if limits:
+        more = f" (and {len(limits) - 1} more)" if len(limits) > 1 else ""
+        return Outcome("limited", "", f"actuator limit at t = {limits[0].t_us * 1e-6:.3f} s: "
+                       f"{limits[0].text}{more}")
     return Outcome("completed", "", "reached its end")

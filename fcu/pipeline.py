@@ -23,7 +23,7 @@ from typing import NamedTuple
 from common.config import Gains, VehicleConfig
 from common.mav_enums import MAV_RESULT, MAV_SEVERITY
 from common.modes import Mode
-from common.outcome import DIVERGED, FAILSAFE, Event, diverged
+from common.outcome import DIVERGED, FAILSAFE, INFO, LIMIT, Event, diverged
 from fcu.actuator_monitor import ActuatorMonitor, unclamped_speeds
 from fcu.commander import Commander
 from fcu.core import FlightCore, StepResult
@@ -314,14 +314,17 @@ class Pipeline:
     def _check_actuators(self, dt_s: float, tilt_rad: tuple[float, ...],
                          omega_sq: tuple[float, ...]) -> None:
         """The actuators against their models (COM_ACT_RATE_T): a WARNING once per
-        episode for each tilt servo rate-limited or rotor at its speed limit for longer, an
-        INFO when they all cleared; reports only, the commands are not changed."""
+        episode for each tilt servo rate-limited or rotor at its speed limit for longer (an
+        event of kind LIMIT: the run's status is `limited`), an INFO when they all cleared;
+        reports only, the commands are not changed."""
         limit_s = self.settings.actuator_limit_s
         for notice in self.actuators.update(dt_s, tilt_rad, unclamped_speeds(omega_sq),
                                             limit_s):
-            severity = MAV_SEVERITY.MAV_SEVERITY_INFO if notice.kind == "clear" else \
-                MAV_SEVERITY.MAV_SEVERITY_WARNING
-            self.commander.say(severity, notice.text(limit_s))
+            if notice.kind == "clear":
+                self.commander.say(MAV_SEVERITY.MAV_SEVERITY_INFO, notice.text(limit_s), INFO)
+            else:
+                self.commander.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, notice.text(limit_s),
+                                   LIMIT)
         if any(self.actuators.tilt_limited):
             self.tilt_rate_limited_steps += 1
 
@@ -339,7 +342,8 @@ class Pipeline:
                 which = ",".join(str(i + 1) for i, w in enumerate(speeds)
                                  if w > self.vehicle.rotor_speed_max_rad_s)
                 cmd.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
-                        f"rotors saturated for over {self.settings.saturation_s:g} s: {which}")
+                        f"rotors saturated for over {self.settings.saturation_s:g} s: {which}",
+                        LIMIT)
         elif change == "clear" and self.failsafe == "rotor saturation":
             self.failsafe = ""
 

@@ -1,7 +1,8 @@
 """Tracking metrics of DESIGN.md section 6 and the paper's Table I.
 
 Position error = |p - p_d|; attitude error = angle of q_d* q in [0, pi]; both sampled at the
-control steps (the desired pose is the one the controller computed for that step).
+control steps (the desired pose is the one the controller computed for that step), over the
+rows where the vehicle is meant to follow its reference (`followed_rows`).
 """
 
 from __future__ import annotations
@@ -48,6 +49,24 @@ def tracking_metrics(p: np.ndarray, q: np.ndarray, p_d: np.ndarray,
     pos = np.linalg.norm(p - p_d, axis=1)
     att = attitude_error_rad(q, q_d)
     return {"position_error_m": error_stats(pos), "attitude_error_rad": error_stats(att)}
+
+
+# The rule that picks the rows the errors are judged over (metrics.json's error_rows.rule).
+ERROR_ROWS_RULE = "ground_below_reference_excluded"
+GROUND_Z_M = 0.0  # the plant's ground plane (ENU z)
+
+
+def followed_rows(p_d: np.ndarray, landed: np.ndarray) -> np.ndarray:
+    """Rows where the vehicle is meant to follow its reference: every row, but those on the
+    ground (the plant's contact flag `landed`) with the reference below the ground plane
+    (z_d < 0), which the vehicle cannot follow there: a landing's set-point sinking on
+    through contact until the land detector disarms. A row in the air counts, whatever its
+    reference; so does a row on the ground with its reference at or above the ground: the
+    rest before a take-off, a climb from the ground (Case I's) while the rotors spin up.
+    With the ground switched off (Case II) the vehicle is never landed: every row counts."""
+    with np.errstate(invalid="ignore"):
+        below = np.asarray(p_d[:, 2] < GROUND_Z_M) if len(p_d) else np.zeros(0, dtype=bool)
+    return np.asarray(~((np.asarray(landed) > 0.5) & below))
 
 
 def rank_key(metrics: dict[str, Any]) -> tuple[int, float]:
@@ -171,11 +190,12 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
     seconds its process spent compiling or loading the numba kernels, outside wall_time_s.
 
     Errors compare the plant's true pose with the desired pose the FCU computed for the same
-    control step (`join_logs`). A run diverges at the first joined sample that
-    `diverged_rows` flags (position beyond the scenario's limit, attitude error above the
-    scenario's divergence_attitude_rad held for its divergence_attitude_hold_s, or a
-    non-finite state), and
-    its figures cover the run up to that instant (never inf or NaN).
+    control step (`join_logs`), over the rows `followed_rows` keeps (`error_rows`: the rule,
+    the rows counted and those left out; divergence is judged on every row). A run
+    diverges at the first joined sample that `diverged_rows` flags (position beyond the
+    scenario's limit, attitude error above the scenario's divergence_attitude_rad held for
+    its divergence_attitude_hold_s, or a non-finite state), and its figures cover the run up
+    to that instant (never inf or NaN).
     """
     common_t, truth_j, onboard_j = join_logs(truth_columns, truth, onboard_columns, onboard)
     p = log_columns(truth_columns, truth_j, "px", "py", "pz")
@@ -207,6 +227,7 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
                        divergence_t_us=divergence_t_us,
                        crash_t_us=crash_time_us(truth_columns, truth), stopped=stopped,
                        divergence_cause=cause)
+    followed = followed_rows(p_d[:end], truth_j[:end, list(truth_columns).index("landed")])
     sim_time_s = float((t_truth[-1] - flight_start_us) * 1e-6) if len(t_truth) else 0.0
     steps = onboard_j[:end, list(onboard_columns).index("step_us")]
     sat = onboard_j[:end, list(onboard_columns).index("saturated")]
@@ -231,7 +252,10 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
         "physics_rate_hz": scenario.physics_rate_hz,
         "ideal_actuators": scenario.ideal_actuators,
         "damping": scenario.gains.damping,
-        **tracking_metrics(p[:end], q[:end], p_d[:end], q_d[:end]),
+        **tracking_metrics(p[:end][followed], q[:end][followed], p_d[:end][followed],
+                           q_d[:end][followed]),
+        "error_rows": {"rule": ERROR_ROWS_RULE, "counted": int(np.sum(followed)),
+                       "on_ground_reference_below": int(end - np.sum(followed))},
         "fcu_step_us": percentiles_us(steps[np.isfinite(steps)]),
         "deadline_misses": deadline_misses,
         "saturated_steps": int(np.sum(sat > 0)),

@@ -1,7 +1,8 @@
 """A campaign's summary: DIR/summary.md and its figures, from results.csv's rows.
 
 - Success rate and error distributions per value of every axis (a run succeeds when its
-  status is "completed").
+  status is "completed"; a "limited" run, flown to its end with an actuator at its limit,
+  is counted on a line of its own and is not a success).
 - The disturbance envelope (`envelope.png`), when the campaign sweeps a disturbance's
   magnitude (a key ending in `.magnitude`) and its direction (`.azimuth_deg`, with
   `.elevation_deg` if swept too): per direction, the largest magnitude survived with every
@@ -25,6 +26,7 @@ from gcs.campaign.keys import key_path
 from gcs.campaign.model import Campaign
 
 OK = "completed"
+LIMITED = "limited"
 
 
 def _num(v: Any) -> float | None:
@@ -155,6 +157,9 @@ def _overview(campaign: Campaign, rows: list[dict[str, Any]]) -> list[str]:
              f"{n} runs recorded.", "",
              f"Success (status completed): {ok}/{n} = {100.0 * ok / max(n, 1):.1f} %  ("
              + ", ".join(f"{k} {v}" for k, v in sorted(statuses.items())) + ")", ""]
+    if statuses.get(LIMITED):
+        lines += [f"Limited (flown to the end with an actuator at its limit, not a success): "
+                  f"{statuses[LIMITED]}/{n}", ""]
     sim = sum(_num(r.get("sim_time_s")) or 0.0 for r in rows)
     lines += [f"Simulated {sim:.0f} s in all.", ""]
     return lines

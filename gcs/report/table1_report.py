@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from common.outcome import INFO, LIMIT
 from gcs.report.chart import table1_chart
 from gcs.report.disturbance_figures import fig7_8_case2
 from gcs.report.names import (
@@ -28,6 +29,8 @@ from gcs.report.run_report import fmt, write_run_report
 from gcs.report.rundata import RunData, cut_short, load_run
 from gcs.report.tracking_figures import fig5_errors
 from gcs.table1 import CASES, CONTROLLERS, STATS, table_json, table_markdown
+
+REPORTS = (INFO, LIMIT)  # event kinds that are news, not reactions (LIMIT: a WARNING)
 
 
 def is_table1_dir(path: Path) -> bool:
@@ -64,8 +67,8 @@ def _events_summary(events: list[dict[str, Any]], limit: int = 4) -> str:
         level = e.get("severity")
         sev = SEVERITY.get(level, str(level)) if isinstance(level, int) else str(level)
         counts[sev] = counts.get(sev, 0) + 1
-    reactions = [e for e in events if e.get("kind", "info") != "info"]
-    warnings = [e for e in events if e.get("kind", "info") == "info"
+    reactions = [e for e in events if e.get("kind", "info") not in REPORTS]
+    warnings = [e for e in events if e.get("kind", "info") in REPORTS
                 and isinstance(e.get("severity"), int) and e["severity"] <= 4]
     notable = reactions + warnings  # failsafes, crashes, divergence always; then warnings
     shown = (notable or events)[:max(limit, len(reactions))]

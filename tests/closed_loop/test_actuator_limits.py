@@ -69,7 +69,8 @@ def test_a_leg_beyond_the_tilt_rate_is_reported_naming_the_servos(tmp_path):
     metrics' events carry a WARNING "tilt servo N rate-limited" for exactly the servos whose
     plant tilt lagged its command for longer than COM_ACT_RATE_T, each within a period of
     when the truth shows it, at a rate above the limit; "actuator limits cleared" (INFO)
-    follows; the reports are not failsafes (the status is the flight's)."""
+    follows; the reports are not failsafes but limits (kind "limit"): the run that reached
+    its end is "limited", its reason the first report."""
     r = _fly_leg(tmp_path)
     m = r.metrics
     events = m["events"]
@@ -77,7 +78,7 @@ def test_a_leg_beyond_the_tilt_rate_is_reported_naming_the_servos(tmp_path):
     for e in events:
         if " rate-limited " in e["text"]:
             assert e["text"].startswith("tilt servo ") and e["severity"] == 4
-            assert e["kind"] == "info"
+            assert e["kind"] == "limit"
             servo = int(e["text"].split()[2]) - 1
             warned.setdefault(servo, e["t_s"])
             demanded = float(e["text"].split(": ")[1].split(" > ")[0])
@@ -90,7 +91,11 @@ def test_a_leg_beyond_the_tilt_rate_is_reported_naming_the_servos(tmp_path):
     first = min(warned.values())
     cleared = [e for e in events if e["text"] == "actuator limits cleared"]
     assert cleared and cleared[0]["t_s"] > first and cleared[0]["severity"] == 6
-    assert m["status"] == "completed", m["reason"]
+    assert cleared[0]["kind"] == "info"
+    assert m["status"] == "limited", m["status_reason"]
+    first_report = min((e for e in events if e["kind"] == "limit"), key=lambda e: e["t_s"])
+    assert m["status_reason"].startswith(
+        f"actuator limit at t = {first_report['t_s']:.3f} s: {first_report['text']}")
 
 
 def test_the_parameter_sets_the_time_in_flight(tmp_path):

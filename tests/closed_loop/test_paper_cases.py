@@ -68,7 +68,7 @@ def test_case2_pid_beats_pd_on_rmse(name, ideal):
         return
     assert pid["status"] == "completed"
     assert rank_key(pid) < rank_key(pd)
-    if pd["status"] == "completed":
+    if pd["status"] in ("completed", "limited"):  # ideal servos: the FCU's 4 rad/s model
         assert pid["position_error_m"]["rmse"] < pd["position_error_m"]["rmse"]
         assert pid["attitude_error_rad"]["rmse"] < pd["attitude_error_rad"]["rmse"]
     else:

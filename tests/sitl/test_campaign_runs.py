@@ -84,7 +84,8 @@ def test_cli_flies_every_run_once_and_a_rerun_flies_nothing(tmp_path: Path) -> N
     assert first.returncode == 0, first.stderr
     rows = table(out)
     assert len(rows) == 8 and journal_ids(out) == Counter({r["run_id"]: 1 for r in rows})
-    assert {r["status"] for r in rows} <= {"completed", "diverged", "failsafe", "crashed"}
+    assert {r["status"] for r in rows} <= {"completed", "limited", "diverged", "failsafe",
+                                           "crashed"}
     assert "8 flown now" in first.stdout
     # A row is the run itself: the same figures as flying its scenario here.
     c = load_campaign(path)

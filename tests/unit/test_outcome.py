@@ -18,6 +18,7 @@ from common.outcome import (
     DIVERGENCE_ATTITUDE_RAD,
     FAILSAFE,
     INFO,
+    LIMIT,
     STATUSES,
     Event,
     attitude_held,
@@ -56,10 +57,19 @@ def ev(t_s: float, kind: str, text: str = "x") -> Event:
     ({"reached_end": False, "events": [], "stopped": "timeout"}, "timeout"),
     ({"reached_end": False, "events": [ev(1, FAILSAFE)], "stopped": "aborted"}, "aborted"),
     ({"reached_end": False, "events": []}, "aborted"),
+    ({"reached_end": True, "events": [ev(2, LIMIT), ev(3, INFO)]}, "limited"),
+    ({"reached_end": True, "events": [ev(2, LIMIT), ev(3, FAILSAFE)]}, "failsafe"),
+    ({"reached_end": True, "events": [ev(2, LIMIT), ev(3, DIVERGED)]}, "diverged"),
+    ({"reached_end": True, "events": [ev(2, LIMIT)], "divergence_t_us": 3_000_000},
+     "diverged"),
+    ({"reached_end": True, "events": [ev(2, LIMIT)], "crash_t_us": 3_000_000}, "crashed"),
+    ({"reached_end": False, "events": [ev(2, LIMIT)], "stopped": "timeout"}, "timeout"),
+    ({"reached_end": False, "events": [ev(2, LIMIT)]}, "aborted"),
 ])
 def test_status_precedence(kwargs, status):
     """Given what happened, then exactly one status: divergence or crash first (whichever
-    came first), then a stopped run, then any failsafe reaction, then completed."""
+    came first), then a stopped run, then any failsafe reaction, then a run cut short, then
+    an actuator limit reported (limited), then completed."""
     kwargs.setdefault("divergence_t_us", None)
     assert classify(**kwargs).status == status and status in STATUSES
 
@@ -69,6 +79,19 @@ def test_a_failsafe_that_cleared_still_counts():
                                              ev(6, INFO, "GCS link regained")],
                    divergence_t_us=None)
     assert out.status == "failsafe" and out.failsafe == "failsafe: GCS link lost: HOLD"
+
+
+def test_a_limit_report_makes_a_finished_run_limited_and_says_which():
+    """Given two limit reports and their clearing, then the run is limited, its reason the
+    first report with its time and how many followed; the clearing alone is no limit."""
+    out = classify(reached_end=True, divergence_t_us=None, events=[
+        Event(1_500_000, 4, "tilt servo 2 rate-limited 0.1 s: 7.0 > 4 rad/s", LIMIT),
+        Event(1_600_000, 4, "rotor 3 at speed limit 0.1 s: 2147 > 1700 rad/s", LIMIT),
+        Event(1_900_000, 6, "actuator limits cleared", INFO)])
+    assert out == ("limited", "", "actuator limit at t = 1.500 s: tilt servo 2 rate-limited "
+                   "0.1 s: 7.0 > 4 rad/s (and 1 more)")
+    assert classify(reached_end=True, divergence_t_us=None, events=[
+        Event(1_900_000, 6, "actuator limits cleared", INFO)]).status == "completed"
 
 
 def test_one_divergence_rule_scalar_and_rows():

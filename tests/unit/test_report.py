@@ -283,8 +283,9 @@ def test_table1_folder_report(table1_dir):
         assert f"**{m['status']}**" in row, row
         assert m["status_reason"] in row, row
         assert f"{len(m['events'])} (" in row, row  # the events' count, then the summary
-        reactions = [e for e in m["events"] if e["kind"] != "info"]
-        warnings = [e for e in m["events"] if e["kind"] == "info" and e["severity"] <= 4]
+        reactions = [e for e in m["events"] if e["kind"] not in ("info", "limit")]
+        warnings = [e for e in m["events"] if e["kind"] in ("info", "limit")
+                    and e["severity"] <= 4]
         for event in reactions:  # failsafes, crashes, divergence are always named
             assert event["text"] in row, (row, event)
         named = [e for e in warnings if e["text"] in row]
