@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 
 from common.config import Gains, VehicleConfig
 from common.mission_items import HomePosition, MissionItem
-from fcu.mission.validation import check_mission, localize
+from fcu.mission.validation import check_mission, localize, refusal
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.telemetry import Home
@@ -47,10 +47,12 @@ def accept_mission(pipeline: Pipeline, items: Sequence[MissionItem],
                    home: HomePosition) -> str:
     """Take a whole mission as the mission protocol does once its last item arrived:
     validated against the limits in force (`check_mission`), then flown as its local
-    equivalent. Returns why it is refused ("MAV_MISSION_RESULT n: reason"), "" if taken."""
+    equivalent. Returns why it is refused, as the mission protocol says it (the result by
+    name, the item and the reason: "MAV_MISSION_UNSUPPORTED: item 2: command 177 is not
+    supported"), "" if taken."""
     check = check_mission(items, pipeline.commander.limits, home)
     if check.result != 0:
-        return f"MAV_MISSION_RESULT {check.result}: {check.reason}"
+        return refusal(check)
     pipeline.commander.set_mission(localize(items, home))
     return ""
 

@@ -146,17 +146,20 @@ class GcsServer:
                 return
             gl.link.send(data)
 
-    def say(self, severity: int, text: str | bytes, index: int | None = None) -> None:
+    def say(self, severity: int, text: str | bytes, index: int | None = None,
+            text_id: int = 0, chunk_seq: int = 0) -> None:
         """STATUSTEXT to one link (an answer to what it sent) or to all (the vehicle's own
         news); each link takes at most STATUSTEXT_BURST in a row, refilled at
-        STATUSTEXT_RATE per second, so a peer cannot turn its refusals into a flood."""
+        STATUSTEXT_RATE per second, so a peer cannot turn its refusals into a flood.
+        `text_id`, `chunk_seq`: a chunk of a longer text (MAVLink 2), sent as it is."""
         raw = text.encode() if isinstance(text, str) else text
         if self.on_text is not None:
             self.on_text(severity, raw[:STATUSTEXT_LEN].decode(errors="replace"))
-        self._text(severity, raw, index)
+        self._text(severity, raw, index, text_id, chunk_seq)
 
-    def _text(self, severity: int, raw: bytes, index: int | None) -> None:
-        msg = M.MAVLink_statustext_message(severity, raw[:STATUSTEXT_LEN], 0, 0)
+    def _text(self, severity: int, raw: bytes, index: int | None, text_id: int = 0,
+              chunk_seq: int = 0) -> None:
+        msg = M.MAVLink_statustext_message(severity, raw[:STATUSTEXT_LEN], text_id, chunk_seq)
         for i in (range(len(self.links)) if index is None else (index,)):
             gl = self.links[i]
             gl.text_tokens = min(STATUSTEXT_BURST, gl.text_tokens + STATUSTEXT_RATE * max(
@@ -241,7 +244,8 @@ class GcsServer:
         elif kind.startswith("MISSION_"):
             for reply in self.missions.handle(msg, now_s):
                 if reply.get_type() == "STATUSTEXT":
-                    self.say(reply.severity, reply.text, index)  # within the link's budget
+                    # within the link's budget, a chunk with its id (put back together)
+                    self.say(reply.severity, reply.text, index, reply.id, reply.chunk_seq)
                     continue
                 if reply.get_type() == "MISSION_REQUEST_INT" and kind == "MISSION_COUNT":
                     self.mission_link = index  # an upload began: its re-requests go here

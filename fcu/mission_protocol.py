@@ -5,13 +5,13 @@ Upload (GCS -> vehicle): MISSION_COUNT, then MISSION_REQUEST_INT for each item i
 re-requested every `item_timeout_s` up to `retries` times (then MISSION_ACK
 OPERATION_CANCELLED); an out-of-sequence or duplicate item re-requests the expected one; after
 the last item the whole mission is validated (`fcu.mission.check_mission`) and only
-MAV_MISSION_ACCEPTED replaces the stored mission, so a failed upload keeps the old one. A
-refusal that has a reason for a person (MAV_MISSION_DENIED: the geofence, or an item the
-vehicle cannot fly in the time it was given) sends it as STATUSTEXT (MAV_SEVERITY_WARNING)
-just before the MISSION_ACK, in chunks when longer than 50 characters (MAVLink 2's `id` and
-`chunk_seq`; every chunk but the last padded with spaces to 50 at a word boundary, so each
-also reads on its own). A final item sent again (the GCS lost our MISSION_ACK) gets the same
-answer again, STATUSTEXT included.
+MAV_MISSION_ACCEPTED replaces the stored mission, so a failed upload keeps the old one. Every
+refusal of a mission (`check_mission`: the item and what is wrong with it; a MISSION_COUNT
+above the limit: the count and the limit) sends its reason as STATUSTEXT
+(MAV_SEVERITY_WARNING) just before the MISSION_ACK, in chunks when longer than 50
+characters (MAVLink 2's `id` and `chunk_seq`; every chunk but the last padded with spaces to
+50 at a word boundary, so each also reads on its own). A final item sent again (the GCS lost
+our MISSION_ACK) gets the same answer again, STATUSTEXT included.
 Download: MISSION_REQUEST_LIST -> MISSION_COUNT, then MISSION_ITEM_INT for each
 MISSION_REQUEST_INT (or legacy MISSION_REQUEST). MISSION_CLEAR_ALL clears. Only
 MAV_MISSION_TYPE_MISSION is supported; the other plan types get MAV_MISSION_UNSUPPORTED.
@@ -44,7 +44,7 @@ from common.mavlink_types.protocol import (
 from common.mavlink_types.protocol import MissionItem as LegacyMissionItem
 from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
 from fcu.mission.limits import MissionLimits
-from fcu.mission.validation import check_mission, localize
+from fcu.mission.validation import check_mission, localize, too_many
 
 M = MAV
 MISSION = M.MAV_MISSION_TYPE_MISSION
@@ -241,7 +241,8 @@ class MissionServer:
         self._upload = None
         self._finished = None
         if count > self.limits.max_items:
-            return [self._ack(partner, M.MAV_MISSION_NO_SPACE)]
+            return [*self._statustexts(too_many(count, self.limits)),
+                    self._ack(partner, M.MAV_MISSION_NO_SPACE)]
         if count == 0:  # the same as clearing
             self._replace(())
             self._finished = _Finished(partner, 0, M.MAV_MISSION_ACCEPTED)

@@ -105,6 +105,9 @@ GROUPS: tuple[tuple[str, tuple[ParamSpec, ...]], ...] = (("Controller", (
            "waypoint travel speed"),
     _bound("MIS_LAND_SPD", "MissionLimits.land_speed_m_s", 0.05, 5.0, "m/s",
            "landing descent speed"),
+    _bound("MIS_ITEM_MAX_S", "MissionLimits.item_max_s", 1.0, 86400.0, "s",
+           "longest item duration a refusal proposes: an item the envelope check would need "
+           "to lengthen beyond it is refused as not flyable"),
     ParamSpec("MIS_ENV_CHK", 1.0, 0.0, 1.0, "enum",
               "mission envelope check: 1 = stretch speed-timed legs and refuse timed items "
               "the rotors cannot fly, 0 = off (accept any profile)"),

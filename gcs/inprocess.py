@@ -46,7 +46,13 @@ from sitl.world import World, obeyed_command
 
 
 class InProcessError(RuntimeError):
-    """A scenario the vehicle refuses (its mission, arming or the start)."""
+    """A scenario the vehicle refuses (its mission, arming or the start). `result`: the run
+    as far as it went, when the vehicle refused it (its metrics with status `aborted` and the
+    refusal as `error`, as a run through processes records a refusal), else None."""
+
+    def __init__(self, message: str, result: RunResult | None = None) -> None:
+        super().__init__(message)
+        self.result = result
 
 
 @dataclass
@@ -205,11 +211,34 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
     truth_log = TruthLog(truth_buf, scenario.name) if logs else None
     onboard_log = OnboardLog(onboard_buf, pipeline, store.values) if logs else None
     items = tuple(through_wire_item(item) for item in scenario_mission(scenario))
+    truth_rows: list[tuple[float, ...]] = []
+
+    def aborted(why: str) -> InProcessError:
+        """The refusal, with the run as far as it went: the states so far, nothing flown,
+        status aborted (`build_metrics`, as `gcs.process_run` records a refused run)."""
+        truth_rows.append(truth_row(world.state))
+        if truth_log is not None and onboard_log is not None:
+            truth_log.record(world.state)
+            onboard_log.events(cmd.events)
+            truth_log.close()
+            onboard_log.close()
+        truth = np.array(truth_rows, dtype=float).reshape(-1, len(TRUTH_COLUMNS))
+        onboard = np.zeros((0, len(ONBOARD_COLUMNS)))
+        metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
+                                events=list(cmd.events), wall_time_s=0.0,
+                                transport="in-process", lockstep=True, stopped="aborted",
+                                flight_start_us=world.state.time_us,
+                                compile_time_s=compile_time_s())
+        metrics["error"] = why
+        metrics["fcu_params"] = scenario_params(scenario)
+        return InProcessError(why, RunResult(
+            metrics, truth, onboard, list(cmd.events),
+            bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None))
+
     refused = accept_mission(pipeline, items, published_home(Home()))
     if refused:
-        raise InProcessError(f"mission refused: {refused}")
+        raise aborted(f"mission refused: {refused}")
     dt_s = control_dt_us * 1e-6
-    truth_rows: list[tuple[float, ...]] = []
     onboard_rows: list[tuple[float, ...]] = []
     feed = world.feed
     if feed is not None:
@@ -228,7 +257,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
         pipeline.on_state(t_us, state_for_fcu(world.state), t_us)
     refused = arm_and_start(pipeline)
     if refused:
-        raise InProcessError(refused)
+        raise aborted(refused)
     world.start_flight()  # the flight's start: the scenario's clock counts from it
     start_us = world.state.time_us
     end_us = start_us + round(scenario.duration_s * 1e6)
@@ -256,6 +285,9 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
             if cmd.events and len(cmd.events) > logged_events:
                 onboard_log.events(cmd.events[logged_events:])
                 logged_events = len(cmd.events)
+        # The step's mission events consumed, as the FCU process's housekeeping consumes
+        # them (MISSION_ITEM_REACHED): the log reads only the new ones at its next step.
+        cmd.mission_events.clear()
         if t_us >= end_us:
             break
         states = world.advance(command_for_plant(out, vehicle, state))

@@ -31,3 +31,12 @@ MAV_MISSION_INVALID_PARAM6_Y: int = MISSION_RESULT.MAV_MISSION_INVALID_PARAM6_Y
 MAV_MISSION_INVALID_PARAM7: int = MISSION_RESULT.MAV_MISSION_INVALID_PARAM7
 MAV_MISSION_INVALID_SEQUENCE: int = MISSION_RESULT.MAV_MISSION_INVALID_SEQUENCE
 MAV_MISSION_DENIED: int = MISSION_RESULT.MAV_MISSION_DENIED
+
+
+def result_name(result: int) -> str:
+    """A MAV_MISSION_RESULT by its name ("MAV_MISSION_UNSUPPORTED"), or its number where
+    common.xml has no such member."""
+    try:
+        return MISSION_RESULT(result).name
+    except ValueError:
+        return f"MAV_MISSION_RESULT {result}"

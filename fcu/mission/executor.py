@@ -12,7 +12,7 @@ from fcu.mission.codes import MAV_MISSION_ACCEPTED
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import plan_item
 from fcu.mission.segments import Segment
-from fcu.mission.validation import check_items
+from fcu.mission.validation import check_items, refusal
 from fcu.tracker import Reference, pose_ref
 
 # Item ends are sums of float seconds; the flight clock is integer microseconds. An item
@@ -44,9 +44,9 @@ class MissionExecutor:
             raise ValueError("empty mission")
         # The geofence and the item count are the uploader's business (the vehicle may have
         # tightened its limits since); what cannot be flown is refused here.
-        result, seq, _ = check_items(self.items, limits, geofence=False)
-        if result != MAV_MISSION_ACCEPTED:
-            raise ValueError(f"mission item {seq}: not executable (MAV_MISSION_RESULT {result})")
+        check = check_items(self.items, limits, geofence=False)
+        if check.result != MAV_MISSION_ACCEPTED:
+            raise ValueError(f"mission not executable: {refusal(check)}")
         self._segments: list[Segment] = []
         self._ends: list[float] = []
         self._start_ref: Reference | None = None

@@ -21,11 +21,12 @@ class MissionLimits:
     land_speed_m_s: float = 0.5
     takeoff_speed_m_s: float = 1.0
     turn_rate_deg_s: float = 30.0  # yaw changes of speed-timed items take at least this long
+    item_max_s: float = 600.0  # the longest item duration a refusal's hint may propose
     vehicle: VehicleConfig | None = None
 
     def __post_init__(self) -> None:
         for name in ("max_distance_m", "cruise_speed_m_s", "land_speed_m_s",
-                     "takeoff_speed_m_s", "turn_rate_deg_s"):
+                     "takeoff_speed_m_s", "turn_rate_deg_s", "item_max_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"MissionLimits.{name} must be finite and > 0, got {value}")

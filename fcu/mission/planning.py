@@ -58,7 +58,9 @@ _TIME_SLOT = {MAV_CMD_POSE_KEYFRAME: "p1", MAV_CMD_FIGURE_EIGHT: "p2", MAV_CMD_N
 
 def envelope_reason(item: MissionItem, seg: Segment, limits: MissionLimits) -> str:
     """'' when the vehicle can fly the planned segment, else why not (for a person), naming
-    the actuator and its limit (`fcu.feasibility.Envelope.explain`)."""
+    the actuator and its limit (`fcu.feasibility.Envelope.explain`) and the duration that
+    would pass, if it is within `limits.item_max_s` (MIS_ITEM_MAX_S); beyond, the reason
+    says that no duration up to it flies the item."""
     if limits.vehicle is None or seg.duration <= 0.0 or (isinstance(seg, Move)
                                                           and not seg.moves):
         return ""
@@ -71,12 +73,15 @@ def envelope_reason(item: MissionItem, seg: Segment, limits: MissionLimits) -> s
     slot = _TIME_SLOT.get(item.command)
     if item.command == MAV_CMD_NAV_TAKEOFF and not item.param2 > 0.0:
         slot = None  # timed by the takeoff speed
+    proposed = math.ceil(shortest * 100.0) / 100.0 if math.isfinite(shortest) else shortest
     if not math.isfinite(shortest):
         hint = "attitude too demanding at any speed"
     elif slot is None:  # cannot happen: speed-timed items are stretched to `shortest`
         hint = "not flyable"
+    elif proposed > limits.item_max_s:  # no hint beyond the longest item
+        hint = f"not flyable with {slot} up to MIS_ITEM_MAX_S ({limits.item_max_s:g} s)"
     else:
-        hint = f"lengthen {slot} to {math.ceil(shortest * 100.0) / 100.0:.2f} s"
+        hint = f"lengthen {slot} to {proposed:.2f} s"
     return f"item {item.seq}: {env.explain(excess)}: {hint}"
 
 

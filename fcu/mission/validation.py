@@ -1,5 +1,10 @@
 """Mission validation: each item's parameters, the geofence, global frames through home, and
 (with `MissionLimits.vehicle`) the actuator envelope of the planned segments.
+
+Every refusal has a reason for a person, naming the item (its seq) and what is wrong with
+it, or for MAV_MISSION_NO_SPACE the count and the limit; `refusal` puts the
+MAV_MISSION_RESULT's name in front ("MAV_MISSION_UNSUPPORTED: item 2: command 177 is not
+supported").
 """
 
 from __future__ import annotations
@@ -8,6 +13,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
+from common.mav_enums import MAV_CMD, MAV_FRAME
 from common.mission_items import (
     GEO_FRAMES,
     INT32_MAX,
@@ -41,6 +47,7 @@ from fcu.mission.codes import (
     MAV_MISSION_UNSUPPORTED,
     MAV_MISSION_UNSUPPORTED_FRAME,
     SUPPORTED_COMMANDS,
+    result_name,
 )
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import envelope_reason, plan_item
@@ -57,7 +64,16 @@ class MissionCheck(NamedTuple):
 
     result: int  # MAV_MISSION_RESULT
     seq: int | None  # the offending item, if any
-    reason: str = ""  # why, for a person: set for MAV_MISSION_DENIED, else ""
+    reason: str = ""  # why, for a person: set for every refusal, "" when accepted
+
+
+def refusal(check: MissionCheck) -> str:
+    """A refusal for a person: the MAV_MISSION_RESULT by name, then the reason, e.g.
+    "MAV_MISSION_NO_SPACE: 501 items: the vehicle holds at most 500"; "" when accepted."""
+    if check.result == MAV_MISSION_ACCEPTED:
+        return ""
+    return f"{result_name(check.result)}: {check.reason}" if check.reason else \
+        result_name(check.result)
 
 
 def _finite(x: float) -> bool:
@@ -85,6 +101,22 @@ def _int32(v: int) -> bool:
     return isinstance(v, int) and INT32_MIN <= v <= INT32_MAX
 
 
+# What each rule asks of a value, for the reasons.
+_RULE_TEXT: dict[Callable[[float], bool], str] = {
+    _finite: "a finite number", _time_s: "a duration >= 0 s",
+    _positive_time_s: "a duration > 0 s", _yaw: "an angle in deg, or NaN to keep it"}
+# How the reasons name the fields.
+_FIELD_TEXT = {"param1": "p1", "param2": "p2", "param3": "p3", "param4": "p4", "z": "z"}
+
+
+def _name(enum: type[MAV_CMD] | type[MAV_FRAME], value: int) -> str:
+    """`value` with its name where `common.mav_enums` knows it: "178 (MAV_CMD_DO_CHANGE_SPEED)"."""
+    try:
+        return f"{value} ({enum(value).name})"
+    except ValueError:
+        return str(value)
+
+
 # The parameters each command uses, in the order they are checked (the first failing one is
 # the result): (MissionItem field, its rule, the refusal).
 _PARAM_RULES: dict[int, tuple[tuple[str, Callable[[float], bool], int], ...]] = {
@@ -110,9 +142,27 @@ _PARAM_RULES: dict[int, tuple[tuple[str, Callable[[float], bool], int], ...]] = 
 }
 
 
+def compared(above: float, below: float) -> tuple[str, str]:
+    """`above` and `below` (above > below, e.g. a distance and the geofence) as texts:
+    `below` as it was set (6 significant digits: a float32 parameter's), `above` with as few
+    decimals, no fewer than `below`'s, as make the comparison true as printed (1000.0004 and
+    1000 as "1000.0004", "1000"; 50 and 30 as "50", "30")."""
+    fence = f"{below:.6g}"
+    if "e" in fence:
+        return repr(above), repr(below)
+    start = len(fence.split(".")[1]) if "." in fence else 0
+    for decimals in range(start, 10):
+        a = f"{above:.{decimals}f}"
+        if float(a) > float(fence):
+            return a, fence
+    return repr(above), repr(below)
+
+
 def _outside(seq: int, reach_m: float, r: float) -> tuple[int, str]:
-    """MAV_MISSION_DENIED for an item reaching `reach_m` from the origin, beyond radius r."""
-    return MAV_MISSION_DENIED, f"item {seq}: beyond the geofence ({reach_m:.0f} m > {r:.0f} m)"
+    """MAV_MISSION_DENIED for an item reaching `reach_m` from the origin, beyond radius r:
+    the distance that went beyond it, precise enough that the comparison reads true."""
+    reach, fence = compared(reach_m, r)
+    return MAV_MISSION_DENIED, f"item {seq}: beyond the geofence ({reach} m > {fence} m)"
 
 
 def _scaled(item: MissionItem, r: float) -> tuple[int, str]:
@@ -124,27 +174,32 @@ def _scaled(item: MissionItem, r: float) -> tuple[int, str]:
         f"({r:.0f} m): a local WPL file scaled by 1e7 (MAVProxy)? use a global frame")
 
 
-def _carried_result(item: MissionItem) -> int:
-    """MAV_MISSION_RESULT of the command, the frame and x, y (which must fit MISSION_ITEM_INT
-    even where the command ignores them)."""
+def _carried_result(item: MissionItem) -> tuple[int, str]:
+    """(MAV_MISSION_RESULT, reason) of the command, the frame and x, y (which must fit
+    MISSION_ITEM_INT even where the command ignores them)."""
     if item.command not in SUPPORTED_COMMANDS:
-        return MAV_MISSION_UNSUPPORTED
+        return MAV_MISSION_UNSUPPORTED, (f"item {item.seq}: command "
+                                         f"{_name(MAV_CMD, item.command)} is not supported")
     if item.frame != MAV_FRAME_LOCAL_NED:
-        return MAV_MISSION_UNSUPPORTED_FRAME
-    if not _int32(item.x):
-        return MAV_MISSION_INVALID_PARAM5_X
-    if not _int32(item.y):
-        return MAV_MISSION_INVALID_PARAM6_Y
-    return MAV_MISSION_ACCEPTED
+        return MAV_MISSION_UNSUPPORTED_FRAME, (
+            f"item {item.seq}: frame {_name(MAV_FRAME, item.frame)} is not supported (local "
+            "NED, or global with an altitude)")
+    for field, v, result in (("x", item.x, MAV_MISSION_INVALID_PARAM5_X),
+                             ("y", item.y, MAV_MISSION_INVALID_PARAM6_Y)):
+        if not _int32(v):
+            return result, f"item {item.seq}: {field} {v} does not fit MISSION_ITEM_INT's int32"
+    return MAV_MISSION_ACCEPTED, ""
 
 
-def _params_result(item: MissionItem) -> int:
-    """MAV_MISSION_RESULT of the parameters the item's command uses (`_PARAM_RULES`)."""
-    for field, rule, refusal in _PARAM_RULES[item.command]:
+def _params_result(item: MissionItem) -> tuple[int, str]:
+    """(MAV_MISSION_RESULT, reason) of the parameters the item's command uses
+    (`_PARAM_RULES`)."""
+    for field, rule, result in _PARAM_RULES[item.command]:
         value: float = getattr(item, field)
         if not rule(value):
-            return refusal
-    return MAV_MISSION_ACCEPTED
+            return result, (f"item {item.seq}: {_FIELD_TEXT[field]} {value:g}: must be "
+                            f"{_RULE_TEXT[rule]}")
+    return MAV_MISSION_ACCEPTED, ""
 
 
 def _fly_to(item: MissionItem, target_ned_m: list[float], pos: list[float],
@@ -180,7 +235,8 @@ def _figure_eight(item: MissionItem, pos: list[float], r: float) -> tuple[int, s
     """The figure-infinity: an axis (p3, p4, z) not zero, its reach (amplitude p1 times
     FIGURE_EXTENT from the start) inside the geofence; it ends where it started (T = 2 pi)."""
     if item.param3 == 0.0 and item.param4 == 0.0 and item.z == 0.0:
-        return MAV_MISSION_INVALID_PARAM3, ""  # no axis
+        return MAV_MISSION_INVALID_PARAM3, (f"item {item.seq}: the figure's axis (p3, p4, z) "
+                                            "is zero")
     reach = norm3((pos[0], pos[1], pos[2])) + item.param1 * FIGURE_EXTENT
     if reach > r:
         return _outside(item.seq, reach, r)
@@ -202,11 +258,11 @@ def _check_item(item: MissionItem, limits: MissionLimits, pos: list[float],
                 geofence: bool = True) -> tuple[int, str]:
     """(MAV_MISSION_RESULT, reason) of one item's parameters and geofence; `pos` (planned NED
     position) moves to its end."""
-    result = _carried_result(item)
+    result, reason = _carried_result(item)
     if result == MAV_MISSION_ACCEPTED:
-        result = _params_result(item)
+        result, reason = _params_result(item)
     if result != MAV_MISSION_ACCEPTED:
-        return result, ""
+        return result, reason
     r = limits.max_distance_m if geofence else math.inf
     return _MOTIONS[item.command](item, pos, r)
 
@@ -219,11 +275,14 @@ def _localized(item: MissionItem, home: HomePosition | None,
     if item.frame not in GEO_FRAMES or item.command not in SUPPORTED_COMMANDS:
         return item, MAV_MISSION_ACCEPTED, ""
     if home is None:
-        return item, MAV_MISSION_UNSUPPORTED_FRAME, ""
+        return item, MAV_MISSION_UNSUPPORTED_FRAME, (
+            f"item {item.seq}: frame {_name(MAV_FRAME, item.frame)} needs the vehicle's home")
     if not (isinstance(item.x, int) and -900_000_000 <= item.x <= 900_000_000):
-        return item, MAV_MISSION_INVALID_PARAM5_X, ""
+        return item, MAV_MISSION_INVALID_PARAM5_X, (
+            f"item {item.seq}: latitude {item.x} (1e-7 deg) beyond +-90 deg")
     if not (isinstance(item.y, int) and -1_800_000_000 <= item.y <= 1_800_000_000):
-        return item, MAV_MISSION_INVALID_PARAM6_Y, ""
+        return item, MAV_MISSION_INVALID_PARAM6_Y, (
+            f"item {item.seq}: longitude {item.y} (1e-7 deg) beyond +-180 deg")
     local = to_local(item, home)
     if item.command in XY_COMMANDS and not local.xy_fit_int32:  # farther than 214 km
         north, east, _ = local_ned(item, home)
@@ -263,9 +322,14 @@ def check_mission(items: Sequence[MissionItem], limits: MissionLimits,
     order: the first failing item is reported.
     """
     if len(items) > limits.max_items:
-        return MissionCheck(MAV_MISSION_NO_SPACE, None)
+        return MissionCheck(MAV_MISSION_NO_SPACE, None, too_many(len(items), limits))
     return check_items(items, limits, geofence=True, envelope_check=limits.vehicle is not None,
                         home=home)
+
+
+def too_many(count: int, limits: MissionLimits) -> str:
+    """The reason of MAV_MISSION_NO_SPACE: the count and the limit."""
+    return f"{count} items: the vehicle holds at most {limits.max_items}"
 
 
 def validate_mission(items: Sequence[MissionItem], limits: MissionLimits,
@@ -278,11 +342,14 @@ def validate_mission(items: Sequence[MissionItem], limits: MissionLimits,
 def check_items(items: Sequence[MissionItem], limits: MissionLimits, geofence: bool,
                  envelope_check: bool = False,
                  home: HomePosition | None = None) -> MissionCheck:
+    """`check_mission` without the item count, the geofence optional."""
     pos = [0.0, 0.0, 0.0]
     t, p, q = 0.0, ZERO, Q_IDENTITY
     for i, item in enumerate(items):
         if item.seq != i:
-            return MissionCheck(MAV_MISSION_INVALID_SEQUENCE, item.seq)
+            return MissionCheck(MAV_MISSION_INVALID_SEQUENCE, item.seq,
+                                f"item {item.seq} sent as item {i} (seq must be 0..n-1 in "
+                                "order)")
         item, result, reason = _localized(item, home, limits)
         if result != MAV_MISSION_ACCEPTED:
             return MissionCheck(result, item.seq, reason)

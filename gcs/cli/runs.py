@@ -57,9 +57,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         try:
             result = run_scenario(scenario)
         except InProcessError as exc:
-            progress.done()
-            print(f"gcs run: {exc}", file=sys.stderr)
-            return 1
+            if exc.result is None:
+                progress.done()
+                print(f"gcs run: {exc}", file=sys.stderr)
+                return 1
+            result = exc.result  # refused by the vehicle: recorded as a process run records it
         write_run(args.out, scenario, result)
         metrics = result.metrics
     else:

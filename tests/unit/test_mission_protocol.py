@@ -439,10 +439,36 @@ def test_refusal_reason_comes_as_statustext_before_the_ack():
     assert [m.text for m in again[:2]] == [t.text for t in texts]
 
 
-def test_refusals_without_a_reason_send_no_statustext(server, link):
-    """Given a parameter error, then only the MISSION_ACK answers (the result says it)."""
-    link.upload(waypoints(2, z=NAN))
-    assert link.texts == []
+def _said(link) -> str:
+    """The STATUSTEXT the link heard, chunks put back together."""
+    return " ".join("".join(t.text for t in link.texts).split())
+
+
+@pytest.mark.parametrize(("change", "result", "reason"), [
+    ({"z": NAN}, M.MAV_MISSION_INVALID_PARAM7, "item 1: z nan: must be a finite number"),
+    ({"command": M.MAV_CMD_DO_SET_SERVO}, M.MAV_MISSION_UNSUPPORTED,
+     "item 1: command 183 (MAV_CMD_DO_SET_SERVO) is not supported"),
+    ({"frame": M.MAV_FRAME_BODY_FRD}, M.MAV_MISSION_UNSUPPORTED_FRAME,
+     "item 1: frame 12 (MAV_FRAME_BODY_FRD) is not supported (local NED, or global with an "
+     "altitude)"),
+])
+def test_every_refusal_says_why_before_the_ack(server, link, change, result, reason):
+    """Given a mission refused for an item, then the STATUSTEXT before the MISSION_ACK names
+    the item and what is wrong with it, whatever the result."""
+    items = waypoints(3)
+    items[1] = items[1]._replace(**change)
+    assert link.upload(items).type == result
+    assert _said(link) == reason
+    assert reason == check_mission(items, server.limits).reason
+
+
+def test_no_space_says_the_limit(server, link):
+    """Given a MISSION_COUNT above the limit, then the STATUSTEXT before NO_SPACE says the
+    count and the limit."""
+    server.limits = MissionLimits(max_items=500)
+    (ack,) = link.count(501)
+    assert ack.type == M.MAV_MISSION_NO_SPACE
+    assert _said(link) == "501 items: the vehicle holds at most 500"
 
 
 @pytest.mark.parametrize("text", [
