@@ -69,7 +69,9 @@ def step_to(sc: Scenario, tmp_path: Path, start, p_goal, phi_ned) -> tuple[RunRe
                                            mission_file=str(path)),
         params={**sc.params, "MIS_ENV_CHK": 0.0})
     result = run_scenario(run, initial=start, logs=False)
-    assert result.metrics["status"] == "completed", result.metrics["status"]
+    # a step of the reference (the envelope check off) drives servos to their rate limit:
+    # the run ends `limited`, never diverged or crashed
+    assert result.metrics["status"] in ("completed", "limited"), result.metrics["status"]
     assert result.truth.shape[0] == result.onboard.shape[0]
     return result, 1
 

@@ -424,7 +424,9 @@ def test_mission_server_survives_any_mission_messages(script):
         for reply in replies:
             back = _through_wire(reply, VEHICLE)
             pack(vehicle, reply)
-            if src is not None:
+            if back.get_type() == "STATUSTEXT":  # a refusal's reason, broadcast
+                assert replies[-1].get_type() == "MISSION_ACK" and back.text
+            elif src is not None:
                 assert (back.target_system, back.target_component) == src
         if server.mission != before:
             observed += 1
