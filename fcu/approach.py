@@ -56,14 +56,8 @@ import numpy as np
 
 from common.jit import njit, warm_up
 from fcu.dualquat import Quat, Vec3, cross, q_exp, q_mul, q_rotate_inv
-from fcu.feasibility import (
-    KINDS,
-    TILT_STEP_S,
-    Envelope,
-    Excess,
-    _nominal_wrench_rows,
-    excess_kernel,
-)
+from fcu.excess import KINDS, Excess, excess_kernel
+from fcu.feasibility import TILT_STEP_S, Envelope, _nominal_wrench_rows
 from fcu.manual import StickSettings
 
 D_MIN_S = 0.02  # the shortest approach

@@ -77,6 +77,17 @@ from common.config import VehicleConfig
 from common.jit import njit
 from fcu.allocation import allocation_matrix, pseudo_inverse
 from fcu.dualquat import Quat, Vec3, cross, q_rotate_inv
+from fcu.excess import (
+    KINDS,
+    ROTOR_DOWN,
+    ROTOR_FLOOR,
+    ROTOR_LAG,
+    TILT,
+    TILT_STEP,
+    TINY,
+    Excess,
+    excess_kernel,
+)
 from fcu.tracker import Reference
 
 MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
@@ -200,19 +211,6 @@ class Peak(NamedTuple):
     sample: int  # the index of the sample where it occurs
 
 
-class Excess(NamedTuple):
-    """The most demanding actuator over a segment's samples: `ratio` = need / limit (> 1: it
-    does not fit), which actuator (`kind` "rotor" or "tilt servo", `number` 1..n), what it
-    needs and its limit (rad/s), and the sample where it happens."""
-
-    ratio: float
-    kind: str
-    number: int  # 1..n
-    need: float
-    limit: float
-    sample: int
-
-
 class Envelope:
     """One vehicle's actuator limits for feed-forward commands (module docstring): rotor
     speed `margin` w_max with its lag, tilt rate TILT_MARGIN tilt_rate_max."""
@@ -298,82 +296,6 @@ class Envelope:
                 + (" with its lag" if excess.kind == ROTOR_LAG else ""))
 
 
-ROTOR = "rotor"
-ROTOR_LAG = "rotor lag"
-ROTOR_DOWN = "rotor slowing"
-TILT = "tilt servo"
-TILT_STEP = "tilt step"
-ROTOR_FLOOR = "rotor floor"
-KINDS = (ROTOR, ROTOR_LAG, ROTOR_DOWN, TILT, TILT_STEP, ROTOR_FLOOR)  # `excess_kernel`'s codes
-_TINY = 1e-12
-
-
-@njit
-def excess_kernel(om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray, dom1: np.ndarray,
-                  is_end: np.ndarray, duration: float, limit: float, tau_up: float,
-                  tau_down: float, tilt_limit: float, step_limit: float,
-                  after: np.ndarray | None = None, gap: np.ndarray | None = None,
-                  floor: float = 0.0) -> tuple[float, int, int, int, float, float]:
-    """The largest need / limit over samples and rotors of a path flown in `duration` s
-    (module docstring): (ratio, kind code of KINDS, rotor 0..n-1, sample, need, limit). The
-    tilt step is judged at the path's ends only (`is_end`), against its pose at rest. With
-    `after` (the index of the next sample in time, -1 for none) and `gap` (the normalised
-    time to it), each tilt's turn from one sample to the next counts too, at its mean rate:
-    where a rotor's thrust reverses (a braking climb on planar rotors: lateral part zero,
-    vertical part through zero) the tilt's derivative is zero at every sample, yet it turns
-    half a revolution between two. A rotor slower than `floor` counts as floor / speed
-    (the feedback's room below the feed-forward: it cannot lower a thrust that is
-    already near zero without reversing it)."""
-    u = 1.0 / (duration * duration)
-    inv_d = 1.0 / duration
-    best, kind, rotor, sample, need, lim = -1.0, 0, 0, 0, 0.0, 0.0
-    for k in range(om0.shape[0]):
-        j = -1 if after is None else after[k]
-        for i in range(om0.shape[1] // 2):
-            lat = om0[k, 2 * i] + u * om1[k, 2 * i]
-            ver = om0[k, 2 * i + 1] + u * om1[k, 2 * i + 1]
-            if j >= 0 and gap is not None and gap[k] > 0.0:
-                lat_j = om0[j, 2 * i] + u * om1[j, 2 * i]
-                ver_j = om0[j, 2 * i + 1] + u * om1[j, 2 * i + 1]
-                if lat * lat + ver * ver > _TINY and lat_j * lat_j + ver_j * ver_j > _TINY:
-                    turn = abs(math.atan2(lat * ver_j - ver * lat_j, lat * lat_j + ver * ver_j))
-                    mean_rate = turn / (gap[k] * duration)
-                    if mean_rate / tilt_limit > best:
-                        best, kind, need, lim = mean_rate / tilt_limit, 3, mean_rate, \
-                            tilt_limit
-                        rotor, sample = i, k
-            dlat = dom0[k, 2 * i] + u * dom1[k, 2 * i]
-            dver = dom0[k, 2 * i + 1] + u * dom1[k, 2 * i + 1]
-            sq = lat * lat + ver * ver
-            w = math.sqrt(math.sqrt(sq))
-            w_rate = tilt_rate = 0.0
-            if sq > _TINY:
-                w_rate = (lat * dlat + ver * dver) / (2.0 * w * sq) * inv_d
-                tilt_rate = (ver * dlat - lat * dver) / sq * inv_d
-            if floor > 0.0 and floor / max(w, _TINY) > best:
-                best, kind, need, lim = floor / max(w, _TINY), 5, w, floor
-                rotor, sample = i, k
-            c = w + tau_up * w_rate if w_rate > 0.0 else w
-            if c / limit > best:
-                best, kind, need, lim = c / limit, 1 if w <= limit < c else 0, c, limit
-                rotor, sample = i, k
-            if w_rate < 0.0 and tau_down * -w_rate / max(w, _TINY) > best:
-                best, kind, need, lim = tau_down * -w_rate / max(w, _TINY), 2, -w_rate, \
-                    w / tau_down
-                rotor, sample = i, k
-            if abs(tilt_rate) / tilt_limit > best:
-                best, kind, need, lim = abs(tilt_rate) / tilt_limit, 3, abs(tilt_rate), \
-                    tilt_limit
-                rotor, sample = i, k
-            if is_end[k]:
-                d = math.atan2(lat, ver) - math.atan2(om0[k, 2 * i], om0[k, 2 * i + 1])
-                step = abs(math.atan2(math.sin(d), math.cos(d)))
-                if step / step_limit > best:
-                    best, kind, need, lim = step / step_limit, 4, step, step_limit
-                    rotor, sample = i, k
-    return best, kind, rotor, sample, need, lim
-
-
 class TimeScaling:
     """Omega(D) = Omega_0 + Omega_1 / D^2 and its rates at a path's sample instants (module
     docstring)."""
@@ -414,8 +336,8 @@ class TimeScaling:
         sq = lat * lat + ver * ver
         w = np.sqrt(np.sqrt(sq))
         with np.errstate(divide="ignore", invalid="ignore"):
-            w_rate = np.where(sq > _TINY, (lat * dlat + ver * dver) / (2.0 * w * sq), 0.0)
-            tilt_rate = np.where(sq > _TINY, (ver * dlat - lat * dver) / sq, 0.0)
+            w_rate = np.where(sq > TINY, (lat * dlat + ver * dver) / (2.0 * w * sq), 0.0)
+            tilt_rate = np.where(sq > TINY, (ver * dlat - lat * dver) / sq, 0.0)
         return w, w_rate / duration, tilt_rate / duration
 
     def excess(self, duration: float) -> Excess:

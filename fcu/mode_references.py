@@ -69,6 +69,7 @@ class ModeReferences:
         self.land: MissionExecutor | None = None
         self.auto: MissionExecutor | None = None  # TAKEOFF's or RTL's plan
         self.touchdown: Touchdown | None = None
+        self.touchdown_speed_cap_m_s = math.inf  # set from the gains (`fcu.pipeline`)
         self.offboard = OffboardSetpoint()
         self.sticks = manual.CENTRED  # the latest MANUAL_CONTROL
         self.sticks_received_s = -math.inf  # wall clock; -inf: never
@@ -262,10 +263,23 @@ class ModeReferences:
         self.touchdown = Touchdown(t_us, ref.p_enu_m, ref.q_enu_flu)
         self.still_since_us = None
         self.on_ground = False  # from here on only the land detector's evidence counts
+        if self.touchdown_speed_m_s < self.limits.land_speed_m_s:
+            # faster, the position loop's damping would push the rotors' thrust to reverse
+            # on the ground (`fcu.landing.touchdown_speed_cap`)
+            self.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
+                     f"touchdown capped at {self.touchdown_speed_m_s:.2f} m/s (MIS_LAND_SPD "
+                     f"{self.limits.land_speed_m_s:.2f})")
+
+    @property
+    def touchdown_speed_m_s(self) -> float:
+        """The land speed (MIS_LAND_SPD), capped by what the gains land at
+        (`fcu.landing.touchdown_speed_cap`)."""
+        return min(self.limits.land_speed_m_s, self.touchdown_speed_cap_m_s)
 
     def _touchdown_ref(self, t_us: int) -> Reference:
         assert self.touchdown is not None
-        return touchdown_ref(self.touchdown, t_us, self.limits.land_speed_m_s)
+        z = self.state.p_enu_m[2] if self.state is not None else None
+        return touchdown_ref(self.touchdown, t_us, self.touchdown_speed_m_s, z)
 
     def land_detector(self, t_us: int, lift_n: float, weight_n: float) -> bool:
         """During a touchdown: True once the vehicle is on the ground (then disarm): held up

@@ -54,7 +54,8 @@ from common.outcome import ATTITUDE_NOT_FLOWN
 from fcu import approach
 from fcu.approach import Approach, Offset, Setpoint, right_jacobian_inv
 from fcu.dualquat import Quat, Vec3, q_angle, q_conj, q_exp, q_log, q_mul, q_rotate_inv
-from fcu.feasibility import TILT, Envelope
+from fcu.excess import TILT
+from fcu.feasibility import Envelope
 from fcu.manual import StickSettings
 from fcu.tracker import Reference
 

@@ -40,6 +40,7 @@ from fcu.failsafe import (
     pose_loss_level,
     state_lost,
 )
+from fcu.landing import touchdown_speed_cap
 from fcu.mission.limits import MissionLimits
 from fcu.mode_references import FlightSettings
 from fcu.rate_filter import ImuRateFilter
@@ -69,6 +70,7 @@ class Pipeline:
         self.weight_n = vehicle.mass_kg * vehicle.gravity_m_s2
         self.core = FlightCore(vehicle, gains, control_rate_hz, initial_tilt_rad)
         self.commander = Commander(limits or MissionLimits(vehicle=vehicle))
+        self._set_touchdown_cap(gains)
         self.settings = failsafes or FailsafeSettings()
         self.supervisor = Supervisor(vehicle.n_rotors, vehicle.rotor_speed_max_rad_s,
                                      initial_tilt_rad)
@@ -186,6 +188,7 @@ class Pipeline:
         """New parameters: gains, mission limits, failsafe settings, the automatic modes' and
         POSCTL's settings."""
         self.core.tracker.set_gains(gains)
+        self._set_touchdown_cap(gains)
         self.commander.limits = limits
         self.commander.offboard_timeout_s = offboard_timeout_s
         if flight is not None:
@@ -193,6 +196,11 @@ class Pipeline:
                 self.commander.manual_sp = None  # re-fit the new limits from here
             self.commander.flight = flight
         self.settings = failsafes
+
+    def _set_touchdown_cap(self, gains: Gains) -> None:
+        """The touchdown speed the position loop's damping lands at (`fcu.landing`)."""
+        self.commander.touchdown_speed_cap_m_s = touchdown_speed_cap(
+            max(gains.kd_d), self.vehicle.gravity_m_s2)
 
     def arm(self) -> tuple[int, str]:
         was = self.commander.armed

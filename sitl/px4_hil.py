@@ -14,16 +14,11 @@ publishes it as vehicle_mocap_odometry). The magnetometer and barometer ride on 
 HIL_SENSOR (PX4 reads them only there); HIL_GPS and HIL_STATE_QUATERNION go out at the
 first IMU sample at or after they fall due, just before it.
 
-Sensors: the scenario's profile (`sensors`, `--sensors`) when it names one, else
-config/sensors/px4-default.toml: PX4's Gazebo classic plugins' noise at PX4's simulator
-rates (IMU 250 Hz, magnetometer 100 Hz, barometer 50 Hz) and PX4's simulated GNSS (5 Hz),
-seeded from the scenario's seed. Noise matters: PX4's DataValidator declares a sensor
-stale after 100 samples equal within 1e-6 (1,000 for the magnetometer), so a profile with
-an exact sensor (`--sensors truth`) is served with a one-line warning. Any IMU rate from
-100 Hz whose period is a whole number of microseconds; the physics step divides the IMU
-period (at most the scenario's step). HIL_STATE_QUATERNION at the interval PX4 asks with
-SET_MESSAGE_INTERVAL (200 Hz when it connects; that rate until it asks), answered with
-COMMAND_ACK.
+Sensors: the scenario's profile, else config/sensors/px4-default.toml, noisy on every
+sensor so that PX4's DataValidator never calls one stale (`sitl.px4_profile`; an exact
+profile is served with a one-line warning). Any IMU rate from 100 Hz whose period is a
+whole number of microseconds. HIL_STATE_QUATERNION at the interval PX4 asks with
+SET_MESSAGE_INTERVAL (200 Hz until it asks), answered with COMMAND_ACK.
 
 In: HIL_ACTUATOR_CONTROLS (motor outputs 0..1 on PX4's hexa X order, `sitl.px4_wire`).
 
@@ -32,29 +27,15 @@ connection arrives (PX4 sends a HEARTBEAT first). PX4's clock is the time of the
 HIL_SENSOR; it answers only when its outputs update, at its control rate (250 Hz in
 SITL), stamped with that clock. The rule (`sitl.px4_lockstep`):
 
-- until the answers' cadence is learned (PX4 starting up, then 16 intervals between
-  answers whose two halves share their longest interval) the plant sends one IMU sample
-  per IMU period of wall time, as Gazebo does, and applies each lockstep answer as it
-  comes;
-- then it steps on its own sensor clock without waiting up to the sample where the next
-  answer is due (the latest answer's stamp plus the longest interval), waits there for it, and
-  applies it from the physics step that starts at that sample: deterministic for a
-  deterministic firmware, whatever the IMU rate and control rate;
-- an answer due that has not come after GRACE_S (50 ms) of wall time lets the plant step
-  one sample on and wait at the next (counted: `grace_steps`): a firmware whose cadence
-  grew, as PX4's does after its start-up, where it answers every sample, needs that
-  sample to answer, and its answer lengthens the interval waited for;
-- an answer due that does not come within 1 s of wall time (Gazebo's poll timeout) is
-  reported in one line on stderr naming the sample and the period, once per stall, and
-  the plant goes back to the wall-clock pace and learns the cadence again (counted:
-  `answer_waits`): a firmware that stops answering (PX4 publishes no outputs in OFFBOARD
-  without set-points) keeps its clock running at real time, not one sample a second;
-- an answer stamped before the latest accepted one, or a second with its stamp, is counted
-  and ignored; one stamped before the latest sample (the plant ran past it: on the
-  wall-clock pace, or a shorter interval than the longest) applies from the next step
-  (counted as `late_answers` once the cadence is learned). Answers
-  without the lockstep flag (PX4 on the wall clock) set the held command and the plant
-  keeps the wall-clock pace.
+where to wait is `sitl.px4_lockstep`'s (learn the cadence from the answers' stamps, step
+on the sensor clock up to the sample an answer is due at, wait there). This loop paces by
+the wall clock until the cadence is learned (one IMU sample per IMU period, as Gazebo
+does), steps one sample past an answer due after GRACE_S (`grace_steps`), and after
+ANSWER_TIMEOUT_S says so in one line on stderr and goes back to the wall-clock pace
+(`answer_waits`, `stall_reports`). An answer stamped before the latest accepted one, or a
+second with its stamp, is counted and ignored; one stamped before the latest sample applies
+from the next step (`late_answers`). Answers without the lockstep flag (PX4 on the wall
+clock) set the held command and the plant keeps the wall-clock pace.
 
 Bad input, never a crash: bytes that are no MAVLink frame are counted and skipped; other
 messages are ignored (HEARTBEAT counted); an answer from another system id is ignored; a
@@ -89,7 +70,7 @@ from common.simlink import (
 )
 from sitl.actuator_faults import ActuatorFaults
 from sitl.plant import ActuatorCommand, PlantState, initial_state, scenario_plant
-from sitl.px4_lockstep import Answer, AnswerSchedule
+from sitl.px4_lockstep import Answer, AnswerSchedule, Wait
 from sitl.px4_profile import physics_step_us, px4_sensor_profile, stale_warning
 from sitl.px4_wire import (
     LOCKSTEP_FLAG,
@@ -171,9 +152,6 @@ class Server:
         self.due_s = 0.0  # wall-clock pace: when the next step is due
         self.speed_factor = speed_factor  # lockstep paced at this x the wall clock, or free
         self.pace_due_s = 0.0  # paced lockstep: when the next step is due
-        self._wait_s: float | None = None  # when the wait for the answer due began
-        self._wait_from_us: int | None = None  # the latest accepted answer then
-        self._grace_s = 0.0  # when the plant last stepped on without the answer due
         self._stalled = False  # an answer due timed out since the latest one on time
         self.flight_start_us: int | None = None
         self.state_interval_us = STATE_DEFAULT_US
@@ -355,7 +333,6 @@ class Server:
         self.decoder = parser()
         self.locked = False
         self.schedule.reset()
-        self._wait_s = None
         self.due_s = time.monotonic()
         if not self.started:
             self.started = True
@@ -428,40 +405,28 @@ class Server:
 
     def _awaiting_answer(self) -> bool:
         """In lockstep: whether the plant still waits for the answer due (having waited
-        briefly for what arrives); False once it may step: no answer is due, or GRACE_S
-        passed (`step_past`), or ANSWER_TIMEOUT_S passed since the wait began (`skip`,
-        reported in one line per run of such timeouts)."""
-        schedule = self.schedule
-        answered = schedule.last_us == self.sent_us
-        if self._wait_s is not None and schedule.last_us != self._wait_from_us:
-            self._wait_s = None  # an answer came since the wait began
-        if answered:
+        briefly for what arrives); False once it may step (`AnswerSchedule.wait_at`: no
+        answer due, GRACE_S passed, or ANSWER_TIMEOUT_S since the wait began)."""
+        if self.schedule.last_us == self.sent_us:
             self._stalled = False
-        if answered or not schedule.waits_at(self.sent_us):
-            return False
-        now = time.monotonic()
-        if self._wait_s is None:
-            self._wait_s = self._grace_s = now
-            self._wait_from_us = schedule.last_us
-        if now - self._wait_s >= ANSWER_TIMEOUT_S:
-            self._give_up()
-            return False
-        if now - self._grace_s >= GRACE_S:
-            schedule.step_past()  # it may need the next sample to answer
-            self.grace_steps += 1
-            self._grace_s = now
-            return False
-        if select.select(self.link.filenos(), [], [], self._grace_s + GRACE_S - now)[0]:
-            self._receive()
-        return True
-
-    def _give_up(self) -> None:
-        """The answer due did not come within ANSWER_TIMEOUT_S: as Gazebo's poll timeout,
-        step on without it, on the wall clock until the cadence is learned again."""
-        self.answer_waits += 1
         every = self.schedule.longest or 0
-        self.schedule.skip()
-        self._wait_s = None
+        now = time.monotonic()
+        wait, until_s = self.schedule.wait_at(self.sent_us, now, GRACE_S, ANSWER_TIMEOUT_S)
+        if wait is Wait.WAIT:
+            if select.select(self.link.filenos(), [], [], until_s - now)[0]:
+                self._receive()
+            return True
+        if wait is Wait.STEP_PAST:
+            self.grace_steps += 1
+        elif wait is Wait.GIVE_UP:
+            self._give_up(every)
+        return False
+
+    def _give_up(self, every: int) -> None:
+        """The answer due did not come within ANSWER_TIMEOUT_S (`every` samples after the
+        one before): as Gazebo's poll timeout, step on without it, on the wall clock until
+        the cadence is learned again; said once per run of such timeouts."""
+        self.answer_waits += 1
         if self._stalled:
             return
         self._stalled = True

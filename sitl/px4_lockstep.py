@@ -47,6 +47,15 @@ class Answer(Enum):
     LATE = "late"  # stamped before the latest sample sent: applies from the next step
 
 
+class Wait(Enum):
+    """What the plant does at a sample (`AnswerSchedule.wait_at`)."""
+
+    STEP = "step"  # no answer due: step on
+    WAIT = "wait"  # wait for what arrives, until the time given
+    STEP_PAST = "step_past"  # the grace has passed: one sample on, wait there (`step_past`)
+    GIVE_UP = "give_up"  # the timeout has passed: learn again (`skip`)
+
+
 class AnswerSchedule:
     """The longest interval in samples between the firmware's answers, from their stamps."""
 
@@ -64,6 +73,9 @@ class AnswerSchedule:
         self.longest: int | None = None  # the longest interval since, in samples
         self._recent: list[int] = []  # the latest intervals, while learning
         self.due_us: int | None = None  # the sample the next answer is due at
+        self._wait_s: float | None = None  # wall time the wait for the answer due began
+        self._wait_from_us: int | None = None  # the latest accepted answer then
+        self._grace_s = 0.0  # wall time of the latest `step_past` (or the wait's start)
 
     @property
     def learned(self) -> bool:
@@ -109,6 +121,27 @@ class AnswerSchedule:
     def waits_at(self, sent_us: int) -> bool:
         """Whether the plant must wait for an answer before stepping past `sent_us`."""
         return self.due_us is not None and sent_us >= self.due_us
+
+    def wait_at(self, sent_us: int, now_s: float, grace_s: float,
+                timeout_s: float) -> tuple[Wait, float]:
+        """At the latest sample sent and the wall time `now_s`: step, wait (until the time
+        returned), step past after `grace_s` without the answer due, or give up (`skip`)
+        `timeout_s` after the wait began; an answer accepted meanwhile ends the wait."""
+        if self._wait_s is not None and self.last_us != self._wait_from_us:
+            self._wait_s = None  # an answer came since the wait began
+        if self.last_us == sent_us or not self.waits_at(sent_us):
+            return Wait.STEP, now_s
+        if self._wait_s is None:
+            self._wait_s = self._grace_s = now_s
+            self._wait_from_us = self.last_us
+        if now_s - self._wait_s >= timeout_s:
+            self.skip()
+            return Wait.GIVE_UP, now_s
+        if now_s - self._grace_s >= grace_s:
+            self.step_past()
+            self._grace_s = now_s
+            return Wait.STEP_PAST, now_s
+        return Wait.WAIT, self._grace_s + grace_s
 
     def step_past(self) -> None:
         """The answer due has not come yet: wait for it one sample later."""

@@ -8,6 +8,7 @@ import itertools
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from common.config import load_gains, load_vehicle
@@ -15,7 +16,13 @@ from common.mav_enums import MAV_RESULT
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE
 from fcu.failsafe import FailsafeSettings
-from fcu.landing import LANDED_STILL_S, TOUCHDOWN_DEPTH_M
+from fcu.landing import (
+    LANDED_STILL_S,
+    TOUCHDOWN_BELOW_M,
+    TOUCHDOWN_DEPTH_M,
+    TOUCHDOWN_RAMP_S,
+    touchdown_speed_cap,
+)
 from fcu.manual import StickSettings
 from fcu.mission.limits import MissionLimits
 from fcu.mode_references import FlightSettings
@@ -41,9 +48,11 @@ def _landing_pipeline(z0: float) -> Pipeline:
 
 
 def test_touchdown_set_point_sinks_below_the_plan_then_stops():
-    """Given LAND from 2 m at 0.5 m/s, when the planned descent has ended (the vehicle held
-    0.3 m up, e.g. by an error), then the set-point keeps sinking at the land speed, at most
-    TOUCHDOWN_DEPTH_M below the plan's end, and nothing disarms a vehicle that moves."""
+    """Given LAND from 2 m at 0.5 m/s, when the planned descent has ended and the vehicle
+    follows its set-point (no ground below), then the set-point keeps sinking, its speed
+    reached from rest over TOUCHDOWN_RAMP_S (no step: 0.1 s after, 1 cm lower), at the land
+    speed at most TOUCHDOWN_DEPTH_M below the plan's end, and nothing disarms a vehicle
+    that moves."""
     pipe = _landing_pipeline(2.0)
     c = pipe.commander
     t = 0
@@ -53,16 +62,38 @@ def test_touchdown_set_point_sinks_below_the_plan_then_stops():
         pipe.step(t)
         assert t < 20_000_000
     end = c.touchdown
-    samples = []
+    samples, speeds = [], []
+    z = end.p_enu_m[2]
     for _ in range(2000):  # 4 s
         t += 2000
-        pipe.on_state(t, _state(0.3, -0.3), t)
+        pipe.on_state(t, _state(z, -0.3), t)
         out = pipe.step(t)
-        samples.append(c.last_ref.p_enu_m[2])
+        z = c.last_ref.p_enu_m[2]  # the vehicle follows its set-point
+        samples.append(z)
+        speeds.append(-c.last_ref.v_enu_m_s[2])
         assert out.armed  # moving: not landed
     dt = 0.1
-    assert abs(samples[49] - (end.p_enu_m[2] - 0.5 * dt)) < 1e-9  # 0.1 s after: 5 cm lower
+    assert samples[49] == pytest.approx(end.p_enu_m[2] - 0.5 * dt * dt / (2 * TOUCHDOWN_RAMP_S))
+    assert max(np.diff(speeds)) <= 0.5 * 0.002 / TOUCHDOWN_RAMP_S + 1e-12  # ramped
+    assert max(speeds) == pytest.approx(0.5)
     assert min(samples) == end.p_enu_m[2] - TOUCHDOWN_DEPTH_M
+
+
+def test_touchdown_set_point_stays_just_below_a_vehicle_held_up():
+    """Given the touchdown phase and a vehicle held 0.3 m above the plan's end (the ground is
+    higher than planned), then the set-point never goes more than TOUCHDOWN_BELOW_M below
+    the vehicle, however long it sinks (it does not sink on into the ground)."""
+    pipe = _landing_pipeline(2.0)
+    c = pipe.commander
+    start = _to_touchdown(pipe, 0.3)
+    t = start
+    lowest = math.inf
+    while pipe.armed and t - start < 3_000_000:
+        t += 2000
+        pipe.on_state(t, _state(0.3), t)
+        pipe.step(t)
+        lowest = min(lowest, c.last_ref.p_enu_m[2])
+    assert lowest == pytest.approx(0.3 - TOUCHDOWN_BELOW_M)
 
 
 def _to_touchdown(pipe: Pipeline, z: float) -> int:
@@ -89,7 +120,9 @@ def test_land_detector_needs_the_vehicle_held_up():
         pipe.on_state(t, _state(0.3), t)
         pipe.step(t)
         assert t - start < 4_000_000
-    assert start + LANDED_STILL_S * 1e6 <= t <= start + LANDED_STILL_S * 1e6 + 4000
+    # the push that tells the ground builds up with the sink's ramp
+    assert start + LANDED_STILL_S * 1e6 <= t <= \
+        start + (LANDED_STILL_S + TOUCHDOWN_RAMP_S) * 1e6 + 4000
     texts = [e.text for e in pipe.events]
     assert "landed: disarmed" in texts and "disarmed in the air" not in texts
 
@@ -310,3 +343,28 @@ def test_offboard_approaches_a_pose_from_the_reference_flown_without_a_yaw_stick
                                (0.0,) * 3, (0.0,) * 3, 0.0))[0]
     more = [x[1] for x in _kinematic(pipe, track[-1][0], 6.0, ground=False)]
     assert math.dist(more[0], p[-1]) < 1e-4 and math.dist(more[-1], (0.0, 12.0, 3.0)) < 1e-3
+
+
+def test_a_land_speed_the_gains_cannot_land_at_is_capped_and_said():
+    """Given MIS_LAND_SPD 3 m/s and the default gains (k_d 10 /s), when the touchdown phase
+    starts, then the set-point sinks at TOUCHDOWN_PUSH g / k_d (0.59 m/s), not 3 m/s, and the
+    vehicle says so once; at 0.5 m/s nothing is capped or said."""
+    pipe = _landing_pipeline(2.0)
+    cap = touchdown_speed_cap(10.0, 9.81)
+    assert cap == pytest.approx(0.5886)
+    pipe.commander.limits = MissionLimits(land_speed_m_s=3.0)
+    start = _to_touchdown(pipe, 1.0)
+    t = start
+    for _ in range(500):
+        t += 2000
+        pipe.on_state(t, _state(1.0), t)
+        pipe.step(t)
+    c = pipe.commander
+    assert c.touchdown_speed_m_s == pytest.approx(cap, rel=1e-3)
+    assert -c.last_ref.v_enu_m_s[2] == pytest.approx(c.touchdown_speed_m_s)
+    said = [e.text for e in pipe.events if e.text.startswith("touchdown capped")]
+    assert said == ["touchdown capped at 0.59 m/s (MIS_LAND_SPD 3.00)"]
+    slow = _landing_pipeline(2.0)
+    _to_touchdown(slow, 1.0)
+    assert slow.commander.touchdown_speed_m_s == 0.5
+    assert not [e for e in slow.events if e.text.startswith("touchdown capped")]

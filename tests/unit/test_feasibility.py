@@ -18,7 +18,8 @@ from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
 from common.mission_items import MissionItem, local_xy
 from fcu.allocation import Allocator
 from fcu.dualquat import q_exp, q_rotate_inv
-from fcu.feasibility import KINDS, MARGIN, Envelope, envelope, excess_kernel, nominal_wrench
+from fcu.excess import KINDS, excess_kernel
+from fcu.feasibility import MARGIN, Envelope, envelope, nominal_wrench
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import Figure as _Figure

@@ -280,3 +280,31 @@ def test_a_cadence_learned_too_short_grows_one_sample_at_a_time():
     s.step_past()  # slow, not longer: its answer is stamped at the sample it was due at
     assert s.accept(t + 16_000, t + 18_000) is Answer.LATE
     assert (s.longest, s.due_us) == (4, t + 24_000)
+
+
+def test_the_wait_for_an_answer_steps_past_then_gives_up_on_the_wall_clock():
+    """Given a learned cadence of 1 sample and no answer at the sample due, then the schedule
+    says wait until the grace has passed, then step one sample past it, again each grace,
+    and give up (learned again) once the timeout has passed since the wait began; an answer
+    that comes ends the wait, and the next one starts afresh."""
+    from sitl.px4_lockstep import Wait
+    s = AnswerSchedule(1000)
+    for k in range(1, 2 * LEARN_WINDOW + 2):
+        s.accept(1000 * k, 1000 * k)
+    t = 1000 * (2 * LEARN_WINDOW + 1)
+    assert s.wait_at(t, 10.0, 0.05, 1.0) == (Wait.STEP, 10.0)  # answered: step
+    sent = t + 1000
+    assert s.wait_at(sent, 10.0, 0.05, 1.0) == (Wait.WAIT, 10.05)
+    assert s.wait_at(sent, 10.04, 0.05, 1.0) == (Wait.WAIT, 10.05)
+    assert s.wait_at(sent, 10.05, 0.05, 1.0)[0] is Wait.STEP_PAST and s.due_us == sent + 1000
+    assert s.wait_at(sent, 10.06, 0.05, 1.0)[0] is Wait.STEP  # not due at `sent` any more
+    sent += 1000
+    assert s.wait_at(sent, 10.07, 0.05, 1.0) == (Wait.WAIT, pytest.approx(10.10))  # from 10.05
+    assert s.accept(sent, sent) is Answer.ON_TIME and s.longest == 2
+    sent += 2000
+    assert s.wait_at(sent, 11.0, 0.05, 1.0) == (Wait.WAIT, 11.05)  # a new wait
+    for k in range(1, 17):
+        wait, _ = s.wait_at(sent, 11.0 + 0.06 * k, 0.05, 1.0)
+        assert wait is Wait.STEP_PAST
+        sent = s.due_us
+    assert s.wait_at(sent, 12.0, 0.05, 1.0)[0] is Wait.GIVE_UP and not s.learned
