@@ -55,7 +55,9 @@ class Commander(ModeReferences):
         self.manual_sp = None  # POSCTL starts from where the vehicle is
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "armed")
         if self.mode == Mode.MISSION and not self.mission_running and not self.mission_done:
-            self._start_mission()  # MISSION_START came first: fly it now
+            refused = self._start_mission()  # MISSION_START came first: fly it now
+            if refused:
+                self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, refused)
         self._maybe_start_flight()
         return MAV_RESULT.MAV_RESULT_ACCEPTED, "armed"
 
@@ -80,19 +82,26 @@ class Commander(ModeReferences):
             self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, "disarmed in the air", CRASH)
         return MAV_RESULT.MAV_RESULT_ACCEPTED, reason
 
-    def set_mode(self, mode: Mode, now_s: float) -> tuple[int, str]:
+    def _mode_refusal(self, mode: Mode, now_s: float) -> str:
+        """Why `mode` cannot be entered now ('' when it can, as far as its inputs go)."""
         if mode == Mode.MISSION and not self.mission:
-            return MAV_RESULT.MAV_RESULT_DENIED, "no mission"
+            return "no mission"
         if mode == Mode.OFFBOARD and (
                 self.offboard.received_s + self.offboard_timeout_s < now_s
                 or (self.offboard.p_enu_m is None and self.offboard.q_enu_flu is None)):
-            return MAV_RESULT.MAV_RESULT_DENIED, "offboard refused: no setpoint stream"
+            return "offboard refused: no setpoint stream"
         if mode == Mode.LAND and not self.armed:
-            return MAV_RESULT.MAV_RESULT_DENIED, "land: not armed"
+            return "land: not armed"
         if mode in (Mode.TAKEOFF, Mode.RTL) and not self.armed:
-            return MAV_RESULT.MAV_RESULT_DENIED, f"{mode.name.lower()}: not armed"
+            return f"{mode.name.lower()}: not armed"
         if mode == Mode.POSCTL and not self.manual_fresh(now_s):
-            return MAV_RESULT.MAV_RESULT_DENIED, "POSCTL refused: no MANUAL_CONTROL"
+            return "POSCTL refused: no MANUAL_CONTROL"
+        return ""
+
+    def set_mode(self, mode: Mode, now_s: float) -> tuple[int, str]:
+        refused = self._mode_refusal(mode, now_s)
+        if refused:
+            return MAV_RESULT.MAV_RESULT_DENIED, refused
         previous = self.mode
         idle = self.auto is None and self.touchdown is None  # e.g. landed, disarmed, re-armed
         if mode == Mode.TAKEOFF and (previous != Mode.TAKEOFF or idle):
@@ -117,7 +126,9 @@ class Commander(ModeReferences):
             self.hold = self._current_pose_ref()
             self.mission_running = False
         elif mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running):
-            self._start_mission()
+            refused = self._start_mission()
+            if refused:
+                return MAV_RESULT.MAV_RESULT_DENIED, refused
         elif mode == Mode.LAND and previous != Mode.LAND:
             self._start_landing()
         elif mode == Mode.OFFBOARD:
@@ -194,7 +205,9 @@ class Commander(ModeReferences):
         self.touchdown = None
         self.land = None
         self.auto = None
-        self._start_mission()
+        refused = self._start_mission()
+        if refused:
+            return MAV_RESULT.MAV_RESULT_DENIED, refused
         self._maybe_start_flight()
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission started")
         return MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started"
@@ -217,7 +230,9 @@ class Commander(ModeReferences):
         self.mission_current = seq
         self.mission_done = False
         if self.mode == Mode.MISSION and self.mission_running:
-            self._start_mission()
+            refused = self._start_mission()
+            if refused:
+                return MAV_RESULT.MAV_RESULT_DENIED, refused
         return MAV_RESULT.MAV_RESULT_ACCEPTED, f"mission item {seq}"
 
     def _maybe_start_flight(self) -> None:
@@ -225,16 +240,29 @@ class Commander(ModeReferences):
                                         Mode.RTL, Mode.POSCTL):
             self.flight_started = True
 
-    def _start_mission(self) -> None:
-        """Plan the mission from the current item, starting now from the desired pose."""
+    def _start_mission(self) -> str:
+        """Plan the mission from the current item, starting now from the desired pose, and
+        check it again from there with the upload's envelope (`MissionExecutor.refusal`):
+        one that no longer fits is not flown (the vehicle holds; the reason is returned,
+        for the command's refusal), never flown into the limits. '' when it runs (or waits
+        for arming)."""
         if not self.armed or not self.mission:
             self.mission_running = False
-            return
+            return ""
         start = self._current_pose_ref()
         t_s = self.clock_us * 1e-6
-        self.executor = MissionExecutor(self.mission, self.limits)
-        self.executor.set_current(self.mission_current, t_s, start.p_enu_m, start.q_enu_flu)
+        executor = MissionExecutor(self.mission, self.limits)
+        executor.set_current(self.mission_current, t_s, start.p_enu_m, start.q_enu_flu)
+        refused = executor.refusal()
+        if refused:
+            self.executor = None
+            self.mission_running = False
+            self.mode = Mode.HOLD
+            self.hold = start
+            return f"mission refused from here: {refused}"
+        self.executor = executor
         self.mission_running = True
+        return ""
 
     def _start_landing(self) -> None:
         start = self._current_pose_ref()

@@ -10,7 +10,7 @@ from common.mission_items import MissionItem
 from fcu.dualquat import Quat, Vec3
 from fcu.mission.codes import MAV_MISSION_ACCEPTED
 from fcu.mission.limits import MissionLimits
-from fcu.mission.planning import plan_item
+from fcu.mission.planning import envelope_reason, plan_item
 from fcu.mission.segments import Segment
 from fcu.mission.validation import check_items, refusal
 from fcu.tracker import Reference, pose_ref
@@ -82,6 +82,18 @@ class MissionExecutor:
         self._reached = 0
         self._completed = False
         self.current_seq = seq
+
+    def refusal(self) -> str:
+        """'' when every planned item fits the envelope as planned from the start pose
+        given (speed-timed items are stretched already), else why the first that does not
+        fails (`fcu.mission.planning.envelope_reason`): a user-timed item that fitted from
+        the origin may not from the vehicle's actual pose."""
+        items = {item.seq: item for item in self.items}
+        for seg in self._segments:
+            reason = envelope_reason(items[seg.seq], seg, self.limits)
+            if reason:
+                return reason
+        return ""
 
     @property
     def started(self) -> bool:

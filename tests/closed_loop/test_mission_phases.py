@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 
 from common.config import load_vehicle
-from gcs.inprocess import run_scenario
+from gcs.inprocess import InProcessError, run_scenario
 
 from .conftest import ROOT, scenario
 
 VEHICLES = ["hexa_tilted", "hexa_planar"]
 
 
-def _mission(folder: Path, takeoff_m: float, hold_s: float) -> Path:
+def _mission(folder: Path, takeoff_m: float, middle: str) -> Path:
     path = folder / "phases.toml"
     path.write_text(f"""format = "dqflight-mission-1"
 [[item]]
@@ -29,10 +29,7 @@ altitude_ned_z_m = {-takeoff_m}
 climb_time_s = 0.0
 yaw_deg = nan
 [[item]]
-type = "waypoint"
-position_ned_m = [0.0, 0.0, {-takeoff_m}]
-hold_s = {hold_s}
-yaw_deg = nan
+{middle}
 [[item]]
 type = "land"
 yaw_deg = nan
@@ -40,13 +37,24 @@ yaw_deg = nan
     return path
 
 
-def _fly(folder: Path, vehicle: str, takeoff_m: float, land_m_s: float, duration_s: float):
+def _hold(takeoff_m: float) -> str:
+    return (f'type = "waypoint"\nposition_ned_m = [0.0, 0.0, {-takeoff_m}]\nhold_s = 1.0\n'
+            'yaw_deg = nan')
+
+
+def _scenario(folder: Path, vehicle: str, takeoff_m: float, land_m_s: float,
+              duration_s: float, middle: str | None = None,
+              start_enu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)):
     sc = scenario("mission_square", duration_s=duration_s,
                   vehicle=load_vehicle(ROOT / "config" / "vehicles" / f"{vehicle}.toml"))
-    sc = dataclasses.replace(
-        sc, trajectory=dataclasses.replace(sc.trajectory,
-                                           mission_file=str(_mission(folder, takeoff_m, 1.0))),
-        params={**sc.params, "MIS_LAND_SPD": land_m_s})
+    path = _mission(folder, takeoff_m, middle or _hold(takeoff_m))
+    return dataclasses.replace(
+        sc, trajectory=dataclasses.replace(sc.trajectory, mission_file=str(path)),
+        params={**sc.params, "MIS_LAND_SPD": land_m_s}, initial_position_enu_m=start_enu_m)
+
+
+def _fly(folder: Path, vehicle: str, takeoff_m: float, land_m_s: float, duration_s: float):
+    sc = _scenario(folder, vehicle, takeoff_m, land_m_s, duration_s)
     return sc, run_scenario(sc, logs=False)
 
 
@@ -96,3 +104,25 @@ def test_every_land_speed_lands_without_a_limited_servo(tmp_path, vehicle, land_
     assert len(f["disarm"]) == 1, f
     capped = [e["text"] for e in r.metrics["events"] if e["text"].startswith("touchdown capped")]
     assert bool(capped) == (land_m_s > 0.59), capped
+
+
+KEYFRAME_HOME = ('type = "keyframe"\ntime_s = 1.0\nposition_ned_m = [0.0, 0.0, -2.0]\n'
+                 "rotvec_ned_frd_rad = [0.0, 0.0, 0.0]")
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+def test_a_start_away_from_home_is_checked_from_there(tmp_path, vehicle):
+    """Given a take-off to 2 m and a 1 s keyframe to 2 m above home (accepted at upload: from
+    home it does not move), when the vehicle starts 3 m from home, then MISSION_START is
+    refused with the item, the actuator and the duration that would pass, and nothing is
+    flown (status aborted, not completed with limit warnings); from home it flies."""
+    sc = _scenario(tmp_path, vehicle, 2.0, 0.5, 12.0, KEYFRAME_HOME, (3.0, 0.0, 0.0))
+    with pytest.raises(InProcessError) as refused:
+        run_scenario(sc, logs=False)
+    text = str(refused.value)
+    assert "mission refused from here: item 1: tilt servo" in text and "lengthen p1 to" in text
+    assert refused.value.result is not None
+    assert refused.value.result.metrics["status"] == "aborted"
+    home = _scenario(tmp_path, vehicle, 2.0, 0.5, 12.0, KEYFRAME_HOME)
+    r = run_scenario(home, logs=False)
+    assert r.metrics["status"] == "completed"
