@@ -228,12 +228,10 @@ def test_imu_rates_fly_without_stalls(tmp_path: Path, rate_hz: float) -> None:
     assert stats["imu_hz"] == rate_hz
     stalls = [float(m) for m in re.findall(r"no answer to the sample at t = ([0-9.]+) s",
                                            (tmp_path / "run" / "sitl.log").read_text())]
-    # any stall in flight is a failure; PX4's start-up (its first 0.6 s, before it arms)
-    # answers every sample, then settles on its rate-limited cadence, which at 500 Hz and
-    # above the plant meets with one wait of 1 s wall time each (measured: 1 at 500 Hz at
-    # 0.44 s, 2 at 1 kHz at 0.40 and 0.52 s)
-    assert all(t_s < 0.6 for t_s in stalls), (stalls, stats)
-    assert stats["answer_waits"] == len(stalls), stats
+    # PX4's start-up (its first 0.3-0.6 s) answers every sample, then settles on its
+    # rate-limited cadence: the plant steps past each answer that needs more samples
+    # (grace_steps) and never waits out 1 s
+    assert stalls == [] and stats["answer_waits"] == 0, (stalls, stats)
     tr = truth(tmp_path / "run")
     takeoff = nav_windows(run, NAV_TAKEOFF)
     assert takeoff
@@ -242,9 +240,6 @@ def test_imu_rates_fly_without_stalls(tmp_path: Path, rate_hz: float) -> None:
     contacts = touchdowns(tr)
     assert len(contacts) == 1 and abs(contacts[0][1]) < 1.0, contacts
     assert disarmed_at_end(run)
-    if stalls:
-        pytest.xfail(f"{len(stalls)} wait(s) of 1 s at PX4's start-up (t = "
-                     f"{', '.join(f'{t_s:.3f}' for t_s in stalls)} s), none in flight")
 
 
 def plan(folder: Path) -> Path:
