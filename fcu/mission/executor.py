@@ -10,7 +10,7 @@ from common.mission_items import MissionItem
 from fcu.dualquat import Quat, Vec3
 from fcu.mission.codes import MAV_MISSION_ACCEPTED
 from fcu.mission.limits import MissionLimits
-from fcu.mission.planning import envelope_reason, plan_item
+from fcu.mission.planning import envelope_reason, plan_item, with_speed
 from fcu.mission.segments import Segment
 from fcu.mission.validation import check_items, refusal
 from fcu.tracker import Reference, pose_ref
@@ -72,8 +72,12 @@ class MissionExecutor:
         self._t_start = t_s
         segments: list[Segment] = []
         t = t_s
+        limits = self.limits  # with the speeds of the DO_CHANGE_SPEED items before seq
+        for item in self.items[:seq]:
+            limits = with_speed(item, limits, self.limits)
         for item in self.items[seq:]:
-            seg = plan_item(item, t, p, q, self.limits)
+            limits = with_speed(item, limits, self.limits)
+            seg = plan_item(item, t, p, q, limits)
             segments.append(seg)
             t, p, q = seg.t1, seg.p_end, seg.q_end
         self._segments = segments

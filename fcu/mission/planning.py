@@ -5,6 +5,7 @@ fly (speed-timed items), and why a user-timed item cannot be flown (`fcu.feasibi
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 from common.config import VehicleConfig
 from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
@@ -12,6 +13,7 @@ from common.mission_items import MissionItem
 from fcu.dualquat import Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul
 from fcu.feasibility import envelope
 from fcu.mission.codes import (
+    MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_FIGURE_EIGHT,
     MAV_CMD_NAV_LAND,
     MAV_CMD_NAV_LOITER_TIME,
@@ -85,9 +87,37 @@ def envelope_reason(item: MissionItem, seg: Segment, limits: MissionLimits) -> s
     return f"item {item.seq}: {env.explain(excess)}: {hint}"
 
 
+# DO_CHANGE_SPEED's speed types (MAVLink's SPEED_TYPE) and the limit each one sets
+SPEED_FIELDS = {0: "cruise_speed_m_s", 1: "cruise_speed_m_s", 2: "takeoff_speed_m_s",
+                3: "land_speed_m_s"}
+SPEED_NO_CHANGE = -1.0
+SPEED_DEFAULT = -2.0
+
+
+def with_speed(item: MissionItem, limits: MissionLimits,
+               defaults: MissionLimits) -> MissionLimits:
+    """The limits the items after `item` are planned with: a DO_CHANGE_SPEED (p1 speed type:
+    air or ground speed set the cruise speed of the legs, climb the take-off speed, descent
+    the land speed; p2 the speed in m/s, -1 no change, -2 back to `defaults`, the parameters'
+    value; p3, the throttle, ignored) changes one, as PX4 and ArduPilot do for a multicopter;
+    any other item leaves them as they are. The legs are stretched by the envelope as at any
+    speed (validation checks p1 and p2)."""
+    if item.command != MAV_CMD_DO_CHANGE_SPEED or item.param2 == SPEED_NO_CHANGE:
+        return limits
+    field = SPEED_FIELDS[int(item.param1)]
+    speed = float(getattr(defaults, field) if item.param2 == SPEED_DEFAULT else item.param2)
+    if field == "cruise_speed_m_s":
+        return replace(limits, cruise_speed_m_s=speed)
+    if field == "takeoff_speed_m_s":
+        return replace(limits, takeoff_speed_m_s=speed)
+    return replace(limits, land_speed_m_s=speed)
+
+
 def plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
                limits: MissionLimits) -> Segment:
     cmd = item.command
+    if cmd == MAV_CMD_DO_CHANGE_SPEED:  # no motion: it changes how later items are planned
+        return Move(item.seq, t0, p0, ZERO, q0, None, 0.0, 0.0)
     turn_rate = math.radians(limits.turn_rate_deg_s)
 
     def speed_timed(dp: Vec3, speed: float, phi: Vec3 | None) -> tuple[Vec3, Vec3 | None, float]:

@@ -26,6 +26,8 @@ from common.mission_items import (
 )
 from fcu.dualquat import Q_IDENTITY, norm3
 from fcu.mission.codes import (
+    FRAMELESS_COMMANDS,
+    MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_FIGURE_EIGHT,
     MAV_CMD_NAV_LAND,
     MAV_CMD_NAV_LOITER_TIME,
@@ -50,7 +52,14 @@ from fcu.mission.codes import (
     result_name,
 )
 from fcu.mission.limits import MissionLimits
-from fcu.mission.planning import envelope_reason, plan_item
+from fcu.mission.planning import (
+    SPEED_DEFAULT,
+    SPEED_FIELDS,
+    SPEED_NO_CHANGE,
+    envelope_reason,
+    plan_item,
+    with_speed,
+)
 from fcu.mission.segments import ZERO
 
 FIGURE_EXTENT = math.sqrt(5.0)  # max |[sin 2T, sin T, 1 - cos 2T]|
@@ -96,6 +105,16 @@ def _yaw(x: float) -> bool:
     return math.isnan(x) or math.isfinite(x)
 
 
+def _speed_type(x: float) -> bool:
+    """DO_CHANGE_SPEED's p1: a SPEED_TYPE (0 air, 1 ground, 2 climb, 3 descent speed)."""
+    return x in SPEED_FIELDS
+
+
+def _speed(x: float) -> bool:
+    """DO_CHANGE_SPEED's p2: a speed > 0 m/s, -1 (no change) or -2 (the default)."""
+    return (math.isfinite(x) and x > 0.0) or x in (SPEED_NO_CHANGE, SPEED_DEFAULT)
+
+
 def _int32(v: int) -> bool:
     """An x or y that fits MISSION_ITEM_INT's int32."""
     return isinstance(v, int) and INT32_MIN <= v <= INT32_MAX
@@ -104,7 +123,9 @@ def _int32(v: int) -> bool:
 # What each rule asks of a value, for the reasons.
 _RULE_TEXT: dict[Callable[[float], bool], str] = {
     _finite: "a finite number", _time_s: "a duration >= 0 s",
-    _positive_time_s: "a duration > 0 s", _yaw: "an angle in deg, or NaN to keep it"}
+    _positive_time_s: "a duration > 0 s", _yaw: "an angle in deg, or NaN to keep it",
+    _speed_type: "a speed type: 0 air, 1 ground, 2 climb or 3 descent speed",
+    _speed: "a speed > 0 m/s, -1 (no change) or -2 (the default)"}
 # How the reasons name the fields.
 _FIELD_TEXT = {"param1": "p1", "param2": "p2", "param3": "p3", "param4": "p4", "z": "z"}
 
@@ -134,6 +155,8 @@ _PARAM_RULES: dict[int, tuple[tuple[str, Callable[[float], bool], int], ...]] = 
                             ("param3", _finite, MAV_MISSION_INVALID_PARAM3),
                             ("param4", _finite, MAV_MISSION_INVALID_PARAM4),
                             ("z", _finite, MAV_MISSION_INVALID_PARAM7)),
+    MAV_CMD_DO_CHANGE_SPEED: (("param1", _speed_type, MAV_MISSION_INVALID_PARAM1),
+                              ("param2", _speed, MAV_MISSION_INVALID_PARAM2)),
     MAV_CMD_FIGURE_EIGHT: (("param1", _time_s, MAV_MISSION_INVALID_PARAM1),
                            ("param2", _positive_time_s, MAV_MISSION_INVALID_PARAM2),
                            ("param3", _finite, MAV_MISSION_INVALID_PARAM3),
@@ -180,7 +203,7 @@ def _carried_result(item: MissionItem) -> tuple[int, str]:
     if item.command not in SUPPORTED_COMMANDS:
         return MAV_MISSION_UNSUPPORTED, (f"item {item.seq}: command "
                                          f"{_name(MAV_CMD, item.command)} is not supported")
-    if item.frame != MAV_FRAME_LOCAL_NED:
+    if item.frame != MAV_FRAME_LOCAL_NED and item.command not in FRAMELESS_COMMANDS:
         return MAV_MISSION_UNSUPPORTED_FRAME, (
             f"item {item.seq}: frame {_name(MAV_FRAME, item.frame)} is not supported (local "
             "NED, or global with an altitude)")
@@ -231,6 +254,11 @@ def _land(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
     return MAV_MISSION_ACCEPTED, ""
 
 
+def _stay(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+    """An item without motion (DO_CHANGE_SPEED)."""
+    return MAV_MISSION_ACCEPTED, ""
+
+
 def _figure_eight(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
     """The figure-infinity: an axis (p3, p4, z) not zero, its reach (amplitude p1 times
     FIGURE_EXTENT from the start) inside the geofence; it ends where it started (T = 2 pi)."""
@@ -251,6 +279,7 @@ _MOTIONS: dict[int, Callable[[MissionItem, list[float], float], tuple[int, str]]
     MAV_CMD_POSE_KEYFRAME: _go_to,
     MAV_CMD_NAV_LAND: _land,
     MAV_CMD_FIGURE_EIGHT: _figure_eight,
+    MAV_CMD_DO_CHANGE_SPEED: _stay,
 }
 
 
@@ -272,7 +301,8 @@ def _localized(item: MissionItem, home: HomePosition | None,
     """(the item in the local frame, MAV_MISSION_RESULT, reason): a GEO_FRAMES item with a
     supported command converted through `home` (none: MAV_MISSION_UNSUPPORTED_FRAME), its
     latitude and longitude checked first; any other item as it is."""
-    if item.frame not in GEO_FRAMES or item.command not in SUPPORTED_COMMANDS:
+    if item.frame not in GEO_FRAMES or item.command not in SUPPORTED_COMMANDS or \
+            item.command in FRAMELESS_COMMANDS:
         return item, MAV_MISSION_ACCEPTED, ""
     if home is None:
         return item, MAV_MISSION_UNSUPPORTED_FRAME, (
@@ -345,6 +375,7 @@ def check_items(items: Sequence[MissionItem], limits: MissionLimits, geofence: b
     """`check_mission` without the item count, the geofence optional."""
     pos = [0.0, 0.0, 0.0]
     t, p, q = 0.0, ZERO, Q_IDENTITY
+    planned = limits  # with the speeds of the DO_CHANGE_SPEED items so far
     for i, item in enumerate(items):
         if item.seq != i:
             return MissionCheck(MAV_MISSION_INVALID_SEQUENCE, item.seq,
@@ -356,9 +387,10 @@ def check_items(items: Sequence[MissionItem], limits: MissionLimits, geofence: b
         result, reason = _check_item(item, limits, pos, geofence)
         if result != MAV_MISSION_ACCEPTED:
             return MissionCheck(result, item.seq, reason)
+        planned = with_speed(item, planned, limits)
         if envelope_check:
-            seg = plan_item(item, t, p, q, limits)
-            reason = envelope_reason(item, seg, limits)
+            seg = plan_item(item, t, p, q, planned)
+            reason = envelope_reason(item, seg, planned)
             if reason:
                 return MissionCheck(MAV_MISSION_DENIED, item.seq, reason)
             t, p, q = seg.t1, seg.p_end, seg.q_end

@@ -7,6 +7,7 @@ rates, the touchdown speed, the status and the FCU's actuator monitor."""
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -126,3 +127,50 @@ def test_a_start_away_from_home_is_checked_from_there(tmp_path, vehicle):
     home = _scenario(tmp_path, vehicle, 2.0, 0.5, 12.0, KEYFRAME_HOME)
     r = run_scenario(home, logs=False)
     assert r.metrics["status"] == "completed"
+
+
+def _plan_with_speeds(folder: Path) -> Path:
+    """tests/data/qgc_mission.plan's take-off (3 m at home) and a 2 m leg north and back,
+    each after a DO_CHANGE_SPEED as QGC writes it (command 178, frame 2, params [1 (ground
+    speed), speed, -1 (throttle), 0, 0, 0, 0]), then RTL's home landing as NAV_LAND."""
+    doc = json.loads((ROOT / "tests" / "data" / "qgc_mission.plan").read_text())
+    takeoff = doc["mission"]["items"][0]
+    north = 2.0 / 111_320.0  # deg of latitude in 2 m
+
+    def waypoint(n: int, lat: float) -> dict:
+        return {**takeoff, "command": 16, "doJumpId": n,
+                "params": [0, 0, 0, None, lat, takeoff["params"][5], 3]}
+
+    def speed(n: int, m_s: float) -> dict:
+        return {"autoContinue": True, "command": 178, "doJumpId": n, "frame": 2,
+                "params": [1, m_s, -1, 0, 0, 0, 0], "type": "SimpleItem"}
+
+    lat0 = takeoff["params"][4]
+    land = {**takeoff, "command": 21, "doJumpId": 6, "Altitude": 0,
+            "params": [0, 0, 0, None, lat0, takeoff["params"][5], 0]}
+    doc["mission"]["items"] = [takeoff, speed(2, 0.5), waypoint(3, lat0 + north),
+                               speed(4, 1.0), waypoint(5, lat0), land]
+    path = folder / "speeds.plan"
+    path.write_text(json.dumps(doc, indent=4))
+    return path
+
+
+@pytest.mark.parametrize("vehicle", VEHICLES)
+def test_a_plan_with_speed_changes_flies_its_legs_at_those_speeds(tmp_path, vehicle):
+    """Given a QGC plan whose 2 m legs follow DO_CHANGE_SPEED 0.5 and 1 m/s, then each leg's
+    quintic peaks at 1.875 x its speed (0.94 and 1.88 m/s: both within the envelope), the
+    mission completes, and the speed items cost no time."""
+    sc = scenario("mission_square", duration_s=24.0,
+                  vehicle=load_vehicle(ROOT / "config" / "vehicles" / f"{vehicle}.toml"))
+    sc = dataclasses.replace(sc, trajectory=dataclasses.replace(
+        sc.trajectory, mission_file=str(_plan_with_speeds(tmp_path))))
+    r = run_scenario(sc, logs=False)
+    assert r.metrics["status"] == "completed", r.metrics["events"]
+    t = r.truth_col("time_us")[:, 0] * 1e-6
+    py, vx, vy = r.truth_col("py", "vx", "vy").T
+    speed = np.hypot(vx, vy)
+    out = (py > 0.05) & (py < 1.95) & (vy > 0.0)
+    back = (py > 0.05) & (py < 1.95) & (vy < 0.0)
+    assert speed[out].max() == pytest.approx(1.875 * 0.5, rel=0.05)
+    assert speed[back].max() == pytest.approx(1.875 * 1.0, rel=0.05)
+    assert t[out][-1] - t[out][0] > 2.0 * (t[back][-1] - t[back][0]) * 0.9

@@ -357,7 +357,7 @@ def test_executor_refuses_what_cannot_be_flown():
     with pytest.raises(ValueError, match="empty"):
         MissionExecutor([], LIMITS)
     with pytest.raises(ValueError, match="not executable"):
-        MissionExecutor([item(0, M.MAV_CMD_DO_CHANGE_SPEED)], LIMITS)
+        MissionExecutor([item(0, M.MAV_CMD_DO_SET_SERVO)], LIMITS)
     with pytest.raises(RuntimeError, match="not started"):
         MissionExecutor(THREE, LIMITS).sample(0.0)
     far = [item(0, M.MAV_CMD_NAV_WAYPOINT, p4=NAN, north=50.0)]
@@ -372,7 +372,7 @@ def test_executor_refuses_what_cannot_be_flown():
 
 WP = M.MAV_CMD_NAV_WAYPOINT
 BAD = [
-    ("unsupported command", item(0, M.MAV_CMD_DO_CHANGE_SPEED), M.MAV_MISSION_UNSUPPORTED),
+    ("unsupported command", item(0, M.MAV_CMD_DO_SET_SERVO), M.MAV_MISSION_UNSUPPORTED),
     ("global frame", item(0, WP, p4=NAN, frame=M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT),
      M.MAV_MISSION_UNSUPPORTED_FRAME),
     ("negative hold", item(0, WP, p1=-1.0, p4=NAN), M.MAV_MISSION_INVALID_PARAM1),

@@ -315,7 +315,7 @@ def test_other_plan_types_are_unsupported(server, link, mission_type):
 @pytest.mark.parametrize(("change", "result"), [
     ({"z": NAN}, M.MAV_MISSION_INVALID_PARAM7),
     ({"param1": -1.0}, M.MAV_MISSION_INVALID_PARAM1),
-    ({"command": M.MAV_CMD_DO_CHANGE_SPEED}, M.MAV_MISSION_UNSUPPORTED),
+    ({"command": M.MAV_CMD_DO_SET_SERVO}, M.MAV_MISSION_UNSUPPORTED),
     ({"frame": M.MAV_FRAME_GLOBAL_INT}, M.MAV_MISSION_UNSUPPORTED_FRAME),
     ({"x": local_xy(5000.0)}, M.MAV_MISSION_DENIED),
 ])

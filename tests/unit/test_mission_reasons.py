@@ -264,3 +264,55 @@ def test_refused_in_process_run_writes_aborted_metrics(tmp_path, capsys):
     captured = capsys.readouterr()
     assert "mission refused: MAV_MISSION_UNSUPPORTED: item 1:" in captured.err
     assert "aborted" in captured.out and "metrics.json" in captured.out
+
+
+# ----------------------------------------------------------------------------------------
+# DO_CHANGE_SPEED
+# ----------------------------------------------------------------------------------------
+
+
+def _speed(seq: int, kind: float, speed: float, frame: int = 2) -> MissionItem:
+    """DO_CHANGE_SPEED as QGC writes it (MAV_FRAME_MISSION, x = y = z = 0, throttle -1)."""
+    return MissionItem(seq, frame, MAV.MAV_CMD_DO_CHANGE_SPEED, 0, 1, kind, speed, -1.0, 0.0,
+                       0, 0, 0.0, MAV.MAV_MISSION_TYPE_MISSION)
+
+
+@pytest.mark.parametrize(("kind", "speed", "result", "reason"), [
+    (7.0, 1.0, "MAV_MISSION_INVALID_PARAM1",
+     "item 1: p1 7: must be a speed type: 0 air, 1 ground, 2 climb or 3 descent speed"),
+    (1.0, 0.0, "MAV_MISSION_INVALID_PARAM2",
+     "item 1: p2 0: must be a speed > 0 m/s, -1 (no change) or -2 (the default)"),
+    (1.0, math.nan, "MAV_MISSION_INVALID_PARAM2",
+     "item 1: p2 nan: must be a speed > 0 m/s, -1 (no change) or -2 (the default)"),
+])
+def test_a_bad_speed_change_is_refused_naming_the_item(kind, speed, result, reason):
+    """Given DO_CHANGE_SPEED with a speed type or a speed MAVLink does not define, then the
+    mission is refused naming the parameter, the item and what it must be."""
+    items = [TAKEOFF, _speed(1, kind, speed), item(2, M.MAV_CMD_NAV_WAYPOINT, north_m=2.0)]
+    check = check_mission(items, MissionLimits())
+    assert refusal(check) == f"{result}: {reason}"
+
+
+def test_speed_changes_time_the_legs_after_them():
+    """Given a take-off to 3 m, DO_CHANGE_SPEED ground 0.5 m/s, a 2 m leg, DO_CHANGE_SPEED -2
+    (the default, MIS_CRUISE_SPD 1 m/s here), a 2 m leg back, climb speed 0.25 m/s and a
+    climb of 1 m, descent speed 0.2 m/s and a landing, then without the envelope each leg
+    takes distance / the speed in force (4 s, 2 s, 4 s, 20 s) and the speed items take no
+    time; the same mission is accepted in any frame QGC or MAVProxy writes them in (2, 0, 3)."""
+    from fcu.mission.executor import MissionExecutor
+    for frame in (2, 0, 3):
+        items = [TAKEOFF, _speed(1, 1.0, 0.5, frame),
+                 item(2, M.MAV_CMD_NAV_WAYPOINT, p1=0.0, north_m=2.0),
+                 _speed(3, 0.0, -2.0, frame), item(4, M.MAV_CMD_NAV_WAYPOINT, p1=0.0),
+                 _speed(5, 2.0, 0.25, frame),
+                 item(6, M.MAV_CMD_NAV_TAKEOFF, z=-4.0), _speed(7, 3.0, 0.2, frame),
+                 item(8, M.MAV_CMD_NAV_LAND)]
+        limits = MissionLimits(cruise_speed_m_s=1.0)
+        assert refusal(check_mission(items, limits)) == ""
+        ex = MissionExecutor(items, limits)
+        ex.start(0.0, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
+        spans = {seq: t1 - t0 for seq, t0, t1 in ex.schedule}
+        assert [spans[k] for k in (1, 3, 5, 7)] == [0.0] * 4
+        assert [spans[k] for k in (2, 4, 6, 8)] == pytest.approx([4.0, 2.0, 4.0, 20.0])
+    ex.set_current(4, 0.0, (0.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0))  # resumed after item 3
+    assert {seq: t1 - t0 for seq, t0, t1 in ex.schedule}[4] == pytest.approx(2.0)
