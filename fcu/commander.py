@@ -218,6 +218,8 @@ class Commander(ModeReferences):
         self.mission_current = 0
         self.mission_done = False
         self.executor = None
+        if any(it.command == MAV_CMD.MAV_CMD_NAV_LAND for it in self.mission):
+            self.say_touchdown_cap()  # the landing's clamp, said when the mission is taken
         if self.mode == Mode.MISSION:
             self.mode = Mode.HOLD
             self.hold = self._current_pose_ref()

@@ -263,9 +263,13 @@ class ModeReferences:
         self.touchdown = Touchdown(t_us, ref.p_enu_m, ref.q_enu_flu)
         self.still_since_us = None
         self.on_ground = False  # from here on only the land detector's evidence counts
+        self.say_touchdown_cap()
+
+    def say_touchdown_cap(self) -> None:
+        """An INFO when MIS_LAND_SPD is faster than the touchdown the gains land at: faster,
+        the position loop's damping would push the rotors' thrust to reverse on the ground
+        (`fcu.landing.touchdown_speed_cap`)."""
         if self.touchdown_speed_m_s < self.limits.land_speed_m_s:
-            # faster, the position loop's damping would push the rotors' thrust to reverse
-            # on the ground (`fcu.landing.touchdown_speed_cap`)
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
                      f"touchdown capped at {self.touchdown_speed_m_s:.2f} m/s (MIS_LAND_SPD "
                      f"{self.limits.land_speed_m_s:.2f})")
