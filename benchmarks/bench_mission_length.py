@@ -34,6 +34,7 @@ from common.config import load_scenario
 from common.mav_enums import MAV_CMD, MAV_FRAME
 from common.mission_items import MissionItem
 from fcu.core import ONBOARD_COLUMNS
+from fcu.onboard_log import OnboardLog
 from gcs.mission_files import write_mission
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,7 +54,7 @@ def mission(n: int) -> list[MissionItem]:
             item(n - 1, MAV_CMD.MAV_CMD_NAV_LAND, z=0.0)]
 
 
-class _TimedLog(inprocess.OnboardLog):
+class _TimedLog(OnboardLog):
     """The onboard log, with the time of each control step (the pipeline's `step`, then the
     log's) kept by flight time."""
 
@@ -91,12 +92,12 @@ def fly(n: int, duration_s: float, folder: Path) -> dict[str, Any]:
         logs.append(log)
         return log
 
-    original = inprocess.OnboardLog
-    inprocess.OnboardLog = timed_log  # type: ignore[misc, assignment]
+    original = inprocess.OnboardLog  # type: ignore[attr-defined]
+    inprocess.OnboardLog = timed_log  # type: ignore[attr-defined, assignment]
     try:
         result = inprocess.run_scenario(scenario)
     finally:
-        inprocess.OnboardLog = original  # type: ignore[misc]
+        inprocess.OnboardLog = original  # type: ignore[attr-defined]
     start_us = round(result.metrics["alignment_s"] * 1e6)
     flying = {int(t) for t in result.onboard[:, ONBOARD_COLUMNS.index("time_us")]}
     spent = [(t_us, us) for t_us, us in logs[0].spent_us.items() if t_us > start_us]
