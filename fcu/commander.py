@@ -34,6 +34,7 @@ from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE
 from fcu import auto_plans
+from fcu.mission.codes import MAV_MISSION_DENIED, result_name
 from fcu.mission.executor import MissionExecutor
 from fcu.mode_references import ModeReferences
 
@@ -261,7 +262,7 @@ class Commander(ModeReferences):
             self.mission_running = False
             self.mode = Mode.HOLD
             self.hold = start
-            return f"mission refused from here: {refused}"
+            return f"mission refused from here: {result_name(MAV_MISSION_DENIED)}: {refused}"
         self.executor = executor
         self.mission_running = True
         return ""

@@ -35,6 +35,7 @@ TILT = "tilt servo"
 TILT_STEP = "tilt step"
 ROTOR_FLOOR = "rotor floor"
 KINDS = (ROTOR, ROTOR_LAG, ROTOR_DOWN, TILT, TILT_STEP, ROTOR_FLOOR)  # `excess_kernel`'s codes
+FLOOR_HOVER_SHARE = 0.8  # `excess_kernel`: the floor at attitudes that hover below it
 TINY = 1e-12  # squared allocation below which a rotor has no direction
 
 
@@ -53,7 +54,8 @@ def excess_kernel(om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray, dom1: np.n
     vertical part through zero) the tilt's derivative is zero at every sample, yet it turns
     half a revolution between two. A rotor slower than `floor` counts as floor / speed
     (the feedback's room below the feed-forward: it cannot lower a thrust that is
-    already near zero without reversing it)."""
+    already near zero without reversing it); where hovering at the sample's attitude
+    already takes it below the floor, the floor is FLOOR_HOVER_SHARE of that hover speed."""
     u = 1.0 / (duration * duration)
     inv_d = 1.0 / duration
     best, kind, rotor, sample, need, lim = -1.0, 0, 0, 0, 0.0, 0.0
@@ -80,9 +82,14 @@ def excess_kernel(om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray, dom1: np.n
             if sq > TINY:
                 w_rate = (lat * dlat + ver * dver) / (2.0 * w * sq) * inv_d
                 tilt_rate = (ver * dlat - lat * dver) / sq * inv_d
-            if floor > 0.0 and floor / max(w, TINY) > best:
-                best, kind, need, lim = floor / max(w, TINY), 5, w, floor
-                rotor, sample = i, k
+            if floor > 0.0:
+                # at an attitude where hovering already takes a rotor below the floor, the
+                # motion may slow it to FLOOR_HOVER_SHARE of that hover speed
+                w0 = math.sqrt(math.sqrt(om0[k, 2 * i] ** 2 + om0[k, 2 * i + 1] ** 2))
+                low = min(floor, FLOOR_HOVER_SHARE * w0)
+                if low > 0.0 and low / max(w, TINY) > best:
+                    best, kind, need, lim = low / max(w, TINY), 5, w, low
+                    rotor, sample = i, k
             c = w + tau_up * w_rate if w_rate > 0.0 else w
             if c / limit > best:
                 best, kind, need, lim = c / limit, 1 if w <= limit < c else 0, c, limit

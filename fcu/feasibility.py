@@ -18,12 +18,14 @@ MODEL.md section 2). The actuators' models (MODEL.md 2, as the plant has them) l
   ends at rest with an acceleration (a figure-infinity), the tilt step there within what the
   servo turns in TILT_STEP_S ("tilt step").
 
-FLOOR = 0.15: no rotor may be slowed below 15 % of its speed limit (`ROTOR_FLOOR`; 2 % of its
-thrust, 5-7 % of what it takes in level hover on the presets), so that the feedback can still
-lower a thrust without reversing it; a braking climb on planar rotors may then decelerate at
-about 0.9 g. Hovering at some attitudes of a figure already takes a rotor to a third of its
-level-hover speed (333 rad/s on the planar preset), so the floor cannot be much higher. A
-reversal itself, where a rotor's thrust passes through zero and its tilt turns half a
+FLOOR = 0.25: no rotor may be slowed below 25 % of its speed limit (`ROTOR_FLOOR`; 6 % of its
+thrust, 15-18 % of what it takes in level hover on the presets), so that the feedback can
+still lower a thrust without reversing it: a climb on planar rotors may then brake, and a
+descent start, at about 0.8 g (at 0.93 g, the floor at 15 %, a 0.3 m descent at 1.3 m/s
+flipped every servo on the planar preset). Where hovering at a path's attitude already
+takes a rotor below that (333 rad/s on the planar preset at some attitudes of a figure),
+the floor there is 80 % of that hover speed (`FLOOR_HOVER_SHARE`). A reversal itself, where
+a rotor's thrust passes through zero and its tilt turns half a
 revolution between two samples, is caught by each tilt's mean rate from one sample to the
 next (`excess_kernel`).
 
@@ -92,7 +94,7 @@ from fcu.tracker import Reference
 
 MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
 TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may use
-FLOOR = 0.15  # share of w_max below which the feed-forward may not slow a rotor
+FLOOR = 0.25  # share of w_max below which the feed-forward may not slow a rotor
 TILT_STEP_S = 0.05  # a tilt step at a path's end may take the servo this long at its rate
 DIFF_STEP = 1e-6  # sigma step of the central differences of a 1 s path
 GRID_RATIO = 1.1  # `TimeScaling.shortest`: durations tried from the speed bound up

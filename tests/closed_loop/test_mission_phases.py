@@ -124,7 +124,8 @@ def test_a_start_away_from_home_is_checked_from_there(tmp_path, vehicle):
     with pytest.raises(InProcessError) as refused:
         run_scenario(sc, logs=False)
     text = str(refused.value)
-    assert "mission refused from here: item 1: tilt servo" in text and "lengthen p1 to" in text
+    assert "mission refused from here: MAV_MISSION_DENIED: item 1: tilt servo" in text
+    assert "lengthen p1 to" in text
     assert refused.value.result is not None
     assert refused.value.result.metrics["status"] == "aborted"
     home = _scenario(tmp_path, vehicle, 2.0, 0.5, 12.0, KEYFRAME_HOME)

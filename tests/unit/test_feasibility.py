@@ -424,15 +424,15 @@ def test_a_climb_that_brakes_beyond_g_does_not_fit_on_planar_rotors(height_m):
 
 def test_a_rotor_slowed_below_the_floor_is_named():
     """Given the planar climb of 0.5 m flown 1 % faster than its shortest duration, then the
-    excess is the rotor floor (15 % of 1700 rad/s), explained with the speed it would slow
+    excess is the rotor floor (25 % of 1700 rad/s), explained with the speed it would slow
     to; 10 % faster the thrust reverses and a tilt servo is named."""
     env = envelope(PLANAR)
     seg = _Move(0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.5), LEVEL, None, 0.5, 0.0)
     sc = env.scaling(seg)
     excess = sc.excess(sc.shortest() * 0.99)
     assert excess.kind == "rotor floor" and 1.0 < excess.ratio < 1.5, excess
-    assert excess.limit == pytest.approx(255.0) and excess.need < 255.0
+    assert excess.limit == pytest.approx(425.0) and excess.need < 425.0
     assert env.explain(excess) == (f"rotor {excess.number} slows to {excess.need:.0f} rad/s, "
-                                   "floor 255 (15% of 1700: its thrust would near zero or "
+                                   "floor 425 (25% of 1700: its thrust would near zero or "
                                    "reverse)")
     assert sc.excess(sc.shortest() * 0.9).kind == "tilt servo"
