@@ -16,23 +16,9 @@ from gcs.inprocess import apply_overrides, run_scenario
 from gcs.metrics import ERROR_ROWS_RULE
 
 from .conftest import SCENARIOS
+from .test_actuator_limits import LEG
 
-# A takeoff to 3 m, then one 2 m leg at the cruise speed (2 m/s) flown as timed, the
-# envelope check off (MIS_ENV_CHK 0): its start needs more tilt rate than the servos have.
-LEG = """format = "dqflight-mission-1"
-
-[[item]]
-type = "takeoff"
-altitude_ned_z_m = -3.0
-climb_time_s = 0.0
-yaw_deg = nan
-
-[[item]]
-type = "waypoint"
-position_ned_m = [2.0, 0.0, -3.0]
-hold_s = 2.0
-yaw_deg = nan
-"""
+# LEG: a takeoff to 3 m, then a 2 m leg at 2 m/s flown as timed (the envelope check off)
 
 
 def _leg_scenario(tmp_path: Path) -> Path:
