@@ -24,7 +24,10 @@ The rule, in samples between the stamps of accepted answers (`intervals`, a hist
   cadence has grown (PX4 answers every sample while it starts, then settles on its
   rate-limited cadence) needs that sample before it answers, and its answer, stamped
   where it came, lengthens `longest`. A firmware that was only slow answers with the
-  earlier stamp, which applies from the next step and leaves `longest` as it was;
+  earlier stamp, which applies from the next step and leaves `longest` as it was; it
+  also doubles the grace (`grace_scale`, up to MAX_GRACE_SCALE and half the timeout):
+  on a busy machine the firmware's own latency sets how long the plant waits, and
+  stepping past a slow answer happens a few times per run at most;
 - an answer that does not come at all (`skip`: the caller's 1 s of wall time since the
   wait began, as Gazebo's poll timeout) drops what was learned: the plant paces by the
   wall clock, as while PX4 starts, and learns the cadence again from the answers that
@@ -38,6 +41,7 @@ from __future__ import annotations
 from enum import Enum
 
 LEARN_WINDOW = 8  # intervals in each half of the learning window
+MAX_GRACE_SCALE = 8  # the grace grows to at most this many times the caller's
 
 
 class Answer(Enum):
@@ -64,6 +68,10 @@ class AnswerSchedule:
             raise ValueError("imu_us must be positive")
         self.imu_us = imu_us
         self.intervals: dict[int, int] = {}  # samples between accepted answers -> count
+        self.grace_scale = 1  # doubled by each answer that was slow, not longer (the run's)
+        self.slow_answers = 0  # answers that came after the plant stepped past them
+        self.slow_waits = 0  # waits that ended so (each doubled the grace)
+        self.slow_steps = 0  # the steps taken past them (in those waits)
         self.reset()
 
     def reset(self) -> None:
@@ -76,6 +84,8 @@ class AnswerSchedule:
         self._wait_s: float | None = None  # wall time the wait for the answer due began
         self._wait_from_us: int | None = None  # the latest accepted answer then
         self._grace_s = 0.0  # wall time of the latest `step_past` (or the wait's start)
+        self._steps_past = 0  # `step_past` calls since the latest accepted answer
+        self._past_us: int | None = None  # the latest sample stepped to past an answer due
 
     @property
     def learned(self) -> bool:
@@ -94,7 +104,18 @@ class AnswerSchedule:
         self.last_us = stamp_us
         if self.longest is not None:
             self.due_us = self._next_due(stamp_us, sent_us)
-        return Answer.ON_TIME if stamp_us == sent_us else Answer.LATE
+        kind = Answer.ON_TIME if stamp_us == sent_us else Answer.LATE
+        past = self._past_us
+        if past is not None and stamp_us < past:  # slow, not longer: the plant stepped past
+            self.slow_answers += 1
+            if self._steps_past:  # the first of them: wait longer from now on
+                self.slow_waits += 1
+                self.slow_steps += self._steps_past
+                self.grace_scale = min(2 * self.grace_scale, MAX_GRACE_SCALE)
+        else:
+            self._past_us = None
+        self._steps_past = 0
+        return kind
 
     def _interval(self, interval: int) -> None:
         self.intervals[interval] = self.intervals.get(interval, 0) + 1
@@ -125,8 +146,10 @@ class AnswerSchedule:
     def wait_at(self, sent_us: int, now_s: float, grace_s: float,
                 timeout_s: float) -> tuple[Wait, float]:
         """At the latest sample sent and the wall time `now_s`: step, wait (until the time
-        returned), step past after `grace_s` without the answer due, or give up (`skip`)
-        `timeout_s` after the wait began; an answer accepted meanwhile ends the wait."""
+        returned), step past after the grace (`grace_s` times `grace_scale`, at most half of
+        `timeout_s`) without the answer due, or give up (`skip`) `timeout_s` after the wait
+        began; an answer accepted meanwhile ends the wait."""
+        grace_s = min(grace_s * self.grace_scale, 0.5 * timeout_s)
         if self._wait_s is not None and self.last_us != self._wait_from_us:
             self._wait_s = None  # an answer came since the wait began
         if self.last_us == sent_us or not self.waits_at(sent_us):
@@ -147,6 +170,8 @@ class AnswerSchedule:
         """The answer due has not come yet: wait for it one sample later."""
         assert self.due_us is not None
         self.due_us += self.imu_us
+        self._steps_past += 1
+        self._past_us = self.due_us
 
     def skip(self) -> None:
         """The answer due did not come: learn the cadence again (the plant paces by the

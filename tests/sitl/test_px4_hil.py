@@ -202,7 +202,10 @@ def test_lockstep_held_over_the_flight(flight):
     assert s["steps"] + s["paced_steps"] == FLIGHT_S * 1e6 // IMU_US
     assert s["paced_steps"] >= first // IMU_US + 2  # the period: two equal intervals
     assert (s["stale_answers"], s["extra_answers"], s["time_mismatches"]) == (0, 0, 0)
-    assert (s["late_answers"], s["stall_reports"]) == (0, 0)
+    # late answers only where the plant stepped past an answer that was slow (a busy
+    # machine), each doubling the grace: a few per run at most
+    assert s["late_answers"] == s["slow_answers"] and s["slow_waits"] <= 4
+    assert s["stall_reports"] == 0
     assert s["sent"]["hil_sensor"] == len(r.samples)
     assert (s["rejected_bytes"], s["other_messages"], s["answer_waits"]) == (0, 0, 0)
     print(f"px4-hil lockstep: {s['steps']} steps, {s['sent']['hil_sensor']} HIL_SENSOR, "
@@ -492,7 +495,9 @@ def test_imu_rates_fly_takeoff_hold_land(tmp_path, imu_hz, period):
     s = server.stats()
     assert r.violations == [] and r.stale == {}
     assert (s["answer_period_samples"], s["answer_waits"], s["stall_reports"]) == (period, 0, 0)
-    assert (s["late_answers"], s["stale_answers"], s["extra_answers"]) == (0, 0, 0)
+    assert (s["stale_answers"], s["extra_answers"]) == (0, 0)
+    # late only where it stepped past a slow answer (a busy machine), a few times at most
+    assert s["late_answers"] == s["slow_answers"] and s["slow_waits"] <= 4
     assert s["sim_time_s"] == 8.0
     assert np.all(np.diff(r.answers) % (period * round(1e6 / imu_hz)) == 0)
     t, z = rows[:, c["time_us"]], rows[:, c["pz"]]
@@ -532,7 +537,8 @@ def test_one_answer_not_sent_is_stepped_past_without_a_stall(tmp_path, capfd):
     s = server.stats()
     assert side.withheld == 2_000_000
     assert "no answer" not in capfd.readouterr().err
-    assert (s["answer_waits"], s["stall_reports"], s["grace_steps"]) == (0, 0, 4)
+    assert (s["answer_waits"], s["stall_reports"]) == (0, 0)
+    assert s["grace_steps"] - s["slow_steps"] == 4  # slow answers (a busy machine) aside
     assert (s["answer_period_samples"], s["answer_interval_longest"]) == (4, 8)
     assert s["sim_time_s"] == 4.0 and r.violations == []
     assert rows[-1, 0] == 4_000_000
@@ -573,7 +579,7 @@ def test_px4s_start_up_cadence_is_outgrown_without_a_stall(tmp_path, capfd, imu_
     assert "no answer" not in capfd.readouterr().err
     assert (s["answer_waits"], s["stall_reports"], s["sim_time_s"]) == (0, 0, 8.0)
     assert s["answer_period_samples"] == 1 and s["answer_interval_longest"] == longest
-    assert 1 <= s["grace_steps"] <= longest
+    assert 1 <= s["grace_steps"] - s["slow_steps"] <= longest
     assert r.violations == [] and r.stale == {}
     assert s["steps"] > 0.85 * 8.0 * imu_hz  # in lockstep, not on the wall clock
     t, z = rows[:, c["time_us"]], rows[:, c["pz"]]

@@ -308,3 +308,33 @@ def test_the_wait_for_an_answer_steps_past_then_gives_up_on_the_wall_clock():
         assert wait is Wait.STEP_PAST
         sent = s.due_us
     assert s.wait_at(sent, 12.0, 0.05, 1.0)[0] is Wait.GIVE_UP and not s.learned
+
+
+def test_an_answer_that_was_only_slow_doubles_the_grace():
+    """Given a learned cadence of 1 sample and an answer that comes after the plant stepped
+    past it, stamped at the sample it was due at (slow, not longer), then it is late, the
+    cadence stays, and the grace doubles, up to MAX_GRACE_SCALE times and half the
+    timeout; an answer that needed the sample stepped to changes no grace."""
+    from sitl.px4_lockstep import MAX_GRACE_SCALE, Wait
+    s = AnswerSchedule(1000)
+    for k in range(1, 2 * LEARN_WINDOW + 2):
+        s.accept(1000 * k, 1000 * k)
+    sent = 1000 * (2 * LEARN_WINDOW + 2)
+    assert s.wait_at(sent, 0.0, 0.05, 1.0) == (Wait.WAIT, 0.05)
+    assert s.wait_at(sent, 0.05, 0.05, 1.0)[0] is Wait.STEP_PAST
+    assert s.accept(sent, sent + 1000) is Answer.LATE  # the answer due, after the step
+    assert (s.longest, s.grace_scale, s.slow_answers, s.slow_steps) == (1, 2, 1, 1)
+    sent = s.due_us
+    assert s.wait_at(sent, 1.0, 0.05, 1.0) == (Wait.WAIT, pytest.approx(1.1))
+    assert s.wait_at(sent, 1.1, 0.05, 1.0)[0] is Wait.STEP_PAST
+    assert s.accept(sent + 1000, sent + 1000) is Answer.ON_TIME  # it needed that sample
+    assert (s.longest, s.grace_scale, s.slow_answers) == (2, 2, 1)
+    for k in range(6):
+        sent = s.due_us
+        t = 10.0 + k
+        wait, until = s.wait_at(sent, t, 0.05, 1.0)
+        assert wait is Wait.WAIT
+        assert until == pytest.approx(t + min(0.05 * s.grace_scale, 0.5))
+        assert s.wait_at(sent, until + 1e-9, 0.05, 1.0)[0] is Wait.STEP_PAST
+        assert s.accept(sent, sent + 1000) is Answer.LATE
+    assert s.grace_scale == MAX_GRACE_SCALE and s.slow_answers == s.slow_waits == 7
