@@ -1,10 +1,14 @@
 """The ground-station side of the MAVLink mission protocol over a pymavlink `mavutil`
 connection: upload, download and clear (https://mavlink.io/en/services/mission.html).
 
-Timeouts and retries are the specification's: 1500 ms for the whole-transaction steps
-(MISSION_COUNT, MISSION_REQUEST_LIST, MISSION_CLEAR_ALL), 250 ms per mission item, 5 retries;
-each timeout resends the last message. Messages from other systems, for other systems or
-about other plan types are skipped. Wall-clock time is fine here: the GCS faces links.
+How long each answer is waited for is the station's policy (`gcs.patience`): the last
+message is re-sent at the specification's timeouts (1500 ms for the whole-transaction steps
+MISSION_COUNT, MISSION_REQUEST_LIST, MISSION_CLEAR_ALL; 250 ms per mission item) for as long
+as the vehicle is heard (any message of its system: a vehicle checking a mission still sends
+its HEARTBEAT), and the transaction fails only when the vehicle falls silent (SILENCE_S) or
+an answer has not come within its ceiling (30 s), the error saying which. Messages from
+other systems, for other systems or about other plan types are skipped. Wall-clock time is
+fine here: the GCS faces links.
 
 Lossy links duplicate and delay answers, and MAVLink 2 as pymavlink knows it has no
 transaction id (no `opaque_id`), so answers of an earlier transaction can arrive during the
@@ -26,7 +30,6 @@ chunked texts (MAVLink 2 `id`, `chunk_seq`) are put back together.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple, Protocol
@@ -34,16 +37,16 @@ from typing import Any, NamedTuple, Protocol
 import common.mavlink  # noqa: F401  (pins MAVLink 2 before anything imports mavutil)
 from common.mavlink import MAV
 from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
+from gcs.patience import MISSION_ITEM, MISSION_STEP, SILENCE_S, Budget, Wait
 
 M = MAV
 MISSION = M.MAV_MISSION_TYPE_MISSION
-TIMEOUT_S = 1.5
-ITEM_TIMEOUT_S = 0.25
-RETRIES = 5
+TIMEOUT_S = MISSION_STEP.resend_s  # the spec's whole-transaction timeout: re-send after it
+ITEM_TIMEOUT_S = MISSION_ITEM.resend_s  # the spec's per-item timeout
+CEILING_S = MISSION_ITEM.ceiling_s  # an answer not come by then is given up, heard or not
 # After the last item a vehicle may check the whole mission before its MISSION_ACK (this
-# FCU's envelope check, ArduPilot's and PX4's storage): the station keeps asking, every
-# try's wait, for up to this long in all before it gives up on the answer.
-FINAL_ACK_S = 10.0
+# FCU's envelope check, ArduPilot's and PX4's storage): like every answer it is waited for
+# while the vehicle is heard, up to CEILING_S.
 SETTLE_S = 0.05  # a transaction starts after this long without a stale mission answer
 _ANSWERS = {"MISSION_ACK", "MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_COUNT",
             "MISSION_ITEM", "MISSION_ITEM_INT"}
@@ -104,18 +107,23 @@ def _drain(conn: Connection, target_system: int, quiet_s: float, limit_s: float 
 
 
 def _recv(conn: Connection, types: list[str], target_system: int, target_component: int,
-          timeout_s: float) -> Any:
-    """The next message of `types` from the target about missions, or None on timeout."""
+          timeout_s: float, wait: Wait | None = None) -> Any:
+    """The next message of `types` from the target about missions, or None on timeout;
+    every message of the target's system heard meanwhile is noted in `wait`."""
     deadline = time.monotonic() + timeout_s
     me = conn.mav.srcSystem
     while True:
         remaining = deadline - time.monotonic()
         if remaining <= 0.0:
             return None
-        msg = conn.recv_match(type=types, blocking=True, timeout=remaining)
-        if msg is None:
+        msg = conn.recv_match(blocking=True, timeout=remaining)
+        if msg is None or msg.get_type() == "BAD_DATA":
             continue  # loop to the deadline check
         if msg.get_srcSystem() != target_system:
+            continue
+        if wait is not None:
+            wait.heard()
+        if msg.get_type() not in types:
             continue
         if target_component and msg.get_srcComponent() != target_component:
             continue
@@ -201,22 +209,33 @@ class UploadResult(NamedTuple):
         return ": ".join([result_name(self.result), *self.notes])
 
 
+def _budgets(timeout_s: float, item_timeout_s: float, silence_s: float,
+             ceiling_s: float) -> tuple[Budget, Budget]:
+    """The transaction step's and the item's budgets with the caller's figures."""
+    return (MISSION_STEP.but(resend_s=timeout_s, silence_s=silence_s, ceiling_s=ceiling_s),
+            MISSION_ITEM.but(resend_s=item_timeout_s, silence_s=silence_s,
+                             ceiling_s=ceiling_s))
+
+
 def upload(conn: Connection, target_system: int, target_component: int,
            items: Sequence[MissionItem],
            progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
-           item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = RETRIES,
-           send: Send | None = None, settle_s: float = SETTLE_S,
-           notes: list[str] | None = None) -> int:
+           item_timeout_s: float = ITEM_TIMEOUT_S, silence_s: float = SILENCE_S,
+           ceiling_s: float = CEILING_S, send: Send | None = None,
+           settle_s: float = SETTLE_S, notes: list[str] | None = None) -> int:
     """Upload `items` (sent with seq = their index) and return the vehicle's
     MAV_MISSION_RESULT (MAV_MISSION_ACCEPTED when it took the mission); the texts of the
     STATUSTEXT it sent meanwhile are appended to `notes` when given (`upload_detailed`).
 
-    Raises MissionError when the vehicle stops answering (after `retries` resends of the
-    last message) or asks for an item outside the mission.
+    The last message is re-sent each `timeout_s` (MISSION_COUNT) or `item_timeout_s` (an
+    item) without an answer. Raises MissionError when the vehicle falls silent for
+    `silence_s`, when an answer has not come within `ceiling_s`, or when it asks for an
+    item outside the mission.
     """
     answer = upload_detailed(conn, target_system, target_component, items, progress,
                              timeout_s=timeout_s, item_timeout_s=item_timeout_s,
-                             retries=retries, send=send, settle_s=settle_s)
+                             silence_s=silence_s, ceiling_s=ceiling_s, send=send,
+                             settle_s=settle_s)
     if notes is not None:
         notes.extend(answer.notes)
     return answer.result
@@ -225,49 +244,47 @@ def upload(conn: Connection, target_system: int, target_component: int,
 def upload_detailed(conn: Connection, target_system: int, target_component: int,
                     items: Sequence[MissionItem], progress: Progress | None = None, *,
                     timeout_s: float = TIMEOUT_S, item_timeout_s: float = ITEM_TIMEOUT_S,
-                    retries: int = RETRIES, send: Send | None = None,
-                    settle_s: float = SETTLE_S) -> UploadResult:
+                    silence_s: float = SILENCE_S, ceiling_s: float = CEILING_S,
+                    send: Send | None = None, settle_s: float = SETTLE_S) -> UploadResult:
     """`upload`, returning the result with the STATUSTEXT texts that the target system sent
     during the upload (a refusal's reason comes just before the MISSION_ACK).
 
     Raises MissionError as `upload` does.
     """
     _send = _sender(conn, send)
+    step, per_item = _budgets(timeout_s, item_timeout_s, silence_s, ceiling_s)
     texts = StatusTexts()
     items = [item._replace(seq=i, mission_type=MISSION) for i, item in enumerate(items)]
     count = len(items)
     _drain(conn, target_system, settle_s)
     last = M.MAVLink_mission_count_message(target_system, target_component, count, MISSION)
     _send(last)
-    wait, attempts, done = timeout_s, 0, -1  # done: highest seq requested so far
-    deadline = time.monotonic() + wait
+    wait, done = Wait(step), -1  # done: highest seq requested so far
     types = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "STATUSTEXT"]
     while True:
-        msg = _recv(conn, types, target_system, target_component,
-                    deadline - time.monotonic())
+        if wait.due() and not wait.expired():
+            _send(last)
+            wait.sent()
+        msg = _recv(conn, types, target_system, target_component, wait.left(), wait)
         if msg is not None and msg.get_type() == "STATUSTEXT":
             texts.add(msg)
             continue
         if msg is None:
-            attempts += 1
-            limit = retries if done < count - 1 else max(retries, math.ceil(FINAL_ACK_S / wait))
-            if attempts > limit:
+            if why := wait.expired():
                 _send(M.MAVLink_mission_ack_message(
                     target_system, target_component, M.MAV_MISSION_OPERATION_CANCELLED,
                     MISSION))
+                held = ""
                 if done < 0:
                     what = f"answer to MISSION_COUNT({count})"
                 elif done == count - 1:
-                    what = (f"MISSION_ACK after the last item ({done}); the vehicle may hold "
-                            "the new mission")
+                    what = f"MISSION_ACK after the last item ({done})"
+                    held = "; the vehicle may hold the new mission"
                 else:
                     what = f"request for the item after {done}"
                 said = "".join(f"; the vehicle said: {t}" for t in texts.texts)
-                raise MissionError(
-                    f"mission upload to system {target_system}: no {what} after "
-                    f"{limit + 1} tries ({wait * 1e3:.0f} ms each){said}")
-            _send(last)
-            deadline = time.monotonic() + wait
+                raise MissionError(f"mission upload to system {target_system}: no {what}"
+                                   f"{why}{wait.tries_text()}{held}{said}")
             continue
         if msg.get_type() == "MISSION_ACK":
             if msg.type == M.MAV_MISSION_ACCEPTED and done < count - 1:
@@ -283,57 +300,61 @@ def upload_detailed(conn: Connection, target_system: int, target_component: int,
                 target_system, target_component, M.MAV_MISSION_INVALID_SEQUENCE, MISSION))
             raise MissionError(f"mission upload to system {target_system}: vehicle asked for "
                                f"item {seq} of a mission of {count}")
-        if seq > done:  # progress: the vehicle holds items 0..seq-1
-            attempts = 0
+        if seq > done:  # progress: the vehicle holds items 0..seq-1; the next answer's wait
             done = seq
+            wait = Wait(per_item)
             if progress is not None:
                 progress(seq, count)
+        else:  # a repeated request (ours or its re-request): the wait goes on
+            wait.sent()
         last = item_message(items[seq], target_system, target_component)
         _send(last)
-        wait = item_timeout_s
-        deadline = time.monotonic() + wait
 
 
 def download(conn: Connection, target_system: int, target_component: int,
              progress: Progress | None = None, *, timeout_s: float = TIMEOUT_S,
-             item_timeout_s: float = ITEM_TIMEOUT_S,
-             retries: int = RETRIES, send: Send | None = None,
+             item_timeout_s: float = ITEM_TIMEOUT_S, silence_s: float = SILENCE_S,
+             ceiling_s: float = CEILING_S, send: Send | None = None,
              settle_s: float = SETTLE_S) -> list[MissionItem]:
-    """The vehicle's mission. Raises MissionError when it stops answering or refuses, or
-    when its mission changes during the download."""
+    """The vehicle's mission. Each request is re-sent as `upload`'s are; MissionError when
+    the vehicle falls silent, an answer does not come within the ceiling, it refuses, or
+    its mission changes during the download."""
     _send = _sender(conn, send)
+    step, per_item = _budgets(timeout_s, item_timeout_s, silence_s, ceiling_s)
     _drain(conn, target_system, settle_s)
     counts: list[int] = []
 
-    def exchange(request: Any, types: list[str], wait: float, accept: Callable[[Any], bool],
-                 what: str) -> Any:
-        for _ in range(retries + 1):
-            _send(request)
-            deadline = time.monotonic() + wait
-            while (remaining := deadline - time.monotonic()) > 0.0:
-                msg = _recv(conn, types, target_system, target_component, remaining)
-                if msg is None:
-                    break
-                if msg.get_type() == "MISSION_ACK":
-                    if msg.type == M.MAV_MISSION_ACCEPTED:
-                        continue  # a late ACK of an earlier transaction
-                    raise MissionError(f"mission download from system {target_system}: "
-                                       f"{what} refused: {result_name(msg.type)}")
-                if msg.get_type() == "MISSION_COUNT" and counts:
-                    if msg.count != counts[0]:
-                        raise MissionError(
-                            f"mission download from system {target_system}: MISSION_COUNT "
-                            f"{counts[0]}, then {msg.count}: the mission changed (or an "
-                            "answer was stale); try again")
-                    continue  # a duplicate of the count we have
-                if accept(msg):
-                    return msg
+    def exchange(request: Any, types: list[str], budget: Budget,
+                 accept: Callable[[Any], bool], what: str) -> Any:
+        _send(request)
+        wait = Wait(budget)
+        while not (why := wait.expired()):
+            if wait.due():
+                _send(request)
+                wait.sent()
+            msg = _recv(conn, types, target_system, target_component, wait.left(), wait)
+            if msg is None:
+                continue
+            if msg.get_type() == "MISSION_ACK":
+                if msg.type == M.MAV_MISSION_ACCEPTED:
+                    continue  # a late ACK of an earlier transaction
+                raise MissionError(f"mission download from system {target_system}: "
+                                   f"{what} refused: {result_name(msg.type)}")
+            if msg.get_type() == "MISSION_COUNT" and counts:
+                if msg.count != counts[0]:
+                    raise MissionError(
+                        f"mission download from system {target_system}: MISSION_COUNT "
+                        f"{counts[0]}, then {msg.count}: the mission changed (or an "
+                        "answer was stale); try again")
+                continue  # a duplicate of the count we have
+            if accept(msg):
+                return msg
         raise MissionError(f"mission download from system {target_system}: no answer to "
-                           f"{what} after {retries + 1} tries ({wait * 1e3:.0f} ms each)")
+                           f"{what}{why}{wait.tries_text()}")
 
     count_msg = exchange(
         M.MAVLink_mission_request_list_message(target_system, target_component, MISSION),
-        ["MISSION_COUNT", "MISSION_ACK"], timeout_s, lambda m: True, "MISSION_REQUEST_LIST")
+        ["MISSION_COUNT", "MISSION_ACK"], step, lambda m: True, "MISSION_REQUEST_LIST")
     count = count_msg.count
     counts.append(count)
     items: list[MissionItem] = []
@@ -342,8 +363,7 @@ def download(conn: Connection, target_system: int, target_component: int,
             M.MAVLink_mission_request_int_message(target_system, target_component, seq,
                                                   MISSION),
             ["MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK", "MISSION_COUNT"],
-            item_timeout_s,
-            _is_item(seq), f"the request for item {seq} of {count}")
+            per_item, _is_item(seq), f"the request for item {seq} of {count}")
         items.append(_item_from(msg))
         if progress is not None:
             progress(seq + 1, count)
@@ -353,19 +373,59 @@ def download(conn: Connection, target_system: int, target_component: int,
 
 
 def clear(conn: Connection, target_system: int, target_component: int, *,
-          timeout_s: float = TIMEOUT_S, retries: int = RETRIES, send: Send | None = None,
+          timeout_s: float = TIMEOUT_S, silence_s: float = SILENCE_S,
+          ceiling_s: float = CEILING_S, send: Send | None = None,
           settle_s: float = SETTLE_S) -> int:
-    """Clear the vehicle's mission; its MAV_MISSION_RESULT. MissionError if it is silent."""
+    """Clear the vehicle's mission; its MAV_MISSION_RESULT. MISSION_CLEAR_ALL is re-sent
+    each `timeout_s` without an answer; MissionError on silence or at the ceiling."""
+    return _one_answer(conn, target_system, target_component,
+                       M.MAVLink_mission_clear_all_message(target_system, target_component,
+                                                           MISSION),
+                       MISSION_STEP.but(resend_s=timeout_s, silence_s=silence_s,
+                                        ceiling_s=ceiling_s),
+                       send, settle_s, f"mission clear on system {target_system}")
+
+
+def set_current(conn: Connection, target_system: int, target_component: int, seq: int, *,
+                timeout_s: float = TIMEOUT_S, silence_s: float = SILENCE_S,
+                ceiling_s: float = CEILING_S, send: Send | None = None) -> int:
+    """MISSION_SET_CURRENT (the mission protocol's "set current item"): the `seq` that the
+    vehicle's MISSION_CURRENT then shows; re-sent each `timeout_s` until a MISSION_CURRENT
+    with `seq` comes, MissionError on silence or at the ceiling (a vehicle that refuses
+    keeps showing its own current item)."""
+    _send = _sender(conn, send)
+    request = M.MAVLink_mission_set_current_message(target_system, target_component, seq)
+    _send(request)
+    wait = Wait(MISSION_STEP.but(resend_s=timeout_s, silence_s=silence_s,
+                                 ceiling_s=ceiling_s))
+    while not (why := wait.expired()):
+        if wait.due():
+            _send(request)
+            wait.sent()
+        msg = _recv(conn, ["MISSION_CURRENT"], target_system, target_component,
+                    wait.left(), wait)
+        if msg is not None and msg.seq == seq:
+            return int(msg.seq)
+    raise MissionError(f"mission set current on system {target_system}: no MISSION_CURRENT "
+                       f"showing item {seq}{why}{wait.tries_text()}")
+
+
+def _one_answer(conn: Connection, target_system: int, target_component: int, request: Any,
+                budget: Budget, send: Send | None, settle_s: float, what: str) -> int:
+    """Send `request`, re-sent by `budget`, until its MISSION_ACK: its result."""
     _send = _sender(conn, send)
     _drain(conn, target_system, settle_s)
-    request = M.MAVLink_mission_clear_all_message(target_system, target_component, MISSION)
-    for _ in range(retries + 1):
-        _send(request)
-        msg = _recv(conn, ["MISSION_ACK"], target_system, target_component, timeout_s)
+    _send(request)
+    wait = Wait(budget)
+    while not (why := wait.expired()):
+        if wait.due():
+            _send(request)
+            wait.sent()
+        msg = _recv(conn, ["MISSION_ACK"], target_system, target_component, wait.left(),
+                    wait)
         if msg is not None:
             return int(msg.type)
-    raise MissionError(f"mission clear on system {target_system}: no MISSION_ACK after "
-                       f"{retries + 1} tries ({timeout_s * 1e3:.0f} ms each)")
+    raise MissionError(f"{what}: no MISSION_ACK{why}{wait.tries_text()}")
 
 
 def home_position(conn: Connection, target_system: int, target_component: int, *,

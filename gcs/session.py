@@ -13,6 +13,8 @@ project's own processes speak common): ArduPilot's own messages (EKF_STATUS_REPO
 for the telemetry a command needs, and `close` gives back what was changed.
 
 Wall-clock timeouts are fine here: the GCS faces people and links, not the lockstep path.
+How long an answer is waited for is `gcs.patience`'s policy: `last_heard` is when any
+message of the vehicle's system last came, whoever read it.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from common.mavlink import GCS_SYSID, MAV, MAV_COMP_ID_MISSIONPLANNER
 from gcs.autopilot import Autopilot, autopilot_of
 from gcs.autopilot import streams as _streams
 from gcs.autopilot.dialect import STATION_DIALECT as DIALECT
+from gcs.patience import COMMAND, Wait
 
 M = MAV
 TCP_CONNECT_S = 3.0  # a tcp: link that has not connected by then is reported, exit 1
@@ -232,6 +235,9 @@ class Session:
                 _log.write(msg)  # every message heard, whatever the caller waits for
             if msg.get_type() == "STATUSTEXT":  # kept whoever reads the link meanwhile
                 self.texts.append((time.monotonic(), msg.get_srcSystem(), str(msg.text)))
+            if self.target_system and msg.get_type() != "BAD_DATA" and \
+                    msg.get_srcSystem() == self.target_system:
+                self.last_heard = time.monotonic()  # the vehicle is alive (gcs.patience)
             _received(msg)
 
         self.conn.post_message = post_message
@@ -241,6 +247,7 @@ class Session:
         self.last_texts: list[str] = []  # STATUSTEXTs that came with the last command's ACK
         self.heartbeat_msg: Any = None  # the vehicle heartbeat that wait_vehicle took
         self.heartbeat_at = 0.0  # and when (monotonic seconds)
+        self.last_heard = 0.0  # the latest message of the target system (monotonic s)
         self.autopilot: Autopilot | None = None  # which autopilot that heartbeat came from
         self._streams = _streams.Streams()  # what request_streams changed on the link
         self._stop = threading.Event()
@@ -288,31 +295,48 @@ class Session:
             return
         raise GcsError(f"no vehicle heartbeat within {timeout:.0f} s")
 
-    def command(self, command: int, *params: float, timeout: float = 1.0,
-                retries: int = 3) -> int:
-        """COMMAND_LONG with retries (confirmation incremented); returns MAV_RESULT.
+    def command(self, command: int, *params: float, timeout: float = COMMAND.resend_s,
+                retries: int | None = None, ceiling_s: float = COMMAND.ceiling_s,
+                silence_s: float = COMMAND.silence_s) -> int:
+        """COMMAND_LONG, re-sent each `timeout` without an answer (confirmation
+        incremented, at most `retries` times when given); returns the final MAV_RESULT.
+        MAV_RESULT_IN_PROGRESS is not final: it stops the re-sends and the wait goes on for
+        the final answer (command protocol). GcsError when the vehicle falls silent for
+        `silence_s` or no final answer comes within `ceiling_s` (`gcs.patience`).
 
         The STATUSTEXTs the target sends meanwhile, and after a refusal until
         REFUSAL_TEXT_S passes without one, are kept in `last_texts`: a refusal's reason
         (`describe`)."""
         p = [*params, *([0.0] * (7 - len(params)))]
         self.last_texts = []
-        for confirmation in range(retries + 1):
-            self.send(M.MAVLink_command_long_message(self.target_system, self.target_component,
-                                                     command, confirmation, *p))
-            deadline = time.monotonic() + timeout
-            while time.monotonic() < deadline:
-                msg = self.recv(["COMMAND_ACK", "STATUSTEXT"],
-                                timeout=max(0.01, deadline - time.monotonic()))
-                if msg is None or msg.get_srcSystem() != self.target_system:
-                    continue
+        budget = COMMAND.but(resend_s=timeout, ceiling_s=ceiling_s, silence_s=silence_s)
+        wait, confirmation = Wait(budget), 0
+        self.send(M.MAVLink_command_long_message(self.target_system, self.target_component,
+                                                 command, confirmation, *p))
+        while not (why := wait.expired()):
+            msg = self.recv(["COMMAND_ACK", "STATUSTEXT"], timeout=wait.left())
+            wait.note_session(self)
+            if msg is not None and msg.get_srcSystem() == self.target_system:
+                wait.heard()
                 if msg.get_type() == "STATUSTEXT":
                     self.last_texts.append(msg.text)
                 elif msg.command == command:
-                    if msg.result not in (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_IN_PROGRESS):
+                    if msg.result == M.MAV_RESULT_IN_PROGRESS:
+                        wait.stop_resending()  # working on it: wait for the final answer
+                        continue
+                    if msg.result != M.MAV_RESULT_ACCEPTED:
                         self._texts_after(REFUSAL_TEXT_S)
                     return int(msg.result)
-        raise GcsError(f"no COMMAND_ACK for command {command} after {retries + 1} tries")
+            if wait.due() and not wait.expired():
+                if retries is not None and confirmation >= retries:
+                    why = ""  # the tries asked for are spent
+                    break
+                confirmation += 1
+                self.send(M.MAVLink_command_long_message(
+                    self.target_system, self.target_component, command,
+                    min(confirmation, 255), *p))
+                wait.sent()
+        raise GcsError(f"no COMMAND_ACK for command {command}{why}{wait.tries_text()}")
 
     def _texts_after(self, quiet_s: float) -> None:
         """Collect the target's STATUSTEXTs until none has come for `quiet_s`."""

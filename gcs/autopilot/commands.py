@@ -18,12 +18,15 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from common.mavlink import MAV
 from gcs.autopilot.dialect import Autopilot, ModeTarget
+from gcs.patience import MODE, Wait
 
 if TYPE_CHECKING:
     from gcs.session import Session
 
 M = MAV
-CONFIRM_S = 3.0  # how long a mode change waits for a HEARTBEAT that shows it
+# How long a mode change waits for a HEARTBEAT that shows it, at most (`gcs.patience`: a
+# vehicle silent for SILENCE_S meanwhile is given up on sooner).
+CONFIRM_S = MODE.ceiling_s
 DEFAULT_TAKEOFF_M = 10.0  # gcs takeoff and gcs mode TAKEOFF, metres above home
 STATE_S = 2.0  # how long takeoff waits for the landed state it asks for
 FRESH_HEARTBEAT_S = 1.5  # a HEARTBEAT this recent tells the armed state without waiting
@@ -62,11 +65,13 @@ def confirm_mode(session: Session, target: ModeTarget, timeout_s: float,
     ap = autopilot(session)
     seen = None
     kinds = ["HEARTBEAT", *HEIGHTS] if observe is not None else ["HEARTBEAT"]
-    end = time.monotonic() + timeout_s
-    while (left := end - time.monotonic()) > 0:
-        hb = session.recv(kinds, timeout=left)
+    wait = Wait(MODE.but(ceiling_s=timeout_s))
+    while not (why := wait.expired()):
+        hb = session.recv(kinds, timeout=wait.left())
+        wait.note_session(session)  # any message of the vehicle
         if hb is None or hb.get_srcSystem() != session.target_system:
             continue
+        wait.heard()
         if hb.get_type() != "HEARTBEAT":
             if observe is not None:
                 observe(hb)
@@ -77,6 +82,8 @@ def confirm_mode(session: Session, target: ModeTarget, timeout_s: float,
         if ap.same_mode(target.custom_mode, hb.custom_mode):
             _settle(session, observe)
             return
+    if why.startswith(":"):  # silence
+        raise NotConfirmed(f"not confirmed{why}")
     if seen is None:
         raise NotConfirmed(f"not confirmed: no HEARTBEAT within {timeout_s:g} s")
     raise NotConfirmed(f"not confirmed: the vehicle is in {ap.mode_name(seen.custom_mode)}")

@@ -64,9 +64,10 @@ def _mode(args: argparse.Namespace, session: Session) -> int:
     """Exit 0 once a HEARTBEAT shows the mode; 1 refused or not confirmed; 2 a name the
     autopilot does not have (with its names)."""
     from gcs.autopilot import UnknownMode
+    from gcs.autopilot.commands import CONFIRM_S
     from gcs.vehicle_link.actions import set_mode
 
-    confirm = 3.0 if args.wait is None else args.wait
+    confirm = CONFIRM_S if args.wait is None else args.wait
     _refuse_bare_offboard(session, args.name)
     try:
         result = set_mode(session, args.name, confirm_s=confirm)
@@ -95,10 +96,11 @@ def _refuse_bare_offboard(session: Session, name: str) -> None:
 
 
 def _takeoff(args: argparse.Namespace, session: Session) -> int:
+    from gcs.autopilot.commands import CONFIRM_S
     from gcs.vehicle_link.actions import takeoff
 
     progress = Progress()
-    confirm = 3.0 if args.wait is None else args.wait
+    confirm = CONFIRM_S if args.wait is None else args.wait
     result, height = takeoff(session, args.alt, reach_s=None if args.no_wait else
                                 args.timeout, tolerance_m=args.tolerance, confirm_s=confirm,
                                 report=lambda h: progress(f"takeoff: {h:.2f} m above home"))

@@ -1,5 +1,10 @@
 """Parameters in their real types: read all or one, set one, encoded as the vehicle
-carries integers (`gcs.param_wire`, chosen by its AUTOPILOT_VERSION or autopilot)."""
+carries integers (`gcs.param_wire`, chosen by its AUTOPILOT_VERSION or autopilot).
+
+Waits follow `gcs.patience`: a read or set is re-sent each PARAM.resend_s without its
+PARAM_VALUE and given up when the vehicle falls silent or at the ceiling (`timeout`); the
+list goes on while parameters come, re-requests what is missing when they pause, and is
+given up on silence or when no new parameter has come for its ceiling."""
 
 from __future__ import annotations
 
@@ -11,6 +16,7 @@ from typing import Any
 from common.mavlink import MAV
 from gcs import param_wire
 from gcs.autopilot import ARDUPILOT, autopilot_of
+from gcs.patience import PARAM, PARAM_LIST, Wait
 from gcs.session import GcsError, Session
 
 M = MAV
@@ -74,34 +80,44 @@ def _decoded(session: Session, raw: bytes, param_type: int) -> ParamValue:
     return ParamValue(param_wire.decode(raw, param_type, encoding), param_type)
 
 
-def param_values(session: Session, timeout: float = 5.0) -> dict[str, ParamValue]:
+def param_values(session: Session, timeout: float = PARAM_LIST.ceiling_s
+                 ) -> dict[str, ParamValue]:
     """All parameters with their types (PARAM_REQUEST_LIST), re-reading missing indices
-    once; `timeout` without a new parameter ends it.
+    when the stream pauses; given up when the vehicle falls silent or `timeout` passes
+    without a new parameter (`gcs.patience`).
 
     Only a PARAM_VALUE whose param_index is within param_count fills the list: ArduPilot
     also sends PARAM_VALUE with param_index 65535 (-1) for a parameter that changes or is
     read by name (its GCS_Param), and counting such an echo as an index ended the list
     one parameter short. The vehicle's latest param_count holds."""
     s = session
-    s.send(M.MAVLink_param_request_list_message(s.target_system, s.target_component))
+    request = M.MAVLink_param_request_list_message(s.target_system, s.target_component)
+    s.send(request)
     values: dict[int, tuple[str, bytes, int]] = {}
     count = None
-    deadline = time.monotonic() + timeout
-    quiet_until = time.monotonic() + 1.0
-    while time.monotonic() < deadline:
-        msg = s.recv(["PARAM_VALUE"], timeout=0.2)
+    wait = Wait(PARAM_LIST.but(ceiling_s=timeout))  # its ceiling restarts at each new one
+    quiet_until = time.monotonic() + PARAM_LIST.resend_s
+    why = ""
+    while not (why := wait.expired()):
+        msg = s.recv(["PARAM_VALUE"], timeout=min(0.2, wait.left()))
+        wait.note_session(s)
         if msg is None:
-            if count is not None and time.monotonic() > quiet_until:
-                missing = [i for i in range(count) if i not in values]
-                if not missing:
-                    break
-                for i in missing:  # the spec's recovery: request what did not arrive
-                    s.send(M.MAVLink_param_request_read_message(
-                        s.target_system, s.target_component, b"", i))
-                quiet_until = time.monotonic() + 1.0
+            if time.monotonic() > quiet_until:
+                if count is None:  # nothing yet: ask again
+                    s.send(request)
+                    wait.sent()
+                else:
+                    missing = [i for i in range(count) if i not in values]
+                    if not missing:
+                        break
+                    for i in missing:  # the spec's recovery: request what did not arrive
+                        s.send(M.MAVLink_param_request_read_message(
+                            s.target_system, s.target_component, b"", i))
+                quiet_until = time.monotonic() + PARAM_LIST.resend_s
             continue
         if msg.get_srcSystem() != s.target_system:
             continue
+        wait.heard()
         if count != msg.param_count:  # the first, or the vehicle's count changed
             count = msg.param_count
             values = {i: v for i, v in values.items() if i < count}
@@ -109,50 +125,59 @@ def param_values(session: Session, timeout: float = 5.0) -> dict[str, ParamValue
         if not 0 <= index < count:  # 65535: an echo of a set or of a read by name
             continue
         if index not in values:
-            deadline = max(deadline, time.monotonic() + timeout)
+            wait.start = time.monotonic()  # progress: the ceiling counts from here
         values[index] = (msg.param_id, param_wire.raw_value(msg), msg.param_type)
         quiet_until = time.monotonic() + 0.3
         if len(values) == count:
             break
     if count is None:
-        raise GcsError("no PARAM_VALUE answered PARAM_REQUEST_LIST")
+        raise GcsError(f"no PARAM_VALUE answered PARAM_REQUEST_LIST{why}")
     if len(values) != count:
-        raise GcsError(f"received {len(values)} of {count} parameters")
+        raise GcsError(f"received {len(values)} of {count} parameters{why}")
     return {name: _decoded(s, raw, ptype) for _, (name, raw, ptype) in sorted(values.items())}
 
 
-def param_list(session: Session, timeout: float = 5.0) -> dict[str, float]:
+def param_list(session: Session, timeout: float = PARAM_LIST.ceiling_s) -> dict[str, float]:
     """All parameters' values (`param_values` without the types)."""
     return {name: p.value for name, p in param_values(session, timeout).items()}
 
 
-def param_read(session: Session, name: str, timeout: float = 2.0) -> ParamValue:
-    """One parameter with its type (PARAM_REQUEST_READ by name, three tries)."""
+def param_read(session: Session, name: str, timeout: float = PARAM.ceiling_s) -> ParamValue:
+    """One parameter with its type (PARAM_REQUEST_READ by name, re-sent each
+    PARAM.resend_s); GcsError when the vehicle falls silent or at the ceiling `timeout`
+    (a vehicle that does not know the name does not answer)."""
     s = session
-    for _ in range(3):
-        s.send(M.MAVLink_param_request_read_message(s.target_system, s.target_component,
-                                                    name.encode(), -1))
-        deadline = time.monotonic() + timeout / 3
-        while time.monotonic() < deadline:
-            msg = s.recv(["PARAM_VALUE"], timeout=0.1)
-            if msg is not None and msg.param_id == name and \
-                    msg.get_srcSystem() == s.target_system:
-                return _decoded(s, param_wire.raw_value(msg), msg.param_type)
-    raise GcsError(f"parameter {name} not answered (unknown to the vehicle?)")
+    request = M.MAVLink_param_request_read_message(s.target_system, s.target_component,
+                                                   name.encode(), -1)
+    s.send(request)
+    wait = Wait(PARAM.but(ceiling_s=timeout))
+    while not (why := wait.expired()):
+        msg = s.recv(["PARAM_VALUE"], timeout=min(0.1, wait.left()))
+        wait.note_session(s)
+        if msg is not None and msg.param_id == name and \
+                msg.get_srcSystem() == s.target_system:
+            return _decoded(s, param_wire.raw_value(msg), msg.param_type)
+        if wait.due() and not wait.expired():
+            s.send(request)
+            wait.sent()
+    hint = "" if why.startswith(":") else " (unknown to the vehicle?)"
+    raise GcsError(f"parameter {name} not answered{why}{wait.tries_text()}{hint}")
 
 
-def param_get(session: Session, name: str, timeout: float = 2.0) -> float:
+def param_get(session: Session, name: str, timeout: float = PARAM.ceiling_s) -> float:
     return param_read(session, name, timeout).value
 
 
-def param_set(session: Session, name: str, value: float, timeout: float = 2.0, *,
+def param_set(session: Session, name: str, value: float, timeout: float = PARAM.ceiling_s, *,
               param_type: int | None = None) -> tuple[float, list[str]]:
     """Set a parameter in its real type (read first unless `param_type` is given), encoded
     as the vehicle carries it; returns (value now in force, STATUSTEXTs heard meanwhile).
-    The value in force is the echo that equals what was sent if one came within
-    ECHO_QUIET_S of the first (a stale answer to the read may come first), else the last
-    echo: a vehicle that clamps the value echoes the clamped one. ParamValueError for a
-    value the type cannot carry."""
+    PARAM_SET is re-sent each PARAM.resend_s without an echo (the same value again: the
+    parameter protocol's recovery); GcsError when the vehicle falls silent or at the
+    ceiling `timeout`. The value in force is the echo that equals what was sent if one
+    came within ECHO_QUIET_S of the first (a stale answer to the read may come first),
+    else the last echo: a vehicle that clamps the value echoes the clamped one.
+    ParamValueError for a value the type cannot carry."""
     s = session
     if param_type is None:
         param_type = param_read(s, name, timeout).param_type
@@ -162,20 +187,28 @@ def param_set(session: Session, name: str, value: float, timeout: float = 2.0, *
     want = param_wire.intended(name, value, param_type)
     texts: list[str] = []
     echoes: list[float] = []
-    for _ in range(3):
-        s.send(param_wire.param_set_message(s.target_system, s.target_component, name, raw,
-                                            param_type))
-        deadline = time.monotonic() + timeout / 3
-        while (left := deadline - time.monotonic()) > 0.0:
-            msg = s.recv(["PARAM_VALUE", "STATUSTEXT"], timeout=min(0.1, left))
-            if msg is None or msg.get_srcSystem() != s.target_system:
-                continue
+    request = param_wire.param_set_message(s.target_system, s.target_component, name, raw,
+                                           param_type)
+    s.send(request)
+    wait = Wait(PARAM.but(ceiling_s=timeout))
+    quiet_until = None  # after the first echo: how long a later one may still come
+    while not (why := wait.expired()):
+        now = time.monotonic()
+        if quiet_until is not None and now >= quiet_until:
+            break
+        left = wait.left() if quiet_until is None else min(wait.left(), quiet_until - now)
+        msg = s.recv(["PARAM_VALUE", "STATUSTEXT"], timeout=min(0.1, max(left, 0.001)))
+        wait.note_session(s)
+        if msg is not None and msg.get_srcSystem() == s.target_system:
             if msg.get_type() == "STATUSTEXT":
                 texts.append(msg.text)
             elif msg.param_id == name:
                 echoes.append(param_wire.decode(param_wire.raw_value(msg), param_type,
                                                 encoding))
-                deadline = time.monotonic() + ECHO_QUIET_S  # a refusal may come just after
-        if echoes:
-            return (want if want in echoes else echoes[-1]), texts
-    raise GcsError(f"parameter {name} not answered")
+                quiet_until = time.monotonic() + ECHO_QUIET_S  # a refusal may come after
+        if quiet_until is None and wait.due() and not wait.expired():
+            s.send(request)
+            wait.sent()
+    if echoes:
+        return (want if want in echoes else echoes[-1]), texts
+    raise GcsError(f"parameter {name} not answered{why}{wait.tries_text()}")

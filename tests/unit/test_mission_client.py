@@ -176,15 +176,18 @@ def test_lossy_link_still_completes(vehicle_factory):
 
 def test_silent_vehicle_raises(vehicle_factory):
     """Given a vehicle whose replies are all lost, then upload, download and clear raise
-    MissionError saying what went unanswered, after the retries."""
+    MissionError saying what went unanswered and that the vehicle was silent, once the
+    silence limit has passed (re-sending meanwhile)."""
     _vehicle, conn = vehicle_factory(drop=1.0)
-    fast = {"timeout_s": 0.05, "retries": 2}
+    fast = {"timeout_s": 0.05, "silence_s": 0.3}
     t0 = time.monotonic()
-    with pytest.raises(MissionError, match=r"no answer to MISSION_COUNT\(11\) after 3 tries"):
+    with pytest.raises(MissionError, match=r"no answer to MISSION_COUNT\(11\): vehicle "
+                       r"silent for 0\.3 s \([0-9]+ tries, 50 ms apart\)"):
         upload(conn, *VEHICLE, case1_and_more(), item_timeout_s=0.02, **fast)
-    with pytest.raises(MissionError, match="no answer to MISSION_REQUEST_LIST after 3 tries"):
+    with pytest.raises(MissionError, match="no answer to MISSION_REQUEST_LIST: vehicle "
+                       "silent for 0.3 s"):
         download(conn, *VEHICLE, item_timeout_s=0.02, **fast)
-    with pytest.raises(MissionError, match="no MISSION_ACK after 3 tries"):
+    with pytest.raises(MissionError, match="no MISSION_ACK: vehicle silent for 0.3 s"):
         clear(conn, *VEHICLE, **fast)
     assert time.monotonic() - t0 < 2.0
 

@@ -263,8 +263,8 @@ class SlowChecker(ScriptedAutopilot):
 
 def test_a_vehicle_that_checks_the_mission_before_its_ack_is_waited_for(tmp_path):
     """Given a vehicle that takes 3 s after the last item to check the mission, then the
-    upload waits for its MISSION_ACK (FINAL_ACK_S) instead of giving up after the item
-    retries (6 x 250 ms), and the vehicle holds the mission."""
+    upload waits for its MISSION_ACK while the vehicle is heard (`gcs.patience`) instead of
+    giving up after the item retries (6 x 250 ms), and the vehicle holds the mission."""
     from gcs.mission_client import upload_detailed
     from gcs.session import Session
 
