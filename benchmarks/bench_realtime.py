@@ -429,6 +429,10 @@ def station_work(tl: Timeline, session: Session, station: int) -> None:
                     time.sleep(min(0.05, max(0.0, end - time.monotonic())))
                 if result != M.MAV_RESULT_ACCEPTED:
                     raise FlightFailed(f"OFFBOARD: {why}")
+            with tl.event(station, "mode HOLD (OFFBOARD's end)") as ev:
+                result, why = set_mode(s, Mode.HOLD)  # before the stream stops
+                ev.note = why
+                ev.ok = result == M.MAV_RESULT_ACCEPTED
         finally:
             stream.stop()
     tl.sync()
@@ -671,6 +675,16 @@ def onboard_rows(folder: Path) -> tuple[tuple[str, ...], np.ndarray]:
     return columns, rows[np.argsort(rows[:, 0], kind="stable")]
 
 
+WORST_GAPS = 5  # the longest gaps reported, each with the events under way
+
+
+def during(events: list[dict[str, Any]], t0_s: float, t1_s: float) -> list[str]:
+    """The events (station: what) under way at some time in [t0_s, t1_s] of the timeline
+    (the flight clock's timeline start is within a telemetry period of the wall clock's)."""
+    return [f"{e['station']}: {e['what']}" for e in events
+            if e["start_s"] <= t1_s + 0.02 and e["end_s"] >= t0_s - 0.02]
+
+
 def figures(run: dict[str, Any], period_us: int) -> dict[str, Any]:
     """The figures of one flight over its timeline (module docstring)."""
     folder = Path(run["folder"])
@@ -734,6 +748,10 @@ def figures(run: dict[str, Any], period_us: int) -> dict[str, Any]:
         # timeline with no gap of 0.5 s
         airborne=bool(len(sel) and heights.min() > 0.5 and armed.min() > 0.5
                       and longest < 500.0 and covered_ms > 0.9 * span_ms),
+        worst_gaps=[{"at_s": float((ts[k + 1] - start) * 1e-6), "gap_ms": float(gaps_ms[k]),
+                     "during": during(run["events"], (ts[k] - start) * 1e-6,
+                                      (ts[k + 1] - start) * 1e-6)}
+                    for k in np.argsort(gaps_ms)[::-1][:WORST_GAPS]],
         step_compute_us_p99=float(np.percentile(sel[:, c["step_us"]], 99)) if len(sel)
         else None)
     return out
@@ -768,7 +786,7 @@ def table(results: list[dict[str, Any]]) -> str:
                      _fmt(f["p999_ms"], ".3f"), _fmt(f["longest_gap_ms"], ".1f"),
                      _fmt(f["deadline_misses"], "d"), _fmt(f["deadline_misses_pct"], ".3f"),
                      _fmt(f["max_position_error_m"], ".4f"),
-                     _fmt(f["max_attitude_error_deg"], ".3f"),
+                     _fmt(f["max_attitude_error_deg"], ".3g"),
                      "FAILED: see below" if r["failure"] else verdicts(r["load"], f)))
     widths = [max(len(row[i]) for row in rows) for i in range(len(head))]
     lines = ["  ".join(cell.ljust(w) if i in (0, len(head) - 1) else cell.rjust(w)
@@ -823,6 +841,9 @@ def main(argv: list[str] | None = None) -> int:
                 results.append({"condition": name, "load": load, "extra_fcu_args": list(extra),
                                 "hog_pids": pids, "load_average_1min": load_avg,
                                 "failure": run["failure"], "figures": f, "run": run})
+                for g in f.get("worst_gaps") or ():
+                    say(f"  gap {g['gap_ms']:6.1f} ms at {g['at_s']:6.2f} s during: "
+                        f"{'; '.join(g['during']) or 'no event (hovering)'}")
                 if run["failure"]:
                     say(f"  FAILED: {run['failure']}")
                 else:
