@@ -1,6 +1,7 @@
 """`gcs run` through processes: start `sitl` and `fcu` on free ports, upload the scenario's
 mission over the mission protocol, arm, start, record `flight.tlog`, wait for the end, stop
 the children, and write metrics.json from the truth and onboard logs (DESIGN.md 5-6).
+Every wait is on progress, with a ceiling that names what it waited for (`gcs.run_waits`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,16 @@ from fcu.core import ONBOARD_COLUMNS
 from gcs.inprocess import scenario_params
 from gcs.metrics import build_metrics, link_timing, onboard_on_truth_clock
 from gcs.mission_client import MissionError, upload_detailed
+from gcs.run_waits import (
+    STOP_S,
+    Progress,
+    Report,
+    RunError,
+    RunTimeout,
+    wait_started,
+    wait_state,
+    watch,
+)
 from gcs.runio import ONBOARD_LOG, ONBOARD_TOPIC, TRUTH_LOG, TRUTH_TOPIC, write_metrics
 from gcs.scenario_mission import scenario_mission
 from gcs.session import GcsError, Session
@@ -39,12 +50,12 @@ from gcs.vehicle_link.params import param_set
 from sitl.plant import TRUTH_COLUMNS
 
 M = MAV
-STALL_S = 60.0
 RTT_PROBES = 2000  # TIMESYNC round trips the FCU times with the simulator before the flight
 
 
-class RunError(RuntimeError):
-    """A run that could not be carried out (a child died, the vehicle refused, a timeout)."""
+__all__ = ["ChildDied", "Children", "Progress", "Report", "RunError", "RunTimeout",
+           "VehiclePlan", "run_processes", "start_router_if_needed"]
+ALIGN_S = 120.0  # arming asked again while TEMPORARILY_REJECTED (aligning), at most
 
 
 class ChildDied(RunError):
@@ -77,7 +88,7 @@ class Children:
                 tail = (self.out / f"{name}.log").read_text(errors="replace")[-800:]
                 raise ChildDied(f"{name} exited with status {code}:\n{tail}")
 
-    def stop(self, timeout: float = 10.0) -> None:
+    def stop(self, timeout: float = STOP_S) -> None:
         for proc in self.procs.values():
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
@@ -88,64 +99,6 @@ class Children:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
-
-
-@dataclass
-class Progress:
-    sim_time_s: float = 0.0
-    mission_completed: bool = False
-    messages: list[str] = field(default_factory=list)
-
-
-Report = Callable[[Progress], None]  # called with the run's progress as it goes
-
-
-class RunTimeout(RunError):
-    """The run did not reach its end within its wall-clock allowance."""
-
-
-def _watch(session: Session, children: Children, progress: Progress, end_s: float,
-           total: int, wall_timeout_s: float, report: Report | None = None) -> None:
-    """Follow the flight until the vehicle's clock reaches end_s (a diverged or crashed
-    vehicle too: the simulator runs to the end, as in-process)."""
-    end_ms = round(end_s * 1000)
-    deadline = time.monotonic() + wall_timeout_s
-    last_check = 0.0
-    reached_end = False
-    last_ms, last_progress = -1, time.monotonic()
-    while time.monotonic() < deadline:
-        msg = session.recv(["ATTITUDE_QUATERNION", "MISSION_CURRENT", "STATUSTEXT",
-                            "MISSION_ITEM_REACHED"], timeout=0.2)
-        now = time.monotonic()
-        if now - last_check > 0.5:
-            children.check()
-            last_check = now
-            if report is not None:
-                report(progress)
-        if msg is None:
-            continue
-        kind = msg.get_type()
-        if kind == "ATTITUDE_QUATERNION":
-            progress.sim_time_s = msg.time_boot_ms * 1e-3
-            if msg.time_boot_ms != last_ms:
-                last_ms, last_progress = msg.time_boot_ms, now
-            elif now - last_progress > STALL_S:
-                raise RunTimeout(f"the vehicle's clock stopped at {last_ms / 1000:.3f} s for "
-                               f"{STALL_S:.0f} s of wall time")
-            if msg.time_boot_ms >= end_ms and not reached_end:
-                reached_end = True
-                deadline = now + 0.3  # let the last mission messages arrive
-        elif kind == "MISSION_CURRENT":
-            if msg.mission_state == M.MISSION_STATE_COMPLETE and msg.total == total:
-                progress.mission_completed = True
-        elif kind == "MISSION_ITEM_REACHED" and msg.seq == total - 1:
-            progress.mission_completed = True
-        elif kind == "STATUSTEXT":
-            progress.messages.append(msg.text)
-    if reached_end:
-        return
-    raise RunTimeout(f"the run did not reach t = {end_s} s within {wall_timeout_s:.0f} s "
-                   f"of wall time (reached {progress.sim_time_s:.2f} s)")
 
 
 @dataclass
@@ -194,7 +147,7 @@ def _plans(scenario: Scenario, out: Path, fleet: int, spacing_m: float, transpor
 class _Flight:
     """The children and the ground-station side of one vehicle's run."""
 
-    def __init__(self, plan: VehiclePlan, *, realtime: bool, wall_timeout_s: float,
+    def __init__(self, plan: VehiclePlan, *, realtime: bool, wall_timeout_s: float | None,
                  report: Report | None = None, signing_key_file: str | None = None) -> None:
         self.plan = plan
         self.signing_key_file = signing_key_file
@@ -262,11 +215,7 @@ class _Flight:
     def _fly(self) -> None:
         s, sc = self.session, self.plan.scenario
         assert s is not None
-        try:
-            s.wait_vehicle(timeout=30.0, system_id=self.plan.sysid)
-        except GcsError:
-            self.children.check()
-            raise
+        wait_started(s, self.children, self.plan.sysid)
         # Parameters first: EKF_EN decides what the FCU flies on (its state comes after).
         for name, value in scenario_params(sc).items():
             now, texts = param_set(s, name, value)
@@ -275,7 +224,7 @@ class _Flight:
                                + "; ".join(texts))
         try:
             # the FCU reports attitude once it has a state (or an aligned estimate)
-            if s.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is None:
+            if wait_state(s, self.children) is None:
                 self.children.check()
                 why = ("its estimator did not align (it needs the vehicle still and a pose; "
                        "EKF_GYR_NOISE and EKF_ACC_NOISE must cover the IMU's noise)"
@@ -295,7 +244,7 @@ class _Flight:
         # With a sensor profile the flight starts when the estimator has aligned (lockstep:
         # simulated time stands still from then until MISSION_START).
         start_ms = 0
-        aligned_by = time.monotonic() + 60.0
+        aligned_by = time.monotonic() + ALIGN_S
         for command, params, what in (
                 (M.MAV_CMD_COMPONENT_ARM_DISARM, (1.0,), "arming"),
                 (M.MAV_CMD_MISSION_START, (0.0, float(len(items) - 1)), "mission start")):
@@ -303,15 +252,18 @@ class _Flight:
             while ack == M.MAV_RESULT_TEMPORARILY_REJECTED and time.monotonic() < aligned_by:
                 time.sleep(0.2)  # the estimator is aligning: ask again
                 ack = s.command(command, *params)
+            if ack == M.MAV_RESULT_TEMPORARILY_REJECTED:
+                raise RunError(f"{what} refused: {s.describe(ack)} (still, after the "
+                               f"{ALIGN_S:g} s ceiling)")
             if ack != M.MAV_RESULT_ACCEPTED:
                 raise RunError(f"{what} refused: {s.describe(ack)}")
             if what == "arming" and (self.realtime or sc.uses_sensors):
-                att = s.recv(["ATTITUDE_QUATERNION"], timeout=5.0)
+                att = wait_state(s, self.children)
                 start_ms = att.time_boot_ms if att is not None else 0
         self.wall0 = time.monotonic()
         self.items = len(items)
-        _watch(s, self.children, self.progress, start_ms * 1e-3 + sc.duration_s, len(items),
-               self.wall_timeout_s, self.report)
+        watch(s, self.children, self.progress, start_ms * 1e-3 + sc.duration_s, len(items),
+              self.wall_timeout_s, self.report)
         self.wall1 = time.monotonic()
 
     def stop(self) -> None:
@@ -399,8 +351,9 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
     if fleet < 1:
         raise RunError(f"a fleet needs at least one vehicle, got {fleet}")
     out.mkdir(parents=True, exist_ok=True)
-    if wall_timeout_s is None:  # a generous cap; a stalled run is caught sooner (STALL_S)
-        wall_timeout_s = 120.0 + (2.0 if realtime else 20.0) * scenario.duration_s * fleet
+    if wall_timeout_s is None and realtime:  # real time: the flight's own length, and more
+        wall_timeout_s = 120.0 + 2.0 * scenario.duration_s * fleet
+    # lockstep: no wall-clock ceiling; a run whose clock stands still ends (STALL_S)
     router = start_router_if_needed(zenoh_url, out) if transport == "zenoh" else None
     flights = [_Flight(plan, realtime=realtime, wall_timeout_s=wall_timeout_s,
                        report=report if fleet == 1 else None, signing_key_file=signing_key_file)

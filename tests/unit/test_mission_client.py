@@ -184,10 +184,10 @@ def test_silent_vehicle_raises(vehicle_factory):
     with pytest.raises(MissionError, match=r"no answer to MISSION_COUNT\(11\): vehicle "
                        r"silent for 0\.3 s \([0-9]+ tries, 50 ms apart\)"):
         upload(conn, *VEHICLE, case1_and_more(), item_timeout_s=0.02, **fast)
-    with pytest.raises(MissionError, match="no answer to MISSION_REQUEST_LIST: vehicle "
-                       "silent for 0.3 s"):
+    with pytest.raises(MissionError, match=r"no answer to MISSION_REQUEST_LIST: vehicle "
+                       r"silent for 0\.3 s"):
         download(conn, *VEHICLE, item_timeout_s=0.02, **fast)
-    with pytest.raises(MissionError, match="no MISSION_ACK: vehicle silent for 0.3 s"):
+    with pytest.raises(MissionError, match=r"no MISSION_ACK: vehicle silent for 0\.3 s"):
         clear(conn, *VEHICLE, **fast)
     assert time.monotonic() - t0 < 2.0
 

@@ -1,0 +1,228 @@
+"""The station's waiting policy (`gcs.patience`) against a scripted vehicle on loopback UDP:
+a vehicle that is busy but heard (its heartbeats go on) is waited for, past the protocols'
+timeouts, up to the ceiling; a vehicle that falls silent is given up on after the silence
+limit, not the ceiling, and the error says which."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from common.mavlink import MAV
+from common.mission_items import MissionItem
+from gcs.mission_client import MissionError, upload_detailed
+from gcs.patience import MISSION_ITEM, SILENCE_S, Budget, Wait
+from gcs.session import GcsError, Session
+from gcs.vehicle_link.params import param_set
+from tests.unit.scripted_autopilot import ScriptedAutopilot
+
+M = MAV
+REAL32 = M.MAV_PARAM_TYPE_REAL32
+SLOW_S = 2.0  # how long the busy vehicle takes to answer: past every protocol timeout
+
+
+class BusyVehicle(ScriptedAutopilot):
+    """A vehicle whose heartbeats go on (10 Hz) while it takes `slow_s` to answer the last
+    mission item, a PARAM_SET or a COMMAND_LONG; with `silent_on` ("item", "param",
+    "command") it stops sending anything at all when that request comes."""
+
+    def __init__(self, slow_s: float = 0.0, silent_on: str = "") -> None:
+        self.slow_s = slow_s
+        self.silent_on = silent_on
+        self.silent = False
+        self.commands_heard: list[int] = []  # confirmation of each COMMAND_LONG
+        self.items_heard = 0
+        self.param_sets_heard = 0
+        self.acks_sent = 0
+        self._answered: set[str] = set()
+        self._lock = threading.Lock()
+        super().__init__("px4", params={"MIS_CRUISE_SPD": (5.0, REAL32)})
+
+    def _send(self, msg) -> None:
+        with self._lock:
+            if not self.silent:
+                super()._send(msg)
+
+    def _later(self, key: str, answer) -> None:
+        """`answer()` once, `slow_s` after the first request (repeats are not acted on)."""
+        if key in self._answered:
+            return
+        self._answered.add(key)
+        threading.Timer(self.slow_s, answer).start()
+
+    def _item(self, item: MissionItem) -> None:
+        self.items_heard += 1
+        last = self._upload is not None and item.seq == self._count - 1 == len(self._upload)
+        if last and self.silent_on == "item":
+            self.silent = True
+            return
+        if last:
+            self._upload.append(item)
+            mission, self._upload = self._upload, None
+
+            def accept() -> None:
+                self.mission = mission
+                self.acks_sent += 1
+                self._send(M.MAVLink_mission_ack_message(255, 0, M.MAV_MISSION_ACCEPTED, 0))
+
+            self._later("mission", accept)
+            return
+        super()._item(item)
+
+    def _param_set(self, msg) -> None:
+        self.param_sets_heard += 1
+        if self.silent_on == "param":
+            self.silent = True
+            return
+        self._later("param", lambda: ScriptedAutopilot._param_set(self, msg))
+
+    def _command(self, msg) -> None:
+        self.commands_heard.append(msg.confirmation)
+        if self.silent_on == "command":
+            self.silent = True
+            return
+        self._later("command", lambda: self._send(
+            M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_ACCEPTED)))
+
+
+def _items(n: int = 3) -> list[MissionItem]:
+    return [MissionItem(i, 1, 16, int(i == 0), 1, 0, 0, 0, 0, 0, 0, -2.0) for i in range(n)]
+
+
+@pytest.fixture
+def connected():
+    made: list[tuple[BusyVehicle, Session]] = []
+
+    def make(**kw) -> tuple[BusyVehicle, Session]:
+        v = BusyVehicle(**kw)
+        s = Session(v.url, heartbeat_hz=5.0)
+        made.append((v, s))
+        s.wait_vehicle(timeout=5.0)
+        return v, s
+
+    yield make
+    for v, s in made:
+        s.close()
+        v.close()
+
+
+def _upload(s: Session):
+    return upload_detailed(s.conn, s.target_system, s.target_component, _items(),
+                           send=s.send)
+
+
+# ------------------------------------------------------------------ the policy itself
+
+def test_a_wait_ends_on_silence_or_at_its_ceiling_and_says_which():
+    b = Budget(resend_s=0.25, ceiling_s=30.0, silence_s=3.0)
+    w = Wait(b, now=100.0)
+    assert w.expired(now=102.9) == "" and w.due(now=100.3) and not w.due(now=100.2)
+    assert w.expired(now=103.0) == ": vehicle silent for 3.0 s"
+    for t in range(101, 131):  # heard every second: only the ceiling ends it
+        w.heard(now=float(t))
+        if t < 130:
+            assert w.expired(now=float(t)) == ""
+    assert w.expired(now=130.0) == " within the 30 s ceiling"
+    assert 0.0 < w.left(now=100.1) <= 0.15 + 1e-9  # the next re-send is the next thing to do
+    w.stop_resending()
+    assert not w.due(now=200.0)
+
+
+# ------------------------------------------------------------------ missions
+
+def test_a_busy_vehicle_answering_the_last_item_after_2_s_gets_its_mission(connected):
+    """Given a vehicle that answers the last item only after 2 s (eight item timeouts) while
+    its heartbeats go on, then the upload succeeds: the last item was re-sent meanwhile
+    and the vehicle, acting once, holds the mission."""
+    v, s = connected(slow_s=SLOW_S)
+    t0 = time.monotonic()
+    answer = _upload(s)
+    took = time.monotonic() - t0
+    assert answer.result == M.MAV_MISSION_ACCEPTED
+    assert len(v.mission) == 3 and v.acks_sent == 1
+    assert SLOW_S <= took < SLOW_S + 2.0
+    assert v.items_heard > 3  # the last item re-sent as the spec says
+
+
+def test_a_vehicle_that_falls_silent_fails_the_upload_after_the_silence_limit(connected):
+    """Given a vehicle that stops sending anything when the last item comes, then the upload
+    fails saying the vehicle was silent for 3.0 s, in about that time, not the ceiling's."""
+    _v, s = connected(silent_on="item")
+    t0 = time.monotonic()
+    with pytest.raises(MissionError, match=r"no MISSION_ACK after the last item \(2\): "
+                       r"vehicle silent for 3\.0 s \([0-9]+ tries, 250 ms apart\); the "
+                       r"vehicle may hold the new mission"):
+        _upload(s)
+    took = time.monotonic() - t0
+    assert SILENCE_S <= took < SILENCE_S + 1.5 < MISSION_ITEM.ceiling_s
+
+
+def test_a_heard_vehicle_that_never_answers_fails_at_the_ceiling(connected):
+    _v, s = connected(slow_s=60.0)
+    t0 = time.monotonic()
+    with pytest.raises(MissionError, match=r"no MISSION_ACK after the last item \(2\) within "
+                       r"the 1\.5 s ceiling"):
+        upload_detailed(s.conn, s.target_system, s.target_component, _items(), send=s.send,
+                        ceiling_s=1.5)
+    assert 1.5 <= time.monotonic() - t0 < 3.0
+
+
+# ------------------------------------------------------------------ parameters
+
+def test_a_busy_vehicle_setting_a_parameter_for_2_s_is_waited_for(connected):
+    v, s = connected(slow_s=SLOW_S)
+    t0 = time.monotonic()
+    value, _texts = param_set(s, "MIS_CRUISE_SPD", 3.5, param_type=REAL32)
+    assert value == 3.5 and v.params["MIS_CRUISE_SPD"][0] == 3.5
+    assert SLOW_S <= time.monotonic() - t0 < SLOW_S + 2.0
+    # PARAM_SET re-sent meanwhile (the same value), acted on once
+    assert v.param_sets_heard >= 2 and len(v.param_sets) == 1
+
+
+def test_a_parameter_set_to_a_silent_vehicle_fails_after_the_silence_limit(connected):
+    _v, s = connected(silent_on="param")
+    t0 = time.monotonic()
+    with pytest.raises(GcsError, match=r"parameter MIS_CRUISE_SPD not answered: vehicle "
+                       r"silent for 3\.0 s"):
+        param_set(s, "MIS_CRUISE_SPD", 3.5, param_type=REAL32)
+    assert SILENCE_S <= time.monotonic() - t0 < SILENCE_S + 1.5
+
+
+# ------------------------------------------------------------------ commands
+
+def test_a_busy_vehicle_acking_a_command_after_2_s_is_waited_for(connected):
+    """Given a vehicle that acknowledges a command 2 s after it first came, then the command
+    is ACCEPTED; the re-sends meanwhile carry an incremented confirmation (so the vehicle
+    can tell them from a new command) and it acted once."""
+    v, s = connected(slow_s=SLOW_S)
+    t0 = time.monotonic()
+    assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0) == M.MAV_RESULT_ACCEPTED
+    assert SLOW_S <= time.monotonic() - t0 < SLOW_S + 2.0
+    assert v.commands_heard[:3] == [0, 1, 2][:len(v.commands_heard[:3])]
+    assert len(v.commands_heard) >= 2
+
+
+def test_a_command_to_a_silent_vehicle_fails_after_the_silence_limit(connected):
+    _v, s = connected(silent_on="command")
+    t0 = time.monotonic()
+    with pytest.raises(GcsError, match=r"no COMMAND_ACK for command 400: vehicle silent for "
+                       r"3\.0 s"):
+        s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+    assert SILENCE_S <= time.monotonic() - t0 < SILENCE_S + 1.5
+
+
+def test_in_progress_stops_the_resends_and_waits_for_the_final_answer(connected):
+    v, s = connected()
+
+    def in_progress(msg) -> None:
+        v.commands_heard.append(msg.confirmation)
+        if len(v.commands_heard) == 1:
+            v._send(M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_IN_PROGRESS))
+            threading.Timer(SLOW_S, lambda: v._send(M.MAVLink_command_ack_message(
+                msg.command, M.MAV_RESULT_ACCEPTED))).start()
+
+    v._command = in_progress  # type: ignore[method-assign]
+    assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0) == M.MAV_RESULT_ACCEPTED
+    assert v.commands_heard == [0]  # never sent again once the vehicle said it works on it
