@@ -1,12 +1,14 @@
 """The whole suite beside a CPU load: two busy processes at nice 19, as on a shared machine.
 
-    .venv/bin/python benchmarks/suite_under_load.py [--times N] [--busy K] [-- pytest args]
+    .venv/bin/python benchmarks/suite_under_load.py [--times N] [--busy K] [--nice P]
+        [-- pytest args]
 
 Runs `make test`'s steps (mypy over the packages, then benchmarks/ and tools/, then pytest
 over tests/ with xdist) N times in a row
-beside K busy-looping children at nice 19, prints each run's wall time and result, stops at
-the first failure, and exits with that run's code (0 when all passed). The busy children are
-this script's own and are stopped on every way out, Ctrl-C included.
+beside K busy-looping children at nice P (default 19; `--busy 8 --nice 0` is a load of 8 at
+normal priority), prints each run's wall time and result, stops at the first failure, and
+exits with that run's code (0 when all passed). The busy children are this script's own and
+are stopped, by their process ids, on every way out, Ctrl-C included.
 """
 
 from __future__ import annotations
@@ -23,8 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 BUSY = "while True:\n    pass\n"
 
 
-def _busy_children(count: int) -> list[subprocess.Popen[bytes]]:
-    return [subprocess.Popen([sys.executable, "-c", BUSY], preexec_fn=lambda: os.nice(19),
+def _busy_children(count: int, niceness: int = 19) -> list[subprocess.Popen[bytes]]:
+    return [subprocess.Popen([sys.executable, "-c", BUSY], preexec_fn=lambda: os.nice(niceness),
                              stdin=subprocess.DEVNULL) for _ in range(count)]
 
 
@@ -43,12 +45,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--times", type=int, default=2, help="runs in a row (default 2)")
     parser.add_argument("--busy", type=int, default=2,
-                        help="busy processes at nice 19 beside the suite (default 2)")
+                        help="busy processes beside the suite (default 2)")
+    parser.add_argument("--nice", type=int, default=19, choices=range(20), metavar="P",
+                        help="their niceness, 0..19 (default 19)")
     parser.add_argument("pytest_args", nargs="*", help="after --: pytest's arguments")
     args = parser.parse_args(argv)
     if args.times < 1 or args.busy < 0:
         parser.error("--times must be at least 1 and --busy at least 0")
-    busy = _busy_children(args.busy)
+    busy = _busy_children(args.busy, args.nice)
     code = 0
     try:
         for run in range(1, args.times + 1):
@@ -56,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
             code = _suite(args.pytest_args)
             minutes, seconds = divmod(time.monotonic() - start, 60)
             result = "passed" if code == 0 else f"failed (exit {code})"
-            print(f"run {run}/{args.times} beside {args.busy} busy at nice 19: {result} "
+            print(f"run {run}/{args.times} beside {args.busy} busy at nice {args.nice}: {result} "
                   f"in {int(minutes)} min {seconds:.0f} s", flush=True)
             if code != 0:
                 break
