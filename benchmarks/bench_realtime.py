@@ -547,17 +547,13 @@ def pause(seconds: float, children: Children) -> None:
         children.check()
 
 
-def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str], None]
-        ) -> dict[str, Any]:
-    """One flight with its timeline; the raw material of its figures."""
-    folder.mkdir(parents=True, exist_ok=True)
+def argv_of(opts: Options, folder: Path, sim_port: int, ports: list[int],
+            extra: tuple[str, ...]) -> tuple[Any, list[str], list[str]]:
+    """The scenario (with the sensor profile), and the sitl and fcu command lines."""
     sc = load_scenario(opts.scenario)
     sc = dataclasses.replace(sc, sensors=resolve_sensor_profile(opts.sensors))
     gains = sc.files["gains_pid" if sc.controller == "pid" else "gains_pd"]
     py = sys.executable
-    sim_port = free_port()
-    n_stations = 2 if opts.second_station else 1
-    ports = [free_port() for _ in range(n_stations)]
     x, y, z = sc.initial_position_enu_m
     sitl = [py, "-m", "sitl.node", str(sc.source), "--link", f"udpin:127.0.0.1:{sim_port}",
             "--realtime", "--truth-log", str(folder / "truth.ulg"), "--control-rate",
@@ -569,6 +565,56 @@ def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str]
            "--stats", str(folder / "fcu_stats.json"),
            *(a for p in ports for a in ("--gcs", f"udpout:127.0.0.1:{p}")),
            *opts.fcu_args, *extra]
+    return sc, sitl, fcu
+
+
+def take_off(sessions: list[Session], children: Children, sc: Any, opts: Options,
+             say: Callable[[str], None]) -> tuple[float, float, float]:
+    """Connect every station, set the run's parameters, arm, take off to HOVER_M and
+    hover `hover_s`; the hover point (NED)."""
+    a = sessions[0]
+    for s in sessions:
+        try:
+            s.wait_vehicle(timeout=60.0, system_id=VEHICLE_ID)
+        except GcsError:
+            children.check()
+            raise
+    if a.recv(["ATTITUDE_QUATERNION"], timeout=30.0) is None:
+        children.check()
+        raise FlightFailed("the vehicle reports no state (is the simulator running?)")
+    for name, value in scenario_params(sc).items():
+        now, texts = param_set(a, name, value)
+        if not math.isclose(now, value, rel_tol=1e-6):
+            raise FlightFailed(f"the vehicle refused {name} = {value:g}: {texts}")
+    deadline = time.monotonic() + 60.0
+    while True:  # with a sensor profile the estimator aligns first
+        ack, why = command(a, M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+        if ack == M.MAV_RESULT_ACCEPTED:
+            break
+        if ack != M.MAV_RESULT_TEMPORARILY_REJECTED or time.monotonic() > deadline:
+            raise FlightFailed(f"arming refused: {why}")
+        time.sleep(0.2)
+    say(f"  armed; take-off to {HOVER_M:g} m")
+    try:
+        takeoff(a, HOVER_M, reach_s=40.0, tolerance_m=0.1)
+    except GcsError as exc:
+        children.check()
+        raise FlightFailed(f"no takeoff: {exc}") from None
+    pause(1.5 + opts.hover_s, children)  # the climb's end, then a quiet hover
+    hover = hover_point(a)
+    if -hover[2] < HOVER_M - 0.5:
+        raise FlightFailed(f"not hovering at {HOVER_M:g} m: at {-hover[2]:.2f} m")
+    return hover
+
+
+def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str], None]
+        ) -> dict[str, Any]:
+    """One flight with its timeline; the raw material of its figures."""
+    folder.mkdir(parents=True, exist_ok=True)
+    sim_port = free_port()
+    n_stations = 2 if opts.second_station else 1
+    ports = [free_port() for _ in range(n_stations)]
+    sc, sitl, fcu = argv_of(opts, folder, sim_port, ports, extra)
     (folder / "commands.txt").write_text(shlex.join(sitl) + "\n" + shlex.join(fcu) + "\n")
     sessions: list[Session] = []
     children = Children(folder)
@@ -584,37 +630,7 @@ def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str]
         children.start("sitl", sitl)
         children.start("fcu", fcu)
         a = sessions[0]
-        for s in sessions:
-            try:
-                s.wait_vehicle(timeout=60.0, system_id=VEHICLE_ID)
-            except GcsError:
-                children.check()
-                raise
-        if a.recv(["ATTITUDE_QUATERNION"], timeout=30.0) is None:
-            children.check()
-            raise FlightFailed("the vehicle reports no state (is the simulator running?)")
-        for name, value in scenario_params(sc).items():
-            now, texts = param_set(a, name, value)
-            if not math.isclose(now, value, rel_tol=1e-6):
-                raise FlightFailed(f"the vehicle refused {name} = {value:g}: {texts}")
-        deadline = time.monotonic() + 60.0
-        while True:  # with a sensor profile the estimator aligns first
-            ack, why = command(a, M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
-            if ack == M.MAV_RESULT_ACCEPTED:
-                break
-            if ack != M.MAV_RESULT_TEMPORARILY_REJECTED or time.monotonic() > deadline:
-                raise FlightFailed(f"arming refused: {why}")
-            time.sleep(0.2)
-        say(f"  armed; take-off to {HOVER_M:g} m")
-        try:
-            takeoff(a, HOVER_M, reach_s=40.0, tolerance_m=0.1)
-        except GcsError as exc:
-            children.check()
-            raise FlightFailed(f"no takeoff: {exc}") from None
-        pause(1.5 + opts.hover_s, children)  # the climb's end, then a quiet hover
-        hover = hover_point(a)
-        if -hover[2] < HOVER_M - 0.5:
-            raise FlightFailed(f"not hovering at {HOVER_M:g} m: at {-hover[2]:.2f} m")
+        hover = take_off(sessions, children, sc, opts, say)
         tl = Timeline(opts, hover, threading.Barrier(n_stations))
         say(f"  hovering at {-hover[2]:.2f} m: the timeline ({n_stations} stations)")
         marks.start_us = latest_clock_us(a)
@@ -629,6 +645,9 @@ def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str]
         finally:
             events = tl.events
         marks.end_us = latest_clock_us(a)
+        beat = fresh(a, "HEARTBEAT")
+        if beat is not None and not beat.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
+            raise FlightFailed("the vehicle disarmed during the timeline")
         say(f"  timeline done in {tl.now():.1f} s; hover, then LAND")
         pause(opts.hover_s, children)
         result, why = set_mode(a, Mode.LAND)
@@ -649,13 +668,41 @@ def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str]
         for s in sessions:
             s.close()
         children.stop()
+    said = vehicle_messages(folder)
+    if failure and children.procs.get("fcu") is not None and \
+            children.procs["fcu"].returncode == -signal.SIGHUP:
+        failure += ("\n(fcu ended on SIGHUP: it does not rotate its log on SIGHUP yet; "
+                    "run without --rotate-log)")
+    if failure:
+        alarms = [f"{m['t_s']:.2f} s {m['text']}" for m in said if m["level"] <= 2]
+        if alarms:  # the vehicle's failsafes and crashes (CRITICAL and worse)
+            failure += "\n(the vehicle said: " + "; ".join(alarms) + ")"
     return {"folder": str(folder), "failure": failure, "marks": dataclasses.asdict(marks),
+            "vehicle_messages": said,
             "events": [e.as_json() for e in events], "rotated": rotated,
             "wall_s": time.monotonic() - wall0, "fcu_command": fcu[2:],
             "exit_codes": {name: p.returncode for name, p in children.procs.items()}}
 
 
 # ---------------------------------------------------------------------- figures
+
+
+def vehicle_messages(folder: Path) -> list[dict[str, Any]]:
+    """What the vehicle said (events and STATUSTEXT, logged strings of its onboard logs):
+    flight-clock time (s), MAVLink severity (0 emergency .. 7 debug) and text."""
+    from pyulog import ULog
+
+    out = []
+    for path in sorted(folder.glob("onboard*.ulg")):
+        try:
+            ulog = ULog(str(path), [], parse_header_only=False)
+        except Exception:  # a log cut short before its definitions: nothing said in it
+            continue
+        for m in ulog.logged_messages:
+            out.append({"t_s": m.timestamp * 1e-6, "level": int(m.log_level) - 48,
+                        "text": str(m.message)})
+    return sorted(out, key=lambda m: float(m["t_s"]))
+
 
 
 def onboard_rows(folder: Path) -> tuple[tuple[str, ...], np.ndarray]:
@@ -777,12 +824,13 @@ def verdicts(load: str, f: dict[str, Any]) -> str:
 
 
 def table(results: list[dict[str, Any]]) -> str:
-    head = ("condition", "p50 ms", "p99 ms", "p99.9 ms", "gap ms", "misses", "misses %",
+    head = ("condition", "load", "p50 ms", "p99 ms", "p99.9 ms", "gap ms", "misses", "misses %",
             "pos err m", "att err deg", "targets")
     rows = [head]
     for r in results:
         f = r["figures"]
-        rows.append((r["condition"], _fmt(f["p50_ms"], ".3f"), _fmt(f["p99_ms"], ".3f"),
+        rows.append((r["condition"], f"{r['load_average_1min']:.2f}",
+                     _fmt(f["p50_ms"], ".3f"), _fmt(f["p99_ms"], ".3f"),
                      _fmt(f["p999_ms"], ".3f"), _fmt(f["longest_gap_ms"], ".1f"),
                      _fmt(f["deadline_misses"], "d"), _fmt(f["deadline_misses_pct"], ".3f"),
                      _fmt(f["max_position_error_m"], ".4f"),
@@ -852,6 +900,7 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(table(results))
     print()
+    print("load: the 1-minute load average when the flight started (a shared machine)")
     print("targets: idle p99.9 <= 4 ms, longest gap <= 10 ms, misses <= 0.1 %; beside two "
           "nice-19 hogs: longest gap <= 20 ms, misses <= 1 % (reported, not asserted)")
     print(f"step period from onboard.ulg's dq_onboard stamps over the timeline; misses from "
