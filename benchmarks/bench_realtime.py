@@ -21,13 +21,19 @@ A second station (system id 254 on the FCU's second GCS link; the first is 255) 
 same work at the same time: its upload is refused while the first one's runs (the FCU takes
 one upload at a time), so it asks again until it is taken; the OFFBOARD targets and the
 mode changes follow one shared schedule, so both stations ask for the same thing at the same
-moment. Then the vehicle lands, the processes are stopped, and the figures are computed over
-the timeline (from its first to its last event) from the FCU's onboard log (`dq_onboard`,
-one record per control step in flight, stamped on the flight clock: the monotonic clock in
-real time; every file the log was rotated into) and its `--stats` (deadline misses over
-the control steps of the whole run): the step period's p50, p99 and p99.9, the longest gap
-between two steps, the deadline misses, and the largest position and attitude errors (the
-log's state against its reference).
+moment. A piece of work that fails (a refusal, no answer) is recorded in its event and the
+timeline goes on (`timeline_complete` in the JSON says whether all of it was done). Then the
+vehicle lands, the processes are stopped, and the figures are computed over the timeline
+(from its start to its end, on the flight clock as the vehicle's telemetry gave it) from the
+FCU's onboard log (`dq_onboard`, one record per control step in flight; every file the log
+was rotated into) and its `--stats` (deadline misses over the control steps of the whole
+run, from start to stop): the step period's p50, p99 and p99.9, the longest gap between two
+steps, the deadline misses, and the largest position and attitude errors (the log's state
+against its reference). A `dq_onboard` record is stamped with the state its step acted on,
+moved onto the flight clock (fcu/onboard_log.py), not with the step's own time: a step on
+the same state as the step before repeats the stamp (counted as `repeated_stamps`), and the
+periods are those between distinct stamps, in whole control periods: how often the loop
+acted on a new state. The longest gaps are printed with the events under way.
 
 The flight is flown twice: idle, and beside `--hogs` busy processes at nice 19 that this
 script starts and kills by PID. `--compare ARG` flies every condition twice, plain and with
@@ -38,8 +44,8 @@ run); `--fcu-arg ARG` passes ARG to every run's fcu. ARG is split as a shell wou
     .venv/bin/python benchmarks/bench_realtime.py [--hover-s S] [--compare ARG] [--json PATH]
 
 Exit status 0 when every flight was flown (the figures are reported beside their targets,
-not asserted), 1 when a flight failed (no takeoff, a process died, the timeline could not
-be carried out), 2 for bad arguments.
+not asserted), 1 when a flight failed (no takeoff, a process died, the vehicle disarmed or
+did not land), 2 for bad arguments.
 """
 
 from __future__ import annotations
