@@ -22,6 +22,14 @@ MANUAL_CONTROL's sticks say (`fcu.manual`); the stream's freshness is checked on
 clock like the offboard one.
 The FCU's MAVLink edge (`fcu.setpoint_wire`) decodes the offboard and manual set-points; the
 commander takes them typed, in ENU/FLU and SI units.
+
+A mission's start (MISSION_START, mode MISSION, a new current item in flight, arming in
+MISSION) plans the mission from the desired pose and checks it again: a job for `work`
+(`fcu.work`). Where it runs beside the loop the command's answer is IN_PROGRESS
+(`MAV_RESULT_IN_PROGRESS`, with `MissionPlan.reply` called with the final one): the mode in
+force flies on, the HEARTBEAT shows it, until the plan is taken in at a step boundary
+(`_planned`); its timeline then starts at that step (`mission_offset_s`). Any other mode
+change, a disarm, a failsafe or a new mission drops a plan under way.
 """
 
 from __future__ import annotations
@@ -36,7 +44,11 @@ from common.outcome import CRASH, FAILSAFE
 from fcu import auto_plans
 from fcu.mission.codes import MAV_MISSION_DENIED, result_name
 from fcu.mission.executor import MissionExecutor
+from fcu.mission.start import MissionPlan, Reply, plan_from
 from fcu.mode_references import ModeReferences
+from fcu.work import Outcome
+
+IN_PROGRESS = MAV_RESULT.MAV_RESULT_IN_PROGRESS  # answered later, through MissionPlan.reply
 
 
 class Commander(ModeReferences):
@@ -55,10 +67,9 @@ class Commander(ModeReferences):
         self.touchdown = None
         self.manual_sp = None  # POSCTL starts from where the vehicle is
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "armed")
-        if self.mode == Mode.MISSION and not self.mission_running and not self.mission_done:
-            refused = self._start_mission()  # MISSION_START came first: fly it now
-            if refused:
-                self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, refused)
+        if self.mode == Mode.MISSION and not self.mission_running and not self.mission_done \
+                and self.mission:  # MISSION_START came first: fly it now
+            self._plan_mission(self.mission_current, "", "mission started", self._warn)
         self._maybe_start_flight()
         return MAV_RESULT.MAV_RESULT_ACCEPTED, "armed"
 
@@ -74,6 +85,7 @@ class Commander(ModeReferences):
                     "disarm refused: in the air (force with p2 = 21196)")
         self.armed = False  # simulated time keeps running once the flight has started
         self.mission_running = False
+        self.mission_plan = None
         self.touchdown = None
         self.land = None
         self.auto = None
@@ -100,10 +112,16 @@ class Commander(ModeReferences):
         return ""
 
     def set_mode(self, mode: Mode, now_s: float) -> tuple[int, str]:
+        """(MAV_RESULT, why); IN_PROGRESS while MISSION's plan is made (`_plan_mission`)."""
         refused = self._mode_refusal(mode, now_s)
         if refused:
             return MAV_RESULT.MAV_RESULT_DENIED, refused
         previous = self.mode
+        self.mission_plan = None  # a start under way gives way to the newer command
+        if mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running) \
+                and self.armed:
+            return self._plan_mission(self.mission_current,
+                                      "mode MISSION" if previous != mode else "", "mode MISSION")
         idle = self.auto is None and self.touchdown is None  # e.g. landed, disarmed, re-armed
         if mode == Mode.TAKEOFF and (previous != Mode.TAKEOFF or idle):
             refused = self._start_takeoff(self.flight.takeoff_alt_m)
@@ -127,9 +145,7 @@ class Commander(ModeReferences):
             self.hold = self._current_pose_ref()
             self.mission_running = False
         elif mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running):
-            refused = self._start_mission()
-            if refused:
-                return MAV_RESULT.MAV_RESULT_DENIED, refused
+            self.mission_running = False  # disarmed: it starts when armed
         elif mode == Mode.LAND and previous != Mode.LAND:
             self._start_landing()
         elif mode == Mode.OFFBOARD:
@@ -199,17 +215,16 @@ class Commander(ModeReferences):
             return MAV_RESULT.MAV_RESULT_DENIED, "no mission"
         if not 0 <= first < len(self.mission):
             return MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {first}"
+        self.mission_plan = None
+        if self.armed:
+            return self._plan_mission(first, "mission started", "mission started")
         self.mission_current = first
         self.mission_done = False
         self.mission_running = False
-        self.mode = Mode.MISSION
+        self.mode = Mode.MISSION  # flown when armed
         self.touchdown = None
         self.land = None
         self.auto = None
-        refused = self._start_mission()
-        if refused:
-            return MAV_RESULT.MAV_RESULT_DENIED, refused
-        self._maybe_start_flight()
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission started")
         return MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started"
 
@@ -219,6 +234,7 @@ class Commander(ModeReferences):
         self.mission_current = 0
         self.mission_done = False
         self.executor = None
+        self.mission_plan = None  # planned for the old one
         if any(it.command == MAV_CMD.MAV_CMD_NAV_LAND for it in self.mission):
             self.say_touchdown_cap()  # the landing's clamp, said when the mission is taken
         if self.mode == Mode.MISSION:
@@ -230,12 +246,11 @@ class Commander(ModeReferences):
     def set_mission_current(self, seq: int) -> tuple[int, str]:
         if not 0 <= seq < len(self.mission):
             return MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {seq}"
+        if self.mode == Mode.MISSION and self.mission_running and self.armed:
+            self.mission_plan = None
+            return self._plan_mission(seq, "", f"mission item {seq}")
         self.mission_current = seq
         self.mission_done = False
-        if self.mode == Mode.MISSION and self.mission_running:
-            refused = self._start_mission()
-            if refused:
-                return MAV_RESULT.MAV_RESULT_DENIED, refused
         return MAV_RESULT.MAV_RESULT_ACCEPTED, f"mission item {seq}"
 
     def _maybe_start_flight(self) -> None:
@@ -243,29 +258,57 @@ class Commander(ModeReferences):
                                         Mode.RTL, Mode.POSCTL):
             self.flight_started = True
 
-    def _start_mission(self) -> str:
-        """Plan the mission from the current item, starting now from the desired pose, and
-        check it again from there with the upload's envelope (`MissionExecutor.refusal`):
-        one that no longer fits is not flown (the vehicle holds; the reason is returned,
-        for the command's refusal), never flown into the limits. '' when it runs (or waits
-        for arming)."""
-        if not self.armed or not self.mission:
-            self.mission_running = False
-            return ""
+    def _warn(self, result: int, text: str) -> None:
+        if result != MAV_RESULT.MAV_RESULT_ACCEPTED:
+            self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, text)
+
+    def _plan_mission(self, seq: int, said: str, text: str,
+                      reply: Reply | None = None) -> tuple[int, str]:
+        """Plan the mission from item `seq`, starting now from the desired pose, and check
+        it again from there with the upload's envelope (`fcu.mission.start.plan_from`, run
+        by `work`): one that no longer fits is not flown (the vehicle holds; the command is
+        refused with the reason), never flown into the limits. The answer, or IN_PROGRESS
+        while the plan is made beside the loop (then `reply` gets it)."""
         start = self._current_pose_ref()
-        t_s = self.clock_us * 1e-6
-        executor = MissionExecutor(self.mission, self.limits)
-        executor.set_current(self.mission_current, t_s, start.p_enu_m, start.q_enu_flu)
-        refused = executor.refusal()
-        if refused:
+        plan = self.mission_plan = MissionPlan(seq, self.clock_us * 1e-6, start, said, text,
+                                               reply)
+        self.work.submit(plan_from, (self.mission, self.limits, seq, plan.t_s, start.p_enu_m,
+                                     start.q_enu_flu),
+                         lambda outcome: self._planned(plan, outcome))
+        return plan.result if plan.result is not None else (IN_PROGRESS, "")
+
+    def _planned(self, plan: MissionPlan,
+                 outcome: Outcome[tuple[MissionExecutor | None, str]]) -> None:
+        """A mission's plan taken in (at a step boundary): flown from this step on, or
+        refused (the vehicle holds where the plan would have started)."""
+        if self.mission_plan is not plan:
+            return  # dropped meanwhile
+        self.mission_plan = None
+        executor, refused = outcome.value if outcome.value is not None else \
+            (None, f"mission plan failed: {outcome.error}")
+        self.mission_current = plan.seq
+        self.mission_done = False
+        self.mode = Mode.MISSION
+        self.touchdown = None
+        self.land = None
+        self.auto = None
+        if executor is None:
             self.executor = None
             self.mission_running = False
             self.mode = Mode.HOLD
-            self.hold = start
-            return f"mission refused from here: {result_name(MAV_MISSION_DENIED)}: {refused}"
-        self.executor = executor
-        self.mission_running = True
-        return ""
+            self.hold = plan.start
+            plan.result = (MAV_RESULT.MAV_RESULT_DENIED, f"mission refused from here: "
+                           f"{result_name(MAV_MISSION_DENIED)}: {refused}")
+        else:
+            self.executor = executor
+            self.mission_running = True
+            self.mission_offset_s = self.clock_us * 1e-6 - plan.t_s  # 0 when planned inline
+            self._maybe_start_flight()
+            if plan.said:
+                self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, plan.said)
+            plan.result = (MAV_RESULT.MAV_RESULT_ACCEPTED, plan.text)
+        if plan.reply is not None:
+            plan.reply(*plan.result)
 
     def _start_landing(self) -> None:
         start = self._current_pose_ref()
@@ -287,6 +330,7 @@ class Commander(ModeReferences):
 
     def failsafe_hold(self, reason: str) -> None:
         """A failsafe reaction: stop where the vehicle should be and hold."""
+        self.mission_plan = None
         self.mode = Mode.HOLD
         self.hold = self._current_pose_ref()
         self.mission_running = False
@@ -296,6 +340,7 @@ class Commander(ModeReferences):
         self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, reason, FAILSAFE)
 
     def failsafe_land(self, reason: str) -> None:
+        self.mission_plan = None
         if self.mode != Mode.LAND:
             self.mode = Mode.LAND
             self.auto = None

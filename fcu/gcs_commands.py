@@ -1,6 +1,9 @@
 """The FCU's commands from ground stations: COMMAND_LONG and COMMAND_INT executed and
 acknowledged (COMMAND_ACK), each refusal explained by STATUSTEXT, and a retry answered
-without executing the command again (`fcu.gcs_server` dispatches them here).
+without executing the command again (`fcu.gcs_server` dispatches them here). A command
+whose work runs beside the control loop (a mission's start: `fcu.commander`, IN_PROGRESS)
+is acknowledged once with its final result, when the work is done; until then a retry is
+executed again and replaces it (one start, one answer).
 
 Parameters are range-checked against what they can mean (a mode's numbers, a mission item,
 a message id); MAV_CMD_NAV_TAKEOFF's altitude is AMSL in COMMAND_LONG's p7 (as PX4 reads it)
@@ -11,6 +14,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections.abc import Callable
 from typing import Any, Protocol
 
 from common.mav_enums import MAV_CMD, MAV_FRAME, MAV_MODE_FLAG, MAV_RESULT, MAV_SEVERITY
@@ -23,6 +27,7 @@ from fcu.telemetry import REQUESTABLE, Home, Schedule
 
 M = MAV
 ACCEPTED, DENIED = MAV_RESULT.MAV_RESULT_ACCEPTED, MAV_RESULT.MAV_RESULT_DENIED
+IN_PROGRESS = MAV_RESULT.MAV_RESULT_IN_PROGRESS
 UNSUPPORTED = MAV_RESULT.MAV_RESULT_UNSUPPORTED
 WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
 FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM p2 that forces a disarm
@@ -50,7 +55,8 @@ class Server(Protocol):
 
     def schedule(self, index: int) -> Schedule: ...
 
-    def set_mission_current(self, seq: int) -> bool: ...
+    def set_mission_current(self, seq: int,
+                            reply: Callable[[int, str], None] | None = None) -> int: ...
 
 
 Command = CommandLong | CommandInt
@@ -109,6 +115,14 @@ class CommandService:
         result, text = self._execute(index, msg, now_s)
         if result is None:
             return  # answered with its message (requests): a retry asks again
+        plan = self.server.pipeline.commander.mission_plan
+        if result == IN_PROGRESS and plan is not None:  # answered when the plan is made
+            plan.reply = lambda r, t: self._answer(index, msg, sender, key, now_s, r, t)
+            return
+        self._answer(index, msg, sender, key, now_s, result, text)
+
+    def _answer(self, index: int, msg: Command, sender: tuple[int, int, int], key: bytes,
+                now_s: float, result: int, text: str) -> None:
         if len(self.executed) >= MAX_PEERS and sender not in self.executed:
             del self.executed[next(iter(self.executed))]
         self.executed[sender] = (key, now_s, result, text)
@@ -149,8 +163,7 @@ class CommandService:
                 result, text = c.mission_start(first)
         elif cmd == MAV_CMD.MAV_CMD_DO_SET_MISSION_CURRENT:
             seq = as_int(p[0], 0, 0xFFFF)
-            ok = seq is not None and self.server.set_mission_current(seq)
-            result = ACCEPTED if ok else DENIED
+            result = DENIED if seq is None else self.server.set_mission_current(seq)
             text = f"no mission item {p[0]:g}"
         elif cmd == MAV_CMD.MAV_CMD_NAV_LAND:
             result, text = c.set_mode(Mode.LAND, now_s)

@@ -242,14 +242,11 @@ class GcsServer:
         elif kind == "COMMAND_INT":
             self.commands.handle(index, as_message(msg, CommandInt), now_s)
         elif kind.startswith("MISSION_"):
-            for reply in self.missions.handle(msg, now_s):
-                if reply.get_type() == "STATUSTEXT":
-                    # within the link's budget, a chunk with its id (put back together)
-                    self.say(reply.severity, reply.text, index, reply.id, reply.chunk_seq)
-                    continue
-                if reply.get_type() == "MISSION_REQUEST_INT" and kind == "MISSION_COUNT":
-                    self.mission_link = index  # an upload began: its re-requests go here
-                self.send(reply, index)
+            replies = self.missions.handle(msg, now_s)
+            if kind == "MISSION_COUNT" and any(r.get_type() == "MISSION_REQUEST_INT"
+                                               for r in replies):
+                self.mission_link = index  # an upload began: its re-requests go here
+            self._send_mission(replies, index)
         elif kind == "PARAM_REQUEST_LIST":
             self.param_service.request_list(index)
         elif kind == "PARAM_REQUEST_READ":
@@ -262,8 +259,22 @@ class GcsServer:
             mode = decode_custom(as_message(msg, SetMode).custom_mode)
             if mode is not None:
                 result, text = cmd.set_mode(mode, now_s)
-                if result != MAV_RESULT.MAV_RESULT_ACCEPTED and text:
-                    self.say(WARNING, text, index)
+                if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and cmd.mission_plan:
+                    cmd.mission_plan.reply = lambda r, t: self._refused(r, t, index)
+                else:
+                    self._refused(result, text, index)
+
+    def _refused(self, result: int, text: str, index: int) -> None:
+        if result != MAV_RESULT.MAV_RESULT_ACCEPTED and text:
+            self.say(WARNING, text, index)
+
+    def _send_mission(self, replies: list[MAV.MAVLink_message], index: int | None) -> None:
+        for reply in replies:
+            if reply.get_type() == "STATUSTEXT":
+                # within the link's budget, a chunk with its id (put back together)
+                self.say(reply.severity, reply.text, index, reply.id, reply.chunk_seq)
+                continue
+            self.send(reply, index)
 
     def _setpoint(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
         """An offboard target decoded (`fcu.setpoint_wire`) and given to the commander; a
@@ -296,11 +307,26 @@ class GcsServer:
         """The streams of link `index`."""
         return self.links[index].schedule
 
-    def set_mission_current(self, seq: int) -> bool:
-        result, _ = self.pipeline.commander.set_mission_current(seq)
-        if result == MAV_RESULT.MAV_RESULT_ACCEPTED:
-            self.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # the spec's confirmation
-        return result == MAV_RESULT.MAV_RESULT_ACCEPTED
+    def set_mission_current(self, seq: int,
+                            reply: Callable[[int, str], None] | None = None) -> int:
+        """MAV_RESULT of a new current item; IN_PROGRESS while the mission is planned again
+        from it beside the loop (MISSION_CURRENT, then `reply`, when it is)."""
+        c = self.pipeline.commander
+        result, _ = c.set_mission_current(seq)
+
+        def confirmed(result: int, text: str) -> None:
+            if result == MAV_RESULT.MAV_RESULT_ACCEPTED:
+                self.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # the spec's confirmation
+            elif text:
+                self.say(WARNING, text)
+            if reply is not None:
+                reply(result, text)
+
+        if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and c.mission_plan is not None:
+            c.mission_plan.reply = confirmed
+        elif result == MAV_RESULT.MAV_RESULT_ACCEPTED:
+            self.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)
+        return result
 
     # ------------------------------------------------------------------ telemetry
 
@@ -362,6 +388,8 @@ class GcsServer:
         """Wall-clock work: mission re-requests, each link's due streams; a HEARTBEAT at once
         when the mode or the arming state changes (on the links that have the stream on)."""
         self.now_s = max(self.now_s, now_s)
+        # the upload's answer once its check is done (`fcu.work`), then re-requests
+        self._send_mission(self.missions.take_outbox(), self.mission_link)
         for reply in self.missions.tick(now_s):
             self.send(reply, self.mission_link)
         c = self.pipeline.commander

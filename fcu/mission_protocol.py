@@ -12,6 +12,12 @@ above the limit: the count and the limit) sends its reason as STATUSTEXT
 characters (MAVLink 2's `id` and `chunk_seq`; every chunk but the last padded with spaces to
 50 at a word boundary, so each also reads on its own). A final item sent again (the GCS lost
 our MISSION_ACK) gets the same answer again, STATUSTEXT included.
+The check runs where the server's `work` runs it (`fcu.work`: at once, or beside the control
+loop): until it is done nothing is answered (MISSION_ACK goes out when it is, through
+`outbox`), a final item sent again meanwhile is no new upload and gets no answer of its
+own, a MISSION_COUNT from the same GCS starts a new upload (the pending check's result is
+dropped), one from another GCS is DENIED as during an upload, and downloads return the
+mission in force. A check that fails (its worker stopped) is MAV_MISSION_ERROR with why.
 Download: MISSION_REQUEST_LIST -> MISSION_COUNT, then MISSION_ITEM_INT for each
 MISSION_REQUEST_INT (or legacy MISSION_REQUEST). MISSION_CLEAR_ALL clears. Only
 MAV_MISSION_TYPE_MISSION is supported; the other plan types get MAV_MISSION_UNSUPPORTED.
@@ -45,6 +51,7 @@ from common.mavlink_types.protocol import MissionItem as LegacyMissionItem
 from common.mission_items import HomePosition, MissionItem, item_from_message, item_message
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission, localize, too_many
+from fcu.work import InlineWork, Outcome, Work
 
 M = MAV
 MISSION = M.MAV_MISSION_TYPE_MISSION
@@ -74,6 +81,15 @@ class _Finished:
     count: int
     result: int
     notes: tuple[MAV.MAVLink_message, ...] = ()  # STATUSTEXT sent before the ACK
+
+
+@dataclass(frozen=True, eq=False)
+class _Checking:
+    """An upload received whole, its check under way (`work`)."""
+
+    partner: Partner
+    count: int
+    items: tuple[MissionItem, ...]
 
 
 def _msg(cls: type[MAV.MAVLink_message], *args: object,
@@ -114,8 +130,10 @@ class MissionServer:
 
     def __init__(self, system_id: int, component_id: int, limits: MissionLimits,
                  item_timeout_s: float = 0.25, retries: int = 5,
-                 home: HomePosition | None = None) -> None:
+                 home: HomePosition | None = None, work: Work | None = None) -> None:
         self.system_id = system_id
+        self.work = work if work is not None else InlineWork()
+        self.outbox: list[MAV.MAVLink_message] = []  # answers that came after the message
         self.component_id = component_id
         self.limits = limits
         self.home = home  # converts global-frame items; None: only local ones are accepted
@@ -132,11 +150,17 @@ class MissionServer:
         self.on_set_current: Callable[[int], bool] | None = None
         self._upload: _Upload | None = None
         self._finished: _Finished | None = None
+        self._checking: _Checking | None = None
         self._text_id = 0  # STATUSTEXT id of the last chunked text (1..65535)
 
     @property
     def uploading(self) -> bool:
         return self._upload is not None
+
+    @property
+    def checking(self) -> bool:
+        """An upload received whole whose check has not answered yet."""
+        return self._checking is not None
 
     # ------------------------------------------------------------------ replies
 
@@ -200,6 +224,7 @@ class MissionServer:
         if kind == "MISSION_CLEAR_ALL":
             if mission_type not in (MISSION, M.MAV_MISSION_TYPE_ALL):
                 return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
+            self._checking = None  # cleared after it: the check's answer would be stale
             self._replace(())
             return [self._ack(partner, M.MAV_MISSION_ACCEPTED, mission_type, opaque=True)]
         if kind not in ("MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM",
@@ -235,10 +260,12 @@ class MissionServer:
 
     def _on_count(self, partner: Partner, count: int,
                   now_s: float) -> list[MAV.MAVLink_message]:
-        up = self._upload
-        if up is not None and up.partner != partner:
+        up, checking = self._upload, self._checking
+        if (up is not None and up.partner != partner) or \
+                (checking is not None and checking.partner != partner):
             return [self._ack(partner, M.MAV_MISSION_DENIED)]  # busy with another GCS
         self._upload = None
+        self._checking = None  # a new upload: the old one's check answers nothing
         self._finished = None
         if count > self.limits.max_items:
             return [*self._statustexts(too_many(count, self.limits)),
@@ -253,6 +280,9 @@ class MissionServer:
     def _on_item(self, partner: Partner, item: MissionItem,
                  now_s: float) -> list[MAV.MAVLink_message]:
         up = self._upload
+        checking = self._checking
+        if up is None and checking is not None and checking.partner == partner:
+            return []  # the last item again while it is checked: answered when it is
         if up is None or up.partner != partner:
             done = self._finished
             if up is None and done is not None and done.partner == partner \
@@ -268,13 +298,32 @@ class MissionServer:
         if up.expected < up.count:
             return [self._request(up, now_s)]
         self._upload = None
-        items = tuple(up.items)
-        result, _seq, reason = check_mission(items, self.limits, self.home)
+        checking = self._checking = _Checking(partner, up.count, tuple(up.items))
+        self.work.submit(check_mission, (checking.items, self.limits, self.home),
+                         lambda outcome: self._checked(checking, outcome))
+        return self.take_outbox()
+
+    def _checked(self, checking: _Checking,
+                 outcome: Outcome[tuple[int, int | None, str]]) -> None:
+        """The check's answer: the mission replaced if it was accepted, the ACK queued."""
+        if self._checking is not checking:
+            return  # superseded by a new upload or a clear
+        self._checking = None
+        if outcome.value is None:
+            result, reason = M.MAV_MISSION_ERROR, f"mission check failed: {outcome.error}"
+        else:
+            result, _seq, reason = outcome.value
         if result == M.MAV_MISSION_ACCEPTED:
-            self._replace(items)
+            self._replace(checking.items)
         notes = self._statustexts(reason) if reason else ()
-        self._finished = _Finished(partner, up.count, result, notes)
-        return [*notes, self._ack(partner, result, opaque=result == M.MAV_MISSION_ACCEPTED)]
+        self._finished = _Finished(checking.partner, checking.count, result, notes)
+        self.outbox += [*notes, self._ack(checking.partner, result,
+                                          opaque=result == M.MAV_MISSION_ACCEPTED)]
+
+    def take_outbox(self) -> list[MAV.MAVLink_message]:
+        """The answers queued since the last call (to the GCS of the latest upload)."""
+        out, self.outbox = self.outbox, []
+        return out
 
     # ------------------------------------------------------------------ time
 

@@ -31,8 +31,10 @@ from fcu.landing import (
 from fcu.manual import ManualSetpoint, Sticks, StickSettings
 from fcu.mission.executor import MissionEvent, MissionExecutor
 from fcu.mission.limits import MissionLimits
+from fcu.mission.start import MissionPlan
 from fcu.offboard_stream import AttitudeTarget, OffboardSetpoint, PositionTarget
 from fcu.tracker import Reference, VehicleState, pose_ref
+from fcu.work import InlineWork, Work
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
@@ -63,6 +65,9 @@ class ModeReferences:
         self.mission: tuple[MissionItem, ...] = ()
         self.mission_current = 0  # the one home of the current mission item
         self.executor: MissionExecutor | None = None
+        self.mission_offset_s = 0.0  # the executor's timeline: the flight clock minus this
+        self.mission_plan: MissionPlan | None = None  # a mission's start under way
+        self.work: Work = InlineWork()  # where plans are made (`fcu.work`; the FCU's own)
         self.mission_running = False
         self.mission_done = False
         self.hold: Reference | None = None
@@ -221,9 +226,10 @@ class ModeReferences:
                                              offboard.limits(self.flight.sticks))
         return ref
 
-    def _mission_ref(self, t_s: float) -> Reference:
+    def _mission_ref(self, t_flight_s: float) -> Reference:
         executor = self.executor
         assert executor is not None
+        t_s = t_flight_s - self.mission_offset_s  # on the plan's timeline
         events = executor.update(t_s)
         self.mission_events.extend(events)
         for ev in events:
@@ -236,7 +242,7 @@ class ModeReferences:
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission complete")
             last = self.mission[-1].command if self.mission else None
             if last == MAV_CMD.MAV_CMD_NAV_LAND:
-                self._begin_touchdown(round(t_s * 1e6), ref)
+                self._begin_touchdown(round(t_flight_s * 1e6), ref)
             else:
                 self.mode = Mode.HOLD
                 self.hold = pose_ref(ref.p_enu_m, ref.q_enu_flu)

@@ -1,9 +1,8 @@
 """`fcu`: the flight controller process: the loop, its clocks and the command line.
 
-The work is done by stages without I/O (`fcu.pipeline`: commander -> tracker -> allocator ->
-supervisor); this shell only selects over the links, feeds the simulator bridge
-(`fcu.sim_bridge`) and the ground-station server (`fcu.gcs_server`), ticks the pipeline and
-writes the onboard log.
+The work is done by stages without I/O (`fcu.pipeline`); this shell selects over the links
+and the work beside the loop (`fcu.work`), feeds the simulator bridge and the ground-station
+server, ticks the pipeline and writes the onboard log.
 
 Clocks (DESIGN.md section 2). Lockstep: each new ODOMETRY is one control period at its own
 stamp, answered with HIL_ACTUATOR_CONTROLS; before the flight starts (armed and MISSION,
@@ -11,8 +10,7 @@ OFFBOARD, LAND, TAKEOFF, RTL or POSCTL) states are not answered, so simulated ti
 still. A simulator that stops answering is reported ("simulator not responding"), never a
 reason to disarm.
 Real time: a fixed-rate loop on the monotonic clock, integrating with the measured period
-(clamped to `MAX_DT_PERIODS` periods). Heartbeat, telemetry, mission re-requests and link
-timeouts run on the monotonic wall clock in both.
+(clamped to `MAX_DT_PERIODS`). Heartbeat, telemetry and link timeouts: the wall clock.
 """
 
 from __future__ import annotations
@@ -47,6 +45,8 @@ from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.sim_bridge import Resent, SimBridge, StateSample
 from fcu.telemetry import Home, heartbeat
+from fcu.work import KINDS, Work
+from fcu.work_process import make_work
 
 M = MAV
 DEFAULT_GCS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")
@@ -55,9 +55,8 @@ SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each state
 SIM_SILENT_S = 1.0  # lockstep: report a simulator silent this long (wall clock)
 MAX_DT_PERIODS = 5  # real time: the integrated period is clamped to this many periods
 # Per-step stages timed in lockstep flight (`stage_us` in the stats): waiting for the next
-# state (the simulator's work and the transport; housekeeping excluded), reading and
-# converting it, the pipeline's step, packing and sending the answer, the onboard log's
-# records, the link-facing housekeeping (telemetry, heartbeats, log writes) per step.
+# state (housekeeping excluded), reading it, the pipeline's step, sending the answer, the
+# onboard log's records, the link-facing housekeeping (telemetry, heartbeats, log writes).
 STAGES = ("wait", "rx", "step", "tx", "log", "housekeeping")
 
 
@@ -65,19 +64,23 @@ class FlightController:
     def __init__(self, pipeline: Pipeline, sim_url: str, gcs_urls: list[str], *,
                  system_id: int, lockstep: bool, home: Home, onboard_log: Path | None,
                  stats_path: Path | None, signing_key: bytes | None = None,
-                 rtt_probes: int = 0, params: ParamStore | None = None) -> None:
-        """`params`: the parameters `pipeline` was built with (fcu.compose); default: the
-        FCU's defaults, put in force here."""
+                 rtt_probes: int = 0, params: ParamStore | None = None,
+                 work: Work | None = None) -> None:
+        """`params`: those `pipeline` was built with (default: the FCU's, put in force);
+        `work`: `fcu.work` (default: inline in lockstep, beside the loop in real time)."""
         self.pipeline = pipeline
+        self.work = work if work is not None else \
+            make_work("inline" if lockstep else "beside", lockstep=lockstep)
         self.system_id = system_id
         self.lockstep = lockstep
         vehicle = pipeline.vehicle
         self.params = params if params is not None else \
             param_store(pipeline, pipeline.core.tracker.gains)
         self.missions = MissionServer(system_id, COMPONENT, pipeline.commander.limits,
-                                      home=published_home(home))
-        self.missions.on_mission_changed = lambda items: pipeline.commander.set_mission(
-            tuple(items))
+                                      home=published_home(home), work=self.work)
+        pipeline.commander.work = self.work
+        self.work.steps = lambda: self.steps
+        self.missions.on_mission_changed = pipeline.commander.set_mission
         sim = open_link(sim_url, role="sim_client", system_id=system_id)
         try:
             gcs = [open_link(u, role="vehicle", system_id=system_id) for u in gcs_urls]
@@ -89,11 +92,11 @@ class FlightController:
         self.server = GcsServer(gcs, pipeline, self.params, self.missions,
                                 system_id=system_id, home=home, signing_key=signing_key,
                                 on_params=self._apply_params)
-        self.missions.on_set_current = self.server.set_mission_current
+        self.missions.on_set_current = lambda seq: (  # accepted, or under way
+            self.server.set_mission_current(seq) != M.MAV_RESULT_DENIED)
         self.sim_mav = encoder(system_id, COMPONENT)
         self.log = OnboardLog(onboard_log, pipeline, self.params.values, system_id=system_id,
-                              home=home) \
-            if onboard_log else None
+                              home=home) if onboard_log else None
         self.server.on_text = self._log_text
         self.stats_path = stats_path
         self.period_us = pipeline.period_us
@@ -107,8 +110,7 @@ class FlightController:
         self.sim_heartbeat_due = 0.0
         self.last_sim_rx_s = time.monotonic()
         self.sim_silent = False
-        # TIMESYNC round trips at the simulator's first word; lockstep only (in real time the
-        # control loop must not stop for them)
+        # TIMESYNC round trips at the simulator's first word; lockstep only
         self.rtt_probes = rtt_probes if lockstep else 0
         self.rtt: dict[str, Any] | None = None
         self.sim_heard = False
@@ -298,6 +300,7 @@ class FlightController:
                     next_housekeeping = time.monotonic() + HOUSEKEEPING_S
                 continue
             fds = {fd: entry for entry in links for fd in entry[1].filenos()}
+            work_fds = self.work.filenos()  # a result of work beside the loop wakes it
             wake = min(self.server.next_due(), next_housekeeping + 0.05)
             if not self.lockstep:
                 wake = min(wake, next_tick)
@@ -305,13 +308,16 @@ class FlightController:
             if self.lockstep and sim_link.spin and now - self.last_sim_rx_s < SPIN_S:
                 timeout = 0.0  # lockstep: the next state is microseconds away, poll for it
             try:
-                readable, _, _ = select.select(list(fds), [], [], timeout)
+                readable, _, _ = select.select([*fds, *work_fds], [], [], timeout)
             except InterruptedError:
                 continue
             if not readable and timeout == 0.0:
                 os.sched_yield()  # polling: let a process that has work run on this core
             self.rx_ns = perf()
-            for index, link in {fds[fd] for fd in readable}:
+            if self.work.pending and self.work.take():  # results in, at a step boundary
+                self._timed_housekeeping(time.monotonic())  # their answers out at once
+                next_housekeeping = time.monotonic() + HOUSEKEEPING_S
+            for index, link in {fds[fd] for fd in readable if fd in fds}:
                 for peer, data in link.recv():
                     if index < 0:
                         self._on_sim_datagram(peer, data)
@@ -362,6 +368,7 @@ class FlightController:
                 "tilt_rate_limited_steps": pipe.tilt_rate_limited_steps,
                 "lockstep": self.lockstep,
                 "sim_rtt": self.rtt,
+                "work": self.work.stats(),
                 "timed_steps": self.timed_steps,
                 "stage_us": {k: v / max(self.timed_steps, 1) * 1e-3
                              for k, v in self.stage_ns.items()},
@@ -382,13 +389,12 @@ class FlightController:
             os.replace(tmp, self.stats_path)
         for link in (self.sim.link, *(gl.link for gl in self.server.links)):
             link.close()
+        self.work.close()
 
 
 def _quantile(samples: list[float], q: float) -> float | None:
-    if not samples:
-        return None
     ordered = sorted(samples)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else None
 
 
 def _home(text: str) -> Home:
@@ -410,6 +416,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"GCS link URL, repeatable (default: {' and '.join(DEFAULT_GCS)})")
     p.add_argument("--rate", type=int, default=500, help="control rate in Hz (1..1000)")
     p.add_argument("--realtime", action="store_true", help="run on the monotonic clock")
+    p.add_argument("--work", choices=KINDS,
+                   help="mission checks and plans: 'beside' the loop in a worker process "
+                        "(real-time default) or 'inline' (lockstep default)")
     p.add_argument("--sysid", type=int, default=1, help="MAVLink system id (1..254)")
     p.add_argument("--home", type=_home, default=Home(), help="LAT,LON,ALT of the origin")
     p.add_argument("--onboard-log", type=Path,
@@ -448,7 +457,9 @@ def main(argv: list[str] | None = None) -> int:
                               system_id=args.sysid, lockstep=not args.realtime,
                               home=args.home, onboard_log=args.onboard_log,
                               stats_path=args.stats, signing_key=key,
-                              rtt_probes=args.rtt_probes, params=params)
+                              rtt_probes=args.rtt_probes, params=params,
+                              work=make_work(args.work, lockstep=not args.realtime)
+                              if args.work else None)
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the loop ran: nothing flown
         print("fcu: stopped while starting", file=sys.stderr, flush=True)
         return 0

@@ -1,0 +1,41 @@
+"""The mission's plan at its start: the job (`fcu.work`; pure, picklable in and out) and
+the record of a start under way."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from common.mission_items import MissionItem
+from fcu.dualquat import Quat, Vec3
+from fcu.mission.executor import MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.tracker import Reference
+
+Reply = Callable[[int, str], None]  # (MAV_RESULT, why): a command's final answer
+
+
+@dataclass(eq=False)
+class MissionPlan:
+    """A mission's start under way (`fcu.commander`): from item `seq`, planned at `t_s` from
+    `start`; `said` when it flies, `text` its command's answer; `reply` told the final
+    answer, kept in `result`."""
+
+    seq: int
+    t_s: float
+    start: Reference
+    said: str
+    text: str
+    reply: Reply | None = None
+    result: tuple[int, str] | None = None
+
+
+def plan_from(items: Sequence[MissionItem], limits: MissionLimits, seq: int, t_s: float,
+              p_enu_m: Vec3, q_enu_flu: Quat) -> tuple[MissionExecutor | None, str]:
+    """The mission planned from item `seq` at `t_s` from the pose given, checked again with
+    the upload's envelope (`MissionExecutor.refusal`): (the executor, '') or (None, why
+    it does not fit from there)."""
+    executor = MissionExecutor(items, limits)
+    executor.set_current(seq, t_s, p_enu_m, q_enu_flu)
+    refused = executor.refusal()
+    return (None, refused) if refused else (executor, "")

@@ -1,0 +1,159 @@
+"""`ProcessWork`: jobs of `fcu.work` in a worker process beside the control loop (the edge:
+a process, a pipe, select), and `make_work` for `fcu --work`."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import select
+import signal
+from collections.abc import Callable
+from multiprocessing.connection import Connection
+from typing import Any
+
+from fcu.work import Done, InlineWork, Outcome, Work, run_job
+
+NICE = 10  # the worker's priority below the loop's
+WAIT_S = 30.0  # wait=True: a job this long is failed (the worker is stopped and restarted)
+
+
+def _serve(conn: Connection, nice: int) -> None:
+    """The worker process: jobs in, outcomes out, until the pipe closes."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the FCU's to act on
+    try:
+        os.nice(nice)
+    except OSError:
+        pass
+    while True:
+        try:
+            job_id, fn, args = conn.recv()
+        except (EOFError, OSError):
+            return  # the FCU closed the pipe (or is gone)
+        outcome = run_job(fn, args)
+        try:
+            conn.send((job_id, outcome))
+        except Exception as exc:  # an unpicklable result: said, not lost
+            conn.send((job_id, Outcome(None, f"result not sent: {exc}")))
+
+
+class ProcessWork(Work):
+    """Jobs run in one worker process (started on the first job, spawned: nothing of the
+    loop's state is inherited), at nice +NICE; callbacks from `take`."""
+
+    kind = "beside"
+
+    def __init__(self, *, wait: bool = False, nice: int = NICE) -> None:
+        super().__init__()
+        self.wait = wait
+        self.nice = nice
+        self._conn: Connection | None = None
+        self._proc: Any = None
+        self._jobs: dict[int, Done] = {}
+        self._next_id = 0
+        self.restarts = 0
+
+    @property
+    def pending(self) -> int:
+        return len(self._jobs) + len(self._finished)
+
+    def _start(self) -> Connection:
+        if self._conn is not None:
+            return self._conn
+        ctx = multiprocessing.get_context("spawn")
+        parent, child = ctx.Pipe()
+        proc = ctx.Process(target=_serve, args=(child, self.nice), name="fcu-work",
+                           daemon=True)
+        proc.start()
+        child.close()
+        self._conn, self._proc = parent, proc
+        return parent
+
+    def start(self) -> None:
+        """Start the worker now (it is otherwise started by the first job)."""
+        self._start()
+
+    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done) -> None:
+        job_id = self._next_id = self._next_id + 1
+        self._jobs[job_id] = done
+        try:
+            self._start().send((job_id, fn, args))
+        except Exception as exc:  # the pipe is gone (the worker died) or args unpicklable
+            self._lost(f"job not sent: {exc}")
+            return
+        if self.wait:
+            self._wait_for(job_id)
+            self.take()
+
+    def filenos(self) -> list[int]:
+        return [self._conn.fileno()] if self._conn is not None and self._jobs else []
+
+    def _wait_for(self, job_id: int) -> None:
+        while job_id in self._jobs:
+            conn = self._conn
+            if conn is None:
+                return
+            if not select.select([conn.fileno()], [], [], WAIT_S)[0]:
+                self._lost(f"no result within {WAIT_S:g} s")
+                return
+            self._receive()
+
+    def _receive(self) -> None:
+        conn = self._conn
+        while conn is not None and self._jobs and conn.poll(0):
+            try:
+                job_id, outcome = conn.recv()
+            except (EOFError, OSError):
+                self._lost(self._exit_reason())
+                return
+            done = self._jobs.pop(job_id, None)
+            if done is not None:
+                self._finished.append((done, outcome))
+
+    def _exit_reason(self) -> str:
+        proc = self._proc
+        if proc is not None:
+            proc.join(timeout=1.0)
+            return f"the worker stopped (exit code {proc.exitcode})"
+        return "the worker stopped"
+
+    def _lost(self, reason: str) -> None:
+        """The worker is gone or stuck: fail every job it had, stop it; the next job
+        starts another."""
+        for done in self._jobs.values():
+            self._finished.append((done, Outcome(None, reason)))
+        self._jobs.clear()
+        self._stop()
+        self.restarts += 1
+
+    def take(self) -> int:
+        if self._jobs:
+            self._receive()
+            proc = self._proc
+            if self._jobs and proc is not None and not proc.is_alive():
+                self._receive()  # what it sent before it stopped
+                if self._jobs:
+                    self._lost(self._exit_reason())
+        return super().take()
+
+    def _stop(self) -> None:
+        conn, proc = self._conn, self._proc
+        self._conn = self._proc = None
+        if conn is not None:
+            conn.close()
+        if proc is not None:
+            proc.join(timeout=1.0)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(timeout=1.0)
+
+    def close(self) -> None:
+        self._stop()
+
+
+def make_work(kind: str, *, lockstep: bool) -> Work:
+    """`--work`: 'inline' or 'beside' (a worker process; in lockstep it is waited for)."""
+    if kind == "inline":
+        return InlineWork()
+    if kind == "beside":
+        return ProcessWork(wait=lockstep)
+    raise ValueError(f"--work: expected one of inline, beside, got {kind!r}")

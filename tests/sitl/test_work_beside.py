@@ -1,0 +1,69 @@
+"""Work beside the control loop, through processes (`fcu.work`): in real time the mission
+check of a 500-item upload and the mission's plan at MISSION_START run while the loop keeps
+stepping, judged in control steps (the FCU's `--stats`: the steps it took while each job was
+under way), never in wall time; with `--work inline` they take none (the loop waited), which
+is what a regression would show; and every answer is the one the protocol says."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from benchmarks.bench_mission_length import mission
+from common.mavlink import MAV
+from common.modes import Mode, decode_custom
+from gcs.mission_client import upload
+
+from .conftest import Stack, launch, stop
+from .waits import until
+
+M = MAV
+ITEMS = 500
+
+
+def _fly_500(tmp_path: Path, *fcu_args: str) -> tuple[dict, Stack]:
+    """Real time, on the ground: upload 500 items, arm, MISSION_START; the FCU's stats."""
+    stats = tmp_path / "fcu.json"
+    s = launch(tmp_path, "case1_figure8", realtime=True,
+               fcu_args=("--stats", str(stats), *fcu_args))
+    try:
+        sess = s.session
+        assert upload(sess.conn, sess.target_system, sess.target_component,
+                      mission(ITEMS), send=sess.send) == M.MAV_MISSION_ACCEPTED
+        assert sess.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0) == M.MAV_RESULT_ACCEPTED
+        assert sess.command(M.MAV_CMD_MISSION_START, 0.0) == M.MAV_RESULT_ACCEPTED
+        hb = s.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1
+                        and decode_custom(m.custom_mode) == Mode.MISSION)
+        assert hb is not None, "no HEARTBEAT in MISSION"
+        until(lambda: s.wait_for(["LOCAL_POSITION_NED"], lambda m: m.z < -0.5, 1.0),
+              "the take-off to 1 m", 30.0)
+    finally:
+        s.session.close()
+        stop(s.procs)
+    return json.loads(stats.read_text()), s
+
+
+@pytest.mark.timeout(180)
+def test_realtime_checks_and_plans_run_while_the_loop_steps(tmp_path):
+    """Given the real-time default (`beside`), then the check and the plan each ran while
+    the loop took control steps (at least one: inline, it takes none), the upload was
+    ACCEPTED, MISSION_START ACCEPTED and the vehicle flew the mission's take-off."""
+    stats, _ = _fly_500(tmp_path)
+    work = stats["work"]
+    assert work["kind"] == "beside" and work["failed"] == 0
+    steps = {job["job"]: job["steps"] for job in work["history"]}
+    assert set(steps) == {"check_mission", "plan_from"}, work
+    assert steps["check_mission"] >= 1 and steps["plan_from"] >= 1, work
+
+
+@pytest.mark.timeout(180)
+def test_inline_work_stops_the_loop_for_it(tmp_path):
+    """Given `--work inline` in real time (the old way), then the same jobs took no control
+    step while they ran: the loop waited for them."""
+    stats, _ = _fly_500(tmp_path, "--work", "inline")
+    work = stats["work"]
+    assert work["kind"] == "inline"
+    assert [(j["job"], j["steps"]) for j in work["history"]] == [
+        ("check_mission", 0), ("plan_from", 0)]

@@ -1,0 +1,271 @@
+"""Work beside the control loop (`fcu.work`, `fcu.work_process`) and the protocol around it:
+the mission upload's MISSION_ACK, a mission's start and its COMMAND_ACK, answered when the
+work is done, and the vehicle flying the mode in force meanwhile."""
+
+from __future__ import annotations
+
+import os
+import signal
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from common.mav_enums import MAV_CMD, MAV_RESULT
+from common.mavlink import MAV
+from common.mission_items import MissionItem, item_message
+from common.modes import Mode
+from fcu.commander import IN_PROGRESS
+from fcu.mission.limits import MissionLimits
+from fcu.mission.validation import check_mission
+from fcu.mission_protocol import MissionServer
+from fcu.work import Done, InlineWork, Outcome, Work
+from fcu.work_process import ProcessWork, make_work
+from tests.unit.test_mission_protocol import waypoints
+
+from common.config import load_gains, load_vehicle
+from fcu.pipeline import Pipeline
+from fcu.tracker import VehicleState
+
+ROOT = Path(__file__).resolve().parents[2]
+
+VEHICLE = (1, 1)
+GCS, OTHER = (255, 190), (254, 190)
+M = MAV
+
+
+class HeldWork(Work):
+    """Jobs computed at once but called back only when `release` says: work beside the loop
+    that takes as long as the test wants."""
+
+    kind = "held"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.held: list[tuple[Done, Outcome[Any]]] = []
+
+    @property
+    def pending(self) -> int:
+        return len(self.held) + len(self._finished)
+
+    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done) -> None:
+        self.held.append((done, Outcome(fn(*args))))
+
+    def release(self) -> int:
+        self._finished += self.held
+        self.held = []
+        return self.take()
+
+
+def _items(n: int) -> list[MissionItem]:
+    """Waypoints 3 m up, 0.5 m apart."""
+    return waypoints(n)
+
+
+def _msg(m: MAV.MAVLink_message, src: tuple[int, int]) -> MAV.MAVLink_message:
+    m._header = MAV.MAVLink_header(m.get_msgId(), srcSystem=src[0], srcComponent=src[1])
+    return m
+
+
+def _count(n: int, src: tuple[int, int] = GCS) -> MAV.MAVLink_message:
+    return _msg(M.MAVLink_mission_count_message(*VEHICLE, n, 0), src)
+
+
+def _item(it: MissionItem, src: tuple[int, int] = GCS) -> MAV.MAVLink_message:
+    return _msg(item_message(it, *VEHICLE), src)
+
+
+def _upload(server: MissionServer, items: list[MissionItem],
+            src: tuple[int, int] = GCS) -> list[MAV.MAVLink_message]:
+    out = server.handle(_count(len(items), src), 0.0)
+    for it in items:
+        out = server.handle(_item(it, src), 0.0)
+    return out
+
+
+def _acks(msgs: list[MAV.MAVLink_message]) -> list[int]:
+    return [m.type for m in msgs if m.get_type() == "MISSION_ACK"]
+
+
+def _kinds(msgs: list[MAV.MAVLink_message]) -> list[str]:
+    return [m.get_type() for m in msgs]
+
+
+# ---------------------------------------------------------------------- the workers
+
+
+def test_a_worker_process_gives_the_inline_result_and_says_why_a_job_failed():
+    """Given the mission check of 500 items, then the worker process's outcome equals the
+    inline one (exactly); a job that raises comes back with its exception's text, and the
+    worker goes on with the next."""
+    items = tuple(_items(500))
+    limits = MissionLimits()
+    inline: list[Outcome[Any]] = []
+    InlineWork().submit(check_mission, (items, limits, None), inline.append)
+    beside: list[Outcome[Any]] = []
+    work = ProcessWork(wait=True)
+    try:
+        work.submit(check_mission, (items, limits, None), beside.append)
+        work.submit(int, ("not a number",), beside.append)
+        work.submit(check_mission, (items[:3], limits, None), beside.append)
+    finally:
+        work.close()
+    assert beside[0] == inline[0] and inline[0].value[0] == M.MAV_MISSION_ACCEPTED
+    assert beside[1].value is None and beside[1].error.startswith("ValueError: invalid")
+    assert beside[2].value[0] == M.MAV_MISSION_ACCEPTED
+    assert (work.submitted, work.failed) == (3, 1)
+    assert [h[0] for h in work.history] == ["check_mission", "int", "check_mission"]
+
+
+def test_a_worker_that_dies_fails_its_job_with_the_reason_and_is_started_again():
+    """Given a worker killed while its job runs, then the job's outcome says the worker
+    stopped (with its exit code), and the next job runs in a new worker."""
+    import time
+    work = ProcessWork()
+    got: list[Outcome[Any]] = []
+    try:
+        work.submit(time.sleep, (30.0,), got.append)
+        assert work.pending == 1
+        os.kill(work._proc.pid, signal.SIGKILL)
+        work._proc.join(timeout=10)
+        while not got:
+            work.take()
+        assert got[0].value is None and "worker stopped (exit code -9)" in got[0].error
+        work.wait = True
+        work.submit(abs, (-2,), got.append)
+        assert got[1] == Outcome(2) and work.restarts == 1 and work.pending == 0
+    finally:
+        work.close()
+
+
+def test_make_work_names_the_two_kinds():
+    assert isinstance(make_work("inline", lockstep=False), InlineWork)
+    beside = make_work("beside", lockstep=True)
+    assert isinstance(beside, ProcessWork) and beside.wait
+    assert not make_work("beside", lockstep=False).wait  # type: ignore[attr-defined]
+    with pytest.raises(ValueError, match="expected one of inline, beside"):
+        make_work("thread", lockstep=False)
+
+
+# ---------------------------------------------------------------------- the mission upload
+
+
+def test_the_answer_to_an_upload_waits_for_its_check():
+    """Given the last item received while the check runs beside the loop, then nothing is
+    answered and the old mission stays (a download returns it); the last item sent again
+    meanwhile is no new upload and gets no answer; when the check is done, one
+    MISSION_ACK ACCEPTED goes out and the new mission is in force."""
+    work = HeldWork()
+    server = MissionServer(*VEHICLE, MissionLimits(), work=work)
+    changed: list[tuple[MissionItem, ...]] = []
+    server.on_mission_changed = changed.append
+    old = _items(2)
+    _upload(server, old)
+    work.release()
+    assert _acks(server.take_outbox()) == [M.MAV_MISSION_ACCEPTED]
+    new = _items(5)
+    assert _upload(server, new) == [] and server.checking
+    assert server.handle(_item(new[-1]), 0.0) == []  # the last item again: no answer
+    assert server.handle(_msg(M.MAVLink_mission_request_list_message(*VEHICLE, 0), GCS),
+                         0.0)[0].count == 2  # a download meanwhile: the mission in force
+    assert server.take_outbox() == [] and len(changed) == 1
+    assert work.release() == 1
+    acks = server.take_outbox()
+    assert _kinds(acks) == ["MISSION_ACK"] and acks[0].type == M.MAV_MISSION_ACCEPTED
+    assert len(server.mission) == 5 and len(changed) == 2 and not server.checking
+    again = server.handle(_item(new[-1]), 0.0)  # after the ACK: the same answer again
+    assert _kinds(again) == ["MISSION_ACK"] and again[0].type == M.MAV_MISSION_ACCEPTED
+
+
+def test_a_new_upload_drops_the_pending_check_and_another_gcs_is_denied():
+    """Given a check under way, then a MISSION_COUNT from another GCS is DENIED (busy); one
+    from the same GCS starts a new upload, and the old check's answer is dropped."""
+    work = HeldWork()
+    server = MissionServer(*VEHICLE, MissionLimits(), work=work)
+    _upload(server, _items(4))
+    busy = server.handle(_count(2, OTHER), 0.0)
+    assert _kinds(busy) == ["MISSION_ACK"] and busy[0].type == M.MAV_MISSION_DENIED
+    assert _kinds(server.handle(_count(2), 0.0)) == ["MISSION_REQUEST_INT"]
+    work.release()
+    assert server.take_outbox() == [] and server.mission == ()  # dropped
+    _upload(server, _items(2))
+    work.release()
+    assert _acks(server.take_outbox()) == [M.MAV_MISSION_ACCEPTED]
+    assert len(server.mission) == 2
+
+
+def test_a_check_that_failed_is_a_mission_error_with_why():
+    class Broken(Work):
+        def _submit(self, fn, args, done):  # noqa: ANN001, ANN202
+            done(Outcome(None, "the worker stopped (exit code -9)"))
+
+    server = MissionServer(*VEHICLE, MissionLimits(), work=Broken())
+    out = _upload(server, _items(2))
+    assert _kinds(out)[-1] == "MISSION_ACK" and set(_kinds(out)[:-1]) == {"STATUSTEXT"}
+    assert _acks(out) == [M.MAV_MISSION_ERROR] and server.mission == ()
+    text = "".join(m.text for m in out[:-1])
+    assert "mission check failed: the worker stopped" in " ".join(text.split())
+
+
+# ---------------------------------------------------------------------- a mission's start
+
+
+def airborne_commander() -> Any:
+    """Hovering armed 2 m up in HOLD (the tilted vehicle's envelope in the limits)."""
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
+                    limits=MissionLimits(vehicle=vehicle))
+    pipe.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    assert pipe.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    return pipe.commander
+
+
+def _planned_commander() -> tuple[Any, HeldWork]:
+    c = airborne_commander()
+    work = HeldWork()
+    c.work = work
+    c.set_mission(tuple(_items(3)))
+    return c, work
+
+
+def test_a_mission_start_is_answered_and_shown_when_its_plan_is_taken_in():
+    """Given MISSION_START in flight with the plan made beside the loop, then the answer is
+    IN_PROGRESS, the mode in force (HOLD) flies on and is shown, and no event is said;
+    when the plan is taken in, the mode is MISSION, 'mission started' is said, the reply
+    gets ACCEPTED, and the mission's timeline starts at that step."""
+    c, work = _planned_commander()
+    replies: list[tuple[int, str]] = []
+    c.clock_us = 2_000_000
+    result = c.mission_start(0)
+    assert result == (IN_PROGRESS, "") and c.mission_plan is not None
+    c.mission_plan.reply = lambda r, t: replies.append((r, t))
+    said = len(c.events)
+    for k in range(5):
+        c.reference(2_000_000 + 2000 * k)
+    assert c.mode == Mode.HOLD and not c.mission_running and len(c.events) == said
+    work.release()
+    assert replies == [(MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")]
+    assert c.mode == Mode.MISSION and c.mission_running
+    assert c.mission_offset_s == pytest.approx(0.008)
+    assert c.events[-1].text == "mission started"
+
+
+def test_a_plan_under_way_gives_way_to_a_newer_command():
+    """Given a mission's plan under way, then LAND drops it: taken in later, it changes
+    nothing and answers nothing."""
+    c, work = _planned_commander()
+    replies: list[tuple[int, str]] = []
+    assert c.set_mode(Mode.MISSION, 0.0)[0] == IN_PROGRESS
+    c.mission_plan.reply = lambda r, t: replies.append((r, t))
+    assert c.set_mode(Mode.LAND, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    work.release()
+    assert c.mode == Mode.LAND and replies == [] and c.mission_plan is None
+
+
+def test_inline_work_answers_a_mission_start_at_once():
+    c = airborne_commander()
+    c.set_mission(tuple(_items(3)))
+    assert c.mission_start(0) == (MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")
+    assert c.mode == Mode.MISSION and c.mission_offset_s == 0.0
