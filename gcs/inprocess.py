@@ -197,10 +197,13 @@ def align(pipeline: Pipeline, world: World, dt_s: float,
 
 
 def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
-                 logs: bool = True) -> RunResult:
+                 logs: bool = True,
+                 before_step: Callable[[int, Pipeline], None] | None = None) -> RunResult:
     """Fly a scenario's mission to its end from `initial` (default: the scenario's start);
     deterministic for a given scenario. With `logs`, the result carries truth.ulg and
-    onboard.ulg as the two processes would write them."""
+    onboard.ulg as the two processes would write them. `before_step(t_us, pipeline)` runs
+    before each control step of the flight (what a ground station does, at fixed
+    simulated times)."""
     vehicle = scenario.vehicle
     control_dt_us = 1_000_000 // scenario.control_rate_hz
     world = World(scenario, control_dt_us, sensors=scenario.sensors, seed=scenario.seed,
@@ -274,6 +277,8 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
             truth_log.record(state)
         if feed is None:
             pipeline.on_state(t_us, state_for_fcu(state), t_us)
+        if before_step is not None:
+            before_step(t_us, pipeline)
         t0 = clock()
         out = pipeline.step(t_us, dt_s)
         step_us = (clock() - t0) * 1e6 + input_us
