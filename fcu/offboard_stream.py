@@ -23,7 +23,6 @@ the callers that compare it with their `now_s`.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
@@ -95,8 +94,9 @@ class OffboardSetpoint:
 
     `flight_clock` None (real time): `received_s` is the wall-clock time of the latest
     sample, as PX4 judges it. Set (lockstep: the flight clock in seconds), the sample is
-    stamped on it too and judged by `age_s`; `received_s` then reads as the wall-clock
-    time that old, so that a caller's `now_s - received_s` is that age."""
+    stamped on it too and judged by `age_s`; with `wall_clock` (the clock the callers'
+    `now_s` comes from) `received_s` then reads as the wall-clock time that old, so that a
+    caller's `now_s - received_s` is that age. No clock is read here unless given."""
 
     p_enu_m: Vec3 | None = None
     v_enu_m_s: Vec3 = _ZERO
@@ -108,13 +108,14 @@ class OffboardSetpoint:
     seq: int = 0  # counts the samples taken: the reference anchors each new one
     flight_clock: Clock | None = None  # lockstep: simulated seconds; None: real time
     received_flight_s: float = -math.inf  # the flight clock at the latest sample
-    wall_clock: Clock = field(default=time.monotonic, repr=False)  # what now_s is read from
+    wall_clock: Clock | None = field(default=None, repr=False)  # what now_s is read from
 
     @property
     def received_s(self) -> float:
         """The latest sample's time on the wall clock; in lockstep the wall-clock time as
         old as the sample is (`age_s`); -inf: none yet."""
-        if self.flight_clock is None or self.received_flight_s == -math.inf:
+        if self.flight_clock is None or self.wall_clock is None or \
+                self.received_flight_s == -math.inf:
             return self.received_wall_s
         now = self.wall_clock()
         return now - self.age_s(now)
