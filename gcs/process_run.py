@@ -34,6 +34,7 @@ from gcs.inprocess import scenario_params
 from gcs.metrics import build_metrics, link_timing, onboard_on_truth_clock
 from gcs.mission_client import MissionError, upload_detailed
 from gcs.run_waits import (
+    RUN_SILENCE_S,
     STOP_S,
     Progress,
     Report,
@@ -235,8 +236,9 @@ class _Flight:
             self.children.check()
             raise
         items = scenario_mission(sc)
+        # our own local child: silence while it lives is its (inline) mission check
         answer = upload_detailed(s.conn, s.target_system, s.target_component, items,
-                                 send=s.send)
+                                 send=s.send, silence_s=RUN_SILENCE_S)
         if not answer.accepted:
             raise RunError(f"mission upload refused: {answer.describe()}")
         # The flight's clock starts at MISSION_START: 0 in lockstep (simulated time stands
