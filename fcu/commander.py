@@ -41,10 +41,11 @@ from common.mav_enums import MAV_CMD, MAV_RESULT, MAV_SEVERITY
 from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE
-from fcu import auto_plans
+from fcu import auto_plans, manual
+from fcu.manual import StickSettings
 from fcu.mission.codes import MAV_MISSION_DENIED, result_name
 from fcu.mission.executor import MissionExecutor
-from fcu.mission.start import MissionPlan, Reply, plan_from
+from fcu.mission.start import MissionPlan, PosctlFit, Reply, plan_from
 from fcu.mode_references import ModeReferences
 from fcu.work import Outcome
 
@@ -67,6 +68,8 @@ class Commander(ModeReferences):
         self.touchdown = None
         self.manual_sp = None  # POSCTL starts from where the vehicle is
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "armed")
+        if self.mode == Mode.POSCTL:
+            self._fit_posctl(Mode.POSCTL)  # fitted again there
         if self.mode == Mode.MISSION and not self.mission_running and not self.mission_done \
                 and self.mission:  # MISSION_START came first: fly it now
             self._plan_mission(self.mission_current, "", "mission started", self._warn)
@@ -118,10 +121,17 @@ class Commander(ModeReferences):
             return MAV_RESULT.MAV_RESULT_DENIED, refused
         previous = self.mode
         self.mission_plan = None  # a start under way gives way to the newer command
+        self.posctl_fit = None
         if mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running) \
                 and self.armed:
             return self._plan_mission(self.mission_current,
                                       "mode MISSION" if previous != mode else "", "mode MISSION")
+        if mode == Mode.POSCTL and previous != Mode.POSCTL:
+            return self._fit_posctl(previous)
+        return self._enter(mode, previous)
+
+    def _enter(self, mode: Mode, previous: Mode) -> tuple[int, str]:
+        """The mode in force from now (its plans made here, cheap ones: TAKEOFF, RTL)."""
         idle = self.auto is None and self.touchdown is None  # e.g. landed, disarmed, re-armed
         if mode == Mode.TAKEOFF and (previous != Mode.TAKEOFF or idle):
             refused = self._start_takeoff(self.flight.takeoff_alt_m)
@@ -258,6 +268,39 @@ class Commander(ModeReferences):
                                         Mode.RTL, Mode.POSCTL):
             self.flight_started = True
 
+    def _fit_posctl(self, previous: Mode) -> tuple[int, str]:
+        """POSCTL's limits fitted to the envelope at the desired attitude (`manual.fit_envelope`,
+        run by `work`); POSCTL is entered when they are (IN_PROGRESS meanwhile)."""
+        start = self._current_pose_ref()
+        fit = self.posctl_fit = PosctlFit(previous)
+        self.work.submit(manual.fit_envelope, (self.flight.sticks, self.limits.vehicle,
+                                               start.q_enu_flu),
+                         lambda outcome: self._fitted(fit, outcome))
+        return fit.result if fit.result is not None else (IN_PROGRESS, "")
+
+    def _fitted(self, fit: PosctlFit, outcome: Outcome[StickSettings]) -> None:
+        if self.posctl_fit is not fit:
+            return  # dropped meanwhile
+        self.posctl_fit = None
+        lim = outcome.value
+        if lim is None:
+            fit.result = (MAV_RESULT.MAV_RESULT_DENIED,
+                          f"POSCTL refused: envelope fit failed: {outcome.error}")
+        else:
+            self.manual_limits = lim
+            fit.result = self._enter(Mode.POSCTL, fit.previous)
+            if lim.acc_xy_m_s2 < self.flight.sticks.acc_xy_m_s2:  # said, as it is unusual
+                self.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
+                         f"POSCTL: acc {lim.acc_xy_m_s2:.2g} m/s2, jerk "
+                         f"{lim.jerk_m_s3:.2g} m/s3 here")
+        if fit.reply is not None:
+            fit.reply(*fit.result)
+
+    @property
+    def under_way(self) -> MissionPlan | PosctlFit | None:
+        """The mode change whose work runs beside the loop (its `reply` is told the end)."""
+        return self.mission_plan or self.posctl_fit
+
     def _warn(self, result: int, text: str) -> None:
         if result != MAV_RESULT.MAV_RESULT_ACCEPTED:
             self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, text)
@@ -330,7 +373,7 @@ class Commander(ModeReferences):
 
     def failsafe_hold(self, reason: str) -> None:
         """A failsafe reaction: stop where the vehicle should be and hold."""
-        self.mission_plan = None
+        self.mission_plan = self.posctl_fit = None
         self.mode = Mode.HOLD
         self.hold = self._current_pose_ref()
         self.mission_running = False
@@ -340,7 +383,7 @@ class Commander(ModeReferences):
         self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, reason, FAILSAFE)
 
     def failsafe_land(self, reason: str) -> None:
-        self.mission_plan = None
+        self.mission_plan = self.posctl_fit = None
         if self.mode != Mode.LAND:
             self.mode = Mode.LAND
             self.auto = None

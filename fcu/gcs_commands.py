@@ -115,7 +115,7 @@ class CommandService:
         result, text = self._execute(index, msg, now_s)
         if result is None:
             return  # answered with its message (requests): a retry asks again
-        plan = self.server.pipeline.commander.mission_plan
+        plan = self.server.pipeline.commander.under_way
         if result == IN_PROGRESS and plan is not None:  # answered when the plan is made
             plan.reply = lambda r, t: self._answer(index, msg, sender, key, now_s, r, t)
             return

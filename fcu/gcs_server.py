@@ -259,8 +259,9 @@ class GcsServer:
             mode = decode_custom(as_message(msg, SetMode).custom_mode)
             if mode is not None:
                 result, text = cmd.set_mode(mode, now_s)
-                if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and cmd.mission_plan:
-                    cmd.mission_plan.reply = lambda r, t: self._refused(r, t, index)
+                under_way = cmd.under_way
+                if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and under_way is not None:
+                    under_way.reply = lambda r, t: self._refused(r, t, index)
                 else:
                     self._refused(result, text, index)
 

@@ -31,7 +31,7 @@ from fcu.landing import (
 from fcu.manual import ManualSetpoint, Sticks, StickSettings
 from fcu.mission.executor import MissionEvent, MissionExecutor
 from fcu.mission.limits import MissionLimits
-from fcu.mission.start import MissionPlan
+from fcu.mission.start import MissionPlan, PosctlFit
 from fcu.offboard_stream import AttitudeTarget, OffboardSetpoint, PositionTarget
 from fcu.tracker import Reference, VehicleState, pose_ref
 from fcu.work import InlineWork, Work
@@ -67,6 +67,7 @@ class ModeReferences:
         self.executor: MissionExecutor | None = None
         self.mission_offset_s = 0.0  # the executor's timeline: the flight clock minus this
         self.mission_plan: MissionPlan | None = None  # a mission's start under way
+        self.posctl_fit: PosctlFit | None = None  # POSCTL's limits being fitted
         self.work: Work = InlineWork()  # where plans are made (`fcu.work`; the FCU's own)
         self.mission_running = False
         self.mission_done = False
@@ -148,14 +149,9 @@ class ModeReferences:
         sp = self.manual_sp
         if sp is None:
             start = self._current_pose_ref()
+            if self.posctl_fit is not None:  # its limits being fitted: hold still till then
+                return start
             sp = manual.start(t_us, start.p_enu_m, start.q_enu_flu)
-            self.manual_limits = lim = manual.fit_envelope(self.flight.sticks,
-                                                           self.limits.vehicle,
-                                                           start.q_enu_flu)
-            if lim.acc_xy_m_s2 < self.flight.sticks.acc_xy_m_s2:  # said, as it is unusual
-                self.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
-                         f"POSCTL: acc {lim.acc_xy_m_s2:.2g} m/s2, jerk "
-                         f"{lim.jerk_m_s3:.2g} m/s3 here")
         p_vehicle = self.state.p_enu_m if self.state is not None else None
         self.manual_sp, ref = manual.advance(sp, t_us, self.sticks, self.manual_limits,
                                              p_vehicle)

@@ -1,5 +1,5 @@
-"""The mission's plan at its start: the job (`fcu.work`; pure, picklable in and out) and
-the record of a start under way."""
+"""The mission's plan at its start: the job (`fcu.work`; pure, picklable in and out); the
+records of a mode change under way (a mission's start, POSCTL's fit)."""
 
 from __future__ import annotations
 
@@ -7,12 +7,22 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from common.mission_items import MissionItem
+from common.modes import Mode
 from fcu.dualquat import Quat, Vec3
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.tracker import Reference
 
 Reply = Callable[[int, str], None]  # (MAV_RESULT, why): a command's final answer
+
+
+@dataclass(eq=False)
+class PosctlFit:
+    """POSCTL's entry under way (`fcu.commander`): its limits being fitted, from `previous`."""
+
+    previous: Mode
+    reply: Reply | None = None
+    result: tuple[int, str] | None = None
 
 
 @dataclass(eq=False)

@@ -12,7 +12,8 @@ from typing import Any
 
 import pytest
 
-from common.mav_enums import MAV_CMD, MAV_RESULT
+from common.config import load_gains, load_vehicle
+from common.mav_enums import MAV_RESULT
 from common.mavlink import MAV
 from common.mission_items import MissionItem, item_message
 from common.modes import Mode
@@ -20,13 +21,11 @@ from fcu.commander import IN_PROGRESS
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
 from fcu.mission_protocol import MissionServer
+from fcu.pipeline import Pipeline
+from fcu.tracker import VehicleState
 from fcu.work import Done, InlineWork, Outcome, Work
 from fcu.work_process import ProcessWork, make_work
 from tests.unit.test_mission_protocol import waypoints
-
-from common.config import load_gains, load_vehicle
-from fcu.pipeline import Pipeline
-from fcu.tracker import VehicleState
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -197,7 +196,7 @@ def test_a_new_upload_drops_the_pending_check_and_another_gcs_is_denied():
 
 def test_a_check_that_failed_is_a_mission_error_with_why():
     class Broken(Work):
-        def _submit(self, fn, args, done):  # noqa: ANN001, ANN202
+        def _submit(self, fn, args, done):
             done(Outcome(None, "the worker stopped (exit code -9)"))
 
     server = MissionServer(*VEHICLE, MissionLimits(), work=Broken())
@@ -269,3 +268,25 @@ def test_inline_work_answers_a_mission_start_at_once():
     c.set_mission(tuple(_items(3)))
     assert c.mission_start(0) == (MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")
     assert c.mode == Mode.MISSION and c.mission_offset_s == 0.0
+
+
+def test_posctl_is_entered_when_its_limits_are_fitted():
+    """Given POSCTL asked with its envelope fit made beside the loop, then the answer is
+    IN_PROGRESS and HOLD flies on (shown), the reference still; when the fit is taken in,
+    POSCTL is in force with the fitted limits and the reply gets ACCEPTED."""
+    from fcu import manual
+    c = airborne_commander()
+    work = HeldWork()
+    c.work = work
+    c.manual_input(0.0, manual.CENTRED)
+    assert c.set_mode(Mode.POSCTL, 0.0) == (IN_PROGRESS, "")
+    replies: list[tuple[int, str]] = []
+    c.under_way.reply = lambda r, t: replies.append((r, t))
+    refs = [c.reference(2000 * k) for k in range(1, 4)]
+    assert c.mode == Mode.HOLD and c.manual_sp is None
+    assert all(r.p_enu_m == refs[0].p_enu_m for r in refs)
+    work.release()
+    assert replies == [(MAV_RESULT.MAV_RESULT_ACCEPTED, "mode POSCTL")]
+    assert c.mode == Mode.POSCTL and c.under_way is None
+    assert c.manual_limits == manual.fit_envelope(c.flight.sticks, c.limits.vehicle,
+                                                  (1.0, 0.0, 0.0, 0.0))
