@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parent.parent
 KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layouts.py",
                   "common/quaternion.py", "fcu/dualquat.py",
                   "fcu/tracker.py", "fcu/allocation.py", "fcu/feasibility.py", "fcu/core.py",
+                  "fcu/wrench.py", "fcu/excess.py", "fcu/approach.py", "fcu/mission/segments.py",
                   "sitl/plant_kernels.py", "sitl/disturbance.py")
 
 

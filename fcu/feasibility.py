@@ -70,15 +70,14 @@ are numbered 1..n as the vehicle file lists its arms (the paper's i = 1..6).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from functools import lru_cache
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
 from common.config import VehicleConfig
-from common.jit import njit
 from fcu.allocation import allocation_matrix, pseudo_inverse
-from fcu.dualquat import Quat, Vec3, cross, q_rotate_inv
 from fcu.excess import (
     KINDS,
     ROTOR_DOWN,
@@ -89,8 +88,16 @@ from fcu.excess import (
     TINY,
     Excess,
     excess_kernel,
+    excess_ratio,
+    pair_parts,
+    shortest_kernel,
+    speed_bound_kernel,
 )
 from fcu.tracker import Reference
+from fcu.wrench import _nominal_wrench_rows as _nominal_wrench_rows
+from fcu.wrench import nominal_wrench as nominal_wrench
+from fcu.wrench import nominal_wrench_kernel as nominal_wrench_kernel
+from fcu.wrench import rows, scaled_parts, wrench_matrix
 
 MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
 TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may use
@@ -106,6 +113,8 @@ FIGURE_STEP_RAD = 0.02  # rad of attitude and phase between a figure's samples
 MOVE_STEP_RAD = 0.01  # rad of attitude between a turning move's samples
 FIGURE_SAMPLES_MAX = 4096
 STRETCH_GUARD = 1e-9  # relative: a stretched duration stays this far above the exact bound
+CACHE_ROWS = 65536  # `Envelope.scaling` keeps the scalings of paths up to this many samples
+CACHE_PATHS = 1024  # ... and this many paths
 
 _QUINTIC_PEAKS = (0.5 - math.sqrt(3.0) / 6.0, 0.5, 0.5 + math.sqrt(3.0) / 6.0)
 
@@ -153,46 +162,29 @@ def figure_instants(axis_norm: float, phase_instants: Any) -> np.ndarray:
     return np.concatenate([np.linspace(0.0, 1.0, n), peaks, [0.5]])
 
 
-@njit
-def nominal_wrench_kernel(m: float, g: float, inertia: Vec3, q: Quat, a: Vec3, w: Vec3,
-                          wd: Vec3) -> tuple[Vec3, Vec3]:
-    """(f_b, tau_b) that follow a reference exactly: m R^T (a - g_W), J omega' + omega x J
-    omega, for its attitude q, acceleration a, rate w and rate derivative wd."""
-    force = q_rotate_inv(q, (m * a[0], m * a[1], m * (a[2] + g)))
-    jx, jy, jz = inertia[0], inertia[1], inertia[2]
-    gyro = cross(w, (jx * w[0], jy * w[1], jz * w[2]))
-    return force, (jx * wd[0] + gyro[0], jy * wd[1] + gyro[1], jz * wd[2] + gyro[2])
+_ORDERS: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
 
-@njit
-def _nominal_wrench_rows(m: float, g: float, inertia: Vec3, q: np.ndarray, a: np.ndarray,
-                         w: np.ndarray, wd: np.ndarray) -> np.ndarray:
-    """nominal_wrench_kernel per sample: columns of q (4 x n), a, w, wd (3 x n) -> 6 x n."""
-    n = q.shape[1]
-    out = np.empty((6, n))
-    for i in range(n):
-        f, t = nominal_wrench_kernel(m, g, inertia, (q[0, i], q[1, i], q[2, i], q[3, i]),
-                                     (a[0, i], a[1, i], a[2, i]), (w[0, i], w[1, i], w[2, i]),
-                                     (wd[0, i], wd[1, i], wd[2, i]))
-        out[0, i], out[1, i], out[2, i] = f
-        out[3, i], out[4, i], out[5, i] = t
-    return out
-
-
-def nominal_wrench(vehicle: VehicleConfig, ref: Reference) -> tuple[Vec3, Vec3]:
-    """(f_b, tau_b) that follow `ref` exactly: m R^T (a - g_W), J omega' + omega x J omega.
-
-    Fields may be floats or numpy arrays (many samples at once: the result's parts are then
-    arrays)."""
-    m, g, inertia = vehicle.mass_kg, vehicle.gravity_m_s2, vehicle.inertia_diag_kg_m2
-    parts = (ref.q_enu_flu, ref.a_enu_m_s2, ref.omega_flu_rad_s, ref.omega_dot_flu_rad_s2)
-    if all(isinstance(c, float) for p in parts for c in p):
-        return nominal_wrench_kernel(m, g, inertia, *parts)
-    n = max(np.size(c) for p in parts for c in p)
-    q, a, w, wd = (np.array([np.broadcast_to(np.asarray(c, dtype=np.float64), (n,))
-                             for c in p]) for p in parts)
-    rows = _nominal_wrench_rows(m, g, inertia, q, a, w, wd)
-    return (rows[0], rows[1], rows[2]), (rows[3], rows[4], rows[5])
+def _order(sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the indices of the ends, the index of the next instant in time or -1, the normalised
+    time to it) of a path's check instants (`TimeScaling`), kept per set of instants
+    (read-only)."""
+    key = sigma.tobytes()
+    hit = _ORDERS.get(key)
+    if hit is not None:
+        return hit
+    n = len(sigma)
+    ends = np.flatnonzero((sigma == 0.0) | (sigma == 1.0))
+    order = np.argsort(sigma, kind="stable")
+    after = np.full(n, -1, dtype=np.int64)
+    after[order[:-1]] = order[1:]
+    gap = np.where(after >= 0, sigma[after] - sigma, 0.0)
+    for x in (ends, after, gap):
+        x.flags.writeable = False
+    if len(_ORDERS) >= 256:
+        _ORDERS.clear()
+    _ORDERS[key] = ends, after, gap
+    return ends, after, gap
 
 
 def _hover(ref: Reference) -> Reference:
@@ -231,17 +223,30 @@ class Envelope:
         self.tilt_limit = tilt_margin * self.tilt_rate_max
         self.tau_up, self.tau_down = vehicle.rotor_tau_up_s, vehicle.rotor_tau_down_s
         self.pinv_t = pseudo_inverse(allocation_matrix(vehicle)).T  # 6 x 2n
+        self._scalings: OrderedDict[bytes, TimeScaling] = OrderedDict()
+        self._cached_rows = 0
 
     def omega_sq(self, ref: Reference) -> np.ndarray:
         """Omega = A^+ [f_b; tau_b] per sample (samples x 2n); a float reference is 1 sample."""
-        return self._allocate(*nominal_wrench(self.vehicle, ref))
+        return np.asarray(self.wrenches(ref) @ self.pinv_t)
 
-    def _allocate(self, force: Any, torque: Any) -> np.ndarray:
-        parts = (*force, *torque)
-        wrench = np.empty((max(np.size(c) for c in parts), 6))
-        for k, c in enumerate(parts):
-            wrench[:, k] = c
-        return np.asarray(wrench @ self.pinv_t)
+    def wrenches(self, ref: Reference) -> np.ndarray:
+        """The nominal wrench along `ref` (`nominal_wrench`), a sample's [f_b, tau_b] per
+        row (samples x 6, the matrix `omega_sq` allocates); a float reference is 1 row."""
+        v = self.vehicle
+        parts = (ref.q_enu_flu, ref.a_enu_m_s2, ref.omega_flu_rad_s, ref.omega_dot_flu_rad_s2)
+        if all(isinstance(c, float) for p in parts for c in p):
+            force, torque = nominal_wrench_kernel(v.mass_kg, v.gravity_m_s2,
+                                                  v.inertia_diag_kg_m2, *parts)
+            out = np.empty((1, 6))
+            out[0, 0], out[0, 1], out[0, 2] = force
+            out[0, 3], out[0, 4], out[0, 5] = torque
+            return out
+        n = max(np.size(c) for p in parts for c in p)
+        q, a, w, wd = (rows(p, n) for p in parts)
+        out = np.empty((n, 6))
+        wrench_matrix(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, q, a, w, wd, out)
+        return out
 
     def speeds(self, ref: Reference) -> np.ndarray:
         """Rotor speeds (samples x rotors) of the nominal wrench along `ref`."""
@@ -254,23 +259,47 @@ class Envelope:
 
     def scaling(self, segment: Path) -> TimeScaling:
         """What the allocation commands along `segment`'s path as a function of the time it
-        is flown in: Omega_0, Omega_1 at its instants and their sigma-derivatives."""
+        is flown in: Omega_0, Omega_1 at its instants and their sigma-derivatives. A segment
+        with a `path_key` (the bytes of what its 1 s path depends on) shares the scaling of
+        an equal one met before (`CACHE_ROWS`, `CACHE_PATHS`); one with a `unit_wrenches`
+        (the nominal wrenches of its 1 s path and of its poses at rest, as `wrenches` makes
+        them from `path`) skips the Reference."""
+        key_of = getattr(segment, "path_key", None)
+        key: bytes | None = key_of() if key_of is not None else None
+        if key is not None:
+            hit = self._scalings.get(key)
+            if hit is not None:
+                self._scalings.move_to_end(key)
+                return hit
         sigma = segment.instants()
         n = len(sigma)
-        unit = segment.path(np.concatenate([sigma, sigma - DIFF_STEP, sigma + DIFF_STEP]))
-        om_all = self.omega_sq(unit)
-        om0_all = np.broadcast_to(self.omega_sq(_hover(unit)), om_all.shape)
-        om1_all = om_all - om0_all
-        om0, lo0, hi0 = om0_all[:n], om0_all[n:2 * n], om0_all[2 * n:]
-        om1, lo1, hi1 = om1_all[:n], om1_all[n:2 * n], om1_all[2 * n:]
-        h2 = 2.0 * DIFF_STEP
-        ends = np.flatnonzero((sigma == 0.0) | (sigma == 1.0))
-        order = np.argsort(sigma, kind="stable")
-        after = np.full(n, -1, dtype=np.int64)
-        after[order[:-1]] = order[1:]
-        gap = np.where(after >= 0, sigma[after] - sigma, 0.0)
-        return TimeScaling(self, om0, om1, (hi0 - lo0) / h2, (hi1 - lo1) / h2, ends,
-                           after, gap)
+        sigmas = np.concatenate([sigma, sigma - DIFF_STEP, sigma + DIFF_STEP])
+        unit_wrenches = getattr(segment, "unit_wrenches", None)
+        pair = unit_wrenches(self.vehicle, sigmas) if unit_wrenches is not None else None
+        if pair is None:
+            unit = segment.path(sigmas)
+            pair = self.wrenches(unit), self.wrenches(_hover(unit))
+        om = pair[0] @ self.pinv_t
+        hover = pair[1] @ self.pinv_t
+        om0, om1, dom0, dom1 = scaled_parts(om, hover, n, 2.0 * DIFF_STEP)
+        ends, after, gap = _order(sigma)
+        out = TimeScaling(self, om0, om1, dom0, dom1, ends, after, gap)
+        if key is not None:
+            self._remember(key, out)
+        return out
+
+    def _remember(self, key: bytes, scaling: TimeScaling) -> None:
+        cache = self._scalings
+        cache[key] = scaling
+        self._cached_rows += len(scaling.om0)
+        while len(cache) > 1 and (self._cached_rows > CACHE_ROWS or len(cache) > CACHE_PATHS):
+            _, old = cache.popitem(last=False)
+            self._cached_rows -= len(old.om0)
+
+    def clear(self) -> None:
+        """Forget the scalings kept (`scaling`)."""
+        self._scalings.clear()
+        self._cached_rows = 0
 
     def describe(self, speed_rad_s: float) -> str:
         return (f"needs {speed_rad_s:.0f} rad/s > {self.limit:.0f} "
@@ -317,6 +346,14 @@ class TimeScaling:
             np.ascontiguousarray(after, dtype=np.int64)
         self.gap = np.zeros(n) if gap is None else np.ascontiguousarray(gap, dtype=np.float64)
         self._shortest: float | None = None
+        self._fit_at: float | None = None  # a duration `_search` found fitting
+        self._parts: np.ndarray | None = None
+        self._fits: dict[float, bool] = {}
+
+    def _pair_parts(self) -> np.ndarray:
+        if self._parts is None:
+            self._parts = pair_parts(self.om0, self.om1, self.dom0, self.dom1, self.env.floor)
+        return self._parts
 
     def _omega(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
         u = 1.0 / (duration * duration) if duration > 0.0 else math.inf
@@ -353,7 +390,20 @@ class TimeScaling:
         return Excess(ratio, KINDS[kind], rotor + 1, need, limit, sample)
 
     def fits(self, duration: float) -> bool:
-        return self.excess(duration).ratio <= 1.0
+        """excess(duration).ratio <= 1 (`excess_ratio`, stopping at the first need beyond)."""
+        duration = float(duration)
+        if duration == self._fit_at:
+            return True
+        hit = self._fits.get(duration)
+        if hit is None:
+            env = self.env
+            hit = excess_ratio(self._pair_parts(), self.om0, self.om1, self.is_end,
+                               duration, env.limit, env.tau_up, env.tau_down, env.tilt_limit,
+                               env.tilt_rate_max * TILT_STEP_S, self.after, self.gap,
+                               env.floor > 0.0, 1.0) <= 1.0
+            if len(self._fits) < 16:
+                self._fits[duration] = hit
+        return hit
 
     def shortest(self) -> float:
         """The shortest duration D such that the path flown in D or any longer time keeps
@@ -368,69 +418,38 @@ class TimeScaling:
         r^(1/3) longer (no need decays faster than 1/D^3: accelerations scale by 1/D^2 and
         rates take another 1/D, so this never jumps past the bound), at least GRID_RATIO;
         GRID_FITS fitting durations in a row end the search, then bisection between the
-        last failing and the first fitting one."""
-        speed_bound = self._speed_bound()
-        if not math.isfinite(speed_bound):
-            return math.inf
-        if not np.any(self.om1) and not np.any(self.dom0):
-            return speed_bound  # nothing moves: no rates
-        start = d = max(speed_bound, 1e-3)
-        last_fail, first_fit, run = math.nan, d, 0
-        for _ in range(GRID_MAX):
-            ratio = self.excess(d).ratio
-            if ratio <= 1.0:
-                first_fit = d if run == 0 else first_fit
-                run += 1
-                if run >= GRID_FITS:
-                    break
-                d *= GRID_RATIO
-            else:
-                last_fail, run = d, 0
-                d *= max(GRID_RATIO, min(ratio, 1e6) ** (1.0 / 3.0))
-        else:
-            return math.inf
-        if math.isnan(last_fail):  # the speed bound (or 1 ms) already fits
-            return start
-        return self._refine(last_fail, first_fit)
-
-    def _refine(self, lo: float, hi: float) -> float:
-        """Bisection between a failing `lo` and a fitting `hi`, to BISECT_TOL of hi."""
-        while hi - lo > BISECT_TOL * hi:
-            mid = 0.5 * (lo + hi)
-            if self.fits(mid):
-                hi = mid
-            else:
-                lo = mid
-        return hi
+        last failing and the first fitting one (`fcu.excess.shortest_kernel`)."""
+        env = self.env
+        shortest, fitted = shortest_kernel(
+            self._pair_parts(), self.om0, self.om1, self.dom0, self.is_end, self.after,
+            self.gap, env.floor > 0.0, env.limit, env.limit ** 4, env.tau_up,
+            env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S, STRETCH_GUARD,
+            GRID_RATIO, GRID_FITS, GRID_MAX, BISECT_TOL)
+        if fitted:
+            self._fit_at = shortest
+        return shortest
 
     def _speed_bound(self) -> float:
-        """Rotor speed alone (no lag): the closed form of the module docstring."""
-        lat0, ver0 = self.om0[:, 0::2], self.om0[:, 1::2]
-        lat1, ver1 = self.om1[:, 0::2], self.om1[:, 1::2]
-        # w^4 = a u^2 + b u + (c + L^4) with u = 1 / D^2 >= 0.
-        a = lat1 * lat1 + ver1 * ver1
-        b = 2.0 * (lat0 * lat1 + ver0 * ver1)
-        c = lat0 * lat0 + ver0 * ver0 - self.limit ** 4
-        if np.any(c > 0.0):
-            return math.inf
-        # c <= 0: w^4 <= L^4 on [0, u_hi], u_hi the larger root, unbounded where nothing
-        # moves (a = 0), in the form without cancellation: (sq - b) / 2a = -2c / (b + sq).
-        bound = a > 0.0
-        if not np.any(bound):
-            return 0.0
-        a, b, c = a[bound], b[bound], c[bound]
-        sq = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
-        num = np.where(b < 0.0, sq - b, -2.0 * c)
-        den = np.where(b < 0.0, 2.0 * a, b + sq)
-        if np.any(den <= 0.0):  # b = c = 0: at the limit in hover, any motion exceeds it
-            return math.inf
-        u_max = float(np.min(num / den))
-        if u_max <= 0.0:
-            return math.inf
-        return (1.0 + STRETCH_GUARD) / math.sqrt(u_max)
+        """Rotor speed alone (no lag): the closed form of the module docstring
+        (`fcu.excess.speed_bound_kernel`)."""
+        return speed_bound_kernel(self.om0, self.om1, self.limit ** 4, STRETCH_GUARD)
+
+
+_ENVELOPES: list[Envelope] = []
 
 
 @lru_cache(maxsize=16)
 def envelope(vehicle: VehicleConfig, margin: float = MARGIN) -> Envelope:
     """The (cached) envelope of a vehicle: the pseudo-inverse is computed once."""
-    return Envelope(vehicle, margin)
+    env = Envelope(vehicle, margin)
+    _ENVELOPES.append(env)
+    del _ENVELOPES[:-16]
+    return env
+
+
+def clear_caches() -> None:
+    """Forget the scalings the envelopes keep (`Envelope.scaling`): each path is evaluated
+    afresh (benchmarks time the work, not the cache)."""
+    for env in _ENVELOPES:
+        env.clear()
+    _ORDERS.clear()

@@ -68,9 +68,9 @@ def envelope_reason(item: MissionItem, seg: Segment, limits: MissionLimits) -> s
         return ""
     env = envelope(limits.vehicle)
     scaling = seg.scaling if seg.scaling is not None else env.scaling(seg)
-    excess = scaling.excess(seg.duration)
-    if excess.ratio <= 1.0:  # flown as planned (a stretched move: at its shortest)
+    if scaling.fits(seg.duration):  # flown as planned (a stretched move: at its shortest)
         return ""
+    excess = scaling.excess(seg.duration)
     shortest = scaling.shortest()
     slot = _TIME_SLOT.get(item.command)
     if item.command == MAV_CMD_NAV_TAKEOFF and not item.param2 > 0.0:

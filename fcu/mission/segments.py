@@ -2,20 +2,26 @@
 
 A move is the minimum-jerk quintic of `fcu.trajectory` in position and along the shortest
 rotation in attitude, then a hold; a figure is `fcu.trajectory.FigureInfinity`. Both sample
-one instant (`sample`) or, for the envelope check, a whole normalised path at once (`path`).
+one instant (`sample`) or, for the envelope check, a whole normalised path at once (`path`;
+a move also its nominal wrenches straight from its parameters, `Move.unit_wrenches`, and
+both the bytes of what that path depends on, `path_key`, by which `fcu.feasibility` shares
+the scaling of equal paths).
 """
 
 from __future__ import annotations
 
 import math
+import struct
 from typing import Any
 
 import numpy as np
 
+from common.config import VehicleConfig
 from common.frames import q_ned_frd_to_enu_flu
+from common.jit import njit
 from common.quaternion import q_exp_many
 from fcu.dualquat import Quat, Vec3, norm3, q_exp, q_mul
-from fcu.feasibility import TimeScaling, figure_instants, move_instants
+from fcu.feasibility import TimeScaling, figure_instants, move_instants, nominal_wrench_kernel
 from fcu.tracker import Reference, pose_ref
 from fcu.trajectory import FigureInfinity, quintic, quintic_poly
 
@@ -25,6 +31,58 @@ ZERO: Vec3 = (0.0, 0.0, 0.0)
 def level_attitude(yaw_ned_deg: float) -> Quat:
     """Level attitude (ENU/FLU) heading at a NED yaw in degrees."""
     return q_ned_frd_to_enu_flu(q_exp((0.0, 0.0, math.radians(yaw_ned_deg))))
+
+
+_NO_Q = np.zeros(0)
+
+
+def _floats(*parts: float) -> bool:
+    return all(isinstance(c, float) for c in parts)
+
+
+@njit
+def quintic_rows(sigma: np.ndarray) -> np.ndarray:
+    """`fcu.trajectory.quintic_poly` at each sigma (its expressions, so its values): rows
+    s, s', s''."""
+    out = np.empty((3, sigma.shape[0]))
+    for i in range(sigma.shape[0]):
+        s = sigma[i]
+        s2 = s * s
+        out[0, i] = s2 * s * (10.0 - 15.0 * s + 6.0 * s2)
+        out[1, i] = 30.0 * s2 * (1.0 - 2.0 * s + s2)
+        out[2, i] = 60.0 * s * (1.0 - 3.0 * s + 2.0 * s2)
+    return out
+
+
+@njit
+def move_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, dp: Vec3, phi: Vec3,
+                  quintic: np.ndarray, qw: np.ndarray, qx: np.ndarray, qy: np.ndarray,
+                  qz: np.ndarray, moving: np.ndarray, hover: np.ndarray) -> None:
+    """The nominal wrenches (`fcu.feasibility.Envelope.wrenches`) of a move's 1 s path
+    (`Move.path`) at the instants of `quintic` (`quintic_rows`) into `moving`, and of its
+    poses at rest into `hover`: one row where the move keeps its attitude (qw empty),
+    else a row per instant, its attitude q0 exp(s phi) from exp(s phi) = (qw, qx, qy, qz)."""
+    zero = (0.0, 0.0, 0.0)
+    turns = qw.shape[0] > 0
+    if not turns:
+        f, t = nominal_wrench_kernel(m, g, inertia, q0, zero, zero, zero)
+        hover[0, 0], hover[0, 1], hover[0, 2] = f
+        hover[0, 3], hover[0, 4], hover[0, 5] = t
+    for i in range(quintic.shape[1]):
+        ds, dds = quintic[1, i], quintic[2, i]
+        a = (dp[0] * dds / 1.0, dp[1] * dds / 1.0, dp[2] * dds / 1.0)
+        if turns:
+            q = q_mul(q0, (qw[i], qx[i], qy[i], qz[i]))
+            w = (phi[0] * ds / 1.0, phi[1] * ds / 1.0, phi[2] * ds / 1.0)
+            wd = (phi[0] * dds / 1.0, phi[1] * dds / 1.0, phi[2] * dds / 1.0)
+            f, t = nominal_wrench_kernel(m, g, inertia, q, zero, zero, zero)
+            hover[i, 0], hover[i, 1], hover[i, 2] = f
+            hover[i, 3], hover[i, 4], hover[i, 5] = t
+        else:
+            q, w, wd = q0, zero, zero
+        f, t = nominal_wrench_kernel(m, g, inertia, q, a, w, wd)
+        moving[i, 0], moving[i, 1], moving[i, 2] = f
+        moving[i, 3], moving[i, 4], moving[i, 5] = t
 
 
 class Segment:
@@ -95,6 +153,37 @@ class Move(Segment):
     def path(self, sigma: np.ndarray) -> Reference:
         return self._at(*quintic_poly(sigma), 1.0, many=True)
 
+    def path_key(self) -> bytes:
+        """What `path` and `instants` depend on (dp, q0, phi), as bytes."""
+        phi = self.phi
+        return struct.pack("<?10d", _floats(*self.q0), *self.dp, *self.q0,
+                           *(phi if phi is not None else (math.nan,) * 3)) + \
+            (b"t" if phi is not None else b"")
+
+    def unit_wrenches(self, vehicle: VehicleConfig, sigma: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The nominal wrenches of `path(sigma)` and of its poses at rest, as
+        `Envelope.wrenches` makes them (`move_wrenches`; None: through `path`)."""
+        if not _floats(*self.q0):
+            return None  # `wrenches` takes such an attitude for arrays
+        quintic = quintic_rows(sigma)
+        moving = np.empty((len(sigma), 6))
+        q0 = (float(self.q0[0]), float(self.q0[1]), float(self.q0[2]), float(self.q0[3]))
+        dp = (float(self.dp[0]), float(self.dp[1]), float(self.dp[2]))
+        phi = self.phi
+        m, g, inertia = vehicle.mass_kg, vehicle.gravity_m_s2, vehicle.inertia_diag_kg_m2
+        if phi is None:
+            hover = np.empty((1, 6))
+            move_wrenches(m, g, inertia, q0, dp, ZERO, quintic, _NO_Q, _NO_Q, _NO_Q, _NO_Q,
+                          moving, hover)
+            return moving, hover
+        s = quintic[0]
+        qw, qx, qy, qz = q_exp_many(s * phi[0], s * phi[1], s * phi[2])
+        hover = np.empty((len(sigma), 6))
+        move_wrenches(m, g, inertia, q0, dp, (float(phi[0]), float(phi[1]), float(phi[2])),
+                      quintic, qw, qx, qy, qz, moving, hover)
+        return moving, hover
+
     def instants(self) -> np.ndarray:
         return move_instants(0.0 if self.phi is None else norm3(self.phi))
 
@@ -124,6 +213,12 @@ class Figure(Segment):
     def path(self, sigma: np.ndarray) -> Reference:
         return FigureInfinity(self.figure.amp, 1.0, self.figure.n, self.figure.p0,
                               self.figure.q0).path(sigma)
+
+    def path_key(self) -> bytes:
+        """What `path` and `instants` depend on (amplitude, axis, q0), as bytes."""
+        f = self.figure
+        q0 = f.q0 if f.q0 is not None else (math.nan,) * 4
+        return struct.pack("<?8d", f.q0 is None, f.amp, *f.n, *q0) + b"figure"
 
     def instants(self) -> np.ndarray:
         return figure_instants(norm3(self.figure.n), self.figure.phase_instants)
