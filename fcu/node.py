@@ -15,9 +15,7 @@ Real time: a fixed-rate loop on the monotonic clock, integrating with the measur
 
 from __future__ import annotations
 
-import argparse
 import json
-import math
 import os
 import select
 import signal
@@ -27,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from common import startup
-from common.cliargs import OneLineParser, check_output_path
+from common.cliargs import check_output_path
 from common.config import ConfigError, load_gains, load_vehicle
 from common.jit import compile_time_s
 from common.links import LinkError, open_link, parse_url
@@ -40,16 +38,16 @@ from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.gcs_server import COMPONENT, GcsServer
 from fcu.mission.limits import MissionLimits
 from fcu.mission_protocol import MissionServer
-from fcu.onboard_log import OnboardLog
+from fcu.node_args import DEFAULT_GCS, build_parser
+from fcu.onboard_log import OnboardLog, set_aside
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.sim_bridge import Resent, SimBridge, StateSample
 from fcu.telemetry import Home, heartbeat
-from fcu.work import KINDS, Work
+from fcu.work import Work
 from fcu.work_process import make_work
 
 M = MAV
-DEFAULT_GCS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")
 HOUSEKEEPING_S = 0.002
 SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each state
 SIM_SILENT_S = 1.0  # lockstep: report a simulator silent this long (wall clock)
@@ -79,7 +77,6 @@ class FlightController:
         self.missions = MissionServer(system_id, COMPONENT, pipeline.commander.limits,
                                       home=published_home(home), work=self.work)
         pipeline.commander.work = self.work
-        self.work.steps = lambda: self.steps
         self.missions.on_mission_changed = pipeline.commander.set_mission
         sim = open_link(sim_url, role="sim_client", system_id=system_id)
         try:
@@ -95,8 +92,9 @@ class FlightController:
         self.missions.on_set_current = lambda seq: (  # accepted, or under way
             self.server.set_mission_current(seq) != M.MAV_RESULT_DENIED)
         self.sim_mav = encoder(system_id, COMPONENT)
-        self.log = OnboardLog(onboard_log, pipeline, self.params.values, system_id=system_id,
-                              home=home) if onboard_log else None
+        self.log_path, self.home = onboard_log, home
+        self.log = self._new_log()
+        self.rotate_log = False  # SIGHUP: end the onboard log, start the next
         self.server.on_text = self._log_text
         self.stats_path = stats_path
         self.period_us = pipeline.period_us
@@ -118,6 +116,10 @@ class FlightController:
         self.timed_steps = 0
         self.rx_ns = 0  # when the datagram being handled was read
         self.done_ns = 0  # when the last control step's work (answer, log records) was done
+        self.work.steps = lambda: self.steps
+        if lockstep:  # offboard loss judged on the flight clock too (fcu.offboard_stream)
+            off = pipeline.commander.offboard
+            off.flight_clock, off.wall_clock = (lambda: self.time_us * 1e-6), time.monotonic
         self._params_in_force(pipeline.commander.limits)
 
     def _flush_log(self) -> None:
@@ -132,6 +134,25 @@ class FlightController:
             log.close()
             self.pipeline.commander.say(M.MAV_SEVERITY_WARNING,
                                         f"onboard log stopped: {log.failed}")
+
+    def _new_log(self) -> OnboardLog | None:
+        return OnboardLog(self.log_path, self.pipeline, self.params.values,
+                          system_id=self.system_id, home=self.home) if self.log_path else None
+
+    def _rotate(self) -> None:
+        """SIGHUP (log rotation): the onboard log ends, complete; one still at its path is
+        set aside (`set_aside`: name.N.ulg, nothing overwritten); a new one starts there."""
+        self.rotate_log = False
+        if self.log is None or self.log_path is None:
+            return
+        self.log.events(self.pipeline.commander.events)  # said so far: in the old one
+        self.events.extend(self.pipeline.commander.events)
+        self.pipeline.commander.events.clear()
+        self.log.close()
+        aside = set_aside(self.log_path)
+        self.log = self._new_log()
+        self.pipeline.commander.say(M.MAV_SEVERITY_INFO, "onboard log: a new file" + (
+            f" ({aside.name} kept)" if aside is not None else ""))
 
     def _log_text(self, severity: int, text: str) -> None:
         if self.log is not None:
@@ -262,6 +283,8 @@ class FlightController:
             c.mission_events.clear()
         self.server.tick(now)
         self._flush_log()  # logged strings and parameter changes
+        if self.rotate_log:
+            self._rotate()
 
     # ------------------------------------------------------------------ loop
 
@@ -397,43 +420,6 @@ def _quantile(samples: list[float], q: float) -> float | None:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else None
 
 
-def _home(text: str) -> Home:
-    try:
-        lat, lon, alt = (float(x) for x in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected LAT,LON,ALT, got {text}") from None
-    if not (-90 <= lat <= 90 and -180 <= lon <= 180 and math.isfinite(alt)):
-        raise argparse.ArgumentTypeError(f"home out of range: {text}")
-    return Home(lat, lon, alt)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(prog="fcu", description="dual-quaternion flight controller")
-    p.add_argument("--vehicle", type=Path, required=True, help="vehicle TOML")
-    p.add_argument("--gains", type=Path, required=True, help="gains TOML (PID or PD)")
-    p.add_argument("--sim", default="udpout:127.0.0.1:4560", help="simulator link URL")
-    p.add_argument("--gcs", action="append", metavar="URL",
-                   help=f"GCS link URL, repeatable (default: {' and '.join(DEFAULT_GCS)})")
-    p.add_argument("--rate", type=int, default=500, help="control rate in Hz (1..1000)")
-    p.add_argument("--realtime", action="store_true", help="run on the monotonic clock")
-    p.add_argument("--work", choices=KINDS,
-                   help="mission checks and plans: 'beside' the loop in a worker process "
-                        "(real-time default) or 'inline' (lockstep default)")
-    p.add_argument("--sysid", type=int, default=1, help="MAVLink system id (1..254)")
-    p.add_argument("--home", type=_home, default=Home(), help="LAT,LON,ALT of the origin")
-    p.add_argument("--onboard-log", type=Path,
-                   help="write the onboard log (ULog) here, e.g. onboard.ulg")
-    p.add_argument("--stats", type=Path,
-                   help="write run statistics and events (JSON) here at exit")
-    p.add_argument("--signing-key", metavar="FILE",
-                   help="MAVLink 2 signing on the GCS links: sign telemetry, refuse unsigned "
-                        "or wrongly signed input (key from `gcs keygen`)")
-    p.add_argument("--rtt-probes", type=int, default=0, metavar="N",
-                   help="lockstep: time N TIMESYNC round trips with the simulator when it is "
-                        "first heard (the link's round trip, in --stats; default 0: none)")
-    return p
-
-
 def main(argv: list[str] | None = None) -> int:
     stop_with_parent()
     args = build_parser().parse_args(argv)
@@ -481,8 +467,12 @@ def main(argv: list[str] | None = None) -> int:
     def stop(_signum: int, _frame: object) -> None:
         fc.running = False
 
+    def rotate(_signum: int, _frame: object) -> None:
+        fc.rotate_log = True
+
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGHUP, rotate)
     links = ", ".join(args.gcs or DEFAULT_GCS)
     print(f"fcu: system {args.sysid}, simulator {args.sim}, GCS {links} "
           f"({'real time' if args.realtime else 'lockstep'}, {args.rate} Hz)", flush=True)

@@ -304,3 +304,16 @@ class OnboardLog(ULogWriter):
             if self.params.get(name) != value:
                 self.params[name] = value
                 self.param(name, value)
+
+
+def set_aside(path: Path) -> Path | None:
+    """Where a finished log still at `path` is moved before a new one starts there (log
+    rotation: a log already renamed stays as it is): the first free `name.N.ulg`; None when
+    there is nothing at `path`."""
+    if not path.exists():
+        return None
+    n = 1
+    while (aside := path.with_name(f"{path.stem}.{n}{path.suffix}")).exists():
+        n += 1
+    path.rename(aside)
+    return aside

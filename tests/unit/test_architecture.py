@@ -20,7 +20,8 @@ EDGE = {
                "common/cliargs.py"),
     "fcu": ("fcu/node.py", "fcu/sim_bridge.py", "fcu/gcs_server.py", "fcu/gcs_commands.py",
             "fcu/gcs_params.py", "fcu/mission_protocol.py", "fcu/telemetry.py",
-            "fcu/onboard_log.py", "fcu/params_doc.py", "fcu/work_process.py"),
+            "fcu/onboard_log.py", "fcu/params_doc.py", "fcu/work_process.py",
+            "fcu/node_args.py"),
     "sitl": ("sitl/node.py", "sitl/server.py", "sitl/ardupilot_json.py", "sitl/px4_hil.py",
              "sitl/sensor_feed.py", "sitl/truth_log.py"),
 }
