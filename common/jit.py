@@ -26,6 +26,7 @@ KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layout
                   "common/quaternion.py", "fcu/dualquat.py",
                   "fcu/tracker.py", "fcu/allocation.py", "fcu/feasibility.py", "fcu/core.py",
                   "fcu/wrench.py", "fcu/excess.py", "fcu/approach.py", "fcu/mission/segments.py",
+                  "fcu/manual.py",
                   "sitl/plant_kernels.py", "sitl/disturbance.py")
 
 

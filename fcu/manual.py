@@ -41,17 +41,18 @@ JERK_FLOOR_M_S3 or YAW_FLOOR_DEG_S, the accelerations are halved again.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from common.config import VehicleConfig
 from common.frames import ned_to_enu
+from common.jit import njit
 from fcu.dualquat import Quat, Vec3, q_exp, q_mul, q_rotate, q_rotate_inv
 from fcu.feasibility import envelope
 from fcu.tracker import Reference
+from fcu.wrench import wrench_matrix
 
 DEADZONE = 0.05  # share of the deflection around the centre that commands nothing
 LEAD_M = 1.0  # the set-point stays within this distance of the vehicle
@@ -117,6 +118,7 @@ def stick_velocity(sticks: Sticks, heading_ned_rad: float, s: StickSettings
     return (vn, ve, -v_up), deflection(sticks.yaw) * math.radians(s.yaw_rate_deg_s)
 
 
+@njit
 def yawed(q0: Quat, yaw_ned_rad: float) -> Quat:
     """q0 turned about the world vertical by a NED yaw (clockwise from above)."""
     return q_mul(q_exp((0.0, 0.0, -yaw_ned_rad)), q0)
@@ -230,46 +232,101 @@ def advance(sp: ManualSetpoint, t_us: int, sticks: Sticks, s: StickSettings,
     return new, Reference(p_new, q_new, v_new, a_new, omega, omega_dot)
 
 
-def _columns(rows: Sequence[tuple[float, ...]], n: int) -> Any:
-    """Samples (rows of n components) as n arrays, one per component: the envelope's kernels
-    take such a tuple of arrays where a `Reference` holds a Vec3 or a Quat (hence Any)."""
-    return tuple(np.array([r[i] for r in rows]) for i in range(n))
+def _corners(s: StickSettings) -> list[Vec3]:
+    """The world accelerations at the corners of the limits: 8 directions x up, down, level."""
+    out: list[Vec3] = []
+    for k in range(8):
+        ang = k * math.pi / 4.0
+        for az in (s.acc_up_m_s2, -s.acc_down_m_s2, 0.0):
+            out.append((s.acc_xy_m_s2 * math.cos(ang), s.acc_xy_m_s2 * math.sin(ang), az))
+    return out
+
+
+def _floats(q: Quat) -> Quat:
+    return float(q[0]), float(q[1]), float(q[2]), float(q[3])
+
+
+def _speeds_of(om: np.ndarray) -> np.ndarray:
+    """Rotor speeds (samples x rotors) from Omega (`fcu.feasibility._speeds`)."""
+    lat, ver = om[:, 0::2], om[:, 1::2]
+    return np.asarray(np.sqrt(np.sqrt(lat * lat + ver * ver)))
+
+
+@njit
+def _corner_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, j: int, acc: np.ndarray,
+                     rate: np.ndarray, rate_dot: np.ndarray, out: np.ndarray) -> None:
+    """The nominal wrenches `_fits` judges at yaw j (q0 turned by j pi / 6), one row per
+    corner (world accelerations acc, 3 x n; yaw rates and their derivatives about the
+    world vertical), by the expressions of the `Reference` it took, so the same values."""
+    q = yawed(q0, j * math.pi / 6.0)
+    up = q_rotate_inv(q, (0.0, 0.0, 1.0))  # the world vertical in the body frame
+    n = rate.shape[0]
+    q_rows, w, wd = np.empty((4, n)), np.empty((3, n)), np.empty((3, n))
+    for k in range(n):
+        for i in range(4):
+            q_rows[i, k] = q[i]
+        for i in range(3):
+            w[i, k] = up[i] * rate[k]
+            wd[i, k] = up[i] * rate_dot[k]
+    wrench_matrix(m, g, inertia, q_rows, acc, w, wd, out)
 
 
 def _fits(vehicle: VehicleConfig, q0: Quat, s: StickSettings) -> bool:
     """Every corner of the acceleration and yaw limits, at q0 turned to any of 12 yaws."""
     env = envelope(vehicle)
-    acc: list[Vec3] = []  # world accelerations
-    rate: list[float] = []  # world yaw rates (about the ENU vertical) and their derivatives
-    rate_dot: list[float] = []
     wz, wdz = math.radians(s.yaw_rate_deg_s), math.radians(s.yaw_acc_deg_s2)
-    for k in range(8):
-        ang = k * math.pi / 4.0
-        for az in (s.acc_up_m_s2, -s.acc_down_m_s2, 0.0):
-            for sign in (1.0, -1.0):
-                acc.append((s.acc_xy_m_s2 * math.cos(ang), s.acc_xy_m_s2 * math.sin(ang), az))
-                rate.append(sign * wz)
-                rate_dot.append(sign * wdz)
-    a = _columns(acc, 3)
-    zero: Any = (0.0, 0.0, 0.0)
+    acc = [a for a in _corners(s) for _ in (1.0, -1.0)]  # world accelerations
+    # world yaw rates (about the ENU vertical) and their derivatives
+    rate = np.array([sign * wz for _ in range(24) for sign in (1.0, -1.0)])
+    rate_dot = np.array([sign * wdz for _ in range(24) for sign in (1.0, -1.0)])
+    a = np.ascontiguousarray(np.array(acc).T)
+    v, q = vehicle, _floats(q0)
     for j in range(12):
-        q = yawed(q0, j * math.pi / 6.0)
-        up = q_rotate_inv(q, (0.0, 0.0, 1.0))  # the world vertical in the body frame
-        w: Any = tuple(up[i] * np.array(rate) for i in range(3))
-        wd: Any = tuple(up[i] * np.array(rate_dot) for i in range(3))
-        if float(env.speeds(Reference(zero, q, zero, a, w, wd)).max()) > env.limit:
+        wrench = np.empty((len(acc), 6))
+        _corner_wrenches(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, q, j, a, rate,
+                         rate_dot, wrench)
+        if float(_speeds_of(wrench @ env.pinv_t).max()) > env.limit:
             return False
     return True
 
 
-def _tilts(vehicle: VehicleConfig, qs: list[Quat], acc: list[Vec3], yaw_acc: list[float]
+@njit
+def _gradient_samples(q0: Quat, corners: np.ndarray, h: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The attitudes (4 x n), world accelerations and body rates' derivatives (3 x n) of
+    `_tilt_gradients`' samples, in its order: 12 yaws x corners x its 10 steps (the
+    acceleration's x, y, z, the yaw, the yaw acceleration, each + and - h); the
+    expressions of the lists it built, so the same values."""
+    n = 12 * corners.shape[0] * 10
+    qs, acc, wd = np.empty((4, n)), np.empty((3, n)), np.empty((3, n))
+    r = 0
+    for j in range(12):
+        q = yawed(q0, j * math.pi / 6.0)
+        for c in range(corners.shape[0]):
+            for step in range(10):
+                d = h if step % 2 == 0 else -h
+                da = (d if step < 2 else 0.0, d if 2 <= step < 4 else 0.0,
+                      d if 4 <= step < 6 else 0.0)
+                qr = yawed(q, d) if 6 <= step < 8 else q
+                dy = d if step >= 8 else 0.0
+                for i in range(4):
+                    qs[i, r] = qr[i]
+                for i in range(3):
+                    acc[i, r] = corners[c, i] + da[i]
+                wd[0, r], wd[1, r], wd[2, r] = q_rotate_inv(qr, (0.0, 0.0, -dy))
+                r += 1
+    return qs, acc, wd
+
+
+def _tilts(vehicle: VehicleConfig, qs: np.ndarray, acc: np.ndarray, wd: np.ndarray
            ) -> np.ndarray:
-    """The allocated tilt angles (samples x rotors) of the nominal wrench at attitudes qs,
-    world accelerations acc and NED yaw accelerations yaw_acc (a turn about the vertical)."""
-    wd = [q_rotate_inv(q, (0.0, 0.0, -y)) for q, y in zip(qs, yaw_acc, strict=True)]
-    zero: Any = (0.0, 0.0, 0.0)
-    ref = Reference(zero, _columns(qs, 4), zero, _columns(acc, 3), zero, _columns(wd, 3))
-    om = envelope(vehicle).omega_sq(ref)
+    """The allocated tilt angles (samples x rotors) of the nominal wrench at attitudes qs
+    (4 x n), world accelerations acc and body rates' derivatives wd (3 x n), no body rate."""
+    v = vehicle
+    wrench = np.empty((qs.shape[1], 6))
+    wrench_matrix(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, qs, acc,
+                  np.zeros((3, qs.shape[1])), wd, wrench)
+    om = np.asarray(wrench @ envelope(vehicle).pinv_t)
     return np.asarray(np.arctan2(om[:, 0::2], om[:, 1::2]))
 
 
@@ -279,26 +336,9 @@ def _tilt_gradients(vehicle: VehicleConfig, q0: Quat, s: StickSettings
     to any of 12 yaws: in the world acceleration (rad per m/s^2, its norm), the yaw (rad per
     rad) and the yaw acceleration (rad per rad/s^2), by central differences."""
     h = GRADIENT_STEP
-    corners: list[Vec3] = [(0.0, 0.0, 0.0)]
-    for k in range(8):
-        ang = k * math.pi / 4.0
-        for az in (s.acc_up_m_s2, -s.acc_down_m_s2, 0.0):
-            corners.append((s.acc_xy_m_s2 * math.cos(ang), s.acc_xy_m_s2 * math.sin(ang), az))
-    qs: list[Quat] = []
-    acc: list[Vec3] = []
-    yaw_acc: list[float] = []
-    for j in range(12):
-        q = yawed(q0, j * math.pi / 6.0)
-        for a in corners:
-            for dq, da, dy in ((0.0, (h, 0, 0), 0.0), (0.0, (-h, 0, 0), 0.0),
-                               (0.0, (0, h, 0), 0.0), (0.0, (0, -h, 0), 0.0),
-                               (0.0, (0, 0, h), 0.0), (0.0, (0, 0, -h), 0.0),
-                               (h, (0, 0, 0), 0.0), (-h, (0, 0, 0), 0.0),
-                               (0.0, (0, 0, 0), h), (0.0, (0, 0, 0), -h)):
-                qs.append(yawed(q, dq) if dq else q)
-                acc.append((a[0] + da[0], a[1] + da[1], a[2] + da[2]))
-                yaw_acc.append(dy)
-    tilt = _tilts(vehicle, qs, acc, yaw_acc).reshape(-1, 10, vehicle.n_rotors)
+    corners = np.array([(0.0, 0.0, 0.0), *_corners(s)])
+    tilt = _tilts(vehicle, *_gradient_samples(_floats(q0), corners, h)).reshape(
+        -1, 10, vehicle.n_rotors)
     diff = np.angle(np.exp(1j * (tilt[:, 0::2] - tilt[:, 1::2]))) / (2.0 * h)  # (n, 5, rotors)
     g_acc = float(np.sqrt((diff[:, 0:3] ** 2).sum(axis=1)).max())
     return g_acc, float(np.abs(diff[:, 3]).max()), float(np.abs(diff[:, 4]).max())
