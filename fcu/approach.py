@@ -112,18 +112,26 @@ ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
 @njit
-def right_jacobian(phi: Vec3, x: Vec3) -> Vec3:
-    """J_r(phi) x: the body rate of exp(phi) when phi changes at x."""
+def _right_jacobians(phi: Vec3, x: Vec3, y: Vec3) -> tuple[Vec3, Vec3]:
+    """J_r(phi) x and J_r(phi) y (`right_jacobian`), the coefficients taken once."""
     th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
     if th2 < 1e-12:
         a, b = 0.5, 1.0 / 6.0
     else:
         th = math.sqrt(th2)
         a, b = (1.0 - math.cos(th)) / th2, (th - math.sin(th)) / (th2 * th)
-    px = cross(phi, x)
-    ppx = cross(phi, px)
-    return (x[0] - a * px[0] + b * ppx[0], x[1] - a * px[1] + b * ppx[1],
-            x[2] - a * px[2] + b * ppx[2])
+    px, py = cross(phi, x), cross(phi, y)
+    ppx, ppy = cross(phi, px), cross(phi, py)
+    return ((x[0] - a * px[0] + b * ppx[0], x[1] - a * px[1] + b * ppx[1],
+             x[2] - a * px[2] + b * ppx[2]),
+            (y[0] - a * py[0] + b * ppy[0], y[1] - a * py[1] + b * ppy[1],
+             y[2] - a * py[2] + b * ppy[2]))
+
+
+@njit
+def right_jacobian(phi: Vec3, x: Vec3) -> Vec3:
+    """J_r(phi) x: the body rate of exp(phi) when phi changes at x."""
+    return _right_jacobians(phi, x, x)[0]
 
 
 @njit
@@ -231,17 +239,26 @@ def reference_kernel(p: Vec3, v: Vec3, a: Vec3, q: Quat, w: Vec3, k: np.ndarray,
 @njit
 def _rows(p: Vec3, v: Vec3, a: Vec3, q: Quat, w: Vec3, k: np.ndarray, d: float,
           taus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """`reference_kernel` at each tau (set-point and approach start together): attitude
-    (4 x n), acceleration, body rate and its derivative (3 x n)."""
+    """`reference_kernel`'s q (4 x n), a, omega, omega_dot (3 x n) at each tau (set-point
+    and approach start together); where w = 0, exp(w tau) is taken once per sign of tau."""
     n = taus.shape[0]
     qs, acc, rate, rate_dot = np.empty((4, n)), np.empty((3, n)), np.empty((3, n)), \
         np.empty((3, n))
+    still = w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0
+    q_signs = (q_mul(q, q_exp((w[0] * 1.0, w[1] * 1.0, w[2] * 1.0))),
+               q_mul(q, q_exp((w[0] * -1.0, w[1] * -1.0, w[2] * -1.0))))
     for i in range(n):
-        _, qi, _, ai, wi, wdi = reference_kernel(p, v, a, q, w, k, d, taus[i], taus[i])
-        for j in range(4):
-            qs[j, i] = qi[j]
+        tau = taus[i]
+        _, _, dde, eps, deps, ddeps = offset_kernel(k, d, tau)
+        q_sp = q_signs[int(math.copysign(1.0, tau) < 0.0)] if still else \
+            q_mul(q, q_exp((w[0] * tau, w[1] * tau, w[2] * tau)))
+        q_e = q_exp(eps)
+        w_seen = q_rotate_inv(q_e, w)
+        w_e, wd = _right_jacobians(eps, deps, ddeps)
+        qs[0, i], qs[1, i], qs[2, i], qs[3, i] = q_mul(q_sp, q_e)
+        acc[0, i], acc[1, i], acc[2, i] = a[0] + dde[0], a[1] + dde[1], a[2] + dde[2]
         for j in range(3):
-            acc[j, i], rate[j, i], rate_dot[j, i] = ai[j], wi[j], wdi[j]
+            rate[j, i], rate_dot[j, i] = w_seen[j] + w_e[j], wd[j]
     return qs, acc, rate, rate_dot
 
 
