@@ -113,7 +113,7 @@ FIGURE_STEP_RAD = 0.02  # rad of attitude and phase between a figure's samples
 MOVE_STEP_RAD = 0.01  # rad of attitude between a turning move's samples
 FIGURE_SAMPLES_MAX = 4096
 STRETCH_GUARD = 1e-9  # relative: a stretched duration stays this far above the exact bound
-CACHE_ROWS = 65536  # `Envelope.scaling` keeps the scalings of paths up to this many samples
+CACHE_ROWS = 16384  # `Envelope.scaling` keeps the scalings of paths up to this many samples
 CACHE_PATHS = 1024  # ... and this many paths
 
 _QUINTIC_PEAKS = (0.5 - math.sqrt(3.0) / 6.0, 0.5, 0.5 + math.sqrt(3.0) / 6.0)
