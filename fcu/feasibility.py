@@ -63,6 +63,12 @@ attitude (T |n|) and of the path phase 2T (at least `MOVE_SAMPLES`, at most `FIG
 plus its ends (extreme T''), its middle (top T') and the phases T = j pi / 4 where the path's
 coordinates peak.
 
+Evaluation: the search runs compiled in one call (`fcu.excess.shortest_kernel`), each
+duration judged by `fcu.excess.excess_ratio`, the largest need of `excess_kernel` to the bit;
+the allocations stay numpy's (a matrix product's rounding depends on its shape, so each is
+the one it always was). Paths that depend on the same parameters (`path_key`: a 500-item
+mission repeats its figures) share one scaling; `clear_caches` forgets them.
+
 Which items stretch and which are refused is the mission's business (fcu.mission). Actuators
 are numbered 1..n as the vehicle file lists its arms (the paper's i = 1..6).
 """
