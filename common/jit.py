@@ -27,7 +27,9 @@ KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layout
                   "fcu/tracker.py", "fcu/allocation.py", "fcu/feasibility.py", "fcu/core.py",
                   "fcu/wrench.py", "fcu/excess.py", "fcu/approach.py", "fcu/mission/segments.py",
                   "fcu/manual.py",
-                  "sitl/plant_kernels.py", "sitl/disturbance.py")
+                  "sitl/plant_kernels.py", "sitl/disturbance.py",
+                  "fcu/estimator/strapdown.py", "fcu/estimator/update.py",
+                  "fcu/estimator/output.py", "fcu/estimator/filter.py")
 
 
 def _sources_hash() -> str:

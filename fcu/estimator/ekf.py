@@ -1,6 +1,10 @@
 """The filter: inputs in arrival order, the delayed horizon, fusion and outputs.
 
-The design is described in `fcu.estimator` (the package docstring).
+The design is described in `fcu.estimator` (the package docstring). Before it is aligned the
+filter is Python (the stationary window, `fcu.estimator.align`); once aligned its state
+lives in flat buffers (`common.layouts` EF_*, EI_*) that compiled kernels advance
+(`fcu.estimator.filter`): an IMU sample is one kernel call, a pose fusion four (the
+innovation covariance is inverted by numpy between them, see `fcu.estimator.update`).
 """
 
 from __future__ import annotations
@@ -11,26 +15,66 @@ from collections import deque
 
 import numpy as np
 
-from common.quaternion import Quat, Vec3, q_conj, q_log, q_mul, q_rotate_inv
-from fcu.estimator.align import AlignWindow
-from fcu.estimator.inputs import ImuInput, PoseInput
-from fcu.estimator.output import corrected_output, propagate
-from fcu.estimator.settings import EstimatorSettings
-from fcu.estimator.status import EstimatorHealth, EstimatorStatus, sd_verdict, variance_verdict
-from fcu.estimator.strapdown import F_IDX, N, State, strapdown, transition_entries
-from fcu.estimator.update import (
-    H_ATT,
-    H_BOTH,
-    H_POS,
-    bound_covariance,
-    inject,
-    joseph_update,
-    reset_block,
+from common.jit import warm_up
+from common.layouts import (
+    EF_C_DT2,
+    EF_C_X,
+    EF_H_X,
+    EF_INNOV,
+    EF_LAST_W,
+    EF_O_X,
+    EF_R,
+    EF_RATIO,
+    EF_SD,
+    EI_C_T,
+    EI_FUSED,
+    EI_H_T,
+    EI_LAST_ATT_FUSE,
+    EI_LAST_CAPTURE,
+    EI_LAST_FUSION,
+    EI_LAST_POS_FUSE,
+    EI_O_T,
+    EI_PEND_HEAD,
+    EI_PEND_N,
+    EI_POSE_IGNORED,
+    EI_POSES_N,
+    EI_REJ_ROW,
+    EI_REJECTED,
+    EI_RESETS,
+    EI_RESYNC_T,
 )
+from common.quaternion import Vec3
+from fcu.estimator.align import AlignWindow
+from fcu.estimator.buffers import filter_buffers
+from fcu.estimator.filter import (
+    DONE,
+    FUSE,
+    GROW,
+    OK_ATT,
+    OK_POS,
+    OUTPUT,
+    PUSH,
+    apply_update,
+    cov_step,
+    fuse_begin,
+    fuse_end,
+    imu_step,
+    output_values,
+    pose_step,
+    repropagate,
+    sd_values,
+    variance_code,
+)
+from fcu.estimator.inputs import ImuInput, PoseInput
+from fcu.estimator.settings import EstimatorSettings
+from fcu.estimator.status import EstimatorHealth, EstimatorStatus, positive_definite, sd_verdict
+from fcu.estimator.strapdown import N, State
+from fcu.estimator.update import H_ATT, H_BOTH, H_POS, joseph_gain
 from fcu.tracker import VehicleState
 
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 _DEFAULTS = EstimatorSettings()
+_T_MAX = 1 << 62  # larger times (us) are refused: the kernels' integers are 64-bit
 
 
 class Estimator:
@@ -41,14 +85,8 @@ class Estimator:
         s = settings
         self._g = s.gravity_m_s2
         self._delay_us = round(s.pose_delay_s * 1e6)
-        self._gate2 = s.pose_gate_sd * s.pose_gate_sd
-        self._r_pos_floor = s.pose_pos_noise_m ** 2
-        self._r_att_floor = s.pose_att_noise_rad ** 2
         self._align_us = round(s.align_time_s * 1e6)
-        self._timeout_us = round(s.pose_reset_timeout_s * 1e6)
-        self._cov_us = round(s.cov_period_s * 1e6)
-        self._resync_us = round(s.output_resync_s * 1e6)
-        self._var_min = np.array([1e-14] * 3 + [1e-14] * 3 + [1e-14] * 3 + [1e-16] * 6)
+        warm_up("fcu.estimator", _warm_up)
         self.reset()
 
     # ------------------------------------------------------------------------------------
@@ -56,46 +94,19 @@ class Estimator:
 
     def reset(self) -> None:
         """Back to unaligned: every state, buffer and counter cleared."""
+        s = self.settings
         self._aligned = False
         self._last_t = -1
         self._last_w: Vec3 = _ZERO3
         self._dt_us = 1000  # nominal IMU period (the shortest interval seen)
         self._dt_seen = False
-        self._pending: deque[ImuInput] = deque()  # samples newer than the horizon
-        self._poses: list[PoseInput] = []  # queued, by capture time
+        self._pending: deque[ImuInput] = deque()  # samples newer than the horizon (unaligned)
+        self._poses: list[PoseInput] = []  # queued, by capture time (unaligned)
         self._latest_pose: PoseInput | None = None
-        # alignment
-        self._window = AlignWindow(self.settings)
-        # horizon (filter) and output states
-        zero16 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                  0.0)
-        self._h_x: State = zero16
-        self._h_t = -1
-        self._o_x: State = zero16
-        self._o_t = -1
-        self._P = np.zeros((N, N))
-        self._F = np.eye(N)
-        self._F_flat = self._F.reshape(-1)
-        self._n_pred = 0
-        self._c_x: State = zero16  # horizon state at the last covariance step
-        self._c_t = -1
-        self._c_dt2 = 0.0  # sum of dt^2 since then
-        self._resync_t = -1  # time of the last exact output re-propagation
-        # fusion bookkeeping
-        self._pos_innov: Vec3 = _ZERO3
-        self._att_innov: Vec3 = _ZERO3
-        self._pos_ratio = 0.0
-        self._att_ratio = 0.0
-        self._rejected_in_row = 0
-        self._last_fusion_us = -1
-        self._last_capture_us = -1
-        self._last_pos_fuse_us = -1
-        self._last_att_fuse_us = -1
-        self._fused = 0
-        self._rejected = 0
+        self._window = AlignWindow(s)
         self._imu_ignored = 0
-        self._pose_ignored = 0
-        self._resets = 0
+        (self._fb, self._ib, self._M, self._pend_t, self._pend_v, self._pose_c,
+         self._pose_v) = filter_buffers(s)
 
     @property
     def aligned(self) -> bool:
@@ -104,7 +115,77 @@ class Estimator:
     @property
     def covariance(self) -> np.ndarray:
         """A copy of the 15x15 error-state covariance at the horizon."""
-        return self._P.copy()
+        P: np.ndarray = self._M[0]
+        return P.copy()
+
+    # The filter's state as the interpreted filter kept it (tests read and set these).
+
+    @property
+    def _P(self) -> np.ndarray:
+        P: np.ndarray = self._M[0]
+        return P
+
+    @_P.setter
+    def _P(self, P: np.ndarray) -> None:
+        self._M[0] = P
+
+    @property
+    def _F(self) -> np.ndarray:
+        F: np.ndarray = self._M[1]
+        return F
+
+    def _state(self, i: int) -> State:
+        x = self._fb[i:i + 16].tolist()
+        return (x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8], x[9], x[10], x[11],
+                x[12], x[13], x[14], x[15])
+
+    @property
+    def _h_x(self) -> State:
+        return self._state(EF_H_X)
+
+    @_h_x.setter
+    def _h_x(self, x: State) -> None:
+        self._fb[EF_H_X:EF_H_X + 16] = x
+
+    @property
+    def _c_x(self) -> State:
+        return self._state(EF_C_X)
+
+    @_c_x.setter
+    def _c_x(self, x: State) -> None:
+        self._fb[EF_C_X:EF_C_X + 16] = x
+
+    @property
+    def _o_x(self) -> State:
+        return self._state(EF_O_X)
+
+    @property
+    def _h_t(self) -> int:
+        return int(self._ib[EI_H_T])
+
+    @_h_t.setter
+    def _h_t(self, t: int) -> None:
+        self._ib[EI_H_T] = t
+
+    @property
+    def _c_t(self) -> int:
+        return int(self._ib[EI_C_T])
+
+    @_c_t.setter
+    def _c_t(self, t: int) -> None:
+        self._ib[EI_C_T] = t
+
+    @property
+    def _c_dt2(self) -> float:
+        return float(self._fb[EF_C_DT2])
+
+    @_c_dt2.setter
+    def _c_dt2(self, v: float) -> None:
+        self._fb[EF_C_DT2] = v
+
+    def _cov_step(self) -> None:
+        """P = F P F^T + Q over the samples since the last step (`filter.cov_step`)."""
+        cov_step(self._fb, self._ib, self._M)
 
     # ------------------------------------------------------------------------------------
     # Inputs
@@ -115,62 +196,82 @@ class Estimator:
         f = s.f_flu_m_s2
         try:
             t = s.t_us if type(s.t_us) is int else int(s.t_us)
-            ok = math.isfinite(w[0] + w[1] + w[2] + f[0] + f[1] + f[2]) and t > self._last_t
+            ok = math.isfinite(w[0] + w[1] + w[2] + f[0] + f[1] + f[2]) and \
+                self._last_t < t < _T_MAX
         except (TypeError, IndexError, OverflowError, ValueError):
             ok = False
         if not ok:
             self._imu_ignored += 1
             return
-        if t is not s.t_us:
-            s = s._replace(t_us=t)
         if self._last_t >= 0:  # the nominal period: the shortest interval (a gap is no period)
             dt = t - self._last_t
             self._dt_us = dt if not self._dt_seen else min(self._dt_us, dt)
             self._dt_seen = True
         self._last_t = t
         self._last_w = w
-        pend = self._pending
-        pend.append(s)
-        if not self._aligned:
-            self._align_step(s)
+        if self._aligned:
+            code = imu_step(self._fb, self._ib, self._M, self._pend_t, self._pend_v,
+                            self._pose_c, self._pose_v, t, w[0], w[1], w[2], f[0], f[1], f[2],
+                            self._dt_us, PUSH | OUTPUT)
+            if code != DONE:
+                self._advance(t, w, f, PUSH | OUTPUT, code)
             return
-        h_lim = t - self._delay_us
-        half = self._dt_us >> 1
-        while pend and pend[0].t_us <= h_lim:
-            self._predict(pend.popleft())
-            if self._poses and self._poses[0].capture_us <= self._h_t + half:
-                self._fuse_due()
-        if not pend:
-            self._o_x = self._h_x
-            self._o_t = self._h_t
-        elif self._o_t < t:
-            self._o_x = strapdown(self._o_x, w, f, (t - self._o_t) * 1e-6, self._g)
-            self._o_t = t
+        if t is not s.t_us:
+            s = s._replace(t_us=t)
+        self._pending.append(s)
+        self._align_step(s)
+
+    def _advance(self, t: int, w: Vec3, f: Vec3, mode: int, code: int = -1) -> None:
+        """`filter.imu_step` until done (code: what it answered last, -1 not called yet):
+        the ring grown when full (GROW), each due pose fused (FUSE)."""
+        while True:
+            if code == DONE:
+                return
+            if code == GROW:
+                self._grow(2 * len(self._pend_t))
+            elif code == FUSE:
+                self._fuse_current()
+                mode &= ~PUSH
+            code = imu_step(self._fb, self._ib, self._M, self._pend_t, self._pend_v,
+                            self._pose_c, self._pose_v, t, w[0], w[1], w[2], f[0], f[1], f[2],
+                            self._dt_us, mode)
+
+    def _grow(self, cap: int) -> None:
+        """The ring of buffered samples at capacity cap, oldest first."""
+        ib = self._ib
+        n, head, old = int(ib[EI_PEND_N]), int(ib[EI_PEND_HEAD]), len(self._pend_t)
+        idx = (head + np.arange(n)) % old
+        pend_t = np.zeros(cap, dtype=np.int64)
+        pend_v = np.zeros((cap, 6))
+        pend_t[:n] = self._pend_t[idx]
+        pend_v[:n] = self._pend_v[idx]
+        self._pend_t, self._pend_v = pend_t, pend_v
+        ib[EI_PEND_HEAD] = 0
 
     def on_pose(self, m: PoseInput) -> None:
         """Queue a pose; it is fused when the horizon reaches capture_us (in time order)."""
         checked = self._check_pose(m)
         if checked is None:
-            self._pose_ignored += 1
+            self._ib[EI_POSE_IGNORED] += 1
             return
         m = checked
         half = self._dt_us >> 1
         c = m.capture_us
         if self._last_t < 0 or c > self._last_t + half:  # no IMU yet, or in the future
-            self._pose_ignored += 1
+            self._ib[EI_POSE_IGNORED] += 1
             return
         if not self._aligned:
             if self._latest_pose is None or c > self._latest_pose.capture_us:
                 self._latest_pose = m
             self._queue(m)
             return
-        if c < self._h_t - half or c <= self._last_capture_us:  # behind the horizon
-            self._pose_ignored += 1
+        if c < -_T_MAX:  # behind the horizon
+            self._ib[EI_POSE_IGNORED] += 1
             return
-        if c <= self._h_t + half:
-            self._fuse(m)
-            return
-        self._queue(m)
+        v = np.array((*m.p_enu_m, *m.q_enu_flu, m.pos_var_m2, m.att_var_rad2))
+        if pose_step(self._fb, self._ib, self._pose_c, self._pose_v, c, v,
+                     self._dt_us) == FUSE:
+            self._fuse_current()
 
     def _check_pose(self, m: PoseInput) -> PoseInput | None:
         try:
@@ -192,7 +293,7 @@ class Estimator:
         bisect.insort(self._poses, m, key=lambda e: e.capture_us)
         if len(self._poses) > self.settings.pose_queue_max:
             self._poses.pop(0)
-            self._pose_ignored += 1
+            self._ib[EI_POSE_IGNORED] += 1
 
     # ------------------------------------------------------------------------------------
     # Alignment
@@ -219,14 +320,17 @@ class Estimator:
                 self._initialise(ground=True)
 
     def _initialise(self, ground: bool) -> None:
-        """Aligned: p, q from the pose nearest the horizon, v = 0, b_g = window mean."""
+        """Aligned: p, q from the pose nearest the horizon, v = 0, b_g = window mean; the
+        buffered samples and queued poses move into the kernels' buffers, the horizon
+        advances over them."""
         st = self.settings
         smp = self._pending.popleft()
-        self._h_t = smp.t_us
+        h_t = smp.t_us
         half = self._dt_us >> 1
-        older = [m for m in self._poses if m.capture_us <= self._h_t + half]
+        older = [m for m in self._poses if m.capture_us <= h_t + half]
         pose = older[-1] if older else self._poses[0]
-        self._poses = [m for m in self._poses if m.capture_us > self._h_t + half]
+        poses = [m for m in self._poses if m.capture_us > h_t + half]
+        self._poses = []
         if ground:
             bg, bg_sd = self._window.gyro_bias()
             v_sd = st.init_vel_sd_m_s
@@ -235,163 +339,76 @@ class Estimator:
             bg_sd = st.init_gyro_bias_sd_rad_s
             v_sd = st.init_vel_sd_in_flight_m_s
         p, q = pose.p_enu_m, pose.q_enu_flu
-        self._h_x = (p[0], p[1], p[2], 0.0, 0.0, 0.0, q[0], q[1], q[2], q[3],
-                     bg[0], bg[1], bg[2], 0.0, 0.0, 0.0)
+        x = (p[0], p[1], p[2], 0.0, 0.0, 0.0, q[0], q[1], q[2], q[3],
+             bg[0], bg[1], bg[2], 0.0, 0.0, 0.0)
         r_p, r_a = self._pose_vars(pose)
         d = [r_p] * 3 + [v_sd ** 2] * 3 + [r_a] * 3 + [bg_sd ** 2] * 3 \
             + [st.init_accel_bias_sd_m_s2 ** 2] * 3
-        self._P = np.diag(d)
-        self._c_x = self._h_x
-        self._c_t = self._h_t
-        self._c_dt2 = 0.0
-        self._last_capture_us = pose.capture_us
-        self._last_pos_fuse_us = self._last_att_fuse_us = pose.capture_us
+        fb, ib = self._fb, self._ib
+        fb[EF_H_X:EF_H_X + 16] = x
+        fb[EF_C_X:EF_C_X + 16] = x
+        fb[EF_C_DT2] = 0.0
+        fb[EF_LAST_W:EF_LAST_W + 3] = self._last_w
+        self._M[0] = np.diag(d)
+        ib[EI_H_T] = ib[EI_C_T] = h_t
+        ib[EI_LAST_CAPTURE] = pose.capture_us
+        ib[EI_LAST_POS_FUSE] = ib[EI_LAST_ATT_FUSE] = pose.capture_us
         self._aligned = True
         self._window.blocks.clear()
-        h_lim = self._last_t - self._delay_us
         pend = self._pending
-        self._o_t = -1
-        while pend and pend[0].t_us <= h_lim:
-            self._predict(pend.popleft())
-            self._fuse_due()
-        self._repropagate()
-        self._resync_t = self._h_t
+        cap = len(self._pend_t)
+        while cap < len(pend):
+            cap *= 2
+        self._grow(cap)
+        for k, smp in enumerate(pend):
+            self._pend_t[k] = smp.t_us
+            self._pend_v[k] = (*smp.omega_flu_rad_s, *smp.f_flu_m_s2)
+        ib[EI_PEND_HEAD], ib[EI_PEND_N] = 0, len(pend)
+        pend.clear()
+        for k, m in enumerate(poses):
+            self._pose_c[k] = m.capture_us
+            self._pose_v[k] = (*m.p_enu_m, *m.q_enu_flu, m.pos_var_m2, m.att_var_rad2)
+        ib[EI_POSES_N] = len(poses)
+        ib[EI_O_T] = -1
+        self._advance(self._last_t, self._last_w, self._last_w, 0)
+        repropagate(fb, ib, self._pend_t, self._pend_v)
+        ib[EI_RESYNC_T] = ib[EI_H_T]
 
     # ------------------------------------------------------------------------------------
     # Filter
 
-    def _predict(self, smp: ImuInput) -> None:
-        """Horizon state over one sample (Sola eq. 260); covariance every cov_period_s."""
-        dt = (smp.t_us - self._h_t) * 1e-6
-        self._h_x = strapdown(self._h_x, smp.omega_flu_rad_s, smp.f_flu_m_s2, dt, self._g)
-        self._h_t = smp.t_us
-        self._c_dt2 += dt * dt
-        if self._h_t - self._c_t >= self._cov_us:
-            self._cov_step()
-
-    def _cov_step(self) -> None:
-        """P = F P F^T + Q over the samples since the last step (Sola eq. 269-274).
-
-        F's entries from `transition_entries`; per-sample IMU noise summed over the
-        interval's dt^2, bias random walks over T.
-        """
-        T = (self._h_t - self._c_t) * 1e-6
-        if T <= 0.0:
-            return
-        self._F_flat[F_IDX] = transition_entries(self._c_x, self._h_x, T, self._g)
-        st = self.settings
-        qa = st.accel_noise_m_s2 ** 2 * self._c_dt2
-        qg = st.gyro_noise_rad_s ** 2 * self._c_dt2
-        qbg = st.gyro_bias_noise_rad_s2 ** 2 * T
-        qba = st.accel_bias_noise_m_s3 ** 2 * T
-        F = self._F
-        P = F.dot(self._P).dot(F.T)
-        P.flat[::16] += (0.0, 0.0, 0.0, qa, qa, qa, qg, qg, qg, qbg, qbg, qbg, qba, qba, qba)
-        self._n_pred += 1
-        if self._n_pred & 7 == 0:
-            P += P.T
-            P *= 0.5
-            bound_covariance(P, self._var_min, self.settings.var_max)
-        self._P = P
-        self._c_x = self._h_x
-        self._c_t = self._h_t
-        self._c_dt2 = 0.0
-
     def _pose_vars(self, m: PoseInput) -> tuple[float, float]:
-        r_p = m.pos_var_m2 if m.pos_var_m2 > self._r_pos_floor else self._r_pos_floor
-        r_a = m.att_var_rad2 if m.att_var_rad2 > self._r_att_floor else self._r_att_floor
+        r_pos_floor = self.settings.pose_pos_noise_m ** 2
+        r_att_floor = self.settings.pose_att_noise_rad ** 2
+        r_p = m.pos_var_m2 if m.pos_var_m2 > r_pos_floor else r_pos_floor
+        r_a = m.att_var_rad2 if m.att_var_rad2 > r_att_floor else r_att_floor
         return r_p, r_a  # NaN compares False: the floor
 
-    def _fuse_due(self) -> None:
-        half = self._dt_us >> 1
-        while self._poses and self._poses[0].capture_us <= self._h_t + half:
-            m = self._poses.pop(0)
-            if m.capture_us <= self._last_capture_us:
-                self._pose_ignored += 1
-                continue
-            self._fuse(m)
-
-    def _fuse(self, m: PoseInput) -> None:
-        """Gate position and attitude separately, Joseph update, inject, reset (Sola 6)."""
-        self._last_capture_us = m.capture_us
-        self._cov_step()
-        x = self._h_x
-        q_hat: Quat = (x[6], x[7], x[8], x[9])
-        zp = m.p_enu_m
-        yp: Vec3 = (zp[0] - x[0], zp[1] - x[1], zp[2] - x[2])
-        ya = q_log(q_mul(q_conj(q_hat), m.q_enu_flu))
-        r_p, r_a = self._pose_vars(m)
-        P = self._P
-        d = P.diagonal().tolist()
-        g2 = self._gate2
-        tr_p = max(yp[i] * yp[i] / (g2 * (d[i] + r_p)) for i in range(3))
-        tr_a = max(ya[i] * ya[i] / (g2 * (d[6 + i] + r_a)) for i in range(3))
-        self._pos_innov, self._att_innov = yp, ya
-        self._pos_ratio, self._att_ratio = tr_p, tr_a
-        ok_p, ok_a = tr_p <= 1.0, tr_a <= 1.0
-        if ok_p and ok_a:
-            self._update(H_BOTH, [*yp, *ya], [r_p] * 3 + [r_a] * 3)
-        elif ok_p:
-            self._update(H_POS, list(yp), [r_p] * 3)
-        elif ok_a:
-            self._update(H_ATT, list(ya), [r_a] * 3)
-        c = m.capture_us
-        reset = False
-        if ok_p:
-            self._last_pos_fuse_us = c
-        if ok_a:
-            self._last_att_fuse_us = c
-        if ok_p or ok_a:
-            self._last_fusion_us = c
-        if ok_p and ok_a:
-            self._fused += 1
-            self._rejected_in_row = 0
-        else:
-            self._rejected += 1
-            self._rejected_in_row += 1
-            if not ok_p and c - self._last_pos_fuse_us > self._timeout_us:
-                self._reset_block(0, zp, r_p)
-                self._last_pos_fuse_us = c
-                reset = True
-            if not ok_a and c - self._last_att_fuse_us > self._timeout_us:
-                self._reset_block(6, m.q_enu_flu, r_a)
-                self._last_att_fuse_us = c
-                reset = True
-        if ok_p or ok_a or reset:
-            self._correct_output(x, reset)
-
-    def _reset_block(self, i0: int, z: tuple[float, ...], r: float) -> None:
-        """Reset the position (i0 = 0) or attitude (i0 = 6) to the pose (`reset_block`)."""
-        self._h_x = reset_block(self._h_x, self._P, i0, z, r)
-        self._resets += 1
-        self._rejected_in_row = 0
+    def _fuse_current(self) -> None:
+        """The pose under way (`filter.fuse_begin`): gate position and attitude separately,
+        Joseph update of the parts that pass, then the counters, resets and the output's
+        correction (`filter.fuse_end`)."""
+        fb = self._fb
+        ok = fuse_begin(fb, self._ib, self._M)
+        if ok:
+            y = fb[EF_INNOV:EF_INNOV + 6].tolist()
+            r_p, r_a = fb[EF_R:EF_R + 2].tolist()
+            if ok == OK_POS | OK_ATT:
+                self._update(H_BOTH, y, [r_p] * 3 + [r_a] * 3)
+            elif ok == OK_POS:
+                self._update(H_POS, y[0:3], [r_p] * 3)
+            else:
+                self._update(H_ATT, y[3:6], [r_a] * 3)
+        fuse_end(fb, self._ib, self._M, self._pend_t, self._pend_v, ok)
 
     def _update(self, H: np.ndarray, y: list[float], r: list[float]) -> None:
-        """Joseph update, injection and reset (Sola eq. 282-287), then the bounds."""
-        P, dx = joseph_update(self._P, H, y, r)
-        self._h_x = inject(self._h_x, dx)
-        bound_covariance(P, self._var_min, self.settings.var_max)
-        self._P = P
-
-    def _correct_output(self, xb: State, exact: bool) -> None:
-        """Carry the horizon's correction (xb -> x) to the output state.
-
-        Linearised over the buffered interval (`corrected_output`); exact re-propagation
-        after a reset, with output_repropagate, and every output_resync_s.
-        """
-        if self._o_t < self._h_t:
-            return
-        if (exact or self._o_t == self._h_t or self.settings.output_repropagate
-                or self._h_t - self._resync_t >= self._resync_us):
-            self._repropagate()
-            self._resync_t = self._h_t
-            return
-        self._o_x = corrected_output(xb, self._h_x, self._o_x,
-                                     (self._o_t - self._h_t) * 1e-6, self._g)
-
-    def _repropagate(self) -> None:
-        """Output = horizon state propagated over the buffered samples (output predictor)."""
-        self._o_x, self._o_t = propagate(self._h_x, self._h_t, self._pending, self._g)
+        """Joseph update, injection and reset (Sola eq. 282-287), then the bounds: S and
+        P H^T compiled, S inverted by numpy, the rest compiled (`filter.apply_update`)."""
+        P = self._M[0]
+        rv = np.array(r, dtype=np.float64)
+        pht, S = joseph_gain(P, H, rv)
+        apply_update(self._fb, self._M, H, pht, np.linalg.inv(S),
+                     np.array(y, dtype=np.float64), rv)
 
     # ------------------------------------------------------------------------------------
     # Outputs
@@ -400,38 +417,59 @@ class Estimator:
         """(t_us, state at the newest IMU sample), None before aligned."""
         if not self._aligned:
             return None
-        x = self._o_x
-        q: Quat = (x[6], x[7], x[8], x[9])
-        w = self._last_w
-        return self._o_t, VehicleState((x[0], x[1], x[2]), q,
-                                       q_rotate_inv(q, (x[3], x[4], x[5])),
-                                       (w[0] - x[10], w[1] - x[11], w[2] - x[12]))
+        t, p, q, v, w = output_values(self._fb, self._ib)
+        return t, VehicleState(p, q, v, w)
 
     def health(self) -> EstimatorHealth:
         """What the failsafes and arming need each control period, without status()'s
         Cholesky test (the covariance is kept positive definite by construction; status()
         checks it for telemetry and logs): finite state, the standard deviations."""
-        converged, healthy = variance_verdict(self.settings, self._P, self._o_x,
-                                              self._aligned)
-        return EstimatorHealth(self._aligned, converged, healthy, self._rejected_in_row,
-                               self._last_fusion_us)
+        ib = self._ib
+        code = variance_code(self._fb, self._M) if self._aligned else 0
+        return EstimatorHealth(self._aligned, code == 3, code != 0, int(ib[EI_REJ_ROW]),
+                               int(ib[EI_LAST_FUSION]))
 
     def status(self) -> EstimatorStatus:
-        x = self._o_x
-        sd, converged, healthy = sd_verdict(self.settings, self._P, x, self._aligned)
+        fb = self._fb
+        if self._aligned:
+            finite = sd_values(fb, self._M)
+            sd = fb[EF_SD:EF_SD + N].tolist()
+            spd = finite and positive_definite(self._M[0])
+        else:
+            sd = [math.nan] * N
+            spd = False
+        converged, healthy = sd_verdict(self.settings, sd, spd)
+        x = fb[EF_O_X:EF_O_X + 16].tolist()
+        e = fb[EF_INNOV:EF_INNOV + 6].tolist()
+        tr_p, tr_a = fb[EF_RATIO:EF_RATIO + 2].tolist()
+        iv = self._ib.tolist()
 
-        def v3(i: int) -> Vec3:
-            return (sd[i], sd[i + 1], sd[i + 2])
+        def v3(a: list[float], i: int) -> Vec3:
+            return (a[i], a[i + 1], a[i + 2])
 
         return EstimatorStatus(
-            t_us=self._o_t if self._aligned else self._last_t,
+            t_us=iv[EI_O_T] if self._aligned else self._last_t,
             aligned=self._aligned, converged=converged,
-            pos_sd_m=v3(0), vel_sd_m_s=v3(3), att_sd_rad=v3(6), gyro_bias_sd=v3(9),
-            accel_bias_sd=v3(12),
-            gyro_bias_rad_s=(x[10], x[11], x[12]), accel_bias_m_s2=(x[13], x[14], x[15]),
-            pos_innov_m=self._pos_innov, att_innov_rad=self._att_innov,
-            pos_test_ratio=self._pos_ratio, att_test_ratio=self._att_ratio,
-            rejected_in_row=self._rejected_in_row, last_fusion_us=self._last_fusion_us,
-            fused=self._fused, rejected=self._rejected, healthy=healthy,
-            imu_ignored=self._imu_ignored, pose_ignored=self._pose_ignored,
-            resets=self._resets)
+            pos_sd_m=v3(sd, 0), vel_sd_m_s=v3(sd, 3), att_sd_rad=v3(sd, 6),
+            gyro_bias_sd=v3(sd, 9), accel_bias_sd=v3(sd, 12),
+            gyro_bias_rad_s=v3(x, 10), accel_bias_m_s2=v3(x, 13),
+            pos_innov_m=v3(e, 0), att_innov_rad=v3(e, 3),
+            pos_test_ratio=tr_p, att_test_ratio=tr_a,
+            rejected_in_row=iv[EI_REJ_ROW], last_fusion_us=iv[EI_LAST_FUSION],
+            fused=iv[EI_FUSED], rejected=iv[EI_REJECTED], healthy=healthy,
+            imu_ignored=self._imu_ignored, pose_ignored=iv[EI_POSE_IGNORED],
+            resets=iv[EI_RESETS])
+
+
+def _warm_up() -> None:
+    """Every kernel once on inputs of their run-time types (compiled, or loaded from the
+    cache): an in-flight alignment, fusions, a rejection and a reset, the outputs."""
+    est = Estimator(EstimatorSettings(align_in_flight=True, pose_reset_timeout_s=0.005))
+    for k in range(1, 40):
+        est.on_imu(ImuInput(k * 1000, (0.0, 0.0, 0.0), (0.0, 0.0, 9.81)))
+        p = (0.0, 0.0, 0.0) if k < 30 else (1.0, 0.0, 0.0)
+        est.on_pose(PoseInput(k * 1000 - 25_000, p, (1.0, 0.0, 0.0, 0.0)))
+        est.on_pose(PoseInput(k * 1000 - 15_000, p, (1.0, 0.0, 0.0, 0.0)))
+    est.output()
+    est.health()
+    est.status()

@@ -2,28 +2,35 @@
 
 The output state integrates each new sample once; a horizon correction is carried to it by
 the linearised transition over the buffered interval (no lag, no EKF2-style feedback time
-constant), or the buffered samples are re-propagated exactly.
+constant), or the buffered samples are re-propagated exactly. Compiled (`common.jit.njit`).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
 
+import numpy as np
+
+from common.jit import njit
 from common.quaternion import Quat, q_conj, q_exp, q_mul, q_rotate
-from fcu.estimator.inputs import ImuInput
 from fcu.estimator.strapdown import State, strapdown
 
 
-def propagate(x: State, t_us: int, samples: Iterable[ImuInput], g: float
-              ) -> tuple[State, int]:
-    """(state, time) of x at t_us propagated over the samples (Sola eq. 260 each)."""
-    for s in samples:
-        x = strapdown(x, s.omega_flu_rad_s, s.f_flu_m_s2, (s.t_us - t_us) * 1e-6, g)
-        t_us = s.t_us
+@njit
+def propagate(x: State, t_us: int, pend_t: np.ndarray, pend_v: np.ndarray, head: int,
+              n: int, g: float) -> tuple[State, int]:
+    """(state, time) of x at t_us propagated over the n buffered samples from `head` of the
+    ring (pend_t their times, pend_v their gyro and accel), Sola eq. 260 each."""
+    cap = pend_t.shape[0]
+    for k in range(n):
+        j = (head + k) % cap
+        v = pend_v[j]
+        x = strapdown(x, (v[0], v[1], v[2]), (v[3], v[4], v[5]), (pend_t[j] - t_us) * 1e-6, g)
+        t_us = pend_t[j]
     return x, t_us
 
 
+@njit
 def corrected_output(xb: State, xa: State, xo: State, T: float, g: float) -> State:
     """The output state xo, T after the horizon, given the horizon's correction xb -> xa.
 

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
 
 from common.quaternion import Vec3
 from fcu.estimator.settings import EstimatorSettings
-from fcu.estimator.strapdown import N, State
 
 
 class EstimatorHealth(NamedTuple):
@@ -48,46 +46,22 @@ class EstimatorStatus(NamedTuple):
 
 
 
-def variance_verdict(st: EstimatorSettings, P: np.ndarray, x: State, aligned: bool
-                     ) -> tuple[bool, bool]:
-    """(converged, healthy) from the largest variances of position, velocity and attitude
-    (no Cholesky test: `health`'s cheap check each control period)."""
-    if not aligned:
-        return False, False
-    d = P.diagonal().tolist()
-    if not (math.isfinite(sum(d)) and math.isfinite(sum(x)) and min(d) > 0.0):
-        return False, False
-    pos_var, vel_var, att_var = max(d[0:3]), max(d[3:6]), max(d[6:9])
-    healthy = (pos_var < st.healthy_pos_sd_max_m ** 2
-               and vel_var < st.healthy_vel_sd_max_m_s ** 2
-               and att_var < st.healthy_att_sd_max_rad ** 2)
-    converged = (healthy and pos_var < st.converged_pos_sd_m ** 2
-                 and vel_var < st.converged_vel_sd_m_s ** 2
-                 and att_var < st.converged_att_sd_rad ** 2)
-    return converged, healthy
+def positive_definite(P: np.ndarray) -> bool:
+    """Whether numpy's Cholesky factorises (P + P^T) / 2."""
+    try:
+        np.linalg.cholesky(0.5 * (P + P.T))
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
-def sd_verdict(st: EstimatorSettings, P: np.ndarray, x: State, aligned: bool
-               ) -> tuple[list[float], bool, bool]:
-    """(the 15 standard deviations, converged, healthy): healthy needs a finite state and a
-    positive definite P (Cholesky) with sd below the blow-up limits; NaN sd before aligned,
-    inf when not finite."""
-    if aligned:
-        d = P.diagonal()
-        finite = bool(np.isfinite(P).all()) and all(math.isfinite(v) for v in x)
-        sd = np.sqrt(np.maximum(d, 0.0)).tolist() if finite else [math.inf] * N
-        spd = finite
-        if finite:
-            try:
-                np.linalg.cholesky(0.5 * (P + P.T))
-            except np.linalg.LinAlgError:
-                spd = False
-    else:
-        sd = [math.nan] * N
-        spd = False
+def sd_verdict(st: EstimatorSettings, sd: list[float], spd: bool) -> tuple[bool, bool]:
+    """(converged, healthy) from the 15 standard deviations (NaN before aligned, inf when
+    not finite) and whether P is positive definite: healthy needs spd and the sd below the
+    blow-up limits (health's cheap variant: `fcu.estimator.filter.variance_code`)."""
     pos_sd, vel_sd, att_sd = max(sd[0:3]), max(sd[3:6]), max(sd[6:9])
     healthy = (spd and pos_sd < st.healthy_pos_sd_max_m
                and vel_sd < st.healthy_vel_sd_max_m_s and att_sd < st.healthy_att_sd_max_rad)
     converged = (healthy and pos_sd < st.converged_pos_sd_m
                  and vel_sd < st.converged_vel_sd_m_s and att_sd < st.converged_att_sd_rad)
-    return sd, converged, healthy
+    return converged, healthy

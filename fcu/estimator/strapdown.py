@@ -2,6 +2,10 @@
 
 State x = (p, v, q, b_g, b_a) as one flat tuple of 16 floats (world ENU, body FLU); error
 state dx = [dp, dv, dtheta, db_g, db_a] (15), dtheta the local (body) attitude error.
+
+Compiled (`common.jit.njit`): the filter's kernels (`fcu.estimator.filter`) call these on
+tuples loaded from their flat buffers (`load_state`, `store_state`); Python callers get
+tuples back, the same floats as the interpreted arithmetic.
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ import math
 
 import numpy as np
 
+from common.jit import njit
 from common.quaternion import Vec3
 
 N = 15  # error-state dimension
@@ -17,6 +22,22 @@ State = tuple[float, float, float, float, float, float, float, float, float, flo
                float, float, float, float, float, float]
 
 
+@njit
+def load_state(a: np.ndarray, i: int) -> State:
+    """The 16 floats of a state at offset i of a flat array, as a tuple."""
+    return (a[i], a[i + 1], a[i + 2], a[i + 3], a[i + 4], a[i + 5], a[i + 6], a[i + 7],
+            a[i + 8], a[i + 9], a[i + 10], a[i + 11], a[i + 12], a[i + 13], a[i + 14],
+            a[i + 15])
+
+
+@njit
+def store_state(a: np.ndarray, i: int, x: State) -> None:
+    """A state into a flat array at offset i."""
+    for k in range(16):
+        a[i + k] = x[k]
+
+
+@njit
 def strapdown(x: State, w: Vec3, f: Vec3, dt: float, g: float) -> State:
     """One IMU sample over dt (Sola eq. 260), specific force rotated to mid-interval."""
     (px, py, pz, vx, vy, vz, qw, qx, qy, qz, bgx, bgy, bgz, bax, bay, baz) = x
@@ -74,6 +95,7 @@ def _flat_indices() -> np.ndarray:
 F_IDX = _flat_indices()
 
 
+@njit
 def transition_entries(x0: State, x1: State, T: float, g: float) -> tuple[float, ...]:
     """The 60 time-varying entries of F (at F_IDX) over an interval T from x0 to x1.
 

@@ -2,6 +2,13 @@
 
 The pose measures position and attitude directly, so H is a selector (rows of I15); the
 attitude innovation is log(q_hat* q_meas), a local (body) rotation vector.
+
+Compiled (`common.jit.njit`), in two halves around the innovation covariance's inverse
+(`joseph_gain`, then `joseph_apply`): the inverse is numpy's own (`np.linalg.inv`, called
+by `fcu.estimator.ekf`), because numba's LAPACK is another build whose inverse differs in
+the last bit for some matrices. The matrix products are BLAS's dgemm/dgemv through numba's
+`np.dot`, the same products numpy's `dot` computes (tests/unit/test_estimator_kernels.py
+checks both against numpy on random inputs).
 """
 
 from __future__ import annotations
@@ -10,6 +17,7 @@ import math
 
 import numpy as np
 
+from common.jit import njit
 from common.quaternion import q_exp, q_mul
 from fcu.estimator.strapdown import N, State
 
@@ -17,32 +25,56 @@ I15 = np.eye(N)
 H_POS = I15[[0, 1, 2]]  # measurement selectors
 H_ATT = I15[[6, 7, 8]]
 H_BOTH = I15[[0, 1, 2, 6, 7, 8]]
-_G_IDX = np.array([6 * N + 7, 6 * N + 8, 7 * N + 6, 7 * N + 8, 8 * N + 6, 8 * N + 7])
 
 
-def joseph_update(P: np.ndarray, H: np.ndarray, y: list[float], r: list[float]
-                  ) -> tuple[np.ndarray, list[float]]:
-    """(P after the update, the error-state correction dx): Joseph form with the selector H,
-    symmetrised, the attitude reset G = I - [dtheta/2]x (Sola eq. 287) folded in:
-    P = (G A) P (G A)^T + (G K) R (G K)^T, A = I - K H."""
-    pht = P.dot(H.T)
-    S = H.dot(pht)
-    S.flat[::len(r) + 1] += r
-    K = pht.dot(np.linalg.inv(S))
-    dx = K.dot(y).tolist()
+@njit
+def joseph_gain(P: np.ndarray, H: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(P H^T, S = H P H^T + diag(r)): the first half of the update."""
+    pht = np.dot(P, H.T)
+    S = np.dot(H, pht)
+    for i in range(r.shape[0]):
+        S[i, i] += r[i]
+    return pht, S
+
+
+@njit
+def symmetrise(P: np.ndarray) -> None:
+    """P = (P + P^T) / 2 in place, as numpy's `P += P.T; P *= 0.5` (buffered) computes it."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i, n):
+            s = (P[i, j] + P[j, i]) * 0.5
+            P[i, j] = s
+            P[j, i] = s
+
+
+@njit
+def joseph_apply(P: np.ndarray, H: np.ndarray, pht: np.ndarray, s_inv: np.ndarray,
+                 y: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The second half: K = P H^T S^-1, dx = K y and, in place, P = (G A) P (G A)^T +
+    (G K) R (G K)^T, symmetrised, with A = I - K H and the attitude reset
+    G = I - [dtheta/2]x (Sola eq. 287) folded in; returns dx."""
+    K = np.dot(pht, s_inv)
+    dx: np.ndarray = np.dot(K, y)
     hx, hy, hz = 0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8]
-    Gr = I15.copy()
-    Gr.flat[_G_IDX] = (hz, -hy, -hz, hx, hy, -hx)
-    A = Gr.dot(I15 - K.dot(H))
-    GK = Gr.dot(K)
-    P = A.dot(P).dot(A.T)
-    P += (GK * r).dot(GK.T)
-    P += P.T
-    P *= 0.5
-    return P, dx
+    Gr = np.eye(N)
+    Gr[6, 7] = hz
+    Gr[6, 8] = -hy
+    Gr[7, 6] = -hz
+    Gr[7, 8] = hx
+    Gr[8, 6] = hy
+    Gr[8, 7] = -hx
+    A = np.dot(Gr, np.eye(N) - np.dot(K, H))
+    GK = np.dot(Gr, K)
+    Pn = np.dot(np.dot(A, P), A.T)
+    Pn += np.dot(GK * r, GK.T)
+    symmetrise(Pn)
+    P[:, :] = Pn
+    return dx
 
 
-def inject(x: State, dx: list[float]) -> State:
+@njit
+def inject(x: State, dx: np.ndarray) -> State:
     """The nominal state corrected by dx (Sola eq. 282-283): q = q exp(dtheta), renormalised."""
     q = q_mul((x[6], x[7], x[8], x[9]), q_exp((dx[6], dx[7], dx[8])))
     n = 1.0 / math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
@@ -53,27 +85,60 @@ def inject(x: State, dx: list[float]) -> State:
             x[13] + dx[12], x[14] + dx[13], x[15] + dx[14])
 
 
+@njit
+def _np_max(a: float, b: float) -> float:
+    """np.maximum: NaN if either is NaN."""
+    if math.isnan(a) or math.isnan(b):
+        return math.nan
+    return a if a >= b else b
+
+
+@njit
 def bound_covariance(P: np.ndarray, var_min: np.ndarray, var_max: float) -> None:
     """Diagonal floors and the var_max clamp, in place (row/column scaling keeps P SPD)."""
-    d = P.diagonal()
-    if (d < var_min).any():
-        P.flat[::16] = np.maximum(d, var_min)
-    if (d > var_max).any():
-        k = np.sqrt(np.minimum(1.0, var_max / np.maximum(d, 1e-300)))
-        P *= k[:, None]
-        P *= k[None, :]
+    n = P.shape[0]
+    low = False
+    for i in range(n):
+        if P[i, i] < var_min[i]:
+            low = True
+    if low:
+        for i in range(n):
+            P[i, i] = _np_max(P[i, i], var_min[i])
+    high = False
+    for i in range(n):
+        if P[i, i] > var_max:
+            high = True
+    if high:
+        k = np.empty(n)
+        for i in range(n):
+            v = var_max / _np_max(P[i, i], 1e-300)
+            if math.isnan(v):  # np.sqrt(np.minimum(1.0, v))
+                k[i] = math.nan
+            elif v > 1.0:
+                k[i] = 1.0
+            else:
+                k[i] = math.sqrt(v)
+        for i in range(n):
+            for j in range(n):
+                P[i, j] = P[i, j] * k[i] * k[j]
 
 
-def reset_block(x: State, P: np.ndarray, i0: int, z: tuple[float, ...], r: float) -> State:
-    """EKF2-style reset to the pose: the position (i0 = 0) or attitude (i0 = 6) set to z,
-    its covariance rows and columns cleared to r I, in place; returns the new state."""
-    xs = list(x)
+@njit
+def reset_block(x: np.ndarray, xi: int, P: np.ndarray, i0: int, z: np.ndarray,
+                r: float) -> None:
+    """EKF2-style reset to the pose, in place: the position (i0 = 0; z its 3 values) or
+    attitude (i0 = 6; z the quaternion) of the state at x[xi:] set to z, its covariance rows
+    and columns cleared to r I."""
     if i0 == 0:
-        xs[0:3] = z[0:3]
+        for k in range(3):
+            x[xi + k] = z[k]
     else:
-        xs[6:10] = z[0:4]
-    P[i0:i0 + 3, :] = 0.0
-    P[:, i0:i0 + 3] = 0.0
-    P[i0:i0 + 3, i0:i0 + 3] = np.eye(3) * r
-    return (xs[0], xs[1], xs[2], xs[3], xs[4], xs[5], xs[6], xs[7], xs[8], xs[9], xs[10],
-            xs[11], xs[12], xs[13], xs[14], xs[15])
+        for k in range(4):
+            x[xi + 6 + k] = z[k]
+    for a in range(3):
+        for j in range(P.shape[0]):
+            P[i0 + a, j] = 0.0
+            P[j, i0 + a] = 0.0
+    for a in range(3):
+        for b in range(3):
+            P[i0 + a, i0 + b] = (1.0 if a == b else 0.0) * r

@@ -1,0 +1,439 @@
+"""The filter's compiled kernels on its flat buffers: prediction, the covariance step, the
+fusion's bookkeeping, the output predictor and the health verdict.
+
+Buffers (`common.layouts`): `fb` floats (EF_*: states, the pose under way, the settings
+the kernels read), `ib` integers (EI_*: times in us, counters, the ring and queue lengths),
+`M` the covariance P (M[0]) and the transition F (M[1]), the ring of buffered IMU samples
+(`pend_t` times, `pend_v` gyro and accel), the pose queue by capture time (`pose_c`
+captures, `pose_v` p, q and the variances as sent). `fcu.estimator.ekf.Estimator` owns them
+and runs the measurement update between `fuse_begin` and `fuse_end` (numpy's inverse of S,
+see `fcu.estimator.update`). The arithmetic is that of the interpreted filter, in its order
+(no fastmath): the same floats.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from common.jit import njit
+from common.layouts import (
+    EF_ACC_B2,
+    EF_ACC_N2,
+    EF_C_DT2,
+    EF_C_X,
+    EF_CONVERGED_VAR,
+    EF_G,
+    EF_GATE2,
+    EF_GYRO_B2,
+    EF_GYRO_N2,
+    EF_H_X,
+    EF_HEALTHY_VAR,
+    EF_INNOV,
+    EF_LAST_W,
+    EF_O_X,
+    EF_POSE,
+    EF_R,
+    EF_R_ATT_FLOOR,
+    EF_R_POS_FLOOR,
+    EF_RATIO,
+    EF_SD,
+    EF_VAR_MAX,
+    EF_VAR_MIN,
+    EF_XB,
+    EI_C_T,
+    EI_COV_US,
+    EI_DELAY_US,
+    EI_DT_US,
+    EI_FUSED,
+    EI_FUSING,
+    EI_H_T,
+    EI_LAST_ATT_FUSE,
+    EI_LAST_CAPTURE,
+    EI_LAST_FUSION,
+    EI_LAST_POS_FUSE,
+    EI_N_PRED,
+    EI_O_T,
+    EI_PEND_HEAD,
+    EI_PEND_N,
+    EI_POSE_C,
+    EI_POSE_IGNORED,
+    EI_POSES_N,
+    EI_QUEUE_MAX,
+    EI_REJ_ROW,
+    EI_REJECTED,
+    EI_REPROPAGATE,
+    EI_RESETS,
+    EI_RESYNC_T,
+    EI_RESYNC_US,
+    EI_TIMEOUT_US,
+)
+from common.quaternion import q_conj, q_log, q_mul, q_rotate_inv
+from fcu.estimator.output import corrected_output, propagate
+from fcu.estimator.strapdown import F_IDX, N, load_state, store_state, strapdown, transition_entries
+from fcu.estimator.update import (
+    bound_covariance,
+    inject,
+    joseph_apply,
+    reset_block,
+    symmetrise,
+)
+
+# imu_step's mode bits and return codes
+PUSH = 1  # buffer the sample first
+OUTPUT = 2  # then carry the output state to it
+DONE = 0
+GROW = 1  # the ring is full: grow it and call again
+FUSE = 2  # a pose is due at the horizon (fb[EF_POSE], ib[EI_POSE_C]): fuse it, call again
+# fuse_begin's verdict bits
+OK_POS = 1
+OK_ATT = 2
+
+
+@njit
+def cov_step(fb: np.ndarray, ib: np.ndarray, M: np.ndarray) -> None:
+    """P = F P F^T + Q over the samples since the last step (Sola eq. 269-274): F's entries
+    from `transition_entries`, per-sample IMU noise summed over the interval's dt^2, bias
+    random walks over T; every 8th step symmetrised and bounded."""
+    T = (ib[EI_H_T] - ib[EI_C_T]) * 1e-6
+    if T <= 0.0:
+        return
+    P = M[0]
+    F = M[1]
+    e = transition_entries(load_state(fb, EF_C_X), load_state(fb, EF_H_X), T, fb[EF_G])
+    for k in range(F_IDX.shape[0]):
+        i = F_IDX[k]
+        F[i // N, i % N] = e[k]
+    qa = fb[EF_ACC_N2] * fb[EF_C_DT2]
+    qg = fb[EF_GYRO_N2] * fb[EF_C_DT2]
+    qbg = fb[EF_GYRO_B2] * T
+    qba = fb[EF_ACC_B2] * T
+    Pn = np.dot(np.dot(F, P), F.T)
+    for i in range(3):
+        Pn[i, i] += 0.0
+        Pn[3 + i, 3 + i] += qa
+        Pn[6 + i, 6 + i] += qg
+        Pn[9 + i, 9 + i] += qbg
+        Pn[12 + i, 12 + i] += qba
+    ib[EI_N_PRED] += 1
+    if ib[EI_N_PRED] & 7 == 0:
+        symmetrise(Pn)
+        bound_covariance(Pn, fb[EF_VAR_MIN:EF_VAR_MIN + N], fb[EF_VAR_MAX])
+    P[:, :] = Pn
+    for k in range(16):
+        fb[EF_C_X + k] = fb[EF_H_X + k]
+    ib[EI_C_T] = ib[EI_H_T]
+    fb[EF_C_DT2] = 0.0
+
+
+@njit
+def _predict(fb: np.ndarray, ib: np.ndarray, M: np.ndarray, t: int, v: np.ndarray) -> None:
+    """The horizon state over one sample (Sola eq. 260); covariance every cov_period_s."""
+    dt = (t - ib[EI_H_T]) * 1e-6
+    x = strapdown(load_state(fb, EF_H_X), (v[0], v[1], v[2]), (v[3], v[4], v[5]), dt, fb[EF_G])
+    store_state(fb, EF_H_X, x)
+    ib[EI_H_T] = t
+    fb[EF_C_DT2] += dt * dt
+    if ib[EI_H_T] - ib[EI_C_T] >= ib[EI_COV_US]:
+        cov_step(fb, ib, M)
+
+
+@njit
+def _pop_pose(fb: np.ndarray, ib: np.ndarray, pose_c: np.ndarray, pose_v: np.ndarray) -> int:
+    """The oldest queued pose into the pose under way; returns its capture time."""
+    c: int = pose_c[0]
+    for k in range(9):
+        fb[EF_POSE + k] = pose_v[0, k]
+    n = ib[EI_POSES_N] - 1
+    for j in range(n):
+        pose_c[j] = pose_c[j + 1]
+        pose_v[j, :] = pose_v[j + 1, :]
+    ib[EI_POSES_N] = n
+    ib[EI_POSE_C] = c
+    return c
+
+
+@njit
+def imu_step(fb: np.ndarray, ib: np.ndarray, M: np.ndarray, pend_t: np.ndarray,
+             pend_v: np.ndarray, pose_c: np.ndarray, pose_v: np.ndarray, t: int, w0: float,
+             w1: float, w2: float, f0: float, f1: float, f2: float, dt_us: int,
+             mode: int) -> int:
+    """One IMU sample (t, w, f), the newest (PUSH: buffer it first): the horizon advances
+    over the buffered samples up to t - pose_delay, fusing each queued pose when it is due
+    (returns FUSE with the pose under way; call again without PUSH once it is fused), then
+    (OUTPUT) the output state integrates the sample. GROW: the ring is full, nothing done."""
+    ib[EI_DT_US] = dt_us
+    if mode & PUSH:
+        cap = pend_t.shape[0]
+        if ib[EI_PEND_N] == cap:
+            return GROW
+        j = (ib[EI_PEND_HEAD] + ib[EI_PEND_N]) % cap
+        pend_t[j] = t
+        pend_v[j, 0] = w0
+        pend_v[j, 1] = w1
+        pend_v[j, 2] = w2
+        pend_v[j, 3] = f0
+        pend_v[j, 4] = f1
+        pend_v[j, 5] = f2
+        ib[EI_PEND_N] += 1
+        fb[EF_LAST_W] = w0
+        fb[EF_LAST_W + 1] = w1
+        fb[EF_LAST_W + 2] = w2
+    h_lim = t - ib[EI_DELAY_US]
+    half = dt_us >> 1
+    while True:
+        if ib[EI_FUSING]:
+            while ib[EI_POSES_N] > 0 and pose_c[0] <= ib[EI_H_T] + half:
+                c = _pop_pose(fb, ib, pose_c, pose_v)
+                if c <= ib[EI_LAST_CAPTURE]:
+                    ib[EI_POSE_IGNORED] += 1
+                    continue
+                return FUSE
+            ib[EI_FUSING] = 0
+        if ib[EI_PEND_N] > 0:
+            head = ib[EI_PEND_HEAD]
+            if pend_t[head] <= h_lim:
+                ib[EI_PEND_HEAD] = (head + 1) % pend_t.shape[0]
+                ib[EI_PEND_N] -= 1
+                _predict(fb, ib, M, pend_t[head], pend_v[head])
+                if ib[EI_POSES_N] > 0 and pose_c[0] <= ib[EI_H_T] + half:
+                    ib[EI_FUSING] = 1
+                continue
+        break
+    if mode & OUTPUT:
+        if ib[EI_PEND_N] == 0:
+            for k in range(16):
+                fb[EF_O_X + k] = fb[EF_H_X + k]
+            ib[EI_O_T] = ib[EI_H_T]
+        elif ib[EI_O_T] < t:
+            x = strapdown(load_state(fb, EF_O_X), (w0, w1, w2), (f0, f1, f2),
+                          (t - ib[EI_O_T]) * 1e-6, fb[EF_G])
+            store_state(fb, EF_O_X, x)
+            ib[EI_O_T] = t
+    return DONE
+
+
+@njit
+def pose_step(fb: np.ndarray, ib: np.ndarray, pose_c: np.ndarray, pose_v: np.ndarray,
+              c: int, v: np.ndarray, dt_us: int) -> int:
+    """A checked pose (capture c, values v as in pose_v) once aligned: ignored behind the
+    horizon (0), due at the horizon (FUSE: it is the pose under way), or queued (0)."""
+    half = dt_us >> 1
+    h_t = ib[EI_H_T]
+    if c < h_t - half or c <= ib[EI_LAST_CAPTURE]:
+        ib[EI_POSE_IGNORED] += 1
+        return DONE
+    if c <= h_t + half:
+        for k in range(9):
+            fb[EF_POSE + k] = v[k]
+        ib[EI_POSE_C] = c
+        return FUSE
+    queue_pose(ib, pose_c, pose_v, c, v)
+    return DONE
+
+
+@njit
+def queue_pose(ib: np.ndarray, pose_c: np.ndarray, pose_v: np.ndarray, c: int,
+               v: np.ndarray) -> None:
+    """Insert by capture time, after equal ones (bisect.insort); beyond pose_queue_max the
+    oldest is dropped and counted as ignored."""
+    j = ib[EI_POSES_N]
+    while j > 0 and pose_c[j - 1] > c:
+        pose_c[j] = pose_c[j - 1]
+        pose_v[j, :] = pose_v[j - 1, :]
+        j -= 1
+    pose_c[j] = c
+    pose_v[j, :] = v
+    n = ib[EI_POSES_N] + 1
+    if n > ib[EI_QUEUE_MAX]:
+        for k in range(n - 1):
+            pose_c[k] = pose_c[k + 1]
+            pose_v[k, :] = pose_v[k + 1, :]
+        n -= 1
+        ib[EI_POSE_IGNORED] += 1
+    ib[EI_POSES_N] = n
+
+
+@njit
+def _gate(y: tuple[float, float, float], d: np.ndarray, i0: int, g2: float,
+          r: float) -> float:
+    """max over axes of y^2 / (gate^2 (P_ii + r)), as Python's max (NaN first stays)."""
+    m: float = y[0] * y[0] / (g2 * (d[i0, i0] + r))
+    for i in range(1, 3):
+        v = y[i] * y[i] / (g2 * (d[i0 + i, i0 + i] + r))
+        if v > m:
+            m = v
+    return m
+
+
+@njit
+def fuse_begin(fb: np.ndarray, ib: np.ndarray, M: np.ndarray) -> int:
+    """The pose under way at the horizon: covariance step, innovations (position, and the
+    attitude's log(q_hat* q)), the variances (the sender's, floored; NaN: the floor), the
+    gates; returns OK_POS | OK_ATT for the parts that pass."""
+    ib[EI_LAST_CAPTURE] = ib[EI_POSE_C]
+    cov_step(fb, ib, M)
+    for k in range(16):
+        fb[EF_XB + k] = fb[EF_H_X + k]
+    x = fb[EF_H_X:EF_H_X + 16]
+    z = fb[EF_POSE:EF_POSE + 9]
+    yp = (z[0] - x[0], z[1] - x[1], z[2] - x[2])
+    ya = q_log(q_mul(q_conj((x[6], x[7], x[8], x[9])), (z[3], z[4], z[5], z[6])))
+    r_p = z[7] if z[7] > fb[EF_R_POS_FLOOR] else fb[EF_R_POS_FLOOR]
+    r_a = z[8] if z[8] > fb[EF_R_ATT_FLOOR] else fb[EF_R_ATT_FLOOR]
+    P = M[0]
+    g2 = fb[EF_GATE2]
+    tr_p = _gate(yp, P, 0, g2, r_p)
+    tr_a = _gate(ya, P, 6, g2, r_a)
+    for k in range(3):
+        fb[EF_INNOV + k] = yp[k]
+        fb[EF_INNOV + 3 + k] = ya[k]
+    fb[EF_R] = r_p
+    fb[EF_R + 1] = r_a
+    fb[EF_RATIO] = tr_p
+    fb[EF_RATIO + 1] = tr_a
+    return (OK_POS if tr_p <= 1.0 else 0) | (OK_ATT if tr_a <= 1.0 else 0)
+
+
+@njit
+def apply_update(fb: np.ndarray, M: np.ndarray, H: np.ndarray, pht: np.ndarray,
+                 s_inv: np.ndarray, y: np.ndarray, r: np.ndarray) -> None:
+    """The update's second half (`joseph_apply`), the injection into the horizon state and
+    the covariance's bounds."""
+    dx = joseph_apply(M[0], H, pht, s_inv, y, r)
+    store_state(fb, EF_H_X, inject(load_state(fb, EF_H_X), dx))
+    bound_covariance(M[0], fb[EF_VAR_MIN:EF_VAR_MIN + N], fb[EF_VAR_MAX])
+
+
+@njit
+def repropagate(fb: np.ndarray, ib: np.ndarray, pend_t: np.ndarray,
+                pend_v: np.ndarray) -> None:
+    """Output = horizon state propagated over the buffered samples (output predictor)."""
+    x, t = propagate(load_state(fb, EF_H_X), ib[EI_H_T], pend_t, pend_v, ib[EI_PEND_HEAD],
+                     ib[EI_PEND_N], fb[EF_G])
+    store_state(fb, EF_O_X, x)
+    ib[EI_O_T] = t
+
+
+@njit
+def _correct_output(fb: np.ndarray, ib: np.ndarray, pend_t: np.ndarray, pend_v: np.ndarray,
+                    exact: bool) -> None:
+    """Carry the horizon's correction (xb -> h_x) to the output state: linearised over the
+    buffered interval (`corrected_output`); exact re-propagation after a reset, with
+    output_repropagate, and every output_resync_s."""
+    o_t, h_t = ib[EI_O_T], ib[EI_H_T]
+    if o_t < h_t:
+        return
+    if (exact or o_t == h_t or ib[EI_REPROPAGATE] != 0
+            or h_t - ib[EI_RESYNC_T] >= ib[EI_RESYNC_US]):
+        repropagate(fb, ib, pend_t, pend_v)
+        ib[EI_RESYNC_T] = h_t
+        return
+    x = corrected_output(load_state(fb, EF_XB), load_state(fb, EF_H_X),
+                         load_state(fb, EF_O_X), (o_t - h_t) * 1e-6, fb[EF_G])
+    store_state(fb, EF_O_X, x)
+
+
+@njit
+def fuse_end(fb: np.ndarray, ib: np.ndarray, M: np.ndarray, pend_t: np.ndarray,
+             pend_v: np.ndarray, ok: int) -> None:
+    """After the update (if any part passed): the counters, the resets to the pose after
+    pose_reset_timeout_s of refusals, the output's correction."""
+    c = ib[EI_POSE_C]
+    ok_p = (ok & OK_POS) != 0
+    ok_a = (ok & OK_ATT) != 0
+    reset = False
+    if ok_p:
+        ib[EI_LAST_POS_FUSE] = c
+    if ok_a:
+        ib[EI_LAST_ATT_FUSE] = c
+    if ok_p or ok_a:
+        ib[EI_LAST_FUSION] = c
+    if ok_p and ok_a:
+        ib[EI_FUSED] += 1
+        ib[EI_REJ_ROW] = 0
+    else:
+        ib[EI_REJECTED] += 1
+        ib[EI_REJ_ROW] += 1
+        timeout = ib[EI_TIMEOUT_US]
+        if not ok_p and c - ib[EI_LAST_POS_FUSE] > timeout:
+            reset_block(fb, EF_H_X, M[0], 0, fb[EF_POSE:EF_POSE + 3], fb[EF_R])
+            ib[EI_RESETS] += 1
+            ib[EI_REJ_ROW] = 0
+            ib[EI_LAST_POS_FUSE] = c
+            reset = True
+        if not ok_a and c - ib[EI_LAST_ATT_FUSE] > timeout:
+            reset_block(fb, EF_H_X, M[0], 6, fb[EF_POSE + 3:EF_POSE + 7], fb[EF_R + 1])
+            ib[EI_RESETS] += 1
+            ib[EI_REJ_ROW] = 0
+            ib[EI_LAST_ATT_FUSE] = c
+            reset = True
+    if ok_p or ok_a or reset:
+        _correct_output(fb, ib, pend_t, pend_v, reset)
+
+
+@njit
+def output_values(fb: np.ndarray, ib: np.ndarray) -> tuple[
+        int, tuple[float, float, float], tuple[float, float, float, float],
+        tuple[float, float, float], tuple[float, float, float]]:
+    """(t_us, p, q, v_flu, bias-corrected rate) of the output state."""
+    x = fb[EF_O_X:EF_O_X + 16]
+    q = (x[6], x[7], x[8], x[9])
+    w = fb[EF_LAST_W:EF_LAST_W + 3]
+    return (ib[EI_O_T], (x[0], x[1], x[2]), q, q_rotate_inv(q, (x[3], x[4], x[5])),
+            (w[0] - x[10], w[1] - x[11], w[2] - x[12]))
+
+
+@njit
+def variance_code(fb: np.ndarray, M: np.ndarray) -> int:
+    """health()'s verdict from the largest variances of position, velocity and attitude (no
+    Cholesky test): 0 neither, 1 healthy, 3 healthy and converged. The finite test sums in
+    Python's order (math.isfinite(sum(list)))."""
+    P = M[0]
+    sd = 0.0
+    lo = P[0, 0]
+    for i in range(N):
+        sd += P[i, i]
+        if P[i, i] < lo:
+            lo = P[i, i]
+    sx = 0.0
+    for k in range(16):
+        sx += fb[EF_O_X + k]
+    if not (math.isfinite(sd) and math.isfinite(sx) and lo > 0.0):
+        return 0
+    v = np.empty(3)
+    for b in range(3):
+        m = P[3 * b, 3 * b]
+        for i in range(1, 3):
+            if P[3 * b + i, 3 * b + i] > m:
+                m = P[3 * b + i, 3 * b + i]
+        v[b] = m
+    hv = fb[EF_HEALTHY_VAR:EF_HEALTHY_VAR + 3]
+    cv = fb[EF_CONVERGED_VAR:EF_CONVERGED_VAR + 3]
+    healthy = v[0] < hv[0] and v[1] < hv[1] and v[2] < hv[2]
+    if not healthy:
+        return 0
+    if v[0] < cv[0] and v[1] < cv[1] and v[2] < cv[2]:
+        return 3
+    return 1
+
+
+@njit
+def sd_values(fb: np.ndarray, M: np.ndarray) -> bool:
+    """status()'s standard deviations into fb[EF_SD:] (sqrt of the diagonal floored at 0;
+    inf when P or the output state is not finite; np.maximum's -0.0 kept); returns whether
+    both are finite."""
+    P = M[0]
+    finite = True
+    for i in range(N):
+        for j in range(N):
+            if not math.isfinite(P[i, j]):
+                finite = False
+    for k in range(16):
+        if not math.isfinite(fb[EF_O_X + k]):
+            finite = False
+    for i in range(N):
+        d = P[i, i]
+        fb[EF_SD + i] = math.sqrt(d if d >= 0.0 else 0.0) if finite else math.inf
+    return finite
