@@ -34,7 +34,7 @@ from fcu.mission.limits import MissionLimits
 from fcu.mission.start import MissionPlan, PosctlFit
 from fcu.offboard_stream import AttitudeTarget, OffboardSetpoint, PositionTarget
 from fcu.tracker import Reference, VehicleState, pose_ref
-from fcu.work import InlineWork, Work
+from fcu.work import InlineWork, Outcome, Work
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
@@ -48,6 +48,9 @@ class FlightSettings:
     rtl_cruise_m_s: float = 5.0  # MPC_XY_CRUISE: RTL's travel speed
     manual_timeout_s: float = 0.5  # COM_RC_LOSS_T: POSCTL without MANUAL_CONTROL -> HOLD
     sticks: StickSettings = field(default_factory=StickSettings)
+
+
+ANCHOR_LEAD_US = 10_000  # beside the loop: a new offboard sample is anchored this far ahead
 
 
 class ModeReferences:
@@ -82,6 +85,9 @@ class ModeReferences:
         self.manual_sp: ManualSetpoint | None = None  # POSCTL's set-point (None: from here)
         self.manual_limits: StickSettings = self.flight.sticks  # fitted to the vehicle
         self.offboard_sp: offboard.Shaped | None = None  # OFFBOARD's shaper (None: from here)
+        self._anchoring: object | None = None  # a new sample's anchor under way beside
+        self._anchored: offboard.Shaped | None = None  # taken in, flown from its time
+        self.late_anchors = 0  # anchors that came after their time (planned again)
         self._offboard_refused = ""  # the last refusal said
         # HOLD brakes to `hold` (where the reference stops) with the same shaper
         self.hold_sp: offboard.Shaped | None = None
@@ -160,20 +166,58 @@ class ModeReferences:
     def _offboard_ref(self, t_us: int) -> Reference:
         """The streamed target approached within POSCTL's limits and the vehicle's envelope
         (`fcu.offboard`), from the reference flown when OFFBOARD began (its velocity,
-        acceleration and body rate too)."""
+        acceleration and body rate too). Where the work runs beside the loop a new sample
+        is anchored there (`_anchor_beside`), not in this step."""
         sp = self.offboard_sp
         lim = offboard.limits(self.flight.sticks)
         if sp is None:
             start = self.last_ref if self.armed and self.last_ref is not None \
                 else self._current_pose_ref()
             sp = offboard.start(t_us, start, lim, self._envelope())
-        self.offboard_sp, ref = offboard.advance(sp, t_us, self.offboard.target(), lim,
-                                                 self._envelope())
+            self._anchoring = self._anchored = None
+        if self.work.immediate:
+            self.offboard_sp, ref = offboard.advance(sp, t_us, self.offboard.target(), lim,
+                                                     self._envelope())
+        else:
+            self.offboard_sp, ref = self._anchor_beside(sp, t_us, lim)
         refused = self.offboard_sp.refused
         if refused and refused != self._offboard_refused:
             self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, refused)
         self._offboard_refused = refused
         return ref
+
+    def _anchor_beside(self, sp: offboard.Shaped, t_us: int,
+                       lim: StickSettings) -> tuple[offboard.Shaped, Reference]:
+        """The plan in force flown on; a new sample anchored by `work` at ANCHOR_LEAD_US
+        ahead, from the reference this plan gives there (`offboard.advance` to that time:
+        continuous), and flown from then on. An anchor that came too late is planned
+        again further ahead; one sample at a time (the newest when the last is in)."""
+        anchored = self._anchored
+        if anchored is not None and t_us >= anchored.t_us:
+            sp, self._anchored = anchored, None
+        sp, ref = offboard.advance(sp, t_us, None, lim)
+        target = self.offboard.target()
+        if target is not None and target.seq != sp.seq and self._anchoring is None \
+                and self._anchored is None:
+            job = self._anchoring = object()
+            self.work.submit(offboard.advance, (sp, t_us + ANCHOR_LEAD_US, target, lim,
+                                                self._envelope()),
+                             lambda outcome: self._anchored_in(job, outcome))
+        return sp, ref
+
+    def _anchored_in(self, job: object,
+                     outcome: Outcome[tuple[offboard.Shaped, Reference]]) -> None:
+        if job is not self._anchoring or self.mode != Mode.OFFBOARD:
+            return  # OFFBOARD left (or entered again) meanwhile
+        self._anchoring = None
+        if outcome.value is None:
+            self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, f"offboard: {outcome.error}")
+            return
+        shaped = outcome.value[0]
+        if shaped.t_us > self.clock_us:  # else too late: planned again from the next step
+            self._anchored = shaped
+        else:
+            self.late_anchors += 1
 
     def _envelope(self) -> Envelope | None:
         vehicle = self.limits.vehicle

@@ -59,6 +59,11 @@ class Work:
         self.history: list[tuple[str, int]] = []  # (job, control steps while under way)
 
     @property
+    def immediate(self) -> bool:
+        """Whether `submit` calls back before it returns (the loop waits for the work)."""
+        return False
+
+    @property
     def pending(self) -> int:
         """Jobs submitted whose callback has not been called yet."""
         return len(self._finished)
@@ -110,6 +115,10 @@ class InlineWork(Work):
     """Jobs run at once in the caller's thread; their callbacks at once too."""
 
     kind = "inline"
+
+    @property
+    def immediate(self) -> bool:
+        return True
 
     def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done) -> None:
         done(run_job(fn, args))

@@ -53,6 +53,10 @@ class ProcessWork(Work):
         self.restarts = 0
 
     @property
+    def immediate(self) -> bool:
+        return self.wait
+
+    @property
     def pending(self) -> int:
         return len(self._jobs) + len(self._finished)
 

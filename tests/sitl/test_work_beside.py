@@ -67,3 +67,46 @@ def test_inline_work_stops_the_loop_for_it(tmp_path):
     assert work["kind"] == "inline"
     assert [(j["job"], j["steps"]) for j in work["history"]] == [
         ("check_mission", 0), ("plan_from", 0)]
+
+
+def _stream_until(s: Stack, target_ned: tuple[float, float, float], mode_set: bool,
+                  reached) -> bool:
+    """SET_POSITION_TARGET_LOCAL_NED at 20 Hz (wall clock) until `reached(LOCAL_POSITION_NED)`
+    or 30 s; OFFBOARD asked once streaming (unless `mode_set`)."""
+    import time
+    sess = s.session
+    deadline = time.monotonic() + 30.0
+    asked = mode_set
+    start = time.monotonic()
+    while time.monotonic() < deadline:
+        sess.send(M.MAVLink_set_position_target_local_ned_message(
+            0, sess.target_system, sess.target_component, M.MAV_FRAME_LOCAL_NED,
+            0b0000_1101_1111_1000, *target_ned, 0, 0, 0, 0, 0, 0, 0.0, 0.0))
+        if not asked and time.monotonic() - start > 0.3:
+            assert sess.command(M.MAV_CMD_DO_SET_MODE, 1.0, 6.0) == M.MAV_RESULT_ACCEPTED
+            asked = True
+        msg = s.wait_for(["LOCAL_POSITION_NED"], timeout=0.05)
+        if msg is not None and reached(msg):
+            return True
+    return False
+
+
+@pytest.mark.timeout(180)
+def test_realtime_offboard_samples_are_anchored_beside_the_loop(tmp_path):
+    """Given real time (`beside`), OFFBOARD from a hover and set-points 1 m north then 1 m
+    east, then the vehicle gets to each, and each new sample's anchor ran while the loop
+    took control steps (`advance` jobs in work.history, each with at least one step)."""
+    stats_path = tmp_path / "fcu.json"
+    s = launch(tmp_path, "case1_figure8", realtime=True, fcu_args=("--stats", str(stats_path)))
+    try:
+        sess = s.session
+        assert sess.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0) == M.MAV_RESULT_ACCEPTED
+        assert _stream_until(s, (0.0, 0.0, -1.5), False, lambda m: m.z < -1.4)
+        assert _stream_until(s, (1.0, 0.0, -1.5), True, lambda m: m.x > 0.95)
+        assert _stream_until(s, (1.0, 1.0, -1.5), True, lambda m: m.y > 0.95)
+    finally:
+        s.session.close()
+        stop(s.procs)
+    work = json.loads(stats_path.read_text())["work"]
+    anchors = [j["steps"] for j in work["history"] if j["job"] == "advance"]
+    assert len(anchors) >= 3 and min(anchors) >= 1 and work["failed"] == 0, work

@@ -290,3 +290,62 @@ def test_posctl_is_entered_when_its_limits_are_fitted():
     assert c.mode == Mode.POSCTL and c.under_way is None
     assert c.manual_limits == manual.fit_envelope(c.flight.sticks, c.limits.vehicle,
                                                   (1.0, 0.0, 0.0, 0.0))
+
+
+def _offboard_commander(work: Work) -> Any:
+    from fcu.setpoint_wire import position_target
+    c = airborne_commander()
+    c.work = work
+    assert c.offboard_position(0.0, position_target(1, 0b0000_1101_1111_1000, (0.0, 0.0, -2.0),
+                                                    (0.0,) * 3, (0.0,) * 3, 0.0))[0]
+    assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    return c
+
+
+def test_a_new_offboard_sample_is_anchored_beside_the_loop_ahead_and_flown_continuously():
+    """Given OFFBOARD with the planner beside the loop, when a sample 2 m north comes, then
+    the step only submits its anchor (the plan in force flies on, still), the anchor is
+    planned ANCHOR_LEAD_US ahead from where that plan is then, the reference leaves from
+    there without a jump and reaches the sample, as it does with the planner inline."""
+    import itertools
+    import math
+
+    from fcu.mode_references import ANCHOR_LEAD_US
+    from fcu.setpoint_wire import position_target
+    work = HeldWork()
+    c = _offboard_commander(work)
+    t = 2000
+    c.reference(t)
+    assert work.release() == 1  # the first sample's anchor
+    assert c.offboard_position(0.0, position_target(1, 0b0000_1101_1111_1000, (2.0, 0.0, -2.0),
+                                                    (0.0,) * 3, (0.0,) * 3, 0.0))[0]
+    path = []
+    for k in range(1, 6):  # the sample's anchor under way: the hover flies on
+        path.append(c.reference(t + 2000 * k).p_enu_m)
+    assert len(work.held) == 1 and all(p == path[0] for p in path)
+    assert work.release() == 1
+    asked_at = t + 2000 * 5
+    for k in range(6, 3000):
+        ref = c.reference(t + 2000 * k)
+        if t + 2000 * k < asked_at + ANCHOR_LEAD_US:
+            assert ref.p_enu_m == path[0]  # not before its time
+        path.append(ref.p_enu_m)
+    jumps = [math.dist(a, b) / 0.002 for a, b in itertools.pairwise(path)]
+    assert max(jumps) <= 5.0 + 1e-6  # MPC_VEL_MANUAL: a continuous approach
+    assert math.dist(path[-1], (0.0, 2.0, 2.0)) < 1e-6 and c.late_anchors == 0
+
+
+def test_an_anchor_that_comes_after_its_time_is_planned_again():
+    """Given the anchor of a sample taken in after its time had passed, then it is not
+    flown (it would jump), it is counted, and the next step asks for it again."""
+    from fcu.mode_references import ANCHOR_LEAD_US
+    work = HeldWork()
+    c = _offboard_commander(work)
+    c.reference(2000)
+    for k in range(2, 2 + ANCHOR_LEAD_US // 2000 + 1):
+        c.reference(2000 * k)
+    assert work.release() == 1 and c.late_anchors == 1
+    c.reference(2000 * 20)
+    assert len(work.held) == 1  # asked again
+    work.release()
+    assert c.late_anchors == 1
