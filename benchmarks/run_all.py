@@ -11,7 +11,8 @@ BENCHMARKS = ("bench_step.py", "bench_flight_core.py", "bench_inprocess.py", "be
               "bench_zenoh.py", "bench_ardupilot_json.py",
               "bench_logs.py", "bench_estimator.py", "bench_estimator_fcu.py",
               "lag_compensation_noise.py",
-              "divergence_limit.py", "mission_envelope.py", "bench_mission_length.py")
+              "divergence_limit.py", "mission_envelope.py", "bench_mission_length.py",
+              "bench_planning.py")
 
 if __name__ == "__main__":
     failed = 0
