@@ -14,8 +14,9 @@ ground-station work while hovering:
 3. mode changes (DO_SET_MODE with PX4's custom modes) through every mode the FCU flies,
    MISSION, POSCTL (centred sticks streamed), OFFBOARD, TAKEOFF, RTL, LAND, ending in HOLD
    (MIS_TAKEOFF_ALT and RTL_RETURN_ALT are set first, so that TAKEOFF and RTL stay near);
-4. with `--rotate-log`, SIGHUP to the fcu process (close the onboard log, go on in the next
-   file). Off by default: the FCU does not handle SIGHUP yet, and SIGHUP would end it.
+4. log rotation: SIGHUP to the fcu process, which ends its onboard log and goes on in a new
+   one at the same path, the first kept as onboard.1.ulg (docs/logs.md); `--no-rotate-log`
+   leaves it out (an fcu that does not handle SIGHUP ends on it).
 
 A second station (system id 254 on the FCU's second GCS link; the first is 255) does the
 same work at the same time: its upload is refused while the first one's runs (the FCU takes
@@ -132,7 +133,7 @@ class Options:
     modes: tuple[str, ...] = MODES
     mode_s: float = 1.0
     second_station: bool = True
-    rotate_log: bool = False
+    rotate_log: bool = True
     loads: tuple[str, ...] = ("idle", "hogs")
     hogs: int = 2
     fcu_args: tuple[str, ...] = ()
@@ -165,9 +166,9 @@ def parse_args(argv: list[str] | None = None) -> Options:
     ap.add_argument("--mode-s", type=float, default=1.0, help="time in each mode, s")
     ap.add_argument("--one-station", action="store_true",
                     help="no second ground station")
-    ap.add_argument("--rotate-log", action="store_true",
-                    help="send SIGHUP to fcu during the timeline (log rotation; off by "
-                         "default: the FCU does not handle SIGHUP yet and would end)")
+    ap.add_argument("--rotate-log", action=argparse.BooleanOptionalAction, default=True,
+                    help="send SIGHUP to fcu after the mode changes: log rotation "
+                         "(docs/logs.md; default on)")
     ap.add_argument("--loads", default="idle,hogs",
                     help="conditions: idle, hogs or both (default idle,hogs)")
     ap.add_argument("--hogs", type=int, default=2,
@@ -381,7 +382,8 @@ def command(session: Session, command_id: int, *params: float, timeout_s: float 
 
 def set_mode(session: Session, mode: Mode) -> tuple[int | None, str]:
     """DO_SET_MODE; the vehicle's answer (None: none) and what it said."""
-    return command(session, M.MAV_CMD_DO_SET_MODE, *mode_params(mode))
+    return command(session, M.MAV_CMD_DO_SET_MODE, *mode_params(mode), timeout_s=5.0,
+                   resend_s=1.5)
 
 
 def position_target(session: Session, p_ned: tuple[float, float, float]) -> Any:
@@ -646,8 +648,12 @@ def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str]
                 with tl.event(0, "log rotation (SIGHUP to fcu)") as ev:
                     children.procs["fcu"].send_signal(signal.SIGHUP)
                     pause(1.0, children)
-                    rotated = True
-                    ev.note = "fcu still running"
+                    kept = sorted(p.name for p in folder.glob("onboard.*.ulg"))
+                    rotated = bool(kept)
+                    ev.note = f"fcu flies on; kept {', '.join(kept)}" if kept else \
+                        "fcu flies on"
+                    if not kept:
+                        raise FlightFailed("SIGHUP: no onboard log set aside (onboard.N.ulg)")
         finally:
             events = tl.events
         marks.end_us = latest_clock_us(a)
@@ -677,8 +683,8 @@ def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str]
     said = vehicle_messages(folder)
     if failure and children.procs.get("fcu") is not None and \
             children.procs["fcu"].returncode == -signal.SIGHUP:
-        failure += ("\n(fcu ended on SIGHUP: it does not rotate its log on SIGHUP yet; "
-                    "run without --rotate-log)")
+        failure += ("\n(fcu ended on SIGHUP: this fcu does not rotate its log on SIGHUP; "
+                    "run with --no-rotate-log)")
     if failure:
         alarms = [f"{m['t_s']:.2f} s {m['text']}" for m in said if m["level"] <= 2]
         if alarms:  # the vehicle's failsafes and crashes (CRITICAL and worse)
@@ -886,8 +892,7 @@ def main(argv: list[str] | None = None) -> int:
           f"modes {' '.join(opts.modes)}; "
           f"{'two stations (255, 254)' if opts.second_station else 'one station (255)'}; "
           + ("log rotation by SIGHUP" if opts.rotate_log else
-             "log rotation skipped (--rotate-log: the FCU does not handle SIGHUP yet, "
-             "it would end)"), flush=True)
+             "no log rotation (--no-rotate-log)"), flush=True)
     if opts.fcu_args:
         print(f"fcu arguments: {shlex.join(opts.fcu_args)}")
     say(f"kernels compiled or loaded, a short in-process flight: {warm_kernels(sc):.1f} s")

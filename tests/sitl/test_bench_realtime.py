@@ -1,6 +1,6 @@
 """benchmarks/bench_realtime.py, shortened: real sitl and fcu processes in real time, two
-ground stations with a 20-item upload, its download, the parameter list, 2 OFFBOARD steps
-and a few mode changes while hovering, no busy processes."""
+ground stations with a 20-item upload, its download, the parameter list, 2 OFFBOARD steps,
+a few mode changes and a log rotation (SIGHUP) while hovering, no busy processes."""
 
 from __future__ import annotations
 
@@ -24,9 +24,9 @@ FIGURE_KEYS = ("p50_ms", "p99_ms", "p999_ms", "longest_gap_ms", "deadline_misses
 def test_short_benchmark_flies_its_timeline_airborne_and_reports_every_figure(tmp_path):
     """Given the benchmark shortened (20 items, 2 OFFBOARD steps, POSCTL, OFFBOARD and
     HOLD, idle only), when it runs, then it exits 0, every piece of ground-station work of
-    both stations succeeded, the JSON holds every figure (numbers), and the onboard log shows
-    the vehicle armed and above 0.5 m at every control step of the timeline, the steps
-    covering it without a pause of 0.5 s."""
+    both stations and the log rotation succeeded, the JSON holds every figure (numbers), and
+    the onboard logs (both files of the rotation) show the vehicle armed and above 0.5 m at
+    every control step of the timeline, the steps covering it without a pause of 0.5 s."""
     out = tmp_path / "figures.json"
     proc = subprocess.run(
         [sys.executable, str(BENCH), "--loads", "idle", "--items", "20",
@@ -42,8 +42,9 @@ def test_short_benchmark_flies_its_timeline_airborne_and_reports_every_figure(tm
     for key in FIGURE_KEYS:
         assert isinstance(figures[key], int | float), (key, figures[key])
     events = result["run"]["events"]
-    stations = {e["station"] for e in events}
+    stations = {e["station"] for e in events} - {0}  # 0: the benchmark's own (SIGHUP)
     assert stations == {255, 254}
+    assert [e["what"] for e in events if e["station"] == 0] == ["log rotation (SIGHUP to fcu)"]
     failed = [e for e in events if not e["ok"]]
     assert not failed, failed
     for station in stations:
@@ -52,12 +53,17 @@ def test_short_benchmark_flies_its_timeline_airborne_and_reports_every_figure(tm
         assert "parameter list" in done
         assert [w for w in done if w.startswith("mode ")][-1] == "mode HOLD"
     assert figures["airborne"] is True
+    assert result["run"]["rotated"] and figures["onboard_logs"] == 2
 
     # Airborne throughout, judged again here from the log (not from wall time).
     marks = result["run"]["marks"]
     start, end = marks["start_us"], marks["end_us"]
     assert end - start > 5e6  # the timeline: uploads, 2 s of OFFBOARD, 3 modes
-    columns, rows = read_topic(tmp_path / "runs" / "idle" / "onboard.ulg", "dq_onboard")
+    folder = tmp_path / "runs" / "idle"
+    parts = [read_topic(folder / name, "dq_onboard") for name in ("onboard.1.ulg",
+                                                                   "onboard.ulg")]
+    columns = parts[0][0]
+    rows = np.concatenate([r for _, r in parts])
     c = {name: i for i, name in enumerate(columns)}
     t = rows[:, c["time_us"]]
     sel = rows[(t >= start) & (t <= end)]
