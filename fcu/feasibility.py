@@ -307,6 +307,13 @@ class Envelope:
         self._scalings.clear()
         self._cached_rows = 0
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the scalings kept (a plan made in another process carries its
+        segments' scalings, not the cache)."""
+        state = self.__dict__.copy()
+        state["_scalings"], state["_cached_rows"] = OrderedDict(), 0
+        return state
+
     def describe(self, speed_rad_s: float) -> str:
         return (f"needs {speed_rad_s:.0f} rad/s > {self.limit:.0f} "
                 f"({self.margin * 100:.0f}% of {self.speed_max:.0f})")
@@ -355,6 +362,11 @@ class TimeScaling:
         self._fit_at: float | None = None  # a duration `_search` found fitting
         self._parts: np.ndarray | None = None
         self._fits: dict[float, bool] = {}
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_parts"] = None  # `pair_parts` again where needed
+        return state
 
     def _pair_parts(self) -> np.ndarray:
         if self._parts is None:
