@@ -37,6 +37,7 @@ from fcu.compose import fcu_pipeline, param_store, published_home
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.gcs_server import COMPONENT, GcsServer
 from fcu.mission.limits import MissionLimits
+from fcu.mission.start import warm as warm_plans
 from fcu.mission_protocol import MissionServer
 from fcu.node_args import DEFAULT_GCS, build_parser
 from fcu.onboard_log import OnboardLog, set_aside
@@ -117,6 +118,9 @@ class FlightController:
         self.rx_ns = 0  # when the datagram being handled was read
         self.done_ns = 0  # when the last control step's work (answer, log records) was done
         self.work.steps = lambda: self.steps
+        warm_plans(pipeline.commander.limits)  # before the loop, not in its first plan
+        if not self.work.immediate:  # the worker started and warmed before the flight
+            self.work.submit(warm_plans, (pipeline.commander.limits,), lambda _: None)
         if lockstep:  # offboard loss judged on the flight clock too (fcu.offboard_stream)
             off = pipeline.commander.offboard
             off.flight_clock, off.wall_clock = (lambda: self.time_us * 1e-6), time.monotonic

@@ -14,7 +14,7 @@ from typing import Any
 from fcu.work import Done, InlineWork, Outcome, Work, run_job
 
 NICE = 10  # the worker's priority below the loop's
-WAIT_S = 30.0  # wait=True: a job this long is failed (the worker is stopped and restarted)
+POLL_S = 1.0  # wait=True: how often the worker is looked at while its job runs
 
 
 def _serve(conn: Connection, nice: int) -> None:
@@ -92,14 +92,18 @@ class ProcessWork(Work):
         return [self._conn.fileno()] if self._conn is not None and self._jobs else []
 
     def _wait_for(self, job_id: int) -> None:
+        """wait=True: for as long as the worker lives (simulated time waits with the loop,
+        so a busy machine makes the run slower, never different)."""
         while job_id in self._jobs:
-            conn = self._conn
-            if conn is None:
+            conn, proc = self._conn, self._proc
+            if conn is None or proc is None:
                 return
-            if not select.select([conn.fileno()], [], [], WAIT_S)[0]:
-                self._lost(f"no result within {WAIT_S:g} s")
-                return
-            self._receive()
+            if select.select([conn.fileno()], [], [], POLL_S)[0]:
+                self._receive()
+            elif not proc.is_alive():
+                self._receive()  # what it sent before it stopped
+                if job_id in self._jobs:
+                    self._lost(self._exit_reason())
 
     def _receive(self) -> None:
         conn = self._conn

@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from common.mav_enums import MAV_CMD, MAV_FRAME
 from common.mission_items import MissionItem
 from common.modes import Mode
 from fcu.dualquat import Quat, Vec3
@@ -49,3 +50,14 @@ def plan_from(items: Sequence[MissionItem], limits: MissionLimits, seq: int, t_s
     executor.set_current(seq, t_s, p_enu_m, q_enu_flu)
     refused = executor.refusal()
     return (None, refused) if refused else (executor, "")
+
+
+def warm(limits: MissionLimits) -> None:
+    """Plan a take-off once and drop it, so that the first plan flown (TAKEOFF's, RTL's,
+    LAND's: made in the loop's thread) does not pay for loading the planner's kernels
+    (28 ms against 0.4 ms after, measured on the tilted vehicle)."""
+    if limits.vehicle is None:
+        return
+    item = MissionItem(0, MAV_FRAME.MAV_FRAME_LOCAL_NED, MAV_CMD.MAV_CMD_NAV_TAKEOFF, 1, 1, 0.0,
+                       0.0, 0.0, float("nan"), 0, 0, -1.0)
+    MissionExecutor((item,), limits).start(0.0, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
