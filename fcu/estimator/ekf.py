@@ -473,3 +473,8 @@ def _warm_up() -> None:
     est.output()
     est.health()
     est.status()
+
+
+# Loaded (or compiled, on a fresh cache) when the module is imported, as the FCU process
+# starts: an Estimator made later, when EKF_EN turns it on over the link, starts at once.
+warm_up("fcu.estimator", _warm_up)
