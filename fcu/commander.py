@@ -88,7 +88,7 @@ class Commander(ModeReferences):
                     "disarm refused: in the air (force with p2 = 21196)")
         self.armed = False  # simulated time keeps running once the flight has started
         self.mission_running = False
-        self.mission_plan = None
+        self._drop_under_way()
         self.touchdown = None
         self.land = None
         self.auto = None
@@ -120,8 +120,7 @@ class Commander(ModeReferences):
         if refused:
             return MAV_RESULT.MAV_RESULT_DENIED, refused
         previous = self.mode
-        self.mission_plan = None  # a start under way gives way to the newer command
-        self.posctl_fit = None
+        self._drop_under_way()  # a start under way gives way to the newer command
         if mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running) \
                 and self.armed:
             return self._plan_mission(self.mission_current,
@@ -225,7 +224,7 @@ class Commander(ModeReferences):
             return MAV_RESULT.MAV_RESULT_DENIED, "no mission"
         if not 0 <= first < len(self.mission):
             return MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {first}"
-        self.mission_plan = None
+        self._drop_under_way()
         if self.armed:
             return self._plan_mission(first, "mission started", "mission started")
         self.mission_current = first
@@ -244,7 +243,7 @@ class Commander(ModeReferences):
         self.mission_current = 0
         self.mission_done = False
         self.executor = None
-        self.mission_plan = None  # planned for the old one
+        self._drop_under_way()  # planned for the old one
         if any(it.command == MAV_CMD.MAV_CMD_NAV_LAND for it in self.mission):
             self.say_touchdown_cap()  # the landing's clamp, said when the mission is taken
         if self.mode == Mode.MISSION:
@@ -257,7 +256,7 @@ class Commander(ModeReferences):
         if not 0 <= seq < len(self.mission):
             return MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {seq}"
         if self.mode == Mode.MISSION and self.mission_running and self.armed:
-            self.mission_plan = None
+            self._drop_under_way()
             return self._plan_mission(seq, "", f"mission item {seq}")
         self.mission_current = seq
         self.mission_done = False
@@ -295,6 +294,15 @@ class Commander(ModeReferences):
                          f"{lim.jerk_m_s3:.2g} m/s3 here")
         if fit.reply is not None:
             fit.reply(*fit.result)
+
+    def _drop_under_way(self) -> None:
+        """A mode change under way gives way to a newer command, a new mission, a disarm or
+        a failsafe: its command is answered MAV_RESULT_FAILED (valid, not carried out; the
+        spec's MAV_RESULT_CANCELLED answers COMMAND_CANCEL only), with why."""
+        dropped = self.under_way
+        self.mission_plan = self.posctl_fit = None
+        if dropped is not None and dropped.reply is not None:
+            dropped.reply(MAV_RESULT.MAV_RESULT_FAILED, "superseded by a newer command")
 
     @property
     def under_way(self) -> MissionPlan | PosctlFit | None:
@@ -373,7 +381,7 @@ class Commander(ModeReferences):
 
     def failsafe_hold(self, reason: str) -> None:
         """A failsafe reaction: stop where the vehicle should be and hold."""
-        self.mission_plan = self.posctl_fit = None
+        self._drop_under_way()
         self.mode = Mode.HOLD
         self.hold = self._current_pose_ref()
         self.mission_running = False
@@ -383,7 +391,7 @@ class Commander(ModeReferences):
         self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, reason, FAILSAFE)
 
     def failsafe_land(self, reason: str) -> None:
-        self.mission_plan = self.posctl_fit = None
+        self._drop_under_way()
         if self.mode != Mode.LAND:
             self.mode = Mode.LAND
             self.auto = None

@@ -1,9 +1,10 @@
 """The FCU's commands from ground stations: COMMAND_LONG and COMMAND_INT executed and
 acknowledged (COMMAND_ACK), each refusal explained by STATUSTEXT, and a retry answered
 without executing the command again (`fcu.gcs_server` dispatches them here). A command
-whose work runs beside the control loop (a mission's start: `fcu.commander`, IN_PROGRESS)
-is acknowledged once with its final result, when the work is done; until then a retry is
-executed again and replaces it (one start, one answer).
+whose work runs beside the control loop (a mission's start, POSCTL: `fcu.commander`) is
+acknowledged MAV_RESULT_IN_PROGRESS at once and with its final result when the work is
+done, as the command protocol says; a retry meanwhile is answered IN_PROGRESS again, never
+executed again; a newer command that supersedes it ends it MAV_RESULT_FAILED, with why.
 
 Parameters are range-checked against what they can mean (a mode's numbers, a mission item,
 a message id); MAV_CMD_NAV_TAKEOFF's altitude is AMSL in COMMAND_LONG's p7 (as PX4 reads it)
@@ -116,7 +117,8 @@ class CommandService:
         if result is None:
             return  # answered with its message (requests): a retry asks again
         plan = self.server.pipeline.commander.under_way
-        if result == IN_PROGRESS and plan is not None:  # answered when the plan is made
+        if result == IN_PROGRESS and plan is not None:  # answered again when the plan is made
+            self._answer(index, msg, sender, key, now_s, IN_PROGRESS, "")
             plan.reply = lambda r, t: self._answer(index, msg, sender, key, now_s, r, t)
             return
         self._answer(index, msg, sender, key, now_s, result, text)

@@ -15,6 +15,7 @@ from fcu.params import SPECS, ParamError, ParamStore
 
 M = MAV
 WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
+LIST_BURST = 10  # PARAM_VALUEs of a list per housekeeping tick (2 ms: 5,000 a second)
 
 
 class ParamService:
@@ -30,11 +31,24 @@ class ParamService:
         self.say = say
         self.armed = armed
         self.on_params = on_params
+        self.lists: dict[int, int] = {}  # link -> the next parameter of its list
 
     def request_list(self, index: int) -> None:
-        """PARAM_REQUEST_LIST: every parameter, in order, to the link that asked."""
-        for i in range(len(SPECS)):
-            self.send_param(i, index)
+        """PARAM_REQUEST_LIST: every parameter, in order, to the link that asked, LIST_BURST
+        at a time (`tick`), so the list never holds the control loop up; a request again
+        starts the list again."""
+        self.lists[index] = 0
+
+    def tick(self) -> None:
+        """The next LIST_BURST parameters of each list under way."""
+        for index, start in list(self.lists.items()):
+            end = min(start + LIST_BURST, len(SPECS))
+            for i in range(start, end):
+                self.send_param(i, index)
+            if end == len(SPECS):
+                del self.lists[index]
+            else:
+                self.lists[index] = end
 
     def send_param(self, i: int, index: int | None = None) -> None:
         """PARAM_VALUE of parameter i to one link (None: all)."""

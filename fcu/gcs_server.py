@@ -391,6 +391,7 @@ class GcsServer:
         self.now_s = max(self.now_s, now_s)
         # the upload's answer once its check is done (`fcu.work`), then re-requests
         self._send_mission(self.missions.take_outbox(), self.mission_link)
+        self.param_service.tick()  # a parameter list, a burst at a time
         for reply in self.missions.tick(now_s):
             self.send(reply, self.mission_link)
         c = self.pipeline.commander

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from common.config import load_gains, load_vehicle
-from common.mav_enums import MAV_RESULT
+from common.mav_enums import MAV_CMD, MAV_RESULT
 from common.mavlink import MAV
 from common.mission_items import MissionItem, item_message
 from common.modes import Mode
@@ -252,15 +252,16 @@ def test_a_mission_start_is_answered_and_shown_when_its_plan_is_taken_in():
 
 
 def test_a_plan_under_way_gives_way_to_a_newer_command():
-    """Given a mission's plan under way, then LAND drops it: taken in later, it changes
-    nothing and answers nothing."""
+    """Given a mission's plan under way, then LAND drops it, its command answered FAILED
+    (superseded): taken in later, it changes nothing and answers nothing more."""
     c, work = _planned_commander()
     replies: list[tuple[int, str]] = []
     assert c.set_mode(Mode.MISSION, 0.0)[0] == IN_PROGRESS
     c.mission_plan.reply = lambda r, t: replies.append((r, t))
     assert c.set_mode(Mode.LAND, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    assert replies == [(MAV_RESULT.MAV_RESULT_FAILED, "superseded by a newer command")]
     work.release()
-    assert c.mode == Mode.LAND and replies == [] and c.mission_plan is None
+    assert c.mode == Mode.LAND and len(replies) == 1 and c.mission_plan is None
 
 
 def test_inline_work_answers_a_mission_start_at_once():
@@ -349,3 +350,49 @@ def test_an_anchor_that_comes_after_its_time_is_planned_again():
     assert len(work.held) == 1  # asked again
     work.release()
     assert c.late_anchors == 1
+
+
+def _command(server: Any, command: int, confirmation: int, *params: float,
+             src: tuple[int, int] = GCS) -> None:
+    p = [*params, *([0.0] * (7 - len(params)))]
+    server.handle(0, _msg(M.MAVLink_command_long_message(1, 1, command, confirmation, *p), src),
+                  1.0)
+
+
+def _command_acks(link: Any) -> list[tuple[int, int]]:
+    from tests.unit.test_gcs_dispatch import parsed
+    return [(m.command, m.result) for m in parsed(link) if m.get_type() == "COMMAND_ACK"]
+
+
+def test_a_command_under_way_is_in_progress_then_final_and_a_retry_is_not_run_again():
+    """Given MISSION_START in flight with the plan made beside the loop (through the FCU's
+    ground-station server), then COMMAND_ACK IN_PROGRESS comes at once; a retry
+    (confirmation 1) meanwhile is answered IN_PROGRESS again and plans nothing more; when
+    the plan is taken in, the final ACCEPTED; a second MISSION_START under way that a LAND
+    supersedes ends FAILED, and LAND is ACCEPTED."""
+    from tests.unit.test_gcs_dispatch import make_server
+    server, links = make_server(1)
+    c = server.pipeline.commander
+    work = HeldWork()
+    c.work = work
+    server.pipeline.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0),
+                                             (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), 0)
+    assert server.pipeline.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    c.set_mission(tuple(_items(3)))
+    start = MAV_CMD.MAV_CMD_MISSION_START
+    _command(server, start, 0)
+    _command(server, start, 1)
+    assert _command_acks(links[0]) == [(start, MAV_RESULT.MAV_RESULT_IN_PROGRESS)] * 2
+    assert len(work.held) == 1 and c.mode == Mode.HOLD
+    work.release()
+    assert _command_acks(links[0]) == [(start, MAV_RESULT.MAV_RESULT_ACCEPTED)]
+    assert c.mode == Mode.MISSION
+    _command(server, MAV_CMD.MAV_CMD_DO_SET_MODE, 0, 1.0, 4.0, 3.0)  # AUTO.LOITER: HOLD
+    _command(server, start, 0)
+    _command(server, MAV_CMD.MAV_CMD_NAV_LAND, 0)
+    work.release()
+    assert _command_acks(links[0]) == [
+        (MAV_CMD.MAV_CMD_DO_SET_MODE, MAV_RESULT.MAV_RESULT_ACCEPTED),
+        (start, MAV_RESULT.MAV_RESULT_IN_PROGRESS), (start, MAV_RESULT.MAV_RESULT_FAILED),
+        (MAV_CMD.MAV_CMD_NAV_LAND, MAV_RESULT.MAV_RESULT_ACCEPTED)]
+    assert c.mode == Mode.LAND
