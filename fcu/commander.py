@@ -26,10 +26,11 @@ commander takes them typed, in ENU/FLU and SI units.
 A mission's start (MISSION_START, mode MISSION, a new current item in flight, arming in
 MISSION) plans the mission from the desired pose and checks it again: a job for `work`
 (`fcu.work`). Where it runs beside the loop the command's answer is IN_PROGRESS
-(`MAV_RESULT_IN_PROGRESS`, with `MissionPlan.reply` called with the final one): the mode in
-force flies on, the HEARTBEAT shows it, until the plan is taken in at a step boundary
-(`_planned`); its timeline then starts at that step (`mission_offset_s`). Any other mode
-change, a disarm, a failsafe or a new mission drops a plan under way.
+(`MAV_RESULT_IN_PROGRESS`; every command waiting on it is told the final one,
+`UnderWay.end`): the mode in force flies on, the HEARTBEAT shows it, until the plan is taken
+in at a step boundary (`_planned`); its timeline then starts at that step
+(`mission_offset_s`). The same mode asked for again meanwhile waits for the same end; any
+other mode change, a disarm, a failsafe or a new mission drops a plan under way.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ from fcu.mission.start import MissionPlan, PosctlFit, Reply, plan_from
 from fcu.mode_references import ModeReferences
 from fcu.work import Outcome
 
-IN_PROGRESS = MAV_RESULT.MAV_RESULT_IN_PROGRESS  # answered later, through MissionPlan.reply
+IN_PROGRESS = MAV_RESULT.MAV_RESULT_IN_PROGRESS  # answered later, through UnderWay.end
 
 
 class Commander(ModeReferences):
@@ -120,6 +121,9 @@ class Commander(ModeReferences):
         if refused:
             return MAV_RESULT.MAV_RESULT_DENIED, refused
         previous = self.mode
+        under_way = self.under_way
+        if under_way is not None and under_way.mode == mode:
+            return IN_PROGRESS, ""  # the same mode asked again (another station): it waits too
         self._drop_under_way()  # a start under way gives way to the newer command
         if mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running) \
                 and self.armed:
@@ -271,7 +275,7 @@ class Commander(ModeReferences):
         """POSCTL's limits fitted to the envelope at the desired attitude (`manual.fit_envelope`,
         run by `work`); POSCTL is entered when they are (IN_PROGRESS meanwhile)."""
         start = self._current_pose_ref()
-        fit = self.posctl_fit = PosctlFit(previous)
+        fit = self.posctl_fit = PosctlFit(previous=previous)
         self.work.submit(manual.fit_envelope, (self.flight.sticks, self.limits.vehicle,
                                                start.q_enu_flu),
                          lambda outcome: self._fitted(fit, outcome))
@@ -283,17 +287,16 @@ class Commander(ModeReferences):
         self.posctl_fit = None
         lim = outcome.value
         if lim is None:
-            fit.result = (MAV_RESULT.MAV_RESULT_DENIED,
-                          f"POSCTL refused: envelope fit failed: {outcome.error}")
-        else:
-            self.manual_limits = lim
-            fit.result = self._enter(Mode.POSCTL, fit.previous)
-            if lim.acc_xy_m_s2 < self.flight.sticks.acc_xy_m_s2:  # said, as it is unusual
-                self.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
-                         f"POSCTL: acc {lim.acc_xy_m_s2:.2g} m/s2, jerk "
-                         f"{lim.jerk_m_s3:.2g} m/s3 here")
-        if fit.reply is not None:
-            fit.reply(*fit.result)
+            fit.end(MAV_RESULT.MAV_RESULT_DENIED,
+                    f"POSCTL refused: envelope fit failed: {outcome.error}")
+            return
+        self.manual_limits = lim
+        result = self._enter(Mode.POSCTL, fit.previous)
+        if lim.acc_xy_m_s2 < self.flight.sticks.acc_xy_m_s2:  # said, as it is unusual
+            self.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
+                     f"POSCTL: acc {lim.acc_xy_m_s2:.2g} m/s2, jerk "
+                     f"{lim.jerk_m_s3:.2g} m/s3 here")
+        fit.end(*result)
 
     def _drop_under_way(self) -> None:
         """A mode change under way gives way to a newer command, a new mission, a disarm or
@@ -301,12 +304,12 @@ class Commander(ModeReferences):
         spec's MAV_RESULT_CANCELLED answers COMMAND_CANCEL only), with why."""
         dropped = self.under_way
         self.mission_plan = self.posctl_fit = None
-        if dropped is not None and dropped.reply is not None:
-            dropped.reply(MAV_RESULT.MAV_RESULT_FAILED, "superseded by a newer command")
+        if dropped is not None:
+            dropped.end(MAV_RESULT.MAV_RESULT_FAILED, "superseded by a newer command")
 
     @property
     def under_way(self) -> MissionPlan | PosctlFit | None:
-        """The mode change whose work runs beside the loop (its `reply` is told the end)."""
+        """The mode change whose work runs beside the loop (its waiting commands told the end)."""
         return self.mission_plan or self.posctl_fit
 
     def _warn(self, result: int, text: str) -> None:
@@ -321,8 +324,10 @@ class Commander(ModeReferences):
         refused with the reason), never flown into the limits. The answer, or IN_PROGRESS
         while the plan is made beside the loop (then `reply` gets it)."""
         start = self._current_pose_ref()
-        plan = self.mission_plan = MissionPlan(seq, self.clock_us * 1e-6, start, said, text,
-                                               reply)
+        plan = self.mission_plan = MissionPlan(seq=seq, t_s=self.clock_us * 1e-6, start=start,
+                                               said=said, text=text)
+        if reply is not None:
+            plan.on_end(reply)
         self.work.submit(plan_from, (self.mission, self.limits, seq, plan.t_s, start.p_enu_m,
                                      start.q_enu_flu),
                          lambda outcome: self._planned(plan, outcome))
@@ -348,8 +353,8 @@ class Commander(ModeReferences):
             self.mission_running = False
             self.mode = Mode.HOLD
             self.hold = plan.start
-            plan.result = (MAV_RESULT.MAV_RESULT_DENIED, f"mission refused from here: "
-                           f"{result_name(MAV_MISSION_DENIED)}: {refused}")
+            plan.end(MAV_RESULT.MAV_RESULT_DENIED, f"mission refused from here: "
+                     f"{result_name(MAV_MISSION_DENIED)}: {refused}")
         else:
             self.executor = executor
             self.mission_running = True
@@ -357,9 +362,7 @@ class Commander(ModeReferences):
             self._maybe_start_flight()
             if plan.said:
                 self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, plan.said)
-            plan.result = (MAV_RESULT.MAV_RESULT_ACCEPTED, plan.text)
-        if plan.reply is not None:
-            plan.reply(*plan.result)
+            plan.end(MAV_RESULT.MAV_RESULT_ACCEPTED, plan.text)
 
     def _start_landing(self) -> None:
         start = self._current_pose_ref()

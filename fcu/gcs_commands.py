@@ -4,7 +4,8 @@ without executing the command again (`fcu.gcs_server` dispatches them here). A c
 whose work runs beside the control loop (a mission's start, POSCTL: `fcu.commander`) is
 acknowledged MAV_RESULT_IN_PROGRESS at once and with its final result when the work is
 done, as the command protocol says; a retry meanwhile is answered IN_PROGRESS again, never
-executed again; a newer command that supersedes it ends it MAV_RESULT_FAILED, with why.
+executed again; the same mode asked for meanwhile (another station) waits for the same
+end; a newer command that supersedes it ends it MAV_RESULT_FAILED, with why.
 
 Parameters are range-checked against what they can mean (a mode's numbers, a mission item,
 a message id); MAV_CMD_NAV_TAKEOFF's altitude is AMSL in COMMAND_LONG's p7 (as PX4 reads it)
@@ -119,7 +120,7 @@ class CommandService:
         plan = self.server.pipeline.commander.under_way
         if result == IN_PROGRESS and plan is not None:  # answered again when the plan is made
             self._answer(index, msg, sender, key, now_s, IN_PROGRESS, "")
-            plan.reply = lambda r, t: self._answer(index, msg, sender, key, now_s, r, t)
+            plan.on_end(lambda r, t: self._answer(index, msg, sender, key, now_s, r, t))
             return
         self._answer(index, msg, sender, key, now_s, result, text)
 

@@ -261,7 +261,7 @@ class GcsServer:
                 result, text = cmd.set_mode(mode, now_s)
                 under_way = cmd.under_way
                 if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and under_way is not None:
-                    under_way.reply = lambda r, t: self._refused(r, t, index)
+                    under_way.on_end(lambda r, t: self._refused(r, t, index))
                 else:
                     self._refused(result, text, index)
 
@@ -324,7 +324,7 @@ class GcsServer:
                 reply(result, text)
 
         if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and c.mission_plan is not None:
-            c.mission_plan.reply = confirmed
+            c.mission_plan.on_end(confirmed)
         elif result == MAV_RESULT.MAV_RESULT_ACCEPTED:
             self.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)
         return result

@@ -4,7 +4,7 @@ records of a mode change under way (a mission's start, POSCTL's fit)."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from common.mav_enums import MAV_CMD, MAV_FRAME
 from common.mission_items import MissionItem
@@ -17,28 +17,49 @@ from fcu.tracker import Reference
 Reply = Callable[[int, str], None]  # (MAV_RESULT, why): a command's final answer
 
 
-@dataclass(eq=False)
-class PosctlFit:
+@dataclass(eq=False, kw_only=True)
+class UnderWay:
+    """A mode change whose work runs beside the loop: every command waiting on it (one
+    station's, or several asking for the same mode) is told its final answer, kept in
+    `result`."""
+
+    replies: list[Reply] = field(default_factory=list)
+    result: tuple[int, str] | None = None
+
+    def on_end(self, reply: Reply) -> None:
+        """`reply` told the final answer (at once if it is known)."""
+        if self.result is not None:
+            reply(*self.result)
+        else:
+            self.replies.append(reply)
+
+    def end(self, result: int, text: str) -> None:
+        """The final answer, told to every command waiting on it."""
+        self.result = (result, text)
+        for reply in self.replies:
+            reply(result, text)
+        self.replies.clear()
+
+
+@dataclass(eq=False, kw_only=True)
+class PosctlFit(UnderWay):
     """POSCTL's entry under way (`fcu.commander`): its limits being fitted, from `previous`."""
 
     previous: Mode
-    reply: Reply | None = None
-    result: tuple[int, str] | None = None
+    mode: Mode = Mode.POSCTL
 
 
-@dataclass(eq=False)
-class MissionPlan:
+@dataclass(eq=False, kw_only=True)
+class MissionPlan(UnderWay):
     """A mission's start under way (`fcu.commander`): from item `seq`, planned at `t_s` from
-    `start`; `said` when it flies, `text` its command's answer; `reply` told the final
-    answer, kept in `result`."""
+    `start`; `said` when it flies, `text` its command's answer."""
 
     seq: int
     t_s: float
     start: Reference
     said: str
     text: str
-    reply: Reply | None = None
-    result: tuple[int, str] | None = None
+    mode: Mode = Mode.MISSION
 
 
 def plan_from(items: Sequence[MissionItem], limits: MissionLimits, seq: int, t_s: float,

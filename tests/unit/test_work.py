@@ -239,7 +239,7 @@ def test_a_mission_start_is_answered_and_shown_when_its_plan_is_taken_in():
     c.clock_us = 2_000_000
     result = c.mission_start(0)
     assert result == (IN_PROGRESS, "") and c.mission_plan is not None
-    c.mission_plan.reply = lambda r, t: replies.append((r, t))
+    c.mission_plan.on_end(lambda r, t: replies.append((r, t)))
     said = len(c.events)
     for k in range(5):
         c.reference(2_000_000 + 2000 * k)
@@ -257,7 +257,7 @@ def test_a_plan_under_way_gives_way_to_a_newer_command():
     c, work = _planned_commander()
     replies: list[tuple[int, str]] = []
     assert c.set_mode(Mode.MISSION, 0.0)[0] == IN_PROGRESS
-    c.mission_plan.reply = lambda r, t: replies.append((r, t))
+    c.mission_plan.on_end(lambda r, t: replies.append((r, t)))
     assert c.set_mode(Mode.LAND, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
     assert replies == [(MAV_RESULT.MAV_RESULT_FAILED, "superseded by a newer command")]
     work.release()
@@ -282,7 +282,7 @@ def test_posctl_is_entered_when_its_limits_are_fitted():
     c.manual_input(0.0, manual.CENTRED)
     assert c.set_mode(Mode.POSCTL, 0.0) == (IN_PROGRESS, "")
     replies: list[tuple[int, str]] = []
-    c.under_way.reply = lambda r, t: replies.append((r, t))
+    c.under_way.on_end(lambda r, t: replies.append((r, t)))
     refs = [c.reference(2000 * k) for k in range(1, 4)]
     assert c.mode == Mode.HOLD and c.manual_sp is None
     assert all(r.p_enu_m == refs[0].p_enu_m for r in refs)
@@ -396,3 +396,67 @@ def test_a_command_under_way_is_in_progress_then_final_and_a_retry_is_not_run_ag
         (start, MAV_RESULT.MAV_RESULT_IN_PROGRESS), (start, MAV_RESULT.MAV_RESULT_FAILED),
         (MAV_CMD.MAV_CMD_NAV_LAND, MAV_RESULT.MAV_RESULT_ACCEPTED)]
     assert c.mode == Mode.LAND
+
+
+def test_the_same_mode_asked_by_two_stations_under_way_is_one_change_both_answered():
+    """Given POSCTL asked by two stations (on two links) while its fit runs beside the loop,
+    then both are answered IN_PROGRESS, one fit runs (the second joins, it does not drop the
+    first), and when it is taken in both get ACCEPTED; a MISSION asked twice likewise.
+    (A second request that dropped the first answered it FAILED while the mode it asked
+    for was entered.)"""
+    from fcu import manual
+    from tests.unit.test_gcs_dispatch import make_server
+    server, links = make_server(2)
+    c = server.pipeline.commander
+    work = HeldWork()
+    c.work = work
+    server.pipeline.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0),
+                                             (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), 0)
+    assert server.pipeline.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    c.manual_input(1.0, manual.CENTRED)
+    set_mode = MAV_CMD.MAV_CMD_DO_SET_MODE
+    for index, src in ((0, GCS), (1, OTHER)):
+        server.handle(index, _msg(M.MAVLink_command_long_message(
+            1, 1, set_mode, 0, 1.0, 3.0, 0.0, 0, 0, 0, 0), src), 1.0)  # POSCTL
+    in_progress = [(set_mode, MAV_RESULT.MAV_RESULT_IN_PROGRESS)]
+    assert _command_acks(links[0]) == in_progress and _command_acks(links[1]) == in_progress
+    assert len(work.held) == 1 and c.mode == Mode.HOLD
+    work.release()
+    accepted = [(set_mode, MAV_RESULT.MAV_RESULT_ACCEPTED)]
+    assert _command_acks(links[0]) == accepted and _command_acks(links[1]) == accepted
+    assert c.mode == Mode.POSCTL
+    c.set_mission(tuple(_items(3)))
+    for index, src in ((0, GCS), (1, OTHER)):
+        server.handle(index, _msg(M.MAVLink_command_long_message(
+            1, 1, set_mode, 0, 1.0, 4.0, 4.0, 0, 0, 0, 0), src), 1.0)  # AUTO.MISSION
+    assert len(work.held) == 1
+    work.release()
+    both = in_progress + accepted
+    assert _command_acks(links[0]) == both and _command_acks(links[1]) == both
+    assert c.mode == Mode.MISSION and c.mission_running
+
+
+def test_a_new_current_item_in_flight_is_confirmed_by_mission_current_and_its_ack():
+    """Given DO_SET_MISSION_CURRENT in a flying mission, planned again beside the loop, then
+    it is answered IN_PROGRESS, and when the plan is taken in both the spec's confirmation
+    (MISSION_CURRENT with the new item) and the final COMMAND_ACK ACCEPTED go out (the
+    ACK's reply used to replace the confirmation's)."""
+    from tests.unit.test_gcs_dispatch import make_server, parsed
+    server, links = make_server(1)
+    c = server.pipeline.commander
+    server.pipeline.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0),
+                                             (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), 0)
+    assert server.pipeline.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    c.set_mission(tuple(_items(3)))
+    assert c.mission_start(0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED  # inline work
+    work = HeldWork()
+    c.work = work
+    parsed(links[0])
+    current = MAV_CMD.MAV_CMD_DO_SET_MISSION_CURRENT
+    _command(server, current, 0, 2.0)
+    assert _command_acks(links[0]) == [(current, MAV_RESULT.MAV_RESULT_IN_PROGRESS)]
+    work.release()
+    sent = parsed(links[0])
+    assert [(m.command, m.result) for m in sent if m.get_type() == "COMMAND_ACK"] == [
+        (current, MAV_RESULT.MAV_RESULT_ACCEPTED)]
+    assert [m.seq for m in sent if m.get_type() == "MISSION_CURRENT"] == [2]
