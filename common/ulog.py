@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import struct
+import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -146,7 +147,13 @@ class _FileSink:
             raise
         self.size += len(data)
 
-    def close(self) -> None:
+    def close(self, beside: bool = False) -> None:
+        """Synced to the disk, then closed; `beside`: in a thread of its own (the fsync
+        takes tens of milliseconds; a control loop rotating its log must not wait for it;
+        the interpreter waits for the thread before it exits)."""
+        if beside:
+            threading.Thread(target=self.close, name="ulog-close").start()
+            return
         try:
             os.fsync(self.fd)
         except OSError:
@@ -168,11 +175,13 @@ class ULogWriter:
             buffer = sink
             self._write: Callable[[bytes], None] = buffer.extend
             self._close: Callable[[], None] = lambda: None
+            self._close_beside: Callable[[], None] = self._close
             self.path: Path | None = None
         else:
             self.path = Path(sink)
             file = _FileSink(self.path)
             self._write, self._close = file.write, file.close
+            self._close_beside = lambda: file.close(beside=True)
         self.failed = ""  # why writing stopped (a full disk, an I/O error); "" while it works
         self._pending: list[bytes] = []
         self._ids: dict[str, tuple[int, struct.Struct]] = {}
@@ -226,11 +235,13 @@ class ULogWriter:
         except OSError as exc:
             self.failed = exc.strerror or type(exc).__name__
 
-    def close(self) -> None:
+    def close(self, beside: bool = False) -> None:
+        """The queued records written, the file synced and closed (`beside`: synced and
+        closed in a thread of its own, `_FileSink.close`)."""
         if self._closed:
             return
         self.flush()
-        self._close()
+        (self._close_beside if beside else self._close)()
         self._closed = True
 
 

@@ -152,7 +152,7 @@ class FlightController:
         self.log.events(self.pipeline.commander.events)  # said so far: in the old one
         self.events.extend(self.pipeline.commander.events)
         self.pipeline.commander.events.clear()
-        self.log.close()
+        self.log.close(beside=True)  # its fsync in a thread: the loop flies on meanwhile
         aside = set_aside(self.log_path)
         self.log = self._new_log()
         self.pipeline.commander.say(M.MAV_SEVERITY_INFO, "onboard log: a new file" + (

@@ -285,14 +285,14 @@ class OnboardLog(ULogWriter):
         w.add("mission_result", (t_us, self.seq_reached, cmd.mission_current,
                                  len(cmd.mission), bool(cmd.mission), cmd.mission_done))
 
-    def close(self) -> None:
+    def close(self, beside: bool = False) -> None:
         """The estimator's last inputs (poses after the last IMU sample stamped with the time
-        the next one was due), then the file closed."""
+        the next one was due), then the file closed (`ULogWriter.close`)."""
         self._estimator_inputs()
         for pose in self.poses_waiting:
             self._pose(max(self.imu_t_us + self.imu_dt_us, 0), pose)
         self.poses_waiting.clear()
-        super().close()
+        super().close(beside)
 
     def events(self, events: list[Event]) -> None:
         for ev in events:

@@ -305,3 +305,32 @@ def test_a_write_that_fails_stops_the_log_at_its_last_complete_record(tmp_path):
     ULogWriter(empty, [Topic("row", (("uint64_t", "timestamp"), ("double", "a"),
                                      ("double", "b")))]).close()
     assert path.stat().st_size == empty.stat().st_size + 29 * n  # no torn record left
+
+
+def test_a_close_beside_returns_before_its_fsync_and_the_file_ends_complete(tmp_path,
+                                                                           monkeypatch):
+    """Given a log closed `beside` (log rotation in the control loop) while the disk's sync
+    is held, then close returns with every record written and the sync still pending; once
+    the sync is let go, its thread syncs and ends."""
+    import threading
+
+    import common.ulog as ulog
+    held, synced = threading.Event(), []
+    real_fsync = os.fsync
+
+    def slow_fsync(fd: int) -> None:
+        assert held.wait(10.0)
+        real_fsync(fd)
+        synced.append(fd)
+
+    monkeypatch.setattr(ulog.os, "fsync", slow_fsync)
+    path = tmp_path / "a.ulg"
+    w = ULogWriter(path, [POSE])
+    for i in range(50):
+        w.add("pose", (1000 * i, 0.0, 1.0, 0.0, 0.0, 0.0, 0, True))
+    w.close(beside=True)
+    assert not synced and len(read_topic(path, "pose")[1]) == 50  # written, not yet synced
+    (closer,) = [t for t in threading.enumerate() if t.name == "ulog-close"]
+    held.set()
+    closer.join(10.0)
+    assert len(synced) == 1 and not closer.is_alive()
