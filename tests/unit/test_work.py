@@ -364,20 +364,26 @@ def _command_acks(link: Any) -> list[tuple[int, int]]:
     return [(m.command, m.result) for m in parsed(link) if m.get_type() == "COMMAND_ACK"]
 
 
+def _airborne_server(n_links: int) -> tuple[Any, list[Any]]:
+    """The FCU's ground-station server (`make_server`) with its vehicle armed 2 m up."""
+    from tests.unit.test_gcs_dispatch import make_server
+    server, links = make_server(n_links)
+    server.pipeline.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0),
+                                             (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), 0)
+    assert server.pipeline.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    return server, links
+
+
 def test_a_command_under_way_is_in_progress_then_final_and_a_retry_is_not_run_again():
     """Given MISSION_START in flight with the plan made beside the loop (through the FCU's
     ground-station server), then COMMAND_ACK IN_PROGRESS comes at once; a retry
     (confirmation 1) meanwhile is answered IN_PROGRESS again and plans nothing more; when
     the plan is taken in, the final ACCEPTED; a second MISSION_START under way that a LAND
     supersedes ends FAILED, and LAND is ACCEPTED."""
-    from tests.unit.test_gcs_dispatch import make_server
-    server, links = make_server(1)
+    server, links = _airborne_server(1)
     c = server.pipeline.commander
     work = HeldWork()
     c.work = work
-    server.pipeline.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0),
-                                             (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), 0)
-    assert server.pipeline.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
     c.set_mission(tuple(_items(3)))
     start = MAV_CMD.MAV_CMD_MISSION_START
     _command(server, start, 0)
@@ -405,14 +411,10 @@ def test_the_same_mode_asked_by_two_stations_under_way_is_one_change_both_answer
     (A second request that dropped the first answered it FAILED while the mode it asked
     for was entered.)"""
     from fcu import manual
-    from tests.unit.test_gcs_dispatch import make_server
-    server, links = make_server(2)
+    server, links = _airborne_server(2)
     c = server.pipeline.commander
     work = HeldWork()
     c.work = work
-    server.pipeline.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0),
-                                             (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), 0)
-    assert server.pipeline.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
     c.manual_input(1.0, manual.CENTRED)
     set_mode = MAV_CMD.MAV_CMD_DO_SET_MODE
     for index, src in ((0, GCS), (1, OTHER)):
@@ -441,12 +443,9 @@ def test_a_new_current_item_in_flight_is_confirmed_by_mission_current_and_its_ac
     it is answered IN_PROGRESS, and when the plan is taken in both the spec's confirmation
     (MISSION_CURRENT with the new item) and the final COMMAND_ACK ACCEPTED go out (the
     ACK's reply used to replace the confirmation's)."""
-    from tests.unit.test_gcs_dispatch import make_server, parsed
-    server, links = make_server(1)
+    from tests.unit.test_gcs_dispatch import parsed
+    server, links = _airborne_server(1)
     c = server.pipeline.commander
-    server.pipeline.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0),
-                                             (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), 0)
-    assert server.pipeline.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
     c.set_mission(tuple(_items(3)))
     assert c.mission_start(0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED  # inline work
     work = HeldWork()
