@@ -37,6 +37,7 @@ class BusyVehicle(ScriptedAutopilot):
         self.param_sets_heard = 0
         self.acks_sent = 0
         self._answered: set[str] = set()
+        self._timers: list[threading.Timer] = []
         self._lock = threading.Lock()
         super().__init__("px4", params={"MIS_CRUISE_SPD": (5.0, REAL32)})
 
@@ -50,7 +51,16 @@ class BusyVehicle(ScriptedAutopilot):
         if key in self._answered:
             return
         self._answered.add(key)
-        threading.Timer(self.slow_s, answer).start()
+        timer = threading.Timer(self.slow_s, answer)
+        self._timers.append(timer)
+        timer.start()
+
+    def close(self) -> None:
+        """Answers not yet due are dropped (their socket closes with the vehicle)."""
+        for timer in self._timers:
+            timer.cancel()
+            timer.join(timeout=5.0)
+        super().close()
 
     def _item(self, item: MissionItem) -> None:
         self.items_heard += 1
