@@ -22,7 +22,7 @@ demo: venv
 test: venv
 	$(PY) -m mypy
 	$(PY) -m mypy benchmarks tools
-	$(PY) -m pytest -q -n auto --dist loadgroup tests
+	$(PY) -m pytest -q -n auto --dist loadgroup --durations=20 tests
 
 test-fast: venv
 	$(PY) -m pytest -q -n auto --dist loadgroup -m "not slow and not process" tests
