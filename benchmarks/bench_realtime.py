@@ -39,8 +39,10 @@ acted on a new state. The longest gaps are printed with the events under way.
 The flight is flown twice: idle, and beside `--hogs` busy processes at nice 19 that this
 script starts and kills by PID. `--compare ARG` flies every condition twice, plain and with
 ARG added to fcu's arguments (one table: before and after, measured the same way in one
-run); `--fcu-arg ARG` passes ARG to every run's fcu. ARG is split as a shell would, so
-`--compare "--work inline"` and `--compare=--work=inline` both work.
+run); `--compare-sitl ARG` adds ARG to sitl's arguments in that variant too (`--compare
+"--rt-priority 0" --compare-sitl "--rt-priority 0"`: both loops at normal priority); `--fcu-arg
+ARG` passes ARG to every run's fcu. ARG is split as a shell would, so `--compare "--work
+inline"` and `--compare=--work=inline` both work.
 
     .venv/bin/python benchmarks/bench_realtime.py [--hover-s S] [--compare ARG] [--json PATH]
 
@@ -138,6 +140,7 @@ class Options:
     hogs: int = 2
     fcu_args: tuple[str, ...] = ()
     compare: tuple[str, ...] = ()  # extra fcu arguments of the compared variant, if any
+    compare_sitl: tuple[str, ...] = ()  # and its extra sitl arguments
     json_path: Path | None = None
     out: Path | None = None  # keep every run's folder here
     quiet: bool = False
@@ -178,6 +181,9 @@ def parse_args(argv: list[str] | None = None) -> Options:
     ap.add_argument("--compare", metavar="ARG", action="append", default=[],
                     help="fly every condition plain and with ARG added to fcu's arguments "
                          "(repeatable: all of them make the one variant)")
+    ap.add_argument("--compare-sitl", metavar="ARG", action="append", default=[],
+                    help="with --compare: ARG added to sitl's arguments in the compared "
+                         "variant (repeatable)")
     ap.add_argument("--json", type=Path, help="write the figures here (JSON)")
     ap.add_argument("--out", type=Path, help="keep every run's folder (logs) under this one")
     ap.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -201,6 +207,7 @@ def parse_args(argv: list[str] | None = None) -> Options:
                    rotate_log=a.rotate_log, loads=loads, hogs=a.hogs,
                    fcu_args=tuple(x for arg in a.fcu_arg for x in shlex.split(arg)),
                    compare=tuple(x for arg in a.compare for x in shlex.split(arg)),
+                   compare_sitl=tuple(x for arg in a.compare_sitl for x in shlex.split(arg)),
                    json_path=a.json, out=a.out, quiet=a.quiet)
 
 
@@ -556,7 +563,8 @@ def pause(seconds: float, children: Children) -> None:
 
 
 def argv_of(opts: Options, folder: Path, sim_port: int, ports: list[int],
-            extra: tuple[str, ...]) -> tuple[Any, list[str], list[str]]:
+            extra: tuple[str, ...], extra_sitl: tuple[str, ...] = ()
+            ) -> tuple[Any, list[str], list[str]]:
     """The scenario (with the sensor profile), and the sitl and fcu command lines."""
     sc = load_scenario(opts.scenario)
     sc = dataclasses.replace(sc, sensors=resolve_sensor_profile(opts.sensors))
@@ -566,7 +574,8 @@ def argv_of(opts: Options, folder: Path, sim_port: int, ports: list[int],
     sitl = [py, "-m", "sitl.node", str(sc.source), "--link", f"udpin:127.0.0.1:{sim_port}",
             "--realtime", "--truth-log", str(folder / "truth.ulg"), "--control-rate",
             str(sc.control_rate_hz), "--position", f"{x!r},{y!r},{z!r}", "--sensors",
-            opts.sensors, "--seed", str(sc.seed), "--stats", str(folder / "sitl_stats.json")]
+            opts.sensors, "--seed", str(sc.seed), "--stats", str(folder / "sitl_stats.json"),
+            *extra_sitl]
     fcu = [py, "-m", "fcu.node", "--vehicle", str(sc.files["vehicle"]), "--gains", str(gains),
            "--sim", f"udpout:127.0.0.1:{sim_port}", "--sysid", str(VEHICLE_ID), "--rate",
            str(sc.control_rate_hz), "--realtime", "--onboard-log", str(folder / "onboard.ulg"),
@@ -615,14 +624,14 @@ def take_off(sessions: list[Session], children: Children, sc: Any, opts: Options
     return hover
 
 
-def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str], None]
-        ) -> dict[str, Any]:
+def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str], None],
+        extra_sitl: tuple[str, ...] = ()) -> dict[str, Any]:
     """One flight with its timeline; the raw material of its figures."""
     folder.mkdir(parents=True, exist_ok=True)
     sim_port = free_port()
     n_stations = 2 if opts.second_station else 1
     ports = [free_port() for _ in range(n_stations)]
-    sc, sitl, fcu = argv_of(opts, folder, sim_port, ports, extra)
+    sc, sitl, fcu = argv_of(opts, folder, sim_port, ports, extra, extra_sitl)
     (folder / "commands.txt").write_text(shlex.join(sitl) + "\n" + shlex.join(fcu) + "\n")
     sessions: list[Session] = []
     children = Children(folder)
@@ -881,9 +890,11 @@ def main(argv: list[str] | None = None) -> int:
 
     sc = load_scenario(opts.scenario)
     period_us = 1_000_000 // sc.control_rate_hz
-    variants: list[tuple[str, tuple[str, ...]]] = [("", ())]
+    variants: list[tuple[str, tuple[str, ...], tuple[str, ...]]] = [("", (), ())]
     if opts.compare:
-        variants.append((" + " + shlex.join(opts.compare), opts.compare))
+        label = " + " + shlex.join(opts.compare) + (
+            f" (sitl {shlex.join(opts.compare_sitl)})" if opts.compare_sitl else "")
+        variants.append((label, opts.compare, opts.compare_sitl))
     print(f"machine: {os.cpu_count()} cores, load average "
           f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}; scenario {sc.name}, "
           f"sensors {opts.sensors}, {sc.control_rate_hz} Hz")
@@ -901,7 +912,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench_realtime_") as tmp:
         base = opts.out or Path(tmp)
         for load in opts.loads:
-            for label, extra in variants:
+            for label, extra, extra_sitl in variants:
                 name = (load if load == "idle" else f"{opts.hogs} hogs") + label
                 say(f"{name}:")
                 folder = base / f"{load}{'_compare' if extra else ''}"
@@ -909,12 +920,13 @@ def main(argv: list[str] | None = None) -> int:
                     if pids:
                         say(f"  busy processes at nice 19: PIDs {', '.join(map(str, pids))}")
                     load_avg = os.getloadavg()[0]
-                    run = fly(opts, folder, extra, say)
+                    run = fly(opts, folder, extra, say, extra_sitl)
                 for e in run["events"]:
                     say(f"  {e['start_s']:6.2f}-{e['end_s']:6.2f} s  station {e['station']}  "
                         f"{e['what']}: {'' if e['ok'] else 'FAILED: '}{e['note']}")
                 f = figures(run, period_us)
                 results.append({"condition": name, "load": load, "extra_fcu_args": list(extra),
+                                "extra_sitl_args": list(extra_sitl),
                                 "hog_pids": pids, "load_average_1min": load_avg,
                                 "failure": run["failure"], "figures": f, "run": run})
                 for g in f.get("worst_gaps") or ():

@@ -32,6 +32,7 @@ from common.links import LinkError, open_link, parse_url
 from common.mavlink import MAV, SigningKeyError, encoder, pack, read_signing_key
 from common.outcome import Event
 from common.parent import stop_with_parent
+from common.realtime import request_fifo
 from common.ulog import ULogError
 from fcu.compose import fcu_pipeline, param_store, published_home
 from fcu.estimator.inputs import ImuInput, PoseInput
@@ -328,7 +329,8 @@ class FlightController:
                 continue
             fds = {fd: entry for entry in links for fd in entry[1].filenos()}
             work_fds = self.work.filenos()  # a result of work beside the loop wakes it
-            wake = min(self.server.next_due(), next_housekeeping + 0.05)
+            # telemetry due goes out with the housekeeping: waking for it sooner only polls
+            wake = min(max(self.server.next_due(), next_housekeeping), next_housekeeping + 0.05)
             if not self.lockstep:
                 wake = min(wake, next_tick)
             timeout = min(max(0.0, wake - now), 0.05)
@@ -440,6 +442,8 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(f"--rtt-probes: expected 0..100000, got {args.rtt_probes}")
         if not 1 <= args.sysid <= 254:
             raise ConfigError(f"--sysid: expected 1..254, got {args.sysid}")
+        if not 0 <= args.rt_priority <= 99:
+            raise ConfigError(f"--rt-priority: expected 0..99, got {args.rt_priority}")
         pipeline, params = fcu_pipeline(load_vehicle(args.vehicle), load_gains(args.gains),
                                         args.rate)
         key = read_signing_key(args.signing_key) if args.signing_key else None
@@ -483,6 +487,10 @@ def main(argv: list[str] | None = None) -> int:
     sim_port = getattr(fc.sim.link, "local_port", None)
     if sim_port is not None:
         print(f"fcu: sim port {sim_port}", flush=True)
+    if args.realtime:  # the loop sleeps between periods: it may run ahead of the machine
+        refused = request_fifo(args.rt_priority)
+        print(f"fcu: loop scheduled SCHED_FIFO {args.rt_priority}" if not refused else
+              f"fcu: loop at normal priority: real-time priority {refused}", flush=True)
     fc.run()
     print(f"fcu: stopped after {fc.steps} control steps; {fc.deadline_misses} deadline misses, "
           f"{fc.sim.resent_answers} answers re-sent, {fc.sim.rejected_bytes} bytes rejected",

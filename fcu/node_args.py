@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 from common.cliargs import OneLineParser
+from common.realtime import DEFAULT_PRIORITY
 from fcu.telemetry import Home
 from fcu.work import KINDS
 
@@ -32,6 +33,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"GCS link URL, repeatable (default: {' and '.join(DEFAULT_GCS)})")
     p.add_argument("--rate", type=int, default=500, help="control rate in Hz (1..1000)")
     p.add_argument("--realtime", action="store_true", help="run on the monotonic clock")
+    p.add_argument("--rt-priority", type=int, default=DEFAULT_PRIORITY, metavar="P",
+                   help="with --realtime: the loop's SCHED_FIFO priority, 1..99, 0 for "
+                        f"normal scheduling (default {DEFAULT_PRIORITY}; where it is not "
+                        "granted the loop runs at normal priority and says so)")
     p.add_argument("--work", choices=KINDS,
                    help="mission checks and plans: 'beside' the loop in a worker process "
                         "(real-time default) or 'inline' (lockstep default)")

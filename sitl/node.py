@@ -26,6 +26,7 @@ from common.cliargs import OneLineParser, check_output_path
 from common.config import ConfigError, Scenario, check_sensor_faults, load_scenario
 from common.links import LinkError, parse_url
 from common.parent import stop_with_parent
+from common.realtime import DEFAULT_PRIORITY, request_fifo
 from common.sensors_config import resolve_sensor_profile
 from common.ulog import ULogError
 from sitl.server import SimulatorServer
@@ -40,7 +41,8 @@ DEFAULT_LINKS = {DQFLIGHT: "udpin:127.0.0.1:4560",  # this project's FCU (PX4's 
 FIRMWARE_MODULES = {"ardupilot-json": "sitl.ardupilot_json", "px4-hil": "sitl.px4_hil"}
 # Options that only the dqflight protocol takes (the firmware protocols refuse them): the
 # firmware sets the rates and drives the clock.
-DQFLIGHT_ONLY = ("realtime", "control_rate", "hil_sensor_hz", "resend_ms")
+DQFLIGHT_ONLY = ("realtime", "rt_priority", "control_rate", "hil_sensor_hz", "resend_ms")
+SITL_PRIORITY = DEFAULT_PRIORITY - 1  # the world's clock, just below the controller's loop
 
 
 class FirmwareServer(Protocol):
@@ -84,6 +86,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "udpin:127.0.0.1:4560, ardupilot-json udpin:127.0.0.1:9002, px4-hil "
                         "tcpin:127.0.0.1:4560)")
     p.add_argument("--realtime", action="store_true", help="pace by the wall clock")
+    p.add_argument("--rt-priority", type=int, default=None, metavar="P",
+                   help="with --realtime: the physics loop's SCHED_FIFO priority, 1..99, 0 "
+                        f"for normal scheduling (default {SITL_PRIORITY}, below fcu's; where "
+                        "it is not granted the loop runs at normal priority and says so)")
     p.add_argument("--truth-log", type=Path,
                    help="write the ground-truth log (ULog) here, e.g. truth.ulg")
     p.add_argument("--end-time", type=float, metavar="S",
@@ -137,6 +143,10 @@ def _check_protocol_options(args: argparse.Namespace) -> None:
         args.hil_sensor_hz = 100.0
     if args.resend_ms is None:
         args.resend_ms = 5.0
+    if args.rt_priority is None:
+        args.rt_priority = SITL_PRIORITY
+    if not 0 <= args.rt_priority <= 99:
+        raise ConfigError(f"--rt-priority: expected 0..99, got {args.rt_priority}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -208,6 +218,10 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, stop)
     print(f"sitl: serving {scenario.name} on {args.link} "
           f"({'real time' if args.realtime else 'lockstep'})", flush=True)
+    if args.realtime:  # the physics loop sleeps between steps: it may run ahead of others
+        refused = request_fifo(args.rt_priority)
+        print(f"sitl: loop scheduled SCHED_FIFO {args.rt_priority}" if not refused else
+              f"sitl: loop at normal priority: real-time priority {refused}", flush=True)
     server.run()
     if args.stats is not None:
         tmp = args.stats.with_suffix(".tmp")
