@@ -1,11 +1,13 @@
 """The console scripts `fcu`, `sitl` and `gcs`: each imports its program, then runs it.
 
 Importing a program loads numpy, numba and its compiled kernels, which takes a while on a
-busy machine. For `fcu` and `sitl` a Ctrl-C or SIGTERM in that time is only recorded
-(`common.startup`; raised, it could be lost inside numba's ctypes callbacks), and after the
-import, or in `main` before its loop, the program says "<prog>: stopped while starting" and
-exits 0; their loops stop on SIGINT and SIGTERM themselves. From `gcs` a Ctrl-C is a
-KeyboardInterrupt: "gcs: interrupted", exit 130, the shell's code for SIGINT.
+busy machine. A Ctrl-C or SIGTERM in that time is only recorded (`common.startup`; raised,
+it could land inside numba's ctypes callbacks, which print it as an ignored exception with
+its traceback and drop it), and after the import the program says "<prog>: stopped while
+starting" and exits 0. `fcu` and `sitl` go on recording until their loops stop on SIGINT and
+SIGTERM themselves (in `main` before the loop: the same words). From `gcs`, once imported, a
+Ctrl-C is a KeyboardInterrupt again: "gcs: interrupted", exit 130, the shell's code for
+SIGINT.
 """
 
 from __future__ import annotations
@@ -17,10 +19,11 @@ from common import startup
 
 
 def _run(prog: str, module: str, *, loop_handles_sigint: bool) -> int:
-    if loop_handles_sigint:
-        startup.guard()
+    startup.guard()
     try:
         main = importlib.import_module(module).main
+        if not loop_handles_sigint:
+            startup.release()  # a stop recorded meanwhile raises here
     except KeyboardInterrupt:
         print(f"{prog}: stopped while starting", file=sys.stderr, flush=True)
         return 0

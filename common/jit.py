@@ -21,6 +21,8 @@ from typing import Any, TypeVar, cast
 
 import numba
 
+from common.startup import sigint_deferred
+
 ROOT = Path(__file__).resolve().parent.parent
 KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layouts.py",
                   "common/quaternion.py", "fcu/dualquat.py",
@@ -64,7 +66,8 @@ def warm_up(name: str, call: Callable[[], object]) -> None:
         return
     _warmed.add(name)
     t0 = time.perf_counter()
-    call()
+    with sigint_deferred():  # a Ctrl-C meanwhile raised after, not inside numba's callbacks
+        call()
     _compile_s[0] += time.perf_counter() - t0
 
 

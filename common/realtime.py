@@ -33,3 +33,10 @@ def request_fifo(priority: int) -> str:
     except OSError as exc:  # EPERM without CAP_SYS_NICE or RLIMIT_RTPRIO
         return exc.strerror or type(exc).__name__
     return ""
+
+
+def schedule_loop(prog: str, priority: int) -> None:
+    """`request_fifo` for a program's real-time loop, said in one line either way."""
+    refused = request_fifo(priority)
+    print(f"{prog}: loop scheduled SCHED_FIFO {priority}" if not refused else
+          f"{prog}: loop at normal priority: real-time priority {refused}", flush=True)

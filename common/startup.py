@@ -13,8 +13,15 @@ flag, and the program looks at it where it is safe (`stop_requested`) and then s
 from __future__ import annotations
 
 import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from types import FrameType
+from typing import Any
 
 _pending: list[int] = []
+_Handler = Callable[[int, FrameType | None], Any] | int | signal.Handlers | None
+_before: dict[int, _Handler] = {}  # the handlers `guard` replaced
 
 
 def _record(signum: int, _frame: object) -> None:
@@ -24,11 +31,46 @@ def _record(signum: int, _frame: object) -> None:
 def guard() -> None:
     """Record SIGINT and SIGTERM from now on (idempotent); SIGINT stays ignored where it was
     ignored at start."""
-    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-        signal.signal(signal.SIGINT, _record)
-    signal.signal(signal.SIGTERM, _record)
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        current = signal.getsignal(signum)
+        if current is _record or (signum == signal.SIGINT and current is signal.SIG_IGN):
+            continue
+        _before[signum] = current
+        signal.signal(signum, _record)
+
+
+def release() -> None:
+    """The handlers `guard` replaced put back (a program whose Ctrl-C is a
+    KeyboardInterrupt from here on); KeyboardInterrupt at once if a stop was recorded
+    meanwhile (one that came between a last look and this call is not lost)."""
+    for signum, handler in _before.items():
+        signal.signal(signum, handler)
+    _before.clear()
+    if _pending:
+        raise KeyboardInterrupt
 
 
 def stop_requested() -> bool:
     """A SIGINT or SIGTERM arrived since `guard`."""
     return bool(_pending)
+
+
+@contextmanager
+def sigint_deferred() -> Iterator[None]:
+    """A Ctrl-C inside (numba loading or compiling kernels) recorded and raised as
+    KeyboardInterrupt when the block ends, not inside numba's ctypes callbacks (which print
+    it as an ignored exception with its traceback and drop it). Only where SIGINT is
+    Python's default KeyboardInterrupt, in the main thread: a program that guards or handles
+    it itself keeps its handler."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield
+        return
+    got: list[int] = []
+    signal.signal(signal.SIGINT, lambda signum, _frame: got.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if got:
+        raise KeyboardInterrupt

@@ -32,7 +32,7 @@ from common.links import LinkError, open_link, parse_url
 from common.mavlink import MAV, SigningKeyError, encoder, pack, read_signing_key
 from common.outcome import Event
 from common.parent import stop_with_parent
-from common.realtime import request_fifo
+from common.realtime import schedule_loop
 from common.ulog import ULogError
 from fcu.compose import fcu_pipeline, param_store, published_home
 from fcu.estimator.inputs import ImuInput, PoseInput
@@ -488,9 +488,7 @@ def main(argv: list[str] | None = None) -> int:
     if sim_port is not None:
         print(f"fcu: sim port {sim_port}", flush=True)
     if args.realtime:  # the loop sleeps between periods: it may run ahead of the machine
-        refused = request_fifo(args.rt_priority)
-        print(f"fcu: loop scheduled SCHED_FIFO {args.rt_priority}" if not refused else
-              f"fcu: loop at normal priority: real-time priority {refused}", flush=True)
+        schedule_loop("fcu", args.rt_priority)
     fc.run()
     print(f"fcu: stopped after {fc.steps} control steps; {fc.deadline_misses} deadline misses, "
           f"{fc.sim.resent_answers} answers re-sent, {fc.sim.rejected_bytes} bytes rejected",

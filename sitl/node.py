@@ -26,7 +26,7 @@ from common.cliargs import OneLineParser, check_output_path
 from common.config import ConfigError, Scenario, check_sensor_faults, load_scenario
 from common.links import LinkError, parse_url
 from common.parent import stop_with_parent
-from common.realtime import DEFAULT_PRIORITY, request_fifo
+from common.realtime import DEFAULT_PRIORITY, schedule_loop
 from common.sensors_config import resolve_sensor_profile
 from common.ulog import ULogError
 from sitl.server import SimulatorServer
@@ -218,10 +218,8 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, stop)
     print(f"sitl: serving {scenario.name} on {args.link} "
           f"({'real time' if args.realtime else 'lockstep'})", flush=True)
-    if args.realtime:  # the physics loop sleeps between steps: it may run ahead of others
-        refused = request_fifo(args.rt_priority)
-        print(f"sitl: loop scheduled SCHED_FIFO {args.rt_priority}" if not refused else
-              f"sitl: loop at normal priority: real-time priority {refused}", flush=True)
+    if args.realtime:  # the loop sleeps between periods: it may run ahead of the machine
+        schedule_loop("sitl", args.rt_priority)
     server.run()
     if args.stats is not None:
         tmp = args.stats.with_suffix(".tmp")
