@@ -20,7 +20,11 @@ line, and re-sends the same frame after a second without one. Here:
   between its last two newlines, and its parser skips exactly `":` after a key, so no
   spaces): timestamp (s), imu gyro (rad/s) and accel_body (specific force, m/s^2) in body
   FRD, position (m) and velocity (m/s) in local NED from the home, quaternion NED <- FRD
-  (w, x, y, z). ArduPilot makes GPS, barometer and compass from these;
+  (w, x, y, z). ArduPilot makes GPS, barometer and compass from these. A touchdown's
+  velocity change is in accel_body spread evenly over CONTACT_SPREAD_S (`ContactSpread`),
+  not in the one frame it happened in: ArduPilot's IMUs sample the latest frame on their
+  own clocks (1 kHz and 800 Hz), so a one-frame impulse was taken once, twice or not at
+  all, and EKF3's height after a landing was then off by up to 0.37 m;
 - anything else on the port (a wrong magic, a short or long datagram) is counted and
   ignored.
 
@@ -45,7 +49,15 @@ from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
 from common.links import LinkError, UdpLink, open_link, parse_url
 from common.mavlink import MAV
 from sitl.actuator_faults import ActuatorFaults
-from sitl.plant import ActuatorCommand, Plant, PlantState, initial_state, scenario_plant
+from sitl.plant import (
+    ActuatorCommand,
+    ContactSpread,
+    Plant,
+    PlantState,
+    Vec3,
+    initial_state,
+    scenario_plant,
+)
 from sitl.rotor_layout import rotors_for_outputs
 from sitl.truth_log import TruthLog, flushed
 
@@ -63,6 +75,7 @@ PWM_FULL_US = 2000  # at or above: w_max (MOT_PWM_MAX)
 # seen from above (+1 counter-clockwise, -1 clockwise).
 ARDUCOPTER_HEXA_X: tuple[tuple[float, int], ...] = (
     (90.0, -1), (-90.0, 1), (-30.0, -1), (150.0, 1), (30.0, 1), (-150.0, -1))
+CONTACT_SPREAD_S = 0.05  # a touchdown's deceleration, as the px4-default sensor profile has it
 LOG_BATCH = 64  # truth records handed to the kernel together (and whenever the link idles)
 
 
@@ -111,11 +124,11 @@ def rotor_speeds(pwm_us: tuple[int, ...], rotor_of_motor: tuple[int, ...],
 
 
 def state_json(timestamp_s: float, plant: Plant, s: PlantState,
-               prev: PlantState | None = None) -> bytes:
-    """The JSON line ArduPilot reads for the state `s`, between newlines, compact; with
-    `prev` (the state one step before) the accelerometer holds a touchdown's impulse."""
+               contact_dv_enu: Vec3 = (0.0, 0.0, 0.0)) -> bytes:
+    """The JSON line ArduPilot reads for the state `s`, between newlines, compact; the
+    accelerometer holds `contact_dv_enu` (ENU m/s) of ground impulse over the step."""
     gx, gy, gz = flu_to_frd(s.omega_flu_rad_s)
-    ax, ay, az = flu_to_frd(plant.specific_force_flu(s, prev))
+    ax, ay, az = flu_to_frd(plant.specific_force_flu(s, contact_dv_enu=contact_dv_enu))
     px, py, pz = enu_to_ned(s.p_enu_m)
     vx, vy, vz = enu_to_ned(s.v_enu_m_s)
     qw, qx, qy, qz = q_enu_flu_to_ned_frd(s.q_enu_flu)
@@ -152,6 +165,7 @@ class JsonPhysics:
         self.time_offset_us = 0  # truth-log clock at the latest restart
         self._session_steps = 0  # steps since the latest restart (each sent as dt + 0.5 us)
         self._tilts = (0.0,) * scenario.vehicle.n_rotors
+        self._contact = ContactSpread(round(CONTACT_SPREAD_S * 1e6))
 
     def _plant(self, dt_us: int) -> Plant:
         plant = self._plants.get(dt_us)
@@ -184,7 +198,8 @@ class JsonPhysics:
         self.state = plant.step(self.state, cmd)
         self.steps += 1
         self._session_steps += 1
-        self.last_answer = state_json(self.timestamp_s(), plant, self.state, prev)
+        dv = self._contact.take(plant.contact_dv_enu(prev, self.state), plant.dt_us)
+        self.last_answer = state_json(self.timestamp_s(), plant, self.state, dv)
         return self.last_answer, True
 
     def _start_flight(self) -> None:
@@ -204,6 +219,7 @@ class JsonPhysics:
         self.faults = ActuatorFaults(self.scenario.actuator_faults)
         self.flight_start_us = None
         self._session_steps = 0
+        self._contact = ContactSpread(round(CONTACT_SPREAD_S * 1e6))
         self.last_count = None
 
     def log_state(self) -> PlantState:

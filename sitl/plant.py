@@ -162,6 +162,33 @@ class ContactImpulses:
         return dv
 
 
+class ContactSpread:
+    """Touchdown impulses spread evenly over `spread_us` from the sample they came in (a
+    landing gear's compliance stretches a real touchdown's deceleration over tens of
+    milliseconds): `take(dv, dt_us)` is the part that falls in a sample of dt_us; the parts
+    sum to each impulse. 0: each impulse all in its own sample."""
+
+    def __init__(self, spread_us: int) -> None:
+        self.spread_us = spread_us
+        self._spreading: list[tuple[Vec3, int]] = []  # [impulse, us still to report]
+
+    def take(self, dv: Vec3, dt_us: int) -> Vec3:
+        if self.spread_us <= 0:
+            return dv
+        if dv != (0.0, 0.0, 0.0):
+            self._spreading.append((dv, self.spread_us))
+        out = [0.0, 0.0, 0.0]
+        left = []
+        for whole, rest_us in self._spreading:
+            part = min(dt_us, rest_us) / self.spread_us
+            for i in range(3):
+                out[i] += whole[i] * part
+            if rest_us > dt_us:
+                left.append((whole, rest_us - dt_us))
+        self._spreading = left
+        return (out[0], out[1], out[2])
+
+
 class Plant:
     """Fixed-step simulator; `step` is a pure function of (state, command)."""
 

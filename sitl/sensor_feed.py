@@ -37,7 +37,7 @@ from common.mavlink import MAV
 from common.quaternion import Vec3, q_conj, q_exp, q_log, q_mul, q_normalize
 from common.sensors_config import IMU_RATE_MIN_HZ, SensorProfile, check_servable
 from common.simlink import HilSensor, Odometry, pose_covariance
-from sitl.plant import ContactImpulses, Plant, PlantState
+from sitl.plant import ContactImpulses, ContactSpread, Plant, PlantState
 from sitl.sensors import ImuSample, SampleClock, SensorSuite, sensor_rng
 
 SEA_LEVEL_HPA = 1013.25
@@ -105,9 +105,7 @@ class SensorFeed:
         self._mag: Vec3 | None = None  # a magnetometer sample for the next HIL_SENSOR
         self._baro_alt_m: float | None = None  # likewise the barometer's
         self._contacts = ContactImpulses()  # ground impulses since the last IMU sample
-        # Impulses being spread (contact_spread_s > 0): [dv, us still to report].
-        self._spreading: list[tuple[Vec3, int]] = []
-        self._spread_us = round(profile.imu.accel.contact_spread_s * 1e6)
+        self._spread = ContactSpread(round(profile.imu.accel.contact_spread_s * 1e6))
         self.true_f_flu_m_s2: Vec3 = (0.0, 0.0, 0.0)  # the last IMU sample's, before noise
         self.flight_start_us: int | None = None
         # The faults as windows on the simulation clock [start_us, end_us) (end None: open).
@@ -175,9 +173,7 @@ class SensorFeed:
         barometer samples not sent yet."""
         t, dt_us = self.imu_clock.take()
         t_s = t * 1e-6
-        dv = self._contacts.take()
-        if self._spread_us > 0:
-            dv = self._spread(dv, dt_us)
+        dv = self._spread.take(self._contacts.take(), dt_us)
         f = self.plant.specific_force_flu(s, contact_dv_enu=dv, interval_s=dt_us * 1e-6)
         self.true_f_flu_m_s2 = f
         imu = self.suite.imu.sample(t_s, dt_us * 1e-6, s.omega_flu_rad_s, f)
@@ -196,22 +192,7 @@ class SensorFeed:
         return HilSensor(t, flu_to_frd(imu.f_flu_m_s2), flu_to_frd(imu.omega_flu_rad_s), mag,
                          pressure, alt, TEMPERATURE_C, fields)
 
-    def _spread(self, dv: Vec3, dt_us: int) -> Vec3:
-        """The part of the impulses being spread that falls in a sample of dt_us (a new
-        impulse dv starts with it): dv x min(dt, left) / spread each, summing to dv."""
-        if dv != (0.0, 0.0, 0.0):
-            self._spreading.append((dv, self._spread_us))
-        out = [0.0, 0.0, 0.0]
-        left = []
-        for whole, rest_us in self._spreading:
-            part = min(dt_us, rest_us) / self._spread_us
-            for i in range(3):
-                out[i] += whole[i] * part
-            if rest_us > dt_us:
-                left.append((whole, rest_us - dt_us))
-        self._spreading = left
-        return (out[0], out[1], out[2])
-
+        dv = self._spread.take(self._contacts.take(), dt_us)
     def period(self, states: Sequence[PlantState]) -> list[HilSensor | Odometry]:
         """The messages for these physics-step states (times increasing, each once): the
         samples due since the previous state, in time order; at one instant a pose delivered

@@ -324,8 +324,8 @@ def test_sensor_profiles_are_refused(scenario) -> None:
 
 
 def test_a_touchdown_is_in_the_accelerometer():
-    """Given the state before a touchdown step, then accel_body holds the contact's impulse
-    (the velocity change over the step), without it the resting g."""
+    """Given the impulse of a touchdown step, then accel_body holds it (the velocity
+    change over the step), without it the resting g."""
     from sitl.ardupilot_json import state_json
     from sitl.plant import ActuatorCommand, Plant
 
@@ -334,7 +334,32 @@ def test_a_touchdown_is_in_the_accelerometer():
         v_enu_m_s=(0.0, 0.0, -1.0))
     b = plant.step(a, ActuatorCommand((0.0,) * 6, (0.0,) * 6))
     assert b.landed
-    with_impulse = json.loads(state_json(0.0, plant, b, a).strip())["imu"]["accel_body"]
+    dv = plant.contact_dv_enu(a, b)
+    with_impulse = json.loads(state_json(0.0, plant, b, dv).strip())["imu"]["accel_body"]
     resting = json.loads(state_json(0.0, plant, b).strip())["imu"]["accel_body"]
     assert resting == pytest.approx([0.0, 0.0, -plant.g])
     assert with_impulse == pytest.approx([0.0, 0.0, -plant.g - 1.0 / (plant.dt_us * 1e-6)])
+
+
+def test_a_touchdown_reaches_arducopter_spread_over_50_ms_in_full(scenario):
+    """Given a descent at 1 m/s onto the ground through the JSON protocol (1200 Hz frames),
+    then the frames' accel_body beyond the resting g integrates to the velocity change
+    (1 m/s up) and is spread over CONTACT_SPREAD_S (60 frames, none above 1/20 of it):
+    ArduPilot's IMUs sample the latest frame at their own rates, and a one-frame impulse
+    was taken 0, 1 or 2 times (EKF3 then 0.33-0.37 m off the ground after landings)."""
+    from sitl.ardupilot_json import CONTACT_SPREAD_S
+
+    phys = JsonPhysics(scenario)
+    phys.state = phys.plant.initial_state((0.0, 0.0, 0.0005), on_ground=False)._replace(
+        v_enu_m_s=(0.0, 0.0, -1.0))
+    g = phys.plant.g
+    excess = []
+    for k in range(200):
+        answer_text, _ = phys.frame(frame(k))
+        excess.append(-json.loads(answer_text.strip())["imu"]["accel_body"][2] - g)
+    dt = phys.plant.dt_us * 1e-6
+    landed_at = next(k for k, x in enumerate(excess) if abs(x) > 1.0)
+    assert sum(excess) * dt == pytest.approx(1.0, rel=1e-3)  # the whole 1 m/s, once
+    assert max(excess) * dt < 1.0 / 20
+    spread = [k for k, x in enumerate(excess) if abs(x) > 1.0]
+    assert spread[-1] - landed_at + 1 == round(CONTACT_SPREAD_S / dt)
