@@ -51,6 +51,7 @@ class FlightSettings:
 
 
 ANCHOR_LEAD_US = 10_000  # beside the loop: a new offboard sample is anchored this far ahead
+COAST_MAX_US = 100_000  # a coast whose plan is not in by then is planned in the loop (late work)
 
 
 class ModeReferences:
@@ -92,6 +93,9 @@ class ModeReferences:
         # HOLD brakes to `hold` (where the reference stops) with the same shaper
         self.hold_sp: offboard.Shaped | None = None
         self._hold_shaped: Reference | None = None  # the hold that hold_sp brakes to
+        self._braking: object | None = None  # HOLD's brake under way beside the loop
+        self._braked: tuple[offboard.Shaped, Reference] | None = None  # taken in, not flown
+        self.inline_plans = 0  # coasts planned in the loop: their work came too late
         self.state: VehicleState | None = None
         self.last_ref: Reference | None = None
         self.clock_us = 0  # the flight clock at the latest input (events are stamped with it)
@@ -173,8 +177,11 @@ class ModeReferences:
         if sp is None:
             start = self.last_ref if self.armed and self.last_ref is not None \
                 else self._current_pose_ref()
-            sp = offboard.start(t_us, start, lim, self._envelope())
             self._anchoring = self._anchored = None
+            if self.work.immediate or not offboard.moving(start):
+                sp = offboard.start(t_us, start, lim, self._envelope())
+            else:  # planned beside (`_anchor_beside`): the reference coasts meanwhile
+                sp = offboard.coast(t_us, start)
         if self.work.immediate:
             self.offboard_sp, ref = offboard.advance(sp, t_us, self.offboard.target(), lim,
                                                      self._envelope())
@@ -190,20 +197,41 @@ class ModeReferences:
                        lim: StickSettings) -> tuple[offboard.Shaped, Reference]:
         """The plan in force flown on; a new sample anchored by `work` at ANCHOR_LEAD_US
         ahead, from the reference this plan gives there (`offboard.advance` to that time:
-        continuous), and flown from then on. An anchor that came too late is planned
-        again further ahead; one sample at a time (the newest when the last is in)."""
+        continuous), and flown from then on; with no new sample, a coast (OFFBOARD entered
+        moving) is given its start there (`offboard.start_ahead`). An anchor that came too
+        late is planned again further ahead; one at a time (the newest sample when the last
+        is in); a coast still unplanned after COAST_MAX_US is planned in this step."""
         anchored = self._anchored
         if anchored is not None and t_us >= anchored.t_us:
             sp, self._anchored = anchored, None
-        sp, ref = offboard.advance(sp, t_us, None, lim)
         target = self.offboard.target()
-        if target is not None and target.seq != sp.seq and self._anchoring is None \
-                and self._anchored is None:
-            job = self._anchoring = object()
+        if self._coasted_too_long(sp, t_us):
+            self._anchoring = self._anchored = None
+            return offboard.start_ahead(sp, t_us, lim, self._envelope())
+        sp, ref = offboard.advance(sp, t_us, None, lim)
+        if self._anchoring is not None or self._anchored is not None:
+            return sp, ref
+        job = object()
+        if target is not None and target.seq != sp.seq:
+            self._anchoring = job
             self.work.submit(offboard.advance, (sp, t_us + ANCHOR_LEAD_US, target, lim,
                                                 self._envelope()),
                              lambda outcome: self._anchored_in(job, outcome))
+        elif sp.seq == offboard.COAST:
+            self._anchoring = job
+            self.work.submit(offboard.start_ahead, (sp, t_us + ANCHOR_LEAD_US, lim,
+                                                    self._envelope()),
+                             lambda outcome: self._anchored_in(job, outcome))
         return sp, ref
+
+    def _coasted_too_long(self, sp: offboard.Shaped, t_us: int) -> bool:
+        """A coast whose plan has not come within COAST_MAX_US (the work is late or failed):
+        it is planned in the loop, counted in `inline_plans` and said."""
+        if sp.seq != offboard.COAST or t_us - sp.anchor_us < COAST_MAX_US:
+            return False
+        self.inline_plans += 1
+        self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, "work late: planned in the loop")
+        return True
 
     def _anchored_in(self, job: object,
                      outcome: Outcome[tuple[offboard.Shaped, Reference]]) -> None:
@@ -250,21 +278,62 @@ class ModeReferences:
     def _hold_ref(self, t_us: int) -> Reference:
         """HOLD: a reference that was moving brakes within OFFBOARD's limits to where it
         comes to rest, and `hold` becomes that pose (PX4's and ArduPilot's hold); one at
-        rest is held as it is. A new `hold` (a mode change, a failsafe) brakes afresh."""
+        rest is held as it is. A new `hold` (a mode change, a failsafe) brakes afresh.
+        Where the work runs beside the loop the brake is planned there (`_brake_beside`)
+        and the reference coasts until it is in."""
+        lim = offboard.limits(self.flight.sticks)
         if self.hold is None:
             self.hold = self._current_pose_ref()
         if self._hold_shaped is not self.hold:
             start = self.last_ref if self.armed and self.last_ref is not None else self.hold
-            self.hold_sp, self.hold = offboard.brake(t_us, start,
-                                                     offboard.limits(self.flight.sticks),
-                                                     self._envelope())
+            self._braking = self._braked = None
+            if self.work.immediate or not offboard.moving(start):
+                self.hold_sp, self.hold = offboard.brake(t_us, start, lim, self._envelope())
+            else:
+                self.hold_sp = offboard.coast(t_us, start)
             self._hold_shaped = self.hold
         assert self.hold_sp is not None
+        if self.hold_sp.seq == offboard.COAST:
+            self._brake_beside(t_us, lim)
         if offboard.settled(self.hold_sp):
             return self.hold
-        self.hold_sp, ref = offboard.advance(self.hold_sp, t_us, None,
-                                             offboard.limits(self.flight.sticks))
+        self.hold_sp, ref = offboard.advance(self.hold_sp, t_us, None, lim)
         return ref
+
+    def _brake_beside(self, t_us: int, lim: StickSettings) -> None:
+        """While HOLD coasts: its brake planned by `work` at ANCHOR_LEAD_US ahead from where
+        the coast is then (`offboard.brake_ahead`), taken in at its time; one that came too
+        late is planned again; after COAST_MAX_US it is planned in this step."""
+        sp = self.hold_sp
+        assert sp is not None
+        braked = self._braked
+        if braked is not None and t_us >= braked[0].t_us:
+            self._braked = None
+            self.hold_sp, self.hold = braked
+        elif self._coasted_too_long(sp, t_us):
+            self._braking = self._braked = None
+            self.hold_sp, self.hold = offboard.brake_ahead(sp, t_us, lim, self._envelope())
+        elif self._braking is None and braked is None:
+            job = self._braking = object()
+            self.work.submit(offboard.brake_ahead, (sp, t_us + ANCHOR_LEAD_US, lim,
+                                                    self._envelope()),
+                             lambda outcome: self._braked_in(job, outcome))
+            return
+        else:
+            return
+        self._hold_shaped = self.hold
+
+    def _braked_in(self, job: object,
+                   outcome: Outcome[tuple[offboard.Shaped, Reference]]) -> None:
+        if job is not self._braking:
+            return  # a newer hold asked meanwhile
+        self._braking = None
+        if outcome.value is None:
+            self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, f"hold: {outcome.error}")
+        elif outcome.value[0].t_us > self.clock_us:  # else too late: planned again
+            self._braked = outcome.value
+        else:
+            self.late_anchors += 1
 
     def _mission_ref(self, t_flight_s: float) -> Reference:
         executor = self.executor

@@ -9,8 +9,9 @@ stamp, answered with HIL_ACTUATOR_CONTROLS; before the flight starts (armed and 
 OFFBOARD, LAND, TAKEOFF, RTL or POSCTL) states are not answered, so simulated time stands
 still. A simulator that stops answering is reported ("simulator not responding"), never a
 reason to disarm.
-Real time: a fixed-rate loop on the monotonic clock, integrating with the measured period
-(clamped to `MAX_DT_PERIODS`). Heartbeat, telemetry and link timeouts: the wall clock.
+Real time: a fixed-rate loop on the monotonic clock (`fcu.deadlines`), integrating with the
+measured period (clamped to `MAX_DT_PERIODS`). Heartbeat, telemetry and link timeouts: the
+wall clock.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from common.parent import stop_with_parent
 from common.realtime import schedule_loop
 from common.ulog import ULogError
 from fcu.compose import fcu_pipeline, param_store, published_home
+from fcu.deadlines import Deadlines
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.gcs_server import COMPONENT, GcsServer
 from fcu.mission.limits import MissionLimits
@@ -105,7 +107,7 @@ class FlightController:
         self.time_us = 0  # the flight clock: simulated in lockstep, monotonic in real time
         self.input_us = 0.0  # estimator work on inputs since the last control step
         self.steps = 0
-        self.deadline_misses = 0
+        self.deadlines = Deadlines(self.period_us * 1e-6)  # real time: misses
         self.events: list[Event] = []  # everything the pipeline said, on the flight clock
         self.sim_heartbeat_due = 0.0
         self.last_sim_rx_s = time.monotonic()
@@ -356,12 +358,7 @@ class FlightController:
                 self._measure_rtt()
             now = time.monotonic()
             if not self.lockstep and now >= next_tick:
-                late = now - next_tick
-                if late > 0.5 * period_s:
-                    self.deadline_misses += 1
-                skipped = int(late // period_s)
-                self.deadline_misses += skipped
-                next_tick += (skipped + 1) * period_s
+                next_tick = self.deadlines.step(now, next_tick, self.boot_s)
                 dt_s = min(max(now - last_tick, 0.0), MAX_DT_PERIODS * period_s) or period_s
                 last_tick = now
                 self.time_us = round((now - self.boot_s) * 1e6)
@@ -383,7 +380,8 @@ class FlightController:
 
     def stats(self) -> dict[str, Any]:
         pipe, server, sim = self.pipeline, self.server, self.sim
-        return {"steps": self.steps, "deadline_misses": self.deadline_misses,
+        return {"steps": self.steps, "deadline_misses": self.deadlines.misses,
+                "misses": self.deadlines.first,
                 "compile_time_s": compile_time_s(),
                 "signing_rejects": server.signing_rejects,
                 "resent_answers": sim.resent_answers,
@@ -397,7 +395,8 @@ class FlightController:
                 "tilt_rate_limited_steps": pipe.tilt_rate_limited_steps,
                 "lockstep": self.lockstep,
                 "sim_rtt": self.rtt,
-                "work": self.work.stats(),
+                "work": {**self.work.stats(), "late_anchors": pipe.commander.late_anchors,
+                         "inline_plans": pipe.commander.inline_plans},
                 "timed_steps": self.timed_steps,
                 "stage_us": {k: v / max(self.timed_steps, 1) * 1e-3
                              for k, v in self.stage_ns.items()},
@@ -490,7 +489,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.realtime:  # the loop sleeps between periods: it may run ahead of the machine
         schedule_loop("fcu", args.rt_priority)
     fc.run()
-    print(f"fcu: stopped after {fc.steps} control steps; {fc.deadline_misses} deadline misses, "
+    print(f"fcu: stopped after {fc.steps} control steps; {fc.deadlines.misses} deadline misses, "
           f"{fc.sim.resent_answers} answers re-sent, {fc.sim.rejected_bytes} bytes rejected",
           flush=True)
     return 0

@@ -66,6 +66,7 @@ ROTATION_ACC_DEG_S2 = 180.0
 # stream re-sent through the wire does not re-plan at every sample.
 SAME_M = 2e-5
 SAME_RAD = 2e-5
+COAST = -2  # Shaped.seq of a coast (`coast`): no sample, no plan yet
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
@@ -145,6 +146,37 @@ def settled(s: Shaped) -> bool:
     """The reference is the sample's pose, still: no approach under way, no feed-forward."""
     done = s.plan is None or (s.t_us - s.plan_us) * 1e-6 >= s.plan.duration_s
     return done and not any((*s.sp.v, *s.sp.a, *s.sp.w))
+
+
+def moving(ref: Reference) -> bool:
+    """`ref` has a velocity, acceleration, body rate or its derivative: starting or braking
+    from it needs a plan (from a still reference it is none, `approach.plan`)."""
+    return any((*ref.v_enu_m_s, *ref.a_enu_m_s2, *ref.omega_flu_rad_s,
+                *ref.omega_dot_flu_rad_s2))
+
+
+def coast(t_us: int, ref: Reference) -> Shaped:
+    """`ref` extrapolated at its velocity, acceleration and body rate (seq COAST, no plan):
+    what flies for the moments a start or a brake is planned beside the control loop
+    (`start_ahead`, `brake_ahead`), continuous in pose, velocity, acceleration and rate."""
+    sp = Setpoint(ref.p_enu_m, ref.v_enu_m_s, ref.a_enu_m_s2, ref.q_enu_flu,
+                  ref.omega_flu_rad_s)
+    return Shaped(t_us, COAST, t_us, sp, None, t_us, ref)
+
+
+def start_ahead(s: Shaped, t_us: int, lim: StickSettings, env: Envelope | None = None
+                ) -> tuple[Shaped, Reference]:
+    """OFFBOARD's start (`start`) planned at t_us, ahead, from where `s` is then; (the
+    shaper, that reference). A job beside the loop (`fcu.work`)."""
+    ref = _reference(s, t_us)
+    return start(t_us, ref, lim, env), ref
+
+
+def brake_ahead(s: Shaped, t_us: int, lim: StickSettings, env: Envelope | None = None
+                ) -> tuple[Shaped, Reference]:
+    """HOLD's brake (`brake`) planned at t_us, ahead, from where `s` is then; (the shaper,
+    the pose held). A job beside the loop (`fcu.work`)."""
+    return brake(t_us, _reference(s, t_us), lim, env)
 
 
 def start(t_us: int, ref: Reference, lim: StickSettings, env: Envelope | None = None

@@ -95,7 +95,8 @@ def _stream_until(s: Stack, target_ned: tuple[float, float, float], mode_set: bo
 def test_realtime_offboard_samples_are_anchored_beside_the_loop(tmp_path):
     """Given real time (`beside`), OFFBOARD from a hover and set-points 1 m north then 1 m
     east, then the vehicle gets to each, and each new sample's anchor ran while the loop
-    took control steps (`advance` jobs in work.history, each with at least one step)."""
+    took control steps (`advance` jobs in work.history, each with at least one step); HOLD
+    asked at speed brakes to rest, its brake planned while the loop stepped."""
     stats_path = tmp_path / "fcu.json"
     s = launch(tmp_path, "case1_figure8", realtime=True, fcu_args=("--stats", str(stats_path)))
     try:
@@ -104,9 +105,17 @@ def test_realtime_offboard_samples_are_anchored_beside_the_loop(tmp_path):
         assert _stream_until(s, (0.0, 0.0, -1.5), False, lambda m: m.z < -1.4)
         assert _stream_until(s, (1.0, 0.0, -1.5), True, lambda m: m.x > 0.95)
         assert _stream_until(s, (1.0, 1.0, -1.5), True, lambda m: m.y > 0.95)
+        # HOLD asked on the way to a set-point 5 m further north, at speed: a brake
+        assert _stream_until(s, (6.0, 1.0, -1.5), True, lambda m: m.x > 2.0 and m.vx > 1.0)
+        assert sess.command(M.MAV_CMD_DO_SET_MODE, 1.0, *Mode.HOLD.value) == \
+            M.MAV_RESULT_ACCEPTED
+        until(lambda: s.wait_for(["LOCAL_POSITION_NED"], lambda m: abs(m.vx) < 0.05, 1.0),
+              "the vehicle at rest in HOLD", 20.0)
     finally:
         s.session.close()
         stop(s.procs)
     work = json.loads(stats_path.read_text())["work"]
     anchors = [j["steps"] for j in work["history"] if j["job"] == "advance"]
     assert len(anchors) >= 3 and min(anchors) >= 1 and work["failed"] == 0, work
+    brakes = [j["steps"] for j in work["history"] if j["job"] == "brake_ahead"]
+    assert len(brakes) == 1 and brakes[0] >= 1 and work["inline_plans"] == 0, work
