@@ -40,7 +40,6 @@ from fcu.deadlines import Deadlines
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.gcs_server import COMPONENT, GcsServer
 from fcu.mission.limits import MissionLimits
-from fcu.mission.start import warm as warm_plans
 from fcu.mission_protocol import MissionServer
 from fcu.node_args import DEFAULT_GCS, build_parser
 from fcu.onboard_log import OnboardLog, set_aside
@@ -48,6 +47,7 @@ from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.sim_bridge import Resent, SimBridge, StateSample
 from fcu.telemetry import Home, heartbeat
+from fcu.warm import warm as warm_plans
 from fcu.work import Work
 from fcu.work_process import make_work
 
@@ -331,10 +331,9 @@ class FlightController:
                 continue
             fds = {fd: entry for entry in links for fd in entry[1].filenos()}
             work_fds = self.work.filenos()  # a result of work beside the loop wakes it
-            # telemetry due goes out with the housekeeping: waking for it sooner only polls
-            wake = min(max(self.server.next_due(), next_housekeeping), next_housekeeping + 0.05)
-            if not self.lockstep:
-                wake = min(wake, next_tick)
+            # telemetry goes out with the housekeeping (real time: after a step), not sooner
+            wake = min(max(self.server.next_due(), next_housekeeping), next_housekeeping + 0.05) \
+                if self.lockstep else next_tick
             timeout = min(max(0.0, wake - now), 0.05)
             if self.lockstep and sim_link.spin and now - self.last_sim_rx_s < SPIN_S:
                 timeout = 0.0  # lockstep: the next state is microseconds away, poll for it
@@ -346,8 +345,7 @@ class FlightController:
                 os.sched_yield()  # polling: let a process that has work run on this core
             self.rx_ns = perf()
             if self.work.pending and self.work.take():  # results in, at a step boundary
-                self._timed_housekeeping(time.monotonic())  # their answers out at once
-                next_housekeeping = time.monotonic() + HOUSEKEEPING_S
+                next_housekeeping = 0.0  # their answers out at once (real time: after a step)
             for index, link in {fds[fd] for fd in readable if fd in fds}:
                 for peer, data in link.recv():
                     if index < 0:
@@ -357,14 +355,16 @@ class FlightController:
             if self.rtt_probes and self.sim_heard:
                 self._measure_rtt()
             now = time.monotonic()
+            stepped = self.lockstep or now >= next_tick
             if not self.lockstep and now >= next_tick:
                 next_tick = self.deadlines.step(now, next_tick, self.boot_s)
                 dt_s = min(max(now - last_tick, 0.0), MAX_DT_PERIODS * period_s) or period_s
                 last_tick = now
                 self.time_us = round((now - self.boot_s) * 1e6)
                 self._control_step(self.time_us, dt_s)
-            if now >= next_housekeeping or c.events or c.mission_events:
-                # Link-facing work at most every few ms: the lockstep path stays lean.
+            if stepped and (now >= next_housekeeping or c.events or c.mission_events):
+                # Link-facing work at most every few ms: the lockstep path stays lean; in
+                # real time right after a step, the most time before the next one is due.
                 self._timed_housekeeping(now)
                 next_housekeeping = now + HOUSEKEEPING_S
 

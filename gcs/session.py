@@ -43,6 +43,8 @@ TCP_CONNECT_S = 3.0  # a tcp: link that has not connected by then is reported, e
 TEXTS_KEPT = 256  # the latest STATUSTEXTs heard, with when (Session.texts)
 REFUSAL_TEXT_S = 0.3  # after a refusal, how long to listen for the STATUSTEXT saying why
 MAX_PARSERS = 64  # one parser per peer (byte stream); the oldest goes beyond this
+_COMMANDS = (MAV.MAVLINK_MSG_ID_COMMAND_LONG, MAV.MAVLINK_MSG_ID_COMMAND_INT,
+             MAV.MAVLINK_MSG_ID_SET_MODE)  # they change the state a HEARTBEAT reports
 
 if TYPE_CHECKING:
     class _MavFile:
@@ -248,6 +250,7 @@ class Session:
         self.heartbeat_msg: Any = None  # the vehicle heartbeat that wait_vehicle took
         self.heartbeat_at = 0.0  # and when (monotonic seconds)
         self.last_heard = 0.0  # the latest message of the target system (monotonic s)
+        self.commanded_at = 0.0  # the latest command sent (wall clock, as pymavlink stamps)
         self.autopilot: Autopilot | None = None  # which autopilot that heartbeat came from
         self._streams = _streams.Streams()  # what request_streams changed on the link
         self._stop = threading.Event()
@@ -269,6 +272,8 @@ class Session:
             self._stop.wait(self._period)
 
     def send(self, msg: Any) -> None:
+        if msg.get_msgId() in _COMMANDS:  # what the vehicle said before it may be stale now
+            self.commanded_at = time.time()
         with self.lock:
             self.conn.mav.send(msg)
         if self.tlog is not None:

@@ -116,10 +116,13 @@ def flight_state(session: Session) -> tuple[bool, int | None, float | None]:
     asked for (MAV_CMD_REQUEST_MESSAGE) and waited for up to STATE_S."""
     s = session
     armed = landed = height = None
-    last = s.conn.messages.get("HEARTBEAT")  # the link's latest: armed now, if it is fresh
+    # the link's latest HEARTBEAT tells the armed state without waiting when it is fresh and
+    # came after the latest command sent (an arm's COMMAND_ACK comes before its HEARTBEAT)
+    last = s.conn.messages.get("HEARTBEAT")
+    heard = getattr(last, "_timestamp", 0.0)
     if last is not None and last.get_srcSystem() == s.target_system and \
             last.get_srcComponent() == s.target_component and \
-            time.time() - getattr(last, "_timestamp", 0.0) < FRESH_HEARTBEAT_S:
+            time.time() - heard < FRESH_HEARTBEAT_S and heard > s.commanded_at:
         armed = bool(last.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
     asked = {M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: "EXTENDED_SYS_STATE",
              M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "GLOBAL_POSITION_INT"}
