@@ -47,7 +47,7 @@ __all__ = [
 Vec3 = tuple[float, float, float]
 
 # ----------------------------------------------------------------------------------------
-# Scenarios (MODEL.md section 5)
+# Scenarios (docs/model.md#scenarios)
 # ----------------------------------------------------------------------------------------
 
 CONTROLLERS = ("pid", "pd")
@@ -96,7 +96,7 @@ class Scenario:
     source: str = ""
     files: dict[str, str] = field(default_factory=dict)
     # The simulated sensors (config/sensors/): None or a kind "truth" profile means the
-    # exact state on the wire and no estimator (DESIGN.md section 3).
+    # exact state on the wire and no estimator (docs/simulator-link.md).
     sensors: SensorProfile | None = None
     # FCU parameters the run sets (PARAM_SET before the mission; the table [params]), e.g.
     # CA_LAG_COMP = 0 for the paper's plain allocation; names and ranges are the FCU's.

@@ -1,4 +1,4 @@
-"""Rotor geometry of a tilt-rotor multirotor (MODEL.md section 2), body frame FLU.
+"""Rotor geometry of a tilt-rotor multirotor (docs/model.md#geometry), body frame FLU.
 
 Arm i is rotated by Rz(gamma_i) Ry(beta_i); the rotor tilts about its arm axis a_i, and its
 thrust direction is n_i = cos(alpha_i) e_v,i + sin(alpha_i) e_l,i.

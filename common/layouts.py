@@ -138,7 +138,7 @@ CO_SIZE = CORE_OUT.size
 
 # ------------------------------------------------------------------ the plant (sitl.plant)
 
-# Force and torque per unit w^2 with the thrust along e_v and along e_l (MODEL.md 2).
+# Force and torque per unit w^2 with the thrust along e_v and along e_l (docs/model.md#geometry).
 PLANT_ROTOR = Layout(("f_v", 3), ("f_l", 3), ("tau_v", 3), ("tau_l", 3))
 PR_F_V, PR_F_L = PLANT_ROTOR.at("f_v"), PLANT_ROTOR.at("f_l")
 PR_TAU_V, PR_TAU_L = PLANT_ROTOR.at("tau_v"), PLANT_ROTOR.at("tau_l")

@@ -1,4 +1,5 @@
-"""How a run ends: the one divergence rule, the crash rule and the run status (DESIGN.md 6).
+"""How a run ends: the one divergence rule, the crash rule and the run status
+(docs/autopilot.md#how-a-run-ends).
 
 Used by the FCU's supervisor (divergence disarms), by the metrics (where the figures stop)
 and by every runner (the status of a run), so that each question has one answer.

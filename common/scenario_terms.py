@@ -1,4 +1,4 @@
-"""The time-tabled parts of a scenario (MODEL.md section 5), read from its TOML tables:
+"""The time-tabled parts of a scenario (docs/model.md#scenarios), read from its TOML tables:
 body-frame disturbance terms ([disturbance]), actuator faults ([[actuator_fault]]) and
 sensor faults ([[sensor_fault]]), each checked by `common.config_reader`."""
 
@@ -47,7 +47,7 @@ class ActuatorFault:
     rotor_off: the rotor's speed command is 0 (it spins down with its lag); rotor_stuck: the
     rotor keeps the speed it had at start_s; tilt_stuck: the servo keeps the tilt it had at
     start_s; tilt_off: the servo is unpowered, and as the plant has no dynamics about the
-    tilt axis (MODEL.md 2: a kinematic, rate-limited servo) it stays where it stopped, as
+    tilt axis (docs/model.md#plant: a kinematic, rate-limited servo) it stays where it stopped, as
     tilt_stuck does. From start_s until end_s (for ever by default).
     """
 

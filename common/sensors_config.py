@@ -70,7 +70,8 @@ class ImuConfig:
 
     @property
     def gyro_sigma_rad_s(self) -> float:
-        """White noise per sample: vibration_factor * N * sqrt(rate) (SENSORS.md)."""
+        """White noise per sample: vibration_factor * N * sqrt(rate) (docs/estimator.md:
+        the profiles and their sources)."""
         return self.vibration_factor * self.gyro.noise_density_rad_s_sqrt_hz * \
             math.sqrt(self.rate_hz)
 

@@ -6,7 +6,7 @@ pose), HIL_SENSOR (SITL -> FCU: IMU, magnetometer, barometer) and HIL_ACTUATOR_C
 Frames are standard MAVLink 2 (magic 0xFD, trailing-zero payload truncation, CRC-16/MCRF4XX
 with the message's CRC_EXTRA); layouts and CRC_EXTRA come from pymavlink's `common` dialect,
 so any MAVLink 2 parser reads what we write and we read any MAVLink 2 sender. Channel map of
-HIL_ACTUATOR_CONTROLS (DESIGN.md section 3): controls[0..5] = rotor speed / w_max (0..1),
+HIL_ACTUATOR_CONTROLS (docs/simulator-link.md): controls[0..5] = rotor speed / w_max (0..1),
 controls[6..11] = tilt angle in rad (continuous after unwrapping, a documented departure
 from the -1..1 convention of this SITL-only message); mode has SAFETY_ARMED when armed;
 flags bit 0 = lockstep.

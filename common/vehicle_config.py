@@ -1,4 +1,4 @@
-"""The vehicle's physical parameters (MODEL.md section 1) from TOML (config/vehicles/), read
+"""The vehicle's physical parameters (docs/model.md#vehicle) from TOML (config/vehicles/), read
 and checked by `common.config_reader`."""
 
 from __future__ import annotations

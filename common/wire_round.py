@@ -51,6 +51,6 @@ def q_enu_flu_as_wire(q_enu_flu: Quat) -> Quat:
 def rotor_speeds_as_wire(speeds_rad_s: tuple[float, ...],
                          w_max_rad_s: float) -> tuple[float, ...]:
     """Rotor speeds as HIL_ACTUATOR_CONTROLS carries them and the plant reads them back:
-    float32(speed / w_max) x w_max each (DESIGN.md section 3)."""
+    float32(speed / w_max) x w_max each (docs/simulator-link.md)."""
     return tuple([c * w_max_rad_s for c in f32s(tuple([w / w_max_rad_s
                                                          for w in speeds_rad_s]))])

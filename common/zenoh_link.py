@@ -1,4 +1,4 @@
-"""MAVLink 2 frames over Zenoh (DESIGN.md section 7): `zenoh:PREFIX[@ENDPOINT,...]`.
+"""MAVLink 2 frames over Zenoh (docs/fleets.md): `zenoh:PREFIX[@ENDPOINT,...]`.
 
 Keys: a vehicle publishes on `PREFIX/<sysid>/out`, listens on `PREFIX/<sysid>/in` and holds
 the liveliness token `PREFIX/<sysid>/alive`; ground stations listen on `PREFIX/*/out` (or one

@@ -1,8 +1,8 @@
 """The commanded actuators against their models, in flight (parameter COM_ACT_RATE_T).
 
 The FCU has no servo feedback, so each tilt servo is modelled from the commands sent, by the
-plant's law (MODEL.md 2, sitl/plant.py `tilt_servo_kernel`): over a control period of dt the
-servo moves towards the held command by at most R dt (R = tilt_rate_max_rad_s) and lands on
+plant's law (docs/model.md#plant, sitl/plant.py `tilt_servo_kernel`): over a control period of
+dt the servo moves towards the held command by at most R dt (R = tilt_rate_max_rad_s) and lands on
 it when it is closer; tilts are continuous (unwrapped), never wrapped. A servo is
 rate-limited in a period when its model cannot reach the command in that period,
 |cmd - model| > R dt (to TILT_TOLERANCE_RAD). Below the allocation's hold speed a rotor's

@@ -1,5 +1,5 @@
 """Control allocation for tilt-rotors: geometry -> A (eq. 27) -> pseudo-inverse (eq. 28) ->
-rotor speeds and tilts (eq. 29) -> unwrapped tilts (Algorithm 1, corrected; MODEL.md 2).
+rotor speeds and tilts (eq. 29) -> unwrapped tilts (Algorithm 1, corrected; docs/model.md#geometry).
 
 `LagCompensator` (parameter CA_LAG_COMP) leads those commands for the actuators the paper
 takes as ideal: the rotors' first-order speed lag (unequal up and down time constants) and
@@ -107,9 +107,10 @@ def solve_kernel(ap: np.ndarray, w6: np.ndarray, om: np.ndarray) -> None:
 
 @njit
 def allocate_kernel(ap: np.ndarray, w6: np.ndarray, tilt: np.ndarray, out: np.ndarray) -> None:
-    """Eqs. (28-29) with saturation and the corrected unwrap (Algorithm 1, MODEL.md 2) for
-    the wrench w6 = [f; tau]; `tilt` (n) is the unwrapped tilt, advanced in place; `out`
-    gets ALLOC_OUT (common.layouts), from the parameters ALLOC_PARAMS `ap`."""
+    """Eqs. (28-29) with saturation and the corrected unwrap (Algorithm 1,
+    docs/model.md#geometry) for the wrench w6 = [f; tau]; `tilt` (n) is the unwrapped tilt,
+    advanced in place; `out` gets ALLOC_OUT (common.layouts), from the parameters
+    ALLOC_PARAMS `ap`."""
     solve_kernel(ap, w6, out[AO_OMEGA:AO_OMEGA + 2 * N_ROTORS])
     w_max, hold = ap[A_WMAX], ap[A_HOLD]
     saturated = 0.0
@@ -202,7 +203,7 @@ MEAN_TAU_S = 0.2  # time constant of the rotors' thrust-mean correction (LagComp
 
 
 class ActuatorFigures(NamedTuple):
-    """What the allocation knows of its actuators (MODEL.md section 2, as the plant has them):
+    """What the allocation knows of its actuators (docs/model.md#plant):
     the rotor's first-order speed lag, w' = (c - w) / tau with tau = tau_up while c > w and
     tau_down otherwise, and the tilt servo's rate limit |alpha'| <= rate_max."""
 
@@ -233,8 +234,8 @@ def speed_lead(rate_rad_s2: float, figures: tuple[float, float, float]) -> float
 @njit
 def rotor_period(w0: float, c: float, dt_s: float,
                  figures: tuple[float, float, float]) -> tuple[float, float]:
-    """A rotor at w0 under a command c held for dt_s (MODEL.md 2's lag, exact): its speed at
-    the end and its mean of w^2 (thrust) over the period. The speed moves towards c without
+    """A rotor at w0 under a command c held for dt_s (docs/model.md#plant: the lag, exact): its
+    speed at the end and its mean of w^2 (thrust) over the period. The speed moves towards c without
     crossing it, so one constant applies all period: w(t) = c + d e^(-t/tau), d = w0 - c, and
     mean w^2 = c^2 + 2 c d tau (1 - E) / dt + d^2 tau (1 - E^2) / (2 dt), E = e^(-dt/tau)."""
     tau = figures[0] if c > w0 else figures[1]
@@ -264,7 +265,7 @@ class LagCompensator:
     """Feed-forward lead of the allocation's commands for the actuators' lag (CA_LAG_COMP 1).
 
     The plain allocation (eqs. 28-29) commands the speeds and tilts that give the desired
-    wrench at once, as if rotors and servos were ideal; the plant's rotors lag (MODEL.md 2)
+    wrench at once, as if rotors and servos were ideal; the plant's rotors lag (docs/model.md#plant)
     and its servos are rate limited, so on a moving reference the wrench comes late. The lead
     is taken from the reference alone, never from the measured state: the nominal wrench of
     the reference (f_b = m R_d^T (a_d - g_W), tau_b = J omega_d' + omega_d x J omega_d) is

@@ -4,7 +4,7 @@ by its base, `fcu.mode_references`.
 
 Time comes in as arguments: `t_us` is the flight clock (simulated in lockstep, monotonic in
 real time) for everything that shapes the flight; `now_s` is the wall clock, used only for
-the offboard stream's freshness (DESIGN.md section 2). What the commander says goes into
+the offboard stream's freshness (docs/clocks.md). What the commander says goes into
 `events` (on the flight clock); the process shell turns them into STATUSTEXT.
 
 Landing (LAND mode, or a mission whose last item is NAV_LAND): the descent to the ground

@@ -101,7 +101,8 @@ def dq_to_pose(a: DualQuat) -> tuple[Quat, Vec3]:
 
 @njit
 def dq_log(a: DualQuat) -> DualVec:
-    """ln q_hat = 1/2 (theta n + eps p_b), theta in [0, pi] (decoupled log, MODEL.md 3).
+    """ln q_hat = 1/2 (theta n + eps p_b), theta in [0, pi] (decoupled log,
+    docs/design.md#corrections).
 
     Shortest path: a negative scalar part selects -q_hat, which is the same pose.
     """

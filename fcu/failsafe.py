@@ -3,7 +3,7 @@
 Pure: every check takes its clock as an argument. The flight clock (`t_us`: simulated time
 in lockstep, monotonic time in real time) drives what changes the flight: state input loss,
 saturation, divergence. The wall clock (`now_s`) serves only the links: GCS heartbeat loss,
-the offboard setpoint stream and MANUAL_CONTROL (DESIGN.md section 2). In lockstep a state
+the offboard setpoint stream and MANUAL_CONTROL (docs/clocks.md). In lockstep a state
 arrives with every control period, so state input loss cannot happen on the flight clock:
 a simulator that stops answering freezes the flight with it and is reported by the process
 shell.

@@ -2,13 +2,13 @@
 judged against every actuator's model (pure: no I/O, no MAVLink).
 
 For a reference r(t) (fcu.tracker.Reference: p, q, v, a, omega, omega_dot; ENU / FLU) the
-wrench that makes the vehicle follow it exactly (MODEL.md section 4 with zero tracking error) is
+wrench that makes the vehicle follow it exactly (docs/model.md#dynamics with zero tracking error) is
 
     f_b = m R(q)^T (a - g_W),  g_W = [0, 0, -g];   tau_b = J omega_dot + omega x J omega,
 
 allocated with the pseudo-inverse of eq. (28), Omega = A^+ [f_b; tau_b], each rotor turning at
 w_i = (lat_i^2 + ver_i^2)^(1/4) with its tilt at alpha_i = atan2(lat_i, ver_i) (eq. 29,
-MODEL.md section 2). The actuators' models (MODEL.md 2, as the plant has them) limit:
+docs/model.md#geometry). The actuators' models (docs/model.md#plant) limit:
 
 * rotor speed, with its first-order lag: the command that makes a lagging rotor follow w_i,
   c_i = w_i + tau_up w_i' while it speeds up, must stay at most MARGIN w_max, and one that

@@ -4,7 +4,7 @@ The work is done by stages without I/O (`fcu.pipeline`); this shell selects over
 and the work beside the loop (`fcu.work`), feeds the simulator bridge and the ground-station
 server, ticks the pipeline and writes the onboard log.
 
-Clocks (DESIGN.md section 2). Lockstep: each new ODOMETRY is one control period at its own
+Clocks (docs/clocks.md). Lockstep: each new ODOMETRY is one control period at its own
 stamp, answered with HIL_ACTUATOR_CONTROLS; before the flight starts (armed and MISSION,
 OFFBOARD, LAND, TAKEOFF, RTL or POSCTL) states are not answered, so simulated time stands
 still. A simulator that stops answering is reported ("simulator not responding"), never a

@@ -358,7 +358,7 @@ class Pipeline:
     # ------------------------------------------------------------------ links (wall clock)
 
     def check_links(self, now_s: float, gcs_seen_s: float = math.inf) -> None:
-        """Offboard and MANUAL_CONTROL streams and GCS heartbeat, on the wall clock (DESIGN.md
+        """Offboard and MANUAL_CONTROL streams and GCS heartbeat, on the wall clock (docs/clocks.md
         section 2)."""
         cmd = self.commander
         if cmd.armed and cmd.mode == Mode.OFFBOARD and offboard_lost(

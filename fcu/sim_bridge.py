@@ -1,5 +1,5 @@
 """The FCU's simulator link: ODOMETRY in (checked and converted to ENU/FLU), stored answers,
-HIL_ACTUATOR_CONTROLS out (DESIGN.md section 3).
+HIL_ACTUATOR_CONTROLS out (docs/simulator-link.md).
 
 Lockstep: a state already answered (same `time_usec`) gets the stored answer again, without
 stepping anything (so loss changes timing, never results); an older state is stale and
@@ -115,7 +115,7 @@ def pose_from_odometry(odo: Odometry) -> PoseInput | None:
 
 
 def actuator_controls(out: StepOutput, w_max: float, lockstep: bool) -> ActuatorControls:
-    """controls[0..n) = speed / w_max, controls[n..2n) = tilt in rad (DESIGN.md 3)."""
+    """controls[0..n) = speed / w_max, controls[n..2n) = tilt in rad (docs/simulator-link.md)."""
     speeds = tuple(s / w_max for s in out.speed_rad_s)
     controls = (*speeds, *out.tilt_rad, *(0.0,) * (CONTROLS - 2 * len(speeds)))
     return ActuatorControls(out.t_us, controls, MODE_ARMED if out.armed else 0,

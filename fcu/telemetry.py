@@ -1,7 +1,7 @@
 """Telemetry of the FCU on its GCS links: message builders (ENU/FLU -> NED/FRD at the wire)
 and a wall-clock scheduler whose intervals MAV_CMD_SET_MESSAGE_INTERVAL changes.
 
-Defaults as DESIGN.md section 5: pose 50 Hz, actuators 10 Hz, status 1 Hz.
+Defaults (docs/autopilot.md): pose 50 Hz, actuators 10 Hz, status 1 Hz.
 """
 
 from __future__ import annotations

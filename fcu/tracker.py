@@ -1,5 +1,5 @@
 """PID feedback-linearisation tracker on unit dual quaternions (eq. 16) and the PD
-baseline (eq. 33), with the physically exact inverse dynamics of MODEL.md section 4.
+baseline (eq. 33), with the physically exact inverse dynamics of docs/model.md#dynamics.
 
 Frames: world ENU, body FLU. The state and the reference are plain tuples; the only state the
 tracker keeps is the integral of ln q_hat_e, which `reset()` clears. The law is one compiled
@@ -105,7 +105,7 @@ assert TRACKER_OUT.names()[:len(TrackerOutput._fields)] == TrackerOutput._fields
 @njit
 def reference_twist(ref: tuple[Vec3, Quat, Vec3, Vec3, Vec3, Vec3]
                     ) -> tuple[DualVec, DualVec]:
-    """xi_d = omega_d + eps R_d^T p_d' and its derivative (MODEL.md section 4), for a
+    """xi_d = omega_d + eps R_d^T p_d' and its derivative (docs/model.md#dynamics), for a
     Reference (or the tuple of its fields)."""
     q = ref[1]
     w = ref[4]
@@ -154,8 +154,8 @@ def desired_accel(j: int, ff: DualVec, cr: DualVec, k: np.ndarray, log_e: DualVe
 @njit
 def tracker_kernel(x: np.ndarray, r: np.ndarray, k: np.ndarray, integral: np.ndarray,
                    dt_s: float, out: np.ndarray) -> None:
-    """Eq. (16) (or eq. 33) with the exact inverse dynamics of MODEL.md 4, on flat arrays
-    (common.layouts): state `x` (VEHICLE_STATE), reference `r` (REFERENCE), parameters `k`
+    """Eq. (16) (or eq. 33) with the exact inverse dynamics (docs/model.md#dynamics), on flat
+    arrays (common.layouts): state `x` (VEHICLE_STATE), reference `r` (REFERENCE), parameters `k`
     (TRACKER_PARAMS); the integral of ln q_hat_e (6) advances in place unless PD; `out`
     gets TRACKER_OUT."""
     p = (x[X_P], x[X_P + 1], x[X_P + 2])

@@ -1,4 +1,4 @@
-"""Desired trajectories with analytic derivatives (paper eqs. 31-32, MODEL.md section 5).
+"""Desired trajectories with analytic derivatives (paper eqs. 31-32, docs/model.md#scenarios).
 
 Each trajectory maps time in seconds to a `Reference`: pose, world velocity and acceleration,
 body rate and its derivative. Nothing here differentiates numerically.
@@ -8,7 +8,7 @@ once; `fcu.mission` flies the same functions (mission items 22, 16, 19, 21, 3100
 
 Breakpoints: a sample at exactly a profile's start or end is its right-hand limit, the value
 that holds over the control period that begins there. At the figure's start T'' jumps from 0
-to pi k^2 (MODEL.md section 5), so the sample at that instant already carries the figure's
+to pi k^2 (docs/model.md#scenarios), so the sample at that instant already carries the figure's
 feed-forward; at its end it is the hold.
 
 The formulas of the profiles (`quintic_poly`, `figure_phase_inside`, `figure_path`) take
@@ -89,7 +89,7 @@ def figure_phase_inside(tau: Any, duration: float, xp: Any = math) -> tuple[Any,
 
 def figure_phase(tau: float, duration: float) -> tuple[float, float, float]:
     """T, T', T'' at tau = t - t_start: 0 before the figure, eq. (32) on [0, D), held at 2 pi
-    from D on (the paper's T = 0 would make the attitude jump; MODEL.md section 5).
+    from D on (the paper's T = 0 would make the attitude jump; docs/model.md#scenarios).
 
     Right-hand limits at both breakpoints: at tau = 0, T'' = pi k^2 (k = pi / D), not 0."""
     if tau < 0.0:
@@ -182,7 +182,7 @@ class FigureEight:
 
     p_d = p0 + [0, 0, h s(t / t_rise)] + A [sin 2T, sin T, 1 - cos 2T], theta_d = T n with
     T = pi (1 - cos(pi (t - t1) / (t2 - t1))) on [t1, t2] and T = 2 pi after t2 (the paper's
-    T = 0 would make the attitude jump; MODEL.md section 5).
+    T = 0 would make the attitude jump; docs/model.md#scenarios).
     """
 
     def __init__(self, cfg: TrajectoryConfig) -> None:

@@ -1,5 +1,5 @@
 """The nominal wrench along a reference, the one that makes the vehicle follow it exactly
-(MODEL.md section 4 with zero tracking error; `fcu.feasibility` allocates it):
+(docs/model.md#dynamics with zero tracking error; `fcu.feasibility` allocates it):
 
     f_b = m R(q)^T (a - g_W),  g_W = [0, 0, -g];   tau_b = J omega_dot + omega x J omega,
 

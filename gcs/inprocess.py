@@ -1,5 +1,5 @@
 """In-process runner: the FCU's pipeline and the simulated world composed in one process
-(DESIGN.md 1).
+(docs/architecture.md).
 
 `run_scenario` flies a scenario exactly as `gcs run` does through processes, with only
 MAVLink and the processes taken away: the FCU built as the FCU process builds it

@@ -1,4 +1,4 @@
-"""Tracking metrics of DESIGN.md section 6 and the paper's Table I.
+"""Tracking metrics of a run (docs/architecture.md#a-run-folder) and the paper's Table I.
 
 Position error = |p - p_d|; attitude error = angle of q_d* q in [0, pi]; both sampled at the
 control steps (the desired pose is the one the controller computed for that step), over the
@@ -180,7 +180,7 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
                   stopped: str = "", reached_end: bool | None = None,
                   flight_start_us: int = 0,
                   compile_time_s: float | None = None) -> dict[str, Any]:
-    """metrics.json content (DESIGN.md section 6), status included (common.outcome).
+    """metrics.json content (docs/architecture.md#a-run-folder), status included (common.outcome).
 
     `reached_end`: whether the run reached its end; None reads it from the truth log (the
     simulator's clock is the flight's in lockstep and in-process). `flight_start_us`: the

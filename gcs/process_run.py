@@ -1,6 +1,7 @@
 """`gcs run` through processes: start `sitl` and `fcu` on free ports, upload the scenario's
 mission over the mission protocol, arm, start, record `flight.tlog`, wait for the end, stop
-the children, and write metrics.json from the truth and onboard logs (DESIGN.md 5-6).
+the children, and write metrics.json from the truth and onboard logs
+(docs/architecture.md#a-run-folder).
 Every wait is on progress, with a ceiling that names what it waited for (`gcs.run_waits`).
 """
 

@@ -2,7 +2,7 @@
 protocol: flown by `fcu.mission.MissionExecutor` from the scenario's start it gives the
 same reference as `fcu.trajectory.make_trajectory` (Case I: to rounding at every step).
 
-Case I (MODEL.md section 5): takeoff (the quintic rise), loiter at the top, the
+Case I (docs/model.md#scenarios): takeoff (the quintic rise), loiter at the top, the
 figure-infinity (command 31001) about the ENU axis n (sent in NED: [1, 2, 3] -> [2, 1, -3]),
 loiter to the end of the run. Hover (Case II): one loiter for the whole run. Mission: the
 items of the scenario's mission file, as `gcs mission upload` would send them.

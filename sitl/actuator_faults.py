@@ -1,7 +1,7 @@
 """Actuator failures injected into the plant's commands ([[actuator_fault]] of a scenario).
 
 A failure replaces what the failed actuator is told, never the physics: the plant's rotor
-lag and servo rate limit (MODEL.md 2) carry on as they are, so a rotor switched off spins
+lag and servo rate limit (docs/model.md#plant) carry on as they are, so a rotor switched off spins
 down with its time constant tau_down, and a stuck servo simply stops where it was. The
 FCU is not told (it sees the consequences only through the state), as on a real vehicle
 whose ESC or servo fails silently.

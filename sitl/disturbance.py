@@ -1,4 +1,4 @@
-"""Body-frame (FLU) force and torque disturbances of the Case II profiles (MODEL.md 5).
+"""Body-frame (FLU) force and torque disturbances of the Case II profiles (docs/model.md#scenarios).
 
 The terms are a flat table (`terms_table`, one row per term) that a compiled kernel
 (`disturbance_kernel`, numba) sums; the plant's step kernel calls it at its RK4 stage times.

@@ -4,7 +4,8 @@ Independent of the controller on purpose (no dual quaternions, no allocation mat
 world-frame Newton-Euler equations in ENU/FLU with gravity,
     p' = v,   m v' = R(q) f_b + m g_W,   q' = 1/2 q (0, w),   J w' = tau_b - w x J w,
 integrated by fixed-step RK4 with the quaternion renormalised after each step. The rotor
-wrench is the per-rotor sum F_i = c_f w_i^2 n_i, Q_i = -sigma_i c_d w_i^2 n_i (MODEL.md 2).
+wrench is the per-rotor sum F_i = c_f w_i^2 n_i, Q_i = -sigma_i c_d w_i^2 n_i
+(docs/model.md#geometry).
 
 Actuators are decoupled from the body, so their state inside a step is known in closed form:
 a first-order rotor lag (time constants up/down) towards a command clamped to [0, w_max], and
@@ -378,7 +379,7 @@ def _moment(r: Vec3, f: tuple[float, ...], spin_cd: float, e: Vec3) -> tuple[flo
 
 def hover_speeds_and_tilts(plant: Plant) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Equal rotor speeds at zero tilt that carry the weight (the plant's own solution; the
-    minimum-norm allocation of both presets, MODEL.md section 2)."""
+    minimum-norm allocation of both presets, docs/model.md#geometry)."""
     n = plant.vehicle.n_rotors
     (_, _, fz), _ = plant.rotor_wrench([1.0] * n, [0.0] * n)
     w = math.sqrt(plant.mass * plant.g / fz)
@@ -393,7 +394,7 @@ def scenario_plant(scenario: Scenario, dt_us: int) -> Plant:
 
 
 def initial_state(scenario: Scenario, plant: Plant) -> PlantState:
-    """Resting on the ground with rotors stopped, or airborne in hover (MODEL.md 5)."""
+    """Resting on the ground with rotors stopped, or airborne in hover (docs/model.md#scenarios)."""
     if scenario.start == "ground":
         return plant.initial_state(scenario.initial_position_enu_m, on_ground=True)
     speeds, tilts = hover_speeds_and_tilts(plant)

@@ -1,8 +1,8 @@
 """The plant's step as compiled kernels (numba) on flat arrays (common.layouts): the
 parameters PLANT_PARAMS, the state PLANT_STATE (a truth-log row), the command PLANT_COMMAND.
 
-The rigid body (MODEL.md 1): p' = v, m v' = R(q) f_b + m g_W, q' = 1/2 q (0, w),
-J w' = tau_b - w x J w in ENU/FLU, integrated by classical RK4. The actuators (MODEL.md 2):
+The rigid body (docs/model.md#plant): p' = v, m v' = R(q) f_b + m g_W, q' = 1/2 q (0, w),
+J w' = tau_b - w x J w in ENU/FLU, integrated by classical RK4. The actuators (ibid.):
 a first-order rotor lag towards the command clamped to [0, w_max] and a rate-limited tilt
 servo, both exact in closed form over a held command; the rotor wrench is the per-rotor sum
 F_i = c_f w_i^2 n_i, Q_i = -sigma_i c_d w_i^2 n_i. `sitl.plant.Plant` is their Python face.

@@ -2,8 +2,8 @@
 
 Pure and I/O-free: given the plant states at the physics steps of a period, in time order,
 `SensorFeed.period` returns the simulator link's messages for them, as a real vehicle gets
-them (DESIGN.md section 3): one HIL_SENSOR per IMU sample (FRD specific force and rate, with
-the magnetometer and barometer fields flagged when they are new) and each motion-capture
+them (docs/simulator-link.md#sensors): one HIL_SENSOR per IMU sample (FRD specific force and
+rate, with the magnetometer and barometer fields flagged when they are new) and each motion-capture
 pose as ODOMETRY (estimator_type MOCAP, stamped with its capture time, its covariance)
 once its latency has passed, placed before the IMU sample of the same instant. Each sensor
 samples at its own rate and jitter, on or off the physics grid (`SampleClock`, `state_at`).

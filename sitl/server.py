@@ -8,7 +8,7 @@ unanswered is re-sent after a few milliseconds of wall time, so loss delays but 
 deadlocks. Simulated time therefore stands still until the FCU starts answering (when the
 flight starts).
 
-With a sensor profile (`--sensors`, DESIGN.md section 3) the FCU gets what a real vehicle
+With a sensor profile (`--sensors`, docs/simulator-link.md#sensors) the FCU gets what a real vehicle
 gets instead of the exact state: HIL_SENSOR per IMU sample (the one at the end of each
 control period drives the lockstep) and the motion-capture pose as ODOMETRY after its
 latency (sitl/sensor_feed.py); the exact state goes only to the truth log. Its estimator

@@ -1,5 +1,5 @@
 """The simulated world of one run: the plant with its disturbances, the actuator faults and
-the sensors, from the first state to the flight's end (MODEL.md 2, DESIGN.md section 3).
+the sensors, from the first state to the flight's end (docs/model.md#plant, docs/simulator-link.md).
 
 The simulator process (`sitl.server`) and the in-process runner (`gcs.inprocess`) step the
 same `World`, so both fly the same physics with the same faults and sensor samples.

@@ -65,3 +65,27 @@ def test_relative_links_and_anchors_exist(page):
         elif anchor and file.suffix == ".md" and anchor not in _anchors(file):
             broken.append(target)
     assert broken == []
+
+
+CODE = [p for top in ("common", "fcu", "sitl", "gcs", "config", "benchmarks", "tests", "tools")
+        for p in sorted((ROOT / top).rglob("*")) if p.suffix in (".py", ".toml")]
+CITED = re.compile(r"docs/([a-z0-9_-]+\.md)(?:#([a-z0-9_-]+))?")
+NOTES = re.compile(r"\b(?:MODEL|DESIGN|SENSORS|MAVLINK)\.md\b")
+
+
+def test_the_code_cites_pages_and_sections_that_exist():
+    """Given every module and config file, then each page of docs/ it cites (`docs/model.md`,
+    `docs/model.md#dynamics`) exists with that section, and none cites a note that is not in
+    the repository (MODEL.md and the like, which a reader of the code cannot open)."""
+    broken, foreign, cited = [], [], 0
+    for path in CODE:
+        text = path.read_text(errors="replace")
+        where = str(path.relative_to(ROOT))
+        foreign += [f"{where}: {m.group(0)}" for m in NOTES.finditer(text)
+                    if path.name != "test_doc_links.py"]
+        for page, anchor in CITED.findall(text):
+            cited += 1
+            target = ROOT / "docs" / page
+            if not target.exists() or (anchor and anchor not in _anchors(target)):
+                broken.append(f"{where}: docs/{page}" + (f"#{anchor}" if anchor else ""))
+    assert cited > 40 and broken == [] and foreign == []

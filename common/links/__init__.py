@@ -1,5 +1,5 @@
-"""Link URLs and the byte transports behind them (DESIGN.md section 1): the one link layer
-of `fcu`, `sitl` and `gcs`.
+"""Link URLs and the byte transports behind them: the one link layer of `fcu`, `sitl` and
+`gcs` (docs/architecture.md#links-and-messages).
 
     udpin:HOST:PORT    bind and answer every peer heard in the last `peer_timeout_s` (at
                        most `max_peers` of them: a flood from many ports cannot make every

@@ -187,7 +187,7 @@ def test_near_pi_rotates_the_short_way(hover_ideal, tmp_path, theta0):
 
 def test_case1_ideal_actuators_within_a_millimetre():
     """Given Case I with ideal actuators and the exact law at 500 Hz, then the errors stay
-    within 1 mm and 0.05 mrad over all 160 s (MODEL.md section 5). A run with ideal
+    within 1 mm and 0.05 mrad over all 160 s (docs/model.md#scenarios). A run with ideal
     actuators sets CA_LAG_COMP 0 (gcs.inprocess.scenario_params): there is no lag to lead."""
     result = run_scenario(scenario("case1_figure8", ideal_actuators=True))
     assert result.metrics["fcu_params"]["CA_LAG_COMP"] == 0.0

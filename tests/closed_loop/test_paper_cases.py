@@ -45,7 +45,7 @@ def test_case1_pid_default_actuators_beats_table1():
     for stat, paper_pos, paper_att in zip(("max", "mean", "rmse"), pos, att, strict=True):
         assert m["position_error_m"][stat] <= paper_pos
         assert m["attitude_error_rad"][stat] <= paper_att
-    # The resolved model allows millimetres (MODEL.md section 5): far inside the table.
+    # The resolved model allows millimetres (docs/model.md#scenarios): far inside the table.
     assert m["position_error_m"]["max"] < 0.01
 
 

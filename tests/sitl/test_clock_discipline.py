@@ -1,4 +1,4 @@
-"""Clock discipline through processes (DESIGN.md 2, 6): a lockstep run is the same run, sample
+"""Clock discipline through processes (docs/clocks.md): a lockstep run is the same run, sample
 for sample, whatever the wall clock does (a paused simulator, a paused FCU, a machine with no
 CPU to spare); in real time a simulator that stops answering in the air is a state-input loss,
 and the run says so.

@@ -145,7 +145,7 @@ def _kill_simulator_in_flight(stack, expect: str, within_s: float):
 def test_lockstep_simulator_killed_is_reported_not_a_failsafe(stack):
     """SIGKILL of the SITL mid-flight in lockstep: simulated time stands still with it, so
     the FCU says "simulator not responding" (wall clock, within SIM_SILENT_S plus a margin)
-    and does not disarm: a stopped world is no reason to drop the vehicle (DESIGN.md 2)."""
+    and does not disarm: a stopped world is no reason to drop the vehicle (docs/clocks.md)."""
     _kill_simulator_in_flight(stack, "simulator not responding", 3.0)
     assert _texts(stack, "state input lost", 1.5) is None
     hb = stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1)

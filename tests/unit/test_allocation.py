@@ -40,7 +40,7 @@ def preset(request):
 
 
 # ----------------------------------------------------------------------------------------
-# Brute-force model (MODEL.md section 2), written from the formulas, read from the raw TOML
+# Brute-force model (docs/model.md#geometry), written from the formulas, read from the raw TOML
 # ----------------------------------------------------------------------------------------
 
 

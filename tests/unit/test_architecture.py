@@ -1,4 +1,4 @@
-"""The plant and the controller stay independent (DESIGN.md section 1)."""
+"""The plant and the controller stay independent (docs/architecture.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The one ENU/FLU <-> NED/FRD conversion: round trips and the identities of DESIGN.md 2."""
+"""The one ENU/FLU <-> NED/FRD conversion: round trips and the identities of
+docs/design.md#conventions."""
 
 from __future__ import annotations
 
