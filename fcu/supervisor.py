@@ -1,9 +1,11 @@
 """The supervisor: the one output gate between the allocator and the actuators, which the
 controller cannot bypass (Crazyflie's `supervisorAreMotorsAllowedToRun`).
 
-Rotor speeds pass only while armed, clamped to [0, w_max]; a command that is not finite is
-a fault (zero speeds, the last finite tilts, and the pipeline disarms); tilts are held at
-their last finite values while disarmed, so the servos do not move on the ground.
+Rotor speeds pass only while armed, clamped to [0, w_max]; disarmed, they are zero and the
+tilts given pass (the pipeline gives the allocator's last ones, so the servos do not move on
+the ground). A command that is not finite is a fault: zero speeds, the last finite tilts, and
+the pipeline disarms. Failsafes and the actuator monitor are the pipeline's checks, not this
+gate's (docs/architecture.md#the-fcus-pipeline).
 """
 
 from __future__ import annotations
