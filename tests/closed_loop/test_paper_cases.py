@@ -133,6 +133,7 @@ def test_gcs_overrides_and_bad_config(tmp_path):
     assert "duration_s" in proc.stderr and "number" in proc.stderr
 
 
+@pytest.mark.process
 def test_gcs_table1_writes_markdown_and_json(tmp_path):
     """Given `gcs table1 --in-process`, then the 8 runs land in table1.md/json beside the
     paper's values."""
