@@ -56,11 +56,11 @@ from benchmarks.grammar_mission_gen import (
     item_phase,
 )
 from common.config import Scenario, TrajectoryConfig, load_scenario, load_vehicle
+from common.mission_items import PX4_SITL_HOME
 from common.ulog import read_topic
 from fcu.compose import published_home
 from fcu.core import ONBOARD_COLUMNS
 from fcu.mission.executor import MissionExecutor
-from fcu.telemetry import Home
 from gcs.inprocess import InProcessError, fcu_pipeline, run_scenario, through_wire_item
 from gcs.mission_files import read_mission, write_mission
 from sitl.plant import TRUTH_COLUMNS
@@ -86,7 +86,7 @@ PHASES = ("takeoff", "cruise", "keyframe_figure", "speed", "touch_and_go", "land
 REFUSAL = re.compile(r"\b(MAV_MISSION_(?!RESULT\b)[A-Z0-9_]+)\b.*?\bitem (\d+)\b:?\s*([^\s:].*)",
                      re.S)
 Q_ID = (1.0, 0.0, 0.0, 0.0)
-HOME = published_home(Home())
+HOME = published_home(PX4_SITL_HOME)
 
 
 def base_scenario(vehicle: str) -> Scenario:

@@ -50,10 +50,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.random_missions import base_scenario, fcu_limits, schedule
 from common.config import Scenario, TrajectoryConfig
 from common.mav_enums import MAV_CMD, MAV_FRAME
-from common.mission_items import MissionItem, local_xy
+from common.mission_items import PX4_SITL_HOME, MissionItem, local_xy
 from common.quaternion import angle_between_rows
 from fcu.compose import published_home
-from fcu.telemetry import Home
 from gcs.inprocess import InProcessError, run_scenario
 from gcs.mission_files import read_mission, write_mission
 from gcs.mission_files.frames import to_frame
@@ -158,7 +157,7 @@ def draw_mission(seed: int, k: int, vehicle: str) -> dict[str, Any]:
 def written(items: list[MissionItem], fmt: str, folder: Path) -> Path:
     """The mission as a user's file of that format (global positions through the default
     home for `wpl-global` and `plan`)."""
-    home = published_home(Home())
+    home = published_home(PX4_SITL_HOME)
     if fmt == "toml":
         path = folder / "mission.toml"
         write_mission(path, items, "toml")

@@ -52,13 +52,12 @@ from benchmarks.random_mission_gen import (
     random_mission,
 )
 from common.config import Scenario, TrajectoryConfig, load_scenario, load_vehicle
-from common.mission_items import MissionItem
+from common.mission_items import PX4_SITL_HOME, MissionItem
 from fcu.compose import published_home
 from fcu.core import ONBOARD_COLUMNS
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
-from fcu.telemetry import Home
 from gcs.inprocess import (
     apply_overrides,
     fcu_pipeline,
@@ -159,7 +158,7 @@ def prepare(base: Scenario, k: int, seed: int, workdir: Path, max_s: float,
         if planned[-1][2] <= max_s:
             break
         regenerated += 1
-    check = check_mission(items, lim, published_home(Home()))
+    check = check_mission(items, lim, published_home(PX4_SITL_HOME))
     nominal = schedule(items, dataclasses.replace(lim, vehicle=None), start)
     scenario = dataclasses.replace(scenario, duration_s=planned[-1][2] + TAIL_S)
     return Prepared(items, cruise, regenerated, check, planned, nominal, scenario)

@@ -165,6 +165,12 @@ class HomePosition(NamedTuple):
                    msg.altitude / 1000.0)
 
 
+# PX4's SITL default home (its Gazebo worlds and jMAVSim: a field near Zurich), where the
+# shipped sensor profiles' earth field (WMM, about 47 N 8 E) holds: the FCU's and the
+# simulator's default origin.
+PX4_SITL_HOME = HomePosition(47.397742, 8.545594, 488.0)
+
+
 def local_ned(item: MissionItem, home: HomePosition) -> tuple[float, float, float]:
     """(north, east, down) in metres of a GEO_FRAMES item's x, y, z relative to `home`
     (down = -z above home in the relative-altitude frames, home alt - z in AMSL ones)."""

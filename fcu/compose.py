@@ -16,7 +16,6 @@ from common.mission_items import HomePosition, MissionItem
 from fcu.mission.validation import check_mission, localize, refusal
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
-from fcu.telemetry import Home
 
 
 def param_store(pipeline: Pipeline, gains: Gains,
@@ -37,7 +36,7 @@ def fcu_pipeline(vehicle: VehicleConfig, gains: Gains, control_rate_hz: int,
     return pipeline, param_store(pipeline, gains, params)
 
 
-def published_home(home: Home) -> HomePosition:
+def published_home(home: HomePosition) -> HomePosition:
     """The home global-frame mission items are converted through, as HOME_POSITION
     publishes it."""
     return HomePosition.published(home.lat_deg, home.lon_deg, home.alt_m)

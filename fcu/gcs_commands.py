@@ -23,9 +23,10 @@ from common.mav_enums import MAV_CMD, MAV_FRAME, MAV_MODE_FLAG, MAV_RESULT, MAV_
 from common.mavlink import MAV
 from common.mavlink_types import Message, as_message
 from common.mavlink_types.protocol import CommandInt, CommandLong
+from common.mission_items import HomePosition
 from common.modes import Mode, decode
 from fcu.pipeline import Pipeline
-from fcu.telemetry import REQUESTABLE, Home, Schedule
+from fcu.telemetry import REQUESTABLE, Schedule
 
 M = MAV
 ACCEPTED, DENIED = MAV_RESULT.MAV_RESULT_ACCEPTED, MAV_RESULT.MAV_RESULT_DENIED
@@ -47,7 +48,7 @@ class Server(Protocol):
     """What the commands need of the ground-station server (`fcu.gcs_server.GcsServer`)."""
 
     pipeline: Pipeline
-    home: Home
+    home: HomePosition
 
     def send(self, msg: Any, index: int | None = None) -> None: ...
 

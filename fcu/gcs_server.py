@@ -35,6 +35,7 @@ from common.mavlink_types.protocol import (
     SetPositionTargetLocalNed,
 )
 from common.mavlink_types.state import Heartbeat
+from common.mission_items import HomePosition
 from common.modes import decode_custom
 from common.outcome import Event
 from fcu.dualquat import q_angle, q_conj, q_mul, q_rotate
@@ -51,7 +52,6 @@ from fcu.setpoint_wire import (
 )
 from fcu.telemetry import (
     Builders,
-    Home,
     Schedule,
     Snapshot,
     autopilot_version,
@@ -90,7 +90,7 @@ class GcsLink:
 
 class GcsServer:
     def __init__(self, links: list[Link], pipeline: Pipeline, params: ParamStore,
-                 missions: MissionServer, *, system_id: int, home: Home,
+                 missions: MissionServer, *, system_id: int, home: HomePosition,
                  signing_key: bytes | None = None,
                  on_params: Callable[[], None] | None = None) -> None:
         self.pipeline = pipeline

@@ -31,6 +31,7 @@ from common.config import ConfigError, load_gains, load_vehicle
 from common.jit import compile_time_s
 from common.links import LinkError, open_link, parse_url
 from common.mavlink import MAV, SigningKeyError, encoder, pack, read_signing_key
+from common.mission_items import HomePosition
 from common.outcome import Event
 from common.parent import stop_with_parent
 from common.realtime import schedule_loop
@@ -46,7 +47,7 @@ from fcu.onboard_log import OnboardLog, set_aside
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.sim_bridge import Resent, SimBridge, StateSample
-from fcu.telemetry import Home, heartbeat
+from fcu.telemetry import heartbeat
 from fcu.warm import warm as warm_plans
 from fcu.work import Work
 from fcu.work_process import make_work
@@ -64,7 +65,7 @@ STAGES = ("wait", "rx", "step", "tx", "log", "housekeeping")
 
 class FlightController:
     def __init__(self, pipeline: Pipeline, sim_url: str, gcs_urls: list[str], *,
-                 system_id: int, lockstep: bool, home: Home, onboard_log: Path | None,
+                 system_id: int, lockstep: bool, home: HomePosition, onboard_log: Path | None,
                  stats_path: Path | None, signing_key: bytes | None = None,
                  rtt_probes: int = 0, params: ParamStore | None = None,
                  work: Work | None = None) -> None:

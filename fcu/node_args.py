@@ -7,21 +7,21 @@ import math
 from pathlib import Path
 
 from common.cliargs import OneLineParser
+from common.mission_items import PX4_SITL_HOME, HomePosition
 from common.realtime import DEFAULT_PRIORITY
-from fcu.telemetry import Home
 from fcu.work import KINDS
 
 DEFAULT_GCS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")
 
 
-def _home(text: str) -> Home:
+def _home(text: str) -> HomePosition:
     try:
         lat, lon, alt = (float(x) for x in text.split(","))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected LAT,LON,ALT, got {text}") from None
     if not (-90 <= lat <= 90 and -180 <= lon <= 180 and math.isfinite(alt)):
         raise argparse.ArgumentTypeError(f"home out of range: {text}")
-    return Home(lat, lon, alt)
+    return HomePosition(lat, lon, alt)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,7 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="mission checks and plans: 'beside' the loop in a worker process "
                         "(real-time default) or 'inline' (lockstep default)")
     p.add_argument("--sysid", type=int, default=1, help="MAVLink system id (1..254)")
-    p.add_argument("--home", type=_home, default=Home(), help="LAT,LON,ALT of the origin")
+    p.add_argument("--home", type=_home, default=PX4_SITL_HOME, help="LAT,LON,ALT of the origin")
     p.add_argument("--onboard-log", type=Path,
                    help="write the onboard log (ULog) here, e.g. onboard.ulg")
     p.add_argument("--stats", type=Path,

@@ -47,6 +47,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from common import px4_topics as px4
+from common.mission_items import PX4_SITL_HOME, HomePosition
 from common.modes import Mode
 from common.outcome import Event
 from common.quaternion import q_rotate
@@ -55,7 +56,6 @@ from fcu.core import ONBOARD_COLUMNS, onboard_row
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.failsafe import state_lost
 from fcu.pipeline import Pipeline, StepOutput
-from fcu.telemetry import Home
 
 # dq_onboard's columns as read back (`common.ulog.read_topic`): ONBOARD_COLUMNS, then the
 # stamp of the state each step acted on
@@ -93,12 +93,12 @@ class OnboardLog(ULogWriter):
 
     def __init__(self, sink: str | Path | bytearray, pipeline: Pipeline,
                  params: Mapping[str, float], *, system_id: int = 1,
-                 home: Home | None = None) -> None:
+                 home: HomePosition | None = None) -> None:
         self.pipeline = pipeline
         self.system_id = system_id
         self.w_max = pipeline.vehicle.rotor_speed_max_rad_s
         # ref_timestamp, ref_lat, ref_lon, ref_alt of the local frame's origin (the home)
-        home = home or Home()  # the FCU's default home
+        home = home or PX4_SITL_HOME  # the FCU's default home
         self.ref_origin = (0, home.lat_deg, home.lon_deg, home.alt_m)
         self.params = dict(params)
         super().__init__(sink, ONBOARD_TOPICS, info={

@@ -15,6 +15,7 @@ from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_
 from common.identity import FLIGHT_CUSTOM_VERSION
 from common.mav_enums import ATTITUDE_TARGET_TYPEMASK, MAV_FRAME, POSITION_TARGET_TYPEMASK
 from common.mavlink import MAV
+from common.mission_items import HomePosition
 from common.modes import MAIN_POSCTL
 from common.quaternion import zyx_euler, zyx_yaw
 from common.simlink import pose_covariance
@@ -139,13 +140,6 @@ class Schedule:
         return min((d for m, d in self.due.items() if self.intervals[m] > 0), default=math.inf)
 
 
-@dataclass(frozen=True)
-class Home:
-    lat_deg: float = 47.397742  # a field near Zurich, as PX4's SITL default
-    lon_deg: float = 8.545594
-    alt_m: float = 488.0
-
-
 def heartbeat(armed: bool, custom_mode: int, active: bool, failsafe: str = ""
               ) -> MAV.MAVLink_message:
     """As PX4 sends it: MAV_AUTOPILOT_PX4 with PX4's custom mode (`common.modes`), so that
@@ -221,7 +215,7 @@ def sys_status(*, state_ok: bool, control_ok: bool, prearm_ok: bool,
 class Builders:
     """Telemetry messages from the FCU's latest state; `get` maps a message id to a builder."""
 
-    def __init__(self, source: Callable[[], Snapshot], home: Home) -> None:
+    def __init__(self, source: Callable[[], Snapshot], home: HomePosition) -> None:
         self.source = source
         self.home = home
 

@@ -24,7 +24,12 @@ import numpy as np
 from common.config import Scenario, VehicleConfig, check_sensor_faults
 from common.jit import compile_time_s
 from common.mavlink import encoder, pack, parser
-from common.mission_items import MissionItem, item_from_message, item_message
+from common.mission_items import (
+    PX4_SITL_HOME,
+    MissionItem,
+    item_from_message,
+    item_message,
+)
 from common.outcome import Event
 from common.sensors_config import check_servable, resolve_sensor_profile
 from common.simlink import HilSensor, Odometry, through_wire_hil_sensor, through_wire_odometry
@@ -36,7 +41,6 @@ from fcu.onboard_log import OnboardLog
 from fcu.params import ParamError, ParamStore
 from fcu.pipeline import Pipeline, StepOutput
 from fcu.sim_bridge import imu_from_hil_sensor, pose_from_odometry, valid_state
-from fcu.telemetry import Home
 from fcu.tracker import VehicleState
 from gcs.metrics import build_metrics
 from gcs.scenario_mission import scenario_mission
@@ -238,7 +242,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
             metrics, truth, onboard, list(cmd.events),
             bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None))
 
-    refused = accept_mission(pipeline, items, published_home(Home()))
+    refused = accept_mission(pipeline, items, published_home(PX4_SITL_HOME))
     if refused:
         raise aborted(f"mission refused: {refused}")
     dt_s = control_dt_us * 1e-6

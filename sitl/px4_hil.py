@@ -56,6 +56,7 @@ from typing import Any
 from common.config import ConfigError, Scenario
 from common.links import LinkError, TcpServerLink, parse_url
 from common.mavlink import MAV, encoder, pack, parser
+from common.mission_items import PX4_SITL_HOME, HomePosition
 from common.sensors_config import (
     PROFILE_IMU_RATE_MIN_HZ,
     period_us,
@@ -75,8 +76,6 @@ from sitl.px4_profile import physics_step_us, px4_sensor_profile, stale_warning
 from sitl.px4_wire import (
     LOCKSTEP_FLAG,
     MODE_ARMED,
-    PX4_HOME,
-    Home,
     command_from_outputs,
     gps_fields,
     motor_order,
@@ -101,7 +100,7 @@ class Server:
     `SensorFeed`, the wire in `sitl.px4_wire`."""
 
     def __init__(self, scenario: Scenario, link_url: str, *, truth_log: Path | None,
-                 end_time_s: float | None, system_id: int, home: Home = PX4_HOME,
+                 end_time_s: float | None, system_id: int, home: HomePosition = PX4_SITL_HOME,
                  speed_factor: float | None = None) -> None:
         url = parse_url(link_url)
         if url.scheme != "tcpin":

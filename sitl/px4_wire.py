@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 from common.config import VehicleConfig
 from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
+from common.mission_items import HomePosition
 from common.sensors_config import EXACT_GPS, GpsConfig
 from sitl.plant import ActuatorCommand, PlantState
 from sitl.rotor_layout import rotors_for_outputs
@@ -74,17 +75,6 @@ def command_from_outputs(controls: tuple[float, ...], mode: int, order: tuple[in
         if armed:
             speeds[rotor] = min(max(u, 0.0), 1.0) * w_max_rad_s
     return Command(ActuatorCommand(tuple(speeds), (0.0,) * n), bad)
-
-
-class Home(NamedTuple):
-    lat_deg: float
-    lon_deg: float
-    alt_m: float  # AMSL
-
-
-# PX4's SITL default home (its Gazebo worlds and jMAVSim: a field near Zurich), where the
-# shipped sensor profiles' earth field (WMM, about 47 N 8 E) holds.
-PX4_HOME = Home(47.397742, 8.545594, 488.0)
 
 
 class GpsFields(NamedTuple):
@@ -139,12 +129,12 @@ def _u16(v: float) -> int:
     return max(0, min(65535, round(v)))
 
 
-def _geodetic(s: PlantState, home: Home) -> tuple[int, int, int]:
+def _geodetic(s: PlantState, home: HomePosition) -> tuple[int, int, int]:
     lat, lon, alt = ned_to_geodetic(enu_to_ned(s.p_enu_m), *home)
     return round(lat * 1e7), round(lon * 1e7), round(alt * 1e3)
 
 
-def gps_fields(s: PlantState, home: Home, gps: GpsConfig = EXACT_GPS) -> GpsFields:
+def gps_fields(s: PlantState, home: HomePosition, gps: GpsConfig = EXACT_GPS) -> GpsFields:
     """The GPS fix of the state (its position and velocity as the fix has them), 3D, with
     the accuracies and satellites of `gps` (default: 1 m, 10 satellites)."""
     lat, lon, alt = _geodetic(s, home)
@@ -157,7 +147,7 @@ def gps_fields(s: PlantState, home: Home, gps: GpsConfig = EXACT_GPS) -> GpsFiel
                      _i16(ve * 100.0), _i16(vd * 100.0), cog, gps.satellites)
 
 
-def state_fields(s: PlantState, home: Home, f_flu_m_s2: tuple[float, float, float]
+def state_fields(s: PlantState, home: HomePosition, f_flu_m_s2: tuple[float, float, float]
                  ) -> StateFields:
     """The exact state; `f_flu_m_s2` is the specific force (Plant.specific_force_flu)."""
     lat, lon, alt = _geodetic(s, home)

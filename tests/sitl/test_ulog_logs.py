@@ -158,7 +158,7 @@ def test_status_topics_say_what_the_vehicle_did(run_dir):
     """Armed in MISSION (PX4's arming_state and nav_state), SITL not HITL, the mission's
     items and progress, no failsafe, the local frame's origin at the FCU's home."""
     from common import px4_topics as px4
-    from fcu.telemetry import Home
+    from common.mission_items import PX4_SITL_HOME
 
     u = open_ulog(run_dir / "onboard.ulg")
     status = u.get_dataset("vehicle_status").data
@@ -171,7 +171,7 @@ def test_status_topics_say_what_the_vehicle_did(run_dir):
     result = u.get_dataset("mission_result").data
     assert result["valid"].all() and result["seq_total"][-1] >= 2
     lp = u.get_dataset("vehicle_local_position").data
-    home = Home()
+    home = PX4_SITL_HOME
     assert lp["ref_lat"][-1] == home.lat_deg and lp["ref_lon"][-1] == home.lon_deg
     assert lp["xy_global"].all() and lp["xy_valid"].all()
 

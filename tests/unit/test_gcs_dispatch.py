@@ -17,11 +17,12 @@ from hypothesis import strategies as st
 from common.config import load_gains, load_vehicle
 from common.links import Link, LinkUrl
 from common.mavlink import MAV, encoder, pack, parser
+from common.mission_items import PX4_SITL_HOME
 from fcu.gcs_server import COMPONENT, HANDLED, GcsServer
 from fcu.mission_protocol import MissionServer
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
-from fcu.telemetry import LINK_BUDGET_MSG_S, MAX_INTERVAL_US, Home
+from fcu.telemetry import LINK_BUDGET_MSG_S, MAX_INTERVAL_US
 from fcu.tracker import VehicleState
 
 M = MAV
@@ -61,7 +62,7 @@ def make_server(n_links: int = 2) -> tuple[GcsServer, list[MemoryLink]]:
     missions = MissionServer(1, COMPONENT, apply_params(store, pipeline))
     missions.on_mission_changed = lambda items: pipeline.commander.set_mission(tuple(items))
     links = [MemoryLink() for _ in range(n_links)]
-    server = GcsServer(list(links), pipeline, store, missions, system_id=1, home=Home(),
+    server = GcsServer(list(links), pipeline, store, missions, system_id=1, home=PX4_SITL_HOME,
                        on_params=lambda: setattr(missions, "limits",
                                                  apply_params(store, pipeline)))
     missions.on_set_current = server.set_mission_current

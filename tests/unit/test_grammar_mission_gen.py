@@ -22,12 +22,11 @@ from benchmarks.grammar_mission_gen import (
     item_phase,
 )
 from benchmarks.grammar_missions import refusal_ok
-from common.mission_items import to_local
+from common.mission_items import PX4_SITL_HOME, to_local
 from fcu.compose import published_home
-from fcu.telemetry import Home
 from gcs.mission_files import read_mission, write_mission
 
-HOME = published_home(Home())
+HOME = published_home(PX4_SITL_HOME)
 
 
 def _missions(n: int = 300) -> list:

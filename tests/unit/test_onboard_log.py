@@ -7,10 +7,10 @@ from pathlib import Path
 
 from common.config import load_gains, load_vehicle
 from common.links import free_port
+from common.mission_items import PX4_SITL_HOME
 from common.ulog import read_topic
 from fcu.node import FlightController
 from fcu.pipeline import Pipeline
-from fcu.telemetry import Home
 from fcu.tracker import VehicleState
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -22,7 +22,7 @@ def test_each_control_step_is_in_the_file_when_the_step_returns(tmp_path):
     path = tmp_path / "onboard.ulg"
     fc = FlightController(pipeline, f"udpout:127.0.0.1:{free_port()}",
                           [f"udpout:127.0.0.1:{free_port()}"], system_id=1, lockstep=True,
-                          home=Home(), onboard_log=path, stats_path=None)
+                          home=PX4_SITL_HOME, onboard_log=path, stats_path=None)
     try:
         pipeline.on_state(0, VehicleState((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0),
                                           (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)), 0)

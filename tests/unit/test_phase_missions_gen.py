@@ -11,9 +11,8 @@ import pytest
 
 from benchmarks.phase_missions import FORMATS, VEHICLES, draw_mission, written
 from common.mav_enums import MAV_CMD
-from common.mission_items import to_local
+from common.mission_items import PX4_SITL_HOME, to_local
 from fcu.compose import published_home
-from fcu.telemetry import Home
 from gcs.mission_files import read_mission
 
 
@@ -41,7 +40,7 @@ def test_a_written_mission_reads_back_as_the_same_flight(tmp_path, fmt):
     m = next(m for k in range(60) for m in [draw_mission(1, k, VEHICLES[1])]
              if "speed" in m["phases"] and "keyframe" in m["phases"])
     back = read_mission(written(m["items"], fmt, tmp_path))
-    home = published_home(Home())
+    home = published_home(PX4_SITL_HOME)
     assert [it.command for it in back] == [it.command for it in m["items"]]
     for a, b in zip((to_local(it, home) for it in back), m["items"], strict=True):
         if b.command in (MAV_CMD.MAV_CMD_NAV_WAYPOINT, 31000):

@@ -13,6 +13,7 @@ import pytest
 
 from common.config import ConfigError, load_scenario, load_vehicle
 from common.frames import flu_to_frd
+from common.mission_items import PX4_SITL_HOME
 from common.sensors_config import (
     PROFILE_IMU_RATE_MIN_HZ,
     check_servable,
@@ -24,7 +25,6 @@ from sitl.px4_hil import physics_step_us, px4_sensor_profile, stale_warning
 from sitl.px4_lockstep import LEARN_WINDOW, Answer, AnswerSchedule
 from sitl.px4_wire import (
     MODE_ARMED,
-    PX4_HOME,
     command_from_outputs,
     gps_fields,
     motor_order,
@@ -112,15 +112,15 @@ def _state(p_enu=(0.0, 0.0, 0.0), v_enu=(0.0, 0.0, 0.0), q=(1.0, 0.0, 0.0, 0.0),
 def test_gps_units_and_frames():
     """Given the state at home, moving or displaced, then HIL_GPS has degE7, mm AMSL, cm/s
     NED and the course in cdeg as PX4 reads them."""
-    g = gps_fields(_state(), PX4_HOME)
+    g = gps_fields(_state(), PX4_SITL_HOME)
     assert (g.lat, g.lon, g.alt) == (473977420, 85455940, 488000)
     assert (g.fix_type, g.satellites_visible, g.eph, g.epv) == (3, 10, 100, 100)
     assert (g.vel, g.vn, g.ve, g.vd, g.cog) == (0, 0, 0, 0, 65535)
-    north = gps_fields(_state(p_enu=(0.0, 10.0, 2.0), v_enu=(0.0, 1.0, -0.5)), PX4_HOME)
+    north = gps_fields(_state(p_enu=(0.0, 10.0, 2.0), v_enu=(0.0, 1.0, -0.5)), PX4_SITL_HOME)
     assert north.lat - 473977420 == round(math.degrees(10.0 / 6_378_137.0) * 1e7)
     assert north.lon == 85455940 and north.alt == 490000
     assert (north.vn, north.ve, north.vd, north.vel, north.cog) == (100, 0, 50, 100, 0)
-    east = gps_fields(_state(p_enu=(10.0, 0.0, 0.0), v_enu=(2.0, 0.0, 0.0)), PX4_HOME)
+    east = gps_fields(_state(p_enu=(10.0, 0.0, 0.0), v_enu=(2.0, 0.0, 0.0)), PX4_SITL_HOME)
     assert east.lon > 85455940 and east.lat == 473977420
     assert (east.ve, east.cog) == (200, 9000)
 
@@ -128,7 +128,7 @@ def test_gps_units_and_frames():
 def test_state_quaternion_units_and_frames():
     """Given the body facing east at rest, then HIL_STATE_QUATERNION has yaw +90 deg in NED,
     FRD rates, mm AMSL and the specific force in mG."""
-    h = state_fields(_state(w_flu=(0.1, 0.2, 0.3), v_enu=(1.0, 0.0, 0.0)), PX4_HOME,
+    h = state_fields(_state(w_flu=(0.1, 0.2, 0.3), v_enu=(1.0, 0.0, 0.0)), PX4_SITL_HOME,
                      (0.0, 0.0, 9.80665))
     w, x, y, z = h.attitude_quaternion
     assert w == pytest.approx(math.sqrt(0.5)) and z == pytest.approx(math.sqrt(0.5))
@@ -176,7 +176,7 @@ def test_the_home_field_is_px4s_table_at_its_home():
     and strength 0.482 gauss: PX4's WMM table bilinearly interpolated at its SITL home
     (the corners of 40-50 N, 0-10 E in geo_magnetic_tables.hpp)."""
     n, e, d = resolve_sensor_profile("px4-default").mag.field_ned_gauss
-    fy, fx = (PX4_HOME.lat_deg - 40.0) / 10.0, PX4_HOME.lon_deg / 10.0
+    fy, fx = (PX4_SITL_HOME.lat_deg - 40.0) / 10.0, PX4_SITL_HOME.lon_deg / 10.0
 
     def table(v00: float, v01: float, v10: float, v11: float) -> float:
         return (1 - fy) * ((1 - fx) * v00 + fx * v01) + fy * ((1 - fx) * v10 + fx * v11)
@@ -200,7 +200,7 @@ def test_gps_noise_and_accuracy_as_declared():
     assert got.mean(axis=0) == pytest.approx((1.0, 2.0, 3.0, 0.0, 0.0, 0.0), abs=0.002)
     assert got.std(axis=0) == pytest.approx((0.0028, 0.0028, 0.0056, 0.0126, 0.0126, 0.0253),
                                           rel=0.05)
-    g = gps_fields(_state(), PX4_HOME, cfg)
+    g = gps_fields(_state(), PX4_SITL_HOME, cfg)
     assert (g.fix_type, g.eph, g.epv, g.satellites_visible) == (3, 100, 100, 10)
 
 
