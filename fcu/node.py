@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import os
 import select
-import signal
 import sys
 import time
 from pathlib import Path
@@ -30,12 +29,11 @@ from common.cliargs import check_output_path
 from common.config import ConfigError, load_gains, load_vehicle
 from common.jit import compile_time_s
 from common.links import LinkError, open_link, parse_url
-from common.mavlink import MAV, SigningKeyError, encoder, pack, read_signing_key
+from common.mavlink import MAV, encoder, pack, read_signing_key
 from common.mission_items import HomePosition
 from common.outcome import Event
 from common.parent import stop_with_parent
-from common.realtime import schedule_loop
-from common.ulog import ULogError
+from common.program import STARTUP_ERRORS, serve, start_failed
 from fcu.compose import fcu_pipeline, param_store, published_home
 from fcu.deadlines import Deadlines
 from fcu.estimator.inputs import ImuInput, PoseInput
@@ -454,42 +452,20 @@ def main(argv: list[str] | None = None) -> int:
                               rtt_probes=args.rtt_probes, params=params,
                               work=make_work(args.work, lockstep=not args.realtime)
                               if args.work else None)
-    except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the loop ran: nothing flown
-        print("fcu: stopped while starting", file=sys.stderr, flush=True)
-        return 0
-    except LinkError as exc:  # 2: bad URL, busy port, missing device; 1: peer not there
-        print(f"fcu: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except (ConfigError, SigningKeyError, ULogError) as exc:
-        print(f"fcu: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # a file that cannot be written: one line
-        print(f"fcu: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
+    except (KeyboardInterrupt, LinkError, *STARTUP_ERRORS, OSError) as exc:
+        return start_failed("fcu", exc)
 
-    if startup.stop_requested():  # Ctrl-C or SIGTERM while it started: nothing flown
-        fc.close()
-        print("fcu: stopped while starting", file=sys.stderr, flush=True)
-        return 0
-
-    def stop(_signum: int, _frame: object) -> None:
-        fc.running = False
-
-    def rotate(_signum: int, _frame: object) -> None:
+    def rotate() -> None:  # SIGHUP: the onboard log rotated at the next housekeeping
         fc.rotate_log = True
 
-    signal.signal(signal.SIGTERM, stop)
-    signal.signal(signal.SIGINT, stop)
-    signal.signal(signal.SIGHUP, rotate)
-    links = ", ".join(args.gcs or DEFAULT_GCS)
-    print(f"fcu: system {args.sysid}, simulator {args.sim}, GCS {links} "
-          f"({'real time' if args.realtime else 'lockstep'}, {args.rate} Hz)", flush=True)
     sim_port = getattr(fc.sim.link, "local_port", None)
-    if sim_port is not None:
-        print(f"fcu: sim port {sim_port}", flush=True)
-    if args.realtime:  # the loop sleeps between periods: it may run ahead of the machine
-        schedule_loop("fcu", args.rt_priority)
-    fc.run()
+    said = (f"fcu: system {args.sysid}, simulator {args.sim}, GCS "
+            f"{', '.join(args.gcs or DEFAULT_GCS)} "
+            f"({'real time' if args.realtime else 'lockstep'}, {args.rate} Hz)"
+            + (f"\nfcu: sim port {sim_port}" if sim_port is not None else ""))
+    if not serve("fcu", fc, said, rt_priority=args.rt_priority if args.realtime else None,
+                 on_hup=rotate):
+        return 0
     print(f"fcu: stopped after {fc.steps} control steps; {fc.deadlines.misses} deadline misses, "
           f"{fc.sim.resent_answers} answers re-sent, {fc.sim.rejected_bytes} bytes rejected",
           flush=True)

@@ -13,10 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import importlib
-import json
 import math
-import os
-import signal
 import sys
 from pathlib import Path
 from typing import Any, Protocol
@@ -26,9 +23,9 @@ from common.cliargs import OneLineParser, check_output_path
 from common.config import ConfigError, Scenario, check_sensor_faults, load_scenario
 from common.links import LinkError, parse_url
 from common.parent import stop_with_parent
-from common.realtime import DEFAULT_PRIORITY, schedule_loop
+from common.program import STARTUP_ERRORS, serve, start_failed
+from common.realtime import DEFAULT_PRIORITY
 from common.sensors_config import resolve_sensor_profile
-from common.ulog import ULogError
 from sitl.server import SimulatorServer
 
 # The simulator protocols `sitl` serves: its own link to this project's FCU, and the
@@ -193,38 +190,13 @@ def main(argv: list[str] | None = None) -> int:
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
                                  resend_ms=args.resend_ms, system_id=args.sysid,
                                  sensors=scenario.sensors, seed=scenario.seed)
-    except KeyboardInterrupt:  # Ctrl-C or SIGTERM before the loop ran: nothing flown
-        print("sitl: stopped while starting", file=sys.stderr, flush=True)
+    except (KeyboardInterrupt, LinkError, *STARTUP_ERRORS, OSError) as exc:
+        return start_failed("sitl", exc)
+    said = (f"sitl: serving {scenario.name} on {args.link} "
+            f"({'real time' if args.realtime else 'lockstep'})")
+    if not serve("sitl", server, said, rt_priority=args.rt_priority if args.realtime else None,
+                 stats=args.stats, stats_of=server.stats):
         return 0
-    except LinkError as exc:  # 2: bad URL, busy port, missing device; 1: peer not there
-        print(f"sitl: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except (ConfigError, ULogError) as exc:
-        print(f"sitl: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # a file that cannot be written: one line
-        print(f"sitl: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
-
-    if startup.stop_requested():  # Ctrl-C or SIGTERM while it started: nothing flown
-        server.close()
-        print("sitl: stopped while starting", file=sys.stderr, flush=True)
-        return 0
-
-    def stop(_signum: int, _frame: object) -> None:
-        server.running = False
-
-    signal.signal(signal.SIGTERM, stop)
-    signal.signal(signal.SIGINT, stop)
-    print(f"sitl: serving {scenario.name} on {args.link} "
-          f"({'real time' if args.realtime else 'lockstep'})", flush=True)
-    if args.realtime:  # the loop sleeps between periods: it may run ahead of the machine
-        schedule_loop("sitl", args.rt_priority)
-    server.run()
-    if args.stats is not None:
-        tmp = args.stats.with_suffix(".tmp")
-        tmp.write_text(json.dumps(server.stats(), indent=2) + "\n")
-        os.replace(tmp, args.stats)
     print(f"sitl: stopped at t = {server.state.time_us * 1e-6:.3f} s after {server.steps} "
           f"control periods; {server.resends} re-sends, {server.ignored_answers} answers "
           f"ignored, {server.rejected_bytes} bytes rejected, {server.skipped_s:.3f} s of wall "
@@ -240,30 +212,12 @@ def _serve_firmware(args: argparse.Namespace, scenario: Scenario, end_s: float |
         pace = {} if args.speed_factor is None else {"speed_factor": args.speed_factor}
         server: FirmwareServer = module.Server(scenario, args.link, truth_log=args.truth_log,
                                                end_time_s=end_s, system_id=args.sysid, **pace)
-    except LinkError as exc:
-        print(f"sitl: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except (ConfigError, ULogError) as exc:
-        print(f"sitl: {exc}", file=sys.stderr)
-        return 2
-
-    if startup.stop_requested():  # Ctrl-C or SIGTERM while it started: nothing flown
-        server.close()
-        print("sitl: stopped while starting", file=sys.stderr, flush=True)
+    except (LinkError, *STARTUP_ERRORS) as exc:
+        return start_failed("sitl", exc)
+    said = (f"sitl: serving {scenario.name} on {args.link} ({args.protocol}, lockstep driven "
+            "by the firmware)")
+    if not serve("sitl", server, said, stats=args.stats, stats_of=server.stats):
         return 0
-
-    def stop(_signum: int, _frame: object) -> None:
-        server.running = False
-
-    signal.signal(signal.SIGTERM, stop)
-    signal.signal(signal.SIGINT, stop)
-    print(f"sitl: serving {scenario.name} on {args.link} ({args.protocol}, lockstep driven "
-          "by the firmware)", flush=True)
-    server.run()
-    if args.stats is not None:
-        tmp = args.stats.with_suffix(".tmp")
-        tmp.write_text(json.dumps(server.stats(), indent=2) + "\n")
-        os.replace(tmp, args.stats)
     print(f"sitl: {server.summary()}", flush=True)
     return 0
 

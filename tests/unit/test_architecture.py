@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 EDGE = {
     "common": ("common/links", "common/zenoh_link.py", "common/mavlink.py", "common/simlink.py",
                "common/mission_items.py", "common/jit.py", "common/ulog.py",
-               "common/entry.py", "common/startup.py", "common/parent.py",
+               "common/entry.py", "common/startup.py", "common/program.py", "common/parent.py",
                "common/cliargs.py"),
     "fcu": ("fcu/node.py", "fcu/sim_bridge.py", "fcu/gcs_server.py", "fcu/gcs_commands.py",
             "fcu/gcs_params.py", "fcu/mission_protocol.py", "fcu/telemetry.py",
