@@ -1,7 +1,7 @@
 """Telemetry of the FCU on its GCS links: message builders (ENU/FLU -> NED/FRD at the wire)
 and a wall-clock scheduler whose intervals MAV_CMD_SET_MESSAGE_INTERVAL changes.
 
-Defaults (docs/autopilot.md): pose 50 Hz, actuators 10 Hz, status 1 Hz.
+Defaults (docs/autopilot.md#telemetry): pose 50 Hz, actuators 10 Hz, status 1 Hz.
 """
 
 from __future__ import annotations
