@@ -58,10 +58,10 @@ def accept_mission(pipeline: Pipeline, items: Sequence[MissionItem],
 
 def arm_and_start(pipeline: Pipeline, first_item: int = 0) -> str:
     """Arm, then start the mission at `first_item` (MAV_CMD_COMPONENT_ARM_DISARM,
-    MAV_CMD_MISSION_START); returns why one is refused ("arming refused: ..."), "" if
-    both are accepted."""
+    MAV_CMD_MISSION_START); returns why one is refused (the vehicle's words: "arming
+    refused: ..."), "" if both are accepted."""
     code, text = pipeline.arm()
     if code != 0:
-        return f"arming refused: {text}"
+        return text
     code, text = pipeline.commander.mission_start(first_item)
     return f"mission start refused: {text}" if code != 0 else ""

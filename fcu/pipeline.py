@@ -209,7 +209,8 @@ class Pipeline:
             why = ("not aligned" if not st.aligned else "not converged" if not st.converged
                    else "unhealthy" if not st.healthy else "")  # within one STATUSTEXT
             if why:
-                return 1, f"arming refused: estimator {why}"  # MAV_RESULT_TEMPORARILY_REJECTED
+                return (MAV_RESULT.MAV_RESULT_TEMPORARILY_REJECTED,
+                        f"arming refused: estimator {why}")
         result = self.commander.arm()
         if result[0] == MAV_RESULT.MAV_RESULT_ACCEPTED and not was:
             self.core.tracker.reset()

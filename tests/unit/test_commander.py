@@ -368,3 +368,12 @@ def test_a_land_speed_the_gains_cannot_land_at_is_capped_and_said():
     _to_touchdown(slow, 1.0)
     assert slow.commander.touchdown_speed_m_s == 0.5
     assert not [e for e in slow.events if e.text.startswith("touchdown capped")]
+
+
+def test_a_refused_arming_is_said_once_in_the_vehicles_words():
+    """`fcu.compose.arm_and_start` (in-process runs) gives the vehicle's own refusal, not
+    'arming refused: arming refused: ...'."""
+    from fcu.compose import arm_and_start
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500)
+    assert arm_and_start(pipe) == "arming refused: no state input"
