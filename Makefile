@@ -20,6 +20,7 @@ demo: venv
 	$(VENV)/bin/gcs run config/scenarios/case1_figure8.toml --out $(OUT) --force
 
 test: venv
+	$(VENV)/bin/ruff check .
 	$(PY) -m mypy
 	$(PY) -m mypy benchmarks tools
 	$(PY) -m pytest -q -n auto --dist loadgroup --durations=20 tests

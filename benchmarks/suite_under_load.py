@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/suite_under_load.py [--times N] [--busy K] [--nice P]
         [-- pytest args]
 
-Runs `make test`'s steps (mypy over the packages, then benchmarks/ and tools/, then pytest
+Runs `make test`'s steps (ruff, mypy over the packages, then benchmarks/ and tools/, then pytest
 over tests/ with xdist) N times in a row
 beside K busy-looping children at nice P (default 19; `--busy 8 --nice 0` is a load of 8 at
 normal priority), prints each run's wall time and result, stops at the first failure, and
@@ -31,7 +31,8 @@ def _busy_children(count: int, niceness: int = 19) -> list[subprocess.Popen[byte
 
 
 def _suite(pytest_args: list[str]) -> int:
-    steps = [[sys.executable, "-m", "mypy"], [sys.executable, "-m", "mypy", "benchmarks", "tools"],
+    steps = [[sys.executable, "-m", "ruff", "check", "."], [sys.executable, "-m", "mypy"],
+             [sys.executable, "-m", "mypy", "benchmarks", "tools"],
              [sys.executable, "-m", "pytest", "-q", "-n", "auto", "--dist", "loadgroup",
               *(pytest_args or ["tests"])]]
     for step in steps:
