@@ -50,8 +50,18 @@ class FlightSettings:
     sticks: StickSettings = field(default_factory=StickSettings)
 
 
-ANCHOR_LEAD_US = 10_000  # beside the loop: a new offboard sample is anchored this far ahead
-COAST_MAX_US = 100_000  # a coast whose plan is not in by then is planned in the loop (late work)
+ANCHOR_LEAD_US = 10_000  # beside the loop: a plan is made this far ahead, at least
+LEAD_MAX_US = 100_000  # and at most this far, after plans that came late (`_on_time`)
+COAST_MAX_US = 250_000  # a coast whose plan is not in by then is planned in the loop (late work)
+
+
+class _Ahead:
+    """A plan under way beside the loop, asked at `t_us` (flight clock)."""
+
+    __slots__ = ("t_us",)
+
+    def __init__(self, t_us: int) -> None:
+        self.t_us = t_us
 
 
 class ModeReferences:
@@ -86,16 +96,17 @@ class ModeReferences:
         self.manual_sp: ManualSetpoint | None = None  # POSCTL's set-point (None: from here)
         self.manual_limits: StickSettings = self.flight.sticks  # fitted to the vehicle
         self.offboard_sp: offboard.Shaped | None = None  # OFFBOARD's shaper (None: from here)
-        self._anchoring: object | None = None  # a new sample's anchor under way beside
+        self._anchoring: _Ahead | None = None  # a new sample's anchor under way beside
         self._anchored: offboard.Shaped | None = None  # taken in, flown from its time
         self.late_anchors = 0  # anchors that came after their time (planned again)
         self._offboard_refused = ""  # the last refusal said
         # HOLD brakes to `hold` (where the reference stops) with the same shaper
         self.hold_sp: offboard.Shaped | None = None
         self._hold_shaped: Reference | None = None  # the hold that hold_sp brakes to
-        self._braking: object | None = None  # HOLD's brake under way beside the loop
+        self._braking: _Ahead | None = None  # HOLD's brake under way beside the loop
         self._braked: tuple[offboard.Shaped, Reference] | None = None  # taken in, not flown
         self.inline_plans = 0  # coasts planned in the loop: their work came too late
+        self.lead_us = ANCHOR_LEAD_US  # how far ahead plans beside the loop are made
         self.state: VehicleState | None = None
         self.last_ref: Reference | None = None
         self.clock_us = 0  # the flight clock at the latest input (events are stamped with it)
@@ -211,15 +222,15 @@ class ModeReferences:
         sp, ref = offboard.advance(sp, t_us, None, lim)
         if self._anchoring is not None or self._anchored is not None:
             return sp, ref
-        job = object()
+        job = _Ahead(t_us)
         if target is not None and target.seq != sp.seq:
             self._anchoring = job
-            self.work.submit(offboard.advance, (sp, t_us + ANCHOR_LEAD_US, target, lim,
+            self.work.submit(offboard.advance, (sp, t_us + self.lead_us, target, lim,
                                                 self._envelope()),
                              lambda outcome: self._anchored_in(job, outcome))
         elif sp.seq == offboard.COAST:
             self._anchoring = job
-            self.work.submit(offboard.start_ahead, (sp, t_us + ANCHOR_LEAD_US, lim,
+            self.work.submit(offboard.start_ahead, (sp, t_us + self.lead_us, lim,
                                                     self._envelope()),
                              lambda outcome: self._anchored_in(job, outcome))
         return sp, ref
@@ -233,7 +244,7 @@ class ModeReferences:
         self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, "work late: planned in the loop")
         return True
 
-    def _anchored_in(self, job: object,
+    def _anchored_in(self, job: _Ahead,
                      outcome: Outcome[tuple[offboard.Shaped, Reference]]) -> None:
         if job is not self._anchoring or self.mode != Mode.OFFBOARD:
             return  # OFFBOARD left (or entered again) meanwhile
@@ -242,10 +253,20 @@ class ModeReferences:
             self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, f"offboard: {outcome.error}")
             return
         shaped = outcome.value[0]
-        if shaped.t_us > self.clock_us:  # else too late: planned again from the next step
+        if self._on_time(job, shaped.t_us):  # else planned again from the next step
             self._anchored = shaped
-        else:
-            self.late_anchors += 1
+
+    def _on_time(self, job: _Ahead, planned_for_us: int) -> bool:
+        """Whether a plan made beside for `planned_for_us` came before that time (a late one
+        would jump: it is counted and planned again). The lead adapts to the work: after a
+        late plan it is twice what that one took (up to LEAD_MAX_US); each plan on time
+        brings it a quarter of the way back to ANCHOR_LEAD_US."""
+        if planned_for_us > self.clock_us:
+            self.lead_us -= (self.lead_us - ANCHOR_LEAD_US) // 4
+            return True
+        self.late_anchors += 1
+        self.lead_us = min(LEAD_MAX_US, max(self.lead_us, 2 * (self.clock_us - job.t_us)))
+        return False
 
     def _envelope(self) -> Envelope | None:
         vehicle = self.limits.vehicle
@@ -314,8 +335,8 @@ class ModeReferences:
             self._braking = self._braked = None
             self.hold_sp, self.hold = offboard.brake_ahead(sp, t_us, lim, self._envelope())
         elif self._braking is None and braked is None:
-            job = self._braking = object()
-            self.work.submit(offboard.brake_ahead, (sp, t_us + ANCHOR_LEAD_US, lim,
+            job = self._braking = _Ahead(t_us)
+            self.work.submit(offboard.brake_ahead, (sp, t_us + self.lead_us, lim,
                                                     self._envelope()),
                              lambda outcome: self._braked_in(job, outcome))
             return
@@ -323,17 +344,15 @@ class ModeReferences:
             return
         self._hold_shaped = self.hold
 
-    def _braked_in(self, job: object,
+    def _braked_in(self, job: _Ahead,
                    outcome: Outcome[tuple[offboard.Shaped, Reference]]) -> None:
         if job is not self._braking:
             return  # a newer hold asked meanwhile
         self._braking = None
         if outcome.value is None:
             self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, f"hold: {outcome.error}")
-        elif outcome.value[0].t_us > self.clock_us:  # else too late: planned again
+        elif self._on_time(job, outcome.value[0].t_us):  # else planned again
             self._braked = outcome.value
-        else:
-            self.late_anchors += 1
 
     def _mission_ref(self, t_flight_s: float) -> Reference:
         executor = self.executor

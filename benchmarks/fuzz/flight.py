@@ -71,7 +71,7 @@ class Flight:
         self.signing_key = secrets.token_bytes(32) if signing else None
         self.scenario = load_scenario(scenario)
         self.sitl_port, self.gcs_port = free_port(), free_port()
-        self.relay = UdpProxy(self.sitl_port, Impairment(), seed=0)
+        self.relay = UdpProxy(self.sitl_port, Impairment(), seed=0, rt_priority=48)
         self.listener = LinkListener()
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self.session: Session | None = None

@@ -118,4 +118,6 @@ def test_realtime_offboard_samples_are_anchored_beside_the_loop(tmp_path):
     anchors = [j["steps"] for j in work["history"] if j["job"] == "advance"]
     assert len(anchors) >= 3 and min(anchors) >= 1 and work["failed"] == 0, work
     brakes = [j["steps"] for j in work["history"] if j["job"] == "brake_ahead"]
-    assert len(brakes) == 1 and brakes[0] >= 1 and work["inline_plans"] == 0, work
+    # one brake, or more where one came after its time on a busy machine (planned again)
+    assert brakes and min(brakes) >= 1 and work["inline_plans"] == 0, work
+    assert len(brakes) <= 1 + work["late_anchors"], work

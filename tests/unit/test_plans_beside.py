@@ -217,3 +217,27 @@ def test_start_ahead_is_the_start_from_where_the_coast_is_then():
     assert pickle.dumps(started) == pickle.dumps(offboard.start(11_000, later, lim))
     assert pickle.dumps(offboard.brake_ahead(s, 11_000, lim)) == \
         pickle.dumps(offboard.brake(11_000, later, lim))
+
+
+def test_the_lead_grows_after_a_late_plan_and_comes_back_after_plans_on_time():
+    """Given HOLD's brake that came 20 ms after it was asked (10 ms after its time), then it
+    is not flown, the next is asked twice that time ahead (so a machine that slow is in
+    time), and that one, in time, is flown; each plan on time brings the lead a quarter of
+    the way back to ANCHOR_LEAD_US."""
+    work = HeldWork()
+    c, t = _moving_north(work)
+    assert c.set_mode(Mode.HOLD, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    asked = t + PERIOD_US
+    for k in range(1, 12):
+        _fly(c, t + PERIOD_US * k)
+    assert len(work.held) == 1 and work.held[0][1][1] == asked + ANCHOR_LEAD_US
+    work.release()  # at t + 11 periods: 20 ms after it was asked, past its time
+    assert c.late_anchors == 1 and c.lead_us == 2 * (t + 11 * PERIOD_US - asked)
+    again = t + 12 * PERIOD_US
+    _fly(c, again)
+    assert work.held[0][1][1] == again + c.lead_us  # asked again, further ahead
+    work.release()
+    assert c.late_anchors == 1 and c.lead_us == 40_000 - (40_000 - ANCHOR_LEAD_US) // 4
+    for k in range(13, 3000):
+        ref = _fly(c, t + PERIOD_US * k)
+    assert c.inline_plans == 0 and ref.v_enu_m_s == (0.0, 0.0, 0.0)
