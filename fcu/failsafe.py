@@ -13,8 +13,29 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import StrEnum
 
 from common.outcome import DIVERGENCE_M
+
+
+class Failsafe(StrEnum):
+    """The failsafe in force (`Pipeline.failsafe`), its value what the logs and STATUSTEXTs
+    name; NONE (empty, false) when none is."""
+
+    NONE = ""
+    STATE_LOST = "state input lost"
+    DIVERGED = "diverged"
+    NON_FINITE = "non-finite command"
+    ESTIMATOR_FAILED = "estimator failed"
+    ESTIMATOR_INCONSISTENT = "estimator inconsistent"
+    POSE_LOST = "pose source lost"
+    ROTOR_SATURATION = "rotor saturation"
+    GCS_LOST = "GCS link lost"
+
+
+# the failsafes that are an emergency, not a degraded flight (HEARTBEAT's EMERGENCY state is
+# DIVERGED's; PX4's vehicle_status.failsafe_and_user_took_over-like flag is both's)
+CRITICAL_FAILSAFES = (Failsafe.DIVERGED, Failsafe.NON_FINITE)
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ from common.mission_items import HomePosition
 from common.modes import decode_custom
 from common.outcome import Event
 from fcu.dualquat import q_angle, q_conj, q_mul, q_rotate
+from fcu.failsafe import Failsafe
 from fcu.gcs_commands import MAX_PEERS, CommandService
 from fcu.gcs_params import ParamService
 from fcu.mission_protocol import MissionServer
@@ -366,7 +367,7 @@ class GcsServer:
         elif msg_id == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             msgs = autopilot_version(self.system_id)
         elif msg_id == M.MAVLINK_MSG_ID_SYS_STATUS:
-            state_ok = pipe.state is not None and pipe.failsafe != "state input lost"
+            state_ok = pipe.state is not None and pipe.failsafe != Failsafe.STATE_LOST
             heard = c.sticks_received_s > -math.inf
             msgs = sys_status(state_ok=state_ok, control_ok=state_ok and not pipe.failsafe,
                               prearm_ok=state_ok and pipe.estimator_ready, load_permille=0,

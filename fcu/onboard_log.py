@@ -54,7 +54,7 @@ from common.quaternion import q_rotate
 from common.ulog import Topic, ULogWriter, info_message
 from fcu.core import ONBOARD_COLUMNS, onboard_row
 from fcu.estimator.inputs import ImuInput, PoseInput
-from fcu.failsafe import state_lost
+from fcu.failsafe import CRITICAL_FAILSAFES, Failsafe, state_lost
 from fcu.pipeline import Pipeline, StepOutput
 
 # dq_onboard's columns as read back (`common.ulog.read_topic`): ONBOARD_COLUMNS, then the
@@ -79,7 +79,6 @@ NAV_STATE = {Mode.HOLD: px4.NAVIGATION_STATE_AUTO_LOITER,
              Mode.TAKEOFF: px4.NAVIGATION_STATE_AUTO_TAKEOFF,
              Mode.RTL: px4.NAVIGATION_STATE_AUTO_RTL,
              Mode.POSCTL: px4.NAVIGATION_STATE_POSCTL}
-CRITICAL_FAILSAFES = ("diverged", "non-finite command")
 def identity_params(system_id: int) -> dict[str, int]:
     """The int32 parameters a PX4 log carries that Flight Review and pyulog read for what
     the vehicle is: MAV_TYPE (`PX4ULog.get_mav_type`: "Hexarotor"), MAV_SYS_ID, and
@@ -273,7 +272,7 @@ class OnboardLog(ULogWriter):
         self.last_status = key
         self.next_status_us = (t_us // self.status_period_us + 1) * self.status_period_us
         w = self
-        gcs_lost = pipe.failsafe == "GCS link lost"
+        gcs_lost = pipe.failsafe == Failsafe.GCS_LOST
         w.add("vehicle_status", (
             t_us, self.armed_time_us, self.takeoff_time_us,
             px4.ARMING_STATE_ARMED if cmd.armed else px4.ARMING_STATE_DISARMED,

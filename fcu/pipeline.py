@@ -32,6 +32,7 @@ from fcu.estimator.ekf import Estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
 from fcu.failsafe import (
+    Failsafe,
     FailsafeSettings,
     GcsLinkMonitor,
     SaturationMonitor,
@@ -83,7 +84,7 @@ class Pipeline:
         self.state: VehicleState | None = None
         self.state_time_us = -1  # the stamp of the latest state
         self.state_rx_us: int | None = None  # the flight clock when it arrived
-        self.failsafe = ""  # the active failsafe, shown in HEARTBEAT and SYS_STATUS
+        self.failsafe: Failsafe = Failsafe.NONE  # in force: shown in HEARTBEAT, SYS_STATUS
         self.last_output: StepOutput | None = None
         self.steps = 0
         self.saturated_steps = 0
@@ -216,7 +217,7 @@ class Pipeline:
             self.core.tracker.reset()
             self.saturation = SaturationMonitor()
             self.actuators.reset(self.core.allocator.tilt)
-            self.failsafe = ""
+            self.failsafe = Failsafe.NONE
             self.pose_level = 0
         return result
 
@@ -244,7 +245,7 @@ class Pipeline:
         if cmd.armed and self.estimator is not None:
             self._check_estimator(t_us)
         if cmd.armed and state_lost(t_us, self.state_rx_us, self.settings):
-            self.failsafe = "state input lost"
+            self.failsafe = Failsafe.STATE_LOST
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, "failsafe: state input lost", FAILSAFE)
             cmd.disarm(force=True, reason="state input lost: disarmed")
         state = self.state
@@ -260,7 +261,7 @@ class Pipeline:
         finite = all(map(math.isfinite, (*state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
                                           *state.omega_flu_rad_s)))
         if diverged(err, finite, self.settings.divergence_m):
-            self.failsafe = "diverged"
+            self.failsafe = Failsafe.DIVERGED
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_EMERGENCY, f"failsafe: diverged ({err:.1f} m)",
                     DIVERGED)
             cmd.disarm(force=True, reason="diverged: disarmed", record_in_air=False)
@@ -269,7 +270,7 @@ class Pipeline:
         out = self.supervisor.gate(True, alloc.speed_rad_s, alloc.tilt_rad)
         if out.fault:
             self.core.allocator.reset(out.tilt_rad)
-            self.failsafe = "non-finite command"
+            self.failsafe = Failsafe.NON_FINITE
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_EMERGENCY, "failsafe: non-finite actuator command",
                     FAILSAFE)
             cmd.disarm(force=True, reason="non-finite command: disarmed")
@@ -299,24 +300,24 @@ class Pipeline:
         st = self.estimator.health()
         cmd = self.commander
         if not st.healthy:
-            self.failsafe = "estimator failed"
+            self.failsafe = Failsafe.ESTIMATOR_FAILED
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_EMERGENCY, "failsafe: estimator failed", FAILSAFE)
             cmd.disarm(force=True, reason="estimator failed: disarmed")
             return
         if st.rejected_in_row >= self.settings.gate_failures and self.failsafe != \
-                "estimator inconsistent":
-            self.failsafe = "estimator inconsistent"
+                Failsafe.ESTIMATOR_INCONSISTENT:
+            self.failsafe = Failsafe.ESTIMATOR_INCONSISTENT
             cmd.failsafe_land("failsafe: estimator inconsistent: LAND")
         level = pose_loss_level(t_us, st.last_fusion_us, self.settings)
         if level > self.pose_level:
-            self.failsafe = "pose source lost"
+            self.failsafe = Failsafe.POSE_LOST
             if level == 1 and not cmd.landing:
                 cmd.failsafe_hold("failsafe: pose source lost: HOLD")
             elif level == 2:
                 cmd.failsafe_land("failsafe: pose source lost: LAND")
         elif level == 0 and self.pose_level > 0:
-            if self.failsafe == "pose source lost":
-                self.failsafe = ""
+            if self.failsafe == Failsafe.POSE_LOST:
+                self.failsafe = Failsafe.NONE
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "pose source regained")
         self.pose_level = level
 
@@ -342,7 +343,7 @@ class Pipeline:
         change = self.saturation.update(t_us, saturated, self.settings)
         cmd = self.commander
         if change == "start":
-            self.failsafe = "rotor saturation"
+            self.failsafe = Failsafe.ROTOR_SATURATION
             if self.settings.saturation_hold and cmd.mode == Mode.MISSION and \
                     not cmd.landing:
                 cmd.failsafe_hold("failsafe: rotors saturated: mission aborted, HOLD")
@@ -353,14 +354,14 @@ class Pipeline:
                 cmd.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
                         f"rotors saturated for over {self.settings.saturation_s:g} s: {which}",
                         LIMIT)
-        elif change == "clear" and self.failsafe == "rotor saturation":
-            self.failsafe = ""
+        elif change == "clear" and self.failsafe == Failsafe.ROTOR_SATURATION:
+            self.failsafe = Failsafe.NONE
 
     # ------------------------------------------------------------------ links (wall clock)
 
     def check_links(self, now_s: float, gcs_seen_s: float = math.inf) -> None:
-        """Offboard and MANUAL_CONTROL streams and GCS heartbeat, on the wall clock (docs/clocks.md
-        section 2)."""
+        """Offboard and MANUAL_CONTROL streams and GCS heartbeat, on the wall clock
+        (docs/clocks.md)."""
         cmd = self.commander
         if cmd.armed and cmd.mode == Mode.OFFBOARD and offboard_lost(
                 now_s, cmd.offboard.received_s, cmd.offboard_timeout_s):
@@ -370,7 +371,7 @@ class Pipeline:
             cmd.failsafe_hold("failsafe: manual control lost: HOLD")
         change = self.gcs_link.update(now_s, gcs_seen_s, self.settings)
         if change == "lost":
-            self.failsafe = "GCS link lost"
+            self.failsafe = Failsafe.GCS_LOST
             if cmd.armed and not cmd.landing:
                 cmd.failsafe_hold("failsafe: GCS link lost: HOLD")
             else:
@@ -378,6 +379,6 @@ class Pipeline:
         elif change == "land" and cmd.armed and cmd.mode == Mode.HOLD:
             cmd.failsafe_land("failsafe: GCS link lost: LAND")
         elif change == "regained":
-            if self.failsafe == "GCS link lost":
-                self.failsafe = ""
+            if self.failsafe == Failsafe.GCS_LOST:
+                self.failsafe = Failsafe.NONE
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "GCS link regained")

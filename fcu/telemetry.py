@@ -20,6 +20,7 @@ from common.modes import MAIN_POSCTL
 from common.quaternion import zyx_euler, zyx_yaw
 from common.simlink import pose_covariance
 from fcu.estimator.ekf import Estimator
+from fcu.failsafe import Failsafe
 from fcu.pipeline import StepOutput
 from fcu.tracker import Reference, VehicleState
 
@@ -155,7 +156,7 @@ def heartbeat(armed: bool, custom_mode: int, active: bool, failsafe: str = ""
         base |= M.MAV_MODE_FLAG_GUIDED_ENABLED | M.MAV_MODE_FLAG_AUTO_ENABLED
     status = M.MAV_STATE_ACTIVE if active else M.MAV_STATE_STANDBY
     if failsafe:
-        status = M.MAV_STATE_EMERGENCY if failsafe == "diverged" else M.MAV_STATE_CRITICAL
+        status = M.MAV_STATE_EMERGENCY if failsafe == Failsafe.DIVERGED else M.MAV_STATE_CRITICAL
     return M.MAVLink_heartbeat_message(M.MAV_TYPE_HEXAROTOR, M.MAV_AUTOPILOT_PX4, base,
                                        custom_mode, status, 3)
 

@@ -377,3 +377,15 @@ def test_a_refused_arming_is_said_once_in_the_vehicles_words():
     vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
     pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500)
     assert arm_and_start(pipe) == "arming refused: no state input"
+
+
+def test_the_failsafe_in_force_is_a_member_whose_value_the_logs_and_texts_name():
+    """`Pipeline.failsafe` is a `Failsafe` member: NONE is empty and false; the others are
+    true and read as the words the logs, STATUSTEXTs and metrics carry."""
+    from fcu.failsafe import CRITICAL_FAILSAFES, Failsafe
+    assert not Failsafe.NONE and str(Failsafe.GCS_LOST) == "GCS link lost"
+    assert all(f and f.value for f in Failsafe if f is not Failsafe.NONE)
+    assert set(CRITICAL_FAILSAFES) == {Failsafe.DIVERGED, Failsafe.NON_FINITE}
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500)
+    assert pipe.failsafe is Failsafe.NONE
