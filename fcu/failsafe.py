@@ -33,8 +33,8 @@ class Failsafe(StrEnum):
     GCS_LOST = "GCS link lost"
 
 
-# the failsafes that are an emergency, not a degraded flight (HEARTBEAT's EMERGENCY state is
-# DIVERGED's; PX4's vehicle_status.failsafe_and_user_took_over-like flag is both's)
+# the failsafes logged as PX4's failsafe_flags.fd_critical_failure (the vehicle lost, not a
+# degraded flight: the onboard log)
 CRITICAL_FAILSAFES = (Failsafe.DIVERGED, Failsafe.NON_FINITE)
 
 
