@@ -4,7 +4,6 @@ directions with a seeded RNG, between a client (who sends to `port`) and a serve
 from __future__ import annotations
 
 import heapq
-import os
 import random
 import select
 import socket
@@ -22,13 +21,7 @@ class Impairment:
 
 
 class UdpProxy:
-    """`rt_priority` (1..99): the forwarding thread in SCHED_FIFO where the system grants it,
-    for a relay between real-time loops (a wire is not starved by the machine's load; the
-    loops themselves run at 50 and 49)."""
-
-    def __init__(self, server_port: int, impairment: Impairment, seed: int = 0,
-                 rt_priority: int = 0) -> None:
-        self.rt_priority = rt_priority
+    def __init__(self, server_port: int, impairment: Impairment, seed: int = 0) -> None:
         self.server = ("127.0.0.1", server_port)
         self.imp = impairment
         self.rng = random.Random(seed)
@@ -62,12 +55,6 @@ class UdpProxy:
             heapq.heappush(self._queue, (time.monotonic() + delay, self._n, sock, data, addr))
 
     def _run(self) -> None:
-        if self.rt_priority:
-            try:
-                os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO,
-                                      os.sched_param(self.rt_priority))
-            except OSError:  # not granted: a normal thread, as before
-                pass
         while not self._stop.is_set():
             timeout = 0.05
             if self._queue:

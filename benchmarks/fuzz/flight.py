@@ -22,6 +22,7 @@ from typing import Any
 
 from benchmarks.fuzz.config import PID, ROOT, SCENARIO, VEHICLE
 from benchmarks.fuzz.listener import LinkListener
+from benchmarks.fuzz.relay import Relay
 from common.config import load_scenario
 from common.links import free_port
 from common.mavlink import MAV
@@ -29,7 +30,6 @@ from common.parent import child_env
 from gcs.mission_client import upload
 from gcs.scenario_mission import scenario_mission
 from gcs.session import Session
-from tests.udp_proxy import Impairment, UdpProxy
 
 M = MAV
 
@@ -60,7 +60,7 @@ class Telemetry:
 
 
 class Flight:
-    """sitl + fcu in real time, the simulator link through a relay (`self.relay`), the
+    """sitl + fcu in real time, the simulator link through a relay process (`self.relay`), the
     FCU's first GCS link `udpin` on `self.gcs_port` with a ground-station session on it and
     a thread that records its telemetry once the mission has started, and its second GCS
     link `udpout` to `self.listener` (a `LinkListener`: nothing is ever sent on it)."""
@@ -71,7 +71,7 @@ class Flight:
         self.signing_key = secrets.token_bytes(32) if signing else None
         self.scenario = load_scenario(scenario)
         self.sitl_port, self.gcs_port = free_port(), free_port()
-        self.relay = UdpProxy(self.sitl_port, Impairment(), seed=0, rt_priority=48)
+        self.relay = Relay(self.sitl_port)
         self.listener = LinkListener()
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self.session: Session | None = None
@@ -190,7 +190,7 @@ class Flight:
             except subprocess.TimeoutExpired:
                 p.kill()
                 codes[name] = p.wait()
-        self.relay.close()
+        relay = self.relay.close()
         self.listener.close()
         stats_path = self.out / "fcu_stats.json"
         fcu = json.loads(stats_path.read_text()) if stats_path.exists() else {}
@@ -200,7 +200,7 @@ class Flight:
         if m:
             sitl = {"resends": int(m.group(1)), "ignored_answers": int(m.group(2)),
                     "rejected_bytes": int(m.group(3))}
-        self.stats = {"fcu": fcu, "sitl": sitl, "exit_codes": codes}
+        self.stats = {"fcu": fcu, "sitl": sitl, "relay": relay, "exit_codes": codes}
         return self.stats
 
 

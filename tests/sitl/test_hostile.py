@@ -7,7 +7,6 @@ the rejection counters show the input was seen and refused."""
 
 from __future__ import annotations
 
-import sys
 import threading
 import time
 from collections import Counter
@@ -27,8 +26,6 @@ RATE = 2_500.0  # per port and second: the three ports together, 7,500 inputs/s
 
 @pytest.mark.timeout(120)
 def test_hostile_input_on_every_port_does_not_stop_a_real_time_flight(tmp_path):
-    switch = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)  # the relay thread forwards the flight's own traffic
     flight = Flight(tmp_path)
     attacks: dict[str, Attack] = {}
     counts = {port: Counter() for port in PORTS}
@@ -69,7 +66,6 @@ def test_hostile_input_on_every_port_does_not_stop_a_real_time_flight(tmp_path):
         for a in attacks.values():
             a.close()
         stats = flight.stop()
-        sys.setswitchinterval(switch)
     print(f"\nhostile: {t1 - t0:.1f} s; {({p: dict(c) for p, c in counts.items()})}; "
           f"during {during}; after {after}; stats {stats}")
     assert not crashed and set(stats["exit_codes"].values()) == {0}, stats
