@@ -119,27 +119,37 @@ class _Triad:
         self.random_walk = random_walk
         self.limit = limit
         self.correlation_time_s = correlation_time_s
-        self.turn_on_bias = rng.normal(0.0, 1.0, 3) * turn_on_sigma
-        self.walk = np.zeros(3)
+        self.turn_on_bias: Vec3 = _vec3(rng.normal(0.0, 1.0, 3) * turn_on_sigma)
+        self.walk: Vec3 = (0.0, 0.0, 0.0)
 
     @property
     def bias(self) -> Vec3:
-        return _vec3(self.turn_on_bias + self.walk)
+        b, w = self.turn_on_bias, self.walk
+        return (b[0] + w[0], b[1] + w[1], b[2] + w[2])
 
     def sample(self, truth: Vec3, dt_s: float) -> Vec3:
+        """One reading. Scalar arithmetic in the order numpy's element-wise form had (the
+        same floats, to the last bit), without its per-call cost on three elements."""
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
-        draws = self.rng.normal(0.0, 1.0, 6)  # always six draws: the stream stays aligned
+        d = self.rng.normal(0.0, 1.0, 6).tolist()  # always six draws: the stream stays aligned
         tau = self.correlation_time_s
+        w = self.walk
         if tau is None:
-            self.walk = self.walk + self.random_walk * math.sqrt(dt_s) * draws[3:]
+            k = self.random_walk * math.sqrt(dt_s)
+            w = (w[0] + k * d[3], w[1] + k * d[4], w[2] + k * d[5])
         else:  # the exact discretisation of db/dt = -b/tau + s_rw w over dt
             sigma = self.random_walk * math.sqrt(-0.5 * tau * math.expm1(-2.0 * dt_s / tau))
-            self.walk = math.exp(-dt_s / tau) * self.walk + sigma * draws[3:]
-        y = np.asarray(truth, dtype=float) + self.turn_on_bias + self.walk
-        if self.white_sigma > 0.0:
-            y = y + self.white_sigma * draws[:3]
-        return _vec3(np.clip(y, -self.limit, self.limit))
+            a = math.exp(-dt_s / tau)
+            w = (a * w[0] + sigma * d[3], a * w[1] + sigma * d[4], a * w[2] + sigma * d[5])
+        self.walk = w
+        b, lim, s = self.turn_on_bias, self.limit, self.white_sigma
+        y = [float(truth[i]) + b[i] + w[i] for i in range(3)]
+        if s > 0.0:
+            y = [y[i] + s * d[i] for i in range(3)]
+        # np.clip's minimum(maximum(y, -lim), lim); a NaN stays NaN in both
+        return (min(max(y[0], -lim), lim), min(max(y[1], -lim), lim),
+                min(max(y[2], -lim), lim))
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,7 @@
 The design is described in `fcu.estimator` (the package docstring). Before it is aligned the
 filter is Python (the stationary window, `fcu.estimator.align`); once aligned its state
 lives in flat buffers (`common.layouts` EF_*, EI_*) that compiled kernels advance
-(`fcu.estimator.filter`): an IMU sample is one kernel call, a pose fusion four (the
-innovation covariance is inverted by numpy between them, see `fcu.estimator.update`).
+(`fcu.estimator.filter`): an IMU sample is one kernel call, a pose fusion one.
 """
 
 from __future__ import annotations
@@ -23,7 +22,6 @@ from common.layouts import (
     EF_INNOV,
     EF_LAST_W,
     EF_O_X,
-    EF_R,
     EF_RATIO,
     EF_SD,
     EI_C_T,
@@ -50,14 +48,10 @@ from fcu.estimator.filter import (
     DONE,
     FUSE,
     GROW,
-    OK_ATT,
-    OK_POS,
     OUTPUT,
     PUSH,
-    apply_update,
     cov_step,
-    fuse_begin,
-    fuse_end,
+    fuse,
     imu_step,
     output_values,
     pose_step,
@@ -69,7 +63,6 @@ from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
 from fcu.estimator.status import EstimatorHealth, EstimatorStatus, positive_definite, sd_verdict
 from fcu.estimator.strapdown import N, State
-from fcu.estimator.update import H_ATT, H_BOTH, H_POS, joseph_gain
 from fcu.tracker import VehicleState
 
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
@@ -385,30 +378,8 @@ class Estimator:
         return r_p, r_a  # NaN compares False: the floor
 
     def _fuse_current(self) -> None:
-        """The pose under way (`filter.fuse_begin`): gate position and attitude separately,
-        Joseph update of the parts that pass, then the counters, resets and the output's
-        correction (`filter.fuse_end`)."""
-        fb = self._fb
-        ok = fuse_begin(fb, self._ib, self._M)
-        if ok:
-            y = fb[EF_INNOV:EF_INNOV + 6].tolist()
-            r_p, r_a = fb[EF_R:EF_R + 2].tolist()
-            if ok == OK_POS | OK_ATT:
-                self._update(H_BOTH, y, [r_p] * 3 + [r_a] * 3)
-            elif ok == OK_POS:
-                self._update(H_POS, y[0:3], [r_p] * 3)
-            else:
-                self._update(H_ATT, y[3:6], [r_a] * 3)
-        fuse_end(fb, self._ib, self._M, self._pend_t, self._pend_v, ok)
-
-    def _update(self, H: np.ndarray, y: list[float], r: list[float]) -> None:
-        """Joseph update, injection and reset (Sola eq. 282-287), then the bounds: S and
-        P H^T compiled, S inverted by numpy, the rest compiled (`filter.apply_update`)."""
-        P = self._M[0]
-        rv = np.array(r, dtype=np.float64)
-        pht, S = joseph_gain(P, H, rv)
-        apply_update(self._fb, self._M, H, pht, np.linalg.inv(S),
-                     np.array(y, dtype=np.float64), rv)
+        """The pose under way: gated, fused, counted, one compiled call (`filter.fuse`)."""
+        fuse(self._fb, self._ib, self._M, self._pend_t, self._pend_v)
 
     # ------------------------------------------------------------------------------------
     # Outputs

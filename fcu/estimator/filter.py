@@ -6,9 +6,9 @@ the kernels read), `ib` integers (EI_*: times in us, counters, the ring and queu
 `M` the covariance P (M[0]) and the transition F (M[1]), the ring of buffered IMU samples
 (`pend_t` times, `pend_v` gyro and accel), the pose queue by capture time (`pose_c`
 captures, `pose_v` p, q and the variances as sent). `fcu.estimator.ekf.Estimator` owns them
-and runs the measurement update between `fuse_begin` and `fuse_end` (numpy's inverse of S,
-see `fcu.estimator.update`). The arithmetic is that of the interpreted filter, in its order
-(no fastmath): the same floats.
+and calls them; a pose's fusion is one call (`fuse`). The arithmetic is that of the
+interpreted filter, in its order (no fastmath): the same floats, but for the inverse of the
+innovation covariance (`fcu.estimator.update.spd_inverse`).
 """
 
 from __future__ import annotations
@@ -76,7 +76,9 @@ from fcu.estimator.update import (
     bound_covariance,
     inject,
     joseph_apply,
+    joseph_gain,
     reset_block,
+    spd_inverse,
     symmetrise,
 )
 
@@ -304,6 +306,46 @@ def apply_update(fb: np.ndarray, M: np.ndarray, H: np.ndarray, pht: np.ndarray,
     dx = joseph_apply(M[0], H, pht, s_inv, y, r)
     store_state(fb, EF_H_X, inject(load_state(fb, EF_H_X), dx))
     bound_covariance(M[0], fb[EF_VAR_MIN:EF_VAR_MIN + N], fb[EF_VAR_MAX])
+
+
+@njit
+def _measurement(fb: np.ndarray, pos: bool, att: bool
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(H, y, r) of the parts of the pose under way that passed their gates: H the rows of
+    I15 they measure (position 0-2, attitude 6-8), the innovations, the variances."""
+    m = 3 * (int(pos) + int(att))
+    H = np.zeros((m, N))
+    y = np.empty(m)
+    r = np.empty(m)
+    i = 0
+    for part, col, innov, var in ((pos, 0, EF_INNOV, EF_R), (att, 6, EF_INNOV + 3, EF_R + 1)):
+        if part:
+            for k in range(3):
+                H[i + k, col + k] = 1.0
+                y[i + k] = fb[innov + k]
+                r[i + k] = fb[var]
+            i += 3
+    return H, y, r
+
+
+@njit
+def fuse(fb: np.ndarray, ib: np.ndarray, M: np.ndarray, pend_t: np.ndarray,
+         pend_v: np.ndarray) -> int:
+    """The pose under way at the horizon, in one call: `fuse_begin` (gates), the Joseph
+    update of the parts that pass (`joseph_gain`, `spd_inverse`, `apply_update`), then
+    `fuse_end`. Returns the verdict bits; 0 when S was not positive definite (nothing is
+    fused, and it counts as a rejection)."""
+    ok = fuse_begin(fb, ib, M)
+    if ok:
+        H, y, r = _measurement(fb, (ok & OK_POS) != 0, (ok & OK_ATT) != 0)
+        pht, S = joseph_gain(M[0], H, r)
+        spd, s_inv = spd_inverse(S)
+        if spd:
+            apply_update(fb, M, H, pht, s_inv, y, r)
+        else:
+            ok = 0
+    fuse_end(fb, ib, M, pend_t, pend_v, ok)
+    return ok
 
 
 @njit

@@ -3,12 +3,15 @@
 The pose measures position and attitude directly, so H is a selector (rows of I15); the
 attitude innovation is log(q_hat* q_meas), a local (body) rotation vector.
 
-Compiled (`common.jit.njit`), in two halves around the innovation covariance's inverse
-(`joseph_gain`, then `joseph_apply`): the inverse is numpy's own (`np.linalg.inv`, called
-by `fcu.estimator.ekf`), because numba's LAPACK is another build whose inverse differs in
-the last bit for some matrices. The matrix products are BLAS's dgemm/dgemv through numba's
-`np.dot`, the same products numpy's `dot` computes (tests/unit/test_estimator_kernels.py
-checks both against numpy on random inputs).
+Compiled (`common.jit.njit`): `joseph_gain`, the innovation covariance's inverse
+(`spd_inverse`, by Cholesky: S is symmetric positive definite), then `joseph_apply`. The
+inverse is this module's own rather than LAPACK's, so that a fusion is one compiled call and
+its result does not depend on the LAPACK a platform's numpy links; it agrees with numpy's
+`np.linalg.inv` within 1e-13 relative on the filter's matrices, and the filter's pinned
+flight figures (tests/closed_loop/test_reference_figures.py, 1e-9 relative) did not move.
+The matrix products are BLAS's dgemm/dgemv through numba's `np.dot`, the same products
+numpy's `dot` computes (tests/unit/test_estimator_kernels.py checks them against numpy on
+random inputs).
 """
 
 from __future__ import annotations
@@ -21,11 +24,6 @@ from common.jit import njit
 from common.quaternion import q_exp, q_mul
 from fcu.estimator.strapdown import N, State
 
-I15 = np.eye(N)
-H_POS = I15[[0, 1, 2]]  # measurement selectors
-H_ATT = I15[[6, 7, 8]]
-H_BOTH = I15[[0, 1, 2, 6, 7, 8]]
-
 
 @njit
 def joseph_gain(P: np.ndarray, H: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -35,6 +33,44 @@ def joseph_gain(P: np.ndarray, H: np.ndarray, r: np.ndarray) -> tuple[np.ndarray
     for i in range(r.shape[0]):
         S[i, i] += r[i]
     return pht, S
+
+
+@njit
+def spd_inverse(S: np.ndarray) -> tuple[bool, np.ndarray]:
+    """(True, S^-1) for a symmetric positive definite S, by Cholesky (S = L L^T, S^-1 =
+    L^-T L^-1, exactly symmetric); (False, NaNs) when S is not (a pivot <= 0 or NaN)."""
+    n = S.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        d = S[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return False, np.full((n, n), np.nan)
+        d = math.sqrt(d)
+        L[j, j] = d
+        for i in range(j + 1, n):
+            t = S[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / d
+    Li = np.zeros((n, n))  # L^-1, lower triangular
+    for i in range(n):
+        Li[i, i] = 1.0 / L[i, i]
+        for j in range(i):
+            t = 0.0
+            for k in range(j, i):
+                t -= L[i, k] * Li[k, j]
+            Li[i, j] = t / L[i, i]
+    inv = np.empty((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            t = 0.0
+            for k in range(i, n):
+                t += Li[k, i] * Li[k, j]
+            inv[i, j] = t
+            inv[j, i] = t
+    return True, inv
 
 
 @njit

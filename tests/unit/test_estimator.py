@@ -22,8 +22,10 @@ from scipy.stats import chi2
 from common.quaternion import q_conj, q_log, q_mul
 from common.sensors_config import load_sensor_profile
 from fcu.estimator.ekf import Estimator
+from fcu.estimator.filter import OK_ATT, OK_POS, _measurement, apply_update, fuse_begin, fuse_end
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
+from fcu.estimator.update import joseph_gain, spd_inverse
 
 ROOT = Path(__file__).resolve().parents[2]
 PROFILE = load_sensor_profile(ROOT / "config" / "sensors" / "mocap-indoor.toml")
@@ -646,18 +648,26 @@ def test_the_filter_is_consistent_nees_within_chi_square_bounds():
 
 class _RecordingEstimator(Estimator):
     """An Estimator that keeps, for every update of position and attitude together, the
-    normalised innovation squared y^T S^-1 y with S = H P H^T + R (6 degrees of freedom)."""
+    normalised innovation squared y^T S^-1 y with S = H P H^T + R (6 degrees of freedom):
+    `filter.fuse`'s steps called one by one, the NIS taken between the gates and the update."""
 
     def __init__(self, settings: EstimatorSettings) -> None:
         super().__init__(settings)
         self.nis: list[tuple[int, float]] = []  # (horizon time in us, NIS)
 
-    def _update(self, H: np.ndarray, y: list[float], r: list[float]) -> None:
-        if len(y) == 6:
-            S = H @ self._P @ H.T + np.diag(r)
-            v = np.array(y)
-            self.nis.append((self._h_t, float(v @ np.linalg.solve(S, v))))
-        super()._update(H, y, r)
+    def _fuse_current(self) -> None:
+        fb, ib, M = self._fb, self._ib, self._M
+        ok = fuse_begin(fb, ib, M)
+        if ok:
+            H, y, r = _measurement(fb, (ok & OK_POS) != 0, (ok & OK_ATT) != 0)
+            if len(y) == 6:
+                S = H @ M[0] @ H.T + np.diag(r)
+                self.nis.append((self._h_t, float(y @ np.linalg.solve(S, y))))
+            pht, S = joseph_gain(M[0], H, r)
+            spd, s_inv = spd_inverse(S)
+            assert spd
+            apply_update(fb, M, H, pht, s_inv, y, r)
+        fuse_end(fb, ib, M, self._pend_t, self._pend_v, ok)
 
 
 def test_the_innovations_are_consistent_nis_within_chi_square_bounds():

@@ -30,16 +30,18 @@ from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
 from fcu.estimator.strapdown import strapdown
 from fcu.estimator.update import (
-    H_ATT,
-    H_BOTH,
-    H_POS,
     bound_covariance,
     inject,
     joseph_apply,
     joseph_gain,
+    spd_inverse,
 )
 
 RNG_SEED = 20261203
+I15 = np.eye(15)
+H_POS = I15[[0, 1, 2]]  # the measurement selectors the filter builds (`filter._measurement`)
+H_ATT = I15[[6, 7, 8]]
+H_BOTH = I15[[0, 1, 2, 6, 7, 8]]
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -184,8 +186,9 @@ def _update_numpy_order(P: np.ndarray, H: np.ndarray, y: list[float], r: list[fl
 @pytest.mark.parametrize("H", [H_BOTH, H_POS, H_ATT], ids=["both", "position", "attitude"])
 def test_update_against_references(H):
     """Given random covariances, innovations and variances, then the compiled update (its
-    two halves around numpy's inverse) is the textbook Joseph update with the reset within
-    rounding, and the interpreted filter's numpy update to the bit."""
+    two halves around the compiled inverse) is the textbook Joseph update with the reset
+    within rounding, and, given numpy's inverse, the interpreted filter's numpy update to
+    the bit."""
     rng = np.random.default_rng(RNG_SEED + 2)
     m = H.shape[0]
     for _ in range(200):
@@ -197,9 +200,39 @@ def test_update_against_references(H):
         dx = joseph_apply(Pk, H, pht, np.linalg.inv(S), y, r)
         P_np, dx_np = _update_numpy_order(P.copy(), H, y.tolist(), r.tolist())
         assert np.array_equal(Pk, P_np) and dx.tolist() == dx_np
+        Pk = P.copy()
+        dx = joseph_apply(Pk, H, pht, spd_inverse(S)[1], y, r)
         P_ref, dx_ref = _update_reference(P, H, y, r)
         assert np.abs(dx - dx_ref).max() < 1e-12
         assert np.abs(Pk - P_ref).max() < 1e-10 * np.abs(P_ref).max()
+
+
+@pytest.mark.parametrize("H", [H_BOTH, H_POS, H_ATT], ids=["both", "position", "attitude"])
+def test_innovation_covariance_inverse_is_numpys_within_rounding(H):
+    """Given the innovation covariances of random filter covariances and measurement
+    variances from 1e-10 to 1e-2, then the compiled Cholesky inverse is numpy's LAPACK
+    inverse within 1e-13 relative, exactly symmetric, and S S^-1 = I within rounding."""
+    rng = np.random.default_rng(RNG_SEED + 7)
+    m = H.shape[0]
+    worst = 0.0
+    for _ in range(300):
+        P = _spd(rng)
+        r = 10.0 ** rng.uniform(-10, -2, m)
+        _, S = joseph_gain(P, H, r)
+        ok, inv = spd_inverse(S)
+        want = np.linalg.inv(S)
+        assert ok and np.array_equal(inv, inv.T)
+        worst = max(worst, float(np.abs(inv - want).max() / np.abs(want).max()))
+        assert np.abs(S @ inv - np.eye(m)).max() < 1e-9
+    assert worst < 1e-13, worst
+
+
+@pytest.mark.parametrize("S", [np.diag([1.0, -1e-9, 1.0]), np.zeros((3, 3)),
+                               np.full((3, 3), np.nan), np.array([[1.0, 2.0], [2.0, 1.0]])],
+                         ids=["negative pivot", "zero", "nan", "indefinite"])
+def test_inverse_refuses_a_matrix_that_is_not_positive_definite(S):
+    ok, inv = spd_inverse(S)
+    assert not ok and np.isnan(inv).all()
 
 
 def test_injection_and_bounds_against_numpy():
