@@ -107,6 +107,27 @@ def _vec3(a: np.ndarray) -> Vec3:
     return (float(a[0]), float(a[1]), float(a[2]))
 
 
+class _Normals:
+    """Standard normal draws from `rng`, `width` per `take()`, fetched in blocks: the same
+    numbers in the same order as one `rng.normal(0.0, 1.0, width)` per take (a Generator
+    fills an array draw by draw), without numpy's cost of a call per sample."""
+
+    def __init__(self, rng: np.random.Generator, width: int, block: int = 256) -> None:
+        self.rng = rng
+        self.width = width
+        self.block = block
+        self._rows: list[list[float]] = []
+        self._next = 0
+
+    def take(self) -> list[float]:
+        i = self._next
+        if i == len(self._rows):
+            self._rows = self.rng.normal(0.0, 1.0, (self.block, self.width)).tolist()
+            i = 0
+        self._next = i + 1
+        return self._rows[i]
+
+
 class _Triad:
     """One three-axis inertial sensor: turn-on bias, bias random walk (unbounded, or
     Gauss-Markov with a correlation time), white noise, range."""
@@ -121,6 +142,7 @@ class _Triad:
         self.correlation_time_s = correlation_time_s
         self.turn_on_bias: Vec3 = _vec3(rng.normal(0.0, 1.0, 3) * turn_on_sigma)
         self.walk: Vec3 = (0.0, 0.0, 0.0)
+        self._draws = _Normals(rng, 6)  # always six per sample: the stream stays aligned
 
     @property
     def bias(self) -> Vec3:
@@ -132,7 +154,7 @@ class _Triad:
         same floats, to the last bit), without its per-call cost on three elements."""
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
-        d = self.rng.normal(0.0, 1.0, 6).tolist()  # always six draws: the stream stays aligned
+        d = self._draws.take()
         tau = self.correlation_time_s
         w = self.walk
         if tau is None:
@@ -144,12 +166,13 @@ class _Triad:
             w = (a * w[0] + sigma * d[3], a * w[1] + sigma * d[4], a * w[2] + sigma * d[5])
         self.walk = w
         b, lim, s = self.turn_on_bias, self.limit, self.white_sigma
-        y = [float(truth[i]) + b[i] + w[i] for i in range(3)]
+        y0 = float(truth[0]) + b[0] + w[0]
+        y1 = float(truth[1]) + b[1] + w[1]
+        y2 = float(truth[2]) + b[2] + w[2]
         if s > 0.0:
-            y = [y[i] + s * d[i] for i in range(3)]
+            y0, y1, y2 = y0 + s * d[0], y1 + s * d[1], y2 + s * d[2]
         # np.clip's minimum(maximum(y, -lim), lim); a NaN stays NaN in both
-        return (min(max(y[0], -lim), lim), min(max(y[1], -lim), lim),
-                min(max(y[2], -lim), lim))
+        return (min(max(y0, -lim), lim), min(max(y1, -lim), lim), min(max(y2, -lim), lim))
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from common.sensors_config import (
     MocapConfig,
     load_sensor_profile,
 )
-from sitl.sensors import BaroModel, ImuModel, MagModel, MocapModel, SensorSuite
+from sitl.sensors import BaroModel, ImuModel, MagModel, MocapModel, SensorSuite, _Normals
 
 ROOT = Path(__file__).resolve().parents[2]
 PROFILES = ROOT / "config" / "sensors"
@@ -354,3 +354,13 @@ def test_each_sensor_has_its_own_stream():
     m = ImuModel(_imu(n_gyro=1e-3, n_acc=1e-3), 0)
     s = m.sample(0.0, 1e-3, ZERO, ZERO)
     assert s.omega_flu_rad_s != s.f_flu_m_s2  # gyro and accel draw from different streams
+
+
+def test_draws_fetched_in_blocks_are_the_stream_of_one_call_per_sample():
+    """Given two Generators of one seed, then the triads' block-fetched normals (across
+    several block boundaries) are, bit for bit, what one rng.normal(0, 1, 6) per sample
+    gives: a sensor's noise does not depend on how its draws are fetched."""
+    blocks = _Normals(np.random.default_rng(7), 6, block=5)
+    calls = np.random.default_rng(7)
+    for _ in range(23):
+        assert blocks.take() == calls.normal(0.0, 1.0, 6).tolist()
