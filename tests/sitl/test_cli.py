@@ -22,6 +22,7 @@ from common.links import free_port
 from common.mavlink import MAV_CMD_POSE_KEYFRAME
 from common.mission_items import MissionItem, local_xy
 from fcu.params import SPECS
+from gcs.cli.parser import HEARTBEAT_WAIT_S
 from gcs.mission_files.toml import format_toml
 from gcs.mission_files.wpl import format_wpl
 from gcs.scenario_mission import scenario_mission
@@ -299,7 +300,9 @@ def test_no_vehicle_is_a_clear_error(tmp_path):
 
 
 def _cmd(*argv: str, timeout: float = 30.0) -> tuple[subprocess.CompletedProcess, float]:
-    """Run `gcs`, `fcu` or `sitl` (python -m); (result, seconds taken)."""
+    """Run `gcs`, `fcu` or `sitl` (python -m); (result, seconds taken). A refusal "at once" is
+    judged against HEARTBEAT_WAIT_S, the 10 s a command that waits for a vehicle waits
+    first: a busy machine has taken 7 s to start a process and refuse."""
     module = {"gcs": "gcs.cli", "fcu": "fcu.node", "sitl": "sitl.node"}[argv[0]]
     t0 = time.monotonic()
     out = subprocess.run([sys.executable, "-m", module, *argv[1:]], cwd=ROOT,
@@ -356,11 +359,12 @@ BAD_INPUT = [
 @pytest.mark.parametrize(("argv", "text"), BAD_INPUT, ids=[" ".join(a[:3]) + " " + a[-1][-24:]
                                                            for a, _ in BAD_INPUT])
 def test_bad_input_is_one_line_and_exit_2_without_waiting(argv, text):
-    """No vehicle anywhere: every bad input is refused at once, exit 2, one stderr line,
-    no traceback (the unknown mode used to wait for a vehicle, then exit 1)."""
+    """No vehicle anywhere: every bad input is refused without waiting for one, exit 2, one
+    stderr line, no traceback (the unknown mode used to wait the heartbeat's 10 s for a
+    vehicle, then exit 1; a busy machine has taken 7 s to start and refuse)."""
     out, took = _cmd(*argv)
     _one_line_error(out, 2, text)
-    assert took < 5.0, f"{argv} took {took:.1f} s"
+    assert took < HEARTBEAT_WAIT_S, f"{argv} took {took:.1f} s"
 
 
 def test_mission_file_errors_reach_one_line(tmp_path):
@@ -369,7 +373,7 @@ def test_mission_file_errors_reach_one_line(tmp_path):
     out, took = _cmd("gcs", "mission", "upload", str(broken), "--connect",
                      f"udpin:127.0.0.1:{free_port()}")
     _one_line_error(out, 2, "position_ned_m")
-    assert took < 5.0
+    assert took < HEARTBEAT_WAIT_S
 
 
 def test_mavsdk_url_forms_reach_the_link(tmp_path):
@@ -388,12 +392,12 @@ def test_refused_tcp_connect_is_one_line_exit_1():
             out, took = _cmd("gcs", "status", "--connect", url)
             _one_line_error(out, 1, f"cannot connect to 127.0.0.1:{port}",
                             "connection refused")
-            assert took < 5.0
+            assert took < HEARTBEAT_WAIT_S
         for argv in (("gcs", "status", "--connect", f"zenoh:mavlink@tcp/127.0.0.1:{port}"),
                      ("sitl", CASE1, "--link", f"zenoh:mavlink@tcp/127.0.0.1:{port}")):
             out, took = _cmd(*argv)  # no Zenoh router there: the peer is missing, exit 1
             _one_line_error(out, 1, "cannot open a Zenoh session")
-            assert took < 5.0
+            assert took < HEARTBEAT_WAIT_S
 
 
 def _holder(kind: int, reuse: bool = True) -> socket.socket:
@@ -426,7 +430,7 @@ def test_busy_port_is_refused_never_shared(who):
         }[who]
         out, took = _cmd(*argv)
     _one_line_error(out, 2, f"127.0.0.1:{port} is in use by another process")
-    assert took < 5.0
+    assert took < HEARTBEAT_WAIT_S
 
 
 def test_two_ground_stations_on_one_udpin_port(tmp_path):
@@ -448,7 +452,7 @@ def test_two_ground_stations_on_one_udpin_port(tmp_path):
             time.sleep(0.1)
         out, took = _cmd("gcs", "watch", "--connect", f"udpin:127.0.0.1:{port}")
         _one_line_error(out, 2, f"127.0.0.1:{port} is in use by another process")
-        assert took < 5.0 and first.poll() is None
+        assert took < HEARTBEAT_WAIT_S and first.poll() is None
     finally:
         first.kill()
         first.wait()
