@@ -43,10 +43,11 @@ from common.mission_items import MissionItem
 from common.modes import Mode
 from common.outcome import CRASH, FAILSAFE
 from fcu import auto_plans, manual
+from fcu.answer import Answer, Reply
 from fcu.manual import StickSettings
 from fcu.mission.codes import MAV_MISSION_DENIED, result_name
 from fcu.mission.executor import MissionExecutor
-from fcu.mission.start import MissionPlan, PosctlFit, Reply, plan_from
+from fcu.mission.start import MissionPlan, PosctlFit, plan_from
 from fcu.mode_references import ModeReferences
 from fcu.work import Outcome
 
@@ -58,11 +59,11 @@ class Commander(ModeReferences):
 
     # ------------------------------------------------------------------ commands
 
-    def arm(self) -> tuple[int, str]:
+    def arm(self) -> Answer:
         if self.armed:
-            return MAV_RESULT.MAV_RESULT_ACCEPTED, "already armed"
+            return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, "already armed")
         if self.state is None:
-            return MAV_RESULT.MAV_RESULT_DENIED, "arming refused: no state input"
+            return Answer(MAV_RESULT.MAV_RESULT_DENIED, "arming refused: no state input")
         self.last_ref = None  # hold where the vehicle is, not where an old reference was
         self.armed = True
         self.hold = self._current_pose_ref()
@@ -75,18 +76,18 @@ class Commander(ModeReferences):
                 and self.mission:  # MISSION_START came first: fly it now
             self._plan_mission(self.mission_current, "", "mission started", self._warn)
         self._maybe_start_flight()
-        return MAV_RESULT.MAV_RESULT_ACCEPTED, "armed"
+        return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, "armed")
 
     def disarm(self, force: bool = False, reason: str = "disarmed",
-               record_in_air: bool = True) -> tuple[int, str]:
+               record_in_air: bool = True) -> Answer:
         """Disarm; in the air only with `force`, and then recorded as a crash unless the
         caller records the cause itself (`record_in_air=False`: divergence)."""
         if not self.armed:
-            return MAV_RESULT.MAV_RESULT_ACCEPTED, "already disarmed"
+            return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, "already disarmed")
         landed = self.landed
         if not force and not landed:
-            return (MAV_RESULT.MAV_RESULT_DENIED,
-                    "disarm refused: in the air (force with p2 = 21196)")
+            return Answer(MAV_RESULT.MAV_RESULT_DENIED,
+                          "disarm refused: in the air (force with p2 = 21196)")
         self.armed = False  # simulated time keeps running once the flight has started
         self.mission_running = False
         self._drop_under_way()
@@ -97,7 +98,7 @@ class Commander(ModeReferences):
                  reason)
         if not landed and record_in_air:
             self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, "disarmed in the air", CRASH)
-        return MAV_RESULT.MAV_RESULT_ACCEPTED, reason
+        return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, reason)
 
     def _mode_refusal(self, mode: Mode, now_s: float) -> str:
         """Why `mode` cannot be entered now ('' when it can, as far as its inputs go)."""
@@ -115,15 +116,15 @@ class Commander(ModeReferences):
             return "POSCTL refused: no MANUAL_CONTROL"
         return ""
 
-    def set_mode(self, mode: Mode, now_s: float) -> tuple[int, str]:
+    def set_mode(self, mode: Mode, now_s: float) -> Answer:
         """(MAV_RESULT, why); IN_PROGRESS while MISSION's plan is made (`_plan_mission`)."""
         refused = self._mode_refusal(mode, now_s)
         if refused:
-            return MAV_RESULT.MAV_RESULT_DENIED, refused
+            return Answer(MAV_RESULT.MAV_RESULT_DENIED, refused)
         previous = self.mode
         under_way = self.under_way
         if under_way is not None and under_way.mode == mode:
-            return IN_PROGRESS, ""  # the same mode asked again (another station): it waits too
+            return Answer(IN_PROGRESS, "")  # the same mode asked again (another station): it waits
         self._drop_under_way()  # a start under way gives way to the newer command
         if mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running) \
                 and self.armed:
@@ -133,17 +134,17 @@ class Commander(ModeReferences):
             return self._fit_posctl(previous)
         return self._enter(mode, previous)
 
-    def _enter(self, mode: Mode, previous: Mode) -> tuple[int, str]:
+    def _enter(self, mode: Mode, previous: Mode) -> Answer:
         """The mode in force from now (its plans made here, cheap ones: TAKEOFF, RTL)."""
         idle = self.auto is None and self.touchdown is None  # e.g. landed, disarmed, re-armed
         if mode == Mode.TAKEOFF and (previous != Mode.TAKEOFF or idle):
             refused = self._start_takeoff(self.flight.takeoff_alt_m)
             if refused:
-                return MAV_RESULT.MAV_RESULT_DENIED, refused
+                return Answer(MAV_RESULT.MAV_RESULT_DENIED, refused)
         elif mode == Mode.RTL and (previous != Mode.RTL or idle):
             refused = self._start_rtl()
             if refused:
-                return MAV_RESULT.MAV_RESULT_DENIED, refused
+                return Answer(MAV_RESULT.MAV_RESULT_DENIED, refused)
         self.mode = mode
         if mode != Mode.LAND and not (mode == Mode.RTL and previous == Mode.RTL):
             self.touchdown = None  # RTL touches down only at the end of its own plan
@@ -168,27 +169,27 @@ class Commander(ModeReferences):
         self._maybe_start_flight()
         if previous != mode:
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"mode {mode.name}")
-        return MAV_RESULT.MAV_RESULT_ACCEPTED, f"mode {mode.name}"
+        return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, f"mode {mode.name}")
 
-    def takeoff(self, target_up_m: float | None = None) -> tuple[int, str]:
+    def takeoff(self, target_up_m: float | None = None) -> Answer:
         """MAV_CMD_NAV_TAKEOFF: TAKEOFF, climbing straight up to `target_up_m` above home
         (None: MIS_TAKEOFF_ALT above where the vehicle should be), then HOLD. As PX4 does, a
         target less than MIS_TAKEOFF_ALT above the vehicle is raised to that, with a
         warning."""
         if not self.armed:
-            return MAV_RESULT.MAV_RESULT_DENIED, "takeoff: not armed"
+            return Answer(MAV_RESULT.MAV_RESULT_DENIED, "takeoff: not armed")
         climb = self.flight.takeoff_alt_m
         if target_up_m is not None:
             wanted = target_up_m - self._current_pose_ref().p_enu_m[2]
             if not math.isfinite(wanted):
-                return MAV_RESULT.MAV_RESULT_DENIED, "takeoff: altitude not finite"
+                return Answer(MAV_RESULT.MAV_RESULT_DENIED, "takeoff: altitude not finite")
             if wanted < climb:
                 self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
                          f"takeoff: using the minimum climb {climb:.1f} m")
             climb = max(climb, wanted)
         refused = self._start_takeoff(climb)
         if refused:
-            return MAV_RESULT.MAV_RESULT_DENIED, refused
+            return Answer(MAV_RESULT.MAV_RESULT_DENIED, refused)
         previous = self.mode
         self.mode = Mode.TAKEOFF
         self.touchdown = None
@@ -197,7 +198,7 @@ class Commander(ModeReferences):
         self._maybe_start_flight()
         if previous != Mode.TAKEOFF:
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"mode {Mode.TAKEOFF.name}")
-        return MAV_RESULT.MAV_RESULT_ACCEPTED, f"takeoff: climbing {climb:.1f} m"
+        return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, f"takeoff: climbing {climb:.1f} m")
 
     def _start_takeoff(self, climb_m: float) -> str:
         """Plan TAKEOFF's climb (one NAV_TAKEOFF item); a reason if refused, else ""."""
@@ -223,11 +224,11 @@ class Commander(ModeReferences):
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"RTL: return at {-items[0].z:.1f} m, then land")
         return ""
 
-    def mission_start(self, first: int = 0) -> tuple[int, str]:
+    def mission_start(self, first: int = 0) -> Answer:
         if not self.mission:
-            return MAV_RESULT.MAV_RESULT_DENIED, "no mission"
+            return Answer(MAV_RESULT.MAV_RESULT_DENIED, "no mission")
         if not 0 <= first < len(self.mission):
-            return MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {first}"
+            return Answer(MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {first}")
         self._drop_under_way()
         if self.armed:
             return self._plan_mission(first, "mission started", "mission started")
@@ -239,7 +240,7 @@ class Commander(ModeReferences):
         self.land = None
         self.auto = None
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission started")
-        return MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started"
+        return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")
 
     def set_mission(self, items: tuple[MissionItem, ...]) -> None:
         """A new mission (already validated by the mission protocol)."""
@@ -256,22 +257,22 @@ class Commander(ModeReferences):
             self.mission_running = False
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission replaced: holding")
 
-    def set_mission_current(self, seq: int) -> tuple[int, str]:
+    def set_mission_current(self, seq: int) -> Answer:
         if not 0 <= seq < len(self.mission):
-            return MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {seq}"
+            return Answer(MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {seq}")
         if self.mode == Mode.MISSION and self.mission_running and self.armed:
             self._drop_under_way()
             return self._plan_mission(seq, "", f"mission item {seq}")
         self.mission_current = seq
         self.mission_done = False
-        return MAV_RESULT.MAV_RESULT_ACCEPTED, f"mission item {seq}"
+        return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, f"mission item {seq}")
 
     def _maybe_start_flight(self) -> None:
         if self.armed and self.mode in (Mode.MISSION, Mode.OFFBOARD, Mode.LAND, Mode.TAKEOFF,
                                         Mode.RTL, Mode.POSCTL):
             self.flight_started = True
 
-    def _fit_posctl(self, previous: Mode) -> tuple[int, str]:
+    def _fit_posctl(self, previous: Mode) -> Answer:
         """POSCTL's limits fitted to the envelope at the desired attitude (`manual.fit_envelope`,
         run by `work`); POSCTL is entered when they are (IN_PROGRESS meanwhile)."""
         start = self._current_pose_ref()
@@ -279,7 +280,7 @@ class Commander(ModeReferences):
         self.work.submit(manual.fit_envelope, (self.flight.sticks, self.limits.vehicle,
                                                start.q_enu_flu),
                          lambda outcome: self._fitted(fit, outcome))
-        return fit.result if fit.result is not None else (IN_PROGRESS, "")
+        return fit.result if fit.result is not None else Answer(IN_PROGRESS, "")
 
     def _fitted(self, fit: PosctlFit, outcome: Outcome[StickSettings]) -> None:
         if self.posctl_fit is not fit:
@@ -317,7 +318,7 @@ class Commander(ModeReferences):
             self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, text)
 
     def _plan_mission(self, seq: int, said: str, text: str,
-                      reply: Reply | None = None) -> tuple[int, str]:
+                      reply: Reply | None = None) -> Answer:
         """Plan the mission from item `seq`, starting now from the desired pose, and check
         it again from there with the upload's envelope (`fcu.mission.start.plan_from`, run
         by `work`): one that no longer fits is not flown (the vehicle holds; the command is
@@ -331,7 +332,7 @@ class Commander(ModeReferences):
         self.work.submit(plan_from, (self.mission, self.limits, seq, plan.t_s, start.p_enu_m,
                                      start.q_enu_flu),
                          lambda outcome: self._planned(plan, outcome))
-        return plan.result if plan.result is not None else (IN_PROGRESS, "")
+        return plan.result if plan.result is not None else Answer(IN_PROGRESS, "")
 
     def _planned(self, plan: MissionPlan,
                  outcome: Outcome[tuple[MissionExecutor | None, str]]) -> None:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Callable
 from typing import Any, Protocol
 
 from common.mav_enums import MAV_CMD, MAV_FRAME, MAV_MODE_FLAG, MAV_RESULT, MAV_SEVERITY
@@ -25,6 +24,7 @@ from common.mavlink_types import Message, as_message
 from common.mavlink_types.protocol import CommandInt, CommandLong
 from common.mission_items import HomePosition
 from common.modes import Mode, decode
+from fcu.answer import Answer, Reply
 from fcu.pipeline import Pipeline
 from fcu.telemetry import REQUESTABLE, Schedule
 
@@ -58,8 +58,7 @@ class Server(Protocol):
 
     def schedule(self, index: int) -> Schedule: ...
 
-    def set_mission_current(self, seq: int,
-                            reply: Callable[[int, str], None] | None = None) -> int: ...
+    def set_mission_current(self, seq: int, reply: Reply | None = None) -> MAV_RESULT: ...
 
 
 Command = CommandLong | CommandInt
@@ -93,7 +92,7 @@ class CommandService:
         self.server = server
         # The last command each sender had executed, for its retries (command protocol:
         # a re-send carries confirmation > 0 and is answered, never executed again).
-        self.executed: dict[tuple[int, int, int], tuple[bytes, float, int, str]] = {}
+        self.executed: dict[tuple[int, int, int], tuple[bytes, float, Answer]] = {}
         self.repeated_commands = 0
 
     def ack(self, index: int, msg: Message, command: int, result: int) -> None:
@@ -111,36 +110,37 @@ class CommandService:
         retry = msg.get_type() == "COMMAND_LONG" and as_message(msg, CommandLong).confirmation > 0
         if retry and last is not None and last[0] == key and now_s - last[1] <= RETRY_WINDOW_S:
             self.repeated_commands += 1
-            self.ack(index, msg, msg.command, last[2])
-            if last[3] and last[2] != ACCEPTED:
-                self.server.say(WARNING, last[3], index)
+            first = last[2]
+            self.ack(index, msg, msg.command, first.result)
+            if first.reason and first.result != ACCEPTED:
+                self.server.say(WARNING, first.reason, index)
             return
-        result, text = self._execute(index, msg, now_s)
-        if result is None:
+        answer = self._execute(index, msg, now_s)
+        if answer is None:
             return  # answered with its message (requests): a retry asks again
         plan = self.server.pipeline.commander.under_way
-        if result == IN_PROGRESS and plan is not None:  # answered again when the plan is made
-            self._answer(index, msg, sender, key, now_s, IN_PROGRESS, "")
-            plan.on_end(lambda r, t: self._answer(index, msg, sender, key, now_s, r, t))
+        if answer.result == IN_PROGRESS and plan is not None:  # answered again when planned
+            self._answer(index, msg, sender, key, now_s, Answer(IN_PROGRESS, ""))
+            plan.on_end(lambda r, t: self._answer(index, msg, sender, key, now_s, Answer(r, t)))
             return
-        self._answer(index, msg, sender, key, now_s, result, text)
+        self._answer(index, msg, sender, key, now_s, answer)
 
     def _answer(self, index: int, msg: Command, sender: tuple[int, int, int], key: bytes,
-                now_s: float, result: int, text: str) -> None:
+                now_s: float, answer: Answer) -> None:
         if len(self.executed) >= MAX_PEERS and sender not in self.executed:
             del self.executed[next(iter(self.executed))]
-        self.executed[sender] = (key, now_s, result, text)
-        self.ack(index, msg, msg.command, result)
-        if text and result != ACCEPTED:
-            self.server.say(WARNING, text, index)
+        self.executed[sender] = (key, now_s, answer)
+        self.ack(index, msg, msg.command, answer.result)
+        if answer.reason and answer.result != ACCEPTED:
+            self.server.say(WARNING, answer.reason, index)
 
-    def _execute(self, index: int, msg: Command, now_s: float) -> tuple[int | None, str]:
-        """(MAV_RESULT, reason) of a command, or (None, "") when it was answered here."""
+    def _execute(self, index: int, msg: Command, now_s: float) -> Answer | None:
+        """A command's answer, or None when it was answered here."""
         cmd = msg.command
         p = (msg.param1, msg.param2, msg.param3, msg.param4)
         pipe = self.server.pipeline
         c = pipe.commander
-        result: int = ACCEPTED
+        result = ACCEPTED
         text = ""
         if cmd == MAV_CMD.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] == 1.0:
@@ -190,7 +190,7 @@ class CommandService:
                 self.ack(index, msg, cmd, ACCEPTED)
                 self.server.send(M.MAVLink_message_interval_message(
                     msg_id, self.server.schedule(index).interval_us(msg_id)), index)
-                return None, ""
+                return None
         elif cmd in (MAV_CMD.MAV_CMD_REQUEST_MESSAGE,
                      MAV_CMD.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             msg_id = M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if cmd != MAV_CMD.MAV_CMD_REQUEST_MESSAGE \
@@ -198,15 +198,15 @@ class CommandService:
             if msg_id is None or (msg_id not in REQUESTABLE
                                   and msg_id not in ALWAYS_REQUESTABLE):
                 self.ack(index, msg, cmd, UNSUPPORTED)
-                return None, ""
+                return None
             self.ack(index, msg, cmd, ACCEPTED)
             self.server.send_message(msg_id, index)
-            return None, ""
+            return None
         else:
             result = UNSUPPORTED
-        return result, text
+        return Answer(result, text)
 
-    def _takeoff(self, msg: Command) -> tuple[int, str]:
+    def _takeoff(self, msg: Command) -> Answer:
         """MAV_CMD_NAV_TAKEOFF: altitude NaN (MAVSDK's, QGC's) -> MIS_TAKEOFF_ALT above the
         vehicle; else the altitude AMSL (COMMAND_LONG p7, as PX4; COMMAND_INT z in a global
         frame) or above home (COMMAND_INT z in a relative-altitude frame)."""
@@ -219,9 +219,9 @@ class CommandService:
         if math.isnan(alt):
             return c.takeoff()
         if not math.isfinite(alt):
-            return DENIED, "takeoff: altitude not finite"
+            return Answer(DENIED, "takeoff: altitude not finite")
         if frame in _AMSL_FRAMES:
             return c.takeoff(alt - self.server.home.alt_m)
         if frame in _RELATIVE_FRAMES:
             return c.takeoff(alt)
-        return DENIED, f"takeoff: frame {frame} not supported"
+        return Answer(DENIED, f"takeoff: frame {frame} not supported")

@@ -38,6 +38,7 @@ from common.mavlink_types.state import Heartbeat
 from common.mission_items import HomePosition
 from common.modes import decode_custom
 from common.outcome import Event
+from fcu.answer import Reply
 from fcu.dualquat import q_angle, q_conj, q_mul, q_rotate
 from fcu.failsafe import Failsafe
 from fcu.gcs_commands import MAX_PEERS, CommandService
@@ -309,14 +310,13 @@ class GcsServer:
         """The streams of link `index`."""
         return self.links[index].schedule
 
-    def set_mission_current(self, seq: int,
-                            reply: Callable[[int, str], None] | None = None) -> int:
+    def set_mission_current(self, seq: int, reply: Reply | None = None) -> MAV_RESULT:
         """MAV_RESULT of a new current item; IN_PROGRESS while the mission is planned again
         from it beside the loop (MISSION_CURRENT, then `reply`, when it is)."""
         c = self.pipeline.commander
         result, _ = c.set_mission_current(seq)
 
-        def confirmed(result: int, text: str) -> None:
+        def confirmed(result: MAV_RESULT, text: str) -> None:
             if result == MAV_RESULT.MAV_RESULT_ACCEPTED:
                 self.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)  # the spec's confirmation
             elif text:

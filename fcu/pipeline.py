@@ -25,6 +25,7 @@ from common.mav_enums import MAV_RESULT, MAV_SEVERITY
 from common.modes import Mode
 from common.outcome import DIVERGED, FAILSAFE, INFO, LIMIT, Event, diverged
 from fcu.actuator_monitor import ActuatorMonitor, unclamped_speeds
+from fcu.answer import Answer
 from fcu.commander import Commander
 from fcu.core import FlightCore, StepResult
 from fcu.dualquat import q_normalize, q_rotate
@@ -203,15 +204,15 @@ class Pipeline:
         self.commander.touchdown_speed_cap_m_s = touchdown_speed_cap(
             max(gains.kd_d), self.vehicle.gravity_m_s2)
 
-    def arm(self) -> tuple[int, str]:
+    def arm(self) -> Answer:
         was = self.commander.armed
         if not was and self.estimator is not None:
             st = self.estimator.health()
             why = ("not aligned" if not st.aligned else "not converged" if not st.converged
                    else "unhealthy" if not st.healthy else "")  # within one STATUSTEXT
             if why:
-                return (MAV_RESULT.MAV_RESULT_TEMPORARILY_REJECTED,
-                        f"arming refused: estimator {why}")
+                return Answer(MAV_RESULT.MAV_RESULT_TEMPORARILY_REJECTED,
+                              f"arming refused: estimator {why}")
         result = self.commander.arm()
         if result[0] == MAV_RESULT.MAV_RESULT_ACCEPTED and not was:
             self.core.tracker.reset()

@@ -3,18 +3,17 @@ records of a mode change under way (a mission's start, POSCTL's fit)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from common.mav_enums import MAV_CMD, MAV_FRAME
+from common.mav_enums import MAV_CMD, MAV_FRAME, MAV_RESULT
 from common.mission_items import MissionItem
 from common.modes import Mode
+from fcu.answer import Answer, Reply
 from fcu.dualquat import Quat, Vec3
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.tracker import Reference
-
-Reply = Callable[[int, str], None]  # (MAV_RESULT, why): a command's final answer
 
 
 @dataclass(eq=False, kw_only=True)
@@ -24,7 +23,7 @@ class UnderWay:
     `result`."""
 
     replies: list[Reply] = field(default_factory=list)
-    result: tuple[int, str] | None = None
+    result: Answer | None = None
 
     def on_end(self, reply: Reply) -> None:
         """`reply` told the final answer (at once if it is known)."""
@@ -33,9 +32,9 @@ class UnderWay:
         else:
             self.replies.append(reply)
 
-    def end(self, result: int, text: str) -> None:
+    def end(self, result: MAV_RESULT, text: str) -> None:
         """The final answer, told to every command waiting on it."""
-        self.result = (result, text)
+        self.result = Answer(result, text)
         for reply in self.replies:
             reply(result, text)
         self.replies.clear()
