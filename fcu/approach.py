@@ -55,7 +55,7 @@ from typing import NamedTuple
 import numpy as np
 
 from common.jit import njit, warm_up
-from fcu.dualquat import Quat, Vec3, cross, q_exp, q_mul, q_rotate_inv
+from fcu.dualquat import Quat, Vec3, cross, q_exp, q_mul, q_rotate_inv, right_jacobian_inv
 from fcu.excess import KINDS, Excess, excess_kernel
 from fcu.feasibility import TILT_STEP_S, Envelope, _nominal_wrench_rows
 from fcu.manual import StickSettings
@@ -135,19 +135,13 @@ def right_jacobian(phi: Vec3, x: Vec3) -> Vec3:
 
 
 @njit
-def right_jacobian_inv(phi: Vec3, w: Vec3) -> Vec3:
-    """J_r(phi)^-1 w: how phi changes for a body rate w of exp(phi); beyond 3 rad, where
-    the inverse grows without bound towards pi, w itself."""
-    th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
-    th = math.sqrt(th2)
-    if th > 3.0:
+def offset_rate(phi: Vec3, w: Vec3) -> Vec3:
+    """How the attitude offset phi changes for a body rate w of exp(phi)
+    (`fcu.dualquat.right_jacobian_inv`); beyond 3 rad, where the inverse grows without bound
+    towards 2 pi, w itself."""
+    if math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]) > 3.0:
         return w
-    c = 1.0 / 12.0 if th < 1e-6 else \
-        1.0 / th2 - (1.0 + math.cos(th)) / (2.0 * th * math.sin(th))
-    pw = cross(phi, w)
-    ppw = cross(phi, pw)
-    return (w[0] + 0.5 * pw[0] + c * ppw[0], w[1] + 0.5 * pw[1] + c * ppw[1],
-            w[2] + 0.5 * pw[2] + c * ppw[2])
+    return right_jacobian_inv(phi, w)
 
 
 def quintic_to_rest(x0: float, v0: float, a0: float, d: float) -> tuple[float, ...]:
@@ -492,7 +486,7 @@ def _warm() -> None:
     reference_kernel(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, 0.0, 0.0)
     _rows(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, np.zeros(2))
     _kinematic_ratio(k, 1.0, np.zeros(2), np.ones(8))
-    right_jacobian_inv(ZERO, ZERO)
+    offset_rate(ZERO, ZERO)
 
 
 def warm() -> None:

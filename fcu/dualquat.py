@@ -150,3 +150,21 @@ def gain_dot(k_r: Vec3, k_d: Vec3, v: DualVec) -> DualVec:
     """k_hat . v_hat = K_r v_r + eps K_d v_d with diagonal K_r, K_d (eq. 3)."""
     return (k_r[0] * v[0], k_r[1] * v[1], k_r[2] * v[2],
             k_d[0] * v[3], k_d[1] * v[4], k_d[2] * v[5])
+
+
+@njit
+def right_jacobian_inv(phi: Vec3, w: Vec3) -> Vec3:
+    """J_r(phi)^-1 w, SO(3)'s inverse right Jacobian: how a rotation vector phi changes for
+    a body rate w of exp(phi), w + 1/2 phi x w + c phi x (phi x w) with
+    c = 1/theta^2 - cot(theta/2) / (2 theta) (its series 1/12 + theta^2/720 below
+    theta^2 = 1e-8), theta = |phi| < 2 pi."""
+    th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+    if th2 < 1e-8:
+        c = 1.0 / 12.0 + th2 / 720.0
+    else:
+        th = math.sqrt(th2)
+        c = 1.0 / th2 - 0.5 / (th * math.tan(0.5 * th))
+    pw = cross(phi, w)
+    ppw = cross(phi, pw)
+    return (w[0] + 0.5 * pw[0] + c * ppw[0], w[1] + 0.5 * pw[1] + c * ppw[1],
+            w[2] + 0.5 * pw[2] + c * ppw[2])

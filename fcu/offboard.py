@@ -52,7 +52,7 @@ from typing import NamedTuple
 
 from common.outcome import ATTITUDE_NOT_FLOWN
 from fcu import approach
-from fcu.approach import Approach, Offset, Setpoint, right_jacobian_inv
+from fcu.approach import Approach, Offset, Setpoint, offset_rate
 from fcu.dualquat import Quat, Vec3, q_angle, q_conj, q_exp, q_log, q_mul, q_rotate_inv
 from fcu.excess import TILT
 from fcu.feasibility import Envelope
@@ -123,10 +123,10 @@ def _offset(ref: Reference, sp: Setpoint) -> Offset:
     q_e = q_mul(q_conj(sp.q), ref.q_enu_flu)
     eps = q_log(q_e)
     w_seen = q_rotate_inv(q_e, sp.w)
-    deps = right_jacobian_inv(eps, (ref.omega_flu_rad_s[0] - w_seen[0],
+    deps = offset_rate(eps, (ref.omega_flu_rad_s[0] - w_seen[0],
                                     ref.omega_flu_rad_s[1] - w_seen[1],
                                     ref.omega_flu_rad_s[2] - w_seen[2]))
-    ddeps = right_jacobian_inv(eps, ref.omega_dot_flu_rad_s2)
+    ddeps = offset_rate(eps, ref.omega_dot_flu_rad_s2)
     return Offset(e, de, dde, eps, deps, ddeps)
 
 

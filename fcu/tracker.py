@@ -9,7 +9,6 @@ calls too; `DualQuaternionTracker.update` is its typed Python face.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
@@ -59,6 +58,7 @@ from fcu.dualquat import (
     dq_mul,
     dual_cross,
     q_rotate_inv,
+    right_jacobian_inv,
 )
 
 
@@ -124,21 +124,11 @@ def log_rate(log_e: DualVec, xi_e: DualVec) -> DualVec:
     phi = theta n is the rotation vector of q_e (= 2 x real part of the log), p_e the error
     position in the body frame; q_hat_e' = 1/2 q_hat_e xi_e (eq. 10) gives both terms.
     """
-    px, py, pz = 2.0 * log_e[0], 2.0 * log_e[1], 2.0 * log_e[2]
     wx, wy, wz = xi_e[0], xi_e[1], xi_e[2]
-    th2 = px * px + py * py + pz * pz
-    if th2 < 1e-8:
-        c = 1.0 / 12.0 + th2 / 720.0
-    else:
-        th = math.sqrt(th2)
-        c = 1.0 / th2 - 0.5 / (th * math.tan(0.5 * th))
-    # phi x w and phi x (phi x w)
-    ax, ay, az = py * wz - pz * wy, pz * wx - px * wz, px * wy - py * wx
-    bx, by, bz = py * az - pz * ay, pz * ax - px * az, px * ay - py * ax
+    r = right_jacobian_inv((2.0 * log_e[0], 2.0 * log_e[1], 2.0 * log_e[2]), (wx, wy, wz))
     ex, ey, ez = 2.0 * log_e[3], 2.0 * log_e[4], 2.0 * log_e[5]
     cx, cy, cz = wy * ez - wz * ey, wz * ex - wx * ez, wx * ey - wy * ex
-    return (wx + 0.5 * ax + c * bx, wy + 0.5 * ay + c * by, wz + 0.5 * az + c * bz,
-            xi_e[3] - cx, xi_e[4] - cy, xi_e[5] - cz)
+    return (r[0], r[1], r[2], xi_e[3] - cx, xi_e[4] - cy, xi_e[5] - cz)
 
 
 @njit

@@ -8,11 +8,13 @@ from __future__ import annotations
 import itertools
 import math
 
+import numpy as np
 import pytest
 
 from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate
 from fcu import offboard
-from fcu.approach import right_jacobian, right_jacobian_inv
+from fcu.approach import offset_rate, right_jacobian
+from fcu.dualquat import right_jacobian_inv
 from fcu.manual import StickSettings
 from fcu.offboard import Target
 from fcu.tracker import Reference, pose_ref
@@ -187,6 +189,26 @@ def test_the_right_jacobian_is_the_body_rate_of_the_exponential_and_inverts(phi)
     assert right_jacobian(phi, x) == pytest.approx(seen, abs=1e-5)
     back = right_jacobian_inv(phi, right_jacobian(phi, x))
     assert back == pytest.approx(x, abs=1e-9)
+
+
+@pytest.mark.parametrize("theta", [0.0, 1e-9, 1e-4, 1e-2, 0.5, 1.5, 2.9, 3.1])
+def test_offset_rate_is_the_inverse_jacobian_below_3_rad_and_the_rate_beyond(theta):
+    """One inverse right Jacobian (`fcu.dualquat`) for the tracker and the approach: it
+    matches the closed form w + phi x w / 2 + (1/theta^2 - (1 + cos) / (2 theta sin))
+    phi x (phi x w) within rounding; the approach takes w itself beyond 3 rad."""
+    n = (0.48, -0.6, 0.64)
+    phi = tuple(theta * c for c in n)
+    w = (0.3, -1.1, 0.7)
+    got = offset_rate(phi, w)
+    if theta > 3.0:
+        assert got == w
+        return
+    c = 1.0 / 12.0 if theta < 1e-4 else \
+        1.0 / theta**2 - (1.0 + math.cos(theta)) / (2.0 * theta * math.sin(theta))
+    pw = np.cross(phi, w)
+    want = np.array(w) + 0.5 * pw + c * np.cross(phi, pw)
+    assert got == pytest.approx(tuple(want), abs=1e-12)
+    assert right_jacobian_inv(phi, w) == got
 
 
 @pytest.mark.parametrize("v", [(5.0, 0.0, 0.0), (0.3, -0.4, 0.0), (2.0, 1.0, 2.5),
