@@ -32,6 +32,7 @@ from common.realtime import request_fifo
 
 PRIORITY = 48  # below the FCU's loop (50) and the simulator's (49): a wire between them
 READY = "relay: port "
+START_TIMEOUT_S = 30.0
 
 
 def _socket() -> socket.socket:
@@ -93,7 +94,9 @@ class Relay:
             cwd=ROOT, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True,
             env=child_env())
         assert self.proc.stdout is not None  # a pipe was asked for
-        line = self.proc.stdout.readline()
+        said, _, _ = select.select([self.proc.stdout], [], [], START_TIMEOUT_S)
+        line = self.proc.stdout.readline() if said else "(nothing within "\
+            f"{START_TIMEOUT_S:g} s)"
         if not line.startswith(READY):
             self.proc.kill()
             self.proc.wait()
