@@ -397,17 +397,18 @@ def speed_bound_kernel(parts: np.ndarray, limit4: float, guard: float) -> float:
 
 
 @njit_loops
-def shortest_kernel(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, use_floor: bool,
-                    limit: float, limit4: float, tau_up: float, tau_down: float,
-                    tilt_limit: float, step_limit: float, guard: float, grid_ratio: float,
-                    grid_fits: int, grid_max: int, bisect_tol: float) -> tuple[float, bool]:
-    """`fcu.feasibility.TimeScaling._search` in one call (its steps, in its order, on
-    `scaling_parts`): (the shortest duration, whether the search found it fitting). Only a
-    failing duration of the grid takes its ratio (`excess_ratio`, counted up to 1e6); every
-    other duration is judged as fitting or not (`fits_kernel`)."""
+def grid_kernel(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, use_floor: bool,
+                limit: float, limit4: float, tau_up: float, tau_down: float,
+                tilt_limit: float, step_limit: float, guard: float, grid_ratio: float,
+                grid_fits: int, grid_max: int) -> tuple[float, float, bool]:
+    """The grid of `fcu.feasibility.TimeScaling._search` (its steps, in its order, on
+    `scaling_parts`): (NaN, the shortest duration, whether the grid found it fitting) where
+    the grid decides it, else (the last failing duration, the first fitting one after it,
+    True) for `bisect_kernel`. Only a failing duration takes its ratio (`excess_ratio`,
+    counted up to 1e6); every other is judged as fitting or not (`fits_kernel`)."""
     speed_bound = speed_bound_kernel(parts, limit4, guard)
     if not math.isfinite(speed_bound):
-        return math.inf, False
+        return math.nan, math.inf, False
     moves = False
     for i in range(parts.shape[0]):
         for row in range(2, 6):  # Omega_1 and the derivative of Omega_0
@@ -415,12 +416,11 @@ def shortest_kernel(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, use_fl
                 if parts[i, row, k] != 0.0:
                     moves = True
     if not moves:  # nothing moves: no rates
-        return speed_bound, False
+        return math.nan, speed_bound, False
     scratch = np.empty(parts.shape[2])
     d = 1e-3 if 1e-3 > speed_bound else speed_bound
     start = d
     last_fail, first_fit, run = math.nan, d, 0
-    found = False
     for _ in range(grid_max):
         if fits_kernel(parts, gap, ends, d, limit, tau_up, tau_down, tilt_limit, step_limit,
                        use_floor, scratch):
@@ -428,8 +428,9 @@ def shortest_kernel(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, use_fl
                 first_fit = d
             run += 1
             if run >= grid_fits:
-                found = True
-                break
+                if math.isnan(last_fail):  # the speed bound (or 1 ms) already fits
+                    return math.nan, start, True
+                return last_fail, first_fit, True
             d *= grid_ratio
         else:
             ratio = excess_ratio(parts, gap, ends, d, limit, tau_up, tau_down, tilt_limit,
@@ -437,16 +438,24 @@ def shortest_kernel(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, use_fl
             last_fail, run = d, 0
             grow = (1e6 if 1e6 < ratio else ratio) ** (1.0 / 3.0)
             d *= grow if grow > grid_ratio else grid_ratio
-    if not found:
-        return math.inf, False
-    if math.isnan(last_fail):  # the speed bound (or 1 ms) already fits
-        return start, True
-    lo, hi = last_fail, first_fit
-    while hi - lo > bisect_tol * hi:
+    return math.nan, math.inf, False
+
+
+@njit_loops
+def bisect_kernel(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, use_floor: bool,
+                  limit: float, tau_up: float, tau_down: float, tilt_limit: float,
+                  step_limit: float, lo: float, hi: float, bisect_tol: float, until: float
+                  ) -> tuple[float, float]:
+    """The bisection of `fcu.feasibility.TimeScaling._search` between a failing duration lo
+    and a fitting one hi (`grid_kernel`), each midpoint judged by `fits_kernel`: (lo, hi)
+    once hi - lo <= bisect_tol hi, or before, once `until` lies outside [lo, hi) (NaN:
+    never). Resumed from where it stopped, it takes the same steps."""
+    scratch = np.empty(parts.shape[2])
+    while hi - lo > bisect_tol * hi and (until != until or lo <= until < hi):
         mid = 0.5 * (lo + hi)
         if fits_kernel(parts, gap, ends, mid, limit, tau_up, tau_down, tilt_limit,
                        step_limit, use_floor, scratch):
             hi = mid
         else:
             lo = mid
-    return hi, True
+    return lo, hi

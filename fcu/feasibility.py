@@ -63,16 +63,18 @@ attitude (T |n|) and of the path phase 2T (at least `MOVE_SAMPLES`, at most `FIG
 plus its ends (extreme T''), its middle (top T') and the phases T = j pi / 4 where the path's
 coordinates peak.
 
-Evaluation: the search runs compiled in one call (`fcu.excess.shortest_kernel`), each
-duration judged by `fcu.excess.fits_kernel` (whether the largest need of `excess_kernel` is
-at most 1, to the bit) and a failing one of its grid measured by `fcu.excess.excess_ratio`
-(that largest need, to the bit), on the path's parts in time order
-(`fcu.excess.scaling_parts`); the allocations stay numpy's (a matrix product's rounding
-depends on its shape, so each is the one it always was). Paths that depend on the same
-parameters (`path_key`: a 500-item mission repeats its figures) share one scaling, and
-paths that share a part (`Envelope.kept`: a move's attitudes and poses at rest depend on
-q0 and phi, not on dp; a figure's shape on its amplitude and axis, not on its start pose)
-share that part; `clear_caches` forgets them.
+Evaluation: the search runs compiled (`fcu.excess.grid_kernel`, then
+`fcu.excess.bisect_kernel`), each duration judged by `fcu.excess.fits_kernel` (whether the
+largest need of `excess_kernel` is at most 1, to the bit) and a failing one of its grid
+measured by `fcu.excess.excess_ratio` (that largest need, to the bit), on the path's parts
+in time order (`fcu.excess.scaling_parts`); the allocations stay numpy's (a matrix
+product's rounding depends on its shape, so each is the one it always was). The upload
+check asks only whether a speed-timed move stretches (`TimeScaling.stretches`: the
+bisection stops once the planned duration is outside its bracket; the executor resumes
+it). Paths that depend on the same parameters (`path_key`: a 500-item mission repeats its
+figures) share one scaling, and paths that share a part (`Envelope.kept`: a move's
+attitudes and poses at rest depend on q0 and phi, not on dp; a figure's shape on its
+amplitude and axis, not on its start pose) share that part; `clear_caches` forgets them.
 
 Which items stretch and which are refused is the mission's business (fcu.mission). Actuators
 are numbered 1..n as the vehicle file lists its arms (the paper's i = 1..6).
@@ -99,10 +101,11 @@ from fcu.excess import (
     TILT_STEP,
     TINY,
     Excess,
+    bisect_kernel,
     excess_kernel,
     fits_kernel,
+    grid_kernel,
     scaling_parts,
-    shortest_kernel,
     speed_bound_kernel,
     unpermuted,
 )
@@ -415,6 +418,7 @@ class TimeScaling:
         self.samples = parts.shape[2]
         self._rows: dict[int, np.ndarray] = {}
         self._shortest: float | None = None
+        self._bracket: tuple[float, float] | None = None  # `_search`'s (lo, hi) so far
         self._fit_at: float | None = None  # a duration `_search` found fitting
         self._fits: dict[float, bool] = {}
 
@@ -516,24 +520,47 @@ class TimeScaling:
         every actuator within its limit (module docstring); 0 when any duration does, inf
         when none does (hovering at some attitude of the path already exceeds the limit)."""
         if self._shortest is None:
-            self._shortest = self._search()
+            self._search(math.nan)
+        assert self._shortest is not None
         return self._shortest
 
-    def _search(self) -> float:
+    def stretches(self, duration: float) -> bool:
+        """math.isfinite(shortest()) and shortest() > duration, the same answer, with the
+        search's bisection taken only until `duration` lies outside its bracket (the rest
+        when `shortest` is asked)."""
+        if self._shortest is None:
+            self._search(float(duration))
+        if self._shortest is not None:
+            return math.isfinite(self._shortest) and self._shortest > duration
+        assert self._bracket is not None
+        return duration < self._bracket[0]
+
+    def _search(self, until: float) -> None:
         """From the speed bound up: while a duration fails by a ratio r, the next tried is
         r^(1/3) longer (no need decays faster than 1/D^3: accelerations scale by 1/D^2 and
         rates take another 1/D, so this never jumps past the bound), at least GRID_RATIO;
         GRID_FITS fitting durations in a row end the search, then bisection between the
-        last failing and the first fitting one (`fcu.excess.shortest_kernel`)."""
+        last failing and the first fitting one (`fcu.excess.grid_kernel`,
+        `fcu.excess.bisect_kernel`), until it ends or `until` lies outside its bracket."""
         env = self.env
-        shortest, fitted = shortest_kernel(
-            self.parts, self.order.place_gap, self.order.place_ends, env.floor > 0.0,
-            env.limit, env.limit ** 4, env.tau_up,
-            env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S, STRETCH_GUARD,
-            GRID_RATIO, GRID_FITS, GRID_MAX, BISECT_TOL)
-        if fitted:
-            self._fit_at = shortest
-        return shortest
+        checks = (self.parts, self.order.place_gap, self.order.place_ends, env.floor > 0.0)
+        if self._bracket is None:
+            lo, hi, fitted = grid_kernel(
+                *checks, env.limit, env.limit ** 4, env.tau_up, env.tau_down, env.tilt_limit,
+                env.tilt_rate_max * TILT_STEP_S, STRETCH_GUARD, GRID_RATIO, GRID_FITS,
+                GRID_MAX)
+            self._bracket = lo, hi
+            if math.isnan(lo):
+                self._shortest = hi
+                if fitted:
+                    self._fit_at = hi
+                return
+        lo, hi = self._bracket
+        lo, hi = bisect_kernel(*checks, env.limit, env.tau_up, env.tau_down, env.tilt_limit,
+                               env.tilt_rate_max * TILT_STEP_S, lo, hi, BISECT_TOL, until)
+        self._bracket = lo, hi
+        if not hi - lo > BISECT_TOL * hi:
+            self._shortest = self._fit_at = hi
 
     def _speed_bound(self) -> float:
         """Rotor speed alone (no lag): the closed form of the module docstring
