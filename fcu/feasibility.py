@@ -109,6 +109,15 @@ from fcu.excess import (
     speed_bound_kernel,
     unpermuted,
 )
+from fcu.instants import DIFF_STEP as DIFF_STEP
+from fcu.instants import FIGURE_SAMPLES_MAX as FIGURE_SAMPLES_MAX
+from fcu.instants import FIGURE_STEP_RAD as FIGURE_STEP_RAD
+from fcu.instants import MOVE_SAMPLES as MOVE_SAMPLES
+from fcu.instants import MOVE_STEP_RAD as MOVE_STEP_RAD
+from fcu.instants import SampleOrder as SampleOrder
+from fcu.instants import clear_orders, time_order
+from fcu.instants import figure_instants as figure_instants
+from fcu.instants import move_instants as move_instants
 from fcu.tracker import Reference
 from fcu.wrench import _nominal_wrench_rows as _nominal_wrench_rows
 from fcu.wrench import nominal_wrench as nominal_wrench
@@ -119,21 +128,13 @@ MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
 TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may use
 FLOOR = 0.25  # share of w_max below which the feed-forward may not slow a rotor
 TILT_STEP_S = 0.05  # a tilt step at a path's end may take the servo this long at its rate
-DIFF_STEP = 1e-6  # sigma step of the central differences of a 1 s path
 GRID_RATIO = 1.1  # `TimeScaling.shortest`: durations tried from the speed bound up
 GRID_FITS = 8  # ... until this many in a row fit (x 2.1 in duration)
 GRID_MAX = 1000  # ... at most this many (x 1e41)
 BISECT_TOL = 1e-4  # relative: the shortest duration found is at most this much too long
-MOVE_SAMPLES = 64
-FIGURE_STEP_RAD = 0.02  # rad of attitude and phase between a figure's samples
-MOVE_STEP_RAD = 0.01  # rad of attitude between a turning move's samples
-FIGURE_SAMPLES_MAX = 4096
 STRETCH_GUARD = 1e-9  # relative: a stretched duration stays this far above the exact bound
 CACHE_ROWS = 16384  # `Envelope.scaling` keeps the scalings of paths up to this many samples
 CACHE_PATHS = 1024  # ... and this many paths
-
-_QUINTIC_PEAKS = (0.5 - math.sqrt(3.0) / 6.0, 0.5, 0.5 + math.sqrt(3.0) / 6.0)
-
 
 class Path(Protocol):
     """A segment that can be flown in any duration: its reference flown in 1 s."""
@@ -141,84 +142,6 @@ class Path(Protocol):
     def path(self, sigma: np.ndarray) -> Reference: ...
 
     def instants(self) -> np.ndarray: ...
-
-
-_MOVE_INSTANTS = np.concatenate([np.linspace(0.0, 1.0, MOVE_SAMPLES), _QUINTIC_PEAKS])
-_MOVE_INSTANTS.flags.writeable = False
-
-
-@lru_cache(maxsize=64)
-def _turning_instants(n: int) -> np.ndarray:
-    out = np.concatenate([np.linspace(0.0, 1.0, n), _QUINTIC_PEAKS])
-    out.flags.writeable = False
-    return out
-
-
-def move_instants(turn_rad: float = 0.0) -> np.ndarray:
-    """Normalised check instants of a quintic move that turns `turn_rad` (module docstring;
-    read-only): a tilt can swing fast where a rotor's thrust passes near zero as the body
-    turns, so a turning move is sampled at most MOVE_STEP_RAD of attitude apart."""
-    if turn_rad <= 0.0:
-        return _MOVE_INSTANTS
-    # the quintic's top rate is 1.875 x its mean: steps of turn / (n - 1) * 1.875 at most
-    n = math.ceil(1.875 * turn_rad / MOVE_STEP_RAD) + 1
-    if n <= MOVE_SAMPLES:
-        return _MOVE_INSTANTS
-    return _turning_instants(int(min(FIGURE_SAMPLES_MAX, 16 * math.ceil(n / 16))))
-
-
-def figure_instants(axis_norm: float, phase_instants: Any) -> np.ndarray:
-    """Normalised check instants of a figure whose attitude turns T |n| (T: 0 .. 2 pi);
-    `phase_instants(T)` maps phases to normalised times."""
-    turns = 2.0 * math.pi * max(2.0, axis_norm)
-    # T' peaks at pi^2 (in 1 s), so evenly spaced instants step T by at most pi^2 / (n - 1).
-    n = int(min(FIGURE_SAMPLES_MAX, max(MOVE_SAMPLES, math.ceil(
-        turns * math.pi / 2.0 / FIGURE_STEP_RAD) + 1)))
-    peaks = phase_instants(np.arange(1, 8) * (math.pi / 4.0))
-    return np.concatenate([np.linspace(0.0, 1.0, n), peaks, [0.5]])
-
-
-class SampleOrder(NamedTuple):
-    """A path's check instants in time (`TimeScaling`; read-only arrays)."""
-
-    stepped: np.ndarray  # the instants, then each - DIFF_STEP, then each + DIFF_STEP
-    ends: np.ndarray  # the indices of the path's ends (sigma 0 or 1)
-    after: np.ndarray  # the index of the next instant in time, -1 for none
-    gap: np.ndarray  # the normalised time to it (0 for none)
-    places: np.ndarray  # the index of the instant at each place in time order
-    place_of: np.ndarray  # the place of each instant
-    place_gap: np.ndarray  # the normalised time from each place to the next (0 for none)
-    place_ends: np.ndarray  # the places of the path's ends
-
-
-_ORDERS: dict[bytes, SampleOrder] = {}
-
-
-def _order(sigma: np.ndarray) -> SampleOrder:
-    """The time order of a path's check instants (`SampleOrder`), kept per set of instants."""
-    key = sigma.tobytes()
-    hit = _ORDERS.get(key)
-    if hit is not None:
-        return hit
-    n = len(sigma)
-    ends = np.flatnonzero((sigma == 0.0) | (sigma == 1.0))
-    order = np.argsort(sigma, kind="stable")
-    after = np.full(n, -1, dtype=np.int64)
-    after[order[:-1]] = order[1:]
-    gap = np.where(after >= 0, sigma[after] - sigma, 0.0)
-    places = order.astype(np.int64)
-    place_of = np.empty(n, dtype=np.int64)
-    place_of[places] = np.arange(n)
-    stepped = np.concatenate([sigma, sigma - DIFF_STEP, sigma + DIFF_STEP])
-    out = SampleOrder(stepped, ends, after, gap, places, place_of,
-                      np.ascontiguousarray(gap[places]),
-                      np.flatnonzero((sigma[places] == 0.0) | (sigma[places] == 1.0)))
-    for x in out:
-        x.flags.writeable = False
-    if len(_ORDERS) >= 256:
-        _ORDERS.clear()
-    _ORDERS[key] = out
-    return out
 
 
 def at_rest(ref: Reference) -> Reference:
@@ -354,7 +277,7 @@ class Envelope:
                 return hit
         sigma = segment.instants()
         n = len(sigma)
-        order = _order(sigma)
+        order = time_order(sigma)
         unit_allocations = getattr(segment, "unit_allocations", None)
         pair = unit_allocations(self, order.stepped) if unit_allocations is not None else None
         if pair is None:
@@ -528,12 +451,13 @@ class TimeScaling:
         """math.isfinite(shortest()) and shortest() > duration, the same answer, with the
         search's bisection taken only until `duration` lies outside its bracket (the rest
         when `shortest` is asked)."""
-        if self._shortest is None:
+        bracket = self._bracket
+        if self._shortest is None and (bracket is None or bracket[0] <= duration < bracket[1]):
             self._search(float(duration))
         if self._shortest is not None:
             return math.isfinite(self._shortest) and self._shortest > duration
         assert self._bracket is not None
-        return duration < self._bracket[0]
+        return duration < self._bracket[0]  # the bisection ends above lo, at hi or below
 
     def _search(self, until: float) -> None:
         """From the speed bound up: while a duration fails by a ratio r, the next tried is
@@ -585,4 +509,4 @@ def clear_caches() -> None:
     afresh (benchmarks time the work, not the cache)."""
     for env in _ENVELOPES:
         env.clear()
-    _ORDERS.clear()
+    clear_orders()
