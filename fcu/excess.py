@@ -2,7 +2,9 @@
 check (`fcu.feasibility`), pure and compiled. For a path flown in a given duration it takes
 the allocation Omega_0 + Omega_1 / D^2 and its sigma-derivatives at the path's samples and
 returns the largest need / limit over samples and rotors, with the actuator and the kind of
-limit (`KINDS`).
+limit (`KINDS`): `excess_kernel` for the explanation, `excess_ratio` and `fits_kernel` (the
+same values, on `scaling_parts`) for the search of the shortest duration (`grid_kernel`,
+`bisect_kernel`).
 """
 
 from __future__ import annotations
@@ -268,7 +270,7 @@ def excess_ratio(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, duration:
                  ) -> float:
     """`excess_kernel`'s ratio alone, the same value to the bit (the same candidates from
     the same expressions; their largest does not depend on the order they are met in), on
-    `pair_parts` (samples in time order; `gap`: the normalised time from each place to the
+    `scaling_parts` (samples in time order; `gap`: the normalised time from each place to the
     next, 0 for none; `ends`: the places of the path's ends): each rotor's needs
     (`_rotor_needs`), then the tilts' turns to the next sample, then the tilt steps at the
     ends. Returned as soon as it exceeds `stop` (the value so far then: enough to tell). A

@@ -495,9 +495,22 @@ class TimeScaling:
 _ENVELOPES: list[Envelope] = []
 
 
-@lru_cache(maxsize=16)
+_LAST: list[tuple[VehicleConfig, float, Envelope]] = []
+
+
 def envelope(vehicle: VehicleConfig, margin: float = MARGIN) -> Envelope:
-    """The (cached) envelope of a vehicle: the pseudo-inverse is computed once."""
+    """The (cached) envelope of a vehicle: the pseudo-inverse is computed once. The last
+    one given is found by identity first (hashing a VehicleConfig takes microseconds, and
+    a mission check asks for it twice an item)."""
+    if _LAST and _LAST[0][0] is vehicle and _LAST[0][1] == margin:
+        return _LAST[0][2]
+    env = _envelope(vehicle, margin)
+    _LAST[:] = [(vehicle, margin, env)]
+    return env
+
+
+@lru_cache(maxsize=16)
+def _envelope(vehicle: VehicleConfig, margin: float) -> Envelope:
     env = Envelope(vehicle, margin)
     _ENVELOPES.append(env)
     del _ENVELOPES[:-16]

@@ -3,9 +3,9 @@
 A move is the minimum-jerk quintic of `fcu.trajectory` in position and along the shortest
 rotation in attitude, then a hold; a figure is `fcu.trajectory.FigureInfinity`. Both sample
 one instant (`sample`) or, for the envelope check, a whole normalised path at once (`path`;
-a move also its nominal wrenches straight from its parameters, `Move.unit_wrenches`, and
-both the bytes of what that path depends on, `path_key`, by which `fcu.feasibility` shares
-the scaling of equal paths).
+both also its allocations, `unit_allocations`, a move's straight from its parameters,
+keeping in the envelope what other paths share with it, and the bytes of what that path
+depends on, `path_key`, by which `fcu.feasibility` shares the scaling of equal paths).
 """
 
 from __future__ import annotations
