@@ -54,6 +54,14 @@ def njit(fn: F) -> F:
     return cast(F, numba.njit(cache=True)(fn))
 
 
+def njit_loops(fn: F) -> F:
+    """`njit` with numba's "numpy" error model: a float division by zero gives inf or NaN as
+    IEEE 754 says instead of raising ZeroDivisionError. Without that check in its body a
+    loop that divides can be vectorised (every value that does not divide by zero is the
+    same, to the bit)."""
+    return cast(F, numba.njit(cache=True, error_model="numpy")(fn))
+
+
 _warmed: set[str] = set()
 _compile_s = [0.0]
 

@@ -63,11 +63,18 @@ attitude (T |n|) and of the path phase 2T (at least `MOVE_SAMPLES`, at most `FIG
 plus its ends (extreme T''), its middle (top T') and the phases T = j pi / 4 where the path's
 coordinates peak.
 
-Evaluation: the search runs compiled in one call (`fcu.excess.shortest_kernel`), each
-duration judged by `fcu.excess.excess_ratio`, the largest need of `excess_kernel` to the bit;
-the allocations stay numpy's (a matrix product's rounding depends on its shape, so each is
-the one it always was). Paths that depend on the same parameters (`path_key`: a 500-item
-mission repeats its figures) share one scaling; `clear_caches` forgets them.
+Evaluation: the search runs compiled (`fcu.excess.grid_kernel`, then
+`fcu.excess.bisect_kernel`), each duration judged by `fcu.excess.fits_kernel` (whether the
+largest need of `excess_kernel` is at most 1, to the bit) and a failing one of its grid
+measured by `fcu.excess.excess_ratio` (that largest need, to the bit), on the path's parts
+in time order (`fcu.excess.scaling_parts`); the allocations stay numpy's (a matrix
+product's rounding depends on its shape, so each is the one it always was). The upload
+check asks only whether a speed-timed move stretches (`TimeScaling.stretches`: the
+bisection stops once the planned duration is outside its bracket; the executor resumes
+it). Paths that depend on the same parameters (`path_key`: a 500-item mission repeats its
+figures) share one scaling, and paths that share a part (`Envelope.kept`: a move's
+attitudes and poses at rest depend on q0 and phi, not on dp; a figure's shape on its
+amplitude and axis, not on its start pose) share that part; `clear_caches` forgets them.
 
 Which items stretch and which are refused is the mission's business (fcu.mission). Actuators
 are numbered 1..n as the vehicle file lists its arms (the paper's i = 1..6).
@@ -77,8 +84,9 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
+from collections.abc import Callable
 from functools import lru_cache
-from typing import Any, NamedTuple, Protocol
+from typing import Any, NamedTuple, Protocol, TypeVar
 
 import numpy as np
 
@@ -93,37 +101,40 @@ from fcu.excess import (
     TILT_STEP,
     TINY,
     Excess,
+    bisect_kernel,
     excess_kernel,
-    excess_ratio,
-    pair_parts,
-    shortest_kernel,
+    fits_kernel,
+    grid_kernel,
+    scaling_parts,
     speed_bound_kernel,
+    unpermuted,
 )
+from fcu.instants import DIFF_STEP as DIFF_STEP
+from fcu.instants import FIGURE_SAMPLES_MAX as FIGURE_SAMPLES_MAX
+from fcu.instants import FIGURE_STEP_RAD as FIGURE_STEP_RAD
+from fcu.instants import MOVE_SAMPLES as MOVE_SAMPLES
+from fcu.instants import MOVE_STEP_RAD as MOVE_STEP_RAD
+from fcu.instants import SampleOrder as SampleOrder
+from fcu.instants import clear_orders, time_order
+from fcu.instants import figure_instants as figure_instants
+from fcu.instants import move_instants as move_instants
 from fcu.tracker import Reference
 from fcu.wrench import _nominal_wrench_rows as _nominal_wrench_rows
 from fcu.wrench import nominal_wrench as nominal_wrench
 from fcu.wrench import nominal_wrench_kernel as nominal_wrench_kernel
-from fcu.wrench import rows, scaled_parts, wrench_matrix
+from fcu.wrench import rows, wrench_matrix
 
 MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
 TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may use
 FLOOR = 0.25  # share of w_max below which the feed-forward may not slow a rotor
 TILT_STEP_S = 0.05  # a tilt step at a path's end may take the servo this long at its rate
-DIFF_STEP = 1e-6  # sigma step of the central differences of a 1 s path
 GRID_RATIO = 1.1  # `TimeScaling.shortest`: durations tried from the speed bound up
 GRID_FITS = 8  # ... until this many in a row fit (x 2.1 in duration)
 GRID_MAX = 1000  # ... at most this many (x 1e41)
 BISECT_TOL = 1e-4  # relative: the shortest duration found is at most this much too long
-MOVE_SAMPLES = 64
-FIGURE_STEP_RAD = 0.02  # rad of attitude and phase between a figure's samples
-MOVE_STEP_RAD = 0.01  # rad of attitude between a turning move's samples
-FIGURE_SAMPLES_MAX = 4096
 STRETCH_GUARD = 1e-9  # relative: a stretched duration stays this far above the exact bound
 CACHE_ROWS = 16384  # `Envelope.scaling` keeps the scalings of paths up to this many samples
 CACHE_PATHS = 1024  # ... and this many paths
-
-_QUINTIC_PEAKS = (0.5 - math.sqrt(3.0) / 6.0, 0.5, 0.5 + math.sqrt(3.0) / 6.0)
-
 
 class Path(Protocol):
     """A segment that can be flown in any duration: its reference flown in 1 s."""
@@ -133,67 +144,7 @@ class Path(Protocol):
     def instants(self) -> np.ndarray: ...
 
 
-_MOVE_INSTANTS = np.concatenate([np.linspace(0.0, 1.0, MOVE_SAMPLES), _QUINTIC_PEAKS])
-_MOVE_INSTANTS.flags.writeable = False
-
-
-@lru_cache(maxsize=64)
-def _turning_instants(n: int) -> np.ndarray:
-    out = np.concatenate([np.linspace(0.0, 1.0, n), _QUINTIC_PEAKS])
-    out.flags.writeable = False
-    return out
-
-
-def move_instants(turn_rad: float = 0.0) -> np.ndarray:
-    """Normalised check instants of a quintic move that turns `turn_rad` (module docstring;
-    read-only): a tilt can swing fast where a rotor's thrust passes near zero as the body
-    turns, so a turning move is sampled at most MOVE_STEP_RAD of attitude apart."""
-    if turn_rad <= 0.0:
-        return _MOVE_INSTANTS
-    # the quintic's top rate is 1.875 x its mean: steps of turn / (n - 1) * 1.875 at most
-    n = math.ceil(1.875 * turn_rad / MOVE_STEP_RAD) + 1
-    if n <= MOVE_SAMPLES:
-        return _MOVE_INSTANTS
-    return _turning_instants(int(min(FIGURE_SAMPLES_MAX, 16 * math.ceil(n / 16))))
-
-
-def figure_instants(axis_norm: float, phase_instants: Any) -> np.ndarray:
-    """Normalised check instants of a figure whose attitude turns T |n| (T: 0 .. 2 pi);
-    `phase_instants(T)` maps phases to normalised times."""
-    turns = 2.0 * math.pi * max(2.0, axis_norm)
-    # T' peaks at pi^2 (in 1 s), so evenly spaced instants step T by at most pi^2 / (n - 1).
-    n = int(min(FIGURE_SAMPLES_MAX, max(MOVE_SAMPLES, math.ceil(
-        turns * math.pi / 2.0 / FIGURE_STEP_RAD) + 1)))
-    peaks = phase_instants(np.arange(1, 8) * (math.pi / 4.0))
-    return np.concatenate([np.linspace(0.0, 1.0, n), peaks, [0.5]])
-
-
-_ORDERS: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-
-
-def _order(sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(the indices of the ends, the index of the next instant in time or -1, the normalised
-    time to it) of a path's check instants (`TimeScaling`), kept per set of instants
-    (read-only)."""
-    key = sigma.tobytes()
-    hit = _ORDERS.get(key)
-    if hit is not None:
-        return hit
-    n = len(sigma)
-    ends = np.flatnonzero((sigma == 0.0) | (sigma == 1.0))
-    order = np.argsort(sigma, kind="stable")
-    after = np.full(n, -1, dtype=np.int64)
-    after[order[:-1]] = order[1:]
-    gap = np.where(after >= 0, sigma[after] - sigma, 0.0)
-    for x in (ends, after, gap):
-        x.flags.writeable = False
-    if len(_ORDERS) >= 256:
-        _ORDERS.clear()
-    _ORDERS[key] = ends, after, gap
-    return ends, after, gap
-
-
-def _hover(ref: Reference) -> Reference:
+def at_rest(ref: Reference) -> Reference:
     """The same poses at rest (the part of a path that does not scale with its duration)."""
     zero = (0.0, 0.0, 0.0)
     return ref._replace(v_enu_m_s=zero, a_enu_m_s2=zero, omega_flu_rad_s=zero,
@@ -204,6 +155,40 @@ def _speeds(omega_sq: np.ndarray) -> np.ndarray:
     """Rotor speeds (samples x rotors) from Omega (samples x [lat_1, ver_1, ...])."""
     lat, ver = omega_sq[:, 0::2], omega_sq[:, 1::2]
     return np.asarray(np.sqrt(np.sqrt(lat * lat + ver * ver)))
+
+
+T = TypeVar("T")
+
+
+class Kept:
+    """A bounded store, the least recently used entry out first: at most `max_rows` rows
+    (each entry counts the samples it holds) and `max_entries` entries."""
+
+    def __init__(self, max_rows: int, max_entries: int) -> None:
+        self.max_rows, self.max_entries = max_rows, max_entries
+        self._entries: OrderedDict[bytes, tuple[Any, int]] = OrderedDict()
+        self._rows = 0
+
+    def get(self, key: bytes) -> Any:
+        """The entry kept for key (now the most recently used), or None."""
+        hit = self._entries.get(key)
+        if hit is None:
+            return None
+        self._entries.move_to_end(key)
+        return hit[0]
+
+    def put(self, key: bytes, value: Any, rows: int) -> None:
+        entries = self._entries
+        entries[key] = value, rows
+        self._rows += rows
+        while len(entries) > 1 and (self._rows > self.max_rows or
+                                    len(entries) > self.max_entries):
+            _, (_, old_rows) = entries.popitem(last=False)
+            self._rows -= old_rows
+
+    def clear(self) -> None:
+        self._entries.clear()
+        self._rows = 0
 
 
 class Peak(NamedTuple):
@@ -229,8 +214,8 @@ class Envelope:
         self.tilt_limit = tilt_margin * self.tilt_rate_max
         self.tau_up, self.tau_down = vehicle.rotor_tau_up_s, vehicle.rotor_tau_down_s
         self.pinv_t = pseudo_inverse(allocation_matrix(vehicle)).T  # 6 x 2n
-        self._scalings: OrderedDict[bytes, TimeScaling] = OrderedDict()
-        self._cached_rows = 0
+        self._scalings = Kept(CACHE_ROWS, CACHE_PATHS)
+        self._kept = Kept(CACHE_ROWS, CACHE_PATHS)
 
     def omega_sq(self, ref: Reference) -> np.ndarray:
         """Omega = A^+ [f_b; tau_b] per sample (samples x 2n); a float reference is 1 sample."""
@@ -263,55 +248,60 @@ class Envelope:
         i = int(np.argmax(per_sample))
         return Peak(float(per_sample[i]), i)
 
+    def allocate(self, wrenches: np.ndarray) -> np.ndarray:
+        """Omega = A^+ [f_b; tau_b] of wrench rows (`wrenches`; samples x 2n)."""
+        return np.asarray(wrenches @ self.pinv_t)
+
+    def kept(self, key: bytes, rows: int, make: Callable[[], T]) -> T:
+        """What make() returns, kept by key (`CACHE_ROWS`, `CACHE_PATHS`; `rows`: the samples
+        it holds): the parts of a path that other paths share (`scaling`)."""
+        hit: T | None = self._kept.get(key)
+        if hit is None:
+            hit = make()
+            self._kept.put(key, hit, rows)
+        return hit
+
     def scaling(self, segment: Path) -> TimeScaling:
         """What the allocation commands along `segment`'s path as a function of the time it
         is flown in: Omega_0, Omega_1 at its instants and their sigma-derivatives. A segment
         with a `path_key` (the bytes of what its 1 s path depends on) shares the scaling of
-        an equal one met before (`CACHE_ROWS`, `CACHE_PATHS`); one with a `unit_wrenches`
-        (the nominal wrenches of its 1 s path and of its poses at rest, as `wrenches` makes
-        them from `path`) skips the Reference."""
+        an equal one met before (`CACHE_ROWS`, `CACHE_PATHS`); one with a
+        `unit_allocations` (the allocations of its 1 s path and of its poses at rest, as
+        `omega_sq` makes them from `path`, or None) skips the Reference, and may keep what
+        it shares with other paths (`kept`)."""
         key_of = getattr(segment, "path_key", None)
         key: bytes | None = key_of() if key_of is not None else None
         if key is not None:
-            hit = self._scalings.get(key)
+            hit: TimeScaling | None = self._scalings.get(key)
             if hit is not None:
-                self._scalings.move_to_end(key)
                 return hit
         sigma = segment.instants()
         n = len(sigma)
-        sigmas = np.concatenate([sigma, sigma - DIFF_STEP, sigma + DIFF_STEP])
-        unit_wrenches = getattr(segment, "unit_wrenches", None)
-        pair = unit_wrenches(self.vehicle, sigmas) if unit_wrenches is not None else None
+        order = time_order(sigma)
+        unit_allocations = getattr(segment, "unit_allocations", None)
+        pair = unit_allocations(self, order.stepped) if unit_allocations is not None else None
         if pair is None:
-            unit = segment.path(sigmas)
-            pair = self.wrenches(unit), self.wrenches(_hover(unit))
-        om = pair[0] @ self.pinv_t
-        hover = pair[1] @ self.pinv_t
-        om0, om1, dom0, dom1 = scaled_parts(om, hover, n, 2.0 * DIFF_STEP)
-        ends, after, gap = _order(sigma)
-        out = TimeScaling(self, om0, om1, dom0, dom1, ends, after, gap)
+            unit = segment.path(order.stepped)
+            pair = self.omega_sq(unit), self.omega_sq(at_rest(unit))
+        om, hover = pair
+        parts = scaling_parts(om, hover, n, 2.0 * DIFF_STEP, self.floor, order.places,
+                              order.place_ends)
+        out = TimeScaling(self, parts, order)
         if key is not None:
-            self._remember(key, out)
+            self._scalings.put(key, out, n)
         return out
 
-    def _remember(self, key: bytes, scaling: TimeScaling) -> None:
-        cache = self._scalings
-        cache[key] = scaling
-        self._cached_rows += len(scaling.om0)
-        while len(cache) > 1 and (self._cached_rows > CACHE_ROWS or len(cache) > CACHE_PATHS):
-            _, old = cache.popitem(last=False)
-            self._cached_rows -= len(old.om0)
-
     def clear(self) -> None:
-        """Forget the scalings kept (`scaling`)."""
+        """Forget the scalings and shared parts kept (`scaling`, `kept`)."""
         self._scalings.clear()
-        self._cached_rows = 0
+        self._kept.clear()
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickled without the scalings kept (a plan made in another process carries its
         segments' scalings, not the cache)."""
         state = self.__dict__.copy()
-        state["_scalings"], state["_cached_rows"] = OrderedDict(), 0
+        state["_scalings"] = Kept(CACHE_ROWS, CACHE_PATHS)
+        state["_kept"] = Kept(CACHE_ROWS, CACHE_PATHS)
         return state
 
     def describe(self, speed_rad_s: float) -> str:
@@ -342,36 +332,61 @@ class Envelope:
 
 class TimeScaling:
     """Omega(D) = Omega_0 + Omega_1 / D^2 and its rates at a path's sample instants (module
-    docstring)."""
+    docstring), kept as `fcu.excess.scaling_parts` (the samples in time order: `order`);
+    Omega_0, Omega_1 and their derivatives by sample are `om0`, `om1`, `dom0`, `dom1`."""
 
-    def __init__(self, env: Envelope, om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray,
-                 dom1: np.ndarray, ends: np.ndarray | None = None,
-                 after: np.ndarray | None = None, gap: np.ndarray | None = None) -> None:
+    def __init__(self, env: Envelope, parts: np.ndarray, order: SampleOrder) -> None:
         self.env, self.limit = env, env.limit
-        self.om0, self.om1, self.dom0, self.dom1 = (np.ascontiguousarray(x, dtype=np.float64)
-                                                    for x in (om0, om1, dom0, dom1))
-        self.is_end = np.zeros(len(om0), dtype=np.bool_)
-        if ends is not None:
-            self.is_end[ends] = True
-        n = len(om0)
-        # the next sample in time and the normalised time to it (`excess_kernel`)
-        self.after = np.full(n, -1, dtype=np.int64) if after is None else \
-            np.ascontiguousarray(after, dtype=np.int64)
-        self.gap = np.zeros(n) if gap is None else np.ascontiguousarray(gap, dtype=np.float64)
+        self.parts, self.order = parts, order
+        self.samples = parts.shape[2]
+        self._rows: dict[int, np.ndarray] = {}
         self._shortest: float | None = None
+        self._bracket: tuple[float, float] | None = None  # `_search`'s (lo, hi) so far
         self._fit_at: float | None = None  # a duration `_search` found fitting
-        self._parts: np.ndarray | None = None
         self._fits: dict[float, bool] = {}
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        state["_parts"] = None  # `pair_parts` again where needed
+        state["_rows"] = {}  # `unpermuted` again where needed
         return state
 
-    def _pair_parts(self) -> np.ndarray:
-        if self._parts is None:
-            self._parts = pair_parts(self.om0, self.om1, self.dom0, self.dom1, self.env.floor)
-        return self._parts
+    def _by_sample(self, row: int) -> np.ndarray:
+        out = self._rows.get(row)
+        if out is None:
+            out = self._rows[row] = unpermuted(self.parts, row, self.order.place_of)
+        return out
+
+    @property
+    def om0(self) -> np.ndarray:
+        return self._by_sample(0)
+
+    @property
+    def om1(self) -> np.ndarray:
+        return self._by_sample(2)
+
+    @property
+    def dom0(self) -> np.ndarray:
+        return self._by_sample(4)
+
+    @property
+    def dom1(self) -> np.ndarray:
+        return self._by_sample(6)
+
+    @property
+    def after(self) -> np.ndarray:
+        """The index of the next sample in time, -1 for none (`excess_kernel`)."""
+        return self.order.after
+
+    @property
+    def gap(self) -> np.ndarray:
+        """The normalised time to it (`excess_kernel`)."""
+        return self.order.gap
+
+    @property
+    def is_end(self) -> np.ndarray:
+        out = np.zeros(self.samples, dtype=np.bool_)
+        out[self.order.ends] = True
+        return out
 
     def _omega(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
         u = 1.0 / (duration * duration) if duration > 0.0 else math.inf
@@ -415,10 +430,10 @@ class TimeScaling:
         hit = self._fits.get(duration)
         if hit is None:
             env = self.env
-            hit = excess_ratio(self._pair_parts(), self.om0, self.om1, self.is_end,
-                               duration, env.limit, env.tau_up, env.tau_down, env.tilt_limit,
-                               env.tilt_rate_max * TILT_STEP_S, self.after, self.gap,
-                               env.floor > 0.0, 1.0) <= 1.0
+            hit = fits_kernel(self.parts, self.order.place_gap,
+                              self.order.place_ends, duration, env.limit, env.tau_up,
+                              env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S,
+                              env.floor > 0.0, np.empty(self.samples))
             if len(self._fits) < 16:
                 self._fits[duration] = hit
         return hit
@@ -428,37 +443,74 @@ class TimeScaling:
         every actuator within its limit (module docstring); 0 when any duration does, inf
         when none does (hovering at some attitude of the path already exceeds the limit)."""
         if self._shortest is None:
-            self._shortest = self._search()
+            self._search(math.nan)
+        assert self._shortest is not None
         return self._shortest
 
-    def _search(self) -> float:
+    def stretches(self, duration: float) -> bool:
+        """math.isfinite(shortest()) and shortest() > duration, the same answer, with the
+        search's bisection taken only until `duration` lies outside its bracket (the rest
+        when `shortest` is asked)."""
+        bracket = self._bracket
+        if self._shortest is None and (bracket is None or bracket[0] <= duration < bracket[1]):
+            self._search(float(duration))
+        if self._shortest is not None:
+            return math.isfinite(self._shortest) and self._shortest > duration
+        assert self._bracket is not None
+        return duration < self._bracket[0]  # the bisection ends above lo, at hi or below
+
+    def _search(self, until: float) -> None:
         """From the speed bound up: while a duration fails by a ratio r, the next tried is
         r^(1/3) longer (no need decays faster than 1/D^3: accelerations scale by 1/D^2 and
         rates take another 1/D, so this never jumps past the bound), at least GRID_RATIO;
         GRID_FITS fitting durations in a row end the search, then bisection between the
-        last failing and the first fitting one (`fcu.excess.shortest_kernel`)."""
+        last failing and the first fitting one (`fcu.excess.grid_kernel`,
+        `fcu.excess.bisect_kernel`), until it ends or `until` lies outside its bracket."""
         env = self.env
-        shortest, fitted = shortest_kernel(
-            self._pair_parts(), self.om0, self.om1, self.dom0, self.is_end, self.after,
-            self.gap, env.floor > 0.0, env.limit, env.limit ** 4, env.tau_up,
-            env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S, STRETCH_GUARD,
-            GRID_RATIO, GRID_FITS, GRID_MAX, BISECT_TOL)
-        if fitted:
-            self._fit_at = shortest
-        return shortest
+        checks = (self.parts, self.order.place_gap, self.order.place_ends, env.floor > 0.0)
+        if self._bracket is None:
+            lo, hi, fitted = grid_kernel(
+                *checks, env.limit, env.limit ** 4, env.tau_up, env.tau_down, env.tilt_limit,
+                env.tilt_rate_max * TILT_STEP_S, STRETCH_GUARD, GRID_RATIO, GRID_FITS,
+                GRID_MAX)
+            self._bracket = lo, hi
+            if math.isnan(lo):
+                self._shortest = hi
+                if fitted:
+                    self._fit_at = hi
+                return
+        lo, hi = self._bracket
+        lo, hi = bisect_kernel(*checks, env.limit, env.tau_up, env.tau_down, env.tilt_limit,
+                               env.tilt_rate_max * TILT_STEP_S, lo, hi, BISECT_TOL, until)
+        self._bracket = lo, hi
+        if not hi - lo > BISECT_TOL * hi:
+            self._shortest = self._fit_at = hi
 
     def _speed_bound(self) -> float:
         """Rotor speed alone (no lag): the closed form of the module docstring
         (`fcu.excess.speed_bound_kernel`)."""
-        return speed_bound_kernel(self.om0, self.om1, self.limit ** 4, STRETCH_GUARD)
+        return speed_bound_kernel(self.parts, self.limit ** 4, STRETCH_GUARD)
 
 
 _ENVELOPES: list[Envelope] = []
 
 
-@lru_cache(maxsize=16)
+_LAST: list[tuple[VehicleConfig, float, Envelope]] = []
+
+
 def envelope(vehicle: VehicleConfig, margin: float = MARGIN) -> Envelope:
-    """The (cached) envelope of a vehicle: the pseudo-inverse is computed once."""
+    """The (cached) envelope of a vehicle: the pseudo-inverse is computed once. The last
+    one given is found by identity first (hashing a VehicleConfig takes microseconds, and
+    a mission check asks for it twice an item)."""
+    if _LAST and _LAST[0][0] is vehicle and _LAST[0][1] == margin:
+        return _LAST[0][2]
+    env = _envelope(vehicle, margin)
+    _LAST[:] = [(vehicle, margin, env)]
+    return env
+
+
+@lru_cache(maxsize=16)
+def _envelope(vehicle: VehicleConfig, margin: float) -> Envelope:
     env = Envelope(vehicle, margin)
     _ENVELOPES.append(env)
     del _ENVELOPES[:-16]
@@ -470,4 +522,4 @@ def clear_caches() -> None:
     afresh (benchmarks time the work, not the cache)."""
     for env in _ENVELOPES:
         env.clear()
-    _ORDERS.clear()
+    clear_orders()

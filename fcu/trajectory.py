@@ -19,7 +19,7 @@ floats or numpy arrays alike (`xp` = math or numpy), so the envelope check of
 from __future__ import annotations
 
 import math
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -114,6 +114,28 @@ def figure_path(amp: float, T: Any, dT: Any, ddT: Any,
     return off, v, acc
 
 
+class FigureShape(NamedTuple):
+    """What a figure's path flown in 1 s is at normalised times sigma before its start pose
+    places it (`FigureInfinity.path`): T, T', T'' (`figure_phase_inside`), the offset, its
+    velocity and acceleration (`figure_path`) and exp(T n) (`q_exp_many`), all arrays."""
+
+    T: Any
+    dT: Any
+    ddT: Any
+    offset: tuple[Any, Any, Any]
+    velocity: tuple[Any, Any, Any]
+    acceleration: tuple[Any, Any, Any]
+    turn: tuple[Any, Any, Any, Any]
+
+
+def figure_shape(amp: float, axis_enu: Vec3, sigma: np.ndarray) -> FigureShape:
+    """The `FigureShape` of a figure of amplitude `amp` about `axis_enu` at sigma."""
+    T, dT, ddT = figure_phase_inside(sigma, 1.0, np)
+    off, v, acc = figure_path(amp, T, dT, ddT, np)
+    n = axis_enu
+    return FigureShape(T, dT, ddT, off, v, acc, q_exp_many(T * n[0], T * n[1], T * n[2]))
+
+
 class FigureInfinity:
     """The figure-infinity of eqs. (31)-(32) from a start pose (p0, q0), tau = t - t_start:
 
@@ -135,13 +157,17 @@ class FigureInfinity:
 
     def attitude(self, T: Any, dT: Any, ddT: Any, exp: Any = q_exp) -> tuple[Any, Any, Any]:
         """q = exp(T n) q0, body rate and its derivative (`exp`: q_exp, or q_exp_many)."""
-        n, nb = self.n, self.n_body
+        n = self.n
         if exp is q_exp:
-            q = q_exp((T * n[0], T * n[1], T * n[2]))
+            turn = q_exp((T * n[0], T * n[1], T * n[2]))
         else:
-            q = exp(T * n[0], T * n[1], T * n[2])
-        if self.q0 is not None:
-            q = q_mul(q, self.q0)
+            turn = exp(T * n[0], T * n[1], T * n[2])
+        return self._turned(turn, dT, ddT)
+
+    def _turned(self, turn: Any, dT: Any, ddT: Any) -> tuple[Any, Any, Any]:
+        """`attitude` from turn = exp(T n)."""
+        nb = self.n_body
+        q = turn if self.q0 is None else q_mul(turn, self.q0)
         return q, (dT * nb[0], dT * nb[1], dT * nb[2]), (ddT * nb[0], ddT * nb[1], ddT * nb[2])
 
     def at(self, T: float, dT: float, ddT: float) -> Reference:
@@ -158,14 +184,17 @@ class FigureInfinity:
             return self.end
         return self.at(*figure_phase_inside(tau, self.duration))
 
-    def path(self, sigma: np.ndarray) -> Reference:
+    def path(self, sigma: np.ndarray, shape: FigureShape | None = None) -> Reference:
         """The same figure flown in 1 s, at normalised times sigma in [0, 1] (arrays in every
-        field); sigma = 0 and 1 give the one-sided limits inside the figure."""
-        T, dT, ddT = figure_phase_inside(sigma, 1.0, np)
-        off, v, acc = figure_path(self.amp, T, dT, ddT, np)
-        q, w, wd = self.attitude(T, dT, ddT, exp=q_exp_many)
+        field); sigma = 0 and 1 give the one-sided limits inside the figure. `shape`: its
+        `figure_shape` at sigma, if already made."""
+        if shape is None:
+            shape = figure_shape(self.amp, self.n, sigma)
+        off = shape.offset
+        q, w, wd = self._turned(shape.turn, shape.dT, shape.ddT)
         x0, y0, z0 = self.p0
-        return Reference((x0 + off[0], y0 + off[1], z0 + off[2]), q, v, acc, w, wd)
+        return Reference((x0 + off[0], y0 + off[1], z0 + off[2]), q, shape.velocity,
+                         shape.acceleration, w, wd)
 
     def phase_instants(self, T: np.ndarray) -> np.ndarray:
         """Normalised times sigma = tau / D at which the phase takes the values T in [0, 2 pi]."""

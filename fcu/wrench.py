@@ -4,8 +4,7 @@
     f_b = m R(q)^T (a - g_W),  g_W = [0, 0, -g];   tau_b = J omega_dot + omega x J omega,
 
 for one sample (`nominal_wrench_kernel`, compiled: the flight core's too) or many at once
-(arrays: `nominal_wrench`, the kernels' rows), and the parts of the envelope's time scaling
-taken from the allocation of a path's samples (`scaled_parts`).
+(arrays: `nominal_wrench`, the kernels' rows).
 """
 
 from __future__ import annotations
@@ -57,27 +56,6 @@ def wrench_matrix(m: float, g: float, inertia: Vec3, q: np.ndarray, a: np.ndarra
                                      (wd[0, i], wd[1, i], wd[2, i]))
         out[i, 0], out[i, 1], out[i, 2] = f
         out[i, 3], out[i, 4], out[i, 5] = t
-
-
-@njit
-def scaled_parts(om: np.ndarray, hover: np.ndarray, n: int, h2: float
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Omega_0, Omega_1 and their central differences at n instants from the allocation of
-    the 1 s path at them, then at them -/+ DIFF_STEP (3n rows), and of its poses at rest
-    (`hover`: 3n rows, or 1 row for all of them)."""
-    cols = om.shape[1]
-    om0, om1 = np.empty((n, cols)), np.empty((n, cols))
-    dom0, dom1 = np.empty((n, cols)), np.empty((n, cols))
-    one = hover.shape[0] == 1
-    for k in range(n):
-        h, lo, hi = (0, 0, 0) if one else (k, n + k, 2 * n + k)
-        for c in range(cols):
-            om0[k, c] = hover[h, c]
-            om1[k, c] = om[k, c] - hover[h, c]
-            dom0[k, c] = (hover[hi, c] - hover[lo, c]) / h2
-            dom1[k, c] = ((om[2 * n + k, c] - hover[hi, c]) -
-                          (om[n + k, c] - hover[lo, c])) / h2
-    return om0, om1, dom0, dom1
 
 
 def nominal_wrench(vehicle: VehicleConfig, ref: Reference) -> tuple[Vec3, Vec3]:

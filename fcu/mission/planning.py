@@ -40,16 +40,18 @@ def _turn(q0: Quat, yaw_deg: float) -> Vec3 | None:
     return phi if norm3(phi) > 0.0 else None
 
 
-def _stretched(seg: Move, vehicle: VehicleConfig | None) -> Move:
+def _stretched(seg: Move, vehicle: VehicleConfig | None, stretch: bool = True) -> Move:
     """A speed-timed move, its travel lengthened to the shortest flyable time if it is
     shorter (`fcu.feasibility.TimeScaling.shortest`); as it is without a vehicle, when it does
-    not move, or when no duration helps."""
+    not move, or when no duration helps; as planned, with its scaling, where not `stretch`
+    (`envelope_reason` tells whether it would be)."""
     if vehicle is None or not seg.moves:
         return seg
     scaling = envelope(vehicle).scaling(seg)
-    shortest = scaling.shortest()
-    if math.isfinite(shortest) and shortest > seg.travel:
-        seg = seg.retimed(shortest)
+    if stretch:
+        shortest = scaling.shortest()
+        if math.isfinite(shortest) and shortest > seg.travel:
+            seg = seg.retimed(shortest)
     seg.scaling = scaling
     return seg
 
@@ -70,11 +72,13 @@ def envelope_reason(item: MissionItem, seg: Segment, limits: MissionLimits) -> s
     scaling = seg.scaling if seg.scaling is not None else env.scaling(seg)
     if scaling.fits(seg.duration):  # flown as planned (a stretched move: at its shortest)
         return ""
-    excess = scaling.excess(seg.duration)
-    shortest = scaling.shortest()
     slot = _TIME_SLOT.get(item.command)
     if item.command == MAV_CMD_NAV_TAKEOFF and not item.param2 > 0.0:
         slot = None  # timed by the takeoff speed
+    if slot is None and scaling.stretches(seg.duration):
+        return ""  # planned unstretched (`plan_item`): flown at its shortest, which fits
+    excess = scaling.excess(seg.duration)
+    shortest = scaling.shortest()
     proposed = math.ceil(shortest * 100.0) / 100.0 if math.isfinite(shortest) else shortest
     if not math.isfinite(shortest):
         hint = "attitude too demanding at any speed"
@@ -114,7 +118,11 @@ def with_speed(item: MissionItem, limits: MissionLimits,
 
 
 def plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
-               limits: MissionLimits) -> Segment:
+              limits: MissionLimits, stretch: bool = True) -> Segment:
+    """The item's segment from (t0, p0, q0); speed-timed moves stretched to what the vehicle
+    can fly, or, where not `stretch` (the upload check, whose outcome does not depend on
+    how long a stretched move becomes), as planned with their scaling (`envelope_reason`
+    then accepts one that the stretch would make fit)."""
     cmd = item.command
     if cmd == MAV_CMD_DO_CHANGE_SPEED:  # no motion: it changes how later items are planned
         return Move(item.seq, t0, p0, ZERO, q0, None, 0.0, 0.0)
@@ -135,7 +143,8 @@ def plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
 
     def move(dp: Vec3, phi: Vec3 | None, travel: float, hold: float) -> Move:
         """A speed-timed move, stretched to what the vehicle can fly."""
-        return _stretched(Move(item.seq, t0, p0, dp, q0, phi, travel, hold), limits.vehicle)
+        return _stretched(Move(item.seq, t0, p0, dp, q0, phi, travel, hold), limits.vehicle,
+                          stretch)
 
     if cmd == MAV_CMD_NAV_TAKEOFF:
         dp = (0.0, 0.0, -item.z - p0[2])

@@ -3,27 +3,33 @@
 A move is the minimum-jerk quintic of `fcu.trajectory` in position and along the shortest
 rotation in attitude, then a hold; a figure is `fcu.trajectory.FigureInfinity`. Both sample
 one instant (`sample`) or, for the envelope check, a whole normalised path at once (`path`;
-a move also its nominal wrenches straight from its parameters, `Move.unit_wrenches`, and
-both the bytes of what that path depends on, `path_key`, by which `fcu.feasibility` shares
-the scaling of equal paths).
+both also its allocations, `unit_allocations`, a move's straight from its parameters,
+keeping in the envelope what other paths share with it, and the bytes of what that path
+depends on, `path_key`, by which `fcu.feasibility` shares the scaling of equal paths).
 """
 
 from __future__ import annotations
 
 import math
 import struct
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from common.config import VehicleConfig
 from common.frames import q_ned_frd_to_enu_flu
 from common.jit import njit
 from common.quaternion import q_exp_many
 from fcu.dualquat import Quat, Vec3, norm3, q_exp, q_mul
-from fcu.feasibility import TimeScaling, figure_instants, move_instants, nominal_wrench_kernel
+from fcu.feasibility import (
+    Envelope,
+    TimeScaling,
+    at_rest,
+    figure_instants,
+    move_instants,
+    nominal_wrench_kernel,
+)
 from fcu.tracker import Reference, pose_ref
-from fcu.trajectory import FigureInfinity, quintic, quintic_poly
+from fcu.trajectory import FigureInfinity, FigureShape, figure_shape, quintic, quintic_poly
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 
@@ -57,17 +63,12 @@ def quintic_rows(sigma: np.ndarray) -> np.ndarray:
 @njit
 def move_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, dp: Vec3, phi: Vec3,
                   quintic: np.ndarray, qw: np.ndarray, qx: np.ndarray, qy: np.ndarray,
-                  qz: np.ndarray, moving: np.ndarray, hover: np.ndarray) -> None:
+                  qz: np.ndarray, moving: np.ndarray) -> None:
     """The nominal wrenches (`fcu.feasibility.Envelope.wrenches`) of a move's 1 s path
-    (`Move.path`) at the instants of `quintic` (`quintic_rows`) into `moving`, and of its
-    poses at rest into `hover`: one row where the move keeps its attitude (qw empty),
-    else a row per instant, its attitude q0 exp(s phi) from exp(s phi) = (qw, qx, qy, qz)."""
+    (`Move.path`) at the instants of `quintic` (`quintic_rows`) into `moving`: its attitude
+    q0 where it keeps it (qw empty), else q0 exp(s phi) from exp(s phi) = (qw, qx, qy, qz)."""
     zero = (0.0, 0.0, 0.0)
     turns = qw.shape[0] > 0
-    if not turns:
-        f, t = nominal_wrench_kernel(m, g, inertia, q0, zero, zero, zero)
-        hover[0, 0], hover[0, 1], hover[0, 2] = f
-        hover[0, 3], hover[0, 4], hover[0, 5] = t
     for i in range(quintic.shape[1]):
         ds, dds = quintic[1, i], quintic[2, i]
         a = (dp[0] * dds / 1.0, dp[1] * dds / 1.0, dp[2] * dds / 1.0)
@@ -75,14 +76,39 @@ def move_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, dp: Vec3, phi: Ve
             q = q_mul(q0, (qw[i], qx[i], qy[i], qz[i]))
             w = (phi[0] * ds / 1.0, phi[1] * ds / 1.0, phi[2] * ds / 1.0)
             wd = (phi[0] * dds / 1.0, phi[1] * dds / 1.0, phi[2] * dds / 1.0)
-            f, t = nominal_wrench_kernel(m, g, inertia, q, zero, zero, zero)
-            hover[i, 0], hover[i, 1], hover[i, 2] = f
-            hover[i, 3], hover[i, 4], hover[i, 5] = t
         else:
             q, w, wd = q0, zero, zero
         f, t = nominal_wrench_kernel(m, g, inertia, q, a, w, wd)
         moving[i, 0], moving[i, 1], moving[i, 2] = f
         moving[i, 3], moving[i, 4], moving[i, 5] = t
+
+
+@njit
+def rest_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, qw: np.ndarray,
+                  qx: np.ndarray, qy: np.ndarray, qz: np.ndarray, hover: np.ndarray) -> None:
+    """The nominal wrenches of a move's poses at rest into `hover`: one row where it keeps
+    its attitude q0 (qw empty), else a row per instant, q0 exp(s phi) as `move_wrenches`."""
+    zero = (0.0, 0.0, 0.0)
+    if qw.shape[0] == 0:
+        f, t = nominal_wrench_kernel(m, g, inertia, q0, zero, zero, zero)
+        hover[0, 0], hover[0, 1], hover[0, 2] = f
+        hover[0, 3], hover[0, 4], hover[0, 5] = t
+    for i in range(qw.shape[0]):
+        q = q_mul(q0, (qw[i], qx[i], qy[i], qz[i]))
+        f, t = nominal_wrench_kernel(m, g, inertia, q, zero, zero, zero)
+        hover[i, 0], hover[i, 1], hover[i, 2] = f
+        hover[i, 3], hover[i, 4], hover[i, 5] = t
+
+
+class MoveRest(NamedTuple):
+    """What a move's path at its instants shares with every move of the same q0 and phi
+    (`Move.unit_allocations`): the quintic's rows there (`quintic_rows`), exp(s phi) there
+    (four arrays, empty where it keeps its attitude) and the allocation of its poses at
+    rest (one row where it keeps its attitude)."""
+
+    quintic: np.ndarray
+    turn: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    hover: np.ndarray
 
 
 class Segment:
@@ -160,29 +186,43 @@ class Move(Segment):
                            *(phi if phi is not None else (math.nan,) * 3)) + \
             (b"t" if phi is not None else b"")
 
-    def unit_wrenches(self, vehicle: VehicleConfig, sigma: np.ndarray
-                      ) -> tuple[np.ndarray, np.ndarray] | None:
-        """The nominal wrenches of `path(sigma)` and of its poses at rest, as
-        `Envelope.wrenches` makes them (`move_wrenches`; None: through `path`)."""
+    def unit_allocations(self, env: Envelope, sigma: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray] | None:
+        """The allocations of `path(sigma)` and of its poses at rest, as `Envelope.omega_sq`
+        makes them (`move_wrenches`; None: through `path`). What depends on q0 and phi alone
+        (`MoveRest`: its instants follow from phi) is kept in the envelope for moves that
+        differ in dp only (`Envelope.kept`)."""
         if not _floats(*self.q0):
             return None  # `wrenches` takes such an attitude for arrays
-        quintic = quintic_rows(sigma)
-        moving = np.empty((len(sigma), 6))
         q0 = (float(self.q0[0]), float(self.q0[1]), float(self.q0[2]), float(self.q0[3]))
         dp = (float(self.dp[0]), float(self.dp[1]), float(self.dp[2]))
         phi = self.phi
-        m, g, inertia = vehicle.mass_kg, vehicle.gravity_m_s2, vehicle.inertia_diag_kg_m2
+        key = b"move rest" + struct.pack("<q4d", len(sigma), *q0) + (
+            struct.pack("<3d", *phi) if phi is not None else b"")
+        rest = env.kept(key, len(sigma), lambda: self._rest(env, sigma))
+        vehicle = env.vehicle
+        moving = np.empty((len(sigma), 6))
+        move_wrenches(vehicle.mass_kg, vehicle.gravity_m_s2, vehicle.inertia_diag_kg_m2, q0,
+                      dp, ZERO if phi is None else (float(phi[0]), float(phi[1]),
+                                                    float(phi[2])),
+                      rest.quintic, *rest.turn, moving)
+        return env.allocate(moving), rest.hover
+
+    def _rest(self, env: Envelope, sigma: np.ndarray) -> MoveRest:
+        """The `MoveRest` of this move's path at sigma."""
+        quintic = quintic_rows(sigma)
+        phi = self.phi
         if phi is None:
+            turn = (_NO_Q, _NO_Q, _NO_Q, _NO_Q)
             hover = np.empty((1, 6))
-            move_wrenches(m, g, inertia, q0, dp, ZERO, quintic, _NO_Q, _NO_Q, _NO_Q, _NO_Q,
-                          moving, hover)
-            return moving, hover
-        s = quintic[0]
-        qw, qx, qy, qz = q_exp_many(s * phi[0], s * phi[1], s * phi[2])
-        hover = np.empty((len(sigma), 6))
-        move_wrenches(m, g, inertia, q0, dp, (float(phi[0]), float(phi[1]), float(phi[2])),
-                      quintic, qw, qx, qy, qz, moving, hover)
-        return moving, hover
+        else:
+            s = quintic[0]
+            turn = q_exp_many(s * phi[0], s * phi[1], s * phi[2])
+            hover = np.empty((len(sigma), 6))
+        v = env.vehicle
+        q0 = (float(self.q0[0]), float(self.q0[1]), float(self.q0[2]), float(self.q0[3]))
+        rest_wrenches(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, q0, *turn, hover)
+        return MoveRest(quintic, turn, env.allocate(hover))
 
     def instants(self) -> np.ndarray:
         return move_instants(0.0 if self.phi is None else norm3(self.phi))
@@ -210,9 +250,21 @@ class Figure(Segment):
     def sample(self, tau: float) -> Reference:
         return self.figure.sample(tau)
 
-    def path(self, sigma: np.ndarray) -> Reference:
+    def path(self, sigma: np.ndarray, shape: FigureShape | None = None) -> Reference:
         return FigureInfinity(self.figure.amp, 1.0, self.figure.n, self.figure.p0,
-                              self.figure.q0).path(sigma)
+                              self.figure.q0).path(sigma, shape)
+
+    def unit_allocations(self, env: Envelope, sigma: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """The allocations of `path(sigma)` and of its poses at rest, as
+        `Envelope.omega_sq` makes them; what depends on the amplitude and the axis alone
+        (`fcu.trajectory.FigureShape`: its instants follow from the axis) is kept in the
+        envelope for figures that differ in their start pose only (`Envelope.kept`)."""
+        f = self.figure
+        key = b"figure shape" + struct.pack("<q4d", len(sigma), f.amp, *f.n)
+        shape = env.kept(key, len(sigma), lambda: figure_shape(f.amp, f.n, sigma))
+        unit = self.path(sigma, shape)
+        return env.omega_sq(unit), env.omega_sq(at_rest(unit))
 
     def path_key(self) -> bytes:
         """What `path` and `instants` depend on (amplitude, axis, q0), as bytes."""

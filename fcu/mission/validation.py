@@ -389,7 +389,7 @@ def check_items(items: Sequence[MissionItem], limits: MissionLimits, geofence: b
             return MissionCheck(result, item.seq, reason)
         planned = with_speed(item, planned, limits)
         if envelope_check:
-            seg = plan_item(item, t, p, q, planned)
+            seg = plan_item(item, t, p, q, planned, stretch=False)
             reason = envelope_reason(item, seg, planned)
             if reason:
                 return MissionCheck(MAV_MISSION_DENIED, item.seq, reason)

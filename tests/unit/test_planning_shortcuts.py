@@ -1,0 +1,187 @@
+"""The mission check's shortcuts give the full computation's answers, to the bit: the yes/no
+kernel and the ratio kernel against `excess_kernel`, the search stopped early
+(`TimeScaling.stretches`) and resumed, the parts moves and figures share through
+`Envelope.kept`, and the upload check's unstretched plan (fcu/excess.py, fcu/feasibility.py,
+fcu/mission/)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.mission_envelope import mixed
+from benchmarks.random_mission_gen import random_cruise_speed, random_mission
+from common.config import load_vehicle
+from fcu import feasibility
+from fcu.dualquat import Q_IDENTITY, q_exp
+from fcu.excess import excess_kernel, excess_ratio, fits_kernel
+from fcu.feasibility import TILT_STEP_S, Envelope, TimeScaling, envelope
+from fcu.mission.limits import MissionLimits
+from fcu.mission.planning import envelope_reason, plan_item, with_speed
+from fcu.mission.segments import Figure, Move
+
+ROOT = Path(__file__).resolve().parents[2]
+TILTED = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+PLANAR = load_vehicle(ROOT / "config/vehicles/hexa_planar.toml")
+Q0 = q_exp((0.3, -0.2, 0.5))
+Q0_W = (-Q0[0], Q0[1], Q0[2], Q0[3])  # another attitude, the same vector part
+
+
+def _paths() -> list[Move | Figure]:
+    """Moves that climb, brake, turn and keep their attitude, and figures (slow to fast)."""
+    return [Move(0, 0.0, (0.0, 0.0, 1.0), (0.0, 0.0, 2.0), Q_IDENTITY, None, 1.0, 0.0),
+            Move(0, 0.0, (0.0, 0.0, 3.0), (4.0, -3.0, -2.5), Q0, None, 1.0, 0.0),
+            Move(0, 0.0, (0.0, 0.0, 3.0), (1.0, 2.0, 0.5), Q0, (0.4, -1.1, 2.0), 1.0, 0.0),
+            Move(0, 0.0, (0.0, 0.0, 3.0), (0.0, 0.0, 0.0), Q_IDENTITY, (0.0, 0.0, 3.0), 1.0,
+                 0.0),
+            Figure(0, 0.0, (0.0, 0.0, 3.0), Q0, 2.0, 1.0, (2.0, 1.0, -3.0)),
+            Figure(0, 0.0, (0.0, 0.0, 3.0), Q_IDENTITY, 0.5, 1.0, (0.0, 0.3, 0.2))]
+
+
+def _fresh(env: Envelope, path: Move | Figure) -> TimeScaling:
+    """The path's scaling with nothing kept from before."""
+    feasibility.clear_caches()
+    return env.scaling(path)
+
+
+@pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
+def test_ratio_and_fits_are_the_excess_kernels(vehicle):
+    """Given paths flown from far too fast to slow, then excess_ratio is excess_kernel's
+    ratio to the bit, fits_kernel says whether it is at most 1, and a ratio stopped at 1 is
+    above 1 exactly where the full one is."""
+    env = envelope(vehicle)
+    for path in _paths():
+        sc = _fresh(env, path)
+        o, scratch = sc.order, np.empty(sc.samples)
+        args = (env.limit, env.tau_up, env.tau_down, env.tilt_limit,
+                env.tilt_rate_max * TILT_STEP_S)
+        for duration in np.geomspace(0.05, 300.0, 60):
+            full = excess_kernel(sc.om0, sc.om1, sc.dom0, sc.dom1, sc.is_end, duration, *args,
+                                 sc.after, sc.gap, env.floor)[0]
+            ratio = excess_ratio(sc.parts, o.place_gap, o.place_ends, duration, *args,
+                                 env.floor > 0.0, 1e6, scratch)
+            stopped = excess_ratio(sc.parts, o.place_gap, o.place_ends, duration, *args,
+                                   env.floor > 0.0, 1.0, scratch)
+            assert ratio == full or ratio > 1e6, (path, duration)
+            assert fits_kernel(sc.parts, o.place_gap, o.place_ends, duration, *args,
+                               env.floor > 0.0, scratch) == (full <= 1.0)
+            assert (stopped > 1.0) == (full > 1.0)
+
+
+@pytest.mark.parametrize("probed", [0, 2, 3, 4], ids=["speed", "slowing", "tilt", "step"])
+def test_fits_at_each_limit_is_the_excess_kernels(probed):
+    """Given one limit binding (rotor speed, slowing, tilt rate and turns, tilt step: the
+    others out of reach), set at the need of a path's most demanding actuator and a few
+    doubles either side, then fits_kernel says whether excess_kernel's ratio is at most 1
+    and excess_ratio is that ratio, to the bit."""
+    env = envelope(TILTED)
+    for path in _paths():
+        sc = _fresh(env, path)
+        o, scratch = sc.order, np.empty(sc.samples)
+        for duration in (0.3, 1.0, 4.0, 30.0):
+            args = [1e300, 0.0, 0.0, 1e300, 1e300]  # limit, tau_up, tau_down, tilt, step
+            args[probed] = 1.0
+            need = excess_kernel(sc.om0, sc.om1, sc.dom0, sc.dom1, sc.is_end, duration, *args,
+                                 sc.after, sc.gap, 0.0)[0]
+            if not 0.0 < need < 1e300:
+                continue
+            at = 1.0 / need if probed == 2 else need  # tau_down divides, the others limit
+            for x in (at, *np.nextafter(at, [0.0, np.inf]),
+                      *np.nextafter(np.nextafter(at, [0.0, np.inf]), [0.0, np.inf])):
+                args[probed] = float(x)
+                full = excess_kernel(sc.om0, sc.om1, sc.dom0, sc.dom1, sc.is_end, duration,
+                                     *args, sc.after, sc.gap, 0.0)[0]
+                assert fits_kernel(sc.parts, o.place_gap, o.place_ends, duration, *args,
+                                   False, scratch) == (full <= 1.0), (path, duration, x)
+                assert excess_ratio(sc.parts, o.place_gap, o.place_ends, duration, *args,
+                                    False, 1e6, scratch) == full
+
+
+@pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
+def test_stretches_is_the_shortest_duration_compared(vehicle):
+    """Given a path and planned durations around its shortest one, then `stretches` answers
+    as the full search compared, and the search resumed after it ends where a fresh one
+    does, with the same duration found fitting."""
+    env = envelope(vehicle)
+    for path in _paths():
+        shortest = _fresh(env, path).shortest()
+        for factor in (0.0, 0.5, 0.9, 0.99, 0.99995, 1.0, 1.00005, 1.01, 1.1, 2.0, 50.0):
+            planned = shortest * factor if math.isfinite(shortest) else factor
+            sc = _fresh(env, path)
+            assert sc.stretches(planned) == (math.isfinite(shortest) and shortest > planned)
+            assert sc.shortest() == shortest
+            assert sc.fits(shortest) == _fresh(env, path).fits(shortest)
+
+
+def _parts_kept_and_fresh(env: Envelope, first: Move | Figure,
+                          second: Move | Figure) -> tuple[np.ndarray, np.ndarray]:
+    feasibility.clear_caches()
+    env.scaling(first)
+    kept = env.scaling(second).parts
+    return kept, _fresh(env, second).parts
+
+
+def test_paths_share_only_what_they_have_in_common():
+    """Given two moves or figures that share what `Envelope.kept` keeps (q0 and phi; the
+    amplitude and axis) or differ in one component of it (with as many samples), when the
+    second is scaled after the first, then its parts are those of the second scaled alone,
+    to the bit."""
+    env = envelope(TILTED)
+    phi = (0.4, -1.1, 2.0)
+    pairs = [
+        (Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, phi, 1.0, 0.0),
+         Move(0, 0.0, (0.0,) * 3, (-3.0, 0.5, 0.0), Q0, phi, 1.0, 0.0)),  # dp differs
+        (Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, phi, 1.0, 0.0),
+         Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, (0.4, -1.1, 2.1), 1.0, 0.0)),
+        *((Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, phi, 1.0, 0.0),
+           Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, other, 1.0, 0.0))
+          for other in ((-0.4, -1.1, 2.0), (0.4, 1.1, 2.0), (0.4, -1.1, -2.0))),
+        (Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, phi, 1.0, 0.0),
+         Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q_IDENTITY, phi, 1.0, 0.0)),
+        (Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, phi, 1.0, 0.0),
+         Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0_W, phi, 1.0, 0.0)),
+        (Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, None, 1.0, 0.0),
+         Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q_IDENTITY, None, 1.0, 0.0)),
+        (Figure(0, 0.0, (0.0,) * 3, Q0, 2.0, 1.0, (2.0, 1.0, -3.0)),
+         Figure(0, 0.0, (1.0, 5.0, 3.0), Q_IDENTITY, 2.0, 1.0, (2.0, 1.0, -3.0))),
+        (Figure(0, 0.0, (0.0,) * 3, Q0, 2.0, 1.0, (2.0, 1.0, -3.0)),
+         Figure(0, 0.0, (0.0,) * 3, Q0, 1.5, 1.0, (2.0, 1.0, -3.0))),
+        *((Figure(0, 0.0, (0.0,) * 3, Q0, 2.0, 1.0, (2.0, 1.0, -3.0)),
+           Figure(0, 0.0, (0.0,) * 3, Q0, 2.0, 1.0, other))
+          for other in ((2.0, 1.0, -2.9), (-2.0, 1.0, -3.0), (2.0, -1.0, -3.0),
+                        (2.0, 1.0, 3.0))),
+    ]
+    for first, second in pairs:
+        kept, fresh = _parts_kept_and_fresh(env, first, second)
+        assert kept.tobytes() == fresh.tobytes(), (first, second)
+
+
+@pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
+def test_the_upload_check_judges_unstretched_moves_as_stretched_ones(vehicle):
+    """Given the items of random missions and of a mixed one planned as the executor plans
+    them, then each item's envelope reason is the same when its speed-timed moves are left
+    unstretched (the upload check) as when they are stretched."""
+    missions = [(mixed(40), MissionLimits(vehicle=vehicle))]
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        items = random_mission(rng)
+        missions.append((items, MissionLimits(vehicle=vehicle,
+                                              cruise_speed_m_s=random_cruise_speed(rng))))
+    judged = 0
+    for items, limits in missions:
+        t, p, q = 0.0, (0.0, 0.0, 0.0), Q_IDENTITY
+        planned = limits
+        for item in items:
+            planned = with_speed(item, planned, limits)
+            feasibility.clear_caches()
+            unstretched = plan_item(item, t, p, q, planned, stretch=False)
+            reason = envelope_reason(item, unstretched, planned)
+            feasibility.clear_caches()
+            stretched = plan_item(item, t, p, q, planned)
+            assert reason == envelope_reason(item, stretched, planned), item
+            judged += 1
+            t, p, q = stretched.t1, stretched.p_end, stretched.q_end
+    assert judged > 300
