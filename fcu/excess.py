@@ -240,6 +240,17 @@ def _largest(x: np.ndarray, best: float) -> float:
     return b2 if b2 > b0 else b0
 
 
+@njit
+def _turn(p: np.ndarray, m: int, u: float) -> float:
+    """The angle a rotor's tilt turns through from instant m to m + 1 (its lateral and
+    vertical parts at u = 1 / duration^2, the angle between them)."""
+    lat = p[0, m] + u * p[2, m]
+    ver = p[1, m] + u * p[3, m]
+    lat_j = p[0, m + 1] + u * p[2, m + 1]
+    ver_j = p[1, m + 1] + u * p[3, m + 1]
+    return abs(math.atan2(lat * ver_j - ver * lat_j, lat * lat_j + ver * ver_j))
+
+
 @njit_loops
 def _turn_flags(p: np.ndarray, gap: np.ndarray, u: float, duration: float,
                 tilt_limit: float, best: float, out: np.ndarray) -> None:
@@ -293,13 +304,7 @@ def excess_ratio(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, duration:
         for m in range(n - 1):
             if scratch[m] == 0.0:
                 continue
-            lat = p[0, m] + u * p[2, m]
-            ver = p[1, m] + u * p[3, m]
-            lat_j = p[0, m + 1] + u * p[2, m + 1]
-            ver_j = p[1, m + 1] + u * p[3, m + 1]
-            y = lat * ver_j - ver * lat_j
-            x = lat * lat_j + ver * ver_j
-            mean_rate = abs(math.atan2(y, x)) / (float(gap[m]) * duration)
+            mean_rate = _turn(p, m, u) / (float(gap[m]) * duration)
             if mean_rate / tilt_limit > best:
                 best = mean_rate / tilt_limit
                 if best > stop:
@@ -335,13 +340,7 @@ def fits_kernel(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, duration: 
         for m in range(n - 1):
             if scratch[m] == 0.0:
                 continue
-            lat = p[0, m] + u * p[2, m]
-            ver = p[1, m] + u * p[3, m]
-            lat_j = p[0, m + 1] + u * p[2, m + 1]
-            ver_j = p[1, m + 1] + u * p[3, m + 1]
-            y = lat * ver_j - ver * lat_j
-            x = lat * lat_j + ver * ver_j
-            if abs(math.atan2(y, x)) / (gap[m] * duration) > tilt_limit:
+            if _turn(p, m, u) / (gap[m] * duration) > tilt_limit:
                 return False
     for m in ends:
         for i in range(n_rot):
