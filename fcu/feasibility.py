@@ -83,7 +83,6 @@ are numbered 1..n as the vehicle file lists its arms (the paper's i = 1..6).
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from collections.abc import Callable
 from functools import lru_cache
 from typing import Any, NamedTuple, Protocol, TypeVar
@@ -118,6 +117,7 @@ from fcu.instants import SampleOrder as SampleOrder
 from fcu.instants import clear_orders, time_order
 from fcu.instants import figure_instants as figure_instants
 from fcu.instants import move_instants as move_instants
+from fcu.kept import Kept
 from fcu.tracker import Reference
 from fcu.wrench import _nominal_wrench_rows as _nominal_wrench_rows
 from fcu.wrench import nominal_wrench as nominal_wrench
@@ -158,37 +158,6 @@ def _speeds(omega_sq: np.ndarray) -> np.ndarray:
 
 
 T = TypeVar("T")
-
-
-class Kept:
-    """A bounded store, the least recently used entry out first: at most `max_rows` rows
-    (each entry counts the samples it holds) and `max_entries` entries."""
-
-    def __init__(self, max_rows: int, max_entries: int) -> None:
-        self.max_rows, self.max_entries = max_rows, max_entries
-        self._entries: OrderedDict[bytes, tuple[Any, int]] = OrderedDict()
-        self._rows = 0
-
-    def get(self, key: bytes) -> Any:
-        """The entry kept for key (now the most recently used), or None."""
-        hit = self._entries.get(key)
-        if hit is None:
-            return None
-        self._entries.move_to_end(key)
-        return hit[0]
-
-    def put(self, key: bytes, value: Any, rows: int) -> None:
-        entries = self._entries
-        entries[key] = value, rows
-        self._rows += rows
-        while len(entries) > 1 and (self._rows > self.max_rows or
-                                    len(entries) > self.max_entries):
-            _, (_, old_rows) = entries.popitem(last=False)
-            self._rows -= old_rows
-
-    def clear(self) -> None:
-        self._entries.clear()
-        self._rows = 0
 
 
 class Peak(NamedTuple):
