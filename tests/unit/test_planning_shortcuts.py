@@ -28,6 +28,8 @@ TILTED = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
 PLANAR = load_vehicle(ROOT / "config/vehicles/hexa_planar.toml")
 Q0 = q_exp((0.3, -0.2, 0.5))
 Q0_W = (-Q0[0], Q0[1], Q0[2], Q0[3])  # another attitude, the same vector part
+Q0_FLIPPED = ((Q0[0], -Q0[1], Q0[2], Q0[3]), (Q0[0], Q0[1], -Q0[2], Q0[3]),
+              (Q0[0], Q0[1], Q0[2], -Q0[3]))  # others, one component of the vector part apart
 
 
 def _paths() -> list[Move | Figure]:
@@ -143,6 +145,12 @@ def test_paths_share_only_what_they_have_in_common():
          Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q_IDENTITY, phi, 1.0, 0.0)),
         (Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, phi, 1.0, 0.0),
          Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0_W, phi, 1.0, 0.0)),
+        *((Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, phi, 1.0, 0.0),
+           Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), other, phi, 1.0, 0.0))
+          for other in Q0_FLIPPED),  # q0 differs in its x, y or z component alone
+        *((Figure(0, 0.0, (0.0,) * 3, Q0, 2.0, 1.0, (2.0, 1.0, -3.0)),
+           Figure(0, 0.0, (0.0,) * 3, other, 2.0, 1.0, (2.0, 1.0, -3.0)))
+          for other in Q0_FLIPPED),
         (Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q0, None, 1.0, 0.0),
          Move(0, 0.0, (0.0,) * 3, (1.0, 2.0, 0.5), Q_IDENTITY, None, 1.0, 0.0)),
         (Figure(0, 0.0, (0.0,) * 3, Q0, 2.0, 1.0, (2.0, 1.0, -3.0)),
