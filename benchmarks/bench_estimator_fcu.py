@@ -17,11 +17,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-from common.config import load_scenario
-from common.sensors_config import resolve_sensor_profile
+from common.config.scenario import load_scenario
+from common.config.sensors import resolve_sensor_profile
 from fcu.estimator.ekf import Estimator
-from gcs.inprocess import run_scenario
-from gcs.process_run import run_processes
+from gcs.run.inprocess import run_scenario
+from gcs.run.process_run import run_processes
 
 ROOT = Path(__file__).resolve().parent.parent
 CASE1 = ROOT / "config/scenarios/case1_figure8.toml"

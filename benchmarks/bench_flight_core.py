@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from common import jit
-from common.config import load_scenario
-from fcu.core import FlightCore
-from fcu.dualquat import q_exp, q_mul
-from fcu.trajectory import make_trajectory
+from common.config.scenario import load_scenario
+from common.process.startup import compile_time_s
+from fcu.control.core import FlightCore
+from fcu.control.dualquat import q_exp, q_mul
+from fcu.reference.trajectory import make_trajectory
 from sitl.plant import STATE_SIZE, Plant, state_row
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -62,7 +62,7 @@ def main(steps: int = 20000) -> dict[str, float]:
     samples.sort()
     return {"median_us": statistics.median(samples),
             "p99_us": samples[math.ceil(0.99 * len(samples)) - 1],
-            "steps": float(steps), "warm_up_s": warm_s, "compile_time_s": jit.compile_time_s()}
+            "steps": float(steps), "warm_up_s": warm_s, "compile_time_s": compile_time_s()}
 
 
 if __name__ == "__main__":

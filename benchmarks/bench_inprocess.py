@@ -13,8 +13,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from common.config import load_scenario
-from gcs.inprocess import apply_overrides, run_scenario
+from common.config.scenario import load_scenario
+from gcs.run.inprocess import apply_overrides, run_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -19,8 +19,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from common.config import load_scenario
-from gcs.process_run import run_processes
+from common.config.scenario import load_scenario
+from gcs.run.process_run import run_processes
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_RATIO = 1.5

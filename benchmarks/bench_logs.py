@@ -16,10 +16,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from common.config import load_scenario
-from common.ulog import open_ulog
-from gcs.inprocess import apply_overrides, run_scenario
-from gcs.runio import ONBOARD_LOG, TRUTH_LOG, read_run_logs, write_run
+from common.config.scenario import load_scenario
+from common.logs.ulog import open_ulog
+from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.runio import ONBOARD_LOG, TRUTH_LOG, read_run_logs, write_run
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE1 = ROOT / "config" / "scenarios" / "case1_figure8.toml"

@@ -5,7 +5,7 @@ ground, disarmed, to the end of the run).
 The 500-item mission holds with 497 waypoints at the take-off's top, 0.02 s each, where the
 5-item one holds with three waypoints, so every step of the 500-item mission passes about
 two mission events more than the other's. Both are flown in this one run with the onboard
-log (`gcs.inprocess.run_scenario`, the tilted vehicle, truth sensors); the FCU's step is the
+log (`gcs.run.inprocess.run_scenario`, the tilted vehicle, truth sensors); the FCU's step is the
 pipeline's step plus the onboard log's records of it, for every control step of the run but
 the first (the MISSION_START step, which plans the whole mission). Prints the median step of
 each mission and their ratio, over the whole run and over the steps in flight (the rows of
@@ -29,12 +29,12 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import gcs.inprocess as inprocess
-from common.config import load_scenario
-from common.mav_enums import MAV_CMD, MAV_FRAME
-from common.mission_items import MissionItem
-from fcu.core import ONBOARD_COLUMNS
-from fcu.onboard_log import OnboardLog
+import gcs.run.inprocess as inprocess
+from common.config.scenario import load_scenario
+from common.logs.columns import ONBOARD_COLUMNS
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mission_items import MissionItem
+from fcu.edge.onboard_log import OnboardLog
 from gcs.mission_files import write_mission
 
 ROOT = Path(__file__).resolve().parents[1]

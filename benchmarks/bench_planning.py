@@ -6,17 +6,18 @@ approach planner and POSCTL's envelope fit.
 
 1. `check_mission` of `mission_envelope.mixed(500)` (a take-off, 498 items cycling 20 m legs
    to stretch, 20 s keyframes and 60 s figures, a landing) on the tilted vehicle: what
-   `fcu.mission_protocol` calls when the last MISSION_ITEM_INT arrives. Each round starts
-   with the planning caches emptied (`fcu.feasibility.clear_caches`), so nothing of an
-   earlier round is reused. Then MISSION_START as `fcu.commander` does it:
+   `fcu.edge.mission_protocol` calls when the last MISSION_ITEM_INT arrives. Each round starts
+   with the planning caches emptied (`fcu.envelope.feasibility.clear_caches`), so nothing of an
+   earlier round is reused. Then MISSION_START as `fcu.modes.commander` does it:
    `MissionExecutor(...)`, `set_current(0, ...)` from a pose 3 cm off the origin, slightly
    tilted and yawed, and `refusal()`; once right after the upload check (the caches as that
    left them, the order of a flight) and once with the caches emptied.
-2. `fcu.approach.plan` over a spread of OFFBOARD and HOLD plans on both vehicle files (steps
+2. `fcu.reference.approach.plan` over a spread of OFFBOARD and HOLD plans on both vehicle files
+(steps
    from a hover up to 20 m and 180 deg, HOLD from a moving reference, OFFBOARD's entry, a new
    sample while an approach is under way, position-only and attitude-only samples), each
    call timed alone.
-3. `fcu.manual.fit_envelope` (POSCTL's entry) at 16 attitudes on both vehicle files.
+3. `fcu.modes.manual.fit_envelope` (POSCTL's entry) at 16 attitudes on both vehicle files.
 
 Prints median, p95 and max of each, in milliseconds.
 """
@@ -38,16 +39,18 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.mission_envelope import mixed
-from common.config import VehicleConfig, load_vehicle
-from common.mission_items import MissionItem
-from fcu import approach, feasibility, manual, offboard
-from fcu.dualquat import Quat, Vec3, q_exp
-from fcu.feasibility import Envelope, envelope
-from fcu.manual import StickSettings
+from common.config.scenario import VehicleConfig, load_vehicle
+from common.wire.mission_items import MissionItem
+from fcu.control.dualquat import Quat, Vec3, q_exp
+from fcu.control.tracker import Reference
+from fcu.envelope import feasibility
+from fcu.envelope.feasibility import Envelope, envelope
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission, refusal
-from fcu.tracker import Reference
+from fcu.modes import manual, offboard
+from fcu.modes.manual import StickSettings
+from fcu.reference import approach
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSION_ITEMS = 500

@@ -3,8 +3,8 @@
 Starts `sitl --realtime` and `fcu --realtime` as processes on free loopback ports (a
 scenario of config/scenarios/ for the vehicle, its gains and its start; truth sensors unless
 `--sensors`), arms, takes off to 3 m through MAVLink (the project's ground-station modules:
-`gcs.session`, `gcs.mission_client`, `gcs.vehicle_link`), hovers, then runs a timeline of
-ground-station work while hovering:
+`gcs.vehicle_link.session`, `gcs.vehicle_link.mission_client`, `gcs.vehicle_link`), hovers, then
+runs a timeline of ground-station work while hovering:
 
 1. a mission upload of `--items` waypoints (500, the most the FCU takes; all within 0.3 m
    of the hover point, so it is accepted), its download, and the whole parameter list
@@ -31,7 +31,7 @@ was rotated into) and its `--stats` (deadline misses over the control steps of t
 run, from start to stop): the step period's p50, p99 and p99.9, the longest gap between two
 steps, the deadline misses, and the largest position and attitude errors (the log's state
 against its reference). A `dq_onboard` record is stamped with the state its step acted on,
-moved onto the flight clock (fcu/onboard_log.py), not with the step's own time: a step on
+moved onto the flight clock (fcu/edge/onboard_log.py), not with the step's own time: a step on
 the same state as the step before repeats the stamp (counted as `repeated_stamps`), and the
 periods are those between distinct stamps, in whole control periods: how often the loop
 acted on a new state. The longest gaps are printed with the events under way.
@@ -75,21 +75,21 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
+from common.config.sensors import resolve_sensor_profile
 from common.links import free_port
-from common.mav_enums import MAV_CMD, MAV_FRAME
-from common.mavlink import MAV
-from common.mission_items import LOCAL_SCALE, MissionItem
-from common.modes import Mode
-from common.sensors_config import resolve_sensor_profile
-from common.ulog import ULogError, read_topic
-from gcs.inprocess import scenario_params
-from gcs.mission_client import MissionError, download, upload_detailed
-from gcs.process_run import ChildDied, Children
-from gcs.session import GcsError, Session
+from common.logs.ulog import ULogError, read_topic
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mavlink import MAV
+from common.wire.mission_items import LOCAL_SCALE, MissionItem
+from common.wire.modes import Mode
+from gcs.run.inprocess import scenario_params
+from gcs.run.process_run import ChildDied, Children
 from gcs.vehicle_link.actions import takeoff
+from gcs.vehicle_link.mission_client import MissionError, download, upload_detailed
 from gcs.vehicle_link.params import param_set, param_values
 from gcs.vehicle_link.pose import POSITION_ONLY
+from gcs.vehicle_link.session import GcsError, Session
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[1]
@@ -576,7 +576,7 @@ def argv_of(opts: Options, folder: Path, sim_port: int, ports: list[int],
             str(sc.control_rate_hz), "--position", f"{x!r},{y!r},{z!r}", "--sensors",
             opts.sensors, "--seed", str(sc.seed), "--stats", str(folder / "sitl_stats.json"),
             *extra_sitl]
-    fcu = [py, "-m", "fcu.node", "--vehicle", str(sc.files["vehicle"]), "--gains", str(gains),
+    fcu = [py, "-m", "fcu.edge.node", "--vehicle", str(sc.files["vehicle"]), "--gains", str(gains),
            "--sim", f"udpout:127.0.0.1:{sim_port}", "--sysid", str(VEHICLE_ID), "--rate",
            str(sc.control_rate_hz), "--realtime", "--onboard-log", str(folder / "onboard.ulg"),
            "--stats", str(folder / "fcu_stats.json"),
@@ -870,7 +870,7 @@ def warm_kernels(sc: Any) -> float:
     fly a short mission in-process (kernels compiled on first use), as the test suite does
     first: a fresh checkout would otherwise compile inside the first real-time flight, whose
     loop then stalls (state input lost before the take-off). The seconds it took."""
-    from gcs.inprocess import apply_overrides, fcu_pipeline, run_scenario
+    from gcs.run.inprocess import apply_overrides, fcu_pipeline, run_scenario
     from sitl.plant import Plant
 
     t0 = time.monotonic()

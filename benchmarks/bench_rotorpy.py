@@ -5,7 +5,7 @@ the other, `--repeats` times each (3 by default); the script prints each figure,
 and the ratio, in simulated seconds per wall second.
 
 - This stack: Case I (`config/scenarios/case1_figure8.toml`, truth sensors, its two ULogs
-  built in memory, `run_scenario`'s default) through `gcs.inprocess.run_scenario`,
+  built in memory, `run_scenario`'s default) through `gcs.run.inprocess.run_scenario`,
   in this interpreter; control at 500 Hz, physics (RK4 plant) at 1 kHz. The figure is the
   run's own `real_time_factor` (its flight loop only). Case I rises for 10 s and hovers
   until 20 s; the figure-infinity starts at 20 s, so `--duration 40` or more includes it.
@@ -124,8 +124,8 @@ def stack_runs(duration_s: float, repeats: int) -> list[dict[str, float]]:
     # This checkout's code, whichever checkout an installed copy of the project points to.
     if str(ROOT) not in sys.path:
         sys.path.insert(0, str(ROOT))
-    from common.config import load_scenario
-    from gcs.inprocess import apply_overrides, run_scenario
+    from common.config.scenario import load_scenario
+    from gcs.run.inprocess import apply_overrides, run_scenario
 
     runs = []
     for _ in range(repeats):

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from common.config import load_scenario
-from fcu.core import FlightCore
-from fcu.dualquat import q_exp, q_mul
-from fcu.tracker import VehicleState
-from fcu.trajectory import make_trajectory
+from common.config.scenario import load_scenario
+from fcu.control.core import FlightCore
+from fcu.control.dualquat import q_exp, q_mul
+from fcu.control.tracker import VehicleState
+from fcu.reference.trajectory import make_trajectory
 
 ROOT = Path(__file__).resolve().parent.parent
 

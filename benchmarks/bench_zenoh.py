@@ -25,8 +25,8 @@ SECONDS = 3.0
 
 
 def lockstep(duration_s: float, router: str) -> dict[str, float]:
-    from common.config import load_scenario
-    from gcs.process_run import run_processes
+    from common.config.scenario import load_scenario
+    from gcs.run.process_run import run_processes
 
     sc = dataclasses.replace(load_scenario(ROOT / "config/scenarios/case1_figure8.toml"),
                              duration_s=duration_s)
@@ -41,8 +41,8 @@ def lockstep(duration_s: float, router: str) -> dict[str, float]:
 def _subscriber(router: str, ready: Any, results: Any, seconds: float) -> None:
     import zenoh
 
-    from common.mavlink import parser
-    from common.zenoh_link import client_config
+    from common.links.zenoh_link import client_config
+    from common.wire.mavlink import parser
 
     session: Any = zenoh.open(client_config([router]))  # zenoh 1.x: partly annotated
     mav = parser()
@@ -64,8 +64,8 @@ def _subscriber(router: str, ready: Any, results: Any, seconds: float) -> None:
 def fanout(router: str, subscribers: int) -> dict[str, float]:
     import zenoh
 
-    from common.mavlink import MAV, encoder, pack
-    from common.zenoh_link import client_config
+    from common.links.zenoh_link import client_config
+    from common.wire.mavlink import MAV, encoder, pack
 
     ctx = mp.get_context("spawn")
     results = ctx.Queue()
@@ -104,7 +104,7 @@ def fanout(router: str, subscribers: int) -> dict[str, float]:
 def main(duration_s: float = 160.0) -> None:
     sys.path.insert(0, str(ROOT))
     from common.links import free_port
-    from common.zenoh_link import router_running
+    from common.links.zenoh_link import router_running
 
     router = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     proc = subprocess.Popen([sys.executable, "-m", "gcs.cli", "router", "--listen", router],

@@ -11,9 +11,9 @@ import dataclasses
 import math
 from pathlib import Path
 
-from common.config import DisturbanceTerm, Scenario, load_scenario
+from common.config.scenario import DisturbanceTerm, Scenario, load_scenario
 from common.quaternion import Vec3
-from gcs.inprocess import run_scenario
+from gcs.run.inprocess import run_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 DIRECTIONS: dict[str, Vec3] = {"-z (down)": (0.0, 0.0, -1.0), "+x (forward)": (1.0, 0.0, 0.0),

@@ -50,9 +50,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.mav_enums import MAV_CMD, MAV_FRAME
-from common.mission_items import HomePosition, MissionItem, local_xy, to_global
-from fcu.dualquat import q_log, q_mul
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mission_items import HomePosition, MissionItem, local_xy, to_global
+from fcu.control.dualquat import q_log, q_mul
 
 LOCAL_NED: int = MAV_FRAME.MAV_FRAME_LOCAL_NED
 MISSION_FRAME: int = MAV_FRAME.MAV_FRAME_MISSION  # 2: QGC's frame for DO_ items

@@ -3,7 +3,7 @@ phase by phase (benchmarks/grammar_mission_gen.py: take-offs to 0.2-3 m, landing
 MIS_LAND_SPD 0.05-5 m/s, touch-and-goes, starts up to 5 m from home, DO_CHANGE_SPEED,
 waypoints, loiters, keyframes, figures), each written as a mission file in its drawn format
 (TOML, QGC WPL local or global, .plan) and flown as a user flies it: the scenario's
-mission_file, its parameters and start position, `gcs.inprocess.run_scenario`.
+mission_file, its parameters and start position, `gcs.run.inprocess.run_scenario`.
 
     .venv/bin/python benchmarks/grammar_missions.py --count 1000 --workers 2
 
@@ -55,15 +55,14 @@ from benchmarks.grammar_mission_gen import (
     file_items,
     item_phase,
 )
-from common.config import Scenario, TrajectoryConfig, load_scenario, load_vehicle
-from common.mission_items import PX4_SITL_HOME
-from common.ulog import read_topic
+from common.config.scenario import Scenario, TrajectoryConfig, load_scenario, load_vehicle
+from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
+from common.logs.ulog import read_topic
+from common.wire.mission_items import PX4_SITL_HOME
 from fcu.compose import published_home
-from fcu.core import ONBOARD_COLUMNS
 from fcu.mission.executor import MissionExecutor
-from gcs.inprocess import InProcessError, fcu_pipeline, run_scenario, through_wire_item
 from gcs.mission_files import read_mission, write_mission
-from sitl.plant import TRUTH_COLUMNS
+from gcs.run.inprocess import InProcessError, fcu_pipeline, run_scenario, through_wire_item
 
 ROOT = Path(__file__).resolve().parents[1]
 VEHICLES = ("hexa_tilted", "hexa_planar")
@@ -109,7 +108,7 @@ def planned_end_s(scenario: Scenario, path: Path, start_enu_m: tuple[float, floa
                   ) -> float:
     """The mission's planned end as the FCU plans it from the start (its limits, the file
     read back as MISSION_ITEM_INT carries it, global items through home)."""
-    from common.mission_items import to_local
+    from common.wire.mission_items import to_local
 
     limits = fcu_pipeline(scenario)[0].commander.limits
     items = [to_local(through_wire_item(it), HOME) for it in read_mission(path)]

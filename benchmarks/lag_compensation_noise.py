@@ -1,7 +1,7 @@
 """Case I with a noisy state: does the allocation's lag compensation (CA_LAG_COMP) pass or
 amplify sensor noise?
 
-Flies Case I in-process (gcs.inprocess.run_scenario: the FCU's pipeline and the plant) with
+Flies Case I in-process (gcs.run.inprocess.run_scenario: the FCU's pipeline and the plant) with
 white noise added to the state the FCU sees, once with CA_LAG_COMP 0 (the paper's plain
 allocation, eqs. 28-29) and once with 1 (the default: commands led for the rotor lag and the
 tilt rate limit), on the same noise sequence, and prints the true tracking errors and how much
@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 
-import gcs.inprocess as inprocess
-from common.config import load_scenario
-from fcu.dualquat import q_mul
-from fcu.tracker import VehicleState
-from gcs.inprocess import apply_overrides, run_scenario
+import gcs.run.inprocess as inprocess
+from common.config.scenario import load_scenario
+from fcu.control.dualquat import q_mul
+from fcu.control.tracker import VehicleState
+from gcs.run.inprocess import apply_overrides, run_scenario
 from sitl.plant import PlantState
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,16 +15,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common.config import load_scenario, load_vehicle
-from common.mav_enums import MAV_CMD, MAV_FRAME
-from common.mission_items import MissionItem, local_xy
-from fcu.feasibility import MARGIN, envelope
+from common.config.scenario import load_scenario, load_vehicle
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mission_items import MissionItem, local_xy
+from fcu.control.tracker import pose_ref
+from fcu.envelope.feasibility import MARGIN, envelope
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import Move as _Move
 from fcu.mission.validation import check_mission
-from fcu.tracker import pose_ref
-from fcu.trajectory import make_trajectory
+from fcu.reference.trajectory import make_trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 WAYPOINT: int = MAV_CMD.MAV_CMD_NAV_WAYPOINT

@@ -21,8 +21,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common.frames import enu_to_ned, q_enu_flu_to_ned_frd
-from common.modes import Mode
-from fcu.setpoint_wire import attitude_target, position_target
+from common.wire.modes import Mode
+from fcu.edge.setpoint_wire import attitude_target, position_target
 from tests.pipeline_flight import (
     ATTITUDE_ONLY,
     LIMIT_S,

@@ -48,14 +48,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.random_missions import base_scenario, fcu_limits, schedule
-from common.config import Scenario, TrajectoryConfig
-from common.mav_enums import MAV_CMD, MAV_FRAME
-from common.mission_items import PX4_SITL_HOME, MissionItem, local_xy
+from common.config.scenario import Scenario, TrajectoryConfig
 from common.quaternion import angle_between_rows
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mission_items import PX4_SITL_HOME, MissionItem, local_xy
 from fcu.compose import published_home
-from gcs.inprocess import InProcessError, run_scenario
 from gcs.mission_files import read_mission, write_mission
 from gcs.mission_files.frames import to_frame
+from gcs.run.inprocess import InProcessError, run_scenario
 
 VEHICLES = ("hexa_tilted", "hexa_planar")
 FORMATS = ("toml", "wpl", "wpl-global", "plan")

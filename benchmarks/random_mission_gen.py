@@ -1,7 +1,7 @@
 """Random missions for the random-mission campaign (benchmarks/random_missions.py): a pure
 generator, `random_mission(rng, dist)`, with stated distributions (`MissionDistributions`).
 
-A mission (MAVLink local NED items, `common.mission_items.MissionItem`):
+A mission (MAVLink local NED items, `common.wire.mission_items.MissionItem`):
 
 * item 0: NAV_TAKEOFF to an altitude uniform in [takeoff_alt_m] (p2 = 0: timed by the
   takeoff speed, yaw NaN); the vehicle starts on the ground at the origin;
@@ -35,9 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.mav_enums import MAV_CMD, MAV_FRAME
-from common.mission_items import MissionItem, local_xy
-from fcu.dualquat import Quat, q_exp, q_log, q_mul
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mission_items import MissionItem, local_xy
+from fcu.control.dualquat import Quat, q_exp, q_log, q_mul
 
 LOCAL_NED: int = MAV_FRAME.MAV_FRAME_LOCAL_NED
 NAV_WAYPOINT: int = MAV_CMD.MAV_CMD_NAV_WAYPOINT

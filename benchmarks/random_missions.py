@@ -51,21 +51,20 @@ from benchmarks.random_mission_gen import (
     random_cruise_speed,
     random_mission,
 )
-from common.config import Scenario, TrajectoryConfig, load_scenario, load_vehicle
-from common.mission_items import PX4_SITL_HOME, MissionItem
+from common.config.scenario import Scenario, TrajectoryConfig, load_scenario, load_vehicle
+from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
+from common.wire.mission_items import PX4_SITL_HOME, MissionItem
 from fcu.compose import published_home
-from fcu.core import ONBOARD_COLUMNS
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
-from gcs.inprocess import (
+from gcs.mission_files import read_mission, write_mission
+from gcs.run.inprocess import (
     apply_overrides,
     fcu_pipeline,
     run_scenario,
     through_wire_item,
 )
-from gcs.mission_files import read_mission, write_mission
-from sitl.plant import TRUTH_COLUMNS
 
 ROOT = Path(__file__).resolve().parents[1]
 VEHICLES = ("hexa_tilted", "hexa_planar")

@@ -20,8 +20,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-from common.config import load_scenario
-from gcs.inprocess import apply_overrides, run_scenario
+from common.config.scenario import load_scenario
+from gcs.run.inprocess import apply_overrides, run_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 CASE1 = ROOT / "config" / "scenarios" / "case1_figure8.toml"

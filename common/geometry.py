@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from common.vehicle_config import VehicleConfig
+from common.config.vehicle import VehicleConfig
 
 Vec3 = tuple[float, float, float]
 

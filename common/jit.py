@@ -5,7 +5,7 @@ compiling it again. Typed for mypy: the decorated function keeps its signature.
 
 numba checks a cached kernel against its own source file only, while a kernel inlines the
 kernels it calls from other modules (the tracker's has the dual-quaternion algebra in it):
-an edit of `fcu/dualquat.py` would leave a stale tracker in the cache. So the cache lives in
+an edit of `fcu/control/dualquat.py` would leave a stale tracker in the cache. So the cache lives in
 `__pycache__/numba-<hash>` at the project's root, the hash taken over every module that
 defines kernels or the constants they freeze (KERNEL_MODULES: the array layouts of
 `common.layouts`): any edit of one of them starts a fresh cache.
@@ -14,21 +14,19 @@ defines kernels or the constants they freeze (KERNEL_MODULES: the array layouts 
 from __future__ import annotations
 
 import hashlib
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar, cast
 
 import numba
 
-from common.startup import sigint_deferred
-
 ROOT = Path(__file__).resolve().parent.parent
 KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layouts.py",
-                  "common/quaternion.py", "fcu/dualquat.py",
-                  "fcu/tracker.py", "fcu/allocation.py", "fcu/feasibility.py", "fcu/core.py",
-                  "fcu/wrench.py", "fcu/excess.py", "fcu/approach.py", "fcu/mission/segments.py",
-                  "fcu/manual.py",
+                  "common/quaternion.py",
+                  "fcu/control/dualquat.py", "fcu/control/tracker.py", "fcu/control/allocation.py",
+                  "fcu/control/core.py", "fcu/control/wrench.py",
+                  "fcu/envelope/feasibility.py", "fcu/envelope/excess.py",
+                  "fcu/reference/approach.py", "fcu/mission/segments.py", "fcu/modes/manual.py",
                   "sitl/plant_kernels.py", "sitl/disturbance.py",
                   "fcu/estimator/strapdown.py", "fcu/estimator/update.py",
                   "fcu/estimator/output.py", "fcu/estimator/filter.py")
@@ -60,25 +58,3 @@ def njit_loops(fn: F) -> F:
     loop that divides can be vectorised (every value that does not divide by zero is the
     same, to the bit)."""
     return cast(F, numba.njit(cache=True, error_model="numpy")(fn))
-
-
-_warmed: set[str] = set()
-_compile_s = [0.0]
-
-
-def warm_up(name: str, call: Callable[[], object]) -> None:
-    """Run `call` (kernels on sample inputs of their run-time types) once per process: its
-    first call compiles the kernels or loads them from the cache, which is timed here rather
-    than in the first control step."""
-    if name in _warmed:
-        return
-    _warmed.add(name)
-    t0 = time.perf_counter()
-    with sigint_deferred():  # a Ctrl-C meanwhile raised after, not inside numba's callbacks
-        call()
-    _compile_s[0] += time.perf_counter() - t0
-
-
-def compile_time_s() -> float:
-    """Seconds this process spent in `warm_up` (compiling or loading kernels)."""
-    return _compile_s[0]

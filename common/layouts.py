@@ -6,11 +6,12 @@ globals when it compiles a kernel, so `x[X_Q + 1]` costs what `x[4]` does); the 
 that packs and unpacks the arrays uses the same constants. Frames and units are those of the
 field names (world ENU, body FLU, SI).
 
-Prefixes: X_ vehicle state, R_ reference, K_ tracker parameters, T_ tracker output (fcu.tracker);
-A_ allocator parameters, AO_ allocation output, L_ lag compensator parameters, LS_ its state
-(fcu.allocation); CI_ CP_ CS_ CO_ the fused control step's input, parameters, state and
-output (fcu.core); PP_ plant parameters, PR_ one rotor's block in them, PS_ plant state (a
-truth-log row), PC_ actuator command (sitl.plant); D_ a disturbance term (sitl.disturbance);
+Prefixes: X_ vehicle state, R_ reference, K_ tracker parameters, T_ tracker output
+(fcu.control.tracker); A_ allocator parameters, AO_ allocation output, L_ lag compensator
+parameters, LS_ its state (fcu.control.allocation); CI_ CP_ CS_ CO_ the fused control step's input,
+parameters, state and output (fcu.control.core); PP_ plant parameters, PR_ one rotor's block in
+them, PS_ plant state (a truth-log row), PC_ actuator command (sitl.plant); D_ a disturbance term
+(sitl.disturbance);
 EF_ EI_ the estimator's float and integer buffers (fcu.estimator.filter).
 """
 

@@ -53,7 +53,7 @@ CRASH_SPEED_M_S = 1.0  # touching the ground faster than this is a crash (LAND: 
 # actuator monitor's report of an actuator at its limit (a WARNING, no reaction).
 INFO, FAILSAFE, CRASH, DIVERGED, LIMIT = "info", "failsafe", "crash", "diverged", "limit"
 # How the FCU's STATUSTEXT begins when OFFBOARD holds its attitude instead of a target's
-# (fcu/offboard.py); `gcs goto` ends on it with the vehicle's reason.
+# (fcu/modes/offboard.py); `gcs goto` ends on it with the vehicle's reason.
 ATTITUDE_NOT_FLOWN = "attitude not flown"
 
 

@@ -1,5 +1,5 @@
 """Unit quaternions as plain float tuples: the one quaternion module of the project, shared
-by the flight core (`fcu.dualquat` builds dual quaternions on it), the frame conversion
+by the flight core (`fcu.control.dualquat` builds dual quaternions on it), the frame conversion
 (`common.frames`) and the ground station. The plant (`sitl.plant`) keeps its own rotation
 on purpose: an independent plant is what makes closed-loop tests mean something.
 
@@ -115,7 +115,7 @@ def q_exp_many(rx: Any, ry: Any, rz: Any) -> Any:
 
     The same function as q_exp, written with np.sinc where q_exp has its small-angle series
     and sin(half) / half: about 5% of the components differ in the last bits, and the
-    envelope check's figures (`fcu.feasibility`) are those of this form."""
+    envelope check's figures (`fcu.envelope.feasibility`) are those of this form."""
     half = 0.5 * np.sqrt(rx * rx + ry * ry + rz * rz)
     k = 0.5 * np.sinc(half / math.pi)  # sin(half) / (2 half), 1/2 at 0
     return (np.cos(half), k * rx, k * ry, k * rz)

@@ -1,7 +1,7 @@
 """The FCU composed: its pipeline with the parameters in force, a mission taken as the mission
 protocol takes it, arming and the mission's start.
 
-The FCU process (`fcu.node`) and the in-process runner (`gcs.inprocess`) build the vehicle
+The FCU process (`fcu.edge.node`) and the in-process runner (`gcs.run.inprocess`) build the vehicle
 here, so both fly the same pipeline with the same parameters; the process then takes
 missions and commands from its links, the in-process runner through `accept_mission` and
 `arm_and_start`.
@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from common.config import Gains, VehicleConfig
-from common.mission_items import HomePosition, MissionItem
+from common.config.scenario import Gains, VehicleConfig
+from common.wire.mission_items import HomePosition, MissionItem
 from fcu.mission.validation import check_mission, localize, refusal
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline

@@ -10,7 +10,7 @@ A parameter that sets a field of a settings dataclass (`FlightSettings`, `StickS
 takes its default from the dataclass, so the two cannot disagree; the converters
 (`failsafe_settings`, ...) build each dataclass from its fields' parameters. The one
 deliberate difference is in `DEFAULT_OVERRIDES`, with its reason. docs/parameters.md is
-generated from this table (`fcu.params_doc`).
+generated from this table (`fcu.edge.params_doc`).
 """
 
 from __future__ import annotations
@@ -20,14 +20,14 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from common.config import ConfigError, Gains, VehicleConfig, check_stability
-from common.wire_round import f32
+from common.config.scenario import ConfigError, Gains, VehicleConfig, check_stability
+from common.wire.rounding import f32
 from fcu.estimator.settings import EstimatorSettings
-from fcu.failsafe import FailsafeSettings
-from fcu.manual import StickSettings
 from fcu.mission.limits import MissionLimits
-from fcu.mode_references import FlightSettings
+from fcu.modes.manual import StickSettings
+from fcu.modes.mode_references import FlightSettings
 from fcu.pipeline import Pipeline
+from fcu.safety.failsafe import FailsafeSettings
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance

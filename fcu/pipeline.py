@@ -20,19 +20,24 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from common.config import Gains, VehicleConfig
-from common.mav_enums import MAV_RESULT, MAV_SEVERITY
-from common.modes import Mode
+from common.config.scenario import Gains, VehicleConfig
 from common.outcome import DIVERGED, FAILSAFE, INFO, LIMIT, Event, diverged
-from fcu.actuator_monitor import ActuatorMonitor, unclamped_speeds
-from fcu.answer import Answer
-from fcu.commander import Commander
-from fcu.core import FlightCore, StepResult
-from fcu.dualquat import q_normalize, q_rotate
+from common.wire.mav_enums import MAV_RESULT, MAV_SEVERITY
+from common.wire.modes import Mode
+from fcu.control.core import FlightCore, StepResult
+from fcu.control.dualquat import q_normalize, q_rotate
+from fcu.control.rate_filter import ImuRateFilter
+from fcu.control.tracker import VehicleState
 from fcu.estimator.ekf import Estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
-from fcu.failsafe import (
+from fcu.mission.limits import MissionLimits
+from fcu.modes.answer import Answer
+from fcu.modes.commander import Commander
+from fcu.modes.landing import touchdown_speed_cap
+from fcu.modes.mode_references import FlightSettings
+from fcu.safety.actuator_monitor import ActuatorMonitor, unclamped_speeds
+from fcu.safety.failsafe import (
     Failsafe,
     FailsafeSettings,
     GcsLinkMonitor,
@@ -42,12 +47,7 @@ from fcu.failsafe import (
     pose_loss_level,
     state_lost,
 )
-from fcu.landing import touchdown_speed_cap
-from fcu.mission.limits import MissionLimits
-from fcu.mode_references import FlightSettings
-from fcu.rate_filter import ImuRateFilter
-from fcu.supervisor import Supervisor
-from fcu.tracker import VehicleState
+from fcu.safety.supervisor import Supervisor
 
 ALIGN_MAX_S = 60.0  # lockstep: simulated time runs for the alignment at most this long
 
@@ -200,7 +200,7 @@ class Pipeline:
         self.settings = failsafes
 
     def _set_touchdown_cap(self, gains: Gains) -> None:
-        """The touchdown speed the position loop's damping lands at (`fcu.landing`)."""
+        """The touchdown speed the position loop's damping lands at (`fcu.modes.landing`)."""
         self.commander.touchdown_speed_cap_m_s = touchdown_speed_cap(
             max(gains.kd_d), self.vehicle.gravity_m_s2)
 

@@ -1,9 +1,9 @@
-"""Every planner's kernels loaded before the loop flies (`common.jit.warm_up`): the first
+"""Every planner's kernels loaded before the loop flies (`common.warm_ups.warm_up`): the first
 mission, take-off, OFFBOARD anchor, HOLD brake and POSCTL fit of a flight then cost what
 every later one costs. numba compiles (or loads from its cache) a kernel at its first call
 with each argument type; left to the first use, that was 2-12 ms per kernel inside a control
 step in real time (the first step armed loaded five quaternion kernels: 9 ms), and 100 ms
-in the worker's first job (`fcu.work_process`), which then came after its time.
+in the worker's first job (`fcu.edge.work_process`), which then came after its time.
 
 `warm(limits)` runs in the FCU's process before its loop and, in real time, as the worker's
 first job."""
@@ -11,13 +11,14 @@ first job."""
 from __future__ import annotations
 
 from common import quaternion
-from common.config import VehicleConfig
-from common.jit import warm_up
-from fcu import approach, manual, offboard
-from fcu.feasibility import envelope
+from common.config.scenario import VehicleConfig
+from common.warm_ups import warm_up
+from fcu.control.tracker import Reference
+from fcu.envelope.feasibility import envelope
 from fcu.mission.limits import MissionLimits
 from fcu.mission.start import warm as warm_mission
-from fcu.tracker import Reference
+from fcu.modes import manual, offboard
+from fcu.reference import approach
 
 _MOVING = Reference((0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0), (1.0, 0.5, 0.0), (0.5, 0.0, 0.0),
                     (0.0, 0.0, 0.2), (0.0, 0.0, 0.0))

@@ -8,7 +8,7 @@ calls at a step boundary (`take`), never half-way through a step. Two kinds:
 - `InlineWork`: the job runs at once in the loop's thread, and its callback with it. This is
   the lockstep default: simulated time stands still while it runs (the simulator waits for
   the answer), so nothing flies on stale outputs, and a run is what it always was.
-- `ProcessWork` (`fcu.work_process`, the I/O edge): the job runs in a worker process at a
+- `ProcessWork` (`fcu.edge.work_process`, the I/O edge): the job runs in a worker process at a
   lower priority (nice +10). A process, not a thread: the checks are Python and numpy
   code that would hold the GIL for milliseconds at a time; a process keeps them off the
   loop's GIL and below its priority whatever they cost. This is the real-time default:

@@ -12,7 +12,7 @@ scenario's disturbances count it).
 
 from __future__ import annotations
 
-from common.config import ActuatorFault
+from common.config.scenario import ActuatorFault
 from sitl.plant import ActuatorCommand, PlantState
 
 

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from common.config.scenario_terms import DisturbanceTerm
 from common.jit import njit
 from common.layouts import (
     D_AMPLITUDE,
@@ -22,7 +23,6 @@ from common.layouts import (
     D_START,
     DISTURBANCE_TERM,
 )
-from common.scenario_terms import DisturbanceTerm
 
 Vec3 = tuple[float, float, float]
 _ZERO: Vec3 = (0.0, 0.0, 0.0)

@@ -2,8 +2,8 @@
 
 Protocols: dqflight, this project's own link to its FCU (`sitl.server`: lockstep or real
 time, the exact state or a sensor profile's samples, `sitl.world`'s physics), and the
-interfaces through which external physics engines serve real firmware (`sitl.ardupilot_json`,
-`sitl.px4_hil`), where the firmware drives simulated time.
+interfaces through which external physics engines serve real firmware
+(`sitl.firmware.ardupilot_json`, `sitl.firmware.px4_hil`), where the firmware drives simulated time.
 
 The ground-truth log (one row per state sent) is the run's reference for every metric.
 """
@@ -18,14 +18,14 @@ import sys
 from pathlib import Path
 from typing import Any, Protocol
 
-from common import startup
-from common.cliargs import OneLineParser, check_output_path
-from common.config import ConfigError, Scenario, check_sensor_faults, load_scenario
+from common.config.scenario import ConfigError, Scenario, check_sensor_faults, load_scenario
+from common.config.sensors import resolve_sensor_profile
 from common.links import LinkError, parse_url
-from common.parent import stop_with_parent
-from common.program import STARTUP_ERRORS, serve, start_failed
-from common.realtime import DEFAULT_PRIORITY
-from common.sensors_config import resolve_sensor_profile
+from common.process import startup
+from common.process.cliargs import OneLineParser, check_output_path
+from common.process.parent import stop_with_parent
+from common.process.program import STARTUP_ERRORS, serve, start_failed
+from common.process.realtime import DEFAULT_PRIORITY
 from sitl.server import SimulatorServer
 
 # The simulator protocols `sitl` serves: its own link to this project's FCU, and the
@@ -35,7 +35,8 @@ DQFLIGHT = "dqflight"
 DEFAULT_LINKS = {DQFLIGHT: "udpin:127.0.0.1:4560",  # this project's FCU (PX4's port)
                  "ardupilot-json": "udpin:127.0.0.1:9002",  # ArduPilot's SIM_JSON
                  "px4-hil": "tcpin:127.0.0.1:4560"}  # PX4's simulator MAVLink API
-FIRMWARE_MODULES = {"ardupilot-json": "sitl.ardupilot_json", "px4-hil": "sitl.px4_hil"}
+FIRMWARE_MODULES = {"ardupilot-json": "sitl.firmware.ardupilot_json",
+                    "px4-hil": "sitl.firmware.px4_hil"}
 # Options that only the dqflight protocol takes (the firmware protocols refuse them): the
 # firmware sets the rates and drives the clock.
 DQFLIGHT_ONLY = ("realtime", "rt_priority", "control_rate", "hil_sensor_hz", "resend_ms")

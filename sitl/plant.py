@@ -38,9 +38,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from common.config import Scenario, VehicleConfig
+from common.config.scenario import Scenario, VehicleConfig
 from common.geometry import rotor_frames
-from common.jit import warm_up
 from common.layouts import (
     PC_SIZE,
     PLANT_COMMAND,
@@ -78,7 +77,9 @@ from common.layouts import (
     PS_V,
     PS_W,
 )
+from common.logs.columns import TRUTH_COLUMNS
 from common.vehicle_constants import N_ROTORS
+from common.warm_ups import warm_up
 from sitl.disturbance import Disturbance
 from sitl.plant_kernels import rotate as rotate
 from sitl.plant_kernels import rotate_inv as rotate_inv
@@ -106,9 +107,6 @@ class PlantState(NamedTuple):
     landed: bool
 
 
-TRUTH_COLUMNS = ("time_us", "px", "py", "pz", "vx", "vy", "vz", "qw", "qx", "qy", "qz",
-                 "wx", "wy", "wz", *(f"rotor{i}" for i in range(N_ROTORS)),
-                 *(f"tilt{i}" for i in range(N_ROTORS)), "landed")
 STATE_SIZE = PS_SIZE  # the kernels' state row: a truth row
 assert len(TRUTH_COLUMNS) == STATE_SIZE and PLANT_STATE.at("landed") == STATE_SIZE - 1
 PARAMS_SIZE = PP_SIZE

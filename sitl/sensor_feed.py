@@ -31,12 +31,12 @@ import dataclasses
 import math
 from collections.abc import Sequence
 
-from common.config import SENSOR_FAULT_KINDS, ConfigError, SensorFault
+from common.config.scenario import SENSOR_FAULT_KINDS, ConfigError, SensorFault
+from common.config.sensors import IMU_RATE_MIN_HZ, SensorProfile, check_servable
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
-from common.mavlink import MAV
 from common.quaternion import Vec3, q_conj, q_exp, q_log, q_mul, q_normalize
-from common.sensors_config import IMU_RATE_MIN_HZ, SensorProfile, check_servable
-from common.simlink import HilSensor, Odometry, pose_covariance
+from common.wire.mavlink import MAV
+from common.wire.simlink import HilSensor, Odometry, pose_covariance
 from sitl.plant import ContactImpulses, ContactSpread, Plant, PlantState
 from sitl.sensors import ImuSample, SampleClock, SensorSuite, sensor_rng
 

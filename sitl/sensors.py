@@ -25,9 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.frames import ned_to_enu
-from common.quaternion import Quat, Vec3, q_exp, q_mul, q_rotate_inv
-from common.sensors_config import (
+from common.config.sensors import (
     AccelConfig,
     BaroConfig,
     GpsConfig,
@@ -38,6 +36,8 @@ from common.sensors_config import (
     SensorProfile,
     period_us,
 )
+from common.frames import ned_to_enu
+from common.quaternion import Quat, Vec3, q_exp, q_mul, q_rotate_inv
 
 
 def sensor_rng(seed: int, name: str) -> np.random.Generator:

@@ -32,13 +32,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-from common.config import ConfigError, Scenario
+from common.config.scenario import ConfigError, Scenario
+from common.config.sensors import SensorProfile
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
-from common.jit import compile_time_s
 from common.links import RECV_BATCH, open_link
-from common.mavlink import MAV
-from common.sensors_config import SensorProfile
-from common.simlink import (
+from common.process.startup import compile_time_s
+from common.wire.mavlink import MAV
+from common.wire.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
     TIMESYNC_ID,
     FrameReader,

@@ -14,9 +14,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from common import px4_topics as px4
-from common.ulog import Topic, ULogWriter
-from sitl.plant import TRUTH_COLUMNS, PlantState, truth_row
+from common.logs import px4_topics as px4
+from common.logs.columns import TRUTH_COLUMNS
+from common.logs.ulog import Topic, ULogWriter
+from sitl.plant import PlantState, truth_row
 
 DQ_TRUTH = Topic("dq_truth", (("uint64_t", "timestamp"),
                               *(("double", c) for c in TRUTH_COLUMNS[1:])))

@@ -1,7 +1,7 @@
 """The simulated world of one run: the plant with its disturbances, the actuator faults and
 the sensors, from the first state to the flight's end (docs/model.md#plant, docs/simulator-link.md).
 
-The simulator process (`sitl.server`) and the in-process runner (`gcs.inprocess`) step the
+The simulator process (`sitl.server`) and the in-process runner (`gcs.run.inprocess`) step the
 same `World`, so both fly the same physics with the same faults and sensor samples.
 
 Before the flight starts (the first armed answer, `start_flight`) the world stands still
@@ -16,12 +16,12 @@ import math
 
 import numpy as np
 
-from common.config import Scenario, VehicleConfig
-from common.mav_enums import MAV_MODE_FLAG
-from common.sensors_config import SensorProfile
+from common.config.scenario import Scenario, VehicleConfig
+from common.config.sensors import SensorProfile
+from common.logs.columns import TRUTH_COLUMNS
+from common.wire.mav_enums import MAV_MODE_FLAG
 from sitl.actuator_faults import ActuatorFaults
 from sitl.plant import (
-    TRUTH_COLUMNS,
     ActuatorCommand,
     ContactImpulses,
     Plant,

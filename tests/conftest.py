@@ -31,8 +31,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 def pytest_configure(config: pytest.Config) -> None:
     if hasattr(config, "workerinput"):  # an xdist worker: the controller has done it
         return
-    from common.config import load_scenario
-    from gcs.inprocess import fcu_pipeline
+    from common.config.scenario import load_scenario
+    from gcs.run.inprocess import fcu_pipeline
     from sitl.plant import Plant
 
     scenario = load_scenario(CASE1)
@@ -41,7 +41,7 @@ def pytest_configure(config: pytest.Config) -> None:
     # Kernels compiled for a caller's types on first use (the mission executor samples a
     # rotation at many instants at once): flown here once, not first inside a real-time
     # flight of some test, where a compilation would stall the loop.
-    from gcs.inprocess import apply_overrides, run_scenario
+    from gcs.run.inprocess import apply_overrides, run_scenario
 
     run_scenario(apply_overrides(load_scenario(CASE1.parent / "mission_tour.toml"),
                                  duration_s=3.0), logs=False)

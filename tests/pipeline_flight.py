@@ -10,9 +10,9 @@ import math
 import random
 from pathlib import Path
 
-from common.config import load_scenario, load_vehicle
+from common.config.scenario import load_scenario, load_vehicle
 from common.quaternion import Quat, Vec3, q_angle, q_conj, q_exp, q_mul
-from gcs.inprocess import command_for_plant, fcu_pipeline, state_for_fcu
+from gcs.run.inprocess import command_for_plant, fcu_pipeline, state_for_fcu
 from sitl.plant import Plant, hover_speeds_and_tilts
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 from pymavlink import mavutil
 
-from common import modes as px4_modes
-from common.mavlink import MAV
+from common.wire import modes as px4_modes
+from common.wire.mavlink import MAV
 
 M = MAV
 G = 9.81

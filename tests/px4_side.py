@@ -40,9 +40,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from common.config import VehicleConfig
+from common.config.scenario import VehicleConfig
 from common.frames import geodetic_to_ned
-from common.mavlink import MAV, encoder, pack, parser
+from common.wire.mavlink import MAV, encoder, pack, parser
 
 ACCEL = 0b111
 GYRO = 0b111000

@@ -7,8 +7,8 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-from common.config import load_scenario
-from gcs.inprocess import run_scenario
+from common.config.scenario import load_scenario
+from gcs.run.inprocess import run_scenario
 
 CASE1 = Path(__file__).resolve().parents[1] / "config" / "scenarios" / "case1_figure8.toml"
 GROUP = "case1_reference"  # the xdist group of the tests that use case1_metrics

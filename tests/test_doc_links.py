@@ -1,7 +1,7 @@
 """The README, CHANGELOG and docs pages point at things that exist: every repository path
-they name in backticks (`fcu/tracker.py`, `config/scenarios/`, `fcu/tracker.py` (`Name`)...)
-and every relative link, anchors included, so a moved module or a renamed section cannot
-leave a page pointing at nothing."""
+they name in backticks (`fcu/control/tracker.py`, `config/scenarios/`, `fcu/control/tracker.py`
+(`Name`)...) and every relative link, anchors included, so a moved module or a renamed section
+cannot leave a page pointing at nothing."""
 
 from __future__ import annotations
 

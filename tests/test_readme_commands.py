@@ -158,7 +158,7 @@ def _parser(prog: str):
     if prog == "gcs":
         from gcs.cli.parser import build_parser
     elif prog == "fcu":
-        from fcu.node import build_parser
+        from fcu.edge.node import build_parser
     else:
         from sitl.node import build_parser
     return build_parser()

@@ -1,4 +1,4 @@
-"""Generate common/mavlink_types/: typed views of the MAVLink messages the code handles.
+"""Generate common/wire/mavlink_types/: typed views of the MAVLink messages the code handles.
 
     .venv/bin/python tools/gen_mavlink_types.py          # rewrite the generated modules
     .venv/bin/python tools/gen_mavlink_types.py --check  # exit 1 if they are not current
@@ -7,7 +7,7 @@ pymavlink's message classes carry no annotations, so each decoded message is `An
 This script reads the field names and C types that pymavlink's ardupilotmega dialect (a
 superset of common) declares for each message in MESSAGES and writes one `typing.Protocol`
 per message, with `msgname` and every field typed (integers int, floats float, char arrays
-str, other arrays Sequence). `common.mavlink_types.as_message` narrows a received message to
+str, other arrays Sequence). `common.wire.mavlink_types.as_message` narrows a received message to
 its view after checking its type at run time. tests/unit/test_mavlink_types.py fails when the
 generated modules differ from what this script writes now (a new pymavlink, a new message).
 """
@@ -24,7 +24,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega
 
 ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "common" / "mavlink_types"
+OUT = ROOT / "common" / "wire" / "mavlink_types"
 
 # Messages by the link they travel on; each group is one generated module.
 MESSAGES: dict[str, tuple[str, ...]] = {
@@ -79,7 +79,7 @@ def render(group: str) -> str:
         "from collections.abc import Sequence",
         "from typing import ClassVar, Protocol",
         "",
-        "from common.mavlink_types.base import Message",
+        "from common.wire.mavlink_types.base import Message",
     ]
     for name in MESSAGES[group]:
         cls = classes[name]

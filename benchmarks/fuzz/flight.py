@@ -23,13 +23,13 @@ from typing import Any
 from benchmarks.fuzz.config import PID, ROOT, SCENARIO, VEHICLE
 from benchmarks.fuzz.listener import LinkListener
 from benchmarks.fuzz.relay import Relay
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from common.links import free_port
-from common.mavlink import MAV
-from common.parent import child_env
-from gcs.mission_client import upload
-from gcs.scenario_mission import scenario_mission
-from gcs.session import Session
+from common.process.parent import child_env
+from common.wire.mavlink import MAV
+from gcs.run.scenario_mission import scenario_mission
+from gcs.vehicle_link.mission_client import upload
+from gcs.vehicle_link.session import Session
 
 M = MAV
 
@@ -101,7 +101,7 @@ class Flight:
             key = self.out / "signing.key"
             key.write_text(self.signing_key.hex() + "\n")
             signing = ["--signing-key", str(key)]
-        self._spawn("fcu", ["fcu.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
+        self._spawn("fcu", ["fcu.edge.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
                             "--sim", f"udpout:127.0.0.1:{self.relay.port}",
                             "--gcs", f"udpin:127.0.0.1:{self.gcs_port}",
                             "--gcs", f"udpout:127.0.0.1:{self.listener.port}",

@@ -13,12 +13,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from benchmarks.fuzz.traffic import Traffic
-from common.mavlink import MAV, encoder, pack, parser, signing_timestamp
-from common.modes import Mode
-from fcu.gcs_server import HANDLED
+from common.wire.mavlink import MAV, encoder, pack, parser, signing_timestamp
+from common.wire.modes import Mode
+from fcu.edge.gcs_server import HANDLED
+from fcu.edge.telemetry import DEFAULT_INTERVALS_S, REQUESTABLE
 from fcu.mission.codes import SUPPORTED_COMMANDS as MISSION_COMMANDS
 from fcu.params import SPECS as PARAM_SPECS
-from fcu.telemetry import DEFAULT_INTERVALS_S, REQUESTABLE
 
 M = MAV
 

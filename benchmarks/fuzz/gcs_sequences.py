@@ -28,10 +28,10 @@ from benchmarks.fuzz.gcs_messages import (
     f32_step,
 )
 from benchmarks.fuzz.traffic import FLOOD_BURST
-from common.mavlink import MAV
-from common.mission_items import local_xy
-from common.modes import Mode
-from fcu.gcs_server import HANDLED
+from common.wire.mavlink import MAV
+from common.wire.mission_items import local_xy
+from common.wire.modes import Mode
+from fcu.edge.gcs_server import HANDLED
 from fcu.mission.codes import SUPPORTED_COMMANDS as MISSION_COMMANDS
 from fcu.params import SPECS as PARAM_SPECS
 

@@ -13,9 +13,9 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-from common.mavlink import MAV, parser
-from common.modes import Mode
-from fcu.telemetry import DEFAULT_INTERVALS_S
+from common.wire.mavlink import MAV, parser
+from common.wire.modes import Mode
+from fcu.edge.telemetry import DEFAULT_INTERVALS_S
 
 M = MAV
 

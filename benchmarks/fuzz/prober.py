@@ -27,15 +27,15 @@ from benchmarks.fuzz.gcs_messages import (
     f32_step,
 )
 from benchmarks.fuzz.listener import LinkListener
-from common.mavlink import MAV, encoder, pack, parser, signing_timestamp
-from fcu.params import SPECS as PARAM_SPECS
-from fcu.telemetry import (
+from common.wire.mavlink import MAV, encoder, pack, parser, signing_timestamp
+from fcu.edge.telemetry import (
     DEFAULT_INTERVALS_S,
     LINK_BUDGET_MSG_S,
     MAX_INTERVAL_US,
     MIN_INTERVAL_S,
     REQUESTABLE,
 )
+from fcu.params import SPECS as PARAM_SPECS
 
 M = MAV
 

@@ -27,8 +27,8 @@ import sys
 from typing import Any
 
 from benchmarks.fuzz.config import ROOT
-from common.parent import child_env, stop_with_parent
-from common.realtime import request_fifo
+from common.process.parent import child_env, stop_with_parent
+from common.process.realtime import request_fifo
 
 PRIORITY = 48  # below the FCU's loop (50) and the simulator's (49): a wire between them
 READY = "relay: port "

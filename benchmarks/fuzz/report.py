@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from benchmarks.fuzz.config import ERR_POS_LIMIT_M
-from fcu.telemetry import LINK_BUDGET_MSG_S
+from fcu.edge.telemetry import LINK_BUDGET_MSG_S
 
 
 def counts_text(d: dict[Any, Any]) -> str:

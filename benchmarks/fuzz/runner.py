@@ -12,8 +12,8 @@ from typing import Any
 from benchmarks.fuzz.flight import Attack, Flight
 from benchmarks.fuzz.sequence_campaign import SequenceCampaign
 from benchmarks.fuzz.traffic import Traffic, blast
-from common.mavlink import MAV
-from common.simlink import ActuatorControls, Odometry, pack_actuator_controls, pack_odometry
+from common.wire.mavlink import MAV
+from common.wire.simlink import ActuatorControls, Odometry, pack_actuator_controls, pack_odometry
 
 M = MAV
 

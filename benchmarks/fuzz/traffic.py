@@ -11,8 +11,8 @@ from collections import Counter
 from collections.abc import Callable
 
 from benchmarks.fuzz.config import PORTS
-from common.mavlink import MAV, encoder, pack
-from common.simlink import ActuatorControls, Odometry, pack_actuator_controls, pack_odometry
+from common.wire.mavlink import MAV, encoder, pack
+from common.wire.simlink import ActuatorControls, Odometry, pack_actuator_controls, pack_odometry
 
 M = MAV
 

@@ -12,7 +12,7 @@
                        when the server goes away; data sent while not connected is dropped
     tcpin:HOST:PORT    listen for TCP clients and serve all of them
     serial:DEVICE:BAUD a serial port (pyserial) in raw mode, 8N1, no flow control
-    zenoh:PREFIX[@ENDPOINT,...]   Zenoh pub/sub (`common/zenoh_link.py`)
+    zenoh:PREFIX[@ENDPOINT,...]   Zenoh pub/sub (`common/links/zenoh_link.py`)
 
 MAVSDK's and pymavlink's spellings are accepted too and mean the same links: `udpin://`,
 `udpout://`, `udp://HOST:PORT` and `udp:HOST:PORT` (listen, as MAVSDK's old form and
@@ -54,7 +54,7 @@ def open_link(url: str | LinkUrl, *, role: str = "vehicle", system_id: int = 0) 
     """Open a link from its URL; `role` and `system_id` choose a Zenoh link's keys."""
     parsed = url if isinstance(url, LinkUrl) else parse_url(url)
     if parsed.scheme == "zenoh":
-        from common.zenoh_link import ZenohLink  # imported only where Zenoh is used
+        from common.links.zenoh_link import ZenohLink  # imported only where Zenoh is used
 
         return ZenohLink(parsed, role=role, system_id=system_id)
     if parsed.scheme in ("udpin", "udpout"):

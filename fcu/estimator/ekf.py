@@ -14,7 +14,6 @@ from collections import deque
 
 import numpy as np
 
-from common.jit import warm_up
 from common.layouts import (
     EF_C_DT2,
     EF_C_X,
@@ -42,6 +41,8 @@ from common.layouts import (
     EI_RESYNC_T,
 )
 from common.quaternion import Vec3
+from common.warm_ups import warm_up
+from fcu.control.tracker import VehicleState
 from fcu.estimator.align import AlignWindow
 from fcu.estimator.buffers import filter_buffers
 from fcu.estimator.filter import (
@@ -63,7 +64,6 @@ from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
 from fcu.estimator.status import EstimatorHealth, EstimatorStatus, positive_definite, sd_verdict
 from fcu.estimator.strapdown import N, State
-from fcu.tracker import VehicleState
 
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 _DEFAULTS = EstimatorSettings()

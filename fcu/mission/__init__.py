@@ -1,15 +1,15 @@
 """Mission validation and execution without I/O: mission items in, a timed `Reference` out.
 
-Items travel as MAVLink local NED / body FRD (`common.mission_items.MissionItem`), or in a
+Items travel as MAVLink local NED / body FRD (`common.wire.mission_items.MissionItem`), or in a
 global frame that the vehicle's home position converts to local NED (`check_mission`,
 `localize`); inside, everything is world ENU / body FLU. Every item starts where the
 previous item's *desired* pose ended (never the measured pose), and has fixed start and end
 times planned when the mission starts, so the timeline is exact and a mission that
-re-creates a trajectory (Case I, see `gcs.scenario_mission`) gives the trajectory's
+re-creates a trajectory (Case I, see `gcs.run.scenario_mission`) gives the trajectory's
 reference to rounding.
 
 Time comes in as arguments (seconds); nothing here reads a clock. The MAVLink numbers used
-(`fcu.mission.codes`) are common.xml's, taken from `common.mav_enums`, so that the package
+(`fcu.mission.codes`) are common.xml's, taken from `common.wire.mav_enums`, so that the package
 imports no MAVLink library (tests/unit/test_mav_enums.py checks the enums against pymavlink).
 
 Item semantics (positions local NED, metres; yaw in degrees, NED; NaN yaw = keep attitude):
@@ -26,7 +26,7 @@ Item semantics (positions local NED, metres; yaw in degrees, NED; NaN yaw = keep
 
 Travel, climbs and descents follow the minimum-jerk quintic (zero velocity and acceleration
 at both ends); attitudes move along the shortest rotation with the same profile. The quintic
-and the figure-infinity are those of `fcu.trajectory` (one copy of the maths). An item is
+and the figure-infinity are those of `fcu.reference.trajectory` (one copy of the maths). An item is
 active on [start, end): at a boundary the reference is the next item's at tau = 0, the
 right-hand limit that holds over the coming control period (at a figure's start, T'' = pi k^2
 at once). A move whose duration comes from a speed (not from a parameter) and whose distance
@@ -36,7 +36,7 @@ keeps the start position (attitude), so a target equal to the previous item's en
 wire's resolution costs no travel. A requested yaw change makes the move last at least
 angle / turn rate.
 
-Flyable missions (`fcu.feasibility`, when `MissionLimits.vehicle` is given): every planned
+Flyable missions (`fcu.envelope.feasibility`, when `MissionLimits.vehicle` is given): every planned
 segment's nominal wrench must allocate to commands every actuator can follow at every sample:
 rotor speeds within `feasibility.MARGIN` w_max with their lag, tilt rates within
 `feasibility.TILT_MARGIN` of the servos' rate limit. Items whose duration comes from a speed

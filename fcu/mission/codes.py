@@ -1,11 +1,11 @@
 """The MAVLink numbers of missions (common.xml) by the names `fcu.mission` uses, from
-`common.mav_enums` (no MAVLink library; tests/unit/test_mav_enums.py checks the enums
+`common.wire.mav_enums` (no MAVLink library; tests/unit/test_mav_enums.py checks the enums
 against pymavlink). Typed int, as the mission items' fields are."""
 
 from __future__ import annotations
 
-from common.mav_enums import MAV_CMD, MAV_FRAME
-from common.mav_enums import MAV_MISSION_RESULT as MISSION_RESULT
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mav_enums import MAV_MISSION_RESULT as MISSION_RESULT
 
 MAV_FRAME_LOCAL_NED: int = MAV_FRAME.MAV_FRAME_LOCAL_NED
 MAV_CMD_NAV_WAYPOINT: int = MAV_CMD.MAV_CMD_NAV_WAYPOINT

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from common.config import VehicleConfig
+from common.config.scenario import VehicleConfig
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
 """Planning one item: its segment from the start pose and time, stretched to what the vehicle can
-fly (speed-timed items), and why a user-timed item cannot be flown (`fcu.feasibility`).
+fly (speed-timed items), and why a user-timed item cannot be flown (`fcu.envelope.feasibility`).
 """
 
 from __future__ import annotations
@@ -7,11 +7,11 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from common.config import VehicleConfig
+from common.config.scenario import VehicleConfig
 from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
-from common.mission_items import MissionItem
-from fcu.dualquat import Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul
-from fcu.feasibility import envelope
+from common.wire.mission_items import MissionItem
+from fcu.control.dualquat import Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul
+from fcu.envelope.feasibility import envelope
 from fcu.mission.codes import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_FIGURE_EIGHT,
@@ -42,8 +42,8 @@ def _turn(q0: Quat, yaw_deg: float) -> Vec3 | None:
 
 def _stretched(seg: Move, vehicle: VehicleConfig | None, stretch: bool = True) -> Move:
     """A speed-timed move, its travel lengthened to the shortest flyable time if it is
-    shorter (`fcu.feasibility.TimeScaling.shortest`); as it is without a vehicle, when it does
-    not move, or when no duration helps; as planned, with its scaling, where not `stretch`
+    shorter (`fcu.envelope.feasibility.TimeScaling.shortest`); as it is without a vehicle, when it
+    does not move, or when no duration helps; as planned, with its scaling, where not `stretch`
     (`envelope_reason` tells whether it would be)."""
     if vehicle is None or not seg.moves:
         return seg
@@ -62,7 +62,7 @@ _TIME_SLOT = {MAV_CMD_POSE_KEYFRAME: "p1", MAV_CMD_FIGURE_EIGHT: "p2", MAV_CMD_N
 
 def envelope_reason(item: MissionItem, seg: Segment, limits: MissionLimits) -> str:
     """'' when the vehicle can fly the planned segment, else why not (for a person), naming
-    the actuator and its limit (`fcu.feasibility.Envelope.explain`) and the duration that
+    the actuator and its limit (`fcu.envelope.feasibility.Envelope.explain`) and the duration that
     would pass, if it is within `limits.item_max_s` (MIS_ITEM_MAX_S); beyond, the reason
     says that no duration up to it flies the item."""
     if limits.vehicle is None or seg.duration <= 0.0 or (isinstance(seg, Move)

@@ -1,11 +1,11 @@
 """Planned segments: one mission item each, sampled at tau = t - t0.
 
-A move is the minimum-jerk quintic of `fcu.trajectory` in position and along the shortest
-rotation in attitude, then a hold; a figure is `fcu.trajectory.FigureInfinity`. Both sample
-one instant (`sample`) or, for the envelope check, a whole normalised path at once (`path`;
+A move is the minimum-jerk quintic of `fcu.reference.trajectory` in position and along the shortest
+rotation in attitude, then a hold; a figure is `fcu.reference.trajectory.FigureInfinity`. Both
+sample one instant (`sample`) or, for the envelope check, a whole normalised path at once (`path`;
 both also its allocations, `unit_allocations`, a move's straight from its parameters,
 keeping in the envelope what other paths share with it, and the bytes of what that path
-depends on, `path_key`, by which `fcu.feasibility` shares the scaling of equal paths).
+depends on, `path_key`, by which `fcu.envelope.feasibility` shares the scaling of equal paths).
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ import numpy as np
 from common.frames import q_ned_frd_to_enu_flu
 from common.jit import njit
 from common.quaternion import q_exp_many
-from fcu.dualquat import Quat, Vec3, norm3, q_exp, q_mul
-from fcu.feasibility import (
+from fcu.control.dualquat import Quat, Vec3, norm3, q_exp, q_mul
+from fcu.control.tracker import Reference, pose_ref
+from fcu.envelope.feasibility import (
     Envelope,
     TimeScaling,
     at_rest,
@@ -28,8 +29,13 @@ from fcu.feasibility import (
     move_instants,
     nominal_wrench_kernel,
 )
-from fcu.tracker import Reference, pose_ref
-from fcu.trajectory import FigureInfinity, FigureShape, figure_shape, quintic, quintic_poly
+from fcu.reference.trajectory import (
+    FigureInfinity,
+    FigureShape,
+    figure_shape,
+    quintic,
+    quintic_poly,
+)
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 
@@ -48,7 +54,7 @@ def _floats(*parts: float) -> bool:
 
 @njit
 def quintic_rows(sigma: np.ndarray) -> np.ndarray:
-    """`fcu.trajectory.quintic_poly` at each sigma (its expressions, so its values): rows
+    """`fcu.reference.trajectory.quintic_poly` at each sigma (its expressions, so its values): rows
     s, s', s''."""
     out = np.empty((3, sigma.shape[0]))
     for i in range(sigma.shape[0]):
@@ -64,7 +70,7 @@ def quintic_rows(sigma: np.ndarray) -> np.ndarray:
 def move_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, dp: Vec3, phi: Vec3,
                   quintic: np.ndarray, qw: np.ndarray, qx: np.ndarray, qy: np.ndarray,
                   qz: np.ndarray, moving: np.ndarray) -> None:
-    """The nominal wrenches (`fcu.feasibility.Envelope.wrenches`) of a move's 1 s path
+    """The nominal wrenches (`fcu.envelope.feasibility.Envelope.wrenches`) of a move's 1 s path
     (`Move.path`) at the instants of `quintic` (`quintic_rows`) into `moving`: its attitude
     q0 where it keeps it (qw empty), else q0 exp(s phi) from exp(s phi) = (qw, qx, qy, qz)."""
     zero = (0.0, 0.0, 0.0)
@@ -233,7 +239,7 @@ class Move(Segment):
 
 
 class Figure(Segment):
-    """The figure-infinity (`fcu.trajectory.FigureInfinity`) from (p0, q0), t0 on."""
+    """The figure-infinity (`fcu.reference.trajectory.FigureInfinity`) from (p0, q0), t0 on."""
 
     def __init__(self, seq: int, t0: float, p0: Vec3, q0: Quat, amp: float, duration: float,
                  axis_enu: Vec3) -> None:
@@ -258,7 +264,7 @@ class Figure(Segment):
                          ) -> tuple[np.ndarray, np.ndarray]:
         """The allocations of `path(sigma)` and of its poses at rest, as
         `Envelope.omega_sq` makes them; what depends on the amplitude and the axis alone
-        (`fcu.trajectory.FigureShape`: its instants follow from the axis) is kept in the
+        (`fcu.reference.trajectory.FigureShape`: its instants follow from the axis) is kept in the
         envelope for figures that differ in their start pose only (`Envelope.kept`)."""
         f = self.figure
         key = b"figure shape" + struct.pack("<q4d", len(sigma), f.amp, *f.n)

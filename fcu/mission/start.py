@@ -6,16 +6,16 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from common.mav_enums import MAV_CMD, MAV_FRAME, MAV_RESULT
-from common.mission_items import MissionItem
-from common.modes import Mode
-from fcu.answer import Answer, Reply
-from fcu.dualquat import Quat, Vec3
-from fcu.feasibility import envelope
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME, MAV_RESULT
+from common.wire.mission_items import MissionItem
+from common.wire.modes import Mode
+from fcu.control.dualquat import Quat, Vec3
+from fcu.control.tracker import Reference
+from fcu.envelope.feasibility import envelope
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import Move
-from fcu.tracker import Reference
+from fcu.modes.answer import Answer, Reply
 
 
 @dataclass(eq=False, kw_only=True)
@@ -44,7 +44,8 @@ class UnderWay:
 
 @dataclass(eq=False, kw_only=True)
 class PosctlFit(UnderWay):
-    """POSCTL's entry under way (`fcu.commander`): its limits being fitted, from `previous`."""
+    """POSCTL's entry under way (`fcu.modes.commander`): its limits being fitted, from
+    `previous`."""
 
     previous: Mode
     mode: Mode = Mode.POSCTL
@@ -52,7 +53,7 @@ class PosctlFit(UnderWay):
 
 @dataclass(eq=False, kw_only=True)
 class MissionPlan(UnderWay):
-    """A mission's start under way (`fcu.commander`): from item `seq`, planned at `t_s` from
+    """A mission's start under way (`fcu.modes.commander`): from item `seq`, planned at `t_s` from
     `start`; `said` when it flies, `text` its command's answer."""
 
     seq: int

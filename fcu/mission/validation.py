@@ -13,8 +13,8 @@ import math
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
-from common.mav_enums import MAV_CMD, MAV_FRAME
-from common.mission_items import (
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mission_items import (
     GEO_FRAMES,
     INT32_MAX,
     INT32_MIN,
@@ -24,7 +24,7 @@ from common.mission_items import (
     local_ned,
     to_local,
 )
-from fcu.dualquat import Q_IDENTITY, norm3
+from fcu.control.dualquat import Q_IDENTITY, norm3
 from fcu.mission.codes import (
     FRAMELESS_COMMANDS,
     MAV_CMD_DO_CHANGE_SPEED,
@@ -131,7 +131,8 @@ _FIELD_TEXT = {"param1": "p1", "param2": "p2", "param3": "p3", "param4": "p4", "
 
 
 def _name(enum: type[MAV_CMD] | type[MAV_FRAME], value: int) -> str:
-    """`value` with its name where `common.mav_enums` knows it: "178 (MAV_CMD_DO_CHANGE_SPEED)"."""
+    """`value` with its name where `common.wire.mav_enums` knows it:
+    "178 (MAV_CMD_DO_CHANGE_SPEED)"."""
     try:
         return f"{value} ({enum(value).name})"
     except ValueError:
@@ -324,7 +325,7 @@ def _localized(item: MissionItem, home: HomePosition | None,
 def localize(items: Sequence[MissionItem],
              home: HomePosition | None) -> tuple[MissionItem, ...]:
     """The items as the executor flies them: global-frame items converted to the local frame
-    through `home` (`common.mission_items.to_local`); for a mission `check_mission` accepted
+    through `home` (`common.wire.mission_items.to_local`); for a mission `check_mission` accepted
     with the same home."""
     if home is None:
         return tuple(items)
@@ -337,7 +338,7 @@ def check_mission(items: Sequence[MissionItem], limits: MissionLimits,
     """Validate a whole mission: (MAV_MISSION_RESULT, offending seq or None, reason).
 
     Items in MAV_FRAME_LOCAL_NED, or, with `home`, in a global frame with an altitude
-    (common.mission_items.GEO_FRAMES: AMSL or above home, INT or not), checked as their
+    (common.wire.mission_items.GEO_FRAMES: AMSL or above home, INT or not), checked as their
     local equivalents (`localize`); other frames are MAV_MISSION_UNSUPPORTED_FRAME. A local
     item whose x, y lie beyond the geofence and SCALED_LOCAL_M or more away is refused with a
     reason naming MAVProxy's 1e7 scaling of local WPL files (its likeliest cause).

@@ -16,16 +16,16 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
-from common.mavlink import MAV
+from common.wire.mavlink import MAV
 from gcs.autopilot.dialect import Autopilot, ModeTarget
-from gcs.patience import MODE, Wait
+from gcs.vehicle_link.patience import MODE, Wait
 
 if TYPE_CHECKING:
-    from gcs.session import Session
+    from gcs.vehicle_link.session import Session
 
 M = MAV
-# How long a mode change waits for a HEARTBEAT that shows it, at most (`gcs.patience`: a
-# vehicle silent for SILENCE_S meanwhile is given up on sooner).
+# How long a mode change waits for a HEARTBEAT that shows it, at most (`gcs.vehicle_link.patience`:
+# a vehicle silent for SILENCE_S meanwhile is given up on sooner).
 CONFIRM_S = MODE.ceiling_s
 DEFAULT_TAKEOFF_M = 10.0  # gcs takeoff and gcs mode TAKEOFF, metres above home
 STATE_S = 2.0  # how long takeoff waits for the landed state it asks for
@@ -169,7 +169,7 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
     `reach_s` is given: waited for until within `tolerance_m`). `fail` (the caller's error
     type) for a vehicle that is disarmed, in the air, without home, or does not climb.
     `observe` sees the heights while it waits (and raises to end the wait)."""
-    from gcs.mission_client import home_position
+    from gcs.vehicle_link.mission_client import home_position
 
     s = session
     ap = autopilot(s)

@@ -4,7 +4,7 @@ mode names and their encodings, how it takes off, flies to a pose and counts mis
 ArduPilot numbers its modes per vehicle (pymavlink's tables `mavutil.mode_mapping_acm`,
 `_apm`, `_rover`, `_sub`, chosen by MAV_TYPE) and puts the number in custom_mode; PX4 (and
 this project's FCU, which says MAV_AUTOPILOT_PX4) puts main mode << 16 | sub mode << 24
-(`common.modes`, `mavutil.px4_map`). MAV_AUTOPILOT_GENERIC is read as PX4, as MAVSDK does.
+(`common.wire.modes`, `mavutil.px4_map`). MAV_AUTOPILOT_GENERIC is read as PX4, as MAVSDK does.
 `gcs mode NAME` takes the vehicle's own names (case-insensitive) and the portable names
 below; where the vehicle has a mode of that very name, its own wins.
 
@@ -35,9 +35,9 @@ from typing import Any
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega
 
-import common.mavlink  # noqa: F401  (pins MAVLink 2 before mavutil is used)
-from common import modes as px4_modes
-from common.mavlink import MAV
+import common.wire.mavlink  # noqa: F401  (pins MAVLink 2 before mavutil is used)
+from common.wire import modes as px4_modes
+from common.wire.mavlink import MAV
 
 M = MAV
 # What the station decodes: ardupilotmega holds common and ArduPilot's own messages

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from common.mavlink import MAV
+from common.wire.mavlink import MAV
 
 M = MAV
 PREARM = M.MAV_SYS_STATUS_PREARM_CHECK

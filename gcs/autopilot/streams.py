@@ -20,12 +20,12 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from common.mavlink import MAV
+from common.wire.mavlink import MAV
 from gcs.autopilot.dialect import ARDUPILOT, STATION_DIALECT, Autopilot
 
 
 class SessionLink(Protocol):
-    """What the stream requests use of a `gcs.session.Session` (which calls them)."""
+    """What the stream requests use of a `gcs.vehicle_link.session.Session` (which calls them)."""
 
     @property
     def target_system(self) -> int: ...

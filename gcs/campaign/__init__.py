@@ -3,7 +3,7 @@
 A campaign file names a base scenario, keys to set on every run (`[set]`), axes (a grid:
 every combination of the axes' values) and Monte-Carlo draws (`[monte_carlo]`: N draws of
 stated distributions per grid point). A key is a path into the scenario's TOML with its
-vehicle and gain files inlined (common.config.resolved_scenario_data): `controller`,
+vehicle and gain files inlined (common.config.scenario.resolved_scenario_data): `controller`,
 `seed`, `sensors`, `vehicle.rotor_tau_up_s`, `gains.pid.kp_d`, `params.CA_LAG_COMP`,
 `disturbance.force[0].magnitude`, `actuator_fault[0].index`, ...; every run's scenario is
 validated by the same loader as a scenario file, before anything flies.

@@ -11,7 +11,7 @@ from typing import Any, TypeGuard
 
 import numpy as np
 
-from common.config import ConfigError, resolved_scenario_data
+from common.config.scenario import ConfigError, resolved_scenario_data
 from gcs.campaign.keys import key_path
 from gcs.campaign.model import DISTRIBUTIONS, KEEP, TRANSPORTS, Axis, Campaign, CampaignError, Draw
 

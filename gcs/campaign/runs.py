@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from common.config import ConfigError, scenario_from_data
+from common.config.scenario import ConfigError, scenario_from_data
 from gcs.campaign.keys import set_key
 from gcs.campaign.model import Campaign, CampaignError, Draw
 

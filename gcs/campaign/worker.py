@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from common.config import load_scenario, scenario_from_data
+from common.config.scenario import load_scenario, scenario_from_data
 from common.links import free_port
 from gcs.campaign.runs import RunSpec
 
@@ -50,8 +50,8 @@ def _write_scenario_files(data: dict[str, Any], folder: Path) -> Path:
 
 def warm_worker() -> None:
     """Import what a run needs, once per worker, before the runs are timed."""
-    import gcs.inprocess
-    import gcs.process_run  # noqa: F401
+    import gcs.run.inprocess
+    import gcs.run.process_run  # noqa: F401
 
 
 START_ATTEMPTS = 3  # a run through processes that could not start is tried again (new ports)
@@ -60,7 +60,7 @@ START_ATTEMPTS = 3  # a run through processes that could not start is tried agai
 def _through_processes(spec: RunSpec, folder: Path) -> dict[str, Any]:
     """A run through sitl and fcu processes on their own free ports (or Zenoh prefix), in
     its run folder or a temporary one."""
-    from gcs.process_run import RunError, run_processes
+    from gcs.run.process_run import RunError, run_processes
 
     where = folder if spec.keep != "none" else Path(tempfile.mkdtemp(prefix="campaign-run-"))
     metrics: dict[str, Any] = {}
@@ -89,8 +89,8 @@ def execute_run(spec: RunSpec) -> dict[str, Any]:
     vehicle is a status; in-process, a vehicle that refuses the run (its mission, arming)
     is status "refused" with the reason. A run that cannot be carried out raises (through
     processes after START_ATTEMPTS tries): it is not recorded, and a rerun tries again."""
-    from gcs.inprocess import InProcessError, run_scenario
-    from gcs.runio import write_run
+    from gcs.run.inprocess import InProcessError, run_scenario
+    from gcs.run.runio import write_run
 
     t0 = time.monotonic()
     folder = Path(spec.folder)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import sys
 
-from common.config import ConfigError
+from common.config.scenario import ConfigError
 from common.links import LinkError
 from gcs.cli.console import InputError
 from gcs.cli.inputs import check_input
@@ -26,10 +26,10 @@ from gcs.cli.vehicle import cmd_vehicle
 def main(argv: list[str] | None = None) -> int:
     """Exit status: 0 done, 1 the vehicle refused or did not answer (or a link failed at
     run time), 2 bad input (arguments, URLs, files, busy ports), 130 interrupted."""
-    from common.mavlink import SigningKeyError
-    from gcs.mission_client import MissionError
+    from common.wire.mavlink import SigningKeyError
     from gcs.mission_files.items import MissionFileError
-    from gcs.session import GcsError
+    from gcs.vehicle_link.mission_client import MissionError
+    from gcs.vehicle_link.session import GcsError
 
     args = build_parser().parse_args(argv)
     try:

@@ -10,12 +10,12 @@ from typing import TYPE_CHECKING
 from gcs.cli.parser import HEARTBEAT_WAIT_S
 
 if TYPE_CHECKING:
-    from gcs.session import Session
+    from gcs.vehicle_link.session import Session
 
 
 def open_session(args: argparse.Namespace, tlog: Path | None = None) -> Session:
-    from common.mavlink import read_signing_key
-    from gcs.session import Session
+    from common.wire.mavlink import read_signing_key
+    from gcs.vehicle_link.session import Session
 
     key = read_signing_key(args.signing_key) if args.signing_key else None
     session = Session(args.connect, tlog=tlog, vehicle=args.sysid or 0, signing_key=key)
@@ -43,7 +43,7 @@ def _request_streams(session: Session, args: argparse.Namespace) -> None:
 
 def print_result(what: str, result: int, session: Session | None = None) -> int:
     """The vehicle's answer; a refusal with the reason it gave (its STATUSTEXT)."""
-    from common.mavlink import MAV
+    from common.wire.mavlink import MAV
 
     if result == MAV.MAV_RESULT_ACCEPTED:
         print(f"{what}: MAV_RESULT_ACCEPTED")

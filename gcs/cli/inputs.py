@@ -27,7 +27,7 @@ def check_input(args: argparse.Namespace) -> None:
     if getattr(args, "connect", None) is not None:
         parse_url(args.connect)
     if getattr(args, "signing_key", None):
-        from common.mavlink import read_signing_key
+        from common.wire.mavlink import read_signing_key
 
         read_signing_key(args.signing_key)
     if args.command == "mode":
@@ -45,7 +45,7 @@ def read_files(args: argparse.Namespace) -> None:
     raises MissionFileError or InputError (one line, exit status 2); the contents go to
     args.items / args.params. Files to be written must have a folder to go to."""
     from gcs.mission_files import file_format, read_mission_doc
-    from gcs.param_files import ParamFileError, read_params
+    from gcs.mission_files.param_files import ParamFileError, read_params
 
     if args.command == "mission" and args.action == "upload":
         args.mission = read_mission_doc(args.file, args.format)

@@ -32,7 +32,7 @@ def cmd_router(args: argparse.Namespace) -> int:
     import threading
 
     from common.links.url import DEFAULT_ROUTER
-    from common.zenoh_link import run_router
+    from common.links.zenoh_link import run_router
 
     listen = args.listen or [DEFAULT_ROUTER]
     for endpoint in listen:

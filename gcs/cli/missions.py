@@ -17,19 +17,19 @@ from gcs.cli.connection import print_result
 from gcs.cli.console import Progress
 
 if TYPE_CHECKING:
-    from common.mission_items import MissionItem
-    from gcs.mission_client import UploadResult
-    from gcs.session import Session
+    from common.wire.mission_items import MissionItem
+    from gcs.vehicle_link.mission_client import UploadResult
+    from gcs.vehicle_link.session import Session
 
 
 def mission_command(args: argparse.Namespace, session: Session) -> int:
-    from common.mavlink import MAV
-    from common.mission_items import plain_frame
+    from common.wire.mavlink import MAV
+    from common.wire.mission_items import plain_frame
     from gcs.autopilot import autopilot_of
-    from gcs.mission_client import clear, download, home_position, result_name
     from gcs.mission_files import file_format, format_mission
     from gcs.mission_files.frames import to_frame
-    from gcs.mission_home import split_home
+    from gcs.vehicle_link.mission_client import clear, download, home_position, result_name
+    from gcs.vehicle_link.mission_home import split_home
 
     t, c, send = session.target_system, session.target_component, session.send
     progress = Progress()
@@ -81,16 +81,16 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
 def _upload(args: argparse.Namespace, session: Session) -> int:
     """`gcs mission upload`: 0 accepted, 1 refused or failed at the vehicle, 2 a plan of
     another firmware whose conversion is not exact (nothing sent)."""
-    from common.mavlink import MAV
+    from common.wire.mavlink import MAV
     from gcs.autopilot import ARDUPILOT, autopilot_of
-    from gcs.mission_client import (
+    from gcs.vehicle_link.mission_client import (
         MissionError,
         download,
         home_position,
         result_name,
         upload_detailed,
     )
-    from gcs.mission_home import HomeError, WireMission, for_ardupilot, plan_conversion
+    from gcs.vehicle_link.mission_home import HomeError, WireMission, for_ardupilot, plan_conversion
 
     t, c, send = session.target_system, session.target_component, session.send
     pilot = autopilot_of(session.heartbeat_msg)
@@ -148,9 +148,9 @@ def _restore(session: Session, old: list[MissionItem], new: list[MissionItem],
              refused: UploadResult, what: str, at_seq0: bool) -> None:
     """Put back the mission `old` that a non-atomic vehicle held before it refused part of
     `new`; say so, or say what it now holds (read back, else by ArduPilot's rule)."""
-    from common.mavlink import MAV
-    from gcs.mission_client import MissionError, clear, download, upload_detailed
-    from gcs.mission_home import after_refusal, describe_held, label_held
+    from common.wire.mavlink import MAV
+    from gcs.vehicle_link.mission_client import MissionError, clear, download, upload_detailed
+    from gcs.vehicle_link.mission_home import after_refusal, describe_held, label_held
 
     t, c, send = session.target_system, session.target_component, session.send
     expected: list[str] | None = after_refusal(["old"] * len(old), len(new), refused.asked,

@@ -8,13 +8,13 @@ import sys
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from gcs.session import Session
+    from gcs.vehicle_link.session import Session
 
 
 
 def param_command(args: argparse.Namespace, session: Session) -> int:
-    from gcs.param_wire import ParamValueError, intended
     from gcs.vehicle_link import params as vl
+    from gcs.vehicle_link.param_wire import ParamValueError, intended
 
     if args.action == "list":
         for name, p in vl.param_values(session).items():
@@ -45,8 +45,8 @@ def param_command(args: argparse.Namespace, session: Session) -> int:
 
 
 def _param_save(args: argparse.Namespace, session: Session) -> int:
-    from common.mavlink import MAV
-    from gcs.param_files import ParamEntry, format_params
+    from common.wire.mavlink import MAV
+    from gcs.mission_files.param_files import ParamEntry, format_params
     from gcs.vehicle_link import params as vl
 
     values = vl.param_values(session)
@@ -76,9 +76,9 @@ def _param_save(args: argparse.Namespace, session: Session) -> int:
 
 
 def _param_load(args: argparse.Namespace, session: Session) -> int:
-    from gcs.param_wire import ParamValueError, intended
-    from gcs.session import GcsError
     from gcs.vehicle_link import params as vl
+    from gcs.vehicle_link.param_wire import ParamValueError, intended
+    from gcs.vehicle_link.session import GcsError
 
     t, c = session.target_system, session.target_component
     refused = 0

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from common.cliargs import OneLineParser
+from common.process.cliargs import OneLineParser
 
 USAGE = """Runs and reports:
     gcs run SCENARIO.toml [--in-process | --realtime] [--controller pid|pd]

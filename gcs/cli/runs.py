@@ -9,8 +9,8 @@ import sys
 import time
 from typing import Any
 
-from common.config import ConfigError, load_scenario
-from common.sensors_config import resolve_sensor_profile
+from common.config.scenario import ConfigError, load_scenario
+from common.config.sensors import resolve_sensor_profile
 from gcs.cli.console import Progress
 
 
@@ -34,10 +34,10 @@ def _summary(m: dict[str, Any]) -> str:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Exit 0 when the run completed, 1 for any other status, 2 for bad input."""
-    from gcs.inprocess import InProcessError, apply_overrides, run_scenario
-    from gcs.process_run import Progress as RunProgress
-    from gcs.process_run import RunError, run_processes
-    from gcs.runio import RunDirError, prepare_run_dir, write_run
+    from gcs.run.inprocess import InProcessError, apply_overrides, run_scenario
+    from gcs.run.process_run import Progress as RunProgress
+    from gcs.run.process_run import RunError, run_processes
+    from gcs.run.runio import RunDirError, prepare_run_dir, write_run
 
     scenario = apply_overrides(load_scenario(args.scenario), controller=args.controller,
                                ideal_actuators=True if args.ideal_actuators else None,
@@ -98,7 +98,7 @@ def _print_error(m: dict[str, Any]) -> None:
 
 
 def cmd_table1(args: argparse.Namespace) -> int:
-    from gcs.table1_run import run_table1
+    from gcs.run.table1_run import run_table1
 
     progress = Progress()
     progress(f"table1: {16 if args.lag_comp == 'both' else 8} runs ...")
@@ -168,8 +168,8 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    """The estimator re-run on an onboard log (gcs.replay): 0 agree, 1 differ, 2 bad input."""
-    from gcs.replay import main as replay_main
+    """The estimator re-run on an onboard log (gcs.run.replay): 0 agree, 1 differ, 2 bad input."""
+    from gcs.run.replay import main as replay_main
 
     return replay_main(args)
 
@@ -181,7 +181,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     from gcs.report.names import TABLE1_JSON
     from gcs.report.run_report import make_report
     from gcs.report.table1_report import is_table1_dir, make_table1_report
-    from gcs.runio import RunDirError, check_run_dir
+    from gcs.run.runio import RunDirError, check_run_dir
 
     if is_table1_dir(args.run_dir):
         def warn(problem: str) -> None:

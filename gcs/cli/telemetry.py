@@ -39,7 +39,7 @@ def cmd_log(args: argparse.Namespace) -> int:
 def cmd_view(args: argparse.Namespace) -> int:
     """Exit 0 on Ctrl-C, SIGTERM or the end of a replay, 1 without a vehicle, 2 for bad
     input (run folder, port, MCAP path)."""
-    from common.mavlink import read_signing_key
+    from common.wire.mavlink import read_signing_key
     from gcs.view import ViewError, view_live, view_replay
 
     try:

@@ -14,7 +14,7 @@ from gcs.cli.missions import mission_command
 from gcs.cli.params import param_command
 
 if TYPE_CHECKING:
-    from gcs.session import Session
+    from gcs.vehicle_link.session import Session
 
 
 def cmd_vehicle(args: argparse.Namespace) -> int:
@@ -47,7 +47,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
         if args.command == "goto":
             return _goto(args, session)
         if args.command == "watch":
-            from gcs.watch import watch
+            from gcs.cli.watch import watch
 
             return watch(session, refresh_hz=args.rate, duration=args.duration,
                          all_vehicles=args.all)

@@ -5,7 +5,7 @@ figure-infinity.
 All map onto `MissionItem` (MISSION_ITEM_INT fields). In QGC WPL and `.plan`, x and y are
 written as floats in the frame's unit (metres in local frames, degrees in global ones); in
 MissionItem local x, y are int32 in 1e-4 m and global ones in 1e-7 deg
-(`common.mission_items.xy_scale`, the scaling of the legacy MISSION_ITEM too). Floats are
+(`common.wire.mission_items.xy_scale`, the scaling of the legacy MISSION_ITEM too). Floats are
 written with Python's shortest round-trip representation, so a file written from downloaded
 items reads back to the same items.
 
@@ -16,7 +16,7 @@ on the step reads back one step short about one time in sixteen (1.1 cm north); 
 quarter step, truncation and rounding both give the item's integer, and a file read here
 (rounding) gives the same items. The written position is within 3 mm of the item's.
 
-ArduPilot keeps its home at mission seq 0 (`gcs.mission_home`): a `.plan` holds it in
+ArduPilot keeps its home at mission seq 0 (`gcs.vehicle_link.mission_home`): a `.plan` holds it in
 `plannedHomePosition`, the TOML form in an optional `[home]` table (lat_deg, lon_deg, alt_m
 AMSL), and a WPL file for ArduPilot as line 0 (MAVProxy's convention). `read_mission_doc`
 gives the items with the file's home; `format_mission` writes the home where the format
@@ -32,8 +32,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from common.cliargs import read_text_file
-from common.mission_items import HomePosition, MissionItem
+from common.process.cliargs import read_text_file
+from common.wire.mission_items import HomePosition, MissionItem
 from gcs.mission_files.items import MissionDoc, MissionFileError
 from gcs.mission_files.plan import (
     MAV_AUTOPILOT_PX4,
@@ -43,7 +43,7 @@ from gcs.mission_files.plan import (
 )
 from gcs.mission_files.toml import format_toml, parse_toml_doc
 from gcs.mission_files.wpl import format_wpl, parse_wpl
-from gcs.mission_home import with_home
+from gcs.vehicle_link.mission_home import with_home
 
 FORMATS = ("plan", "wpl", "toml")
 # File formats by extension; others (.txt among them) are read by their content and
@@ -77,7 +77,7 @@ def parse_mission(text: str, fmt: str, source: str = "<mission>") -> list[Missio
 
 def parse_mission_doc(text: str, fmt: str, source: str = "<mission>") -> MissionDoc:
     """Items and home of a mission text in `fmt` (plan, wpl or toml; WPL names no home
-    apart from its lines: `gcs.mission_home.for_ardupilot` reads line 0)."""
+    apart from its lines: `gcs.vehicle_link.mission_home.for_ardupilot` reads line 0)."""
     if fmt == "plan":
         return parse_plan_doc(text, source)
     if fmt == "wpl":

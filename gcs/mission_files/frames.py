@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from common.mission_items import HomePosition, MissionItem, to_global, to_local
+from common.wire.mission_items import HomePosition, MissionItem, to_global, to_local
 from gcs.mission_files.items import MissionFileError
 
 
@@ -13,7 +13,7 @@ def to_frame(items: Sequence[MissionItem], frame: str | None,
              home: HomePosition | None) -> list[MissionItem]:
     """The items with their positions in "global" (MAV_FRAME_GLOBAL_RELATIVE_ALT: lat, lon
     in degrees, altitude above home) or "local" (MAV_FRAME_LOCAL_NED) frames, through the
-    vehicle's home (`common.mission_items.to_global` / `to_local`); None: as they are.
+    vehicle's home (`common.wire.mission_items.to_global` / `to_local`); None: as they are.
     Items whose command has no position semantics here keep their frame."""
     if frame is None:
         return list(items)

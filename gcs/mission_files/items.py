@@ -9,8 +9,8 @@ import math
 import struct
 from typing import NamedTuple
 
-from common.mavlink import MAV
-from common.mission_items import GLOBAL_SCALE, HomePosition, MissionItem, xy_scale
+from common.wire.mavlink import MAV
+from common.wire.mission_items import GLOBAL_SCALE, HomePosition, MissionItem, xy_scale
 
 M = MAV
 KNOWN_FRAMES = frozenset(v for v in M.enums["MAV_FRAME"] if v != M.MAV_FRAME_ENUM_END)

@@ -8,8 +8,8 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from common.mavlink import MAV
-from common.mission_items import GEO_FRAMES, GLOBAL_SCALE, HomePosition, MissionItem
+from common.wire.mavlink import MAV
+from common.wire.mission_items import GEO_FRAMES, GLOBAL_SCALE, HomePosition, MissionItem
 from gcs.mission_files.items import MissionDoc, MissionFileError, checked, xy_int, xy_unit
 
 M = MAV

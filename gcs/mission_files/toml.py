@@ -9,8 +9,8 @@ import tomllib
 from collections.abc import Sequence
 from typing import Any
 
-from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import LOCAL_SCALE, HomePosition, MissionItem
+from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import LOCAL_SCALE, HomePosition, MissionItem
 from gcs.mission_files.items import MissionDoc, MissionFileError, checked, float_text
 
 M = MAV

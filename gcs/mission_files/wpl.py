@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from common.mission_items import MissionItem
+from common.wire.mission_items import MissionItem
 from gcs.mission_files.items import MissionFileError, checked, float_text, xy_int, xy_unit
 
 WPL_HEADER = "QGC WPL 110"

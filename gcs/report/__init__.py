@@ -41,7 +41,7 @@ and `DIR/report.md`:
 - report.md: Table I (ours beside the paper), every run's status, why, and its events, links
   to every figure, and the run folders that are missing or could not be read.
 
-`table1_chart(table, png)` draws `gcs.table1.table_json` output as grouped bars.
+`table1_chart(table, png)` draws `gcs.report.table1.table_json` output as grouped bars.
 
 The parts, one job each: names (file names, captions), rundata (loading a run folder), plot
 (shared plot helpers), tracking_figures (Figs. 3-6), disturbance_figures (Figs. 7 and 8),

@@ -10,12 +10,12 @@ import numpy as np
 from matplotlib.patches import Patch
 
 from gcs.report.plot import new_figure, save_figure
-from gcs.table1 import CASES, CONTROLLERS, PAPER
+from gcs.report.table1 import CASES, CONTROLLERS, PAPER
 
 
 def table1_chart(table: dict[str, Any], out_png: Path) -> Path:
     """Grouped bars (log y) of position and attitude RMSE, ours vs the paper, PID and PD, for
-    the four cases of `gcs.table1.table_json` output; diverged runs hatched and labelled."""
+    the four cases of `gcs.report.table1.table_json` output; diverged runs hatched and labelled."""
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
     rows = {(r["scenario"], r["controller"]): r for r in table.get("rows", [])}

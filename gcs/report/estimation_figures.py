@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.ulog import ULogError, open_ulog, topic_rows
+from common.logs.ulog import ULogError, open_ulog, topic_rows
 from gcs.report.names import FIG_ESTIMATION, FIG_INNOVATIONS
 from gcs.report.plot import (
     AXIS_COLORS,
@@ -21,7 +21,7 @@ from gcs.report.plot import (
     thin_indices,
 )
 from gcs.report.rundata import RunData, estimation_errors
-from gcs.runio import ONBOARD_LOG
+from gcs.run.runio import ONBOARD_LOG
 
 
 def fig_estimation(data: RunData, path: Path) -> Path:

@@ -14,7 +14,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from gcs.metrics import attitude_error_rad
+from gcs.report.metrics import attitude_error_rad
 from gcs.report.rundata import RunData
 
 DPI = 150

@@ -7,9 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from common.outcome import DIVERGENCE_ATTITUDE_HOLD_S, DIVERGENCE_ATTITUDE_RAD
-from gcs.euler import zyx_events
 from gcs.report.disturbance_figures import fig78_disturbance
 from gcs.report.estimation_figures import estimation_figures
+from gcs.report.euler import zyx_events
 from gcs.report.names import (
     CAPTIONS,
     FIG3,
@@ -24,6 +24,7 @@ from gcs.report.names import (
     SEVERITY,
 )
 from gcs.report.rundata import RunData, cut_short, load_run
+from gcs.report.table1 import PAPER, STATS
 from gcs.report.tracking_figures import (
     fig3_tilt,
     fig4_tracking,
@@ -31,7 +32,6 @@ from gcs.report.tracking_figures import (
     fig6_path,
     is_case1_pd,
 )
-from gcs.table1 import PAPER, STATS
 
 
 def fmt(x: Any) -> str:

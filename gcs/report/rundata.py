@@ -1,5 +1,5 @@
 """A run folder loaded for its report: metrics.json, scenario.toml and the two logs joined on
-time_us (gcs.metrics.join_logs), non-finite rows dropped, cut at the divergence."""
+time_us (gcs.report.metrics.join_logs), non-finite rows dropped, cut at the divergence."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from common.vehicle_constants import N_ROTORS
-from gcs.metrics import estimation_error_rows, join_logs, log_columns
-from gcs.runio import check_run_dir, read_run_logs
+from gcs.report.metrics import estimation_error_rows, join_logs, log_columns
+from gcs.run.runio import check_run_dir, read_run_logs
 
 
 @dataclass
@@ -108,7 +108,7 @@ def load_run(run_dir: Path) -> RunData:
 def estimation_errors(data: RunData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(t s, position error norm m, world velocity error norm m/s, attitude error angle rad)
     of the estimate (dq_onboard's state) against the truth at the same control steps, by
-    gcs.metrics.estimation_error_rows (metrics.json's estimation_error); non-finite
+    gcs.report.metrics.estimation_error_rows (metrics.json's estimation_error); non-finite
     rows dropped, cut at divergence."""
     tc, truth, oc, onboard = read_run_logs(data.run_dir)
     truth = truth[np.isfinite(truth[:, tc.index("time_us")])]

@@ -27,8 +27,8 @@ from gcs.report.names import (
 )
 from gcs.report.run_report import fmt, write_run_report
 from gcs.report.rundata import RunData, cut_short, load_run
+from gcs.report.table1 import CASES, CONTROLLERS, STATS, table_json, table_markdown
 from gcs.report.tracking_figures import fig5_errors
-from gcs.table1 import CASES, CONTROLLERS, STATS, table_json, table_markdown
 
 REPORTS = (INFO, LIMIT)  # event kinds that are news, not reactions (LIMIT: a WARNING)
 
@@ -39,7 +39,8 @@ def is_table1_dir(path: Path) -> bool:
 
 
 def table1_run_name(scenario: str, controller: str) -> str:
-    """The run folder of a case and controller in a table1 folder (`gcs.table1_run.run_table1`)."""
+    """The run folder of a case and controller in a table1 folder
+    (`gcs.run.table1_run.run_table1`)."""
     return f"{scenario}_{controller}"
 
 

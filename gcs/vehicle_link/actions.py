@@ -7,11 +7,11 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from common.mavlink import MAV
+from common.wire.mavlink import MAV
 from gcs.autopilot import Autopilot, ModeTarget
 from gcs.autopilot import commands as _commands
-from gcs.session import GcsError, Session
 from gcs.vehicle_link.descent import HOLDING_MODES, DescentWatch, watch_for
+from gcs.vehicle_link.session import GcsError, Session
 
 M = MAV
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gcs.autopilot import ARDUPILOT, Autopilot
-from gcs.session import GcsError, Session
+from gcs.vehicle_link.session import GcsError, Session
 
 DEFAULT_LIMIT_M_S = 3.0  # a vehicle whose descent limit cannot be read
 SPEED_FACTOR, SPEED_MARGIN_M_S = 1.5, 0.5

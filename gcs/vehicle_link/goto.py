@@ -6,16 +6,16 @@ import math
 import time
 from collections.abc import Callable
 
-from common.identity import flies_pose as identity_flies_pose
-from common.mavlink import MAV
 from common.outcome import ATTITUDE_NOT_FLOWN
+from common.wire.identity import flies_pose as identity_flies_pose
+from common.wire.mavlink import MAV
 from gcs.autopilot import ARDUPILOT, PX4, Autopilot, ModeTarget, UnknownMode
 from gcs.autopilot import commands as _commands
-from gcs.session import GcsError, Session
 from gcs.vehicle_link.actions import arm
 from gcs.vehicle_link.descent import Unsafe, watch_for
 from gcs.vehicle_link.params import autopilot_version
 from gcs.vehicle_link.pose import PoseTarget, SetpointStream, pose_errors
+from gcs.vehicle_link.session import GcsError, Session
 from gcs.vehicle_link.snapshot import Snapshot
 
 M = MAV
@@ -23,7 +23,7 @@ M = MAV
 
 def flies_pose(session: Session) -> bool:
     """Whether the vehicle says it flies position and attitude targets together
-    (`common.identity`: this FCU's AUTOPILOT_VERSION). PX4 and ArduPilot do not: to them
+    (`common.wire.identity`: this FCU's AUTOPILOT_VERSION). PX4 and ArduPilot do not: to them
     goto sends the position and the yaw alone."""
     ap = _commands.autopilot(session)
     if ap.kind != PX4:

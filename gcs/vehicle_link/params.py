@@ -1,7 +1,7 @@
 """Parameters in their real types: read all or one, set one, encoded as the vehicle
-carries integers (`gcs.param_wire`, chosen by its AUTOPILOT_VERSION or autopilot).
+carries integers (`gcs.vehicle_link.param_wire`, chosen by its AUTOPILOT_VERSION or autopilot).
 
-Waits follow `gcs.patience`: a read or set is re-sent each PARAM.resend_s without its
+Waits follow `gcs.vehicle_link.patience`: a read or set is re-sent each PARAM.resend_s without its
 PARAM_VALUE and given up when the vehicle falls silent or at the ceiling (`timeout`); the
 list goes on while parameters come, re-requests what is missing when they pause, and is
 given up on silence or when no new parameter has come for its ceiling."""
@@ -13,11 +13,11 @@ import weakref
 from dataclasses import dataclass
 from typing import Any
 
-from common.mavlink import MAV
-from gcs import param_wire
+from common.wire.mavlink import MAV
 from gcs.autopilot import ARDUPILOT, autopilot_of
-from gcs.patience import PARAM, PARAM_LIST, Wait
-from gcs.session import GcsError, Session
+from gcs.vehicle_link import param_wire
+from gcs.vehicle_link.patience import PARAM, PARAM_LIST, Wait
+from gcs.vehicle_link.session import GcsError, Session
 
 M = MAV
 
@@ -59,9 +59,9 @@ def autopilot_version(session: Session, timeout: float = 0.5) -> Any:
 
 
 def param_encoding(session: Session) -> str:
-    """How the vehicle carries integer parameters (`gcs.param_wire`): its AUTOPILOT_VERSION
-    capabilities, else by autopilot (ArduPilot casts, PX4 sends bytes); asked once per
-    session."""
+    """How the vehicle carries integer parameters (`gcs.vehicle_link.param_wire`): its
+    AUTOPILOT_VERSION capabilities, else by autopilot (ArduPilot casts, PX4 sends bytes); asked once
+    per session."""
     known = _ENCODINGS.get(session)
     if known is None:
         ver = autopilot_version(session)
@@ -84,7 +84,7 @@ def param_values(session: Session, timeout: float = PARAM_LIST.ceiling_s
                  ) -> dict[str, ParamValue]:
     """All parameters with their types (PARAM_REQUEST_LIST), re-reading missing indices
     when the stream pauses; given up when the vehicle falls silent or `timeout` passes
-    without a new parameter (`gcs.patience`).
+    without a new parameter (`gcs.vehicle_link.patience`).
 
     Only a PARAM_VALUE whose param_index is within param_count fills the list: ArduPilot
     also sends PARAM_VALUE with param_index 65535 (-1) for a parameter that changes or is

@@ -9,9 +9,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from common.mavlink import MAV
 from common.quaternion import q_angle, q_conj, q_exp, q_mul
-from gcs.session import Session
+from common.wire.mavlink import MAV
+from gcs.vehicle_link.session import Session
 from gcs.vehicle_link.snapshot import Snapshot
 
 M = MAV
@@ -41,7 +41,7 @@ class PoseTarget:
 
     def messages(self, session: Session, attitude: bool = True) -> list[Any]:
         """The set-points: the position (yaw ignored) and the attitude target, for a vehicle
-        that flies the two together (`common.identity`); or, without `attitude` (PX4's
+        that flies the two together (`common.wire.identity`); or, without `attitude` (PX4's
         OFFBOARD, where an attitude target turns position control off, and ArduPilot's
         GUIDED, where it replaces the position target), the position with the yaw alone."""
         s = session

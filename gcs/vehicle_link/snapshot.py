@@ -9,8 +9,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from common.mavlink import MAV
-from gcs.session import Session
+from common.wire.mavlink import MAV
+from gcs.vehicle_link.session import Session
 
 M = MAV
 

@@ -10,13 +10,13 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from common.mavlink import MAV
-from common.wire_round import f32
+from common.wire.mavlink import MAV
+from common.wire.rounding import f32
 from gcs.autopilot import autopilot_of
 from gcs.autopilot.health import format_readiness as _format_readiness
 from gcs.autopilot.health import health as _health
 from gcs.autopilot.health import readiness as _readiness
-from gcs.session import Session
+from gcs.vehicle_link.session import Session
 from gcs.vehicle_link.snapshot import Snapshot, collect_requested, link_quality
 
 M = MAV

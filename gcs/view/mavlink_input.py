@@ -6,11 +6,12 @@ from __future__ import annotations
 from typing import Any
 
 from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
-from common.mav_enums import ATTITUDE_TARGET_TYPEMASK as ATT
-from common.mav_enums import MAV_MODE_FLAG
-from common.mav_enums import POSITION_TARGET_TYPEMASK as POS
-from common.mavlink_types import as_message
-from common.mavlink_types.state import (
+from common.quaternion import Q_IDENTITY
+from common.wire.mav_enums import ATTITUDE_TARGET_TYPEMASK as ATT
+from common.wire.mav_enums import MAV_MODE_FLAG
+from common.wire.mav_enums import POSITION_TARGET_TYPEMASK as POS
+from common.wire.mavlink_types import as_message
+from common.wire.mavlink_types.state import (
     ActuatorOutputStatus,
     AttitudeQuaternion,
     AttitudeTarget,
@@ -18,7 +19,6 @@ from common.mavlink_types.state import (
     LocalPositionNed,
     PositionTargetLocalNed,
 )
-from common.quaternion import Q_IDENTITY
 from gcs.vehicle_link.status import mode_name
 from gcs.view.sample import Pose, Sample
 

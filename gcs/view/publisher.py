@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from common.config import VehicleConfig
+from common.config.scenario import VehicleConfig
 from gcs.view.sample import ViewState, arm_mounts, state_message, transforms
 from gcs.view.scenes import airframe_scene, frame_transforms, path_scene
 from gcs.view.settings import HOST, RATES_HZ, STATE_SCHEMA, ViewError, due_topics

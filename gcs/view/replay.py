@@ -12,7 +12,7 @@ import numpy as np
 
 from common.quaternion import Quat, Vec3
 from common.vehicle_constants import N_ROTORS
-from gcs.metrics import onboard_on_truth_clock
+from gcs.report.metrics import onboard_on_truth_clock
 from gcs.view.sample import Pose, Sample
 from gcs.view.settings import DEFAULT_VEHICLE, ViewError
 
@@ -125,9 +125,9 @@ def load_replay(run_dir: Path) -> ReplayLog:
     if not truth_path.is_file():
         raise ViewError(f"{run_dir} has no truth.ulg (not a run folder with ULog logs)")
     try:
-        from common import ulog
+        from common.logs import ulog
     except ImportError:
-        raise ViewError("replay needs common/ulog.py (ULog reader)") from None
+        raise ViewError("replay needs common/logs/ulog.py (ULog reader)") from None
     try:
         tc, truth = ulog.read_topic(truth_path, "dq_truth")
         oc: tuple[str, ...] | None = None

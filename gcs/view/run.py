@@ -11,7 +11,7 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
-from common.config import ConfigError, VehicleConfig, load_vehicle
+from common.config.scenario import ConfigError, VehicleConfig, load_vehicle
 from gcs.view.mavlink_input import apply_message
 from gcs.view.publisher import Outputs, Publisher
 from gcs.view.replay import ReplayLog, load_replay, replay_vehicle_path
@@ -19,7 +19,7 @@ from gcs.view.sample import PathBuffer, ViewState
 from gcs.view.settings import BASE_HZ, DEFAULT_PORT, DEFAULT_VEHICLE, ViewError, replay_ticks
 
 if TYPE_CHECKING:
-    from gcs.session import Session
+    from gcs.vehicle_link.session import Session
 
 
 class _Stop:
@@ -113,7 +113,7 @@ def run_replay(log: ReplayLog, publisher: Publisher, speed: float,
 def _wait_vehicle(session: Session, timeout: float, system_id: int | None,
                   stop: threading.Event) -> bool:
     """Session.wait_vehicle in short slices, so that Ctrl-C ends the wait at once."""
-    from gcs.session import GcsError
+    from gcs.vehicle_link.session import GcsError
 
     deadline = time.monotonic() + timeout
     while not stop.is_set():
@@ -133,7 +133,7 @@ def view_live(connect: str, *, port: int = DEFAULT_PORT, mcap: Path | None = Non
               duration_s: float | None = None) -> int:
     """`gcs view [--connect URL]`: serve the vehicle's telemetry until Ctrl-C or SIGTERM.
     Raises ViewError (bad input), LinkError (bad URL), GcsError (no vehicle)."""
-    from gcs.session import Session
+    from gcs.vehicle_link.session import Session
 
     vehicle = _load_geometry(vehicle_file)
     outputs = Outputs(port, mcap)

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from common.config import VehicleConfig
+from common.config.scenario import VehicleConfig
 from common.frames import ned_to_enu, q_ned_frd_to_enu_flu
 from common.geometry import rotor_frames
 from common.quaternion import Q_IDENTITY, Quat, Vec3, q_exp, q_mul

@@ -7,7 +7,7 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from common.config import VehicleConfig
+from common.config.scenario import VehicleConfig
 from common.geometry import rotor_frames
 from common.quaternion import Q_IDENTITY, Quat, Vec3
 from gcs.view.sample import Transform

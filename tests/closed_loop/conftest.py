@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from common.config import Scenario, load_scenario
+from common.config.scenario import Scenario, load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "config" / "scenarios"

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.inprocess import RunResult, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.runio import RunResult
 
 from .. import reference_runs
 from .conftest import scenario

@@ -18,15 +18,16 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from common.config import Scenario
+from common.config.scenario import Scenario
 from common.frames import enu_to_ned, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
-from common.mavlink import MAV
-from common.mission_items import MissionItem, local_xy
-from common.wire_round import f32_vec3
-from fcu.dualquat import q_conj, q_exp, q_log, q_mul
-from gcs.inprocess import RunResult, run_scenario
-from gcs.metrics import attitude_error_rad
+from common.wire.mavlink import MAV
+from common.wire.mission_items import MissionItem, local_xy
+from common.wire.rounding import f32_vec3
+from fcu.control.dualquat import q_conj, q_exp, q_log, q_mul
 from gcs.mission_files import write_mission
+from gcs.report.metrics import attitude_error_rad
+from gcs.run.inprocess import run_scenario
+from gcs.run.runio import RunResult
 from sitl.plant import Plant
 
 from .conftest import scenario
@@ -188,7 +189,7 @@ def test_near_pi_rotates_the_short_way(hover_ideal, tmp_path, theta0):
 def test_case1_ideal_actuators_within_a_millimetre():
     """Given Case I with ideal actuators and the exact law at 500 Hz, then the errors stay
     within 1 mm and 0.05 mrad over all 160 s (docs/model.md#scenarios). A run with ideal
-    actuators sets CA_LAG_COMP 0 (gcs.inprocess.scenario_params): there is no lag to lead."""
+    actuators sets CA_LAG_COMP 0 (gcs.run.inprocess.scenario_params): there is no lag to lead."""
     result = run_scenario(scenario("case1_figure8", ideal_actuators=True))
     assert result.metrics["fcu_params"]["CA_LAG_COMP"] == 0.0
     m = result.metrics

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from common.sensors_config import resolve_sensor_profile
-from gcs.inprocess import run_scenario
+from common.config.sensors import resolve_sensor_profile
+from gcs.run.inprocess import run_scenario
 
 from .conftest import scenario
 

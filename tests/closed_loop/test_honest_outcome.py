@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from gcs import cli
-from gcs.inprocess import apply_overrides, run_scenario
-from gcs.metrics import ERROR_ROWS_RULE
+from gcs.report.metrics import ERROR_ROWS_RULE
+from gcs.run.inprocess import apply_overrides, run_scenario
 
 from .conftest import SCENARIOS
 from .test_actuator_limits import LEG

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from gcs.inprocess import run_scenario
+from gcs.run.inprocess import run_scenario
 
 from .conftest import scenario
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from common.config import load_scenario
-from gcs.inprocess import run_scenario
+from common.config.scenario import load_scenario
+from gcs.run.inprocess import run_scenario
 
 from .conftest import SCENARIOS
 
@@ -41,8 +41,8 @@ def test_land_with_no_ground_below_never_disarms_in_the_air():
     stays armed (no ground: nothing to land on), and the disarm is refused: in the air."""
     import dataclasses
 
-    from common.modes import Mode
-    from gcs.inprocess import fcu_pipeline, state_for_fcu
+    from common.wire.modes import Mode
+    from gcs.run.inprocess import fcu_pipeline, state_for_fcu
     from sitl.disturbance import Disturbance
     from sitl.plant import ActuatorCommand, Plant, initial_state
 

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import load_vehicle
-from gcs.inprocess import InProcessError, run_scenario
+from common.config.scenario import load_vehicle
+from gcs.run.inprocess import InProcessError, run_scenario
 
 from .conftest import ROOT, scenario
 

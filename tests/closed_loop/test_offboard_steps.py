@@ -9,22 +9,22 @@ import math
 
 import pytest
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from common.frames import ned_to_enu, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
-from common.mav_enums import ATTITUDE_TARGET_TYPEMASK as ATT
-from common.mav_enums import POSITION_TARGET_TYPEMASK as POS
-from common.modes import Mode
 from common.quaternion import q_angle, q_conj, q_mul
-from common.simlink import through_wire_controls
-from fcu.setpoint_wire import (
+from common.wire.mav_enums import ATTITUDE_TARGET_TYPEMASK as ATT
+from common.wire.mav_enums import POSITION_TARGET_TYPEMASK as POS
+from common.wire.modes import Mode
+from common.wire.simlink import through_wire_controls
+from fcu.edge.setpoint_wire import (
     ACCELERATION_IGNORE,
     RATES_IGNORE,
     VELOCITY_IGNORE,
     attitude_target,
     position_target,
 )
-from fcu.sim_bridge import actuator_controls
-from gcs.inprocess import fcu_pipeline, state_for_fcu
+from fcu.edge.sim_bridge import actuator_controls
+from gcs.run.inprocess import fcu_pipeline, state_for_fcu
 from gcs.vehicle_link.pose import PoseTarget
 from sitl.plant import Plant, hover_speeds_and_tilts
 from sitl.world import command_from_controls

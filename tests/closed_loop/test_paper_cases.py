@@ -9,10 +9,10 @@ import sys
 
 import pytest
 
-from common.ulog import read_topic
-from gcs.inprocess import run_scenario
-from gcs.metrics import rank_key
-from gcs.table1 import PAPER
+from common.logs.ulog import read_topic
+from gcs.report.metrics import rank_key
+from gcs.report.table1 import PAPER
+from gcs.run.inprocess import run_scenario
 
 from .. import reference_runs
 from .conftest import ROOT, SCENARIOS, scenario

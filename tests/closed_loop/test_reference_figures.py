@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from common.config import load_scenario
-from gcs.inprocess import apply_overrides, run_scenario
+from common.config.scenario import load_scenario
+from gcs.run.inprocess import apply_overrides, run_scenario
 
 from .. import reference_runs
 from .conftest import SCENARIOS

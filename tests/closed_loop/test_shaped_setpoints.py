@@ -1,5 +1,5 @@
 """OFFBOARD steps and HOLD entries are shaped to what every actuator can follow, on both
-vehicle files (fcu/approach.py): 170 deg attitude steps about several axes and a HOLD at
+vehicle files (fcu/reference/approach.py): 170 deg attitude steps about several axes and a HOLD at
 10 m/s are flown by the FCU's pipeline over the plant with no tilt servo rate-limited for
 COM_ACT_RATE_T (0.1 s) and within 5 cm and 3 deg of the shaped reference; a 170 deg roll,
 which no duration makes flyable (two tilts flip), is refused in attitude and held. An
@@ -14,9 +14,9 @@ import random
 import pytest
 
 from common.frames import enu_to_ned, q_enu_flu_to_ned_frd
-from common.modes import Mode
 from common.quaternion import q_angle, q_conj, q_exp, q_mul
-from fcu.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
+from common.wire.modes import Mode
+from fcu.edge.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
 
 from ..pipeline_flight import (
     ATTITUDE_ONLY,

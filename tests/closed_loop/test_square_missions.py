@@ -10,11 +10,11 @@ import math
 import numpy as np
 import pytest
 
-from common.config import load_vehicle
+from common.config.scenario import load_vehicle
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
-from gcs.inprocess import fcu_pipeline, run_scenario
-from gcs.scenario_mission import scenario_mission
+from gcs.run.inprocess import fcu_pipeline, run_scenario
+from gcs.run.scenario_mission import scenario_mission
 
 from .conftest import ROOT, scenario
 

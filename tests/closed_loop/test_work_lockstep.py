@@ -16,16 +16,17 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_mission_length import mission
-from common.config import load_scenario
-from common.mav_enums import MAV_RESULT
-from common.mavlink import MAV
-from common.mission_items import item_message
-from fcu.core import ONBOARD_COLUMNS
-from fcu.mission_protocol import MissionServer
+from common.config.scenario import load_scenario
+from common.logs.columns import ONBOARD_COLUMNS
+from common.wire.mav_enums import MAV_RESULT
+from common.wire.mavlink import MAV
+from common.wire.mission_messages import item_message
+from fcu.edge.mission_protocol import MissionServer
+from fcu.edge.work_process import ProcessWork
 from fcu.pipeline import Pipeline
 from fcu.work import InlineWork, Work
-from fcu.work_process import ProcessWork
-from gcs.inprocess import RunResult, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.runio import RunResult
 
 ROOT = Path(__file__).resolve().parents[2]
 UPLOAD_US, START_US = 4_000_000, 4_500_000  # in the hover before the figure-infinity

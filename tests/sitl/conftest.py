@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from common.links import free_port
-from gcs.session import Session
+from gcs.vehicle_link.session import Session
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "config" / "scenarios"
@@ -79,7 +79,8 @@ def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = 
                                            "--truth-log", str(tmp_path / "truth.ulg"),
                                            *sitl_args],
                                   tmp_path)
-        procs["fcu"] = start("fcu", ["fcu.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
+        procs["fcu"] = start("fcu", ["fcu.edge.node", "--vehicle", str(VEHICLE), "--gains",
+        str(PID),
                                      "--sim", f"udpout:127.0.0.1:{sim_port}", "--gcs",
                                      f"udpout:127.0.0.1:{gcs_port}", *rt, *fcu_args,
                                      "--onboard-log", str(tmp_path / "onboard.ulg")],

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from common.links import free_port
-from common.ulog import read_topic
+from common.logs.ulog import read_topic
 from tests.arducopter import ROOT, namespace, needs_arducopter, start_arducopter, stop_group
 
 SCENARIO = ROOT / "config" / "scenarios" / "ardupilot_hexa.toml"

@@ -7,8 +7,8 @@ import time
 import pytest
 from pymavlink import mavutil
 
-from common.mavlink import MAV
-from common.modes import Mode
+from common.wire.mavlink import MAV
+from common.wire.modes import Mode
 
 M = MAV
 pytestmark = pytest.mark.timeout(120)

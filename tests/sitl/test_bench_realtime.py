@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from common.ulog import read_topic
+from common.logs.ulog import read_topic
 
 from .conftest import ROOT
 

@@ -17,14 +17,14 @@ from pathlib import Path
 
 import pytest
 
-from common.config import scenario_from_data
+from common.config.scenario import scenario_from_data
 from common.links import free_port
 from gcs.campaign import run as run_mod
 from gcs.campaign.load import load_campaign
 from gcs.campaign.run import run_campaign
 from gcs.campaign.runs import RunSpec, expand
 from gcs.cli import main
-from gcs.inprocess import run_scenario
+from gcs.run.inprocess import run_scenario
 
 from .conftest import stop
 

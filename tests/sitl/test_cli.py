@@ -17,15 +17,15 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from common.links import free_port
-from common.mavlink import MAV_CMD_POSE_KEYFRAME
-from common.mission_items import MissionItem, local_xy
+from common.wire.mavlink import MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import MissionItem, local_xy
 from fcu.params import SPECS
 from gcs.cli.parser import HEARTBEAT_WAIT_S
 from gcs.mission_files.toml import format_toml
 from gcs.mission_files.wpl import format_wpl
-from gcs.scenario_mission import scenario_mission
+from gcs.run.scenario_mission import scenario_mission
 
 from .conftest import PID, ROOT, SCENARIOS, VEHICLE, start, stop
 from .waits import until
@@ -52,14 +52,14 @@ def vehicle(tmp_path) -> Iterator[Vehicle]:
     procs = {
         "sitl": start("sitl", ["sitl.node", str(SCENARIOS / "case1_figure8.toml"), "--link",
                                f"udpin:127.0.0.1:{sim}", "--end-time", "600"], tmp_path),
-        "fcu": start("fcu", ["fcu.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
+        "fcu": start("fcu", ["fcu.edge.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
                              "--sim", f"udpout:127.0.0.1:{sim}", "--gcs",
                              f"udpout:127.0.0.1:{gcs}"], tmp_path),
     }
     try:
         # Commands start once the vehicle has its state (the FCU reports attitude then):
         # the processes load their compiled kernels first, slowly on a loaded machine.
-        from gcs.session import Session
+        from gcs.vehicle_link.session import Session
 
         session = Session(f"udpin:127.0.0.1:{gcs}")
         try:
@@ -101,7 +101,7 @@ def test_status_asks_for_what_is_not_streamed(vehicle):
     that a 1 Hz stream brings them within its window."""
     from pymavlink.dialects.v20 import common as M
 
-    from gcs.session import Session
+    from gcs.vehicle_link.session import Session
 
     session = Session(vehicle.connect)
     try:
@@ -303,7 +303,7 @@ def _cmd(*argv: str, timeout: float = 30.0) -> tuple[subprocess.CompletedProcess
     """Run `gcs`, `fcu` or `sitl` (python -m); (result, seconds taken). A refusal "at once" is
     judged against HEARTBEAT_WAIT_S, the 10 s a command that waits for a vehicle waits
     first: a busy machine has taken 7 s to start a process and refuse."""
-    module = {"gcs": "gcs.cli", "fcu": "fcu.node", "sitl": "sitl.node"}[argv[0]]
+    module = {"gcs": "gcs.cli", "fcu": "fcu.edge.node", "sitl": "sitl.node"}[argv[0]]
     t0 = time.monotonic()
     out = subprocess.run([sys.executable, "-m", module, *argv[1:]], cwd=ROOT,
                          capture_output=True, text=True, timeout=timeout, check=False)
@@ -462,7 +462,7 @@ def test_refusal_prints_the_vehicles_reason(tmp_path):
     """An FCU without a simulator refuses to arm; `gcs arm` prints the STATUSTEXT that came
     with the COMMAND_ACK, not only MAV_RESULT_DENIED."""
     gcs = free_port()
-    procs = {"fcu": start("fcu", ["fcu.node", *FCU_ARGS, "--sim",
+    procs = {"fcu": start("fcu", ["fcu.edge.node", *FCU_ARGS, "--sim",
                                   f"udpout:127.0.0.1:{free_port()}", "--gcs",
                                   f"udpout:127.0.0.1:{gcs}"], tmp_path)}
     try:
@@ -529,7 +529,7 @@ def test_every_transport_carries_the_ground_station(tmp_path):
     """One link layer for gcs and fcu: the FCU serves udpin, tcpin and a tcp client link;
     `gcs status` reaches it over udpout://, tcp:// and tcpin (MAVSDK's forms included)."""
     udp, tcpin, tcp = free_port(), free_port(socket.SOCK_STREAM), free_port(socket.SOCK_STREAM)
-    procs = {"fcu": start("fcu", ["fcu.node", *FCU_ARGS, "--sim",
+    procs = {"fcu": start("fcu", ["fcu.edge.node", *FCU_ARGS, "--sim",
                                   f"udpout:127.0.0.1:{free_port()}",
                                   "--gcs", f"udpin://127.0.0.1:{udp}",
                                   "--gcs", f"tcpin:127.0.0.1:{tcpin}",
@@ -556,14 +556,14 @@ def test_goto_ends_when_the_vehicle_leaves_offboard(tmp_path):
     the wall clock (in lockstep the 40 m could be flown before the pause)."""
     import signal
 
-    from common.modes import Mode, decode_custom
-    from gcs.session import Session
+    from common.wire.modes import Mode, decode_custom
+    from gcs.vehicle_link.session import Session
 
     sim, gcs, watch = free_port(), free_port(), free_port()
     procs = {
         "sitl": start("sitl", ["sitl.node", str(SCENARIOS / "case1_figure8.toml"), "--link",
                                f"udpin:127.0.0.1:{sim}", "--realtime"], tmp_path),
-        "fcu": start("fcu", ["fcu.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
+        "fcu": start("fcu", ["fcu.edge.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
                              "--sim", f"udpout:127.0.0.1:{sim}", "--realtime", "--gcs",
                              f"udpout:127.0.0.1:{gcs}", "--gcs",
                              f"udpout:127.0.0.1:{watch}"], tmp_path),

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.ulog import read_topic, tail_record
+from common.logs.ulog import read_topic, tail_record
 
 from .conftest import ROOT, SCENARIOS
 from .waits import until

@@ -13,10 +13,9 @@ import sys
 import numpy as np
 import pytest
 
-from common.config import load_scenario
-from fcu.core import ONBOARD_COLUMNS
-from fcu.onboard_log import DQ_ONBOARD_COLUMNS
-from sitl.plant import TRUTH_COLUMNS
+from common.config.scenario import load_scenario
+from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
+from fcu.edge.onboard_log import DQ_ONBOARD_COLUMNS
 
 from .conftest import ROOT, SCENARIOS
 from .test_estimator_flight import read_topic

@@ -22,12 +22,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import gcs.inprocess as inprocess
-from common.config import SensorFault, load_scenario
+import gcs.run.inprocess as inprocess
+from common.config.scenario import SensorFault, load_scenario
+from common.config.sensors import resolve_sensor_profile
 from common.links import free_port
-from common.mavlink import MAV
-from common.sensors_config import resolve_sensor_profile
-from common.simlink import (
+from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
+from common.logs.ulog import read_topic
+from common.wire.mavlink import MAV
+from common.wire.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
     HilSensor,
     pack_hil_sensor,
@@ -35,14 +37,13 @@ from common.simlink import (
     split_frames,
     unpack_actuator_controls,
 )
-from common.ulog import read_topic
-from fcu.core import ONBOARD_COLUMNS
-from fcu.onboard_log import DQ_ONBOARD_COLUMNS
-from gcs.inprocess import RunResult, apply_overrides, run_scenario
-from gcs.metrics import attitude_error_rad, join_logs
-from gcs.session import Session
+from fcu.edge.onboard_log import DQ_ONBOARD_COLUMNS
+from gcs.report.metrics import attitude_error_rad, join_logs
+from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.runio import RunResult
 from gcs.vehicle_link.params import param_set
-from sitl.plant import TRUTH_COLUMNS, Plant, initial_state
+from gcs.vehicle_link.session import Session
+from sitl.plant import Plant, initial_state
 from sitl.sensor_feed import SensorFeed
 
 from .conftest import PID, ROOT, SCENARIOS, VEHICLE, launch, start, stop
@@ -285,7 +286,8 @@ def test_arming_is_refused_until_the_estimator_has_aligned(tmp_path):
     procs: dict[str, subprocess.Popen] = {}
     s = Session(f"udpin:127.0.0.1:{gcs_port}")
     try:
-        procs["fcu"] = start("fcu", ["fcu.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
+        procs["fcu"] = start("fcu", ["fcu.edge.node", "--vehicle", str(VEHICLE), "--gains",
+        str(PID),
                                      "--sim", f"udpout:127.0.0.1:{sim_port}", "--gcs",
                                      f"udpout:127.0.0.1:{gcs_port}"], tmp_path)
         s.wait_vehicle(timeout=15.0)

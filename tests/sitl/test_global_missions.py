@@ -22,16 +22,16 @@ import numpy as np
 import pytest
 
 from common.links import free_port
-from common.mavlink import MAV
-from common.mission_items import HomePosition
-from common.ulog import read_topic
+from common.logs.ulog import read_topic
+from common.wire.mavlink import MAV
+from common.wire.mission_items import HomePosition
 from fcu.params import SPECS
-from gcs.mission_client import download, home_position
 from gcs.mission_files import read_mission
 from gcs.mission_files.plan import format_plan, parse_plan
 from gcs.mission_files.toml import parse_toml
 from gcs.mission_files.wpl import parse_wpl
 from gcs.vehicle_link.actions import arm
+from gcs.vehicle_link.mission_client import download, home_position
 from gcs.vehicle_link.params import param_get, param_set
 
 from .conftest import ROOT, Stack, launch, stop

@@ -16,7 +16,7 @@ import pytest
 from benchmarks.fuzz.config import PORTS
 from benchmarks.fuzz.flight import Attack, Flight
 from benchmarks.fuzz.traffic import Traffic, blast
-from common.mavlink import MAV
+from common.wire.mavlink import MAV
 
 from .waits import until
 

@@ -1,27 +1,28 @@
 """Bugs found by fuzzing (tests/unit/test_fuzz_parsers.py, benchmarks/fuzz_campaign.py,
-in-process fuzzing of FlightController) in files changed elsewhere (fcu/node.py,
-fcu/vehicle.py, sitl/node.py, fcu/telemetry.py): each test shows one with the smallest input
+in-process fuzzing of FlightController) in files changed elsewhere (fcu/edge/node.py,
+fcu/vehicle.py, sitl/node.py, fcu/edge/telemetry.py): each test shows one with the smallest input
 that triggers it. Each failed when written; all pass since commits 674bea7, 8459807,
 1ec21fa (velocity and rate bounds, unsendable telemetry skipped) and 6b5a095 (frames cut at
 a datagram's end dropped).
 
 * A COMMAND_LONG GET_MESSAGE_INTERVAL whose p1 does not fit uint16 killed the FCU
-  (fcu/node.py `FlightController._command`: MESSAGE_INTERVAL(int(p1)) -> struct.error, which
+  (fcu/edge/node.py `FlightController._command`: MESSAGE_INTERVAL(int(p1)) -> struct.error, which
   `_on_gcs_datagram` does not catch).
 * An ODOMETRY with a zero quaternion killed the FCU (fcu/vehicle.py `Vehicle.on_state` ->
-  fcu/dualquat.py `q_normalize` -> ZeroDivisionError, from fcu/node.py `_on_sim_datagram`).
+  fcu/control/dualquat.py `q_normalize` -> ZeroDivisionError, from fcu/edge/node.py
+  `_on_sim_datagram`).
 * An ODOMETRY 3000 km up (finite, so accepted) killed the FCU at its next telemetry
-  (fcu/node.py `_send_message` -> GLOBAL_POSITION_INT alt in int32 mm -> struct.error).
-* The FCU took ODOMETRY from any system id as its own state (fcu/node.py
+  (fcu/edge/node.py `_send_message` -> GLOBAL_POSITION_INT alt in int32 mm -> struct.error).
+* The FCU took ODOMETRY from any system id as its own state (fcu/edge/node.py
   `_on_sim_datagram` never looked at `Frame.sysid`).
 * The simulator took HIL_ACTUATOR_CONTROLS from any system id (sitl/node.py
   `SimulatorServer._answers` never looked at `Frame.sysid`).
 * An ODOMETRY with a finite but absurd velocity (3e38 m/s, each component a valid float32)
   and a 45 degree yaw was accepted; the velocity turned into NED no longer fits a float32
-  and the next LOCAL_POSITION_NED killed the FCU (fcu/node.py `_housekeeping` ->
+  and the next LOCAL_POSITION_NED killed the FCU (fcu/edge/node.py `_housekeeping` ->
   `_send_message` -> `send` -> pack -> OverflowError: float too large to pack with f format).
 * A frame cut one byte short at the end of a datagram was completed by the first byte of the
-  sender's next datagram (fcu/node.py `_on_gcs_datagram`, one pymavlink stream parser per UDP
+  sender's next datagram (fcu/edge/node.py `_on_gcs_datagram`, one pymavlink stream parser per UDP
   peer): in the campaign a cut MISSION_CLEAR_ALL so completed cleared the mission in flight.
 """
 
@@ -34,8 +35,8 @@ import time
 import pytest
 
 from common.links import free_port
-from common.mavlink import MAV
-from common.simlink import (
+from common.wire.mavlink import MAV
+from common.wire.simlink import (
     ODOMETRY_ID,
     ActuatorControls,
     Odometry,
@@ -101,7 +102,7 @@ def fake_sim(tmp_path):
 def test_get_message_interval_beyond_uint16_does_not_kill_the_fcu(stack):
     """GET_MESSAGE_INTERVAL(p1 = 70000), or p1 = -1: the FCU ACKs, then packs
     MESSAGE_INTERVAL(message_id = 70000) and dies:
-        fcu/node.py _command -> self.send(MAVLink_message_interval_message(msg_id, ...))
+        fcu/edge/node.py _command -> self.send(MAVLink_message_interval_message(msg_id, ...))
         -> struct.error: ushort format requires 0 <= number <= 65535
     Expected: an answer (DENIED, or MESSAGE_INTERVAL with -1) and the FCU alive."""
     s = stack.session
@@ -116,7 +117,7 @@ def test_get_message_interval_beyond_uint16_does_not_kill_the_fcu(stack):
 
 def test_a_zero_quaternion_state_does_not_kill_the_fcu(fake_sim):
     """ODOMETRY with q = (0, 0, 0, 0) (finite, so it passes the NaN check):
-        fcu/node.py _on_sim_datagram -> fcu/vehicle.py Vehicle.on_state -> q_normalize
+        fcu/edge/node.py _on_sim_datagram -> fcu/vehicle.py Vehicle.on_state -> q_normalize
         -> ZeroDivisionError: float division by zero
     Expected: the state is refused (counted) and the FCU keeps running."""
     fake_sim.state(1000, q=(0.0, 0.0, 0.0, 0.0))
@@ -126,7 +127,7 @@ def test_a_zero_quaternion_state_does_not_kill_the_fcu(fake_sim):
 def test_a_state_far_away_does_not_kill_the_fcu(fake_sim):
     """ODOMETRY 3000 km up (z = -3e6 m, finite): accepted, then the next GLOBAL_POSITION_INT
     cannot be packed:
-        fcu/node.py _housekeeping -> _send_message -> send -> pack
+        fcu/edge/node.py _housekeeping -> _send_message -> send -> pack
         -> struct.error: 'i' format requires -2147483648 <= number <= 2147483647
     (20,000 km north breaks lat the same way.) Expected: such a state refused, or the
     telemetry clamped, and the FCU alive."""
@@ -137,7 +138,7 @@ def test_a_state_far_away_does_not_kill_the_fcu(fake_sim):
 def test_a_state_with_an_absurd_velocity_does_not_kill_the_fcu(fake_sim):
     """ODOMETRY v_frd = (3e38, 3e38, 0) m/s, yaw 45 degrees: every field is a valid float32,
     |q| = 1 and |p| < 1e6 m, so the state is accepted; in NED vx = 4.2e38 > float32 max and
-        fcu/node.py _housekeeping -> _send_message(LOCAL_POSITION_NED) -> send -> pack
+        fcu/edge/node.py _housekeeping -> _send_message(LOCAL_POSITION_NED) -> send -> pack
         -> OverflowError: float too large to pack with f format
     Expected: such a state refused (bound the velocity and rates as the position is), or
     the telemetry clamped, and the FCU alive."""
@@ -151,7 +152,7 @@ def test_states_from_another_system_are_not_taken(fake_sim):
     """The FCU (system 1) takes ODOMETRY from system 42 as its own state: its position
     jumps to the stranger's. Seen in the campaign: ERR_POS 4-7 m while the real vehicle was
     on its path. Expected: frames whose sysid is not ours are ignored (and counted).
-        fcu/node.py _on_sim_datagram: `for f in frames: if f.msg_id != ODOMETRY_ID: ...`
+        fcu/edge/node.py _on_sim_datagram: `for f in frames: if f.msg_id != ODOMETRY_ID: ...`
         never compares f.sysid with self.system_id."""
     s = fake_sim.stack
 
@@ -213,10 +214,10 @@ def test_a_frame_cut_short_is_not_completed_by_the_next_datagram(stack, tmp_path
     """UDP carries whole frames: MISSION_CLEAR_ALL cut one byte short, then a datagram that
     starts with the missing byte, must not clear the mission (found by the fuzz campaign:
     pymavlink parses one byte stream per sender)."""
-    from common.config import load_scenario
-    from common.mavlink import encoder, pack
-    from gcs.mission_client import download, upload
-    from gcs.scenario_mission import scenario_mission
+    from common.config.scenario import load_scenario
+    from common.wire.mavlink import encoder, pack
+    from gcs.run.scenario_mission import scenario_mission
+    from gcs.vehicle_link.mission_client import download, upload
 
     s = stack.session
     items = scenario_mission(load_scenario(SCENARIOS / "case1_figure8.toml"))

@@ -14,21 +14,21 @@ import time
 import numpy as np
 import pytest
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from common.links import free_port
-from common.mavlink import MAV
-from common.simlink import (
+from common.logs.ulog import read_topic
+from common.wire.mavlink import MAV
+from common.wire.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
     Odometry,
     pack_odometry,
     split_frames,
     unpack_actuator_controls,
 )
-from common.ulog import read_topic
-from fcu.trajectory import FigureEight
-from gcs.mission_client import upload
-from gcs.process_run import run_processes
-from gcs.scenario_mission import scenario_mission
+from fcu.reference.trajectory import FigureEight
+from gcs.run.process_run import run_processes
+from gcs.run.scenario_mission import scenario_mission
+from gcs.vehicle_link.mission_client import upload
 
 from .. import reference_runs
 from ..udp_proxy import Impairment, UdpProxy
@@ -193,7 +193,7 @@ def test_repeated_state_gets_the_stored_answer(tmp_path):
 
 def test_control_port_argument_is_validated():
     """A wrong link URL is refused at start-up with a clear message."""
-    proc = subprocess.run([sys.executable, "-m", "fcu.node", "--vehicle",
+    proc = subprocess.run([sys.executable, "-m", "fcu.edge.node", "--vehicle",
                            str(ROOT / "config/vehicles/hexa_tilted.toml"), "--gains",
                            str(ROOT / "config/gains/pid_eq30.toml"), "--sim",
                            f"udpx:127.0.0.1:{free_port()}"], cwd=ROOT, capture_output=True,
@@ -217,7 +217,7 @@ def test_udp_rtt_is_measured_between_the_two_processes(tmp_path):
     TIMESYNC probe answered by the SITL process, a median that is positive, finite and below
     10 ms with a spread (measured, not a constant), and the step's wall time and its ratio
     to that round trip beside it."""
-    from gcs.process_run import RTT_PROBES
+    from gcs.run.process_run import RTT_PROBES
 
     scenario = dataclasses.replace(load_scenario(CASE1), duration_s=2.0)
     m = run_processes(scenario, tmp_path / "run")

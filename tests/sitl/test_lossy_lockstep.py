@@ -9,9 +9,9 @@ import time
 import numpy as np
 import pytest
 
-from common.config import load_scenario
-from common.ulog import read_topic
-from gcs.process_run import run_processes
+from common.config.scenario import load_scenario
+from common.logs.ulog import read_topic
+from gcs.run.process_run import run_processes
 
 from ..udp_proxy import Impairment, UdpProxy
 from .conftest import SCENARIOS
@@ -71,7 +71,7 @@ def test_loss_with_sensors_gives_the_same_flight(tmp_path):
     """With a sensor profile (HIL_SENSOR per IMU sample, delayed poses, the estimator's
     alignment before the flight) the same impairments change timing, never results: every
     IMU sample and pose is taken once, whatever is lost, duplicated or held back."""
-    from common.sensors_config import resolve_sensor_profile
+    from common.config.sensors import resolve_sensor_profile
 
     scenario = dataclasses.replace(load_scenario(CASE1), duration_s=2.5,
                                    sensors=resolve_sensor_profile("mocap-indoor"))

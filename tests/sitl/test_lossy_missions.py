@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 import pytest
 
 from common.links import free_port
-from common.mavlink import MAV
-from common.mission_items import MissionItem, local_xy
-from gcs.mission_client import MissionError, download, upload
-from gcs.session import Session
+from common.wire.mavlink import MAV
+from common.wire.mission_items import MissionItem, local_xy
+from gcs.vehicle_link.mission_client import MissionError, download, upload
+from gcs.vehicle_link.session import Session
 
 from ..udp_proxy import Impairment, UdpProxy
 from .conftest import PID, VEHICLE, start, stop
@@ -91,7 +91,7 @@ class Worker:
         p, q = free_port(), free_port()
         logs.mkdir(parents=True, exist_ok=True)
         self.procs = {"fcu": start("fcu", [
-            "fcu.node", "--vehicle", str(VEHICLE), "--gains", str(PID), "--sim",
+            "fcu.edge.node", "--vehicle", str(VEHICLE), "--gains", str(PID), "--sim",
             f"udpout:127.0.0.1:{free_port()}", "--gcs", f"udpin:127.0.0.1:{p}", "--gcs",
             f"udpin:127.0.0.1:{q}"], logs)}
         self.logs = logs

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from common.links import free_port
-from common.mavlink import MAV
-from common.modes import Mode
+from common.wire.mavlink import MAV
+from common.wire.modes import Mode
 
 from .conftest import launch, stop
 

@@ -22,10 +22,10 @@ from pathlib import Path
 
 import pytest
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from common.links import free_port
-from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import local_xy
+from common.wire.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import local_xy
 
 from .conftest import SCENARIOS, launch, stop
 
@@ -270,7 +270,7 @@ class Watch:
         return [m for _, m in list(self.seen) if m.get_type() == kind]
 
     def modes(self) -> list[str]:
-        from common.modes import decode_custom
+        from common.wire.modes import decode_custom
 
         names: list[str] = []
         for hb in self.of("HEARTBEAT"):

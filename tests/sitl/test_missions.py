@@ -6,11 +6,11 @@ import math
 
 import pytest
 
-from common.config import load_scenario
-from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import MissionItem, local_xy
-from gcs.mission_client import clear, download, upload
-from gcs.scenario_mission import scenario_mission
+from common.config.scenario import load_scenario
+from common.wire.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import MissionItem, local_xy
+from gcs.run.scenario_mission import scenario_mission
+from gcs.vehicle_link.mission_client import clear, download, upload
 
 from .conftest import SCENARIOS
 

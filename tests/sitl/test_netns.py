@@ -12,9 +12,9 @@ from collections.abc import Iterator
 
 import pytest
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from gcs.mission_files.toml import format_toml
-from gcs.scenario_mission import scenario_mission
+from gcs.run.scenario_mission import scenario_mission
 
 from .conftest import PID, ROOT, SCENARIOS, VEHICLE
 from .waits import until
@@ -83,7 +83,7 @@ def test_ground_station_in_another_namespace_flies_the_vehicle(namespaces, tmp_p
         assert procs[0].poll() is None, (tmp_path / "router.log").read_text()
         procs += [in_ns(ns_v, "sitl", "sitl.node", str(SCENARIOS / "case1_figure8.toml"),
                         "--link", url, "--end-time", "600"),
-                  in_ns(ns_v, "fcu", "fcu.node", "--vehicle", str(VEHICLE), "--gains",
+                  in_ns(ns_v, "fcu", "fcu.edge.node", "--vehicle", str(VEHICLE), "--gains",
                         str(PID), "--sim", url, "--gcs", url)]
         status = gcs("status")
         assert status.returncode == 0, status.stderr + (tmp_path / "fcu.log").read_text()

@@ -10,10 +10,10 @@ import time
 
 import pytest
 
-from common.config import load_vehicle
-from common.mavlink import MAV
-from common.modes import MAIN_POSCTL, Mode
-from fcu import manual
+from common.config.scenario import load_vehicle
+from common.wire.mavlink import MAV
+from common.wire.modes import MAIN_POSCTL, Mode
+from fcu.modes import manual
 
 from .conftest import VEHICLE
 

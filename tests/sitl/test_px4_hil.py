@@ -22,13 +22,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
+from common.config.sensors import resolve_sensor_profile
 from common.links import free_port
-from common.mavlink import MAV, encoder, pack, parser
-from common.sensors_config import resolve_sensor_profile
-from common.ulog import read_topic
-from sitl.px4_hil import GRACE_S, Server
-from sitl.px4_lockstep import LEARN_WINDOW
+from common.logs.ulog import read_topic
+from common.wire.mavlink import MAV, encoder, pack, parser
+from sitl.firmware.px4_hil import GRACE_S, Server
+from sitl.firmware.px4_lockstep import LEARN_WINDOW
 from tests.px4_side import ACCEL, BARO, DIFF_PRESS, GYRO, MAG, ScriptedPX4
 
 from .conftest import ROOT, SCENARIOS, start, stop

@@ -1,4 +1,4 @@
-"""The real-time loops' scheduling (`common/realtime.py`): in real time `fcu` and `sitl` put
+"""The real-time loops' scheduling (`common/process/realtime.py`): in real time `fcu` and `sitl` put
 their loops in SCHED_FIFO (fcu above sitl) where the system grants it, say so, and leave the
 FCU's worker process at normal scheduling below them; `--rt-priority 0` and lockstep keep
 normal scheduling; where it is refused the loop says why and flies at normal priority."""
@@ -19,7 +19,8 @@ from .waits import until
 def _granted() -> bool:
     """Whether this machine lets a process of ours into SCHED_FIFO (root, CAP_SYS_NICE or
     RLIMIT_RTPRIO), asked of a child so that this process stays as it is."""
-    code = "from common.realtime import request_fifo; import sys; sys.exit(bool(request_fifo(1)))"
+    code = ("from common.process.realtime import request_fifo; import sys; "
+            "sys.exit(bool(request_fifo(1)))")
     return subprocess.run([sys.executable, "-c", code], cwd=ROOT).returncode == 0
 
 
@@ -30,7 +31,7 @@ def _policy(pid: int) -> tuple[int, int]:
 
 
 def _worker(pid: int) -> int | None:
-    """The FCU's worker process (`fcu.work_process`, a multiprocessing spawn) once it has
+    """The FCU's worker process (`fcu.edge.work_process`, a multiprocessing spawn) once it has
     lowered its own priority, else None."""
     tasks = Path(f"/proc/{pid}/task")
     for child in (int(c) for t in tasks.iterdir() for c in (t / "children").read_text().split()):
@@ -85,10 +86,10 @@ def test_lockstep_and_rt_priority_0_keep_normal_scheduling(tmp_path, realtime, f
         stop(s.procs)
 
 
-@pytest.mark.parametrize("program", ["fcu.node", "sitl.node"])
+@pytest.mark.parametrize("program", ["fcu.edge.node", "sitl.node"])
 def test_a_priority_out_of_range_is_exit_2(program):
     args = ["--vehicle", "config/vehicles/hexa_tilted.toml", "--gains",
-            "config/gains/pid_eq30.toml"] if program == "fcu.node" else \
+            "config/gains/pid_eq30.toml"] if program == "fcu.edge.node" else \
         ["config/scenarios/case1_figure8.toml"]
     proc = subprocess.run([sys.executable, "-m", program, *args, "--realtime",
                            "--rt-priority", "100"], cwd=ROOT, capture_output=True, text=True,

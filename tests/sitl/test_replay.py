@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.ulog import open_ulog
-from gcs.replay import STATE_COLUMNS
+from common.logs.ulog import open_ulog
+from gcs.run.replay import STATE_COLUMNS
 
 from .conftest import ROOT, SCENARIOS
 

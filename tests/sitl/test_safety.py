@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from pymavlink import mavutil
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from common.links import free_port
-from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import MissionItem, local_xy
-from gcs.mission_client import download, upload
-from gcs.scenario_mission import scenario_mission
+from common.wire.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import MissionItem, local_xy
+from gcs.run.scenario_mission import scenario_mission
+from gcs.vehicle_link.mission_client import download, upload
 
 from .conftest import ROOT, SCENARIOS, launch, stop
 from .test_run_folder import _flown_s
@@ -51,7 +51,7 @@ def _fly_keyframe(stack, east_m: float, seconds: float) -> None:
 
 
 def _mode(stack, mode_name: str, timeout: float = 5.0):
-    from common.modes import Mode
+    from common.wire.modes import Mode
 
     want = Mode[mode_name].custom_mode
     return stack.wait_for(["HEARTBEAT"], lambda m: m.get_srcComponent() == 1 and
@@ -97,8 +97,8 @@ def test_gcs_link_loss_holds_then_lands(endless_stack):
 def _onboard_log_tells_the_same_story(path, mission_items: int) -> None:
     """The FCU's onboard.ulg, read while it runs: the parameters set over MAVLink, armed in
     MISSION, then HOLD and LAND with the GCS link lost, as PX4's topics say them."""
-    from common import px4_topics as px4
-    from common.ulog import open_ulog
+    from common.logs import px4_topics as px4
+    from common.logs.ulog import open_ulog
 
     # The mode changes on the FCU's wall clock (link check) and is logged with the next
     # control step, which in lockstep waits for the simulator: on a loaded machine the
@@ -200,7 +200,7 @@ def test_signed_link_flies_and_refuses_unsigned_wrong_and_replayed(tmp_path):
                                        f"udpin:127.0.0.1:{gcs_port}"))
     # The fixture's own session listens unsigned on the first GCS link: it hears the signed
     # telemetry but cannot command.
-    from common.mavlink import read_signing_key
+    from common.wire.mavlink import read_signing_key
 
     secret = read_signing_key(str(key))
     try:
@@ -338,7 +338,7 @@ def test_gcs_run_reports_a_dead_child_and_leaves_none_behind(tmp_path):
             listing = subprocess.run(["ps", "-o", "pid=,args=", "-g", str(proc.pid)],
                                      capture_output=True, text=True, check=False).stdout
             fcu_pid = next((int(line.split()[0]) for line in listing.splitlines()
-                            if "fcu.node" in line), None)
+                            if "fcu.edge.node" in line), None)
         assert fcu_pid is not None
         until(lambda: _flown_s(out / "flight.tlog") >= 1.0, "the flight's start", 90.0)
         os.kill(fcu_pid, signal.SIGKILL)  # a child of our own ground station

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.ulog import read_topic
+from common.logs.ulog import read_topic
 
 ROOT = Path(__file__).resolve().parents[2]
 CASE1 = ROOT / "config" / "scenarios" / "case1_figure8.toml"

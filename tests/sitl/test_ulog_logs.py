@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from pyulog.px4 import PX4ULog
 
-from common.config import load_scenario
-from common.ulog import open_ulog, read_topic, tail_record
-from gcs.inprocess import apply_overrides, run_scenario
-from gcs.metrics import build_metrics
-from gcs.runio import read_run_logs
+from common.config.scenario import load_scenario
+from common.logs.ulog import open_ulog, read_topic, tail_record
+from gcs.report.metrics import build_metrics
+from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.runio import read_run_logs
 
 from .conftest import ROOT, SCENARIOS, launch, stop
 from .test_safety import _fly_keyframe
@@ -157,8 +157,8 @@ def _mul(a, b):
 def test_status_topics_say_what_the_vehicle_did(run_dir):
     """Armed in MISSION (PX4's arming_state and nav_state), SITL not HITL, the mission's
     items and progress, no failsafe, the local frame's origin at the FCU's home."""
-    from common import px4_topics as px4
-    from common.mission_items import PX4_SITL_HOME
+    from common.logs import px4_topics as px4
+    from common.wire.mission_items import PX4_SITL_HOME
 
     u = open_ulog(run_dir / "onboard.ulg")
     status = u.get_dataset("vehicle_status").data
@@ -303,7 +303,7 @@ def _limit_file_size() -> None:
 def test_a_full_disk_ends_the_log_not_the_flight(tmp_path):
     """The FCU's onboard log hits a full disk in flight: the FCU says so once, flies on
     (armed, answering the simulator), and the log reads to its last complete record."""
-    from common.mavlink import MAV
+    from common.wire.mavlink import MAV
 
     stack = launch(tmp_path, fcu_preexec=_limit_file_size)
     try:
@@ -330,7 +330,7 @@ def test_an_unwritable_log_is_a_clear_error(tmp_path):
     """`fcu --onboard-log` and `sitl --truth-log` into a missing folder or onto a full
     device: one line naming the file, exit 2, no traceback."""
     cases = [
-        ["fcu.node", "--vehicle", str(ROOT / "config/vehicles/hexa_tilted.toml"), "--gains",
+        ["fcu.edge.node", "--vehicle", str(ROOT / "config/vehicles/hexa_tilted.toml"), "--gains",
          str(ROOT / "config/gains/pid_eq30.toml"), "--sim", "udpout:127.0.0.1:9", "--gcs",
          "udpout:127.0.0.1:9", "--onboard-log"],
         ["sitl.node", str(CASE1), "--link", "udpin:127.0.0.1:0", "--truth-log"],

@@ -28,11 +28,11 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 from pymavlink import mavutil
 
-from common.config import load_vehicle
+from common.config.scenario import load_vehicle
 from common.geometry import rotor_frames
 from common.links import free_port
-from common.mavlink import MAV
 from common.quaternion import q_rotate
+from common.wire.mavlink import MAV
 from gcs.vehicle_link.actions import arm, set_mode
 from gcs.vehicle_link.pose import PoseTarget
 
@@ -359,7 +359,7 @@ def test_replay_of_a_run_folder_writes_the_truth_to_mcap(tmp_path):
     exits 0 at once, and every /tf world->base_link of the MCAP equals dq_truth's pose at its
     time stamp, world->desired equals dq_onboard's desired pose, arm tilts equal the truth's
     tilts; one /tf per 50 ms of the run."""
-    from common.ulog import read_topic
+    from common.logs.ulog import read_topic
 
     run = tmp_path / "run"
     made = subprocess.run([sys.executable, "-m", "gcs.cli", "run",

@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from benchmarks.bench_mission_length import mission
-from common.mavlink import MAV
-from common.modes import Mode, decode_custom
-from gcs.mission_client import upload
+from common.wire.mavlink import MAV
+from common.wire.modes import Mode, decode_custom
+from gcs.vehicle_link.mission_client import upload
 
 from .conftest import Stack, launch, stop
 from .waits import until

@@ -15,10 +15,10 @@ import pytest
 import zenoh
 from pymavlink.dialects.v20 import common as mavlink2
 
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from common.links import free_port
-from common.zenoh_link import client_config, router_running
-from gcs.process_run import run_processes
+from common.links.zenoh_link import client_config, router_running
+from gcs.run.process_run import run_processes
 
 from .conftest import ROOT, SCENARIOS
 
@@ -165,7 +165,7 @@ def test_ground_station_discovers_and_picks_vehicles(tmp_path, router):
     for n in (3, 7):
         procs[f"sitl{n}"] = start(f"sitl{n}", ["sitl.node", str(CASE1), "--link", url,
                                                "--sysid", str(n)], tmp_path)
-        procs[f"fcu{n}"] = start(f"fcu{n}", ["fcu.node", "--vehicle", str(VEHICLE), "--gains",
+        procs[f"fcu{n}"] = start(f"fcu{n}", ["fcu.edge.node", "--vehicle", str(VEHICLE), "--gains",
                                              str(PID), "--sim", url, "--gcs", url, "--sysid",
                                              str(n)], tmp_path)
     try:

@@ -38,7 +38,7 @@ def flown_to(stack, t_s: float, timeout: float = 60.0):
 
 
 class TlogTail:
-    """The messages appended to a growing telemetry log (gcs.session.Tlog: each message
+    """The messages appended to a growing telemetry log (gcs.vehicle_link.session.Tlog: each message
     after its 8-byte time stamp, written whole) since the last call, read incrementally."""
 
     def __init__(self, path: Path) -> None:

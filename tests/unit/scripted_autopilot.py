@@ -19,8 +19,9 @@ import struct
 import threading
 import time
 
-from common.mavlink import MAV, encoder, pack, parser
-from common.mission_items import MissionItem, item_from_message, item_message
+from common.wire.mavlink import MAV, encoder, pack, parser
+from common.wire.mission_items import MissionItem, item_from_message
+from common.wire.mission_messages import item_message
 from gcs import cli  # imported before any test captures the output (gcs.cli.console)
 
 M = MAV

@@ -1,4 +1,4 @@
-"""The in-flight actuator monitor (fcu/actuator_monitor.py, COM_ACT_RATE_T): a model of each
+"""The in-flight actuator monitor (fcu/safety/actuator_monitor.py, COM_ACT_RATE_T): a model of each
 tilt servo driven by the commands (the plant's rate limit) and each rotor's speed clamp."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ import random
 
 import pytest
 
-from common.config import load_gains, load_vehicle
-from fcu.actuator_monitor import ActuatorMonitor, LimitNotice, unclamped_speeds
+from common.config.scenario import load_gains, load_vehicle
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
+from fcu.safety.actuator_monitor import ActuatorMonitor, LimitNotice, unclamped_speeds
 from sitl.plant import ActuatorCommand, Plant
 
 from .test_allocation import PRESETS, ROOT, vehicle_path

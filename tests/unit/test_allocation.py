@@ -11,8 +11,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from common.config import load_vehicle
-from fcu.allocation import (
+from common.config.scenario import load_vehicle
+from fcu.control.allocation import (
     Allocator,
     allocation_matrix,
     hover_command,

@@ -1,4 +1,4 @@
-"""The approach planner (fcu/approach.py): its blend is smooth to the acceleration, a long
+"""The approach planner (fcu/reference/approach.py): its blend is smooth to the acceleration, a long
 step cruises at the speed limit, the duration found is the shortest that fits every
 actuator, a rotation that flips a tilt is found, and a new sample mid-approach keeps the
 reference continuous in acceleration too."""
@@ -12,14 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import load_vehicle
+from common.config.scenario import load_vehicle
 from common.quaternion import q_exp
-from fcu import approach, offboard
-from fcu.approach import Setpoint, blend
-from fcu.feasibility import envelope
-from fcu.manual import StickSettings
-from fcu.offboard import Target
-from fcu.tracker import Reference, pose_ref
+from fcu.control.tracker import Reference, pose_ref
+from fcu.envelope.feasibility import envelope
+from fcu.modes import offboard
+from fcu.modes.manual import StickSettings
+from fcu.modes.offboard import Target
+from fcu.reference import approach
+from fcu.reference.approach import Setpoint, blend
 
 ROOT = Path(__file__).resolve().parents[2]
 LIM = offboard.limits(StickSettings())

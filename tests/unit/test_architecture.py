@@ -1,181 +1,147 @@
-"""The plant and the controller stay independent (docs/architecture.md)."""
+"""The architecture's one-way edges, checked on every module's whole import closure
+(docs/architecture.md): the plant and the controller stay independent, the pure packages
+load no I/O even through other modules, only the FCU's edge talks to the world, and the
+ground station loads the flight code only in the runners that start it."""
 
 from __future__ import annotations
 
-import ast
-from pathlib import Path
-
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tools.codemap import (
+    ROOT,
+    Graph,
+    circles,
+    closure,
+    import_graph,
+    loading_graph,
+    module_paths,
+    modules_per_folder,
+    path_to,
+)
+
+MODULES = module_paths()
+GRAPH = import_graph(MODULES)
+LOADS = loading_graph(GRAPH)  # importing a.b.c also runs a and a.b
+
+# The I/O edges, by package: every other module of common/, fcu/ and sitl/ is pure (no
+# MAVLink library, no links, no clocks, no threads, no processes, not even through the
+# modules it imports). A new module is pure unless it joins an edge. gcs/ is all edge.
+EDGE = (
+    "fcu.edge",  # the process, its links, protocols, telemetry and onboard log
+    "common.links", "common.process", "common.logs.ulog", "common.logs.px4_topics",
+    "common.wire.mavlink", "common.wire.simlink", "common.wire.mission_messages",
+    "sitl.node", "sitl.server", "sitl.sensor_feed", "sitl.world", "sitl.truth_log",
+    "sitl.firmware.ardupilot_json", "sitl.firmware.px4_hil",
+)
+IO = {"pymavlink", "zenoh", "serial", "socket", "select", "selectors", "time", "threading",
+      "signal", "subprocess", "multiprocessing", "concurrent", "asyncio"}
+# The ground station's runners: they start the FCU and the plant (in-process, as processes,
+# in a campaign's worker, the estimator's replay), so they alone may load fcu/ and sitl/.
+RUNNERS = ("gcs.run.inprocess", "gcs.run.process_run", "gcs.run.table1_run", "gcs.run.replay",
+           "gcs.campaign.worker")
 
 
-# The purity rule, by package: every module of common/, fcu/ and sitl/ is pure (no MAVLink,
-# no links, no clocks, no threads) except its I/O edge, named here. A new module is pure
-# unless it joins an edge, so a split keeps every part under the rule. gcs/ is all edge.
-EDGE = {
-    "common": ("common/links", "common/zenoh_link.py", "common/mavlink.py", "common/simlink.py",
-               "common/mission_items.py", "common/jit.py", "common/ulog.py",
-               "common/entry.py", "common/startup.py", "common/program.py", "common/parent.py",
-               "common/cliargs.py"),
-    "fcu": ("fcu/node.py", "fcu/sim_bridge.py", "fcu/gcs_server.py", "fcu/gcs_commands.py",
-            "fcu/gcs_params.py", "fcu/mission_protocol.py", "fcu/telemetry.py",
-            "fcu/onboard_log.py", "fcu/params_doc.py", "fcu/work_process.py",
-            "fcu/node_args.py"),
-    "sitl": ("sitl/node.py", "sitl/server.py", "sitl/ardupilot_json.py", "sitl/px4_hil.py",
-             "sitl/sensor_feed.py", "sitl/truth_log.py"),
-}
-IO = {"pymavlink", "zenoh", "time", "socket", "threading", "select", "subprocess", "signal",
-      "common.mavlink", "common.links", "common.simlink", "common.zenoh_link"}
+def _under(name: str, prefixes: tuple[str, ...] | str) -> bool:
+    prefixes = (prefixes,) if isinstance(prefixes, str) else prefixes
+    return any(name == p or name.startswith(p + ".") for p in prefixes)
 
 
-def _pure_modules() -> list[str]:
-    found = []
-    for package, edge in EDGE.items():
-        for path in sorted((ROOT / package).rglob("*.py")):
-            name = str(path.relative_to(ROOT))
-            if not any(name == e or name.startswith(e + "/") for e in edge):
-                found.append(name)
-    return found
+def pure_modules(graph: Graph) -> list[str]:
+    return sorted(m for m in graph if _under(m, ("common", "fcu", "sitl")) and m != "common"
+                  and not _under(m, EDGE) and m not in ("fcu", "sitl"))
 
 
-PURE_MODULES = _pure_modules()
+def io_loaded(loads: Graph, module: str) -> list[str]:
+    """What of the I/O (IO, the edges) `module` loads, directly or through other modules, each
+    with one chain that loads it (empty when the module is pure)."""
+    found = closure(loads, module)
+    bad = sorted({m for m in found if m in IO or _under(m, EDGE)})
+    return [" -> ".join(path_to(loads, module, m)) for m in bad]
 
 
-def _imports(package: str) -> set[str]:
-    found = set()
-    paths = (ROOT / package).rglob("*.py") if (ROOT / package).is_dir() else [ROOT / package]
-    for path in paths:
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if isinstance(node, ast.Import):
-                found |= {alias.name for alias in node.names}
-            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-                found.add(node.module)
-    return found
+def forbidden_loads(loads: Graph, module: str, forbidden: tuple[str, ...],
+                    through: tuple[str, ...] = ()) -> list[str]:
+    """The modules under `forbidden` that `module` loads, each with its chain, not counting
+    what it loads through the modules under `through` (whose imports are cut)."""
+    cut = {m: (set() if _under(m, through) and m != module else t) for m, t in loads.items()}
+    return [" -> ".join(path_to(cut, module, m)) for m in sorted(closure(cut, module))
+            if _under(m, forbidden)]
 
 
-@pytest.mark.parametrize(("package", "forbidden"), [
-    ("sitl", {"fcu", "gcs"}),  # an independent plant makes closed-loop tests mean something
-    ("fcu", {"sitl", "gcs"}),
-    ("common", {"fcu", "sitl", "gcs"}),
+@pytest.mark.parametrize("module", pure_modules(GRAPH))
+def test_pure_modules_load_no_io(module):
+    """Given a module outside every edge, then nothing it loads, directly or through other
+    modules, is a MAVLink library, a link, a clock, a thread, a process or an edge module."""
+    assert io_loaded(LOADS, module) == []
+
+
+@pytest.mark.parametrize(("package", "forbidden", "why"), [
+    ("sitl", ("fcu", "gcs"), "an independent plant makes closed-loop tests mean something"),
+    ("fcu", ("sitl", "gcs"), "the controller flies real vehicles without the simulator"),
+    ("common", ("fcu", "sitl", "gcs"), "the shared parts are shared, not owned"),
 ])
-def test_package_does_not_import(package, forbidden):
-    """Given a package, then it imports none of the packages it must stay apart from."""
-    imported = {m.split(".")[0] for m in _imports(package)}
-    assert imported, f"no imports found in {package}: the scan is broken"
-    assert not imported & forbidden
+def test_package_loads_none_of_the_packages_it_stays_apart_from(package, forbidden, why):
+    """Given every module of a package, then its whole import closure holds none of the
+    packages it must stay apart from."""
+    found = [chain for m in GRAPH if _under(m, package)
+             for chain in forbidden_loads(LOADS, m, forbidden)]
+    assert found == [], why
+
+
+def test_only_the_fcu_edge_and_the_runners_load_the_fcu_edge():
+    """Given every module, then only fcu/edge itself and the ground station's runners (which
+    are the process edge of an FCU they run in-process) load a module of fcu/edge."""
+    found = [chain for m in GRAPH if not _under(m, ("fcu.edge", *RUNNERS, "gcs"))
+             for chain in forbidden_loads(LOADS, m, ("fcu.edge",))]
+    assert found == []
+
+
+def test_gcs_loads_the_flight_code_only_through_its_runners():
+    """Given every module of gcs/, then fcu/ and sitl/ are loaded only through a runner; and
+    the reports, which read run folders, load neither even through a runner."""
+    found = [chain for m in GRAPH if _under(m, "gcs") and not _under(m, RUNNERS)
+             for chain in forbidden_loads(LOADS, m, ("fcu", "sitl"), through=RUNNERS)]
+    assert found == []
+    reports = [chain for m in GRAPH if _under(m, "gcs.report")
+               for chain in forbidden_loads(LOADS, m, ("fcu", "sitl"))]
+    assert reports == []
+
+
+def test_the_rules_see_through_other_modules(tmp_path):
+    """Given modules whose I/O or controller is two imports away, or behind a package's
+    __init__, then the rules find each with its chain (so the silence above means
+    something), and a runner's imports are cut only where the rule says so."""
+    graph: Graph = {"common.a": {"common.b"}, "common.b": {"time"},
+                    "sitl.p": {"sitl.q"}, "sitl.q": {"common.c"}, "common.c": {"fcu.x"},
+                    "fcu.x": set(), "fcu.y.z": set(), "fcu.y": {"socket"},
+                    "gcs.cli": {"gcs.run.inprocess"}, "gcs.run.inprocess": {"fcu.x"},
+                    "gcs.run": set()}
+    loads = loading_graph(graph)
+    assert io_loaded(loads, "common.a") == ["common.a -> common.b -> time"]
+    assert io_loaded(loads, "fcu.y.z") == ["fcu.y.z -> fcu.y -> socket"]
+    assert forbidden_loads(loads, "sitl.p", ("fcu",)) == ["sitl.p -> sitl.q -> common.c -> fcu.x"]
+    assert forbidden_loads(loads, "gcs.cli", ("fcu",), through=("gcs.run.inprocess",)) == []
+    assert forbidden_loads(loads, "gcs.cli", ("fcu",)) == \
+        ["gcs.cli -> gcs.run.inprocess -> fcu.x"]
 
 
 def test_the_edges_exist_and_the_rule_covers_the_core():
-    """Given the edge lists, then each names a module that exists (a renamed edge would
-    silently become pure-checked or unchecked), and the core modules are under the rule."""
-    for edge in EDGE.values():
-        for name in edge:
-            assert (ROOT / name).exists(), f"{name} in EDGE does not exist"
-    for core in ("fcu/tracker.py", "fcu/allocation.py", "fcu/pipeline.py", "sitl/plant.py",
-                 "common/frames.py", "fcu/commander.py"):
-        assert core in PURE_MODULES
-
-
-@pytest.mark.parametrize("module", PURE_MODULES)
-def test_pure_modules_import_no_io(module):
-    """Given a module outside its package's edge, then it imports neither pymavlink, zenoh,
-    the links nor clocks, threads or processes."""
-    imported = _imports(module)
-    assert not {m for m in imported if m in IO or m.split(".")[0] in IO
-                or any(m.startswith(i + ".") for i in IO)}
-
-
-PACKAGES = ("common", "fcu", "sitl", "gcs")
-
-
-def _module_paths(root: Path = ROOT, packages: tuple[str, ...] = PACKAGES) -> dict[str, Path]:
-    """Every module of the packages by dotted name (a package by its __init__)."""
-    found = {}
-    for package in packages:
-        for path in (root / package).rglob("*.py"):
-            parts = list(path.relative_to(root).with_suffix("").parts)
-            if parts[-1] == "__init__":
-                parts = parts[:-1]
-            found[".".join(parts)] = path
-    return found
-
-
-def _import_graph(modules: dict[str, Path]) -> dict[str, set[str]]:
-    """Module -> the project's modules it imports, counting every import statement: at the
-    top, inside functions and under `if TYPE_CHECKING:` alike (a circle hidden in a function
-    is still a circle), relative imports resolved, `from a import b` naming module a.b when
-    b is one."""
-    graph: dict[str, set[str]] = {name: set() for name in modules}
-    for name, path in modules.items():
-        package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
-        for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            if isinstance(node, ast.Import):
-                targets = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom):
-                if node.level:
-                    base = package[:len(package) - (node.level - 1)]
-                    module = ".".join(base + ([node.module] if node.module else []))
-                else:
-                    module = node.module or ""
-                targets = [module] + [f"{module}.{alias.name}" for alias in node.names]
-            else:
-                continue
-            for target in targets:
-                while target and target not in modules:  # the deepest module named
-                    target = target.rpartition(".")[0]
-                if target and target != name:
-                    graph[name].add(target)
-    return graph
-
-
-def _circles(graph: dict[str, set[str]]) -> list[list[str]]:
-    """The strongly connected components of more than one module (Tarjan, iterative)."""
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    on_stack: set[str] = set()
-    found: list[list[str]] = []
-    for root in sorted(graph):
-        if root in index:
-            continue
-        work = [(root, iter(sorted(graph[root])))]
-        index[root] = low[root] = len(index)
-        stack.append(root)
-        on_stack.add(root)
-        while work:
-            node, children = work[-1]
-            child = next(children, None)
-            if child is not None:
-                if child not in index:
-                    index[child] = low[child] = len(index)
-                    stack.append(child)
-                    on_stack.add(child)
-                    work.append((child, iter(sorted(graph[child]))))
-                elif child in on_stack:
-                    low[node] = min(low[node], index[child])
-                continue
-            work.pop()
-            if work:
-                low[work[-1][0]] = min(low[work[-1][0]], low[node])
-            if low[node] == index[node]:
-                component = []
-                while True:
-                    member = stack.pop()
-                    on_stack.discard(member)
-                    component.append(member)
-                    if member == node:
-                        break
-                if len(component) > 1:
-                    found.append(sorted(component))
-    return found
+    """Given the edge and runner lists, then each names a module that exists (a renamed edge
+    would silently become pure-checked or unchecked), and the core is under the rule."""
+    for name in (*EDGE, *RUNNERS):
+        assert name in GRAPH, f"{name} does not exist"
+    pure = pure_modules(GRAPH)
+    for core in ("fcu.control.tracker", "fcu.control.allocation", "fcu.pipeline",
+                 "sitl.plant", "common.frames", "fcu.modes.commander", "fcu.estimator.ekf",
+                 "fcu.mission.validation", "common.jit", "common.warm_ups"):
+        assert core in pure
 
 
 def test_circle_finder_finds_hidden_circles(tmp_path):
     """Given modules that import each other only inside a function, under TYPE_CHECKING or
     relatively, then the finder reports each circle (so the next test's silence means
     something), and not a one-way import."""
-    assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     pkg = tmp_path / "pkg"
     (pkg / "sub").mkdir(parents=True)
     (pkg / "__init__.py").write_text("")
@@ -184,25 +150,35 @@ def test_circle_finder_finds_hidden_circles(tmp_path):
     (pkg / "b.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
                               "    from pkg.a import g\n")
     (pkg / "sub" / "x.py").write_text("def f():\n    from .. import sub\n")
-    (pkg / "c.py").write_text("import pkg.a\n")
-    graph = _import_graph(_module_paths(tmp_path, ("pkg",)))
-    assert graph["pkg.c"] == {"pkg.a"}
-    assert _circles(graph) == [["pkg.a", "pkg.b"], ["pkg.sub", "pkg.sub.x"]]
+    (pkg / "c.py").write_text("import pkg.a\nimport time\n")
+    graph = import_graph(module_paths(tmp_path, ("pkg",)))
+    assert graph["pkg.c"] == {"pkg.a", "time"}
+    assert circles({m: t & graph.keys() for m, t in graph.items()}) == \
+        [["pkg.a", "pkg.b"], ["pkg.sub", "pkg.sub.x"]]
 
 
 def test_no_import_circle():
     """Given every import in common, fcu, sitl and gcs, wherever it is written, then no
     module reaches itself through its imports."""
-    assert _circles(_import_graph(_module_paths())) == []
+    assert circles({m: t & GRAPH.keys() for m, t in GRAPH.items()}) == []
 
 
 MAX_LINES = 500  # one job per file: past this a module has several (split it by job)
+MAX_MODULES = 15  # a folder past this holds several roles (split it by role)
 
 
 def test_no_module_over_the_line_limit():
     """Given every module of the four packages, generated ones included, then none is longer
     than MAX_LINES."""
     lengths = {str(path.relative_to(ROOT)): len(path.read_text().splitlines())
-               for path in _module_paths().values()}
+               for path in MODULES.values()}
     assert len(lengths) > 50, "the scan found too few modules: it is broken"
     assert {path: n for path, n in lengths.items() if n > MAX_LINES} == {}
+
+
+def test_no_folder_over_the_module_limit():
+    """Given every folder of the four packages, then none holds more than MAX_MODULES
+    modules: the tree shows the roles."""
+    counts = modules_per_folder()
+    assert len(counts) > 10, "the scan found too few folders: it is broken"
+    assert {folder: n for folder, n in counts.items() if n > MAX_MODULES} == {}

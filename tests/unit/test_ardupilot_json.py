@@ -1,4 +1,4 @@
-"""ArduPilot's JSON physics interface (sitl.ardupilot_json): servo packets, the JSON answer
+"""ArduPilot's JSON physics interface (sitl.firmware.ardupilot_json): servo packets, the JSON answer
 and its frames, stepping on new frame counts only, restarts, ArduPilot's clock, the hexa X
 motor map, and the server on loopback against a scripted ArduPilot side."""
 
@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import ActuatorFault, ConfigError, load_scenario, load_vehicle
+from common.config.scenario import ActuatorFault, ConfigError, load_scenario, load_vehicle
 from common.links import LinkError, free_port
+from common.logs.ulog import read_topic
 from common.quaternion import q_exp, q_mul
-from common.ulog import read_topic
-from sitl.ardupilot_json import (
+from sitl.firmware.ardupilot_json import (
     MAGIC_16,
     MAGIC_32,
     JsonPhysics,
@@ -314,7 +314,7 @@ def test_server_takes_only_udpin(scenario) -> None:
 
 def test_sensor_profiles_are_refused(scenario) -> None:
     """ArduPilot simulates its sensors from the exact state: a profile would be ignored."""
-    from common.sensors_config import resolve_sensor_profile
+    from common.config.sensors import resolve_sensor_profile
 
     noisy = dataclasses.replace(scenario, sensors=resolve_sensor_profile("mocap-indoor"))
     with pytest.raises(ConfigError, match=r"mocap-indoor.*ArduPilot makes its own sensors"):
@@ -326,7 +326,7 @@ def test_sensor_profiles_are_refused(scenario) -> None:
 def test_a_touchdown_is_in_the_accelerometer():
     """Given the impulse of a touchdown step, then accel_body holds it (the velocity
     change over the step), without it the resting g."""
-    from sitl.ardupilot_json import state_json
+    from sitl.firmware.ardupilot_json import state_json
     from sitl.plant import ActuatorCommand, Plant
 
     plant = Plant(load_scenario(ROOT / "config" / "scenarios" / "px4_hexa.toml").vehicle)
@@ -347,7 +347,7 @@ def test_a_touchdown_reaches_arducopter_spread_over_50_ms_in_full(scenario):
     (1 m/s up) and is spread over CONTACT_SPREAD_S (60 frames, none above 1/20 of it):
     ArduPilot's IMUs sample the latest frame at their own rates, and a one-frame impulse
     was taken 0, 1 or 2 times (EKF3 then 0.33-0.37 m off the ground after landings)."""
-    from sitl.ardupilot_json import CONTACT_SPREAD_S
+    from sitl.firmware.ardupilot_json import CONTACT_SPREAD_S
 
     phys = JsonPhysics(scenario)
     phys.state = phys.plant.initial_state((0.0, 0.0, 0.0005), on_ground=False)._replace(

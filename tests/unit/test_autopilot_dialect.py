@@ -11,15 +11,15 @@ from types import SimpleNamespace
 import pytest
 from pymavlink import mavutil
 
-from common import modes as px4_modes
-from common.identity import FLIGHT_CUSTOM_VERSION, flies_pose
-from common.mavlink import encoder, parser
-from fcu.telemetry import autopilot_version
+from common.wire import modes as px4_modes
+from common.wire.identity import FLIGHT_CUSTOM_VERSION, flies_pose
+from common.wire.mavlink import encoder, parser
+from fcu.edge.telemetry import autopilot_version
 from gcs.autopilot import PORTABLE_NAMES, UnknownMode, autopilot_of, commands, health, streams
 from gcs.autopilot.dialect import STATION_DIALECT as A
-from gcs.session import GcsError
 from gcs.vehicle_link.actions import set_mode
 from gcs.vehicle_link.pose import PoseTarget, pose_errors
+from gcs.vehicle_link.session import GcsError
 from gcs.vehicle_link.snapshot import Snapshot
 from gcs.vehicle_link.status import heartbeat_mode, mode_name
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from common.config import (
+from common.config.scenario import (
     ActuatorFault,
     ConfigError,
     load_scenario,

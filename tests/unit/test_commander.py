@@ -1,4 +1,4 @@
-"""The commander's landing (fcu/commander.py): the set-point sinks below the planned end of
+"""The commander's landing (fcu/modes/commander.py): the set-point sinks below the planned end of
 the descent until the land detector sees the vehicle held up and still, then disarms; a
 vehicle still in the air is never taken for landed."""
 
@@ -11,24 +11,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import load_gains, load_vehicle
-from common.mav_enums import MAV_RESULT
-from common.modes import Mode
+from common.config.scenario import load_gains, load_vehicle
 from common.outcome import CRASH, FAILSAFE
-from fcu.failsafe import FailsafeSettings
-from fcu.landing import (
+from common.wire.mav_enums import MAV_RESULT
+from common.wire.modes import Mode
+from fcu.control.tracker import VehicleState, pose_ref
+from fcu.edge.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
+from fcu.mission.limits import MissionLimits
+from fcu.modes.landing import (
     LANDED_STILL_S,
     TOUCHDOWN_BELOW_M,
     TOUCHDOWN_DEPTH_M,
     TOUCHDOWN_RAMP_S,
     touchdown_speed_cap,
 )
-from fcu.manual import StickSettings
-from fcu.mission.limits import MissionLimits
-from fcu.mode_references import FlightSettings
+from fcu.modes.manual import StickSettings
+from fcu.modes.mode_references import FlightSettings
 from fcu.pipeline import Pipeline
-from fcu.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
-from fcu.tracker import VehicleState, pose_ref
+from fcu.safety.failsafe import FailsafeSettings
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -382,7 +382,7 @@ def test_a_refused_arming_is_said_once_in_the_vehicles_words():
 def test_the_failsafe_in_force_is_a_member_whose_value_the_logs_and_texts_name():
     """`Pipeline.failsafe` is a `Failsafe` member: NONE is empty and false; the others are
     true and read as the words the logs, STATUSTEXTs and metrics carry."""
-    from fcu.failsafe import CRITICAL_FAILSAFES, Failsafe
+    from fcu.safety.failsafe import CRITICAL_FAILSAFES, Failsafe
     assert not Failsafe.NONE and str(Failsafe.GCS_LOST) == "GCS link lost"
     assert all(f and f.value for f in Failsafe if f is not Failsafe.NONE)
     assert set(CRITICAL_FAILSAFES) == {Failsafe.DIVERGED, Failsafe.NON_FINITE}

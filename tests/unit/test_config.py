@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from common.config import (
+from common.config.scenario import (
     ConfigError,
     Gains,
     check_stability,

@@ -1,4 +1,4 @@
-"""The real-time loop's deadlines (`fcu.deadlines`): a step more than half a period late is a
+"""The real-time loop's deadlines (`fcu.edge.deadlines`): a step more than half a period late is a
 miss, the periods it passed over are misses too, the grid keeps its phase, and the first
 misses are kept with when and how late."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from fcu.deadlines import KEPT, Deadlines
+from fcu.edge.deadlines import KEPT, Deadlines
 
 PERIOD = 0.002
 

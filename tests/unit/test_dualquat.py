@@ -1,4 +1,4 @@
-"""Property tests of the quaternion / dual-quaternion algebra in fcu.dualquat."""
+"""Property tests of the quaternion / dual-quaternion algebra in fcu.control.dualquat."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
-from fcu.dualquat import (
+from fcu.control.dualquat import (
     DQ_IDENTITY,
     dq_ad,
     dq_conj,

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from common.config.sensors import load_sensor_profile
 from common.quaternion import q_conj, q_log, q_mul
-from common.sensors_config import load_sensor_profile
 from fcu.estimator.ekf import Estimator
 from fcu.estimator.filter import OK_ATT, OK_POS, _measurement, apply_update, fuse_begin, fuse_end
 from fcu.estimator.inputs import ImuInput, PoseInput

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from common.config import load_gains, load_vehicle
+from common.config.scenario import load_gains, load_vehicle
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common import px4_topics as px4
 from common.frames import q_ned_frd_to_enu_flu
-from common.ulog import open_ulog
-from gcs import replay as rp
+from common.logs import px4_topics as px4
+from common.logs.ulog import open_ulog
+from gcs.run import replay as rp
 
 ROOT = Path(__file__).resolve().parents[2]
 CASE1 = ROOT / "config" / "scenarios" / "case1_figure8.toml"

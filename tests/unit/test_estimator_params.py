@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from common.config import load_gains, load_vehicle
+from common.config.scenario import load_gains, load_vehicle
 from fcu.params import ParamError, ParamStore, apply_params
 from fcu.pipeline import Pipeline
 

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from common import quaternion as quat
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from common.quaternion import zyx_euler_rows
 from common.quaternion import zyx_euler_rows as zyx_euler
-from fcu.dualquat import q_exp
-from fcu.trajectory import make_trajectory
-from gcs.euler import zyx_events
+from fcu.control.dualquat import q_exp
+from fcu.reference.trajectory import make_trajectory
+from gcs.report.euler import zyx_events
 
 from ..closed_loop.conftest import SCENARIOS
 

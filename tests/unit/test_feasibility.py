@@ -1,4 +1,4 @@
-"""Missions the vehicle can fly (fcu/feasibility.py, fcu/mission/): nominal wrench, rotor
+"""Missions the vehicle can fly (fcu/envelope/feasibility.py, fcu/mission/): nominal wrench, rotor
 speed envelope, time scaling, stretching of speed-timed items, refusal of user-timed ones."""
 
 from __future__ import annotations
@@ -13,20 +13,20 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.config import Gains, load_scenario, load_vehicle
-from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import MissionItem, local_xy
-from fcu.allocation import Allocator
-from fcu.dualquat import q_exp, q_rotate_inv
-from fcu.excess import KINDS, excess_kernel
-from fcu.feasibility import MARGIN, Envelope, envelope, nominal_wrench
+from common.config.scenario import Gains, load_scenario, load_vehicle
+from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import MissionItem, local_xy
+from fcu.control.allocation import Allocator
+from fcu.control.dualquat import q_exp, q_rotate_inv
+from fcu.control.tracker import DualQuaternionTracker, Reference, VehicleState
+from fcu.envelope.excess import KINDS, excess_kernel
+from fcu.envelope.feasibility import MARGIN, Envelope, envelope, nominal_wrench
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import Figure as _Figure
 from fcu.mission.segments import Move as _Move
 from fcu.mission.validation import MissionCheck, check_mission, validate_mission
-from fcu.tracker import DualQuaternionTracker, Reference, VehicleState
-from gcs.scenario_mission import scenario_mission
+from gcs.run.scenario_mission import scenario_mission
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]
@@ -99,7 +99,8 @@ def test_nominal_wrench_is_the_trackers_at_zero_error(x):
 @pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
 def test_envelope_speeds_are_the_allocators(vehicle):
     """Given a reference, then the envelope's rotor speeds are those the flight allocation
-    (fcu.allocation.Allocator) gives for the nominal wrench, and the limit is 85 % of w_max."""
+    (fcu.control.allocation.Allocator) gives for the nominal wrench, and the limit is 85 % of
+    w_max."""
     env = Envelope(vehicle)
     assert env.limit == MARGIN * 1700.0 == pytest.approx(1445.0)
     ref = Reference(ZERO, q_exp((0.3, 0.1, -0.7)), (1.0, 0.0, 0.0), (2.0, -1.0, 3.0),
@@ -330,12 +331,12 @@ def test_five_hundred_items_are_checked():
 
 
 def test_feasibility_is_pure():
-    """fcu/feasibility.py imports neither MAVLink nor I/O nor clocks."""
-    tree = ast.parse((ROOT / "fcu/feasibility.py").read_text())
+    """fcu/envelope/feasibility.py imports neither MAVLink nor I/O nor clocks."""
+    tree = ast.parse((ROOT / "fcu/envelope/feasibility.py").read_text())
     names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     names |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
-    io = {"pymavlink", "zenoh", "time", "socket", "threading", "select", "common.mavlink",
-          "common.links", "common.simlink", "fcu.mission", "fcu.mission_protocol"}
+    io = {"pymavlink", "zenoh", "time", "socket", "threading", "select", "common.wire.mavlink",
+          "common.links", "common.wire.simlink", "fcu.mission", "fcu.edge.mission_protocol"}
     assert names and not {m for m in names if m in io or m.split(".")[0] in io}
 
 
@@ -405,7 +406,7 @@ def test_a_climb_that_brakes_beyond_g_does_not_fit_on_planar_rotors(height_m):
     not fit, naming a tilt servo; the shortest duration that fits brakes at under g and keeps
     every rotor above the floor; and judged without the sample-to-sample turns (the check of
     before) the reversing climb is taken for flyable."""
-    from fcu.feasibility import FLOOR, TILT_STEP_S
+    from fcu.envelope.feasibility import FLOOR, TILT_STEP_S
     env = envelope(PLANAR)
     seg = _Move(0, 0.0, (0.0, 0.0, 0.0), (0.0, 0.0, height_m), LEVEL, None, height_m / 1.0, 0.0)
     sc = env.scaling(seg)

@@ -9,7 +9,7 @@ import time
 from types import SimpleNamespace
 from typing import Any
 
-from common.mavlink import MAV
+from common.wire.mavlink import MAV
 from gcs.autopilot.commands import flight_state
 
 M = MAV

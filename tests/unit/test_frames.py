@@ -18,7 +18,7 @@ from common.frames import (
     q_enu_flu_to_ned_frd,
     q_ned_frd_to_enu_flu,
 )
-from fcu.dualquat import cross, q_exp, q_mul, q_rotate
+from fcu.control.dualquat import cross, q_exp, q_mul, q_rotate
 
 finite = st.floats(-100.0, 100.0, allow_nan=False)
 vec = st.tuples(finite, finite, finite)

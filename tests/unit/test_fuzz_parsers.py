@@ -1,6 +1,6 @@
 """Property-based fuzzing of everything that parses input from outside: the simulator link's
-lean frame parser (`common.simlink`), the vehicle side of the mission protocol
-(`fcu.mission_protocol.MissionServer`) and the mission files (`gcs.mission_files`).
+lean frame parser (`common.wire.simlink`), the vehicle side of the mission protocol
+(`fcu.edge.mission_protocol.MissionServer`) and the mission files (`gcs.mission_files`).
 
 Arbitrary input must never raise, never yield a frame whose CRC is wrong, account for every
 byte it rejects, and never change the stored mission unless an upload (or a clear) is
@@ -16,9 +16,9 @@ from pathlib import Path
 from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
-from common.mavlink import MAV, encoder, pack, parser
-from common.mission_items import MissionItem
-from common.simlink import (
+from common.wire.mavlink import MAV, encoder, pack, parser
+from common.wire.mission_items import MissionItem
+from common.wire.simlink import (
     HIL_ACTUATOR_CONTROLS_ID,
     HIL_SENSOR_ID,
     ODOMETRY_ID,
@@ -34,9 +34,9 @@ from common.simlink import (
     unpack_hil_sensor,
     unpack_odometry,
 )
+from fcu.edge.mission_protocol import MissionServer, item_from_message
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import validate_mission
-from fcu.mission_protocol import MissionServer, item_from_message
 from gcs.mission_files import read_mission
 from gcs.mission_files.items import MissionFileError
 from gcs.mission_files.toml import parse_toml

@@ -1,4 +1,4 @@
-"""The FCU's ground-station dispatch as one error boundary (fcu/gcs_server.py).
+"""The FCU's ground-station dispatch as one error boundary (fcu/edge/gcs_server.py).
 
 Property: every message type the server handles, with arbitrary field values (NaN, +-inf,
 0, the extremes of each integer type, huge floats), reaches no internal error, and every
@@ -14,16 +14,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from common.config import load_gains, load_vehicle
+from common.config.scenario import load_gains, load_vehicle
 from common.links import Link, LinkUrl
-from common.mavlink import MAV, encoder, pack, parser
-from common.mission_items import PX4_SITL_HOME
-from fcu.gcs_server import COMPONENT, HANDLED, GcsServer
-from fcu.mission_protocol import MissionServer
+from common.wire.mavlink import MAV, encoder, pack, parser
+from common.wire.mission_items import PX4_SITL_HOME
+from fcu.control.tracker import VehicleState
+from fcu.edge.gcs_server import COMPONENT, HANDLED, GcsServer
+from fcu.edge.mission_protocol import MissionServer
+from fcu.edge.telemetry import LINK_BUDGET_MSG_S, MAX_INTERVAL_US
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
-from fcu.telemetry import LINK_BUDGET_MSG_S, MAX_INTERVAL_US
-from fcu.tracker import VehicleState
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]
@@ -285,7 +285,7 @@ def test_a_forged_frame_does_not_lock_a_signed_stream_out():
     """Given a signed link, when a frame signed with another key and a timestamp far ahead
     arrives on a sender's stream, then it is refused and the sender's next validly signed
     frames are still accepted; a replay is refused."""
-    from common.mavlink import signed_parser
+    from common.wire.mavlink import signed_parser
 
     key, stolen = bytes(range(32)), bytes(32)
     stamps: dict = {}
@@ -303,7 +303,7 @@ def test_a_forged_frame_does_not_lock_a_signed_stream_out():
         msgs = fcu_parser.parse_buffer(data) or []
         return any(m.get_type() == "HEARTBEAT" for m in msgs)
 
-    from common.mavlink import signing_timestamp
+    from common.wire.mavlink import signing_timestamp
 
     now = signing_timestamp()
     first = frame(key, now)
@@ -348,7 +348,7 @@ def test_mission_replies_go_to_the_uploading_link_and_notes_are_bounded():
 def test_parsers_are_bounded_whatever_the_peers():
     """Given datagrams from 5,000 peers (source ports cycling), then at most MAX_PARSERS
     parsers are kept."""
-    from fcu.gcs_server import MAX_PARSERS
+    from fcu.edge.gcs_server import MAX_PARSERS
 
     server, _ = make_server()
     hb = pack(encoder(255, 190), M.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))
@@ -495,8 +495,8 @@ def test_a_retried_command_is_answered_not_executed_again():
     with confirmation 1 (its ACK was lost or late, as on a loaded machine), then the vehicle
     answers ACCEPTED again and the mission keeps its start time; a fresh MISSION_START
     (confirmation 0) and a retry that differs in a parameter are executed."""
-    from common.config import load_scenario
-    from gcs.scenario_mission import scenario_mission
+    from common.config.scenario import load_scenario
+    from gcs.run.scenario_mission import scenario_mission
 
     server, links = make_server()
     c = server.pipeline.commander

@@ -1,5 +1,5 @@
-"""The station's waiting policy (`gcs.patience`) against a scripted vehicle on loopback UDP:
-a vehicle that is busy but heard (its heartbeats go on) is waited for, past the protocols'
+"""The station's waiting policy (`gcs.vehicle_link.patience`) against a scripted vehicle on loopback
+UDP: a vehicle that is busy but heard (its heartbeats go on) is waited for, past the protocols'
 timeouts, up to the ceiling; a vehicle that falls silent is given up on after the silence
 limit, not the ceiling, and the error says which."""
 
@@ -10,12 +10,12 @@ import time
 
 import pytest
 
-from common.mavlink import MAV
-from common.mission_items import MissionItem
-from gcs.mission_client import MissionError, upload_detailed
-from gcs.patience import MISSION_ITEM, SILENCE_S, Budget, Wait
-from gcs.session import GcsError, Session
+from common.wire.mavlink import MAV
+from common.wire.mission_items import MissionItem
+from gcs.vehicle_link.mission_client import MissionError, upload_detailed
 from gcs.vehicle_link.params import param_set
+from gcs.vehicle_link.patience import MISSION_ITEM, SILENCE_S, Budget, Wait
+from gcs.vehicle_link.session import GcsError, Session
 from tests.unit.scripted_autopilot import ScriptedAutopilot
 
 M = MAV

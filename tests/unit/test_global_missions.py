@@ -1,7 +1,7 @@
 """Missions in global frames: the geodetic <-> local conversion (common/frames.py), items
-converted through the home (common/mission_items.py), the vehicle's acceptance of global
+converted through the home (common/wire/mission_items.py), the vehicle's acceptance of global
 items and its refusal of local items that MAVProxy scaled by 1e7 (fcu/mission/,
-fcu/mission_protocol.py)."""
+fcu/edge/mission_protocol.py)."""
 
 from __future__ import annotations
 
@@ -11,22 +11,22 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.config import load_vehicle
+from common.config.scenario import load_vehicle
 from common.frames import EARTH_RADIUS_M, geodetic_to_ned, ned_to_geodetic
-from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import (
+from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import (
     GEO_FRAMES,
     HomePosition,
     MissionItem,
     item_from_message,
-    item_message,
     local_xy,
     to_global,
     to_local,
 )
+from common.wire.mission_messages import item_message
+from fcu.edge.mission_protocol import MissionServer
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission, localize
-from fcu.mission_protocol import MissionServer
 from gcs.mission_files.wpl import format_wpl
 
 from ..closed_loop.conftest import ROOT
@@ -174,7 +174,7 @@ def test_global_items_out_of_range_or_far_away():
 def _through_mavproxy(text: str, tmp_path) -> list[MissionItem]:
     """A WPL file as MAVProxy's `wp load` sends it: pymavlink's loader, then MAVProxy's own
     MISSION_ITEM -> MISSION_ITEM_INT conversion (x, y times 1e7, truncated). Imported here,
-    after common.mavlink has chosen MAVLink 2 for pymavlink's mavutil."""
+    after common.wire.mavlink has chosen MAVLink 2 for pymavlink's mavutil."""
     from MAVProxy.modules.lib.mission_item_protocol import MissionItemProtocolModule
     from pymavlink import mavwp
 

@@ -12,12 +12,12 @@ import time
 import pytest
 from pymavlink import mavutil
 
-from common.identity import FLIGHT_CUSTOM_VERSION
-from common.mavlink import MAV
+from common.wire.identity import FLIGHT_CUSTOM_VERSION
+from common.wire.mavlink import MAV
 from gcs.autopilot import autopilot_of
-from gcs.session import GcsError, Session
 from gcs.vehicle_link.goto import goto
 from gcs.vehicle_link.pose import PoseTarget
+from gcs.vehicle_link.session import GcsError, Session
 
 REFUSAL = "attitude not flown: tilt servo 2 would flip"
 PX4 = autopilot_of(type("Hb", (), {"autopilot": MAV.MAV_AUTOPILOT_PX4,

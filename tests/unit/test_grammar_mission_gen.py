@@ -22,7 +22,7 @@ from benchmarks.grammar_mission_gen import (
     item_phase,
 )
 from benchmarks.grammar_missions import refusal_ok
-from common.mission_items import PX4_SITL_HOME, to_local
+from common.wire.mission_items import PX4_SITL_HOME, to_local
 from fcu.compose import published_home
 from gcs.mission_files import read_mission, write_mission
 

@@ -10,19 +10,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import load_scenario, load_vehicle
-from fcu.allocation import (
+from common.config.scenario import load_scenario, load_vehicle
+from fcu.control.allocation import (
     ActuatorFigures,
     Allocator,
     LagCompensator,
     speed_lead,
     tilt_lead,
 )
-from fcu.core import FlightCore
+from fcu.control.core import FlightCore
+from fcu.control.tracker import DualQuaternionTracker, VehicleState
 from fcu.params import BY_NAME, ParamError, ParamStore, apply_params
 from fcu.pipeline import Pipeline
-from fcu.tracker import DualQuaternionTracker, VehicleState
-from fcu.trajectory import make_trajectory
+from fcu.reference.trajectory import make_trajectory
 from sitl.plant import Plant
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -174,8 +174,8 @@ def test_lead_depends_on_the_reference_only():
     correction, which moves by at most dt / T of the noise per period; the lead is not zero
     on the figure-infinity, leads each speed the way the nominal speed moves, with tau_up
     rising and tau_down falling."""
-    from fcu.allocation import MEAN_TAU_S
-    from fcu.feasibility import nominal_wrench
+    from fcu.control.allocation import MEAN_TAU_S
+    from fcu.envelope.feasibility import nominal_wrench
 
     refs = _case1_samples(30.0, 40)
     gains = load_scenario(ROOT / "config" / "scenarios" / "case1_figure8.toml").gains
@@ -209,7 +209,7 @@ def test_mean_correction_removes_the_rectified_thrust():
     rotor's mean thrust exceeds the ideal rotor's (it rises faster than it falls); the
     compensator's correction, driven by its rotor model, brings the mean back, and the
     plant's rotor under the corrected commands agrees."""
-    from fcu.allocation import AllocationResult, rotor_period
+    from fcu.control.allocation import AllocationResult, rotor_period
 
     rng = np.random.default_rng(3)
     n, w0 = 3000, 900.0

@@ -1,6 +1,6 @@
 """An honest outcome: the actuator monitor's reports make a run `limited` (common/outcome.py,
 fcu/pipeline.py), the errors are judged over the rows the vehicle is meant to follow
-(gcs/metrics.py `followed_rows`), and a campaign's summary counts limited runs apart."""
+(gcs/report/metrics.py `followed_rows`), and a campaign's summary counts limited runs apart."""
 
 from __future__ import annotations
 
@@ -10,18 +10,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import load_gains, load_scenario, load_vehicle
-from common.modes import Mode
+from common.config.scenario import load_gains, load_scenario, load_vehicle
+from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
 from common.outcome import LIMIT, classify
-from fcu.core import ONBOARD_COLUMNS
-from fcu.failsafe import FailsafeSettings
+from common.wire.modes import Mode
+from fcu.control.tracker import VehicleState
+from fcu.edge.setpoint_wire import position_target
 from fcu.pipeline import Pipeline
-from fcu.setpoint_wire import position_target
-from fcu.tracker import VehicleState
+from fcu.safety.failsafe import FailsafeSettings
 from gcs.campaign.load import load_campaign
 from gcs.campaign.report import write_report
-from gcs.metrics import ERROR_ROWS_RULE, build_metrics, followed_rows
-from sitl.plant import TRUTH_COLUMNS
+from gcs.report.metrics import ERROR_ROWS_RULE, build_metrics, followed_rows
 
 ROOT = Path(__file__).resolve().parents[2]
 

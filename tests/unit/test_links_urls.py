@@ -340,11 +340,11 @@ def test_serial_device_that_goes_away_is_not_a_busy_loop(pty_pair):
 
 
 def test_a_session_over_a_serial_line(pty_pair):
-    """The ground station's session (gcs/session.py) over serial:DEVICE:BAUD, with a tiny
-    MAVLink vehicle on the other end of the pty: heartbeat, then a refused command whose
+    """The ground station's session (gcs/vehicle_link/session.py) over serial:DEVICE:BAUD, with a
+    tiny MAVLink vehicle on the other end of the pty: heartbeat, then a refused command whose
     STATUSTEXT reason is kept."""
-    from common.mavlink import MAV, encoder, pack, parser
-    from gcs.session import Session
+    from common.wire.mavlink import MAV, encoder, pack, parser
+    from gcs.vehicle_link.session import Session
 
     master, path = pty_pair
     stop = threading.Event()

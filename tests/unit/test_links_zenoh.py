@@ -1,4 +1,4 @@
-"""Zenoh links (common/zenoh_link.py) under a flood: the queue fed by Zenoh's threads is
+"""Zenoh links (common/links/zenoh_link.py) under a flood: the queue fed by Zenoh's threads is
 bounded (the oldest samples go, counted), recv() returns bounded batches, and the pipe
 that wakes the caller's select never loses a wakeup. A router of the test's own runs in
 this process on a free port of 127.0.0.1; multicast scouting is off everywhere."""
@@ -15,7 +15,7 @@ import pytest
 import zenoh
 
 from common.links import RECV_BATCH, free_port, parse_url
-from common.zenoh_link import MAX_QUEUE, ZenohLink, client_config, router_running, run_router
+from common.links.zenoh_link import MAX_QUEUE, ZenohLink, client_config, router_running, run_router
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -13,8 +13,8 @@ import types
 import pytest
 from pymavlink import mavutil
 
-import gcs.session
-from common.mavlink import MAV
+import gcs.vehicle_link.session
+from common.wire.mavlink import MAV
 from gcs import cli
 from tests.unit.scripted_autopilot import ScriptedAutopilot
 
@@ -96,7 +96,7 @@ def test_stamps_never_go_back_when_the_wall_clock_does(capsys, vehicle, tmp_path
     clock = types.SimpleNamespace(**{k: getattr(time, k) for k in dir(time)
                                      if not k.startswith("_")})
     clock.time = stepping
-    monkeypatch.setattr(gcs.session, "time", clock)
+    monkeypatch.setattr(gcs.vehicle_link.session, "time", clock)
     path = tmp_path / "step.tlog"
     count = record(capsys, vehicle, path, 1.2)
     stamps = [t for _, t in read_tlog(path)]

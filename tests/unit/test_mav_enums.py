@@ -1,4 +1,4 @@
-"""common/mav_enums.py: every member's name and value as pymavlink's dialects have them
+"""common/wire/mav_enums.py: every member's name and value as pymavlink's dialects have them
 (common and ardupilotmega), so a typed-in number that is wrong fails here."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ os.environ["MAVLINK20"] = "1"
 from pymavlink.dialects.v20 import ardupilotmega
 from pymavlink.dialects.v20 import common as common_xml
 
-from common import mav_enums
+from common.wire import mav_enums
 
 ENUMS = [cls for _, cls in inspect.getmembers(mav_enums, inspect.isclass)
          if issubclass(cls, enum.IntEnum | enum.IntFlag) and cls.__module__ == mav_enums.__name__]

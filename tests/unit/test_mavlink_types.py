@@ -1,4 +1,4 @@
-"""The typed views of MAVLink messages (common/mavlink_types) match pymavlink."""
+"""The typed views of MAVLink messages (common/wire/mavlink_types) match pymavlink."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from common.mavlink import encoder
-from common.mavlink_types import as_message, protocol, state
-from common.mavlink_types.protocol import CommandLong
-from common.mavlink_types.state import Heartbeat, HilActuatorControls
+from common.wire.mavlink import encoder
+from common.wire.mavlink_types import as_message, protocol, state
+from common.wire.mavlink_types.protocol import CommandLong
+from common.wire.mavlink_types.state import Heartbeat, HilActuatorControls
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -12,18 +12,18 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import fcu.mission.codes as mission_mod
-from common.config import load_scenario
+from common.config.scenario import load_scenario
 from common.frames import enu_to_ned, ned_to_enu, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
-from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import MissionItem, local_xy
-from fcu.dualquat import q_angle, q_conj, q_exp, q_mul, q_norm, q_rotate_inv
+from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import MissionItem, local_xy
+from fcu.control.dualquat import q_angle, q_conj, q_exp, q_mul, q_norm, q_rotate_inv
 from fcu.mission import validation
 from fcu.mission.executor import MissionEvent, MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import level_attitude
 from fcu.mission.validation import validate_mission
-from fcu.trajectory import FigureEight, make_trajectory
-from gcs.scenario_mission import scenario_mission
+from fcu.reference.trajectory import FigureEight, make_trajectory
+from gcs.run.scenario_mission import scenario_mission
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,5 +1,5 @@
-"""Ground-station mission client (gcs/mission_client.py) against a MissionServer behind a
-loopback UDP socket, served by a small loop in a thread; optionally losing replies."""
+"""Ground-station mission client (gcs/vehicle_link/mission_client.py) against a MissionServer behind
+a loopback UDP socket, served by a small loop in a thread; optionally losing replies."""
 
 from __future__ import annotations
 
@@ -13,14 +13,15 @@ from pathlib import Path
 
 import pytest
 
-import common.mavlink  # noqa: F401  (MAVLink 2 before mavutil)
-from common.config import load_scenario, load_vehicle
-from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME, encoder, pack, parser
-from common.mission_items import MissionItem, local_xy
+import common.wire.mavlink  # noqa: F401  (MAVLink 2 before mavutil)
+from common.config.scenario import load_scenario, load_vehicle
+from common.wire.mavlink import MAV, MAV_CMD_POSE_KEYFRAME, encoder, pack, parser
+from common.wire.mission_items import MissionItem, local_xy
+from fcu.edge.mission_protocol import MissionServer, statustext_chunks
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
-from fcu.mission_protocol import MissionServer, statustext_chunks
-from gcs.mission_client import (
+from gcs.run.scenario_mission import scenario_mission
+from gcs.vehicle_link.mission_client import (
     MissionError,
     StatusTexts,
     UploadResult,
@@ -29,7 +30,6 @@ from gcs.mission_client import (
     upload,
     upload_detailed,
 )
-from gcs.scenario_mission import scenario_mission
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]
@@ -91,7 +91,7 @@ class UdpVehicle:
 def vehicle_factory():
     made: list[tuple[UdpVehicle, object]] = []
 
-    from pymavlink import mavutil  # after common.mavlink has pinned MAVLink 2
+    from pymavlink import mavutil  # after common.wire.mavlink has pinned MAVLink 2
 
     def make(**kwargs):
         vehicle = UdpVehicle(**kwargs)

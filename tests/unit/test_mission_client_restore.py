@@ -1,4 +1,4 @@
-"""An upload is atomic for the user (gcs/cli/missions.py, gcs/mission_home.py): to an
+"""An upload is atomic for the user (gcs/cli/missions.py, gcs/vehicle_link/mission_home.py): to an
 ArduPilot-like vehicle whose upload is not atomic (it truncates its mission at
 MISSION_COUNT and writes each item as it comes, as ArduPilot's GCS_MAVLink mission protocol
 does), `gcs mission upload` reads the mission first and puts it back when an item is
@@ -15,10 +15,10 @@ from pathlib import Path
 
 import pytest
 
-from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import HomePosition, MissionItem
+from common.wire.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import HomePosition, MissionItem
 from gcs.mission_files import read_mission
-from gcs.mission_home import after_refusal, describe_held, home_item
+from gcs.vehicle_link.mission_home import after_refusal, describe_held, home_item
 from tests.unit.scripted_autopilot import HOME, ScriptedAutopilot, gcs
 
 M = MAV
@@ -263,10 +263,10 @@ class SlowChecker(ScriptedAutopilot):
 
 def test_a_vehicle_that_checks_the_mission_before_its_ack_is_waited_for(tmp_path):
     """Given a vehicle that takes 3 s after the last item to check the mission, then the
-    upload waits for its MISSION_ACK while the vehicle is heard (`gcs.patience`) instead of
-    giving up after the item retries (6 x 250 ms), and the vehicle holds the mission."""
-    from gcs.mission_client import upload_detailed
-    from gcs.session import Session
+    upload waits for its MISSION_ACK while the vehicle is heard (`gcs.vehicle_link.patience`)
+    instead of giving up after the item retries (6 x 250 ms), and the vehicle holds the mission."""
+    from gcs.vehicle_link.mission_client import upload_detailed
+    from gcs.vehicle_link.session import Session
 
     v = SlowChecker(3.0)
     session = Session(v.url)

@@ -11,10 +11,10 @@ import time
 
 import pytest
 
-import common.mavlink  # noqa: F401  (MAVLink 2 before mavutil)
-from common.mavlink import MAV, encoder, pack
-from common.mission_items import MissionItem, local_xy
-from gcs.mission_client import MissionError, download, upload
+import common.wire.mavlink  # noqa: F401  (MAVLink 2 before mavutil)
+from common.wire.mavlink import MAV, encoder, pack
+from common.wire.mission_items import MissionItem, local_xy
+from gcs.vehicle_link.mission_client import MissionError, download, upload
 
 from .test_mission_client import VEHICLE, UdpVehicle, same_items
 

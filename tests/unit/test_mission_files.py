@@ -8,14 +8,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.config import load_scenario
-from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import MissionItem
+from common.config.scenario import load_scenario
+from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import MissionItem
 from gcs.mission_files import read_mission, write_mission
 from gcs.mission_files.items import MissionFileError
 from gcs.mission_files.toml import format_toml, parse_toml
 from gcs.mission_files.wpl import format_wpl, parse_wpl
-from gcs.scenario_mission import scenario_mission
+from gcs.run.scenario_mission import scenario_mission
 
 from ..closed_loop.conftest import SCENARIOS
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from common.mavlink import MAV
-from common.mission_items import HomePosition, MissionItem
+from common.wire.mavlink import MAV
+from common.wire.mission_items import HomePosition, MissionItem
 from gcs.mission_files import format_mission, parse_mission
 from tests.unit.scripted_autopilot import HOME, ScriptedAutopilot, gcs
 

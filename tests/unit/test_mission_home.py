@@ -1,5 +1,5 @@
-"""ArduPilot's home at mission seq 0 (gcs/mission_home.py, the `gcs mission` commands): a
-.plan, WPL or TOML file uploads to an ArduPilot-like vehicle with home at seq 0 and every
+"""ArduPilot's home at mission seq 0 (gcs/vehicle_link/mission_home.py, the `gcs mission` commands):
+a .plan, WPL or TOML file uploads to an ArduPilot-like vehicle with home at seq 0 and every
 item after it, downloads back with home where the format keeps it and firmwareType 3;
 to a PX4-like vehicle nothing changes; an item the vehicle refuses is exit 1 with its
 reason."""
@@ -12,14 +12,14 @@ from pathlib import Path
 
 import pytest
 
-from common.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import HomePosition, MissionItem, local_xy, to_local
-from gcs.mission_client import MissionError, upload_detailed
+from common.wire.mavlink import MAV, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import HomePosition, MissionItem, local_xy, to_local
 from gcs.mission_files import read_mission
 from gcs.mission_files.plan import parse_plan_doc
 from gcs.mission_files.toml import format_toml, parse_toml_doc
 from gcs.mission_files.wpl import format_wpl, parse_wpl
-from gcs.mission_home import HomeError, for_ardupilot, home_item, split_home, with_home
+from gcs.vehicle_link.mission_client import MissionError, upload_detailed
+from gcs.vehicle_link.mission_home import HomeError, for_ardupilot, home_item, split_home, with_home
 from tests.unit.scripted_autopilot import HOME, ScriptedAutopilot, gcs
 
 M = MAV

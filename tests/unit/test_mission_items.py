@@ -1,4 +1,4 @@
-"""Mission items <-> MAVLink mission messages (common/mission_items.py): the one conversion
+"""Mission items <-> MAVLink mission messages (common/wire/mission_items.py): the one conversion
 that the vehicle, the ground station and the mission files share."""
 
 from __future__ import annotations
@@ -7,20 +7,20 @@ import math
 
 import pytest
 
-from common.mavlink import MAV, encoder, pack, parser
-from common.mission_items import (
+from common.wire.mavlink import MAV, encoder, pack, parser
+from common.wire.mission_items import (
     GLOBAL_FRAMES,
     GLOBAL_SCALE,
     INT32_MAX,
     LOCAL_SCALE,
     MissionItem,
     item_from_message,
-    item_message,
     local_xy,
     xy_scale,
 )
-from fcu import mission_protocol
-from gcs import mission_client
+from common.wire.mission_messages import item_message
+from fcu.edge import mission_protocol
+from gcs.vehicle_link import mission_client
 
 M = MAV
 SRC = (255, M.MAV_COMP_ID_MISSIONPLANNER)

@@ -9,10 +9,10 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-import gcs.inprocess as inprocess
+import gcs.run.inprocess as inprocess
 from benchmarks.bench_mission_length import mission
-from common.config import load_scenario
-from common.ulog import read_topic
+from common.config.scenario import load_scenario
+from common.logs.ulog import read_topic
 from gcs.mission_files import write_mission
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,4 +1,4 @@
-"""Vehicle side of the mission protocol (fcu/mission_protocol.py), driven with pymavlink
+"""Vehicle side of the mission protocol (fcu/edge/mission_protocol.py), driven with pymavlink
 messages that go through the MAVLink 2 codec both ways, as on a link."""
 
 from __future__ import annotations
@@ -8,14 +8,21 @@ from pathlib import Path
 
 import pytest
 
-from common.config import load_scenario, load_vehicle
-from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME, encoder, pack, parser
-from common.mission_items import MissionItem, local_xy
+from common.config.scenario import load_scenario, load_vehicle
+from common.wire.mavlink import (
+    MAV,
+    MAV_CMD_FIGURE_EIGHT,
+    MAV_CMD_POSE_KEYFRAME,
+    encoder,
+    pack,
+    parser,
+)
+from common.wire.mission_items import MissionItem, local_xy
+from fcu.edge.mission_protocol import MissionServer, statustext_chunks
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
-from fcu.mission_protocol import MissionServer, statustext_chunks
-from gcs.scenario_mission import scenario_mission
+from gcs.run.scenario_mission import scenario_mission
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]

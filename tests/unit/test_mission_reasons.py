@@ -12,15 +12,15 @@ from pathlib import Path
 
 import pytest
 
-from common.config import load_gains, load_scenario, load_vehicle
-from common.mavlink import MAV, encoder, pack, parser
-from common.mission_items import HomePosition, MissionItem, local_xy
+from common.config.scenario import load_gains, load_scenario, load_vehicle
+from common.wire.mavlink import MAV, encoder, pack, parser
+from common.wire.mission_items import HomePosition, MissionItem, local_xy
 from fcu.compose import accept_mission, fcu_pipeline
 from fcu.mission.codes import MAV_CMD_POSE_KEYFRAME, result_name
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission, compared, refusal
 from fcu.params import ParamError, ParamStore, mission_limits
-from gcs.mission_client import StatusTexts
+from gcs.vehicle_link.mission_client import StatusTexts
 from tests.unit.test_gcs_dispatch import make_server, parsed
 
 M = MAV
@@ -245,7 +245,7 @@ def test_refused_in_process_run_writes_aborted_metrics(tmp_path, capsys):
     exits 1 and writes metrics.json with status aborted and the refusal as `error` (named,
     with the item), as a run through processes does; the refusal is printed."""
     from gcs.cli import main
-    from gcs.inprocess import InProcessError, run_scenario
+    from gcs.run.inprocess import InProcessError, run_scenario
 
     scenario = _refused_scenario(tmp_path)
     with pytest.raises(InProcessError) as raised:

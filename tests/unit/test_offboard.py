@@ -1,6 +1,6 @@
-"""OFFBOARD's set-point shaper (fcu/offboard.py, fcu/approach.py): a step is approached
-continuously in pose, velocity and acceleration, within the speed and acceleration limits,
-and reached exactly; a stream that is a trajectory is flown as streamed; velocity-only and
+"""OFFBOARD's set-point shaper (fcu/modes/offboard.py, fcu/reference/approach.py): a step is
+approached continuously in pose, velocity and acceleration, within the speed and acceleration
+limits, and reached exactly; a stream that is a trajectory is flown as streamed; velocity-only and
 rate-only samples fly the velocity and the rate; HOLD brakes to where it stops."""
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate
-from fcu import offboard
-from fcu.approach import offset_rate, right_jacobian
-from fcu.dualquat import right_jacobian_inv
-from fcu.manual import StickSettings
-from fcu.offboard import Target
-from fcu.tracker import Reference, pose_ref
+from fcu.control.dualquat import right_jacobian_inv
+from fcu.control.tracker import Reference, pose_ref
+from fcu.modes import offboard
+from fcu.modes.manual import StickSettings
+from fcu.modes.offboard import Target
+from fcu.reference.approach import offset_rate, right_jacobian
 
 LIM = StickSettings(speed_xy_m_s=5.0, speed_up_m_s=3.0, speed_down_m_s=1.5, acc_xy_m_s2=3.0,
                     acc_up_m_s2=3.0, acc_down_m_s2=2.0, yaw_rate_deg_s=90.0,
@@ -193,7 +193,7 @@ def test_the_right_jacobian_is_the_body_rate_of_the_exponential_and_inverts(phi)
 
 @pytest.mark.parametrize("theta", [0.0, 1e-9, 1e-4, 1e-2, 0.5, 1.5, 2.9, 3.1])
 def test_offset_rate_is_the_inverse_jacobian_below_3_rad_and_the_rate_beyond(theta):
-    """One inverse right Jacobian (`fcu.dualquat`) for the tracker and the approach: it
+    """One inverse right Jacobian (`fcu.control.dualquat`) for the tracker and the approach: it
     matches the closed form w + phi x w / 2 + (1/theta^2 - (1 + cos) / (2 theta sin))
     phi x (phi x w) within rounding; the approach takes w itself beyond 3 rad."""
     n = (0.48, -0.6, 0.64)

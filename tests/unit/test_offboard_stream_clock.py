@@ -1,12 +1,12 @@
-"""Offboard set-point loss on the FCU's clock (`fcu.offboard_stream`): the wall clock in
+"""Offboard set-point loss on the FCU's clock (`fcu.modes.offboard_stream`): the wall clock in
 real time, as PX4; in lockstep a sample is as old as the lesser of its wall-clock and
 flight-clock ages, so machine load (simulated time slowed with the ground station) and a
 run faster than real time (a wall-clock stream thinned on the flight clock) lose nothing."""
 
 from __future__ import annotations
 
-from fcu.failsafe import offboard_lost
-from fcu.offboard_stream import OffboardSetpoint, PositionTarget
+from fcu.modes.offboard_stream import OffboardSetpoint, PositionTarget
+from fcu.safety.failsafe import offboard_lost
 
 T = 1.0  # COM_OF_LOSS_T
 TARGET = PositionTarget((0.0, 0.0, 2.0))

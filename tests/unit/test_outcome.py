@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import ConfigError, load_gains, load_scenario, load_vehicle
+from common.config.scenario import ConfigError, load_gains, load_scenario, load_vehicle
+from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
 from common.outcome import (
     CRASH,
     DIVERGED,
@@ -27,11 +28,9 @@ from common.outcome import (
     diverged_rows,
     touchdowns,
 )
-from fcu.core import ONBOARD_COLUMNS
+from fcu.control.tracker import VehicleState
 from fcu.pipeline import Pipeline
-from fcu.tracker import VehicleState
-from gcs.metrics import build_metrics
-from sitl.plant import TRUTH_COLUMNS
+from gcs.report.metrics import build_metrics
 
 ROOT = Path(__file__).resolve().parents[2]
 HOVER_STATE = VehicleState((0.0, 0.0, 5.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),

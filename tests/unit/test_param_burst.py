@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from common.config import load_gains
-from fcu.gcs_params import LIST_BURST, ParamService
+from common.config.scenario import load_gains
+from fcu.edge.gcs_params import LIST_BURST, ParamService
 from fcu.params import SPECS, ParamStore
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -10,12 +10,11 @@ import math
 
 import pytest
 
-from common.config import Gains
+from common.config.scenario import Gains
 from fcu.estimator.settings import EstimatorSettings
-from fcu.failsafe import FailsafeSettings
-from fcu.manual import StickSettings
 from fcu.mission.limits import MissionLimits
-from fcu.mode_references import FlightSettings
+from fcu.modes.manual import StickSettings
+from fcu.modes.mode_references import FlightSettings
 from fcu.params import (
     DAMPING_CODES,
     DEFAULT_OVERRIDES,
@@ -26,6 +25,7 @@ from fcu.params import (
     flight_settings,
     mission_limits,
 )
+from fcu.safety.failsafe import FailsafeSettings
 
 DEFAULTS = {s.name: s.default for s in SPECS}
 COVERED = (FlightSettings, StickSettings, FailsafeSettings, EstimatorSettings, MissionLimits,

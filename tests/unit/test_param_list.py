@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import pytest
 
-from common.mavlink import MAV
+from common.wire.mavlink import MAV
 from gcs import cli
-from gcs.param_files import parse_params
+from gcs.mission_files.param_files import parse_params
 from tests.unit.scripted_autopilot import ScriptedAutopilot, _RawParamValue
 
 M = MAV

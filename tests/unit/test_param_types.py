@@ -1,4 +1,4 @@
-"""Parameters in their real types (gcs/param_wire.py, gcs/vehicle_link/params.py, the
+"""Parameters in their real types (gcs/vehicle_link/param_wire.py, gcs/vehicle_link/params.py, the
 `gcs param` commands): `param save` writes each parameter's MAV_PARAM_TYPE, integer values
 ride as the vehicle carries them (ArduPilot casts, PX4 sends bytes) and survive a save/load
 round trip, and a set the vehicle clamps is exit 1 "not taken: the vehicle keeps 127"."""
@@ -9,10 +9,10 @@ import struct
 
 import pytest
 
-from common.mavlink import MAV
-from common.wire_round import f32
-from gcs import param_wire as pw
-from gcs.param_files import parse_params
+from common.wire.mavlink import MAV
+from common.wire.rounding import f32
+from gcs.mission_files.param_files import parse_params
+from gcs.vehicle_link import param_wire as pw
 from tests.unit.scripted_autopilot import ScriptedAutopilot, gcs
 
 M = MAV

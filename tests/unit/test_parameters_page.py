@@ -1,15 +1,15 @@
-"""docs/parameters.md is what `fcu.params_doc` generates from the parameter table now: the
-page cannot go stale (regenerate it with `python -m fcu.params_doc`)."""
+"""docs/parameters.md is what `fcu.edge.params_doc` generates from the parameter table now: the
+page cannot go stale (regenerate it with `python -m fcu.edge.params_doc`)."""
 
 from __future__ import annotations
 
-from fcu import params_doc
+from fcu.edge import params_doc
 from fcu.params import SPECS
 
 
 def test_the_page_is_the_generated_one():
     assert params_doc.PAGE.read_text() == params_doc.render(), (
-        "docs/parameters.md is stale: run python -m fcu.params_doc")
+        "docs/parameters.md is stale: run python -m fcu.edge.params_doc")
 
 
 def test_the_page_lists_every_parameter_once():

@@ -10,8 +10,8 @@ from collections import Counter
 import pytest
 
 from benchmarks.phase_missions import FORMATS, VEHICLES, draw_mission, written
-from common.mav_enums import MAV_CMD
-from common.mission_items import PX4_SITL_HOME, to_local
+from common.wire.mav_enums import MAV_CMD
+from common.wire.mission_items import PX4_SITL_HOME, to_local
 from fcu.compose import published_home
 from gcs.mission_files import read_mission
 

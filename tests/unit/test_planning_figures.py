@@ -9,14 +9,16 @@ import math
 from pathlib import Path
 
 from benchmarks.mission_envelope import mixed, waypoints
-from common.config import load_vehicle
-from fcu import approach, feasibility, manual, offboard
-from fcu.dualquat import q_exp
+from common.config.scenario import load_vehicle
+from fcu.control.dualquat import q_exp
+from fcu.control.tracker import Reference
+from fcu.envelope import feasibility
 from fcu.mission.codes import MAV_MISSION_ACCEPTED
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
-from fcu.tracker import Reference
+from fcu.modes import manual, offboard
+from fcu.reference import approach
 
 ROOT = Path(__file__).resolve().parents[2]
 TILTED = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")

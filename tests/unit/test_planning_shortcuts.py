@@ -1,8 +1,8 @@
 """The mission check's shortcuts give the full computation's answers, to the bit: the yes/no
 kernel and the ratio kernel against `excess_kernel`, the search stopped early
 (`TimeScaling.stretches`) and resumed, the parts moves and figures share through
-`Envelope.kept`, and the upload check's unstretched plan (fcu/excess.py, fcu/feasibility.py,
-fcu/mission/)."""
+`Envelope.kept`, and the upload check's unstretched plan (fcu/envelope/excess.py,
+fcu/envelope/feasibility.py, fcu/mission/)."""
 
 from __future__ import annotations
 
@@ -14,11 +14,11 @@ import pytest
 
 from benchmarks.mission_envelope import mixed
 from benchmarks.random_mission_gen import random_cruise_speed, random_mission
-from common.config import load_vehicle
-from fcu import feasibility
-from fcu.dualquat import Q_IDENTITY, q_exp
-from fcu.excess import excess_kernel, excess_ratio, fits_kernel
-from fcu.feasibility import TILT_STEP_S, Envelope, TimeScaling, envelope
+from common.config.scenario import load_vehicle
+from fcu.control.dualquat import Q_IDENTITY, q_exp
+from fcu.envelope import feasibility
+from fcu.envelope.excess import excess_kernel, excess_ratio, fits_kernel
+from fcu.envelope.feasibility import TILT_STEP_S, Envelope, TimeScaling, envelope
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import envelope_reason, plan_item, with_speed
 from fcu.mission.segments import Figure, Move

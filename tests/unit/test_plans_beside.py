@@ -1,6 +1,6 @@
-"""HOLD's brake and OFFBOARD's start beside the control loop (`fcu.mode_references`): where
-the work runs beside, a step never plans an approach (`fcu.approach.plan`); a reference that
-was moving coasts until its plan, made ANCHOR_LEAD_US ahead, is taken in at its time, and
+"""HOLD's brake and OFFBOARD's start beside the control loop (`fcu.modes.mode_references`): where
+the work runs beside, a step never plans an approach (`fcu.reference.approach.plan`); a reference
+that was moving coasts until its plan, made ANCHOR_LEAD_US ahead, is taken in at its time, and
 flies on continuously; a plan that does not come is made in the loop after COAST_MAX_US."""
 
 from __future__ import annotations
@@ -14,12 +14,13 @@ from typing import Any
 
 import pytest
 
-from common.mav_enums import MAV_RESULT
-from common.modes import Mode
-from fcu import approach, offboard
-from fcu.mode_references import ANCHOR_LEAD_US, COAST_MAX_US
-from fcu.setpoint_wire import position_target
-from fcu.tracker import Reference
+from common.wire.mav_enums import MAV_RESULT
+from common.wire.modes import Mode
+from fcu.control.tracker import Reference
+from fcu.edge.setpoint_wire import position_target
+from fcu.modes import offboard
+from fcu.modes.mode_references import ANCHOR_LEAD_US, COAST_MAX_US
+from fcu.reference import approach
 from fcu.work import Done, Outcome, Work
 from tests.unit.test_work import airborne_commander
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import DisturbanceTerm, load_scenario, load_vehicle
-from fcu.allocation import hover_command
+from common.config.scenario import DisturbanceTerm, load_scenario, load_vehicle
+from fcu.control.allocation import hover_command
 from sitl.disturbance import Disturbance
 from sitl.plant import ActuatorCommand, Plant, PlantState, rotate, rotate_inv
 from sitl.plant_kernels import derivative_kernel

@@ -58,9 +58,9 @@ def test_a_station_that_sends_attitude_targets_to_px4_sees_it_fall_and_holds(px4
     """What `gcs goto` did before: position and attitude targets to PX4. The scripted PX4
     drops position control (thrust 0 with ignore-throttle); goto must end at once with
     UNSAFE, stop streaming and command HOLD."""
-    from gcs.session import Session
     from gcs.vehicle_link.goto import goto
     from gcs.vehicle_link.pose import PoseTarget
+    from gcs.vehicle_link.session import Session
 
     vehicle, link = px4(airborne_m=6.0)
     session = Session(link[1])

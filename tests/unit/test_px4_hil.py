@@ -1,6 +1,6 @@
-"""PX4's side of the wire as the plant sees it (sitl/px4_wire.py, sitl/px4_hil.py's pure
-parts): PX4's hexa X outputs on our rotors, the motor outputs obeyed, HIL_GPS and
-HIL_STATE_QUATERNION in PX4's units and frames, the rates and steps chosen."""
+"""PX4's side of the wire as the plant sees it (sitl/firmware/px4_wire.py,
+sitl/firmware/px4_hil.py's pure parts): PX4's hexa X outputs on our rotors, the motor outputs
+obeyed, HIL_GPS and HIL_STATE_QUATERNION in PX4's units and frames, the rates and steps chosen."""
 
 from __future__ import annotations
 
@@ -11,25 +11,25 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import ConfigError, load_scenario, load_vehicle
-from common.frames import flu_to_frd
-from common.mission_items import PX4_SITL_HOME
-from common.sensors_config import (
+from common.config.scenario import ConfigError, load_scenario, load_vehicle
+from common.config.sensors import (
     PROFILE_IMU_RATE_MIN_HZ,
     check_servable,
     resolve_sensor_profile,
     stale_sensors,
 )
-from sitl.plant import Plant
-from sitl.px4_hil import physics_step_us, px4_sensor_profile, stale_warning
-from sitl.px4_lockstep import LEARN_WINDOW, Answer, AnswerSchedule
-from sitl.px4_wire import (
+from common.frames import flu_to_frd
+from common.wire.mission_items import PX4_SITL_HOME
+from sitl.firmware.px4_hil import physics_step_us, px4_sensor_profile, stale_warning
+from sitl.firmware.px4_lockstep import LEARN_WINDOW, Answer, AnswerSchedule
+from sitl.firmware.px4_wire import (
     MODE_ARMED,
     command_from_outputs,
     gps_fields,
     motor_order,
     state_fields,
 )
+from sitl.plant import Plant
 from sitl.sensors import GpsModel
 from tests.px4_side import HEXA_X
 
@@ -287,7 +287,7 @@ def test_the_wait_for_an_answer_steps_past_then_gives_up_on_the_wall_clock():
     says wait until the grace has passed, then step one sample past it, again each grace,
     and give up (learned again) once the timeout has passed since the wait began; an answer
     that comes ends the wait, and the next one starts afresh."""
-    from sitl.px4_lockstep import Wait
+    from sitl.firmware.px4_lockstep import Wait
     s = AnswerSchedule(1000)
     for k in range(1, 2 * LEARN_WINDOW + 2):
         s.accept(1000 * k, 1000 * k)
@@ -315,7 +315,7 @@ def test_an_answer_that_was_only_slow_doubles_the_grace():
     past it, stamped at the sample it was due at (slow, not longer), then it is late, the
     cadence stays, and the grace doubles, up to MAX_GRACE_SCALE times and half the
     timeout; an answer that needed the sample stepped to changes no grace."""
-    from sitl.px4_lockstep import MAX_GRACE_SCALE, Wait
+    from sitl.firmware.px4_lockstep import MAX_GRACE_SCALE, Wait
     s = AnswerSchedule(1000)
     for k in range(1, 2 * LEARN_WINDOW + 2):
         s.accept(1000 * k, 1000 * k)

@@ -1,5 +1,5 @@
-"""PX4's modes (common/modes.py) against pymavlink's own PX4 tables, and POSCTL's stick ->
-set-point integration (fcu/manual.py)."""
+"""PX4's modes (common/wire/modes.py) against pymavlink's own PX4 tables, and POSCTL's stick ->
+set-point integration (fcu/modes/manual.py)."""
 
 from __future__ import annotations
 
@@ -12,13 +12,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink import mavutil
 
-from common.config import load_vehicle
-from common.mavlink import MAV
-from common.modes import ALIASES, Mode, by_name, decode, decode_custom, names
-from fcu import manual
-from fcu.dualquat import q_angle, q_exp, q_mul
-from fcu.feasibility import envelope
-from fcu.manual import (
+from common.config.scenario import load_vehicle
+from common.wire.mavlink import MAV
+from common.wire.modes import ALIASES, Mode, by_name, decode, decode_custom, names
+from fcu.control.dualquat import q_angle, q_exp, q_mul
+from fcu.control.tracker import Reference
+from fcu.edge.setpoint_wire import sticks_from_manual_control
+from fcu.envelope.feasibility import envelope
+from fcu.modes import manual
+from fcu.modes.manual import (
     DEADZONE,
     LEAD_M,
     Sticks,
@@ -29,8 +31,6 @@ from fcu.manual import (
     heading_ned,
     stick_velocity,
 )
-from fcu.setpoint_wire import sticks_from_manual_control
-from fcu.tracker import Reference
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]

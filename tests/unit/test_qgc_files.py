@@ -1,7 +1,7 @@
 """The files other ground stations read and write: QGroundControl's `.plan`, QGC WPL 110 in
 global frames (what MAVProxy loads unchanged), QGC's `.params`; empty and broken files; the
-CLI refusing a bad file before any network wait (gcs/mission_files/, gcs/param_files.py,
-gcs/cli/)."""
+CLI refusing a bad file before any network wait (gcs/mission_files/,
+gcs/mission_files/param_files.py, gcs/cli/)."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common.links import free_port
-from common.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
-from common.mission_items import GLOBAL_SCALE, HomePosition, MissionItem, local_xy, to_local
+from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
+from common.wire.mission_items import GLOBAL_SCALE, HomePosition, MissionItem, local_xy, to_local
 from gcs import cli
 from gcs.mission_files import (
     file_format,
@@ -27,10 +27,10 @@ from gcs.mission_files import (
 )
 from gcs.mission_files.frames import to_frame
 from gcs.mission_files.items import MissionFileError
+from gcs.mission_files.param_files import ParamEntry, ParamFileError, format_params, parse_params
 from gcs.mission_files.plan import format_plan, parse_plan
 from gcs.mission_files.toml import format_toml, parse_toml
 from gcs.mission_files.wpl import format_wpl, parse_wpl
-from gcs.param_files import ParamEntry, ParamFileError, format_params, parse_params
 
 M = MAV
 DATA = Path(__file__).resolve().parents[1] / "data"

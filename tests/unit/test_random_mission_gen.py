@@ -22,9 +22,8 @@ from benchmarks.random_mission_gen import (
     random_mission,
 )
 from benchmarks.random_missions import reason_kind, tracking_errors, violations
-from fcu.core import ONBOARD_COLUMNS
-from fcu.dualquat import q_conj, q_exp, q_mul
-from sitl.plant import TRUTH_COLUMNS
+from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
+from fcu.control.dualquat import q_conj, q_exp, q_mul
 
 DRAWS = 200
 

@@ -1,4 +1,4 @@
-"""The gyro's low-pass (fcu/rate_filter.py, PX4's IMU_GYRO_CUTOFF): a second-order
+"""The gyro's low-pass (fcu/control/rate_filter.py, PX4's IMU_GYRO_CUTOFF): a second-order
 Butterworth filter per axis."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from fcu.rate_filter import GyroLowPass
+from fcu.control.rate_filter import GyroLowPass
 
 
 def _gain(f_hz: float, cutoff_hz: float = 40.0, rate_hz: float = 1000.0) -> float:

@@ -14,9 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import load_scenario
-from common.ulog import Topic, ULogWriter, read_topic
-from gcs.inprocess import apply_overrides, run_scenario
+from common.config.scenario import load_scenario
+from common.logs.ulog import Topic, ULogWriter, read_topic
 from gcs.report.chart import table1_chart
 from gcs.report.disturbance_figures import disturbance_profile, fig7_8_figure
 from gcs.report.names import (
@@ -34,9 +33,10 @@ from gcs.report.names import (
 from gcs.report.plot import thin_indices
 from gcs.report.run_report import make_report
 from gcs.report.rundata import load_run
+from gcs.report.table1 import CASES, CONTROLLERS, PAPER, table_json
 from gcs.report.tracking_figures import fig5_figure
-from gcs.runio import RunDirError, write_metrics, write_run
-from gcs.table1 import CASES, CONTROLLERS, PAPER, table_json
+from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.runio import RunDirError, write_metrics, write_run
 from sitl.disturbance import Disturbance
 
 from ..closed_loop.conftest import SCENARIOS
@@ -231,7 +231,7 @@ def _gcs(*argv: str) -> tuple[int, str, str]:
 @pytest.fixture(scope="session")  # its tests share one xdist group (one worker): built once
 def table1_dir(tmp_path_factory) -> Path:  # (module scope was torn down between them)
     """`gcs table1 --in-process --duration 8` (through run_table1), then `gcs report` on it."""
-    from gcs.table1_run import run_table1
+    from gcs.run.table1_run import run_table1
 
     out = tmp_path_factory.mktemp("table1") / "t1"
     run_table1(SCENARIOS, out, in_process=True, duration_s=TABLE1_S, workers=2)

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from common.config import ConfigError, Scenario, SensorFault, load_scenario
-from common.sensors_config import resolve_sensor_profile
-from common.simlink import HilSensor, Odometry
+from common.config.scenario import ConfigError, Scenario, SensorFault, load_scenario
+from common.config.sensors import resolve_sensor_profile
+from common.wire.simlink import HilSensor, Odometry
 from sitl.plant import Plant, initial_state
 from sitl.sensor_feed import SensorFeed
 
@@ -265,7 +265,7 @@ def test_a_fault_needs_a_sensor_profile(tmp_path):
 def test_the_command_line_cannot_drop_a_scenario_s_faults(tmp_path):
     """`--sensors truth` on a scenario with faults is refused (gcs run, gcs table1 and
     sitl share apply_overrides' or the same check), never a run without its faults."""
-    from gcs.inprocess import apply_overrides
+    from gcs.run.inprocess import apply_overrides
 
     fault = '[[sensor_fault]]\nkind = "mocap_off"\nstart_s = 1.0\nend_s = 2.0\n'
     sc = load_scenario(_scenario(tmp_path, fault))
@@ -285,8 +285,8 @@ def test_the_accelerometer_integrates_to_the_touchdowns_velocity_change(imu_hz, 
     sample reads more than the resting g plus the impulse over the spread)."""
     import dataclasses
 
+    from common.config.sensors import PROFILE_IMU_RATE_MIN_HZ
     from common.frames import frd_to_flu
-    from common.sensors_config import PROFILE_IMU_RATE_MIN_HZ
     from sitl.plant import ActuatorCommand, rotate
 
     scenario = load_scenario(CASE1)

@@ -14,16 +14,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import ConfigError, load_scenario
-from common.frames import flu_to_frd, ned_to_enu
-from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate_inv
-from common.sensors_config import (
+from common.config.scenario import ConfigError, load_scenario
+from common.config.sensors import (
     SensorProfile,
     check_servable,
     load_sensor_profile,
     resolve_sensor_profile,
 )
-from common.simlink import HilSensor, Odometry
+from common.frames import flu_to_frd, ned_to_enu
+from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate_inv
+from common.wire.simlink import HilSensor, Odometry
 from sitl.plant import Plant, PlantState, initial_state
 from sitl.sensor_feed import MAG_FIELDS, SensorFeed, state_at
 from sitl.sensors import SampleClock, sensor_rng
@@ -262,7 +262,7 @@ def test_the_loader_refuses_what_no_plant_serves_naming_file_and_key(tmp_path, e
 def test_a_scenario_refuses_a_profile_its_plant_cannot_serve(tmp_path, edits, message):
     """At the scenario's load (key `sensors`) and when --sensors overrides it, before any
     run: the message names the profile's file and its key."""
-    from gcs.inprocess import apply_overrides
+    from gcs.run.inprocess import apply_overrides
 
     path = _write(tmp_path, "mocap-fast.toml", *edits)
     profile = load_sensor_profile(path)  # loads: it is the scenario's rates it cannot meet

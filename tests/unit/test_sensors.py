@@ -1,4 +1,4 @@
-"""Sensor models (sitl.sensors) and their profiles (common.sensors_config)."""
+"""Sensor models (sitl.sensors) and their profiles (common.config.sensors)."""
 
 from __future__ import annotations
 
@@ -9,16 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import ConfigError
-from common.frames import ned_to_enu
-from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate_inv
-from common.sensors_config import (
+from common.config.scenario import ConfigError
+from common.config.sensors import (
     AccelConfig,
     GyroConfig,
     ImuConfig,
     MocapConfig,
     load_sensor_profile,
 )
+from common.frames import ned_to_enu
+from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate_inv
 from sitl.sensors import BaroModel, ImuModel, MagModel, MocapModel, SensorSuite, _Normals
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -168,7 +168,7 @@ def test_same_seed_same_sequence_regardless_of_other_sensors():
 
 
 def test_baro_noise_and_bias():
-    from common.sensors_config import BaroConfig
+    from common.config.sensors import BaroConfig
     m = BaroModel(BaroConfig(50.0, 0.1, 0.3), 5)
     h = np.array([m.sample(i * 0.02, (0.0, 0.0, 2.0)).alt_m for i in range(20000)])
     assert np.mean(h) == pytest.approx(2.3, abs=0.005)
@@ -176,7 +176,7 @@ def test_baro_noise_and_bias():
 
 
 def test_mag_rotates_the_earth_field_into_flu():
-    from common.sensors_config import MagConfig
+    from common.config.sensors import MagConfig
     field_ned = (0.216, 0.012, 0.425)
     m = MagModel(MagConfig(100.0, field_ned, 0.0), 0)
     # body x east (identity ENU/FLU): north (ENU y) is body +y (left), down is body -z

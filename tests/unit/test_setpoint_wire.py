@@ -1,4 +1,4 @@
-"""The FCU's MAVLink edge for set-points (fcu/setpoint_wire.py): type_mask bits, MAV_FRAME
+"""The FCU's MAVLink edge for set-points (fcu/edge/setpoint_wire.py): type_mask bits, MAV_FRAME
 and NED/FRD decoded into the commander's ENU/FLU targets; what the wire cannot mean is
 refused with the STATUSTEXT the commander used to send."""
 
@@ -9,9 +9,9 @@ import math
 import pytest
 
 from common.frames import q_enu_flu_to_ned_frd
-from common.mavlink import MAV as M
 from common.quaternion import q_angle, q_conj, q_exp, q_mul
-from fcu.setpoint_wire import SetpointRefused, attitude_target, position_target
+from common.wire.mavlink import MAV as M
+from fcu.edge.setpoint_wire import SetpointRefused, attitude_target, position_target
 
 Z3 = (0.0, 0.0, 0.0)
 

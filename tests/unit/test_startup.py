@@ -1,4 +1,4 @@
-"""`common.startup`: a Ctrl-C while kernels load is raised after, never inside numba's
+"""`common.process.startup`: a Ctrl-C while kernels load is raised after, never inside numba's
 ctypes callbacks (which print it as an ignored exception with a traceback and drop it)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import signal
 
 import pytest
 
-from common import startup
+from common.process import startup
 
 
 @pytest.fixture

@@ -1,4 +1,4 @@
-"""The supervisor (`fcu/supervisor.py`), the gate between the allocator and the actuators:
+"""The supervisor (`fcu/safety/supervisor.py`), the gate between the allocator and the actuators:
 speeds only while armed and within [0, w_max], a non-finite command stopped with the last
 finite tilts, whatever the arming state."""
 
@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from fcu.supervisor import Supervisor
+from fcu.safety.supervisor import Supervisor
 
 W_MAX = 1700.0
 TILTS = (0.1, -0.2, 0.3, -0.4, 0.5, -0.6)

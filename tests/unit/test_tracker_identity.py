@@ -11,8 +11,8 @@ central difference of xi_e must equal
 
 at large errors (position ~1 m, attitude up to 2.5 rad about random axes) against a moving,
 rotating reference. The derivative in D is a central difference too, independent of
-`fcu.tracker.log_rate`. This pins the sign of the dual cross term of eq. (14)/(16) and that the
-`damping` option is honoured: either mistake leaves a residual of order 1 where the identity
+`fcu.control.tracker.log_rate`. This pins the sign of the dual cross term of eq. (14)/(16) and that
+the `damping` option is honoured: either mistake leaves a residual of order 1 where the identity
 holds to the finite-difference error.
 """
 
@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from common.config import TrajectoryConfig, load_gains, load_vehicle
-from fcu.dualquat import dq_ad, dq_conj, dq_from_pose, dq_log, dq_mul, q_exp, q_mul
-from fcu.tracker import DualQuaternionTracker, VehicleState, reference_twist
-from fcu.trajectory import FigureEight
+from common.config.scenario import TrajectoryConfig, load_gains, load_vehicle
+from fcu.control.dualquat import dq_ad, dq_conj, dq_from_pose, dq_log, dq_mul, q_exp, q_mul
+from fcu.control.tracker import DualQuaternionTracker, VehicleState, reference_twist
+from fcu.reference.trajectory import FigureEight
 from sitl.plant import Plant
 from sitl.plant_kernels import derivative_kernel, rotate, rotate_inv
 

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
-from common.config import load_scenario
-from fcu.dualquat import (
+from common.config.scenario import load_scenario
+from fcu.control.dualquat import (
     dq_from_pose,
     dq_log,
     q_angle,
@@ -20,8 +20,8 @@ from fcu.dualquat import (
     q_mul,
     q_rotate_inv,
 )
-from fcu.tracker import log_rate, reference_twist
-from fcu.trajectory import (
+from fcu.control.tracker import log_rate, reference_twist
+from fcu.reference.trajectory import (
     FigureEight,
     FigureInfinity,
     Hover,

@@ -6,8 +6,8 @@ from __future__ import annotations
 import errno
 from pathlib import Path
 
-from common.config import load_scenario
-from common.ulog import read_topic
+from common.config.scenario import load_scenario
+from common.logs.ulog import read_topic
 from sitl.plant import Plant, initial_state
 from sitl.truth_log import TruthLog, flushed
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from common import px4_topics as px4
-from common.ulog import Topic, ULogError, ULogWriter, open_ulog, read_topic, tail_record
+from common.logs import px4_topics as px4
+from common.logs.ulog import Topic, ULogError, ULogWriter, open_ulog, read_topic, tail_record
 
 POSE = Topic("pose", (("uint64_t", "timestamp"), ("double", "x"), ("float", "q", 4),
                       ("int8_t", "flag"), ("bool", "ok")))
@@ -23,7 +23,7 @@ RATE = Topic("rate", (("uint64_t", "timestamp"), ("double", "w")))
 
 WRITER = """
 import sys
-from common.ulog import Topic, ULogWriter
+from common.logs.ulog import Topic, ULogWriter
 t = Topic("row", (("uint64_t", "timestamp"), ("double", "a"), ("double", "b")))
 w = ULogWriter(sys.argv[1], [t])
 i = 0
@@ -269,7 +269,7 @@ def test_tail_record_is_not_fooled_by_a_record_inside_another_payload(tmp_path):
 
 FULL_DISK = """
 import resource, signal, sys
-from common.ulog import Topic, ULogWriter
+from common.logs.ulog import Topic, ULogWriter
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
 resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
 t = Topic("row", (("uint64_t", "timestamp"), ("double", "a"), ("double", "b")))
@@ -314,7 +314,7 @@ def test_a_close_beside_returns_before_its_fsync_and_the_file_ends_complete(tmp_
     the sync is let go, its thread syncs and ends."""
     import threading
 
-    import common.ulog as ulog
+    import common.logs.ulog as ulog
     held, synced = threading.Event(), []
     real_fsync = os.fsync
 

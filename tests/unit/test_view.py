@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from common.config import load_vehicle
+from common.config.scenario import load_vehicle
 from common.geometry import rotor_frames
 from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate
 from gcs.view.replay import ReplayLog

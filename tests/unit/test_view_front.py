@@ -11,7 +11,7 @@ import socket
 
 import pytest
 
-from common.config import load_vehicle
+from common.config.scenario import load_vehicle
 from gcs.view.publisher import Outputs, Publisher
 from gcs.view.settings import DEFAULT_VEHICLE, TOPICS
 from gcs.view.ws_front import (

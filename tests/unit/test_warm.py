@@ -16,13 +16,13 @@ SCRIPT = r'''
 import gc, json
 from pathlib import Path
 from numba.core.registry import CPUDispatcher
-from common.config import load_gains, load_vehicle
-from common.modes import Mode
-from fcu import manual
+from common.config.scenario import load_gains, load_vehicle
+from common.wire.modes import Mode
+from fcu.modes import manual
 from fcu.mission.limits import MissionLimits
 from fcu.pipeline import Pipeline
-from fcu.setpoint_wire import position_target
-from fcu.tracker import VehicleState
+from fcu.edge.setpoint_wire import position_target
+from fcu.control.tracker import VehicleState
 from fcu.warm import warm
 
 def kernels():

@@ -1,4 +1,4 @@
-"""`gcs watch`'s view (gcs/watch.py) from given messages: link lost, the active failsafe
+"""`gcs watch`'s view (gcs/cli/watch.py) from given messages: link lost, the active failsafe
 with its reason, the landed state, health; `gcs status`'s formatting (gcs/vehicle_link/status.py):
 no Python notation, sensible digits, JSON-ready values."""
 
@@ -7,10 +7,10 @@ from __future__ import annotations
 import json
 import math
 
-from common.mavlink import MAV as M
+from common.wire.mavlink import MAV as M
+from gcs.cli.watch import ALERT, STALE_S, render, view_lines
 from gcs.vehicle_link.snapshot import Snapshot
 from gcs.vehicle_link.status import _shortest_f32, format_status
-from gcs.watch import ALERT, STALE_S, render, view_lines
 
 QUALITY = (0.0, 100, 0)
 

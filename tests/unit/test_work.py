@@ -1,4 +1,4 @@
-"""Work beside the control loop (`fcu.work`, `fcu.work_process`) and the protocol around it:
+"""Work beside the control loop (`fcu.work`, `fcu.edge.work_process`) and the protocol around it:
 the mission upload's MISSION_ACK, a mission's start and its COMMAND_ACK, answered when the
 work is done, and the vehicle flying the mode in force meanwhile."""
 
@@ -12,19 +12,20 @@ from typing import Any
 
 import pytest
 
-from common.config import load_gains, load_vehicle
-from common.mav_enums import MAV_CMD, MAV_RESULT
-from common.mavlink import MAV
-from common.mission_items import MissionItem, item_message
-from common.modes import Mode
-from fcu.commander import IN_PROGRESS
+from common.config.scenario import load_gains, load_vehicle
+from common.wire.mav_enums import MAV_CMD, MAV_RESULT
+from common.wire.mavlink import MAV
+from common.wire.mission_items import MissionItem
+from common.wire.mission_messages import item_message
+from common.wire.modes import Mode
+from fcu.control.tracker import VehicleState
+from fcu.edge.mission_protocol import MissionServer
+from fcu.edge.work_process import ProcessWork, make_work
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
-from fcu.mission_protocol import MissionServer
+from fcu.modes.commander import IN_PROGRESS
 from fcu.pipeline import Pipeline
-from fcu.tracker import VehicleState
 from fcu.work import Done, InlineWork, Outcome, Work
-from fcu.work_process import ProcessWork, make_work
 from tests.unit.test_mission_protocol import waypoints
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -275,7 +276,7 @@ def test_posctl_is_entered_when_its_limits_are_fitted():
     """Given POSCTL asked with its envelope fit made beside the loop, then the answer is
     IN_PROGRESS and HOLD flies on (shown), the reference still; when the fit is taken in,
     POSCTL is in force with the fitted limits and the reply gets ACCEPTED."""
-    from fcu import manual
+    from fcu.modes import manual
     c = airborne_commander()
     work = HeldWork()
     c.work = work
@@ -294,7 +295,7 @@ def test_posctl_is_entered_when_its_limits_are_fitted():
 
 
 def _offboard_commander(work: Work) -> Any:
-    from fcu.setpoint_wire import position_target
+    from fcu.edge.setpoint_wire import position_target
     c = airborne_commander()
     c.work = work
     assert c.offboard_position(0.0, position_target(1, 0b0000_1101_1111_1000, (0.0, 0.0, -2.0),
@@ -311,8 +312,8 @@ def test_a_new_offboard_sample_is_anchored_beside_the_loop_ahead_and_flown_conti
     import itertools
     import math
 
-    from fcu.mode_references import ANCHOR_LEAD_US
-    from fcu.setpoint_wire import position_target
+    from fcu.edge.setpoint_wire import position_target
+    from fcu.modes.mode_references import ANCHOR_LEAD_US
     work = HeldWork()
     c = _offboard_commander(work)
     t = 2000
@@ -339,7 +340,7 @@ def test_a_new_offboard_sample_is_anchored_beside_the_loop_ahead_and_flown_conti
 def test_an_anchor_that_comes_after_its_time_is_planned_again():
     """Given the anchor of a sample taken in after its time had passed, then it is not
     flown (it would jump), it is counted, and the next step asks for it again."""
-    from fcu.mode_references import ANCHOR_LEAD_US
+    from fcu.modes.mode_references import ANCHOR_LEAD_US
     work = HeldWork()
     c = _offboard_commander(work)
     c.reference(2000)
@@ -410,7 +411,7 @@ def test_the_same_mode_asked_by_two_stations_under_way_is_one_change_both_answer
     first), and when it is taken in both get ACCEPTED; a MISSION asked twice likewise.
     (A second request that dropped the first answered it FAILED while the mode it asked
     for was entered.)"""
-    from fcu import manual
+    from fcu.modes import manual
     server, links = _airborne_server(2)
     c = server.pipeline.commander
     work = HeldWork()

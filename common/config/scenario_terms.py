@@ -1,0 +1,168 @@
+"""The time-tabled parts of a scenario (docs/model.md#scenarios), read from its TOML tables:
+body-frame disturbance terms ([disturbance]), actuator faults ([[actuator_fault]]) and
+sensor faults ([[sensor_fault]]), each checked by `common.config.reader`."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from common.config.reader import ConfigError, Table
+from common.config.sensors import SensorProfile
+
+Vec3 = tuple[float, float, float]
+
+PROFILE_KINDS = ("pulse", "sine")
+
+
+@dataclass(frozen=True)
+class DisturbanceTerm:
+    """One body-frame (FLU) disturbance term, per axis.
+
+    pulse: amplitude while start_s <= t < end_s; sine: amplitude sin(omega t + phase) for
+    t >= start_s (and t < end_s when end_s is finite).
+    """
+
+    kind: str
+    amplitude: Vec3
+    start_s: float = 0.0
+    end_s: float = math.inf
+    omega_rad_s: float = 0.0
+    phase_rad: float = 0.0
+
+
+def direction_flu(azimuth_deg: float, elevation_deg: float) -> Vec3:
+    """Unit vector in FLU at an azimuth from +x towards +y and an elevation towards +z."""
+    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
+    return (math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el))
+
+
+ACTUATOR_FAULT_KINDS = ("rotor_off", "rotor_stuck", "tilt_stuck", "tilt_off")
+
+
+@dataclass(frozen=True)
+class ActuatorFault:
+    """One actuator failing at a time of the scenario clock (sitl/actuator_faults.py).
+
+    rotor_off: the rotor's speed command is 0 (it spins down with its lag); rotor_stuck: the
+    rotor keeps the speed it had at start_s; tilt_stuck: the servo keeps the tilt it had at
+    start_s; tilt_off: the servo is unpowered, and as the plant has no dynamics about the
+    tilt axis (docs/model.md#plant: a kinematic, rate-limited servo) it stays where it stopped, as
+    tilt_stuck does. From start_s until end_s (for ever by default).
+    """
+
+    kind: str
+    index: int  # rotor / servo 0..n-1
+    start_s: float
+    end_s: float = math.inf
+
+    def active(self, t_s: float) -> bool:
+        return self.start_s <= t_s < self.end_s
+
+
+SENSOR_FAULT_KINDS = ("mocap_off", "gyro_bias_step", "imu_nan", "pose_nan")
+
+
+@dataclass(frozen=True)
+class SensorFault:
+    """One injected sensor fault, times counted from the flight's start (the scenario clock).
+
+    mocap_off: no pose captured while start_s <= t < end_s; gyro_bias_step: `amplitude`
+    (rad/s, FLU) added to the gyro from start_s on (until end_s, if given); imu_nan: the IMU
+    samples of the window carry NaN in the gyro and the accelerometer; pose_nan: the poses
+    captured in the window carry NaN.
+    """
+
+    kind: str
+    start_s: float
+    end_s: float = math.inf
+    amplitude: Vec3 = (0.0, 0.0, 0.0)
+
+    def active(self, t_s: float) -> bool:
+        return self.start_s <= t_s < self.end_s
+
+
+def parse_terms(tables: list[Table]) -> tuple[DisturbanceTerm, ...]:
+    terms = []
+    for t in tables:
+        kind = t.string("kind", choices=PROFILE_KINDS)
+        term = DisturbanceTerm(
+            kind=kind,
+            amplitude=_amplitude(t),
+            start_s=t.number("start_s", 0.0, lo=0.0),
+            end_s=t.number("end_s", math.inf) if t.has("end_s") else math.inf,
+            omega_rad_s=t.number("omega_rad_s", 0.0) if kind == "sine" else 0.0,
+            phase_rad=t.number("phase_rad", 0.0) if kind == "sine" else 0.0,
+        )
+        if kind == "pulse" and not math.isfinite(term.end_s):
+            raise t.error("end_s", "a finite end time for a pulse")
+        if term.end_s <= term.start_s:
+            raise t.error("end_s", f"a time after start_s = {term.start_s}")
+        t.finish()
+        terms.append(term)
+    return tuple(terms)
+
+
+def _amplitude(t: Table) -> Vec3:
+    """A term's per-axis amplitude: `amplitude = [x, y, z]`, or `magnitude` along a direction
+    given as `direction_flu = [x, y, z]` (normalised) or `azimuth_deg` and `elevation_deg`
+    (`direction_flu`; for sweeps of a disturbance's size and direction)."""
+    if not t.has("magnitude"):
+        a = t.numbers("amplitude", 3)
+        return (a[0], a[1], a[2])
+    if t.has("amplitude"):
+        raise t.error("magnitude", "either 'amplitude' or 'magnitude' (with a direction), "
+                      "not both")
+    magnitude = t.number("magnitude", lo=0.0)
+    if t.has("direction_flu"):
+        d = t.numbers("direction_flu", 3)
+        n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        if not n > 0.0:
+            raise t.error("direction_flu", "a non-zero vector")
+        u = (d[0] / n, d[1] / n, d[2] / n)
+    else:
+        u = direction_flu(t.number("azimuth_deg", 0.0), t.number("elevation_deg", 0.0))
+    return (magnitude * u[0], magnitude * u[1], magnitude * u[2])
+
+
+def parse_actuator_faults(tables: list[Table], n_rotors: int) -> tuple[ActuatorFault, ...]:
+    faults = []
+    for t in tables:
+        fault = ActuatorFault(
+            kind=t.string("kind", choices=ACTUATOR_FAULT_KINDS),
+            index=t.integer("index", lo=0, hi=n_rotors - 1),
+            start_s=t.number("start_s", 0.0, lo=0.0),
+            end_s=t.number("end_s") if t.has("end_s") else math.inf)
+        if fault.end_s <= fault.start_s:
+            raise t.error("end_s", f"a time after start_s = {fault.start_s}")
+        t.finish()
+        faults.append(fault)
+    return tuple(faults)
+
+
+def parse_sensor_faults(tables: list[Table]) -> tuple[SensorFault, ...]:
+    faults = []
+    for t in tables:
+        kind = t.string("kind", choices=SENSOR_FAULT_KINDS)
+        start_s = t.number("start_s", lo=0.0)
+        if kind == "gyro_bias_step":
+            end_s = t.number("end_s") if t.has("end_s") else math.inf
+            amplitude = t.numbers("amplitude", 3)
+        else:  # a window: both ends
+            end_s = t.number("end_s")
+            amplitude = (0.0, 0.0, 0.0)
+        if end_s <= start_s:
+            raise t.error("end_s", f"a time after start_s = {start_s}")
+        t.finish()
+        faults.append(SensorFault(kind, start_s, end_s,
+                                  (amplitude[0], amplitude[1], amplitude[2])))
+    return tuple(faults)
+
+
+def check_sensor_faults(faults: tuple[SensorFault, ...], sensors: SensorProfile | None,
+                        where: str) -> None:
+    """Faults act on simulated sensors: refused with the exact state (no profile, truth)."""
+    if faults and (sensors is None or sensors.is_truth):
+        raise ConfigError(f"{where}: faults need a sensor profile (key 'sensors', not the "
+                          f"exact state), got "
+                          f"{'no sensors key' if sensors is None else repr(sensors.name)}")

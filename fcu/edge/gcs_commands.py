@@ -1,0 +1,227 @@
+"""The FCU's commands from ground stations: COMMAND_LONG and COMMAND_INT executed and
+acknowledged (COMMAND_ACK), each refusal explained by STATUSTEXT, and a retry answered
+without executing the command again (`fcu.edge.gcs_server` dispatches them here). A command
+whose work runs beside the control loop (a mission's start, POSCTL: `fcu.modes.commander`) is
+acknowledged MAV_RESULT_IN_PROGRESS at once and with its final result when the work is
+done, as the command protocol says; a retry meanwhile is answered IN_PROGRESS again, never
+executed again; the same mode asked for meanwhile (another station) waits for the same
+end; a newer command that supersedes it ends it MAV_RESULT_FAILED, with why.
+
+Parameters are range-checked against what they can mean (a mode's numbers, a mission item,
+a message id); MAV_CMD_NAV_TAKEOFF's altitude is AMSL in COMMAND_LONG's p7 (as PX4 reads it)
+and in COMMAND_INT's z by its frame.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from typing import Any, Protocol
+
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME, MAV_MODE_FLAG, MAV_RESULT, MAV_SEVERITY
+from common.wire.mavlink import MAV
+from common.wire.mavlink_types import Message, as_message
+from common.wire.mavlink_types.protocol import CommandInt, CommandLong
+from common.wire.mission_items import HomePosition
+from common.wire.modes import Mode, decode
+from fcu.edge.telemetry import REQUESTABLE, Schedule
+from fcu.modes.answer import Answer, Reply
+from fcu.pipeline import Pipeline
+
+M = MAV
+ACCEPTED, DENIED = MAV_RESULT.MAV_RESULT_ACCEPTED, MAV_RESULT.MAV_RESULT_DENIED
+IN_PROGRESS = MAV_RESULT.MAV_RESULT_IN_PROGRESS
+UNSUPPORTED = MAV_RESULT.MAV_RESULT_UNSUPPORTED
+WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
+FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM p2 that forces a disarm
+MAX_PEERS = 64  # senders remembered for their retries (as parsers: one per link and peer)
+RETRY_WINDOW_S = 5.0  # a COMMAND_LONG with confirmation > 0 this soon after is a retry
+ALWAYS_REQUESTABLE = (M.MAVLINK_MSG_ID_MISSION_CURRENT, M.MAVLINK_MSG_ID_HEARTBEAT,
+                      M.MAVLINK_MSG_ID_SYS_STATUS)
+# NAV_TAKEOFF's altitude: COMMAND_LONG p7 is AMSL (as PX4 reads it); COMMAND_INT's z by frame
+_AMSL_FRAMES = (MAV_FRAME.MAV_FRAME_GLOBAL, MAV_FRAME.MAV_FRAME_GLOBAL_INT)
+_RELATIVE_FRAMES = (MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                    MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+
+
+class Server(Protocol):
+    """What the commands need of the ground-station server (`fcu.edge.gcs_server.GcsServer`)."""
+
+    pipeline: Pipeline
+    home: HomePosition
+
+    def send(self, msg: Any, index: int | None = None) -> None: ...
+
+    def say(self, severity: int, text: str | bytes, index: int | None = None) -> None: ...
+
+    def send_message(self, msg_id: int, index: int | None = None) -> None: ...
+
+    def schedule(self, index: int) -> Schedule: ...
+
+    def set_mission_current(self, seq: int, reply: Reply | None = None) -> MAV_RESULT: ...
+
+
+Command = CommandLong | CommandInt
+
+
+def command_key(msg: Command) -> bytes:
+    """A command's identity for retries: its id and parameters, bit for bit (NaN too)."""
+    params: list[float]
+    if msg.get_type() == "COMMAND_LONG":
+        long = as_message(msg, CommandLong)
+        params = [long.param1, long.param2, long.param3, long.param4, long.param5,
+                  long.param6, long.param7]
+    else:
+        cint = as_message(msg, CommandInt)
+        params = [cint.param1, cint.param2, cint.param3, cint.param4, cint.x, cint.y, cint.z,
+                  cint.frame]
+    return struct.pack("<I", msg.command) + struct.pack(f"<{len(params)}d", *params)
+
+
+def as_int(x: float, lo: int, hi: int) -> int | None:
+    """A float parameter as an integer in [lo, hi], or None."""
+    if not math.isfinite(x) or x != round(x) or not lo <= x <= hi:
+        return None
+    return int(x)
+
+
+class CommandService:
+    """COMMAND_LONG / COMMAND_INT for one server: executed, acknowledged, retries answered."""
+
+    def __init__(self, server: Server) -> None:
+        self.server = server
+        # The last command each sender had executed, for its retries (command protocol:
+        # a re-send carries confirmation > 0 and is answered, never executed again).
+        self.executed: dict[tuple[int, int, int], tuple[bytes, float, Answer]] = {}
+        self.repeated_commands = 0
+
+    def ack(self, index: int, msg: Message, command: int, result: int) -> None:
+        self.server.send(M.MAVLink_command_ack_message(
+            command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), index)
+
+    def handle(self, index: int, msg: Command, now_s: float) -> None:
+        """Execute a COMMAND_LONG/INT and ACK it; a COMMAND_LONG re-sent by its sender
+        (confirmation > 0, the same command and parameters, within RETRY_WINDOW_S of the
+        first) gets the first answer again: a retry after a lost or late ACK must not start
+        a mission, a landing or an RTL a second time, mid-flight."""
+        sender = (index, msg.get_srcSystem(), msg.get_srcComponent())
+        key = command_key(msg)
+        last = self.executed.get(sender)
+        retry = msg.get_type() == "COMMAND_LONG" and as_message(msg, CommandLong).confirmation > 0
+        if retry and last is not None and last[0] == key and now_s - last[1] <= RETRY_WINDOW_S:
+            self.repeated_commands += 1
+            first = last[2]
+            self.ack(index, msg, msg.command, first.result)
+            if first.reason and first.result != ACCEPTED:
+                self.server.say(WARNING, first.reason, index)
+            return
+        answer = self._execute(index, msg, now_s)
+        if answer is None:
+            return  # answered with its message (requests): a retry asks again
+        plan = self.server.pipeline.commander.under_way
+        if answer.result == IN_PROGRESS and plan is not None:  # answered again when planned
+            self._answer(index, msg, sender, key, now_s, Answer(IN_PROGRESS, ""))
+            plan.on_end(lambda r, t: self._answer(index, msg, sender, key, now_s, Answer(r, t)))
+            return
+        self._answer(index, msg, sender, key, now_s, answer)
+
+    def _answer(self, index: int, msg: Command, sender: tuple[int, int, int], key: bytes,
+                now_s: float, answer: Answer) -> None:
+        if len(self.executed) >= MAX_PEERS and sender not in self.executed:
+            del self.executed[next(iter(self.executed))]
+        self.executed[sender] = (key, now_s, answer)
+        self.ack(index, msg, msg.command, answer.result)
+        if answer.reason and answer.result != ACCEPTED:
+            self.server.say(WARNING, answer.reason, index)
+
+    def _execute(self, index: int, msg: Command, now_s: float) -> Answer | None:
+        """A command's answer, or None when it was answered here."""
+        cmd = msg.command
+        p = (msg.param1, msg.param2, msg.param3, msg.param4)
+        pipe = self.server.pipeline
+        c = pipe.commander
+        result = ACCEPTED
+        text = ""
+        if cmd == MAV_CMD.MAV_CMD_COMPONENT_ARM_DISARM:
+            if p[0] == 1.0:
+                result, text = pipe.arm()
+            elif p[0] == 0.0:
+                result, text = c.disarm(force=p[1] == FORCE_DISARM_MAGIC)
+            else:
+                result, text = DENIED, "arm: p1 must be 0 or 1"
+        elif cmd == MAV_CMD.MAV_CMD_DO_SET_MODE:
+            base = as_int(p[0], 0, 255)
+            main = as_int(p[1], 0, 255)
+            sub = as_int(p[2], 0, 255) if math.isfinite(p[2]) else 0
+            mode = decode(main, sub or 0) if base is not None and main is not None and \
+                base & MAV_MODE_FLAG.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED else None
+            if mode is None:
+                result, text = DENIED, "unsupported mode"
+            else:
+                result, text = c.set_mode(mode, now_s)
+        elif cmd == MAV_CMD.MAV_CMD_MISSION_START:
+            first = as_int(p[0], 0, 0xFFFF) if p[0] != 0 else 0
+            if first is None:
+                result, text = DENIED, f"no mission item {p[0]:g}"
+            else:
+                result, text = c.mission_start(first)
+        elif cmd == MAV_CMD.MAV_CMD_DO_SET_MISSION_CURRENT:
+            seq = as_int(p[0], 0, 0xFFFF)
+            result = DENIED if seq is None else self.server.set_mission_current(seq)
+            text = f"no mission item {p[0]:g}"
+        elif cmd == MAV_CMD.MAV_CMD_NAV_LAND:
+            result, text = c.set_mode(Mode.LAND, now_s)
+        elif cmd == MAV_CMD.MAV_CMD_NAV_TAKEOFF:
+            result, text = self._takeoff(msg)
+        elif cmd == MAV_CMD.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            result, text = c.set_mode(Mode.RTL, now_s)
+        elif cmd == MAV_CMD.MAV_CMD_SET_MESSAGE_INTERVAL:
+            msg_id = as_int(p[0], 0, 0xFFFFFF)
+            if msg_id is None:
+                result, text = DENIED, f"no message id {p[0]:g}"
+            else:
+                ok, text = self.server.schedule(index).set_interval(msg_id, p[1])
+                result = ACCEPTED if ok else DENIED
+        elif cmd == MAV_CMD.MAV_CMD_GET_MESSAGE_INTERVAL:
+            msg_id = as_int(p[0], 0, 0xFFFF)
+            if msg_id is None:
+                result, text = DENIED, f"no message id {p[0]:g}"
+            else:
+                self.ack(index, msg, cmd, ACCEPTED)
+                self.server.send(M.MAVLink_message_interval_message(
+                    msg_id, self.server.schedule(index).interval_us(msg_id)), index)
+                return None
+        elif cmd in (MAV_CMD.MAV_CMD_REQUEST_MESSAGE,
+                     MAV_CMD.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            msg_id = M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if cmd != MAV_CMD.MAV_CMD_REQUEST_MESSAGE \
+                else as_int(p[0], 0, 0xFFFFFF)
+            if msg_id is None or (msg_id not in REQUESTABLE
+                                  and msg_id not in ALWAYS_REQUESTABLE):
+                self.ack(index, msg, cmd, UNSUPPORTED)
+                return None
+            self.ack(index, msg, cmd, ACCEPTED)
+            self.server.send_message(msg_id, index)
+            return None
+        else:
+            result = UNSUPPORTED
+        return Answer(result, text)
+
+    def _takeoff(self, msg: Command) -> Answer:
+        """MAV_CMD_NAV_TAKEOFF: altitude NaN (MAVSDK's, QGC's) -> MIS_TAKEOFF_ALT above the
+        vehicle; else the altitude AMSL (COMMAND_LONG p7, as PX4; COMMAND_INT z in a global
+        frame) or above home (COMMAND_INT z in a relative-altitude frame)."""
+        c = self.server.pipeline.commander
+        if msg.get_type() == "COMMAND_INT":
+            cint = as_message(msg, CommandInt)
+            alt, frame = cint.z, cint.frame
+        else:
+            alt, frame = as_message(msg, CommandLong).param7, MAV_FRAME.MAV_FRAME_GLOBAL
+        if math.isnan(alt):
+            return c.takeoff()
+        if not math.isfinite(alt):
+            return Answer(DENIED, "takeoff: altitude not finite")
+        if frame in _AMSL_FRAMES:
+            return c.takeoff(alt - self.server.home.alt_m)
+        if frame in _RELATIVE_FRAMES:
+            return c.takeoff(alt)
+        return Answer(DENIED, f"takeoff: frame {frame} not supported")

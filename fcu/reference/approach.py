@@ -1,0 +1,495 @@
+"""An approach planned to fit every actuator: the offset between a reference and the set-point
+it joins, brought to zero smoothly in the shortest duration the vehicle flies (pure).
+
+OFFBOARD and HOLD (`fcu.modes.offboard`) fly a set-point (p, v, a, q, omega: a pose with its
+feed-forward, extrapolated from its anchor) plus an offset that keeps the reference continuous
+where the set-point jumps:
+
+    p_ref = p_sp + e                           q_ref = q_sp (x) exp(eps)
+
+e in ENU, eps a rotation vector in the set-point's body frame (FLU). Each of their six
+components x goes from its value, rate and acceleration when the plan starts to rest at zero
+in D seconds as x0 (1 - B(t / D)) plus the quintic that takes its starting rate and
+acceleration to rest from zero (`quintic_to_rest`, `_component`). B is `blend`: the
+minimum-jerk 10 s^3 - 15 s^4 + 6 s^5, or, on a long step, a cruise between minimum-jerk
+ramps of share r (`cruise_share`: the ramps reach the speed limit at the acceleration
+limit); both are tried and the shorter kept. Position, velocity and acceleration are then
+continuous at both ends, so the accelerations the wrench follows never step (a step in them
+is a step in the tilt angles, which a rate-limited servo cannot take: the shaper without a
+jerk limit that this replaced rate-limited tilt servos for 0.9 s and more on a 170 deg roll).
+
+The reference's body rate is exp(eps)^-1 omega_sp exp(eps) + J_r(eps) d eps/dt (J_r: the
+right Jacobian of SO(3)'s exponential), its derivative taken as J_r(eps) d^2 eps/dt^2 (exact
+while eps keeps its direction, as it does from rest).
+
+D is the shortest duration found (`plan`) for which
+* the offset's rates stay within the approach limits (`StickSettings`: horizontal speed and
+  acceleration, climb and descent speeds, the up and down accelerations, and a rotation rate
+  and acceleration about any axis), and
+* what the allocation commands along the whole reference (set-point plus offset) fits every
+  actuator of `fcu.envelope.feasibility.Envelope`: rotor speed with its lag and slowing, tilt-servo
+  rate (the kernels the mission check uses, on the samples' exact central differences in
+  time). Without an envelope (no vehicle), the limits alone.
+
+A rotation along which a rotor's thrust passes through zero makes its tilt flip by half a
+revolution at any duration (`flip`): no duration fits, and a slower one leaves that rotor's
+thrust misdirected for longer while its servo turns (a 170 deg roll stretched to 11 s lost the
+vehicle there); such an approach is flown at the limits' bound, `fits` False, its excess the
+flip (kind FLIP).
+
+Durations are tried from the limits' rest-to-rest bound up, each failing one by a ratio r
+multiplied by max(GROW_MIN, min(sqrt r, GROW_MAX)), then bisected to REFINE_TOL. None fitting
+up to D_MAX_S: the longest is flown and `Approach.fits` is False.
+
+An approach with a free end (HOLD: the reference brakes and holds where it comes to rest; a
+sample without a position or an attitude: that part is not a target) makes the offset's
+start depend on D: for a rate v0 and acceleration a0 it starts at -(v0 D / 2 + a0 D^2 / 12),
+the end of the cubic rate profile from (v0, a0) to rest, and the set-point moves by as much.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from common.jit import njit
+from common.warm_ups import warm_up
+from fcu.control.dualquat import Quat, Vec3, cross, q_exp, q_mul, q_rotate_inv, right_jacobian_inv
+from fcu.envelope.excess import KINDS, Excess, excess_kernel
+from fcu.envelope.feasibility import TILT_STEP_S, Envelope, _nominal_wrench_rows
+from fcu.modes.manual import StickSettings
+
+D_MIN_S = 0.02  # the shortest approach
+D_MAX_S = 120.0  # the longest tried
+GROW_MIN = 1.05
+GROW_MAX = 4.0
+REFINE_TOL = 0.02  # relative: the duration found is at most this much too long
+MAX_TRIES = 80
+SAMPLES = 64  # at least this many instants of the approach are checked
+STEP_RAD = 0.01  # ... at most this much attitude turned between two of them
+SAMPLES_MAX = 2048
+RAMP_SAMPLES = 32
+DIFF_S = 1e-5  # the central differences' time step (s)
+TINY = 1e-9  # an offset and its rates below this are zero: no plan
+CRUISE_MAX = 0.4  # a longer ramp share flies as the plain minimum-jerk blend
+FLIP_RAD = 1.0  # a nominal tilt that turns this much between two samples flips (`flip`)
+FLIP = "tilt flip"
+
+
+class Offset(NamedTuple):
+    """An offset's value, rate and acceleration: e (ENU) and eps (FLU rotation vector)."""
+
+    e: Vec3
+    de: Vec3
+    dde: Vec3
+    eps: Vec3
+    deps: Vec3
+    ddeps: Vec3
+
+
+class Setpoint(NamedTuple):
+    """The set-point at its anchor (ENU / FLU), extrapolated with its own feed-forward."""
+
+    p: Vec3
+    v: Vec3
+    a: Vec3
+    q: Quat
+    w: Vec3
+
+
+class Approach(NamedTuple):
+    """A planned approach: the quintics' coefficients (6 components x 6, in s = tau / D),
+    its duration, and the most demanding actuator along it (None: no envelope checked)."""
+
+    coeffs: np.ndarray  # (6, 7): `coefficients`
+    duration_s: float
+    fits: bool
+    excess: Excess | None
+
+
+ZERO: Vec3 = (0.0, 0.0, 0.0)
+
+
+@njit
+def _right_jacobians(phi: Vec3, x: Vec3, y: Vec3) -> tuple[Vec3, Vec3]:
+    """J_r(phi) x and J_r(phi) y (`right_jacobian`), the coefficients taken once."""
+    th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
+    if th2 < 1e-12:
+        a, b = 0.5, 1.0 / 6.0
+    else:
+        th = math.sqrt(th2)
+        a, b = (1.0 - math.cos(th)) / th2, (th - math.sin(th)) / (th2 * th)
+    px, py = cross(phi, x), cross(phi, y)
+    ppx, ppy = cross(phi, px), cross(phi, py)
+    return ((x[0] - a * px[0] + b * ppx[0], x[1] - a * px[1] + b * ppx[1],
+             x[2] - a * px[2] + b * ppx[2]),
+            (y[0] - a * py[0] + b * ppy[0], y[1] - a * py[1] + b * ppy[1],
+             y[2] - a * py[2] + b * ppy[2]))
+
+
+@njit
+def right_jacobian(phi: Vec3, x: Vec3) -> Vec3:
+    """J_r(phi) x: the body rate of exp(phi) when phi changes at x."""
+    return _right_jacobians(phi, x, x)[0]
+
+
+@njit
+def offset_rate(phi: Vec3, w: Vec3) -> Vec3:
+    """How the attitude offset phi changes for a body rate w of exp(phi)
+    (`fcu.control.dualquat.right_jacobian_inv`); beyond 3 rad, where the inverse grows without bound
+    towards 2 pi, w itself."""
+    if math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]) > 3.0:
+        return w
+    return right_jacobian_inv(phi, w)
+
+
+def quintic_to_rest(x0: float, v0: float, a0: float, d: float) -> tuple[float, ...]:
+    """Coefficients k0..k5 of x(s) = sum k_j s^j, s = tau / d in [0, 1], with x, dx/dtau,
+    d^2x/dtau^2 = (x0, v0, a0) at s = 0 and (0, 0, 0) at s = 1."""
+    v, a = v0 * d, a0 * d * d
+    return (x0, v, 0.5 * a, -(20.0 * x0 + 12.0 * v + 3.0 * a) / 2.0,
+            (30.0 * x0 + 16.0 * v + 3.0 * a) / 2.0, -(12.0 * x0 + 6.0 * v + a) / 2.0)
+
+
+@njit
+def blend(s: float, r: float) -> tuple[float, float, float]:
+    """B(s) from 0 to 1 on [0, 1] and its first two s-derivatives, zero at both ends: the
+    minimum-jerk 10 s^3 - 15 s^4 + 6 s^5 for r = 0; for 0 < r <= 1/2 a cruise at
+    1 / (1 - r) between ramps of share r whose rate is the minimum-jerk blend of the ramp
+    (so B'' is continuous: no step in an acceleration)."""
+    if s <= 0.0:
+        return 0.0, 0.0, 0.0
+    if s >= 1.0:
+        return 1.0, 0.0, 0.0
+    if r <= 0.0:
+        s2 = s * s
+        return (s2 * s * (10.0 - 15.0 * s + 6.0 * s2), 30.0 * s2 * (1.0 - 2.0 * s + s2),
+                60.0 * s * (1.0 - 3.0 * s + 2.0 * s2))
+    k = 1.0 / (1.0 - r)
+    if r < s < 1.0 - r:
+        return k * (s - 0.5 * r), k, 0.0
+    u = s / r if s <= r else (1.0 - s) / r
+    u2 = u * u
+    big_q = u2 * u2 * (2.5 - 3.0 * u + u2)  # the integral of the ramp's rate
+    q = u2 * u * (10.0 - 15.0 * u + 6.0 * u2)
+    dq = 30.0 * u2 * (1.0 - u) * (1.0 - u)
+    if s <= r:
+        return k * r * big_q, k * q, k * dq / r
+    return 1.0 - k * r * big_q, k * q, -k * dq / r
+
+
+@njit
+def _component(k: np.ndarray, j: int, d: float, tau: float) -> tuple[float, float, float]:
+    """Component j's value, rate and acceleration at tau (zero from tau >= d on): its
+    start k[j, 0] times 1 - B(s) (`blend`, cruise share k[j, 6]) plus the quintic of its
+    start's rates, k[j, 1..5]."""
+    if tau >= d:
+        return 0.0, 0.0, 0.0
+    s = max(tau, 0.0) / d
+    x0, c1, c2, c3, c4, c5 = k[j, 0], k[j, 1], k[j, 2], k[j, 3], k[j, 4], k[j, 5]
+    b, db, ddb = blend(s, k[j, 6])
+    x = x0 * (1.0 - b) + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
+    dx = (-x0 * db + c1 + s * (2.0 * c2 + s * (3.0 * c3 + s * (4.0 * c4 + s * 5.0 * c5)))) / d
+    ddx = (-x0 * ddb + 2.0 * c2 + s * (6.0 * c3 + s * (12.0 * c4 + s * 20.0 * c5))) / (d * d)
+    return x, dx, ddx
+
+
+@njit
+def offset_kernel(k: np.ndarray, d: float, tau: float) -> tuple[Vec3, Vec3, Vec3, Vec3, Vec3,
+                                                                 Vec3]:
+    """(e, de, dde, eps, deps, ddeps) at tau seconds into the approach."""
+    e0, de0, dde0 = _component(k, 0, d, tau)
+    e1, de1, dde1 = _component(k, 1, d, tau)
+    e2, de2, dde2 = _component(k, 2, d, tau)
+    r0, dr0, ddr0 = _component(k, 3, d, tau)
+    r1, dr1, ddr1 = _component(k, 4, d, tau)
+    r2, dr2, ddr2 = _component(k, 5, d, tau)
+    return ((e0, e1, e2), (de0, de1, de2), (dde0, dde1, dde2), (r0, r1, r2), (dr0, dr1, dr2),
+            (ddr0, ddr1, ddr2))
+
+
+@njit
+def reference_kernel(p: Vec3, v: Vec3, a: Vec3, q: Quat, w: Vec3, k: np.ndarray, d: float,
+                     tau_sp: float, tau: float) -> tuple[Vec3, Quat, Vec3, Vec3, Vec3, Vec3]:
+    """The reference (p, q, v, a, omega, omega_dot) of the set-point extrapolated tau_sp
+    seconds from its anchor plus the offset tau seconds into the approach."""
+    e, de, dde, eps, deps, ddeps = offset_kernel(k, d, tau)
+    h = 0.5 * tau_sp * tau_sp
+    q_sp = q_mul(q, q_exp((w[0] * tau_sp, w[1] * tau_sp, w[2] * tau_sp)))
+    q_e = q_exp(eps)
+    w_seen = q_rotate_inv(q_e, w)
+    w_e = right_jacobian(eps, deps)
+    return ((p[0] + v[0] * tau_sp + a[0] * h + e[0], p[1] + v[1] * tau_sp + a[1] * h + e[1],
+             p[2] + v[2] * tau_sp + a[2] * h + e[2]),
+            q_mul(q_sp, q_e),
+            (v[0] + a[0] * tau_sp + de[0], v[1] + a[1] * tau_sp + de[1],
+             v[2] + a[2] * tau_sp + de[2]),
+            (a[0] + dde[0], a[1] + dde[1], a[2] + dde[2]),
+            (w_seen[0] + w_e[0], w_seen[1] + w_e[1], w_seen[2] + w_e[2]),
+            right_jacobian(eps, ddeps))
+
+
+@njit
+def _rows(p: Vec3, v: Vec3, a: Vec3, q: Quat, w: Vec3, k: np.ndarray, d: float,
+          taus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`reference_kernel`'s q (4 x n), a, omega, omega_dot (3 x n) at each tau (set-point
+    and approach start together); where w = 0, exp(w tau) is taken once per sign of tau."""
+    n = taus.shape[0]
+    qs, acc, rate, rate_dot = np.empty((4, n)), np.empty((3, n)), np.empty((3, n)), \
+        np.empty((3, n))
+    still = w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0
+    q_signs = (q_mul(q, q_exp((w[0] * 1.0, w[1] * 1.0, w[2] * 1.0))),
+               q_mul(q, q_exp((w[0] * -1.0, w[1] * -1.0, w[2] * -1.0))))
+    for i in range(n):
+        tau = taus[i]
+        _, _, dde, eps, deps, ddeps = offset_kernel(k, d, tau)
+        q_sp = q_signs[int(math.copysign(1.0, tau) < 0.0)] if still else \
+            q_mul(q, q_exp((w[0] * tau, w[1] * tau, w[2] * tau)))
+        q_e = q_exp(eps)
+        w_seen = q_rotate_inv(q_e, w)
+        w_e, wd = _right_jacobians(eps, deps, ddeps)
+        qs[0, i], qs[1, i], qs[2, i], qs[3, i] = q_mul(q_sp, q_e)
+        acc[0, i], acc[1, i], acc[2, i] = a[0] + dde[0], a[1] + dde[1], a[2] + dde[2]
+        for j in range(3):
+            rate[j, i], rate_dot[j, i] = w_seen[j] + w_e[j], wd[j]
+    return qs, acc, rate, rate_dot
+
+
+@njit
+def _kinematic_ratio(k: np.ndarray, d: float, taus: np.ndarray, lim: np.ndarray) -> float:
+    """The largest share of the approach limits the offset uses: lim = (speed_xy, speed_up,
+    speed_down, acc_xy, acc_up, acc_down, rotation rate, rotation acceleration)."""
+    worst = 0.0
+    for i in range(taus.shape[0]):
+        _, de, dde, _, deps, ddeps = offset_kernel(k, d, taus[i])
+        r = max(math.hypot(de[0], de[1]) / lim[0],
+                de[2] / lim[1] if de[2] > 0.0 else -de[2] / lim[2],
+                math.hypot(dde[0], dde[1]) / lim[3],
+                dde[2] / lim[4] if dde[2] > 0.0 else -dde[2] / lim[5],
+                math.sqrt(deps[0] ** 2 + deps[1] ** 2 + deps[2] ** 2) / lim[6],
+                math.sqrt(ddeps[0] ** 2 + ddeps[1] ** 2 + ddeps[2] ** 2) / lim[7])
+        worst = max(worst, r)
+    return worst
+
+
+def _limits(lim: StickSettings, x: Offset) -> np.ndarray:
+    """The limits of `_kinematic_ratio`, each at least what the offset starts with (a
+    reference that enters faster than a limit, say HOLD at 10 m/s, slows from there)."""
+    return np.array([max(lim.speed_xy_m_s, math.hypot(x.de[0], x.de[1])),
+                     max(lim.speed_up_m_s, x.de[2]), max(lim.speed_down_m_s, -x.de[2]),
+                     max(lim.acc_xy_m_s2, math.hypot(x.dde[0], x.dde[1])),
+                     max(lim.acc_up_m_s2, x.dde[2]), max(lim.acc_down_m_s2, -x.dde[2]),
+                     max(math.radians(lim.yaw_rate_deg_s), _norm(x.deps)),
+                     max(math.radians(lim.yaw_acc_deg_s2), _norm(x.ddeps))])
+
+
+def _f3(v: Vec3) -> Vec3:
+    return float(v[0]), float(v[1]), float(v[2])
+
+
+def floats(sp: Setpoint) -> tuple[Vec3, Vec3, Vec3, Quat, Vec3]:
+    """The set-point's parts as floats (the kernels are compiled for floats only)."""
+    q = sp.q
+    return (_f3(sp.p), _f3(sp.v), _f3(sp.a), (float(q[0]), float(q[1]), float(q[2]),
+                                              float(q[3])), _f3(sp.w))
+
+
+def _norm(x: Vec3) -> float:
+    return math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+
+
+def free_end(x: Offset, d: float, free: tuple[bool, bool] = (True, True)) -> Offset:
+    """The offset of an approach whose end is free in position (free[0]) or attitude
+    (free[1]): it starts where the rates' cubic profile to rest ends, -(v0 d / 2 +
+    a0 d^2 / 12) (module docstring)."""
+    def start(v0: Vec3, a0: Vec3) -> Vec3:
+        return (-(v0[0] * d / 2.0 + a0[0] * d * d / 12.0),
+                -(v0[1] * d / 2.0 + a0[1] * d * d / 12.0),
+                -(v0[2] * d / 2.0 + a0[2] * d * d / 12.0))
+    return x._replace(e=start(x.de, x.dde) if free[0] else x.e,
+                      eps=start(x.deps, x.ddeps) if free[1] else x.eps)
+
+
+def coefficients(x: Offset, d: float, r: float = 0.0) -> np.ndarray:
+    """Per component (e, then eps): its start, the quintic of its start's rates (from 0),
+    and the cruise share r (`_component`)."""
+    rows = [(x.e[j], *quintic_to_rest(0.0, x.de[j], x.dde[j], d)[1:], r) for j in range(3)] + \
+        [(x.eps[j], *quintic_to_rest(0.0, x.deps[j], x.ddeps[j], d)[1:], r) for j in range(3)]
+    return np.array(rows)
+
+
+def at_rest(x: Offset) -> bool:
+    return max(map(abs, (*x.e, *x.de, *x.dde, *x.eps, *x.deps, *x.ddeps))) < TINY
+
+
+def _components(x: Offset, lim: StickSettings) -> list[tuple[float, float, float]]:
+    """(distance, speed limit, acceleration limit) of the offset's horizontal, vertical
+    (a reference below its set-point climbs) and rotation parts."""
+    return [(math.hypot(x.e[0], x.e[1]), lim.speed_xy_m_s, lim.acc_xy_m_s2),
+            (abs(x.e[2]), lim.speed_up_m_s if x.e[2] < 0.0 else lim.speed_down_m_s,
+             min(lim.acc_up_m_s2, lim.acc_down_m_s2)),
+            (_norm(x.eps), math.radians(lim.yaw_rate_deg_s), math.radians(lim.yaw_acc_deg_s2))]
+
+
+def _bound(x: Offset, lim: StickSettings, r: float = 0.0) -> float:
+    """A lower bound on D from the limits (the search starts there and never goes below).
+    From rest, `blend`'s top rate is 1.875 (r = 0) or 1 / (1 - r) times the mean, its top
+    acceleration 5.774 or 1.875 / (r (1 - r)) times the distance / D^2; a rate v0 brakes at
+    most at the limit."""
+    d = D_MIN_S
+    for dist, speed, acc in _components(x, lim):
+        if r <= 0.0:
+            d = max(d, 1.875 * dist / speed, math.sqrt(5.774 * dist / acc))
+        else:
+            d = max(d, dist / (speed * (1.0 - r)), math.sqrt(1.875 * dist / (acc * r * (1 - r))))
+    return max(d, math.hypot(x.de[0], x.de[1]) / lim.acc_xy_m_s2,
+               abs(x.de[2]) / min(lim.acc_up_m_s2, lim.acc_down_m_s2),
+               _norm(x.deps) / math.radians(lim.yaw_acc_deg_s2))
+
+
+def cruise_share(x: Offset, lim: StickSettings) -> float:
+    """The cruise share r (`blend`) that reaches the speed limit of the part that takes
+    longest, ramping at its acceleration limit: D = dist / V + 1.875 V / A, r = 1.875 V /
+    (A D); 0 (no cruise) where the ramps would take most of it (r > CRUISE_MAX)."""
+    best_d, r = 0.0, 0.0
+    for dist, speed, acc in _components(x, lim):
+        ramp = 1.875 * speed / acc
+        d = dist / speed + ramp
+        if dist > 0.0 and d > best_d:
+            best_d, r = d, ramp / d
+    return r if 0.0 < r <= CRUISE_MAX else 0.0
+
+
+def _instants(sp: Setpoint, x: Offset, d: float, r: float = 0.0) -> np.ndarray:
+    """Check instants: evenly spaced over [0, d], at most STEP_RAD of attitude apart (the
+    blend's top rate is at most twice its mean), and RAMP_SAMPLES in each ramp of a
+    cruise."""
+    turn = 2.0 * _norm(x.eps) + _norm(sp.w) * d + _norm(x.deps) * d
+    n = max(SAMPLES, math.ceil(turn / STEP_RAD) + 1, math.ceil(RAMP_SAMPLES / r) if r else 0)
+    return np.linspace(0.0, d, int(min(SAMPLES_MAX, n)))
+
+
+def _allocated(env: Envelope, sp: Setpoint, k: np.ndarray, d: float, taus: np.ndarray
+               ) -> np.ndarray:
+    """Omega = A^+ [f_b; tau_b] of the nominal wrench along the reference at each tau
+    (samples x 2n, contiguous)."""
+    qs, acc, rate, rate_dot = _rows(*floats(sp), k, d, taus)
+    v = env.vehicle
+    wrench = _nominal_wrench_rows(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, qs, acc,
+                                  rate, rate_dot)
+    return np.ascontiguousarray(wrench.T @ env.pinv_t)
+
+
+def check(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset, d: float,
+          r: float = 0.0) -> tuple[float, Excess | None]:
+    """(ratio, excess) of the approach of offset x to set-point sp in d seconds: the largest
+    share of a limit or an actuator's envelope it uses (> 1: it does not fit)."""
+    k = coefficients(x, d, r)
+    taus = _instants(sp, x, d, r)
+    ratio = float(_kinematic_ratio(k, d, taus, _limits(lim, x)))
+    if env is None:
+        return ratio, None
+    n = len(taus)
+    all_taus = np.concatenate([taus, taus - DIFF_S, taus + DIFF_S])
+    om = _allocated(env, sp, k, d, all_taus)
+    om0 = np.ascontiguousarray(om[:n])
+    dom = np.ascontiguousarray((om[2 * n:] - om[n:2 * n]) / (2.0 * DIFF_S))
+    zero = np.zeros_like(om0)
+    r, kind, rotor, sample, need, limit = excess_kernel(
+        om0, zero, dom, zero, np.zeros(n, dtype=np.bool_), 1.0, env.limit, env.tau_up,
+        env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S)
+    return max(ratio, r), Excess(r, KINDS[kind], rotor + 1, need, limit, sample)
+
+
+def flip(env: Envelope, sp: Setpoint, x: Offset, d: float) -> Excess | None:
+    """A tilt that must turn half a revolution at once along the approach: where a rotor's
+    thrust passes through zero (its lateral and vertical parts both), the nominal tilt jumps
+    by pi between two samples, at any duration; None when there is none."""
+    k = coefficients(x, d)
+    taus = _instants(sp, x, d)
+    om = _allocated(env, sp, k, d, taus)
+    tilt = np.arctan2(om[:, 0::2], om[:, 1::2])
+    step = np.abs(np.angle(np.exp(1j * np.diff(tilt, axis=0))))
+    if not step.size or float(step.max()) < FLIP_RAD:
+        return None
+    sample, rotor = np.unravel_index(int(np.argmax(step)), step.shape)
+    return Excess(math.inf, FLIP, int(rotor) + 1, float(step[sample, rotor]), FLIP_RAD,
+                  int(sample))
+
+
+def plan(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
+         free: tuple[bool, bool] = (False, False)) -> Approach | None:
+    """The shortest approach of offset x to set-point sp that fits (module docstring); where
+    `free` (position, attitude), x's value there is free (`free_end`): the approach starts
+    at the returned coefficients' first column. A fixed end is also tried with a cruise
+    (`cruise_share`), the shorter kept. None: x is at rest at zero already."""
+    if at_rest(free_end(x, 0.0, free)):
+        return None
+    d = _bound(free_end(x, 0.0, free), lim)  # a free part's value is no bound
+    if free[0]:  # the free end's top rate is its start's; its acceleration 1.5 v0 / d
+        d = max(d, 1.5 * math.hypot(x.de[0], x.de[1]) / lim.acc_xy_m_s2,
+                1.5 * abs(x.de[2]) / min(lim.acc_up_m_s2, lim.acc_down_m_s2))
+    if free[1]:
+        d = max(d, 1.5 * _norm(x.deps) / math.radians(lim.yaw_acc_deg_s2))
+    if env is not None:
+        flipped = flip(env, sp, free_end(x, d, free), d)
+        if flipped is not None:  # slower would leave that rotor's thrust wrong for longer
+            return Approach(coefficients(free_end(x, d, free), d), d, False, flipped)
+    best = _search(env, lim, sp, x, free, 0.0, d)
+    r = 0.0 if any(free) else cruise_share(x, lim)
+    if r > 0.0:
+        cruise = _search(env, lim, sp, x, free, r, _bound(x, lim, r))
+        if cruise.fits and (not best.fits or cruise.duration_s < best.duration_s):
+            best = cruise
+    return best
+
+
+def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
+            free: tuple[bool, bool], r: float, d: float) -> Approach:
+    """The shortest duration from d up that fits with cruise share r (module docstring)."""
+    def trial(dur: float) -> tuple[float, Excess | None]:
+        return check(env, lim, sp, free_end(x, dur, free), dur, r)
+
+    lo, best = math.nan, None
+    for _ in range(MAX_TRIES):
+        ratio, excess = trial(d)
+        if ratio <= 1.0:
+            best = (d, excess)
+            break
+        lo = d
+        if d >= D_MAX_S:
+            break
+        d = min(D_MAX_S, d * max(GROW_MIN, min(math.sqrt(ratio), GROW_MAX)))
+    if best is None:  # nothing fits: the longest tried
+        return Approach(coefficients(free_end(x, d, free), d, r), d, False, trial(d)[1])
+    hi, hi_excess = best
+    while not math.isnan(lo) and hi - lo > REFINE_TOL * hi:
+        mid = 0.5 * (lo + hi)
+        ratio, excess = trial(mid)
+        if ratio <= 1.0:
+            hi, hi_excess = mid, excess
+        else:
+            lo = mid
+    return Approach(coefficients(free_end(x, hi, free), hi, r), hi, True, hi_excess)
+
+
+def start_offset(a: Approach) -> tuple[Vec3, Vec3]:
+    """(e, eps) where the approach starts."""
+    k = a.coeffs
+    return (float(k[0, 0]), float(k[1, 0]), float(k[2, 0])), \
+        (float(k[3, 0]), float(k[4, 0]), float(k[5, 0]))
+
+
+def _warm() -> None:
+    k = np.zeros((6, 7))
+    reference_kernel(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, 0.0, 0.0)
+    _rows(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, np.zeros(2))
+    _kinematic_ratio(k, 1.0, np.zeros(2), np.ones(8))
+    offset_rate(ZERO, ZERO)
+
+
+def warm() -> None:
+    """Compile (or load) the kernels once per process, before the first control period."""
+    warm_up("fcu.reference.approach", _warm)

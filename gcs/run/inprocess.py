@@ -1,0 +1,301 @@
+"""In-process runner: the FCU's pipeline and the simulated world composed in one process
+(docs/architecture.md).
+
+`run_scenario` flies a scenario exactly as `gcs run` does through processes, with only
+MAVLink and the processes taken away: the FCU built as the FCU process builds it
+(`fcu.compose`: the pipeline with the parameters the run sets, the scenario's mission taken
+as the mission protocol takes it, armed, the mission started at t = 0), the world the
+simulator process steps (`sitl.world`: plant, disturbances, faults, sensors, standing still
+before the flight), and the simulator link's float32 rounding applied to the state and to
+the actuator commands in the code's frames (`common.wire.rounding`), so both ways give the same
+status, events and figures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from common.config.scenario import Scenario, VehicleConfig, check_sensor_faults
+from common.config.sensors import check_servable, resolve_sensor_profile
+from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
+from common.process.startup import compile_time_s
+from common.wire.mavlink import encoder, pack, parser
+from common.wire.mission_items import PX4_SITL_HOME, MissionItem, item_from_message
+from common.wire.mission_messages import item_message
+from common.wire.rounding import f32_vec3, f32s, q_enu_flu_as_wire, rotor_speeds_as_wire
+from common.wire.simlink import HilSensor, Odometry, through_wire_hil_sensor, through_wire_odometry
+from fcu import compose
+from fcu.compose import accept_mission, arm_and_start, published_home
+from fcu.control.core import onboard_row
+from fcu.control.tracker import VehicleState
+from fcu.edge.onboard_log import OnboardLog
+from fcu.edge.sim_bridge import imu_from_hil_sensor, pose_from_odometry, valid_state
+from fcu.params import ParamError, ParamStore
+from fcu.pipeline import Pipeline, StepOutput
+from gcs.report.metrics import build_metrics
+from gcs.run.runio import RunResult
+from gcs.run.scenario_mission import scenario_mission
+from sitl.plant import ActuatorCommand, PlantState, rotate_inv, truth_row
+from sitl.truth_log import TruthLog
+from sitl.world import World, obeyed_command
+
+
+class InProcessError(RuntimeError):
+    """A scenario the vehicle refuses (its mission, arming or the start). `result`: the run
+    as far as it went, when the vehicle refused it (its metrics with status `aborted` and the
+    refusal as `error`, as a run through processes records a refusal), else None."""
+
+    def __init__(self, message: str, result: RunResult | None = None) -> None:
+        super().__init__(message)
+        self.result = result
+
+
+def apply_overrides(scenario: Scenario, *, controller: str | None = None,
+                    ideal_actuators: bool | None = None,
+                    duration_s: float | None = None, sensors: str | None = None,
+                    seed: int | None = None) -> Scenario:
+    """The scenario with the command line's choices (a sensor profile by name or file)."""
+    changes: dict[str, Any] = {}
+    if sensors is not None:
+        changes["sensors"] = resolve_sensor_profile(sensors)
+    if seed is not None:
+        changes["seed"] = seed
+    if controller is not None:
+        changes["controller"] = controller
+    if ideal_actuators is not None:
+        changes["ideal_actuators"] = ideal_actuators
+    if duration_s is not None:
+        changes["duration_s"] = min(duration_s, scenario.duration_s)
+    out = dataclasses.replace(scenario, **changes)
+    check_sensor_faults(out.sensor_faults, out.sensors, "--sensors")
+    if out.sensors is not None:  # refused before any run, processes or in-process
+        check_servable(out.sensors, 1_000_000 // out.physics_rate_hz,
+                       1_000_000 // out.control_rate_hz)
+    return out
+
+
+def scenario_params(scenario: Scenario) -> dict[str, float]:
+    """Parameters a run sets on the FCU beyond its defaults (the same through processes):
+    no lead for actuators without lag; with a sensor profile the estimator's noise figures
+    those of the profile's IMU and motion capture and its fusion horizon at the pose's
+    latency (as a user tunes EKF2_GYR_NOISE, EKF2_ACC_NOISE, EKF2_EVP_NOISE, EKF2_EVA_NOISE
+    and EKF2_EV_DELAY to the vehicle); the scenario's own [params]; last, with a sensor
+    profile, the estimator on. Set in this order."""
+    params = {"COM_DIV_POS": scenario.divergence_position_m}
+    if scenario.ideal_actuators:
+        params["CA_LAG_COMP"] = 0.0  # actuators without lag: nothing to lead
+    if scenario.uses_sensors:
+        assert scenario.sensors is not None
+        imu = scenario.sensors.imu
+        params["EKF_GYR_NOISE"] = max(imu.gyro_sigma_rad_s, 1e-4)  # the IMU's, per sample
+        params["EKF_ACC_NOISE"] = max(imu.accel_sigma_m_s2, 1e-3)
+        mocap = scenario.sensors.mocap
+        params["EKF_EVP_NOISE"] = max(mocap.position_noise_m, 1e-5)  # trust its covariance
+        params["EKF_EVA_NOISE"] = max(mocap.attitude_noise_rad, 1e-5)
+        params["EKF_EV_DELAY"] = mocap.latency_s
+    params.update(scenario.params)
+    if scenario.uses_sensors:
+        # Last: the estimator starts (and in lockstep simulated time runs, aligning it) once
+        # it is on, so the flight starts at the same instant however the sets were timed.
+        params.pop("EKF_EN", None)
+        params["EKF_EN"] = 1.0
+    return params
+
+
+def fcu_pipeline(scenario: Scenario) -> tuple[Pipeline, ParamStore]:
+    """The pipeline as the FCU process builds it, with the run's parameters in force."""
+    try:
+        return compose.fcu_pipeline(scenario.vehicle, scenario.gains, scenario.control_rate_hz,
+                                    scenario_params(scenario))
+    except ParamError as exc:
+        raise InProcessError(f"the vehicle refused a parameter: {exc}") from None
+
+
+def through_wire_item(item: MissionItem) -> MissionItem:
+    """A mission item as the FCU receives it in MISSION_ITEM_INT (params and z float32)."""
+    mav = encoder(255, 190)
+    msg = parser().parse_buffer(pack(mav, item_message(item, 1, 1)))[0]
+    return item_from_message(msg)
+
+
+def state_for_fcu(s: PlantState) -> VehicleState:
+    """What the FCU sees: the state as ODOMETRY carries it, each field float32 (rounded in
+    ENU/FLU, the same bits; the attitude in the wire's frame), refused as the FCU refuses a
+    state no vehicle can be in."""
+    state = VehicleState(f32_vec3(s.p_enu_m), q_enu_flu_as_wire(s.q_enu_flu),
+                         f32_vec3(rotate_inv(s.q_enu_flu, s.v_enu_m_s)),
+                         f32_vec3(s.omega_flu_rad_s))
+    if not valid_state(*state):
+        raise InProcessError(f"t = {s.time_us * 1e-6:.3f} s: the plant's state is not one "
+                             "the FCU accepts")
+    return state
+
+
+def command_for_plant(out: StepOutput, vehicle: VehicleConfig,
+                      state: PlantState) -> ActuatorCommand:
+    """A step's output as the plant obeys it through HIL_ACTUATOR_CONTROLS: the rotor
+    speeds and tilts rounded as the wire rounds them, then `obeyed_command`."""
+    return obeyed_command(rotor_speeds_as_wire(out.speed_rad_s, vehicle.rotor_speed_max_rad_s),
+                          f32s(out.tilt_rad), out.armed, state)
+
+
+def feed_fcu(pipeline: Pipeline, messages: list[HilSensor | Odometry]) -> float:
+    """A period's sensor messages as the FCU takes them from the simulator link (float32);
+    returns the microseconds the estimator spent on them (part of the FCU's step time)."""
+    spent = 0.0
+    clock = time.perf_counter
+    for m in messages:
+        if isinstance(m, HilSensor):
+            imu = imu_from_hil_sensor(through_wire_hil_sensor(m))
+            t0 = clock()
+            pipeline.on_imu(imu)
+        else:
+            pose = pose_from_odometry(through_wire_odometry(m))
+            if pose is None:
+                continue
+            t0 = clock()
+            pipeline.on_pose(pose)
+        spent += (clock() - t0) * 1e6
+    return spent
+
+
+def align(pipeline: Pipeline, world: World, dt_s: float,
+          record: Callable[[PlantState], None], logged: Callable[[StepOutput], None]) -> None:
+    """Before the flight (a sensor feed): the world stands still while time and the sensors
+    run, and the FCU answers disarmed, until its estimator is aligned and converged or gives
+    up (pipeline.ALIGN_MAX_S; arming is then refused), as with the two processes.
+    `record` gets each state sent but the last, `logged` each step's output."""
+    assert world.feed is not None
+    feed_fcu(pipeline, world.feed.period([world.state]))
+    while pipeline.needs_time:
+        record(world.state)
+        out = pipeline.step(world.state.time_us, dt_s)
+        logged(out)
+        states = world.advance(command_for_plant(out, world.scenario.vehicle, world.state))
+        feed_fcu(pipeline, world.feed.period(states))
+
+
+def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
+                 logs: bool = True,
+                 before_step: Callable[[int, Pipeline], None] | None = None) -> RunResult:
+    """Fly a scenario's mission to its end from `initial` (default: the scenario's start);
+    deterministic for a given scenario. With `logs`, the result carries truth.ulg and
+    onboard.ulg as the two processes would write them. `before_step(t_us, pipeline)` runs
+    before each control step of the flight (what a ground station does, at fixed
+    simulated times)."""
+    vehicle = scenario.vehicle
+    control_dt_us = 1_000_000 // scenario.control_rate_hz
+    world = World(scenario, control_dt_us, sensors=scenario.sensors, seed=scenario.seed,
+                  initial=initial)
+    pipeline, store = fcu_pipeline(scenario)
+    cmd = pipeline.commander
+    truth_buf, onboard_buf = bytearray(), bytearray()
+    truth_log = TruthLog(truth_buf, scenario.name) if logs else None
+    onboard_log = OnboardLog(onboard_buf, pipeline, store.values) if logs else None
+    items = tuple(through_wire_item(item) for item in scenario_mission(scenario))
+    truth_rows: list[tuple[float, ...]] = []
+
+    def aborted(why: str) -> InProcessError:
+        """The refusal, with the run as far as it went: the states so far, nothing flown,
+        status aborted (`build_metrics`, as `gcs.run.process_run` records a refused run)."""
+        truth_rows.append(truth_row(world.state))
+        if truth_log is not None and onboard_log is not None:
+            truth_log.record(world.state)
+            onboard_log.events(cmd.events)
+            truth_log.close()
+            onboard_log.close()
+        truth = np.array(truth_rows, dtype=float).reshape(-1, len(TRUTH_COLUMNS))
+        onboard = np.zeros((0, len(ONBOARD_COLUMNS)))
+        metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
+                                events=list(cmd.events), wall_time_s=0.0,
+                                transport="in-process", lockstep=True, stopped="aborted",
+                                flight_start_us=world.state.time_us,
+                                compile_time_s=compile_time_s())
+        metrics["error"] = why
+        metrics["fcu_params"] = scenario_params(scenario)
+        return InProcessError(why, RunResult(
+            metrics, truth, onboard, list(cmd.events),
+            bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None))
+
+    refused = accept_mission(pipeline, items, published_home(PX4_SITL_HOME))
+    if refused:
+        raise aborted(f"mission refused: {refused}")
+    dt_s = control_dt_us * 1e-6
+    onboard_rows: list[tuple[float, ...]] = []
+    feed = world.feed
+    if feed is not None:
+        def record(s: PlantState) -> None:
+            truth_rows.append(truth_row(s))
+            if truth_log is not None:
+                truth_log.record(s)
+
+        def logged(out: StepOutput) -> None:
+            if onboard_log is not None:
+                onboard_log.step(out, 0.0, out.t_us)
+
+        align(pipeline, world, dt_s, record, logged)
+    else:
+        t_us = world.state.time_us
+        pipeline.on_state(t_us, state_for_fcu(world.state), t_us)
+    refused = arm_and_start(pipeline)
+    if refused:
+        raise aborted(refused)
+    world.start_flight()  # the flight's start: the scenario's clock counts from it
+    start_us = world.state.time_us
+    end_us = start_us + round(scenario.duration_s * 1e6)
+    clock = time.perf_counter
+    logged_events = 0
+    input_us = 0.0  # the estimator's work on the period's inputs
+    rows: list[np.ndarray] = []
+    wall0 = clock()
+    while True:
+        state = world.state
+        t_us = state.time_us
+        rows.append(world.row)
+        if truth_log is not None:
+            truth_log.record(state)
+        if feed is None:
+            pipeline.on_state(t_us, state_for_fcu(state), t_us)
+        if before_step is not None:
+            before_step(t_us, pipeline)
+        t0 = clock()
+        out = pipeline.step(t_us, dt_s)
+        step_us = (clock() - t0) * 1e6 + input_us
+        if out.result is not None and pipeline.state is not None:
+            onboard_rows.append(onboard_row(t_us, pipeline.state, out.result, out.speed_rad_s,
+                                            out.tilt_rad, out.armed, step_us))
+        if onboard_log is not None:
+            onboard_log.step(out, step_us, t_us)
+            if cmd.events and len(cmd.events) > logged_events:
+                onboard_log.events(cmd.events[logged_events:])
+                logged_events = len(cmd.events)
+        # The step's mission events consumed, as the FCU process's housekeeping consumes
+        # them (MISSION_ITEM_REACHED): the log reads only the new ones at its next step.
+        cmd.mission_events.clear()
+        if t_us >= end_us:
+            break
+        states = world.advance(command_for_plant(out, vehicle, state))
+        if feed is not None:
+            input_us = feed_fcu(pipeline, feed.period(states))
+    wall = clock() - wall0
+
+    if truth_log is not None and onboard_log is not None:
+        onboard_log.events(cmd.events[logged_events:])
+        truth_log.close()
+        onboard_log.close()
+    truth = np.vstack([np.array(truth_rows, dtype=float).reshape(-1, len(TRUTH_COLUMNS)),
+                       *rows])
+    onboard = np.array(onboard_rows, dtype=float).reshape(-1, len(ONBOARD_COLUMNS))
+    events = list(cmd.events)
+    metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
+                            events=events, wall_time_s=wall, transport="in-process",
+                            lockstep=True, mission_completed=cmd.mission_done,
+                            flight_start_us=start_us, compile_time_s=compile_time_s())
+    metrics["fcu_params"] = scenario_params(scenario)
+    return RunResult(metrics, truth, onboard, events,
+                     bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None)
