@@ -60,6 +60,7 @@ from fcu.control.dualquat import Quat, Vec3, cross, q_exp, q_mul, q_rotate_inv, 
 from fcu.envelope.excess import KINDS, Excess, excess_kernel
 from fcu.envelope.feasibility import TILT_STEP_S, Envelope, _nominal_wrench_rows
 from fcu.modes.manual import StickSettings
+from fcu.reference.trajectory import quintic_poly
 
 D_MIN_S = 0.02  # the shortest approach
 D_MAX_S = 120.0  # the longest tried
@@ -153,6 +154,9 @@ def quintic_to_rest(x0: float, v0: float, a0: float, d: float) -> tuple[float, .
             (30.0 * x0 + 16.0 * v + 3.0 * a) / 2.0, -(12.0 * x0 + 6.0 * v + a) / 2.0)
 
 
+_quintic = njit(quintic_poly)  # the one minimum-jerk polynomial, compiled for `blend`
+
+
 @njit
 def blend(s: float, r: float) -> tuple[float, float, float]:
     """B(s) from 0 to 1 on [0, 1] and its first two s-derivatives, zero at both ends: the
@@ -164,17 +168,15 @@ def blend(s: float, r: float) -> tuple[float, float, float]:
     if s >= 1.0:
         return 1.0, 0.0, 0.0
     if r <= 0.0:
-        s2 = s * s
-        return (s2 * s * (10.0 - 15.0 * s + 6.0 * s2), 30.0 * s2 * (1.0 - 2.0 * s + s2),
-                60.0 * s * (1.0 - 3.0 * s + 2.0 * s2))
+        return _quintic(s)
     k = 1.0 / (1.0 - r)
     if r < s < 1.0 - r:
         return k * (s - 0.5 * r), k, 0.0
     u = s / r if s <= r else (1.0 - s) / r
     u2 = u * u
     big_q = u2 * u2 * (2.5 - 3.0 * u + u2)  # the integral of the ramp's rate
-    q = u2 * u * (10.0 - 15.0 * u + 6.0 * u2)
-    dq = 30.0 * u2 * (1.0 - u) * (1.0 - u)
+    q = _quintic(u)[0]
+    dq = 30.0 * u2 * (1.0 - u) * (1.0 - u)  # q's rate, factored as the pinned figures have it
     if s <= r:
         return k * r * big_q, k * q, k * dq / r
     return 1.0 - k * r * big_q, k * q, -k * dq / r
