@@ -8,7 +8,8 @@ kernels it calls from other modules (the tracker's has the dual-quaternion algeb
 an edit of `fcu/control/dualquat.py` would leave a stale tracker in the cache. So the cache lives in
 `__pycache__/numba-<hash>` at the project's root, the hash taken over every module that
 defines kernels or the constants they freeze (KERNEL_MODULES: the array layouts of
-`common.layouts`): any edit of one of them starts a fresh cache.
+`fcu.control.layouts`, `fcu.estimator.layouts` and `sitl.layouts` too): any edit of one of
+them starts a fresh cache.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numba
 
 ROOT = Path(__file__).resolve().parent.parent
 KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layouts.py",
+                  "fcu/control/layouts.py", "fcu/estimator/layouts.py", "sitl/layouts.py",
                   "common/quaternion.py",
                   "fcu/control/dualquat.py", "fcu/control/tracker.py", "fcu/control/allocation.py",
                   "fcu/control/core.py", "fcu/control/wrench.py",

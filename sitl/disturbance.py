@@ -12,7 +12,7 @@ import numpy as np
 
 from common.config.scenario_terms import DisturbanceTerm
 from common.jit import njit
-from common.layouts import (
+from sitl.layouts import (
     D_AMPLITUDE,
     D_END,
     D_OMEGA,

@@ -25,7 +25,7 @@ force plus gravity integrates to the true velocity change.
 
 The step is a compiled kernel (`sitl.plant_kernels.step_kernel`, numba) on a flat state
 array laid out as TRUTH_COLUMNS (so a state is its truth-log row) and a flat parameter array
-(common.layouts: PLANT_STATE, PLANT_PARAMS); `Plant.step` is its Python face on PlantState,
+(sitl.layouts: PLANT_STATE, PLANT_PARAMS); `Plant.step` is its Python face on PlantState,
 `Plant.step_rows` runs a control period's substeps at once. The plant's own rotation
 (`rotate`, `rotate_inv`, independent of the controller's) is part of this module's interface.
 """
@@ -40,7 +40,11 @@ import numpy as np
 
 from common.config.scenario import Scenario, VehicleConfig
 from common.geometry import rotor_frames
-from common.layouts import (
+from common.logs.columns import TRUTH_COLUMNS
+from common.vehicle_constants import N_ROTORS
+from common.warm_ups import warm_up
+from sitl.disturbance import Disturbance
+from sitl.layouts import (
     PC_SIZE,
     PLANT_COMMAND,
     PLANT_STATE,
@@ -77,10 +81,6 @@ from common.layouts import (
     PS_V,
     PS_W,
 )
-from common.logs.columns import TRUTH_COLUMNS
-from common.vehicle_constants import N_ROTORS
-from common.warm_ups import warm_up
-from sitl.disturbance import Disturbance
 from sitl.plant_kernels import rotate as rotate
 from sitl.plant_kernels import rotate_inv as rotate_inv
 from sitl.plant_kernels import (

@@ -1,4 +1,4 @@
-"""The plant's step as compiled kernels (numba) on flat arrays (common.layouts): the
+"""The plant's step as compiled kernels (numba) on flat arrays (sitl.layouts): the
 parameters PLANT_PARAMS, the state PLANT_STATE (a truth-log row), the command PLANT_COMMAND.
 
 The rigid body (docs/model.md#plant): p' = v, m v' = R(q) f_b + m g_W, q' = 1/2 q (0, w),
@@ -15,7 +15,9 @@ import math
 import numpy as np
 
 from common.jit import njit
-from common.layouts import (
+from common.vehicle_constants import N_ROTORS
+from sitl.disturbance import disturbance_kernel
+from sitl.layouts import (
     PC_SPEED,
     PC_TILT,
     PP_DECAY_DOWN,
@@ -49,8 +51,6 @@ from common.layouts import (
     PS_V,
     PS_W,
 )
-from common.vehicle_constants import N_ROTORS
-from sitl.disturbance import disturbance_kernel
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]

@@ -20,7 +20,9 @@ import numpy as np
 from common.config.vehicle import VehicleConfig
 from common.geometry import rotor_frames
 from common.jit import njit
-from common.layouts import (
+from common.vehicle_constants import N_ROTORS
+from fcu.control.dualquat import Vec3, cross
+from fcu.control.layouts import (
     A_HOLD,
     A_PINV,
     A_SIZE,
@@ -49,8 +51,6 @@ from common.layouts import (
     LS_W_LAST,
     PINV_SIZE,
 )
-from common.vehicle_constants import N_ROTORS
-from fcu.control.dualquat import Vec3, cross
 
 TWO_PI = 2.0 * math.pi
 WRENCH_SIZE = 6  # [f; tau]: force xyz, torque xyz
@@ -109,7 +109,7 @@ def solve_kernel(ap: np.ndarray, w6: np.ndarray, om: np.ndarray) -> None:
 def allocate_kernel(ap: np.ndarray, w6: np.ndarray, tilt: np.ndarray, out: np.ndarray) -> None:
     """Eqs. (28-29) with saturation and the corrected unwrap (Algorithm 1,
     docs/model.md#geometry) for the wrench w6 = [f; tau]; `tilt` (n) is the unwrapped tilt,
-    advanced in place; `out` gets ALLOC_OUT (common.layouts), from the parameters
+    advanced in place; `out` gets ALLOC_OUT (fcu.control.layouts), from the parameters
     ALLOC_PARAMS `ap`."""
     solve_kernel(ap, w6, out[AO_OMEGA:AO_OMEGA + 2 * N_ROTORS])
     w_max, hold = ap[A_WMAX], ap[A_HOLD]

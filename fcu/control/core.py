@@ -22,7 +22,12 @@ import numpy as np
 from common.config.gains import Gains
 from common.config.vehicle import VehicleConfig
 from common.jit import njit
-from common.layouts import (
+from common.vehicle_constants import N_ROTORS
+from common.warm_ups import warm_up
+from fcu.control import allocation as al
+from fcu.control import tracker as tr
+from fcu.control.allocation import AllocationResult, Allocator, LagCompensator, allocation_result
+from fcu.control.layouts import (
     AO_SPEED,
     AO_TILT,
     CI_DT,
@@ -54,11 +59,6 @@ from common.layouts import (
     X_Q,
     X_SIZE,
 )
-from common.vehicle_constants import N_ROTORS
-from common.warm_ups import warm_up
-from fcu.control import allocation as al
-from fcu.control import tracker as tr
-from fcu.control.allocation import AllocationResult, Allocator, LagCompensator, allocation_result
 from fcu.control.tracker import (
     DualQuaternionTracker,
     Reference,
@@ -68,7 +68,7 @@ from fcu.control.tracker import (
 )
 from fcu.envelope.feasibility import nominal_wrench_kernel
 
-# The fused step's buffers (common.layouts): CORE_PARAMS holds the tracker's, the
+# The fused step's buffers (fcu.control.layouts): CORE_PARAMS holds the tracker's, the
 # allocator's and the compensator's parameters; CORE_STATE the tracker's integral, the
 # allocator's tilts and the compensator's state; CORE_IN the vehicle state, the reference,
 # dt and lag compensation on (1) or off (0); CORE_OUT the tracker's output, then the

@@ -16,7 +16,21 @@ import numpy as np
 from common.config.gains import Gains
 from common.config.vehicle import VehicleConfig
 from common.jit import njit
-from common.layouts import (
+from fcu.control.dualquat import (
+    DualVec,
+    Quat,
+    Vec3,
+    cross,
+    dq_ad,
+    dq_conj,
+    dq_from_pose,
+    dq_log,
+    dq_mul,
+    dual_cross,
+    q_rotate_inv,
+    right_jacobian_inv,
+)
+from fcu.control.layouts import (
     DUAL_VEC_SIZE,
     K_D,
     K_G,
@@ -45,20 +59,6 @@ from common.layouts import (
     X_Q,
     X_V,
     X_W,
-)
-from fcu.control.dualquat import (
-    DualVec,
-    Quat,
-    Vec3,
-    cross,
-    dq_ad,
-    dq_conj,
-    dq_from_pose,
-    dq_log,
-    dq_mul,
-    dual_cross,
-    q_rotate_inv,
-    right_jacobian_inv,
 )
 
 
@@ -145,9 +145,9 @@ def desired_accel(j: int, ff: DualVec, cr: DualVec, k: np.ndarray, log_e: DualVe
 def tracker_kernel(x: np.ndarray, r: np.ndarray, k: np.ndarray, integral: np.ndarray,
                    dt_s: float, out: np.ndarray) -> None:
     """Eq. (16) (or eq. 33) with the exact inverse dynamics (docs/model.md#dynamics), on flat
-    arrays (common.layouts): state `x` (VEHICLE_STATE), reference `r` (REFERENCE), parameters `k`
-    (TRACKER_PARAMS); the integral of ln q_hat_e (6) advances in place unless PD; `out`
-    gets TRACKER_OUT."""
+    arrays (fcu.control.layouts): state `x` (VEHICLE_STATE), reference `r` (REFERENCE),
+    parameters `k` (TRACKER_PARAMS); the integral of ln q_hat_e (6) advances in place unless
+    PD; `out` gets TRACKER_OUT."""
     p = (x[X_P], x[X_P + 1], x[X_P + 2])
     q = (x[X_Q], x[X_Q + 1], x[X_Q + 2], x[X_Q + 3])
     v = (x[X_V], x[X_V + 1], x[X_V + 2])

@@ -1,7 +1,7 @@
 """The filter's flat buffers as `fcu.estimator.filter`'s kernels read them, for settings.
 
 `filter_buffers` returns (fb, ib, M, pend_t, pend_v, pose_c, pose_v): the float and integer
-buffers (`common.layouts` EF_*, EI_*: unaligned states, -1 times, the settings the kernels
+buffers (`fcu.estimator.layouts` EF_*, EI_*: unaligned states, -1 times, the settings the kernels
 read), P and F (M[0], M[1] = I), the ring of RING buffered IMU samples (it grows when full)
 and the pose queue (pose_queue_max + 1 rows: a pose is inserted before the oldest is dropped).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from common.layouts import (
+from fcu.estimator.layouts import (
     EF_ACC_B2,
     EF_ACC_N2,
     EF_C_X,

@@ -2,7 +2,7 @@
 
 The design is described in `fcu.estimator` (the package docstring). Before it is aligned the
 filter is Python (the stationary window, `fcu.estimator.align`); once aligned its state
-lives in flat buffers (`common.layouts` EF_*, EI_*) that compiled kernels advance
+lives in flat buffers (`fcu.estimator.layouts` EF_*, EI_*) that compiled kernels advance
 (`fcu.estimator.filter`): an IMU sample is one kernel call, a pose fusion one.
 """
 
@@ -14,7 +14,28 @@ from collections import deque
 
 import numpy as np
 
-from common.layouts import (
+from common.quaternion import Vec3
+from common.warm_ups import warm_up
+from fcu.control.tracker import VehicleState
+from fcu.estimator.align import AlignWindow
+from fcu.estimator.buffers import filter_buffers
+from fcu.estimator.filter import (
+    DONE,
+    FUSE,
+    GROW,
+    OUTPUT,
+    PUSH,
+    cov_step,
+    fuse,
+    imu_step,
+    output_values,
+    pose_step,
+    repropagate,
+    sd_values,
+    variance_code,
+)
+from fcu.estimator.inputs import ImuInput, PoseInput
+from fcu.estimator.layouts import (
     EF_C_DT2,
     EF_C_X,
     EF_H_X,
@@ -40,27 +61,6 @@ from common.layouts import (
     EI_RESETS,
     EI_RESYNC_T,
 )
-from common.quaternion import Vec3
-from common.warm_ups import warm_up
-from fcu.control.tracker import VehicleState
-from fcu.estimator.align import AlignWindow
-from fcu.estimator.buffers import filter_buffers
-from fcu.estimator.filter import (
-    DONE,
-    FUSE,
-    GROW,
-    OUTPUT,
-    PUSH,
-    cov_step,
-    fuse,
-    imu_step,
-    output_values,
-    pose_step,
-    repropagate,
-    sd_values,
-    variance_code,
-)
-from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
 from fcu.estimator.status import EstimatorHealth, EstimatorStatus, positive_definite, sd_verdict
 from fcu.estimator.strapdown import N, State

@@ -1,7 +1,7 @@
 """The filter's compiled kernels on its flat buffers: prediction, the covariance step, the
 fusion's bookkeeping, the output predictor and the health verdict.
 
-Buffers (`common.layouts`): `fb` floats (EF_*: states, the pose under way, the settings
+Buffers (`fcu.estimator.layouts`): `fb` floats (EF_*: states, the pose under way, the settings
 the kernels read), `ib` integers (EI_*: times in us, counters, the ring and queue lengths),
 `M` the covariance P (M[0]) and the transition F (M[1]), the ring of buffered IMU samples
 (`pend_t` times, `pend_v` gyro and accel), the pose queue by capture time (`pose_c`
@@ -18,7 +18,8 @@ import math
 import numpy as np
 
 from common.jit import njit
-from common.layouts import (
+from common.quaternion import q_conj, q_log, q_mul, q_rotate_inv
+from fcu.estimator.layouts import (
     EF_ACC_B2,
     EF_ACC_N2,
     EF_C_DT2,
@@ -69,7 +70,6 @@ from common.layouts import (
     EI_RESYNC_US,
     EI_TIMEOUT_US,
 )
-from common.quaternion import q_conj, q_log, q_mul, q_rotate_inv
 from fcu.estimator.output import corrected_output, propagate
 from fcu.estimator.strapdown import F_IDX, N, load_state, store_state, strapdown, transition_entries
 from fcu.estimator.update import (

@@ -10,7 +10,12 @@ import math
 import numpy as np
 import pytest
 
-from common.layouts import (
+from fcu.estimator import buffers
+from fcu.estimator.buffers import filter_buffers
+from fcu.estimator.ekf import Estimator
+from fcu.estimator.filter import cov_step, sd_values, variance_code
+from fcu.estimator.inputs import ImuInput, PoseInput
+from fcu.estimator.layouts import (
     EF_C_DT2,
     EF_C_X,
     EF_H_X,
@@ -22,11 +27,6 @@ from common.layouts import (
     EI_H_T,
     EI_N_PRED,
 )
-from fcu.estimator import buffers
-from fcu.estimator.buffers import filter_buffers
-from fcu.estimator.ekf import Estimator
-from fcu.estimator.filter import cov_step, sd_values, variance_code
-from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
 from fcu.estimator.strapdown import strapdown
 from fcu.estimator.update import (
