@@ -15,6 +15,7 @@ from typing import Any
 from common.config.scenario import load_scenario, scenario_from_data
 from common.links import free_port
 from gcs.campaign.runs import RunSpec
+from gcs.report.run_metrics import RunMetrics
 
 
 def flatten(metrics: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -57,13 +58,13 @@ def warm_worker() -> None:
 START_ATTEMPTS = 3  # a run through processes that could not start is tried again (new ports)
 
 
-def _through_processes(spec: RunSpec, folder: Path) -> dict[str, Any]:
+def _through_processes(spec: RunSpec, folder: Path) -> RunMetrics | dict[str, Any]:
     """A run through sitl and fcu processes on their own free ports (or Zenoh prefix), in
     its run folder or a temporary one."""
-    from gcs.run.process_run import RunError, run_processes
+    from gcs.run.process_run import RunError, one_vehicle, run_processes
 
     where = folder if spec.keep != "none" else Path(tempfile.mkdtemp(prefix="campaign-run-"))
-    metrics: dict[str, Any] = {}
+    metrics: RunMetrics | dict[str, Any] = {}
     try:
         scenario = load_scenario(_write_scenario_files(spec.data, where))
         for attempt in range(1, START_ATTEMPTS + 1):
@@ -71,8 +72,9 @@ def _through_processes(spec: RunSpec, folder: Path) -> dict[str, Any]:
             # shared by concurrent runs would stop with the run that started it).
             router = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
             try:
-                metrics = run_processes(scenario, where, transport=spec.transport,
-                                        zenoh_url=f"zenoh:campaign/{spec.run_id}@{router}")
+                metrics = one_vehicle(run_processes(
+                    scenario, where, transport=spec.transport,
+                    zenoh_url=f"zenoh:campaign/{spec.run_id}@{router}"))
                 break
             except RunError:
                 if attempt == START_ATTEMPTS:
@@ -102,7 +104,7 @@ def execute_run(spec: RunSpec) -> dict[str, Any]:
         except InProcessError as exc:
             row.update(status="refused", status_reason=str(exc))
             return row
-        metrics = result.metrics
+        metrics: RunMetrics | dict[str, Any] = result.metrics
         if spec.keep == "all" or (spec.keep == "failed" and metrics["status"] != "completed"):
             src = _write_scenario_files(spec.data, folder)
             write_run(folder, dataclasses.replace(scenario, source=str(src)), result)

@@ -7,14 +7,14 @@ import argparse
 import dataclasses
 import sys
 import time
-from typing import Any
 
 from common.config.scenario import ConfigError, load_scenario
 from common.config.sensors import resolve_sensor_profile
 from gcs.cli.console import Progress
+from gcs.report.run_metrics import RunMetrics
 
 
-def _summary(m: dict[str, Any]) -> str:
+def _summary(m: RunMetrics) -> str:
     pos, att = m["position_error_m"], m["attitude_error_rad"]
     events = "".join(f"\n  t = {e['t_s']:8.3f} s  {e['text']}" for e in m.get("events", [])
                      if e.get("kind", "info") != "info" or e["severity"] <= 4)
@@ -36,7 +36,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     """Exit 0 when the run completed, 1 for any other status, 2 for bad input."""
     from gcs.run.inprocess import InProcessError, apply_overrides, run_scenario
     from gcs.run.process_run import Progress as RunProgress
-    from gcs.run.process_run import RunError, run_processes
+    from gcs.run.process_run import RunError, fleet_of, one_vehicle, run_processes
     from gcs.run.runio import RunDirError, prepare_run_dir, write_run
 
     scenario = apply_overrides(load_scenario(args.scenario), controller=args.controller,
@@ -70,7 +70,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             progress(f"{scenario.name}: t = {p.sim_time_s:7.2f} / {scenario.duration_s:.0f} s"
                      f"   {p.sim_time_s / max(elapsed, 1e-3):5.1f}x real time")
         try:
-            metrics = run_processes(scenario, args.out, realtime=args.realtime,
+            outcome = run_processes(scenario, args.out, realtime=args.realtime,
                                     transport=args.link, report=report, fleet=args.fleet,
                                     spacing_m=args.spacing, zenoh_url=args.zenoh,
                                     signing_key_file=args.signing_key)
@@ -80,11 +80,13 @@ def cmd_run(args: argparse.Namespace) -> int:
             return 1
         if args.fleet > 1:
             progress.done()
-            for m in metrics["vehicles"].values():
+            fleet = fleet_of(outcome)
+            for m in fleet["vehicles"].values():
                 _print_error(m)
                 print(f"vehicle {m['system_id']}: " + _summary(m))
             print(f"  wrote {args.out / 'fleet.json'}")
-            return 0 if metrics["all_completed"] else 1
+            return 0 if fleet["all_completed"] else 1
+        metrics = one_vehicle(outcome)
     progress.done()
     _print_error(metrics)
     print(_summary(metrics))
@@ -92,7 +94,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0 if metrics["status"] == "completed" else 1
 
 
-def _print_error(m: dict[str, Any]) -> None:
+def _print_error(m: RunMetrics) -> None:
     if m.get("error"):
         print(f"gcs run: {m['error']}", file=sys.stderr)
 

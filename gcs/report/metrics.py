@@ -22,6 +22,13 @@ from common.outcome import (
     touchdowns,
 )
 from common.quaternion import angle_between_rows, rotate_rows
+from gcs.report.run_metrics import (
+    ErrorStats,
+    RunMetrics,
+    StepPercentiles,
+    Tracking,
+    event_record,
+)
 
 
 def attitude_error_rad(q: np.ndarray, q_d: np.ndarray) -> np.ndarray:
@@ -29,14 +36,14 @@ def attitude_error_rad(q: np.ndarray, q_d: np.ndarray) -> np.ndarray:
     return angle_between_rows(q, q_d)
 
 
-def error_stats(err: np.ndarray) -> dict[str, float]:
+def error_stats(err: np.ndarray) -> ErrorStats:
     if err.size == 0:
         return {"max": 0.0, "mean": 0.0, "rmse": 0.0}
     return {"max": float(np.max(err)), "mean": float(np.mean(err)),
             "rmse": float(math.sqrt(float(np.mean(err * err))))}
 
 
-def percentiles_us(samples: np.ndarray) -> dict[str, float]:
+def percentiles_us(samples: np.ndarray) -> StepPercentiles:
     if samples.size == 0:
         return {"p50": 0.0, "p99": 0.0, "max": 0.0}
     return {"p50": float(np.percentile(samples, 50)), "p99": float(np.percentile(samples, 99)),
@@ -44,7 +51,7 @@ def percentiles_us(samples: np.ndarray) -> dict[str, float]:
 
 
 def tracking_metrics(p: np.ndarray, q: np.ndarray, p_d: np.ndarray,
-                     q_d: np.ndarray) -> dict[str, Any]:
+                     q_d: np.ndarray) -> Tracking:
     """Table I figures; rows must be finite (a diverged run is cut at its last finite row)."""
     pos = np.linalg.norm(p - p_d, axis=1)
     att = attitude_error_rad(q, q_d)
@@ -147,10 +154,10 @@ def estimation_error(truth_columns: Sequence[str], truth_j: np.ndarray,
             "attitude_rad": error_stats(da)}
 
 
-def link_timing(metrics: dict[str, Any], fcu_stats: dict[str, Any],
-                sitl_stats: dict[str, Any], transport: str, *,
-                lockstep: bool) -> dict[str, Any]:
-    """The lockstep path's timing in a run through processes: the wall time per control step
+def add_link_timing(metrics: RunMetrics, fcu_stats: dict[str, Any],
+                    sitl_stats: dict[str, Any], transport: str, *, lockstep: bool) -> None:
+    """Into `metrics`, the lockstep path's timing in a run through processes: the wall time
+    per control step
     (`step_wall_us`), the simulator link's round trip that the FCU timed before the flight
     (TIMESYNC ping-pong between the two processes, median: `link_rtt_us`, and as
     `udp_rtt_us` on UDP), their ratio `step_per_rtt`, and where a step's wall time goes
@@ -159,18 +166,18 @@ def link_timing(metrics: dict[str, Any], fcu_stats: dict[str, Any],
     wall = float(metrics.get("wall_time_s") or 0.0)
     step_us = wall / samples * 1e6 if samples and lockstep else None
     rtt = (fcu_stats.get("sim_rtt") or {}).get("median_us")
-    out: dict[str, Any] = {"step_wall_us": step_us, "link_rtt_us": rtt,
-                           "step_per_rtt": step_us / rtt if step_us and rtt else None}
+    metrics["step_wall_us"] = step_us
+    metrics["link_rtt_us"] = rtt
+    metrics["step_per_rtt"] = step_us / rtt if step_us and rtt else None
     if transport == "udp":
-        out["udp_rtt_us"] = rtt
+        metrics["udp_rtt_us"] = rtt
     stages = {}
     if fcu_stats.get("stage_us"):
         stages["fcu"] = fcu_stats["stage_us"]
     if sitl_stats.get("stage_us"):
         stages["sitl"] = sitl_stats["stage_us"]
     if stages:
-        out["step_stages_us"] = stages
-    return out
+        metrics["step_stages_us"] = stages
 
 
 def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.ndarray,
@@ -179,7 +186,7 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
                   lockstep: bool, deadline_misses: int = 0, mission_completed: bool = False,
                   stopped: str = "", reached_end: bool | None = None,
                   flight_start_us: int = 0,
-                  compile_time_s: float | None = None) -> dict[str, Any]:
+                  compile_time_s: float | None = None) -> RunMetrics:
     """metrics.json content (docs/architecture.md#a-run-folder), status included (common.outcome).
 
     `reached_end`: whether the run reached its end; None reads it from the truth log (the
@@ -231,29 +238,24 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
     sim_time_s = float((t_truth[-1] - flight_start_us) * 1e-6) if len(t_truth) else 0.0
     steps = onboard_j[:end, list(onboard_columns).index("step_us")]
     sat = onboard_j[:end, list(onboard_columns).index("saturated")]
-    sensors: dict[str, Any] = {}
-    if scenario.uses_sensors:
-        assert scenario.sensors is not None
-        sensors = {"estimation_error": estimation_error(truth_columns, truth_j[:end],
-                                                        onboard_columns, onboard_j[:end])}
-    return {
+    tracking = tracking_metrics(p[:end][followed], q[:end][followed], p_d[:end][followed],
+                                q_d[:end][followed])
+    metrics: RunMetrics = {
         "scenario": scenario.name,
         "sensors": scenario.sensors.name if scenario.sensors is not None else "truth",
-        **sensors,
         "alignment_s": flight_start_us * 1e-6,
         "controller": scenario.controller,
         "lockstep": lockstep,
         "transport": transport,
         "sim_time_s": sim_time_s,
         "wall_time_s": wall_time_s,
-        **({} if compile_time_s is None else {"compile_time_s": compile_time_s}),
         "real_time_factor": sim_time_s / wall_time_s if wall_time_s > 0 else 0.0,
         "control_rate_hz": scenario.control_rate_hz,
         "physics_rate_hz": scenario.physics_rate_hz,
         "ideal_actuators": scenario.ideal_actuators,
         "damping": scenario.gains.damping,
-        **tracking_metrics(p[:end][followed], q[:end][followed], p_d[:end][followed],
-                           q_d[:end][followed]),
+        "position_error_m": tracking["position_error_m"],
+        "attitude_error_rad": tracking["attitude_error_rad"],
         "error_rows": {"rule": ERROR_ROWS_RULE, "counted": int(np.sum(followed)),
                        "on_ground_reference_below": int(end - np.sum(followed))},
         "fcu_step_us": percentiles_us(steps[np.isfinite(steps)]),
@@ -265,6 +267,12 @@ def build_metrics(scenario: Scenario, truth_columns: Sequence[str], truth: np.nd
         "status_reason": outcome.reason,
         "divergence_t_s": None if divergence_t_us is None else divergence_t_us * 1e-6,
         "failsafe": outcome.failsafe,
-        "events": [e.as_json() for e in events],
+        "events": [event_record(e) for e in events],
         "seed": scenario.seed,
     }
+    if scenario.uses_sensors:
+        metrics["estimation_error"] = estimation_error(truth_columns, truth_j[:end],
+                                                       onboard_columns, onboard_j[:end])
+    if compile_time_s is not None:
+        metrics["compile_time_s"] = compile_time_s
+    return metrics

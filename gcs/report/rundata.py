@@ -12,6 +12,7 @@ import numpy as np
 
 from common.vehicle_constants import N_ROTORS
 from gcs.report.metrics import estimation_error_rows, join_logs, log_columns
+from gcs.report.run_metrics import RunMetrics
 from gcs.run.runio import check_run_dir, read_run_logs
 
 
@@ -20,7 +21,7 @@ class RunData:
     """A run folder's logs joined on time_us, non-finite rows dropped, cut at divergence."""
 
     run_dir: Path
-    metrics: dict[str, Any]
+    metrics: RunMetrics
     scenario: dict[str, Any]
     t: np.ndarray  # s
     p: np.ndarray  # truth position, ENU m
@@ -89,9 +90,10 @@ def load_run(run_dir: Path) -> RunData:
 
     keep = np.all(np.isfinite(np.hstack([p, q, p_d, q_d, tilt_raw, tilt_cmd])), axis=1)
     notes: list[str] = []
-    if metrics.get("divergence_t_s") is not None:
+    divergence_t_s = metrics.get("divergence_t_s")
+    if divergence_t_s is not None:
         # metrics.json ends a diverged run at its first divergent sample; so do the figures.
-        keep &= t <= float(metrics["divergence_t_s"]) + 1e-9
+        keep &= t <= divergence_t_s + 1e-9
     dropped = int(np.sum(~keep))
     if dropped:
         nonfinite = int(np.sum(~np.all(np.isfinite(
@@ -117,8 +119,9 @@ def estimation_errors(data: RunData) -> tuple[np.ndarray, np.ndarray, np.ndarray
     dp, dv, da = estimation_error_rows(tc, truth, oc, onboard)
     t = common_t * 1e-6
     keep = np.isfinite(dp) & np.isfinite(dv) & np.isfinite(da)
-    if data.metrics.get("divergence_t_s") is not None:
-        keep &= t <= float(data.metrics["divergence_t_s"]) + 1e-9
+    divergence_t_s = data.metrics.get("divergence_t_s")
+    if divergence_t_s is not None:
+        keep &= t <= divergence_t_s + 1e-9
     return t[keep], dp[keep], dv[keep], da[keep]
 
 

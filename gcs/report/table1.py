@@ -11,7 +11,10 @@ rows carry the second as "plain" and table1.md shows it in columns of its own.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
+
+from gcs.report.run_metrics import RunMetrics
 
 CASES = (
     ("I", "case1_figure8"),
@@ -43,8 +46,8 @@ def paper_figures(scenario: str, controller: str) -> dict[str, dict[str, float]]
             "attitude_error_rad": dict(zip(STATS, att, strict=True))}
 
 
-def table_json(results: dict[tuple[str, str], dict[str, Any]],
-               plain: dict[tuple[str, str], dict[str, Any]] | None = None) -> dict[str, Any]:
+def table_json(results: Mapping[tuple[str, str], RunMetrics],
+               plain: Mapping[tuple[str, str], RunMetrics] | None = None) -> dict[str, Any]:
     """Rows of Table I from the runs' metrics; `plain` (the runs with CA_LAG_COMP 0), when
     given, adds each row's "plain" figures and status."""
     rows = []

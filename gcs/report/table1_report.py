@@ -25,6 +25,7 @@ from gcs.report.names import (
     TABLE1_JSON,
     TABLE1_PNG,
 )
+from gcs.report.run_metrics import EventRecord, RunMetrics
 from gcs.report.run_report import fmt, write_run_report
 from gcs.report.rundata import RunData, cut_short, load_run
 from gcs.report.table1 import CASES, CONTROLLERS, STATS, table_json, table_markdown
@@ -57,7 +58,7 @@ def _md_cell(text: str) -> str:
     return text.replace("|", "\\|").replace("\n", " ")
 
 
-def _events_summary(events: list[dict[str, Any]], limit: int = 4) -> str:
+def _events_summary(events: list[EventRecord], limit: int = 4) -> str:
     """One line: how many events, by severity, and the notable ones in time order: every
     reaction (failsafe, crash, divergence), then warnings up to `limit` in all (the rest
     counted), else the first few."""
@@ -80,7 +81,7 @@ def _events_summary(events: list[dict[str, Any]], limit: int = 4) -> str:
             + "; ".join(parts) + (f"; … {rest} more" if rest > 0 else ""))
 
 
-def _status_text(m: dict[str, Any]) -> str:
+def _status_text(m: RunMetrics) -> str:
     text = f"**{m.get('status', 'unknown')}**"
     if m.get("status") == "diverged" and m.get("divergence_t_s") is not None:
         text += f" at {fmt(m['divergence_t_s'])} s"

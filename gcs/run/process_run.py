@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -31,7 +31,8 @@ from common.logs.ulog import ULogError, read_topic
 from common.outcome import Event
 from common.process.parent import child_env
 from common.wire.mavlink import MAV, read_signing_key
-from gcs.report.metrics import build_metrics, link_timing, onboard_on_truth_clock
+from gcs.report.metrics import add_link_timing, build_metrics, onboard_on_truth_clock
+from gcs.report.run_metrics import FleetMetrics, RunMetrics
 from gcs.run.inprocess import scenario_params
 from gcs.run.run_waits import (
     RUN_SILENCE_S,
@@ -275,7 +276,7 @@ class _Flight:
         if self.session is not None:
             self.session.close()
 
-    def metrics(self, transport: str) -> dict[str, Any]:
+    def metrics(self, transport: str) -> RunMetrics:
         """metrics.json of this vehicle's run, written last: also for a run that could not
         finish (status timeout or aborted, figures over what was flown)."""
         out, sc = self.plan.out, self.plan.scenario
@@ -311,8 +312,7 @@ class _Flight:
         sitl_stats = json.loads(sitl_path.read_text()) if sitl_path.exists() else {}
         if sitl_stats:
             metrics["sitl"] = sitl_stats
-        metrics.update(link_timing(metrics, stats, sitl_stats, transport,
-                                   lockstep=not self.realtime))
+        add_link_timing(metrics, stats, sitl_stats, transport, lockstep=not self.realtime)
         # Both processes' kernels, compiled or loaded from the cache before their loops ran.
         if "compile_time_s" in stats or "compile_time_s" in sitl_stats:
             metrics["compile_time_s"] = float(stats.get("compile_time_s", 0.0)) + \
@@ -339,7 +339,7 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
                   sim_route: Callable[[int], int] | None = None,
                   transport: str = "udp", fleet: int = 1, spacing_m: float = 0.0,
                   zenoh_url: str = "zenoh:mavlink",
-                  signing_key_file: str | None = None) -> dict[str, Any]:
+                  signing_key_file: str | None = None) -> RunMetrics | FleetMetrics:
     """Fly `scenario` through sitl + fcu processes; returns the metrics written to out.
 
     `transport` is the links' ("udp", "tcp" for the simulator link with UDP to the GCS, or
@@ -387,12 +387,26 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
     results = [f.metrics(transport) for f in flights]
     if fleet == 1:
         return results[0]
-    summary = {"fleet": fleet, "spacing_m": spacing_m, "transport": transport,
+    summary: FleetMetrics = {"fleet": fleet, "spacing_m": spacing_m, "transport": transport,
                "scenario": scenario.name,
                "all_completed": all(m["status"] == "completed" for m in results),
                "vehicles": {str(m["system_id"]): m for m in results}}
     (out / "fleet.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
+
+
+def one_vehicle(metrics: RunMetrics | FleetMetrics) -> RunMetrics:
+    """The metrics of a run of one vehicle (`run_processes` with `fleet=1`)."""
+    if "vehicles" in metrics:
+        raise ValueError("a fleet's metrics where one vehicle was flown")
+    return metrics
+
+
+def fleet_of(metrics: RunMetrics | FleetMetrics) -> FleetMetrics:
+    """The metrics of a fleet's run (`run_processes` with `fleet` > 1)."""
+    if "vehicles" not in metrics:
+        raise ValueError("one vehicle's metrics where a fleet was flown")
+    return cast(FleetMetrics, metrics)
 
 
 def start_router_if_needed(zenoh_url: str, out: Path) -> Children | None:

@@ -23,6 +23,7 @@ from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
 from common.logs.ulog import ULogError, read_topic
 from common.outcome import Event
 from gcs.report.metrics import onboard_on_truth_clock
+from gcs.report.run_metrics import RunMetrics, metrics_from_json
 
 TRUTH_LOG = "truth.ulg"  # written by the simulator (sitl.truth_log)
 ONBOARD_LOG = "onboard.ulg"  # written by the FCU (fcu.edge.onboard_log)
@@ -32,7 +33,7 @@ ONBOARD_TOPIC = "dq_onboard"
 
 @dataclass
 class RunResult:
-    metrics: dict[str, Any]
+    metrics: RunMetrics
     truth: np.ndarray  # rows of sitl.plant.TRUTH_COLUMNS
     onboard: np.ndarray  # rows of fcu.control.core.ONBOARD_COLUMNS
     events: list[Event] = field(default_factory=list)
@@ -88,7 +89,7 @@ def write_run(out: Path, scenario: Scenario, result: RunResult) -> None:
         raise ValueError("a run written to a folder must be flown with its logs")
     (out / TRUTH_LOG).write_bytes(result.truth_ulog)
     (out / ONBOARD_LOG).write_bytes(result.onboard_ulog)
-    metrics = dict(result.metrics)
+    metrics = result.metrics.copy()
     metrics["overrides"] = {"controller": scenario.controller,
                             "ideal_actuators": scenario.ideal_actuators,
                             "duration_s": scenario.duration_s}
@@ -103,9 +104,9 @@ def _fingerprint(path: Path) -> dict[str, Any]:
     return {"bytes": path.stat().st_size, "sha256": digest.hexdigest()}
 
 
-def write_metrics(out: Path, metrics: dict[str, Any]) -> None:
+def write_metrics(out: Path, metrics: RunMetrics) -> None:
     """metrics.json, last, with the fingerprints of the logs it was computed from."""
-    metrics = dict(metrics)
+    metrics = metrics.copy()
     metrics["logs"] = {name: _fingerprint(out / name) for name in (TRUTH_LOG, ONBOARD_LOG)
                        if (out / name).exists()}
     tmp = out / "metrics.json.tmp"
@@ -113,11 +114,11 @@ def write_metrics(out: Path, metrics: dict[str, Any]) -> None:
     tmp.replace(out / "metrics.json")
 
 
-def check_run_dir(run_dir: Path) -> dict[str, Any]:
+def check_run_dir(run_dir: Path) -> RunMetrics:
     """metrics.json of a run folder whose logs are the ones it was computed from."""
     try:
-        metrics: dict[str, Any] = json.loads((run_dir / "metrics.json").read_text())
-    except (OSError, ValueError) as exc:
+        metrics = metrics_from_json(json.loads((run_dir / "metrics.json").read_text()))
+    except (OSError, ValueError) as exc:  # MetricsError is a ValueError
         raise RunDirError(f"{run_dir}: no readable metrics.json ({exc})") from None
     for name, expected in metrics.get("logs", {}).items():
         path = run_dir / name

@@ -12,6 +12,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
+from gcs.report.run_metrics import RunMetrics
 from gcs.report.table1 import CASES, CONTROLLERS, table_json, table_markdown
 
 LAG_COMP = ("both", "on", "off")  # which allocations run_table1 flies (module docstring)
@@ -19,10 +20,10 @@ PLAIN_DIR = "plain"  # the run folders of the plain allocation (CA_LAG_COMP 0), 
 
 
 def _run_one(job: tuple[str, str, bool, float | None, str, bool, float | None, str | None,
-                        int | None]) -> dict[str, Any]:
+                        int | None]) -> RunMetrics:
     from common.config.scenario import load_scenario
     from gcs.run.inprocess import apply_overrides, run_scenario
-    from gcs.run.process_run import run_processes
+    from gcs.run.process_run import one_vehicle, run_processes
     from gcs.run.runio import prepare_run_dir, write_run
 
     path, ctrl, ideal, duration, out, in_process, lag_comp, sensors, seed = job
@@ -34,7 +35,7 @@ def _run_one(job: tuple[str, str, bool, float | None, str, bool, float | None, s
         scenario = dataclasses.replace(scenario,
                                        params={**scenario.params, "CA_LAG_COMP": lag_comp})
     if not in_process:
-        return run_processes(scenario, Path(out))
+        return one_vehicle(run_processes(scenario, Path(out)))
     result = run_scenario(scenario)
     write_run(Path(out), scenario, result)
     return result.metrics
@@ -63,8 +64,8 @@ def run_table1(config_dir: Path, out_dir: Path, *, ideal: bool = False,
               str(folder / f"{scen}_{ctrl}"), in_process, value, sensors, seed),
              (is_plain, scen, ctrl))
             for is_plain, value, folder in sets for scen, ctrl in keys]
-    results: dict[tuple[str, str], dict[str, Any]] = {}
-    plain: dict[tuple[str, str], dict[str, Any]] = {}
+    results: dict[tuple[str, str], RunMetrics] = {}
+    plain: dict[tuple[str, str], RunMetrics] = {}
     with ProcessPoolExecutor(max_workers=workers) as pool:
         futures = {pool.submit(_run_one, job): key for job, key in jobs}
         done = 0

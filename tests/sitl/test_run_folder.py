@@ -14,6 +14,8 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
+from gcs.report.run_metrics import RunMetrics, metrics_from_json
+
 from ..terminal import sigint_default
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -89,7 +91,8 @@ def test_ctrl_c_leaves_an_aborted_run(tmp_path):
             proc.kill()
             proc.wait()
     assert proc.returncode == 1, err
-    m = json.loads((out / "metrics.json").read_text())
+    m = metrics_from_json(json.loads((out / "metrics.json").read_text()))
+    assert m.keys() <= RunMetrics.__annotations__.keys()  # the record holds every key written
     assert m["status"] == "aborted" and "interrupted" in m["error"]
     assert 0.0 < m["sim_time_s"] < 160.0 and m["wall_time_s"] > 0.0
     for log in ("sitl.log", "fcu.log"):
