@@ -20,14 +20,15 @@ from typing import Any
 from common.config.scenario import load_scenario
 from common.config.sensors import resolve_sensor_profile
 from fcu.estimator.ekf import Estimator
+from gcs.report.run_metrics import RunMetrics
 from gcs.run.inprocess import run_scenario
-from gcs.run.process_run import run_processes
+from gcs.run.process_run import one_vehicle, run_processes
 
 ROOT = Path(__file__).resolve().parent.parent
 CASE1 = ROOT / "config/scenarios/case1_figure8.toml"
 
 
-def in_process(profile: str) -> tuple[dict[str, Any], float, int, float]:
+def in_process(profile: str) -> tuple[RunMetrics, float, int, float]:
     """(metrics, thread CPU seconds in the estimator's calls, calls, thread CPU seconds of
     the whole run) of the whole Case I in-process with `profile`, logs written as `gcs run`
     writes them. The run's CPU time is the figure a busy machine changes least."""
@@ -78,8 +79,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for profile in ("truth", "mocap-indoor"):
             sc = dataclasses.replace(base, sensors=resolve_sensor_profile(profile))
-            rt = run_processes(sc, Path(tmp) / f"rt_{profile}", realtime=True)
-            ls = run_processes(sc, Path(tmp) / f"ls_{profile}")
+            rt = one_vehicle(run_processes(sc, Path(tmp) / f"rt_{profile}", realtime=True))
+            ls = one_vehicle(run_processes(sc, Path(tmp) / f"ls_{profile}"))
             step = rt["fcu_step_us"]
             print(f"{profile:13s} real time: step p50 {step['p50']:6.1f} us  p99 "
                   f"{step['p99']:6.1f} us  max {step['max']:7.1f} us  deadline misses "

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from common.config.scenario import load_scenario
-from gcs.run.process_run import run_processes
+from gcs.run.process_run import one_vehicle, run_processes
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET_RATIO = 1.5
@@ -31,7 +31,7 @@ def run_once(duration_s: float | None = None) -> dict[str, Any]:
     if duration_s is not None:
         scenario = dataclasses.replace(scenario, duration_s=duration_s)
     with tempfile.TemporaryDirectory() as tmp:
-        m = run_processes(scenario, Path(tmp))
+        m = one_vehicle(run_processes(scenario, Path(tmp)))
     rtt = m["fcu"].get("sim_rtt") or {}
     return {"status": m["status"], "real_time_factor": m["real_time_factor"],
             "sim_time_s": m["sim_time_s"], "wall_time_s": m["wall_time_s"],

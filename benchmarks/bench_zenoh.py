@@ -26,14 +26,14 @@ SECONDS = 3.0
 
 def lockstep(duration_s: float, router: str) -> dict[str, float]:
     from common.config.scenario import load_scenario
-    from gcs.run.process_run import run_processes
+    from gcs.run.process_run import one_vehicle, run_processes
 
     sc = dataclasses.replace(load_scenario(ROOT / "config/scenarios/case1_figure8.toml"),
                              duration_s=duration_s)
     with tempfile.TemporaryDirectory() as tmp:
-        udp = run_processes(sc, Path(tmp) / "udp")
-        zen = run_processes(sc, Path(tmp) / "zenoh", transport="zenoh",
-                            zenoh_url=f"zenoh:bench@{router}")
+        udp = one_vehicle(run_processes(sc, Path(tmp) / "udp"))
+        zen = one_vehicle(run_processes(sc, Path(tmp) / "zenoh", transport="zenoh",
+                                        zenoh_url=f"zenoh:bench@{router}"))
     return {"udp_rtf": udp["real_time_factor"], "zenoh_rtf": zen["real_time_factor"],
             "same_figures": udp["position_error_m"] == zen["position_error_m"]}
 

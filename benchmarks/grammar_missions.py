@@ -62,6 +62,7 @@ from common.wire.mission_items import PX4_SITL_HOME
 from fcu.compose import published_home
 from fcu.mission.executor import MissionExecutor
 from gcs.mission_files import read_mission, write_mission
+from gcs.report.run_metrics import RunMetrics
 from gcs.run.inprocess import InProcessError, fcu_pipeline, run_scenario, through_wire_item
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -270,7 +271,7 @@ def run_one(job: tuple[str, int, int, str]) -> dict[str, Any]:
             ok, result, reason = refusal_ok(text)
             stage = ("upload" if text.startswith("mission refused:")
                      else "start" if text.startswith("mission start refused") else "other")
-            m = exc.result.metrics if exc.result is not None else {}
+            m: RunMetrics | dict[str, Any] = exc.result.metrics if exc.result is not None else {}
             rec.update(verdict="refused", stage=stage, text=text, result=result,
                        reason=reason, reason_kind=reason_kind(reason), refusal_ok=ok,
                        metrics_status=m.get("status"), metrics_error=m.get("error"))

@@ -174,7 +174,9 @@ def longest_chain(graph: Graph) -> list[str]:
         return (name, *best)
 
     sys.setrecursionlimit(max(sys.getrecursionlimit(), 10_000))
-    return list(max((longest_from(n) for n in sorted(inner)), key=len))
+    chains: list[tuple[str, ...]] = [longest_from(n) for n in sorted(inner)]
+    longest = max(chains, key=len)
+    return list(longest)
 
 
 def modules_per_folder(root: Path = ROOT, packages: Iterable[str] = PACKAGES) -> dict[str, int]:
