@@ -122,7 +122,7 @@ before anything flies.""",
           campaign.DRAW_KEYS, campaign.KEEP_KEYS), level=2),
     Part("Write a mission", """Mission files are the vehicle's missions, not a run's
 configuration: their items and formats (TOML, `.plan`, WPL) are in
-[missions.md](missions.md#writing-one).""", level=2),
+[missions.md](missions.md#write-a-mission).""", level=2),
 )
 
 
