@@ -262,3 +262,24 @@ def test_the_campaign_loader_takes_exactly_the_declared_keys():
         (p, k) for p, k in documented if p == "monte_carlo"}
     args = {"key", "distribution"} | {a for names in DISTRIBUTIONS.values() for a in names}
     assert args == DRAW_KEYS.names()
+
+
+def test_a_key_reads_as_declared_and_prints_its_declaration():
+    from common.config.keys import Key, KeyTable
+    from common.config.reader import ConfigError, Table
+
+    k = Key("rate_hz", "number", "a rate", "Hz", 5.0, lo=0.0, hi=10.0, lo_open=True)
+    assert k.read(Table({}, "f")) == 5.0
+    assert k.read(Table({"rate_hz": 2}, "f")) == 2.0
+    with pytest.raises(ConfigError, match=r"key 'rate_hz': expected a number in \(0.0, 10.0\]"):
+        k.read(Table({"rate_hz": 0.0}, "f"))
+    with pytest.raises(ConfigError, match="missing key 'rate_hz'"):
+        k.read(Table({}, "f"), ...)
+    assert (k.type_text(), k.default_text(), k.range_text()) == ("number", "5", "(0, 10]")
+    choice = Key("kind", "string", "a kind", default="a", choices=("a", "b"), range_doc="x")
+    assert (choice.default_text(), choice.range_text()) == ('"a"', "`a`, `b`; x")
+    assert Key("v", "numbers", "", n=6).type_text() == "list of 6 numbers"
+    with pytest.raises(ValueError, match="unknown type"):
+        Key("x", "float", "")
+    with pytest.raises(KeyError, match="no key 'y' declared"):
+        KeyTable("t", (k,))["y"]
