@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from common.config.keys import Key, KeyTable
 from common.config.reader import ConfigError, Table, read_toml
 
 Vec3 = tuple[float, float, float]
@@ -39,6 +40,20 @@ class Gains:
 
 GAIN_PARTS = ("kp_r", "kp_d", "ki_r", "ki_d", "kd_r", "kd_d")
 
+_PART = {"r": "real part (attitude)", "d": "dual part (position)"}
+_TERM = {"kp": "proportional gain k_p", "ki": "integral gain k_i", "kd": "damping gain k_d"}
+_RULE = {"kp": "each > 0", "ki": "each >= 0 and < k_p k_d", "kd": "each > 0"}
+
+GAIN_KEYS = KeyTable("", (
+    *(Key(key, "numbers", f"{_TERM[key[:2]]} per axis, {_PART[key[-1]]}",
+          default=(0.0, 0.0, 0.0) if key.startswith("ki") else ...,
+          range_doc=_RULE[key[:2]])
+      for key in GAIN_PARTS),
+    Key("damping", "string", "D in eq. (16): `log_rate` = 2 k_d . (ln q_e)' (the paper's "
+        "PID law), `twist` = k_d . xi_e (the PD baseline's)", default="log_rate",
+        choices=DAMPING_CHOICES),
+))
+
 
 def check_stability(gains: Gains) -> None:
     """Routh-Hurwitz for s^3 + k_d s^2 + k_p s + k_i per axis and part (eqs. 20-25)."""
@@ -63,11 +78,8 @@ def check_stability(gains: Gains) -> None:
 
 def parse_gains(data: dict[str, Any], source: str) -> Gains:
     t = Table(data, source)
-    values: dict[str, Any] = {}
-    for key in GAIN_PARTS:
-        default = (0.0, 0.0, 0.0) if key.startswith("ki") else ...
-        values[key] = t.numbers(key, 3, default)
-    gains = Gains(**values, damping=t.string("damping", "log_rate", choices=DAMPING_CHOICES))
+    values = {key: GAIN_KEYS[key].read(t) for key in GAIN_PARTS}
+    gains = Gains(**values, damping=GAIN_KEYS["damping"].read(t))
     t.finish()
     try:
         check_stability(gains)

@@ -14,11 +14,12 @@ faults (`common.config.scenario_terms`) and the sensor profiles (`common.config.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from common.config.gains import Gains, check_stability, load_gains, parse_gains
+from common.config.keys import Key, KeyTable
 from common.config.reader import ConfigError, Table, read_toml
 from common.config.scenario_terms import (
     ACTUATOR_FAULT_KINDS,
@@ -53,6 +54,97 @@ Vec3 = tuple[float, float, float]
 CONTROLLERS = ("pid", "pd")
 TRAJECTORIES = ("case1_figure8", "hover", "mission")
 STARTS = ("ground", "hover")
+
+
+SCENARIO_KEYS = KeyTable("", (
+    Key("name", "string", "the run's name"),
+    Key("duration_s", "number", "simulated seconds", "s", lo=0.0, lo_open=True),
+    Key("controller", "string", "`pid` (eq. 16) or `pd` (eq. 33)", default="pid",
+        choices=CONTROLLERS),
+    Key("vehicle", "raw", "a vehicle file (relative to the scenario), or an inline table of "
+        "its keys", type_doc="file name or table"),
+    Key("seed", "integer", "the sensors' and disturbances' random seed", default=0, lo=0),
+    Key("ground", "boolean", "whether the ground exists (Case II switches it off)",
+        default_doc="true when `initial.start` is `ground`"),
+    Key("sensors", "string", "a sensor profile: a name of `config/sensors/` (`mocap-indoor`) "
+        "or a file; the FCU then flies on its estimator", default="truth",
+        default_doc="the exact state, no estimator"),
+    Key("divergence_position_m", "number", "the position error that ends a run as diverged "
+        "(set on the FCU as COM_DIV_POS)", "m", 10.0, lo=0.1, hi=1000.0),
+    Key("divergence_attitude_rad", "number", "the attitude error that, held "
+        "`divergence_attitude_hold_s`, ends a run as diverged", "rad",
+        DIVERGENCE_ATTITUDE_RAD, lo=0.1, hi=math.pi),
+    Key("divergence_attitude_hold_s", "number", "how long the attitude error must hold", "s",
+        DIVERGENCE_ATTITUDE_HOLD_S, lo=0.0, hi=60.0),
+    Key("gains", "table", "the tracker's gains (`[gains]`)"),
+    Key("rates", "table", "the loops' rates (`[rates]`)", default={}),
+    Key("initial", "table", "where the vehicle starts (`[initial]`)"),
+    Key("trajectory", "table", "what the vehicle flies (`[trajectory]`)"),
+    Key("disturbance", "table", "body-frame disturbance terms (`[[disturbance.force]]`, "
+        "`[[disturbance.torque]]`)", default={}),
+    Key("actuators", "table", "the actuators' model (`[actuators]`)", default={}),
+    Key("params", "table", "FCU parameters the run sets (`[params]`)", default={}),
+    Key("sensor_fault", "tables", "faults injected into the simulated sensors",
+        default_doc="none"),
+    Key("actuator_fault", "tables", "rotors and tilt servos failing during the flight",
+        default_doc="none"),
+))
+
+GAINS_TABLE_KEYS = KeyTable("gains", (
+    Key("pid", "raw", "the PID gains (eq. 30): a gain file or an inline table",
+        type_doc="file name or table"),
+    Key("pd", "raw", "the PD baseline's gains (eq. 33): a file or a table with "
+        "`ki_r = ki_d = 0`", type_doc="file name or table"),
+))
+
+RATES_KEYS = KeyTable("rates", (
+    Key("control_hz", "integer", "the control loop's rate", "Hz", 500, lo=1, hi=1000),
+    Key("physics_hz", "integer", "the plant's physics rate", "Hz", 1000, lo=1, hi=100000,
+        range_doc="a multiple of `control_hz`"),
+))
+
+INITIAL_KEYS = KeyTable("initial", (
+    Key("start", "string", "`ground`: resting at the position, rotors stopped; `hover`: "
+        "airborne at hover speed", choices=STARTS),
+    Key("position_enu_m", "vec3", "the start position (ENU)", "m", (0.0, 0.0, 0.0)),
+))
+
+TRAJECTORY_KEYS = KeyTable("trajectory", (
+    Key("kind", "string", "`case1_figure8`: Case I, the quintic rise, a hover, the "
+        "figure-infinity; `hover`: a hover; `mission`: a mission file, uploaded as `gcs "
+        "mission upload` would send it", choices=TRAJECTORIES),
+    Key("position_enu_m", "vec3", "`hover`, `case1_figure8`: the hover's or the figure's "
+        "centre (ENU)", "m", default_doc="the initial position"),
+    Key("mission", "string", "`mission` only: a mission file (TOML, `.plan` or WPL), "
+        "relative to the scenario", type_doc="file name", default_doc="required for `mission`"),
+    Key("rise_height_m", "number", "`case1_figure8`: the rise's height", "m", 5.0),
+    Key("rise_end_s", "number", "`case1_figure8`: when the rise ends", "s", 10.0, lo=0.0,
+        lo_open=True),
+    Key("figure_start_s", "number", "`case1_figure8`: when the figure starts", "s", 20.0,
+        lo=0.0, range_doc=">= rise_end_s"),
+    Key("figure_end_s", "number", "`case1_figure8`: when the figure ends", "s", 140.0,
+        lo=0.0, range_doc="> figure_start_s"),
+    Key("amplitude_m", "number", "`case1_figure8`: the figure's amplitude", "m", 5.0, lo=0.0),
+    Key("axis_enu", "vec3", "`case1_figure8`: the axis the attitude turns about",
+        default=(1.0, 2.0, 3.0)),
+))
+
+DISTURBANCE_KEYS = KeyTable("disturbance", (
+    Key("force", "tables", "force terms (N), summed", default_doc="none"),
+    Key("torque", "tables", "torque terms (N m), summed", default_doc="none"),
+))
+
+ACTUATORS_KEYS = KeyTable("actuators", (
+    Key("ideal", "boolean", "actuators that follow their commands at once (the speed limit "
+        "stays)", default=False),
+))
+
+PARAMS_KEYS = KeyTable("params", (
+    Key("*", "number", "any FCU parameter (a name of at most 16 characters, "
+        "[parameters](parameters.md)) and its value, set by PARAM_SET before the mission; a "
+        "refused one ends the run with the vehicle's reason", default_doc="none",
+        range_doc="the parameter's"),
+))
 
 
 @dataclass(frozen=True)
@@ -160,6 +252,44 @@ def resolved_scenario_data(path: str | Path) -> dict[str, Any]:
     return data
 
 
+def _trajectory(traj_t: Table, initial_p: Vec3, base: Path) -> TrajectoryConfig:
+    """The `[trajectory]` table's keys for its kind."""
+    k = TRAJECTORY_KEYS
+    kind = k["kind"].read(traj_t)
+    if kind == "hover":
+        return TrajectoryConfig(kind=kind, position_enu_m=k["position_enu_m"].read(
+            traj_t, initial_p))
+    if kind == "mission":
+        mission = (base / k["mission"].read(traj_t)).resolve()
+        if not mission.is_file():
+            raise traj_t.error("mission", f"a mission file (not found: {mission})")
+        return TrajectoryConfig(kind=kind, position_enu_m=initial_p, mission_file=str(mission))
+    traj = TrajectoryConfig(
+        kind=kind,
+        position_enu_m=k["position_enu_m"].read(traj_t, initial_p),
+        rise_height_m=k["rise_height_m"].read(traj_t),
+        rise_end_s=k["rise_end_s"].read(traj_t),
+        figure_start_s=k["figure_start_s"].read(traj_t),
+        figure_end_s=k["figure_end_s"].read(traj_t),
+        amplitude_m=k["amplitude_m"].read(traj_t),
+        axis_enu=k["axis_enu"].read(traj_t),
+    )
+    if not traj.rise_end_s <= traj.figure_start_s < traj.figure_end_s:
+        raise traj_t.error("figure_end_s", "rise_end_s <= figure_start_s < figure_end_s")
+    return traj
+
+
+def _params(params_t: Table) -> dict[str, float]:
+    """`[params]`: FCU parameter names and their values."""
+    params: dict[str, float] = {}
+    for name in list(params_t.data):
+        if not (isinstance(name, str) and 0 < len(name) <= 16):
+            raise params_t.error(name, "a parameter name of at most 16 characters")
+        params[name] = replace(PARAMS_KEYS["*"], name=name).read(params_t)
+    params_t.finish()
+    return params
+
+
 def scenario_from_data(data: dict[str, Any], path: str | Path, *,
                        firmware: bool = False) -> Scenario:
     """A scenario from its TOML data; file names are relative to `path`'s folder, and the
@@ -172,106 +302,77 @@ def scenario_from_data(data: dict[str, Any], path: str | Path, *,
     def rel(key: str, table: Table) -> Path:
         return (base / table.string(key)).resolve()
 
-    def part(key: str, table: Table, parse: Any, load: Any) -> tuple[Any, str]:
+    def part(key: Key, table: Table, parse: Any, load: Any) -> tuple[Any, str]:
         """(a loader, the file or INLINE): files are read after the scenario's own keys
         are checked, so a scenario's own mistake is the one reported first."""
-        value = table.raw(key)
+        value = key.read(table)
         if isinstance(value, dict):
-            return (lambda: parse(value, f"{source}: table '{table.prefix}{key}'")), INLINE
-        file = rel(key, table)
+            return (lambda: parse(value, f"{source}: table '{table.prefix}{key.name}'")), INLINE
+        file = rel(key.name, table)
         return (lambda: load(file)), str(file)
 
-    vehicle_of, vehicle_path = part("vehicle", t, parse_vehicle, load_vehicle)
-    gains_t = t.table("gains")
-    pid_of, pid_path = part("pid", gains_t, parse_gains, load_gains)
-    pd_of, pd_path = part("pd", gains_t, parse_gains, load_gains)
+    k = SCENARIO_KEYS
+    vehicle_of, vehicle_path = part(k["vehicle"], t, parse_vehicle, load_vehicle)
+    gains_t = k["gains"].read(t)
+    pid_of, pid_path = part(GAINS_TABLE_KEYS["pid"], gains_t, parse_gains, load_gains)
+    pd_of, pd_path = part(GAINS_TABLE_KEYS["pd"], gains_t, parse_gains, load_gains)
     gains_t.finish()
 
-    rates = t.table("rates", {})
-    control_hz = rates.integer("control_hz", 500, lo=1, hi=1000)
-    physics_hz = rates.integer("physics_hz", 1000, lo=1, hi=100000)
+    rates = k["rates"].read(t)
+    control_hz = RATES_KEYS["control_hz"].read(rates)
+    physics_hz = RATES_KEYS["physics_hz"].read(rates)
     rates.finish()
     if physics_hz % control_hz:
         raise ConfigError(f"{source}: key 'rates.physics_hz': expected a multiple of "
                           f"rates.control_hz = {control_hz}, got {physics_hz}")
 
-    init = t.table("initial")
-    start = init.string("start", choices=STARTS)
-    initial_p = init.vec3("position_enu_m", (0.0, 0.0, 0.0))
+    init = k["initial"].read(t)
+    start = INITIAL_KEYS["start"].read(init)
+    initial_p = INITIAL_KEYS["position_enu_m"].read(init)
     init.finish()
 
-    traj_t = t.table("trajectory")
-    kind = traj_t.string("kind", choices=TRAJECTORIES)
-    if kind == "hover":
-        traj = TrajectoryConfig(kind=kind, position_enu_m=traj_t.vec3("position_enu_m",
-                                                                      initial_p))
-    elif kind == "mission":
-        mission = rel("mission", traj_t)
-        if not mission.is_file():
-            raise traj_t.error("mission", f"a mission file (not found: {mission})")
-        traj = TrajectoryConfig(kind=kind, position_enu_m=initial_p,
-                                mission_file=str(mission))
-    else:
-        traj = TrajectoryConfig(
-            kind=kind,
-            position_enu_m=traj_t.vec3("position_enu_m", initial_p),
-            rise_height_m=traj_t.number("rise_height_m", 5.0),
-            rise_end_s=traj_t.number("rise_end_s", 10.0, lo=0.0, lo_open=True),
-            figure_start_s=traj_t.number("figure_start_s", 20.0, lo=0.0),
-            figure_end_s=traj_t.number("figure_end_s", 140.0, lo=0.0),
-            amplitude_m=traj_t.number("amplitude_m", 5.0, lo=0.0),
-            axis_enu=traj_t.vec3("axis_enu", (1.0, 2.0, 3.0)),
-        )
-        if not traj.rise_end_s <= traj.figure_start_s < traj.figure_end_s:
-            raise traj_t.error("figure_end_s", "rise_end_s <= figure_start_s < figure_end_s")
+    traj_t = k["trajectory"].read(t)
+    traj = _trajectory(traj_t, initial_p, base)
     traj_t.finish()
 
-    dist = t.table("disturbance", {})
-    force_terms = parse_terms(dist.tables("force"))
-    torque_terms = parse_terms(dist.tables("torque"))
+    dist = k["disturbance"].read(t)
+    force_terms = parse_terms(DISTURBANCE_KEYS["force"].read(dist))
+    torque_terms = parse_terms(DISTURBANCE_KEYS["torque"].read(dist))
     dist.finish()
 
-    actuators = t.table("actuators", {})
-    ideal = actuators.boolean("ideal", False)
+    actuators = k["actuators"].read(t)
+    ideal = ACTUATORS_KEYS["ideal"].read(actuators)
     actuators.finish()
 
-    sensors = resolve_sensor_profile(t.string("sensors", "truth"), base) \
+    sensors = resolve_sensor_profile(k["sensors"].read(t), base) \
         if t.has("sensors") else None
     if sensors is not None and not firmware:  # what this FCU's link cannot take: refused
         check_servable(sensors, 1_000_000 // physics_hz, 1_000_000 // control_hz)
-    params_t = t.table("params", {})
-    params: dict[str, float] = {}
-    for name in list(params_t.data):
-        if not (isinstance(name, str) and 0 < len(name) <= 16):
-            raise params_t.error(name, "a parameter name of at most 16 characters")
-        params[name] = params_t.number(name)
-    params_t.finish()
-    sensor_faults = parse_sensor_faults(t.tables("sensor_fault"))
+    params = _params(k["params"].read(t))
+    sensor_faults = parse_sensor_faults(k["sensor_fault"].read(t))
     check_sensor_faults(sensor_faults, sensors, f"{source}: key 'sensor_fault'")
-    actuator_faults = parse_actuator_faults(t.tables("actuator_fault"), N_ROTORS)
+    actuator_faults = parse_actuator_faults(k["actuator_fault"].read(t), N_ROTORS)
     scenario = Scenario(
-        name=t.string("name"),
-        duration_s=t.number("duration_s", lo=0.0, lo_open=True),
-        controller=t.string("controller", "pid", choices=CONTROLLERS),
+        name=k["name"].read(t),
+        duration_s=k["duration_s"].read(t),
+        controller=k["controller"].read(t),
         vehicle=vehicle_of(),
         gains_pid=pid_of(),
         gains_pd=pd_of(),
         control_rate_hz=control_hz,
         physics_rate_hz=physics_hz,
         ideal_actuators=ideal,
-        ground_enabled=t.boolean("ground", start == "ground"),
+        ground_enabled=k["ground"].read(t, start == "ground"),
         start=start,
         initial_position_enu_m=initial_p,
         trajectory=traj,
         force_terms=force_terms,
         torque_terms=torque_terms,
-        seed=t.integer("seed", 0, lo=0),
+        seed=k["seed"].read(t),
         # the range of the FCU's parameter COM_DIV_POS, which a run sets from this key
-        divergence_position_m=t.number("divergence_position_m", 10.0, lo=0.1, hi=1000.0),
-        divergence_attitude_rad=t.number("divergence_attitude_rad", DIVERGENCE_ATTITUDE_RAD,
-                                         lo=0.1, hi=math.pi),
-        divergence_attitude_hold_s=t.number("divergence_attitude_hold_s",
-                                            DIVERGENCE_ATTITUDE_HOLD_S, lo=0.0, hi=60.0),
+        divergence_position_m=k["divergence_position_m"].read(t),
+        divergence_attitude_rad=k["divergence_attitude_rad"].read(t),
+        divergence_attitude_hold_s=k["divergence_attitude_hold_s"].read(t),
         source=source,
         files={"scenario": str(path.resolve()), "vehicle": vehicle_path,
                "gains_pid": pid_path, "gains_pd": pd_path},

@@ -5,10 +5,12 @@ sensor faults ([[sensor_fault]]), each checked by `common.config.reader`."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
+from common.config.keys import REQUIRED, Key, KeyTable
 from common.config.reader import ConfigError, Table
 from common.config.sensors import SensorProfile
+from common.vehicle_constants import N_ROTORS
 
 Vec3 = tuple[float, float, float]
 
@@ -82,17 +84,60 @@ class SensorFault:
         return self.start_s <= t_s < self.end_s
 
 
+TERM_KEYS = KeyTable("disturbance.force[]", (
+    Key("kind", "string", "`pulse`: `amplitude` while start_s <= t < end_s; `sine`: "
+        "`amplitude` sin(omega t + phase) from start_s", choices=PROFILE_KINDS),
+    Key("amplitude", "numbers", "per axis, body frame (FLU)", "N or N m",
+        default_doc="required unless `magnitude`"),
+    Key("magnitude", "number", "instead of `amplitude`: the size along a direction", "N or N m",
+        lo=0.0, default_doc="none"),
+    Key("direction_flu", "numbers", "with `magnitude`: the direction (normalised, not zero)",
+        default_doc="from the angles"),
+    Key("azimuth_deg", "number", "with `magnitude` and no `direction_flu`: from +x towards +y",
+        "deg", 0.0),
+    Key("elevation_deg", "number", "with `magnitude` and no `direction_flu`: towards +z",
+        "deg", 0.0),
+    Key("start_s", "number", "the term's start (scenario clock)", "s", 0.0, lo=0.0),
+    Key("end_s", "number", "the term's end; a pulse needs a finite one", "s", math.inf,
+        default_doc="for ever", range_doc="> start_s"),
+    Key("omega_rad_s", "number", "a sine's angular frequency", "rad/s", 0.0),
+    Key("phase_rad", "number", "a sine's phase", "rad", 0.0),
+), also=("disturbance.torque[]",))
+
+ACTUATOR_FAULT_KEYS = KeyTable("actuator_fault[]", (
+    Key("kind", "string", "`rotor_off`: commanded 0, spins down with its lag; `rotor_stuck`: "
+        "keeps its speed; `tilt_stuck`: keeps its tilt; `tilt_off`: unpowered, stays where "
+        "it stopped", choices=ACTUATOR_FAULT_KINDS),
+    Key("index", "integer", "the rotor or tilt servo", lo=0, hi=N_ROTORS - 1),
+    Key("start_s", "number", "when it fails (scenario clock)", "s", 0.0, lo=0.0),
+    Key("end_s", "number", "when it works again", "s", math.inf, default_doc="for ever",
+        range_doc="> start_s"),
+))
+
+SENSOR_FAULT_KEYS = KeyTable("sensor_fault[]", (
+    Key("kind", "string", "`mocap_off`: no pose captured; `imu_nan`, `pose_nan`: the "
+        "window's samples carry NaN; `gyro_bias_step`: `amplitude` added to the gyro",
+        choices=SENSOR_FAULT_KINDS),
+    Key("start_s", "number", "the fault's start (scenario clock)", "s", lo=0.0),
+    Key("end_s", "number", "the fault's end", "s", math.inf, range_doc="> start_s",
+        default_doc="`gyro_bias_step`: for ever; the others: required"),
+    Key("amplitude", "numbers", "`gyro_bias_step` only: the bias step, FLU", "rad/s",
+        default_doc="required for `gyro_bias_step`"),
+), "Faults need a sensor profile (key `sensors`, not the exact state).")
+
+
 def parse_terms(tables: list[Table]) -> tuple[DisturbanceTerm, ...]:
     terms = []
+    k = TERM_KEYS
     for t in tables:
-        kind = t.string("kind", choices=PROFILE_KINDS)
+        kind = k["kind"].read(t)
         term = DisturbanceTerm(
             kind=kind,
             amplitude=_amplitude(t),
-            start_s=t.number("start_s", 0.0, lo=0.0),
-            end_s=t.number("end_s", math.inf) if t.has("end_s") else math.inf,
-            omega_rad_s=t.number("omega_rad_s", 0.0) if kind == "sine" else 0.0,
-            phase_rad=t.number("phase_rad", 0.0) if kind == "sine" else 0.0,
+            start_s=k["start_s"].read(t),
+            end_s=k["end_s"].read(t) if t.has("end_s") else math.inf,
+            omega_rad_s=k["omega_rad_s"].read(t) if kind == "sine" else 0.0,
+            phase_rad=k["phase_rad"].read(t) if kind == "sine" else 0.0,
         )
         if kind == "pulse" and not math.isfinite(term.end_s):
             raise t.error("end_s", "a finite end time for a pulse")
@@ -107,32 +152,35 @@ def _amplitude(t: Table) -> Vec3:
     """A term's per-axis amplitude: `amplitude = [x, y, z]`, or `magnitude` along a direction
     given as `direction_flu = [x, y, z]` (normalised) or `azimuth_deg` and `elevation_deg`
     (`direction_flu`; for sweeps of a disturbance's size and direction)."""
+    k = TERM_KEYS
     if not t.has("magnitude"):
-        a = t.numbers("amplitude", 3)
+        a = k["amplitude"].read(t, REQUIRED)
         return (a[0], a[1], a[2])
     if t.has("amplitude"):
         raise t.error("magnitude", "either 'amplitude' or 'magnitude' (with a direction), "
                       "not both")
-    magnitude = t.number("magnitude", lo=0.0)
+    magnitude = k["magnitude"].read(t, REQUIRED)
     if t.has("direction_flu"):
-        d = t.numbers("direction_flu", 3)
+        d = k["direction_flu"].read(t, REQUIRED)
         n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         if not n > 0.0:
             raise t.error("direction_flu", "a non-zero vector")
         u = (d[0] / n, d[1] / n, d[2] / n)
     else:
-        u = direction_flu(t.number("azimuth_deg", 0.0), t.number("elevation_deg", 0.0))
+        u = direction_flu(k["azimuth_deg"].read(t), k["elevation_deg"].read(t))
     return (magnitude * u[0], magnitude * u[1], magnitude * u[2])
 
 
 def parse_actuator_faults(tables: list[Table], n_rotors: int) -> tuple[ActuatorFault, ...]:
     faults = []
+    k = ACTUATOR_FAULT_KEYS
+    index = replace(k["index"], hi=n_rotors - 1)
     for t in tables:
         fault = ActuatorFault(
-            kind=t.string("kind", choices=ACTUATOR_FAULT_KINDS),
-            index=t.integer("index", lo=0, hi=n_rotors - 1),
-            start_s=t.number("start_s", 0.0, lo=0.0),
-            end_s=t.number("end_s") if t.has("end_s") else math.inf)
+            kind=k["kind"].read(t),
+            index=index.read(t),
+            start_s=k["start_s"].read(t),
+            end_s=k["end_s"].read(t, REQUIRED) if t.has("end_s") else math.inf)
         if fault.end_s <= fault.start_s:
             raise t.error("end_s", f"a time after start_s = {fault.start_s}")
         t.finish()
@@ -142,14 +190,15 @@ def parse_actuator_faults(tables: list[Table], n_rotors: int) -> tuple[ActuatorF
 
 def parse_sensor_faults(tables: list[Table]) -> tuple[SensorFault, ...]:
     faults = []
+    k = SENSOR_FAULT_KEYS
     for t in tables:
-        kind = t.string("kind", choices=SENSOR_FAULT_KINDS)
-        start_s = t.number("start_s", lo=0.0)
+        kind = k["kind"].read(t)
+        start_s = k["start_s"].read(t)
         if kind == "gyro_bias_step":
-            end_s = t.number("end_s") if t.has("end_s") else math.inf
-            amplitude = t.numbers("amplitude", 3)
+            end_s = k["end_s"].read(t, REQUIRED) if t.has("end_s") else math.inf
+            amplitude = k["amplitude"].read(t, REQUIRED)
         else:  # a window: both ends
-            end_s = t.number("end_s")
+            end_s = k["end_s"].read(t, REQUIRED)
             amplitude = (0.0, 0.0, 0.0)
         if end_s <= start_s:
             raise t.error("end_s", f"a time after start_s = {start_s}")

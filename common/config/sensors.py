@@ -25,6 +25,7 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
+from common.config.keys import REQUIRED, Key, KeyTable
 from common.config.reader import ConfigError, Table, read_toml
 
 Vec3 = tuple[float, float, float]
@@ -141,19 +142,112 @@ class SensorProfile:
 SECTIONS = ("imu", "baro", "mag", "mocap")
 
 
+# ------------------------------------------------------------------ the keys
+
+def _rate_key(lo: float = RATE_MIN_HZ) -> Key:
+    return Key("rate_hz", "number", "the sampling rate: sample k at k / rate_hz", "Hz",
+               lo=lo, hi=RATE_MAX_HZ)
+
+
+_JITTER = Key("jitter_s", "number", "each sampling instant uniform within +-jitter_s", "s",
+              0.0, lo=0.0, range_doc="below half the period")
+
+
+def _sigma(name: str, meaning: str, unit: str, default: Any = REQUIRED) -> Key:
+    return Key(name, "number", meaning, unit, default, lo=0.0)
+
+
+def _bias_keys(turn_on: str, unit: str, rw_name: str, rw_unit: str) -> tuple[Key, ...]:
+    return (
+        _sigma(turn_on, "sigma of the constant bias drawn at start", unit),
+        _sigma(rw_name, "sigma_rw: bias += sigma_rw sqrt(dt) n", rw_unit),
+        Key("bias_correlation_time_s", "number", "the bias's correlation time: a first-order "
+            "Gauss-Markov process driven by sigma_rw", "s", lo=0.0, lo_open=True,
+            default_doc="none: an unbounded random walk"))
+
+
+PROFILE_KEYS = KeyTable("", (
+    Key("name", "string", "the profile's name"),
+    Key("kind", "string", "`truth`: a perfect profile (every noise, bias, latency, dropout "
+        "and jitter figure 0); `model`: modelled sensors", choices=KINDS),
+    Key("imu", "table", "the IMU (`[imu]`)"),
+    Key("baro", "table", "the barometer (`[baro]`)"),
+    Key("mag", "table", "the magnetometer (`[mag]`)"),
+    Key("mocap", "table", "the motion capture (`[mocap]`)"),
+    Key("gps", "table", "GNSS, sent on PX4's link only (`[gps]`)", default_doc="an exact fix"),
+))
+
+IMU_KEYS = KeyTable("imu", (
+    _rate_key(PROFILE_IMU_RATE_MIN_HZ),
+    _sigma("vibration_factor", "multiplies both white noise densities", ""),
+    Key("gyro", "table", "the gyro (`[imu.gyro]`)"),
+    Key("accel", "table", "the accelerometer (`[imu.accel]`)"),
+    _JITTER,
+), f"This project's FCU needs an IMU from {IMU_RATE_MIN_HZ:g} Hz, with a sample at the end of "
+   "every control period and no jitter; firmware served by `sitl --protocol` takes it from "
+   f"{PROFILE_IMU_RATE_MIN_HZ:g} Hz.")
+
+GYRO_KEYS = KeyTable("imu.gyro", (
+    _sigma("noise_density_rad_s_sqrt_hz", "white noise density N (datasheet)",
+           "rad/s/sqrt(Hz)"),
+    *_bias_keys("turn_on_bias_sigma_rad_s", "rad/s", "bias_random_walk_rad_s2_sqrt_hz",
+                "rad/s^2/sqrt(Hz)"),
+    Key("range_rad_s", "number", "saturation, per axis", "rad/s", lo=0.0, lo_open=True),
+))
+
+ACCEL_KEYS = KeyTable("imu.accel", (
+    _sigma("noise_density_m_s2_sqrt_hz", "white noise density N (datasheet)",
+           "m/s^2/sqrt(Hz)"),
+    *_bias_keys("turn_on_bias_sigma_m_s2", "m/s^2", "bias_random_walk_m_s3_sqrt_hz",
+                "m/s^3/sqrt(Hz)"),
+    Key("range_m_s2", "number", "saturation, per axis", "m/s^2", lo=0.0, lo_open=True),
+    Key("contact_spread_s", "number", "a ground contact's impulse spread over this long (0: "
+        "within one sample)", "s", 0.0, lo=0.0, hi=1.0),
+))
+
+BARO_KEYS = KeyTable("baro", (
+    _rate_key(),
+    _sigma("noise_m", "sigma of the pressure altitude per sample", "m"),
+    Key("bias_m", "number", "constant offset", "m", 0.0),
+    _JITTER,
+), "Not faster than the IMU (its samples ride on the IMU's).")
+
+MAG_KEYS = KeyTable("mag", (
+    Key("field_ned_gauss", "numbers", "the fixed earth field (NED)", "gauss"),
+    _rate_key(),
+    _sigma("noise_gauss", "sigma per axis per sample", "gauss"),
+    _JITTER,
+), "Not faster than the IMU.")
+
+MOCAP_KEYS = KeyTable("mocap", (
+    _rate_key(),
+    _sigma("position_noise_m", "sigma per axis", "m"),
+    _sigma("attitude_noise_rad", "sigma per axis of the small body-frame rotation", "rad"),
+    _sigma("latency_s", "a capture at t is delivered at t + latency", "s"),
+    Key("dropout_probability", "number", "the chance a capture is lost", lo=0.0, hi=1.0),
+    _JITTER,
+))
+
+GPS_KEYS = KeyTable("gps", (
+    Key("velocity_noise_ned_m_s", "numbers", "sigma per NED axis", "m/s", lo=0.0),
+    Key("satellites", "number", "the satellites reported", lo=0.0, hi=255.0,
+        range_doc="whole"),
+    _sigma("position_noise_m", "sigma per horizontal axis", "m"),
+    _sigma("altitude_noise_m", "sigma of the altitude", "m"),
+    Key("eph_m", "number", "the horizontal accuracy reported", "m", lo=0.0, hi=655.0),
+    Key("epv_m", "number", "the vertical accuracy reported", "m", lo=0.0, hi=655.0),
+))
+
+
 def period_us(rate_hz: float) -> Fraction:
     """The exact sample period in microseconds (the float rate taken as it is stored)."""
     return Fraction(1_000_000) / Fraction(rate_hz)
 
 
-def _rate(t: Table, lo: float = RATE_MIN_HZ) -> float:
-    return t.number("rate_hz", lo=lo, hi=RATE_MAX_HZ)
-
-
 def _jitter(t: Table, rate_hz: float) -> float:
     """`jitter_s` (optional, 0): at least 0 and below half the period, so that the samples
     keep their order."""
-    jitter = t.number("jitter_s", 0.0, lo=0.0)
+    jitter: float = _JITTER.read(t)
     half_s = 0.5 / rate_hz
     if not jitter < half_s:
         raise ConfigError(f"{t.source}: {t.prefix}jitter_s = {jitter:g} is not below half "
@@ -161,36 +255,35 @@ def _jitter(t: Table, rate_hz: float) -> float:
     return jitter
 
 
-def _nonneg(t: Table, key: str, default: Any = ...) -> float:
-    return t.number(key, default, lo=0.0)
+def _read(keys: KeyTable, t: Table, *names: str) -> list[Any]:
+    """The named keys of `t`, in that order."""
+    return [keys[n].read(t) for n in names]
 
 
-def _correlation_time(t: Table) -> float | None:
+def _correlation_time(keys: KeyTable, t: Table) -> float | None:
     """`bias_correlation_time_s` (optional; absent: an unbounded random walk), > 0."""
     if not t.has("bias_correlation_time_s"):
         return None
-    return t.number("bias_correlation_time_s", lo=0.0, lo_open=True)
+    value: float = keys["bias_correlation_time_s"].read(t)
+    return value
 
 
 def _parse_imu(t: Table) -> ImuConfig:
-    rate = _rate(t, PROFILE_IMU_RATE_MIN_HZ)
-    vib = _nonneg(t, "vibration_factor")
-    g = t.table("gyro")
-    gyro = GyroConfig(
-        noise_density_rad_s_sqrt_hz=_nonneg(g, "noise_density_rad_s_sqrt_hz"),
-        turn_on_bias_sigma_rad_s=_nonneg(g, "turn_on_bias_sigma_rad_s"),
-        bias_random_walk_rad_s2_sqrt_hz=_nonneg(g, "bias_random_walk_rad_s2_sqrt_hz"),
-        range_rad_s=g.number("range_rad_s", lo=0.0, lo_open=True),
-        bias_correlation_time_s=_correlation_time(g))
+    rate, vib = _read(IMU_KEYS, t, "rate_hz", "vibration_factor")
+    g = IMU_KEYS["gyro"].read(t)
+    density, turn_on, walk, span = _read(
+        GYRO_KEYS, g, "noise_density_rad_s_sqrt_hz", "turn_on_bias_sigma_rad_s",
+        "bias_random_walk_rad_s2_sqrt_hz", "range_rad_s")
+    gyro = GyroConfig(density, turn_on, walk, span,
+                      bias_correlation_time_s=_correlation_time(GYRO_KEYS, g))
     g.finish()
-    a = t.table("accel")
-    accel = AccelConfig(
-        noise_density_m_s2_sqrt_hz=_nonneg(a, "noise_density_m_s2_sqrt_hz"),
-        turn_on_bias_sigma_m_s2=_nonneg(a, "turn_on_bias_sigma_m_s2"),
-        bias_random_walk_m_s3_sqrt_hz=_nonneg(a, "bias_random_walk_m_s3_sqrt_hz"),
-        range_m_s2=a.number("range_m_s2", lo=0.0, lo_open=True),
-        bias_correlation_time_s=_correlation_time(a),
-        contact_spread_s=a.number("contact_spread_s", 0.0, lo=0.0, hi=1.0))
+    a = IMU_KEYS["accel"].read(t)
+    density, turn_on, walk, span = _read(
+        ACCEL_KEYS, a, "noise_density_m_s2_sqrt_hz", "turn_on_bias_sigma_m_s2",
+        "bias_random_walk_m_s3_sqrt_hz", "range_m_s2")
+    accel = AccelConfig(density, turn_on, walk, span,
+                        bias_correlation_time_s=_correlation_time(ACCEL_KEYS, a),
+                        contact_spread_s=ACCEL_KEYS["contact_spread_s"].read(a))
     a.finish()
     jitter = _jitter(t, rate)
     t.finish()
@@ -199,46 +292,39 @@ def _parse_imu(t: Table) -> ImuConfig:
 
 
 def _parse_baro(t: Table) -> BaroConfig:
-    rate = _rate(t)
-    out = BaroConfig(rate_hz=rate, noise_m=_nonneg(t, "noise_m"),
-                     bias_m=t.number("bias_m", 0.0), jitter_s=_jitter(t, rate))
+    rate, noise, bias = _read(BARO_KEYS, t, "rate_hz", "noise_m", "bias_m")
+    out = BaroConfig(rate_hz=rate, noise_m=noise, bias_m=bias, jitter_s=_jitter(t, rate))
     t.finish()
     return out
 
 
 def _parse_mag(t: Table) -> MagConfig:
-    field_ned = t.numbers("field_ned_gauss", 3)
-    rate = _rate(t)
+    field_ned, rate, noise = _read(MAG_KEYS, t, "field_ned_gauss", "rate_hz", "noise_gauss")
     out = MagConfig(rate_hz=rate, field_ned_gauss=(field_ned[0], field_ned[1], field_ned[2]),
-                    noise_gauss=_nonneg(t, "noise_gauss"), jitter_s=_jitter(t, rate))
+                    noise_gauss=noise, jitter_s=_jitter(t, rate))
     t.finish()
     return out
 
 
 def _parse_mocap(t: Table) -> MocapConfig:
-    rate = _rate(t)
-    out = MocapConfig(
-        rate_hz=rate,
-        position_noise_m=_nonneg(t, "position_noise_m"),
-        attitude_noise_rad=_nonneg(t, "attitude_noise_rad"),
-        latency_s=_nonneg(t, "latency_s"),
-        dropout_probability=t.number("dropout_probability", lo=0.0, hi=1.0),
-        jitter_s=_jitter(t, rate))
+    rate, position, attitude, latency, dropout = _read(
+        MOCAP_KEYS, t, "rate_hz", "position_noise_m", "attitude_noise_rad", "latency_s",
+        "dropout_probability")
+    out = MocapConfig(rate, position, attitude, latency, dropout, jitter_s=_jitter(t, rate))
     t.finish()
     return out
 
 
 def _parse_gps(t: Table) -> GpsConfig:
-    vel = t.numbers("velocity_noise_ned_m_s", 3, lo=0.0)
-    sats = t.number("satellites", lo=0.0, hi=255.0)
+    vel, sats = _read(GPS_KEYS, t, "velocity_noise_ned_m_s", "satellites")
     if sats != int(sats):
         raise ConfigError(f"{t.source}: key '{t.prefix}satellites': expected a whole number, "
                           f"got {sats!r}")
-    out = GpsConfig(position_noise_m=_nonneg(t, "position_noise_m"),
-                    altitude_noise_m=_nonneg(t, "altitude_noise_m"),
+    pos, alt, eph, epv = _read(GPS_KEYS, t, "position_noise_m", "altitude_noise_m", "eph_m",
+                               "epv_m")
+    out = GpsConfig(position_noise_m=pos, altitude_noise_m=alt,
                     velocity_noise_ned_m_s=(vel[0], vel[1], vel[2]),
-                    eph_m=t.number("eph_m", lo=0.0, hi=655.0),
-                    epv_m=t.number("epv_m", lo=0.0, hi=655.0), satellites=int(sats))
+                    eph_m=eph, epv_m=epv, satellites=int(sats))
     t.finish()
     return out
 
@@ -330,15 +416,16 @@ def stale_sensors(p: SensorProfile) -> list[str]:
 
 def parse_sensor_profile(data: dict[str, Any], source: str) -> SensorProfile:
     t = Table(data, source)
+    k = PROFILE_KEYS
     profile = SensorProfile(
-        name=t.string("name"),
-        kind=t.string("kind", choices=KINDS),
-        imu=_parse_imu(t.table("imu")),
-        baro=_parse_baro(t.table("baro")),
-        mag=_parse_mag(t.table("mag")),
-        mocap=_parse_mocap(t.table("mocap")),
+        name=k["name"].read(t),
+        kind=k["kind"].read(t),
+        imu=_parse_imu(k["imu"].read(t)),
+        baro=_parse_baro(k["baro"].read(t)),
+        mag=_parse_mag(k["mag"].read(t)),
+        mocap=_parse_mocap(k["mocap"].read(t)),
         source=source,
-        gps=_parse_gps(t.table("gps")) if t.has("gps") else EXACT_GPS)
+        gps=_parse_gps(k["gps"].read(t)) if t.has("gps") else EXACT_GPS)
     t.finish()
     if profile.is_truth:
         _check_truth(profile, source)

@@ -13,12 +13,23 @@ import numpy as np
 
 from common.config.scenario import ConfigError, resolved_scenario_data
 from gcs.campaign.keys import key_path
-from gcs.campaign.model import DISTRIBUTIONS, KEEP, TRANSPORTS, Axis, Campaign, CampaignError, Draw
+from gcs.campaign.model import (
+    AXIS_KEYS,
+    CAMPAIGN_KEYS,
+    DISTRIBUTIONS,
+    DRAW_KEYS,
+    KEEP_KEYS,
+    MONTE_CARLO_KEYS,
+    Axis,
+    Campaign,
+    CampaignError,
+    Draw,
+)
 
-_TOP_KEYS = frozenset({"name", "base", "description", "transport", "set", "axis",
-                       "monte_carlo", "keep"})
-_AXIS_KEYS = frozenset({"key", "keys", "values", "start", "stop", "num"})
-_MONTE_CARLO_KEYS = frozenset({"draws", "seed", "draw"})
+_TOP_KEYS = CAMPAIGN_KEYS.names()
+_AXIS_KEYS = AXIS_KEYS.names()
+_MONTE_CARLO_KEYS = MONTE_CARLO_KEYS.names()
+_DRAW_KEYS = DRAW_KEYS.names()
 
 
 def _refuse_unknown(t: dict[str, Any], allowed: Collection[str], where: str,
@@ -152,7 +163,7 @@ def _draw(t: Any, where: str) -> Draw:
         raise CampaignError(f"{where}: key 'distribution': expected one of "
                             f"{', '.join(DISTRIBUTIONS)}, got {dist!r}")
     names = DISTRIBUTIONS[dist]
-    _refuse_unknown(t, {"key", "distribution", *names}, where, f" for {dist}")
+    _refuse_unknown(t, {"key", "distribution", *names} & _DRAW_KEYS, where, f" for {dist}")
     key = t.get("key")
     if not isinstance(key, str):
         raise CampaignError(f"{where}: key 'key': expected a key, got {key!r}")
@@ -178,7 +189,7 @@ def _monte_carlo(data: dict[str, Any], src: str,
     if not isinstance(mc, dict):
         raise CampaignError(f"{where}: expected a table")
     _refuse_unknown(mc, _MONTE_CARLO_KEYS, where)
-    n_draws, seed = mc.get("draws"), mc.get("seed", 0)
+    n_draws, seed = mc.get("draws"), mc.get("seed", MONTE_CARLO_KEYS["seed"].default)
     if not _is_int_from(n_draws, 1):
         raise CampaignError(f"{where}: key 'draws': expected an integer >= 1")
     if not _is_int_from(seed, 0):
@@ -231,10 +242,11 @@ def _base(data: dict[str, Any], path: Path, src: str) -> tuple[Path, dict[str, A
 
 def _transport(data: dict[str, Any], src: str) -> str:
     """'transport': one of TRANSPORTS (default in-process)."""
-    transport = data.get("transport", "in-process")
-    if transport not in TRANSPORTS:
+    key = CAMPAIGN_KEYS["transport"]
+    transport = data.get(key.name, key.default)
+    if transport not in key.choices:
         raise CampaignError(f"{src}: key 'transport': expected one of "
-                            f"{', '.join(TRANSPORTS)}, got {transport!r}")
+                            f"{', '.join(key.choices)}, got {transport!r}")
     return str(transport)
 
 
@@ -252,12 +264,13 @@ def _fixed(data: dict[str, Any], src: str) -> dict[str, Any]:
 def _keep(data: dict[str, Any], src: str) -> str:
     """[keep] run_folders: one of KEEP (default none)."""
     keep_t = data.get("keep", {})
-    if not isinstance(keep_t, dict) or set(keep_t) - {"run_folders"}:
+    if not isinstance(keep_t, dict) or set(keep_t) - KEEP_KEYS.names():
         raise CampaignError(f"{src}: key 'keep': expected a table with 'run_folders'")
-    keep = keep_t.get("run_folders", "none")
-    if keep not in KEEP:
+    key = KEEP_KEYS["run_folders"]
+    keep = keep_t.get(key.name, key.default)
+    if keep not in key.choices:
         raise CampaignError(f"{src}: key 'keep.run_folders': expected one of "
-                            f"{', '.join(KEEP)}, got {keep!r}")
+                            f"{', '.join(key.choices)}, got {keep!r}")
     return str(keep)
 
 
