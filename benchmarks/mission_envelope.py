@@ -1,4 +1,4 @@
-"""Figures of the mission envelope check (docs/autopilot.md, section Missions): how long a 2 m
+"""Figures of the mission envelope check (docs/missions.md#the-envelope-check): how long a 2 m
 leg at MIS_CRUISE_SPD 2 m/s becomes on each vehicle and which actuator bounds it, the peak
 rotor speed and tilt rate of Case I, the rotor speed of hovering at the worst attitude, and
 how long the upload check of 500 items takes (waypoints alone, and a mix of fast legs,

@@ -53,7 +53,7 @@ PLAIN_FRAMES: dict[int, int] = {
     MAV_FRAME.MAV_FRAME_GLOBAL_INT: MAV_FRAME.MAV_FRAME_GLOBAL,
     MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: MAV_FRAME.MAV_FRAME_GLOBAL_RELATIVE_ALT,
     MAV_FRAME.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT: MAV_FRAME.MAV_FRAME_GLOBAL_TERRAIN_ALT}
-# The commands of fcu.mission and what their x, y, z hold (docs/autopilot.md, section Missions):
+# The commands of fcu.mission and what their x, y, z hold (docs/missions.md#items-and-commands):
 # NAV_WAYPOINT, NAV_LOITER_TIME and the pose keyframe (WAYPOINT_USER_1) fly to x, y, z;
 # NAV_TAKEOFF climbs to z and NAV_LAND ignores it (an altitude all the same); the
 # figure-infinity's (WAYPOINT_USER_2) z is an axis component. x, y of takeoff, land and the
