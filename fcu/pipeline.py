@@ -35,7 +35,7 @@ from fcu.mission.limits import MissionLimits
 from fcu.modes.answer import Answer
 from fcu.modes.commander import Commander
 from fcu.modes.landing import touchdown_speed_cap
-from fcu.modes.mode_references import FlightSettings
+from fcu.modes.settings import FlightSettings
 from fcu.safety.actuator_monitor import ActuatorMonitor, unclamped_speeds
 from fcu.safety.failsafe import (
     Failsafe,
@@ -108,9 +108,7 @@ class Pipeline:
         self.state = state
         self.state_time_us = stamp_us
         self.state_rx_us = rx_us
-        self.commander.state = state
-        self.commander.clock_us = rx_us
-        self.commander.update_landed()
+        self.commander.on_state(state, rx_us)
 
     def use_estimator(self, settings: EstimatorSettings | None) -> None:
         """Fly on the estimator with these settings, or (None) on the exact state input.
@@ -120,7 +118,7 @@ class Pipeline:
         elif self.estimator is None or self.estimator.settings != settings:
             self.estimator = Estimator(settings)
             self.state = None
-            self.commander.state = None
+            self.commander.drop_state()
             self.rate_filter = ImuRateFilter(self.rate_filter.cutoff_hz)
 
     def set_gyro_cutoff(self, cutoff_hz: float) -> None:
@@ -191,18 +189,13 @@ class Pipeline:
         POSCTL's settings."""
         self.core.tracker.set_gains(gains)
         self._set_touchdown_cap(gains)
-        self.commander.limits = limits
-        self.commander.offboard_timeout_s = offboard_timeout_s
-        if flight is not None:
-            if flight.sticks != self.commander.flight.sticks:
-                self.commander.manual_sp = None  # re-fit the new limits from here
-            self.commander.flight = flight
+        self.commander.configure(limits, offboard_timeout_s, flight)
         self.settings = failsafes
 
     def _set_touchdown_cap(self, gains: Gains) -> None:
         """The touchdown speed the position loop's damping lands at (`fcu.modes.landing`)."""
-        self.commander.touchdown_speed_cap_m_s = touchdown_speed_cap(
-            max(gains.kd_d), self.vehicle.gravity_m_s2)
+        self.commander.set_touchdown_cap(touchdown_speed_cap(max(gains.kd_d),
+                                                             self.vehicle.gravity_m_s2))
 
     def arm(self) -> Answer:
         was = self.commander.armed
@@ -239,7 +232,7 @@ class Pipeline:
     def step(self, t_us: int, dt_s: float | None = None) -> StepOutput:
         """One control period at t_us (flight clock) on the latest state."""
         cmd = self.commander
-        cmd.clock_us = t_us
+        cmd.step_at(t_us)
         self.steps += 1
         if cmd.flight_started and self.flight_start_us is None:
             self.flight_start_us = t_us
@@ -254,8 +247,7 @@ class Pipeline:
             out = self.supervisor.gate(False, self.supervisor.zero, tuple(self.core.allocator.tilt))
             self.actuators.reset(out.tilt_rad)  # the servos settle on what is sent
             return self._output(out.speed_rad_s, out.tilt_rad, None)
-        ref = cmd.reference(t_us)
-        cmd.last_ref = ref
+        ref = cmd.fly(t_us)
         result = self.core.step(state, ref, dt_s)
         alloc = result.allocation
         err = math.dist(state.p_enu_m, ref.p_enu_m)
