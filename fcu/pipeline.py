@@ -41,6 +41,9 @@ from fcu.safety.failsafe import (
     Failsafe,
     FailsafeSettings,
     GcsLinkMonitor,
+    LinkChange,
+    PoseLoss,
+    SaturationChange,
     SaturationMonitor,
     manual_control_lost,
     offboard_lost,
@@ -92,7 +95,7 @@ class Pipeline:
         self.tilt_rate_limited_steps = 0  # armed periods with a tilt servo rate-limited
         self.estimator: Estimator | None = None  # EKF_EN = 1
         self.rate_filter = ImuRateFilter(0.0)  # IMU_GYRO_CUTOFF: the rate's low-pass
-        self.pose_level = 0  # pose loss: 0 fresh, 1 HOLD, 2 LAND (failsafe.pose_loss_level)
+        self.pose_level = PoseLoss.FRESH  # pose loss (failsafe.pose_loss_level)
         self.flight_start_us: int | None = None  # the flight clock at the flight's start
         # A logger sets this to a list: every input handed to the estimator is appended, in
         # arrival order, for the logger to drain (the onboard log's sensor topics). None
@@ -212,7 +215,7 @@ class Pipeline:
             self.saturation = SaturationMonitor()
             self.actuators.reset(self.core.allocator.tilt)
             self.failsafe = Failsafe.NONE
-            self.pose_level = 0
+            self.pose_level = PoseLoss.FRESH
         return result
 
     @property
@@ -297,19 +300,19 @@ class Pipeline:
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_EMERGENCY, "failsafe: estimator failed", FAILSAFE)
             cmd.disarm(force=True, reason="estimator failed: disarmed")
             return
-        if st.rejected_in_row >= self.settings.gate_failures and self.failsafe != \
-                Failsafe.ESTIMATOR_INCONSISTENT:
+        if st.rejected_in_row >= self.settings.gate_failures and \
+                self.failsafe is not Failsafe.ESTIMATOR_INCONSISTENT:
             self.failsafe = Failsafe.ESTIMATOR_INCONSISTENT
             cmd.failsafe_land("failsafe: estimator inconsistent: LAND")
         level = pose_loss_level(t_us, st.last_fusion_us, self.settings)
         if level > self.pose_level:
             self.failsafe = Failsafe.POSE_LOST
-            if level == 1 and not cmd.landing:
+            if level is PoseLoss.HOLD and not cmd.landing:
                 cmd.failsafe_hold("failsafe: pose source lost: HOLD")
-            elif level == 2:
+            elif level is PoseLoss.LAND:
                 cmd.failsafe_land("failsafe: pose source lost: LAND")
-        elif level == 0 and self.pose_level > 0:
-            if self.failsafe == Failsafe.POSE_LOST:
+        elif level is PoseLoss.FRESH and self.pose_level > PoseLoss.FRESH:
+            if self.failsafe is Failsafe.POSE_LOST:
                 self.failsafe = Failsafe.NONE
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "pose source regained")
         self.pose_level = level
@@ -335,7 +338,7 @@ class Pipeline:
                           omega_sq: tuple[float, ...]) -> None:
         change = self.saturation.update(t_us, saturated, self.settings)
         cmd = self.commander
-        if change == "start":
+        if change is SaturationChange.START:
             self.failsafe = Failsafe.ROTOR_SATURATION
             if self.settings.saturation_hold and cmd.mode == Mode.MISSION and \
                     not cmd.landing:
@@ -347,7 +350,7 @@ class Pipeline:
                 cmd.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
                         f"rotors saturated for over {self.settings.saturation_s:g} s: {which}",
                         LIMIT)
-        elif change == "clear" and self.failsafe == Failsafe.ROTOR_SATURATION:
+        elif change is SaturationChange.CLEAR and self.failsafe is Failsafe.ROTOR_SATURATION:
             self.failsafe = Failsafe.NONE
 
     # ------------------------------------------------------------------ links (wall clock)
@@ -363,15 +366,15 @@ class Pipeline:
                 now_s, cmd.sticks_received_s, cmd.flight.manual_timeout_s):
             cmd.failsafe_hold("failsafe: manual control lost: HOLD")
         change = self.gcs_link.update(now_s, gcs_seen_s, self.settings)
-        if change == "lost":
+        if change is LinkChange.LOST:
             self.failsafe = Failsafe.GCS_LOST
             if cmd.armed and not cmd.landing:
                 cmd.failsafe_hold("failsafe: GCS link lost: HOLD")
             else:
                 cmd.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, "failsafe: GCS link lost")
-        elif change == "land" and cmd.armed and cmd.mode == Mode.HOLD:
+        elif change is LinkChange.LAND and cmd.armed and cmd.mode == Mode.HOLD:
             cmd.failsafe_land("failsafe: GCS link lost: LAND")
-        elif change == "regained":
-            if self.failsafe == Failsafe.GCS_LOST:
+        elif change is LinkChange.REGAINED:
+            if self.failsafe is Failsafe.GCS_LOST:
                 self.failsafe = Failsafe.NONE
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "GCS link regained")
