@@ -228,9 +228,7 @@ class Commander:
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, "arming refused: no state input")
         self.last_ref = None  # hold where the vehicle is, not where an old reference was
         self.armed = True
-        self.modes.brake.hold_at(self.modes.here())
-        self.modes.descent.end()
-        self.modes.posctl.restart()
+        self.modes.on_arming()
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "armed")
         if self.mode == Mode.POSCTL:
             self._fit_posctl(Mode.POSCTL)  # fitted again there
@@ -252,10 +250,8 @@ class Commander:
             return Answer(MAV_RESULT.MAV_RESULT_DENIED,
                           "disarm refused: in the air (force with p2 = 21196)")
         self.armed = False  # simulated time keeps running once the flight has started
-        self.modes.mission_run.stop()
+        self.modes.on_disarming()
         self._drop_under_way()
-        self.modes.descent.end()
-        self.modes.auto = None
         self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING if force else MAV_SEVERITY.MAV_SEVERITY_INFO,
                  reason)
         if not landed and record_in_air:

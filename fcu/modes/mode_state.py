@@ -24,7 +24,8 @@ mode resets its own state, except when it is re-entered (HOLD's always):
 
 and what belongs to the other modes ends: the landing (LAND's plan, a touchdown), TAKEOFF's
 or RTL's plan, the mission's run. A mission replaced during its own touchdown lets that
-touchdown go on (`touchdown_goes_on`).
+touchdown go on (`touchdown_goes_on`). Arming and disarming keep the mode and reset here too
+(`on_arming`, `on_disarming`).
 """
 
 from __future__ import annotations
@@ -107,6 +108,20 @@ class ModeState:
         elif mode == Mode.LAND:
             self.descent.start(self.known.voice.clock_us * 1e-6, self.here(),
                                self.known.limits)
+
+    def on_arming(self) -> None:
+        """Armed: the mode in force starts from where the vehicle is (HOLD holds there,
+        POSCTL's set-point starts there), with no landing left over."""
+        self.brake.hold_at(self.here())
+        self.descent.end()
+        self.posctl.restart()
+
+    def on_disarming(self) -> None:
+        """Disarmed: what flew ends (the mission's run, the landing, TAKEOFF's or RTL's
+        plan); the mode stays."""
+        self.mission_run.stop()
+        self.descent.end()
+        self.auto = None
 
     def plan_auto(self, mode: Mode, previous: Mode) -> str:
         """TAKEOFF's or RTL's plan when entered anew, or again with nothing left to fly
