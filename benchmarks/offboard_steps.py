@@ -51,7 +51,7 @@ def campaign(vehicle: str, count: int, seed: int) -> dict[str, float]:
         t_plan = time.perf_counter()
         f.step()  # the step that sees the sample plans the approach
         plan_ms.append((time.perf_counter() - t_plan) * 1e3)
-        sp = c.offboard_sp
+        sp = c.modes.shaper.sp
         assert sp is not None and sp.plan is not None
         for _ in range(round((sp.plan.duration_s + 1.0) * 500)):
             f.step()

@@ -25,7 +25,7 @@ from common.wire.rounding import f32
 from fcu.estimator.settings import EstimatorSettings
 from fcu.mission.limits import MissionLimits
 from fcu.modes.manual import StickSettings
-from fcu.modes.mode_references import FlightSettings
+from fcu.modes.settings import FlightSettings
 from fcu.pipeline import Pipeline
 from fcu.safety.failsafe import FailsafeSettings
 

@@ -35,12 +35,15 @@ from fcu.mission.limits import MissionLimits
 from fcu.modes.answer import Answer
 from fcu.modes.commander import Commander
 from fcu.modes.landing import touchdown_speed_cap
-from fcu.modes.mode_references import FlightSettings
+from fcu.modes.settings import FlightSettings
 from fcu.safety.actuator_monitor import ActuatorMonitor, unclamped_speeds
 from fcu.safety.failsafe import (
     Failsafe,
     FailsafeSettings,
     GcsLinkMonitor,
+    LinkChange,
+    PoseLoss,
+    SaturationChange,
     SaturationMonitor,
     manual_control_lost,
     offboard_lost,
@@ -92,7 +95,7 @@ class Pipeline:
         self.tilt_rate_limited_steps = 0  # armed periods with a tilt servo rate-limited
         self.estimator: Estimator | None = None  # EKF_EN = 1
         self.rate_filter = ImuRateFilter(0.0)  # IMU_GYRO_CUTOFF: the rate's low-pass
-        self.pose_level = 0  # pose loss: 0 fresh, 1 HOLD, 2 LAND (failsafe.pose_loss_level)
+        self.pose_level = PoseLoss.FRESH  # pose loss (failsafe.pose_loss_level)
         self.flight_start_us: int | None = None  # the flight clock at the flight's start
         # A logger sets this to a list: every input handed to the estimator is appended, in
         # arrival order, for the logger to drain (the onboard log's sensor topics). None
@@ -108,9 +111,7 @@ class Pipeline:
         self.state = state
         self.state_time_us = stamp_us
         self.state_rx_us = rx_us
-        self.commander.state = state
-        self.commander.clock_us = rx_us
-        self.commander.update_landed()
+        self.commander.on_state(state, rx_us)
 
     def use_estimator(self, settings: EstimatorSettings | None) -> None:
         """Fly on the estimator with these settings, or (None) on the exact state input.
@@ -120,7 +121,7 @@ class Pipeline:
         elif self.estimator is None or self.estimator.settings != settings:
             self.estimator = Estimator(settings)
             self.state = None
-            self.commander.state = None
+            self.commander.drop_state()
             self.rate_filter = ImuRateFilter(self.rate_filter.cutoff_hz)
 
     def set_gyro_cutoff(self, cutoff_hz: float) -> None:
@@ -191,18 +192,13 @@ class Pipeline:
         POSCTL's settings."""
         self.core.tracker.set_gains(gains)
         self._set_touchdown_cap(gains)
-        self.commander.limits = limits
-        self.commander.offboard_timeout_s = offboard_timeout_s
-        if flight is not None:
-            if flight.sticks != self.commander.flight.sticks:
-                self.commander.manual_sp = None  # re-fit the new limits from here
-            self.commander.flight = flight
+        self.commander.configure(limits, offboard_timeout_s, flight)
         self.settings = failsafes
 
     def _set_touchdown_cap(self, gains: Gains) -> None:
         """The touchdown speed the position loop's damping lands at (`fcu.modes.landing`)."""
-        self.commander.touchdown_speed_cap_m_s = touchdown_speed_cap(
-            max(gains.kd_d), self.vehicle.gravity_m_s2)
+        self.commander.set_touchdown_cap(touchdown_speed_cap(max(gains.kd_d),
+                                                             self.vehicle.gravity_m_s2))
 
     def arm(self) -> Answer:
         was = self.commander.armed
@@ -219,7 +215,7 @@ class Pipeline:
             self.saturation = SaturationMonitor()
             self.actuators.reset(self.core.allocator.tilt)
             self.failsafe = Failsafe.NONE
-            self.pose_level = 0
+            self.pose_level = PoseLoss.FRESH
         return result
 
     @property
@@ -239,7 +235,7 @@ class Pipeline:
     def step(self, t_us: int, dt_s: float | None = None) -> StepOutput:
         """One control period at t_us (flight clock) on the latest state."""
         cmd = self.commander
-        cmd.clock_us = t_us
+        cmd.step_at(t_us)
         self.steps += 1
         if cmd.flight_started and self.flight_start_us is None:
             self.flight_start_us = t_us
@@ -254,8 +250,7 @@ class Pipeline:
             out = self.supervisor.gate(False, self.supervisor.zero, tuple(self.core.allocator.tilt))
             self.actuators.reset(out.tilt_rad)  # the servos settle on what is sent
             return self._output(out.speed_rad_s, out.tilt_rad, None)
-        ref = cmd.reference(t_us)
-        cmd.last_ref = ref
+        ref = cmd.fly(t_us)
         result = self.core.step(state, ref, dt_s)
         alloc = result.allocation
         err = math.dist(state.p_enu_m, ref.p_enu_m)
@@ -305,19 +300,19 @@ class Pipeline:
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_EMERGENCY, "failsafe: estimator failed", FAILSAFE)
             cmd.disarm(force=True, reason="estimator failed: disarmed")
             return
-        if st.rejected_in_row >= self.settings.gate_failures and self.failsafe != \
-                Failsafe.ESTIMATOR_INCONSISTENT:
+        if st.rejected_in_row >= self.settings.gate_failures and \
+                self.failsafe is not Failsafe.ESTIMATOR_INCONSISTENT:
             self.failsafe = Failsafe.ESTIMATOR_INCONSISTENT
             cmd.failsafe_land("failsafe: estimator inconsistent: LAND")
         level = pose_loss_level(t_us, st.last_fusion_us, self.settings)
         if level > self.pose_level:
             self.failsafe = Failsafe.POSE_LOST
-            if level == 1 and not cmd.landing:
+            if level is PoseLoss.HOLD and not cmd.landing:
                 cmd.failsafe_hold("failsafe: pose source lost: HOLD")
-            elif level == 2:
+            elif level is PoseLoss.LAND:
                 cmd.failsafe_land("failsafe: pose source lost: LAND")
-        elif level == 0 and self.pose_level > 0:
-            if self.failsafe == Failsafe.POSE_LOST:
+        elif level is PoseLoss.FRESH and self.pose_level > PoseLoss.FRESH:
+            if self.failsafe is Failsafe.POSE_LOST:
                 self.failsafe = Failsafe.NONE
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "pose source regained")
         self.pose_level = level
@@ -343,7 +338,7 @@ class Pipeline:
                           omega_sq: tuple[float, ...]) -> None:
         change = self.saturation.update(t_us, saturated, self.settings)
         cmd = self.commander
-        if change == "start":
+        if change is SaturationChange.START:
             self.failsafe = Failsafe.ROTOR_SATURATION
             if self.settings.saturation_hold and cmd.mode == Mode.MISSION and \
                     not cmd.landing:
@@ -355,7 +350,7 @@ class Pipeline:
                 cmd.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
                         f"rotors saturated for over {self.settings.saturation_s:g} s: {which}",
                         LIMIT)
-        elif change == "clear" and self.failsafe == Failsafe.ROTOR_SATURATION:
+        elif change is SaturationChange.CLEAR and self.failsafe is Failsafe.ROTOR_SATURATION:
             self.failsafe = Failsafe.NONE
 
     # ------------------------------------------------------------------ links (wall clock)
@@ -371,15 +366,15 @@ class Pipeline:
                 now_s, cmd.sticks_received_s, cmd.flight.manual_timeout_s):
             cmd.failsafe_hold("failsafe: manual control lost: HOLD")
         change = self.gcs_link.update(now_s, gcs_seen_s, self.settings)
-        if change == "lost":
+        if change is LinkChange.LOST:
             self.failsafe = Failsafe.GCS_LOST
             if cmd.armed and not cmd.landing:
                 cmd.failsafe_hold("failsafe: GCS link lost: HOLD")
             else:
                 cmd.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, "failsafe: GCS link lost")
-        elif change == "land" and cmd.armed and cmd.mode == Mode.HOLD:
+        elif change is LinkChange.LAND and cmd.armed and cmd.mode == Mode.HOLD:
             cmd.failsafe_land("failsafe: GCS link lost: LAND")
-        elif change == "regained":
-            if self.failsafe == Failsafe.GCS_LOST:
+        elif change is LinkChange.REGAINED:
+            if self.failsafe is Failsafe.GCS_LOST:
                 self.failsafe = Failsafe.NONE
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "GCS link regained")

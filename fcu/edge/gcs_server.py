@@ -325,8 +325,8 @@ class GcsServer:
             if reply is not None:
                 reply(result, text)
 
-        if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and c.mission_plan is not None:
-            c.mission_plan.on_end(confirmed)
+        if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and c.modes.mission_run.plan is not None:
+            c.modes.mission_run.plan.on_end(confirmed)
         elif result == MAV_RESULT.MAV_RESULT_ACCEPTED:
             self.send_message(M.MAVLINK_MSG_ID_MISSION_CURRENT)
         return result
@@ -353,7 +353,7 @@ class GcsServer:
             state = MISSION_STATE.MISSION_STATE_NO_MISSION
         elif c.mission_done:
             state = MISSION_STATE.MISSION_STATE_COMPLETE
-        elif c.mission_running:
+        elif c.modes.mission_run.running:
             state = MISSION_STATE.MISSION_STATE_ACTIVE
         else:
             state = MISSION_STATE.MISSION_STATE_NOT_STARTED

@@ -394,8 +394,9 @@ class FlightController:
                 "tilt_rate_limited_steps": pipe.tilt_rate_limited_steps,
                 "lockstep": self.lockstep,
                 "sim_rtt": self.rtt,
-                "work": {**self.work.stats(), "late_anchors": pipe.commander.late_anchors,
-                         "inline_plans": pipe.commander.inline_plans},
+                "work": {**self.work.stats(),
+                         "late_anchors": pipe.commander.modes.ahead.late_anchors,
+                         "inline_plans": pipe.commander.modes.ahead.inline_plans},
                 "timed_steps": self.timed_steps,
                 "stage_us": {k: v / max(self.timed_steps, 1) * 1e-3
                              for k, v in self.stage_ns.items()},

@@ -1,11 +1,17 @@
-"""The commander stage: arming, modes and which reference flies (mission, offboard, hold,
-land, takeoff, return, position control), without I/O; the references themselves are flown
-by its base, `fcu.modes.mode_references`.
+"""The commander stage: arming, modes, commands and the reference of the mode in force
+(mission, offboard, hold, land, takeoff, return, position control), without I/O.
 
 Time comes in as arguments: `t_us` is the flight clock (simulated in lockstep, monotonic in
 real time) for everything that shapes the flight; `now_s` is the wall clock, used only for
-the offboard stream's freshness (docs/clocks.md). What the commander says goes into
-`events` (on the flight clock); the process shell turns them into STATUSTEXT.
+the offboard and manual streams' freshness (docs/clocks.md). What the commander says goes
+into `events` (on the flight clock, `fcu.modes.voice`); the process shell turns them into
+STATUSTEXT.
+
+The mode in force, each mode's state and the one table of what entering a mode resets are
+`ModeState` (`fcu.modes.mode_state`, `modes`), which also flies the references; the commander
+arms, takes the commands and the failsafes' reactions and changes modes through it.
+Arming holds where the vehicle is and restarts POSCTL's set-point; disarming ends the
+mission's run, the landing and TAKEOFF's or RTL's plan.
 
 Landing (LAND mode, or a mission whose last item is NAV_LAND): the descent to the ground
 plane follows its planned profile; then the set-point sinks and the land detector disarms
@@ -29,52 +35,207 @@ MISSION) plans the mission from the desired pose and checks it again: a job for 
 (`MAV_RESULT_IN_PROGRESS`; every command waiting on it is told the final one,
 `UnderWay.end`): the mode in force flies on, the HEARTBEAT shows it, until the plan is taken
 in at a step boundary (`_planned`); its timeline then starts at that step
-(`mission_offset_s`). The same mode asked for again meanwhile waits for the same end; any
+(`MissionRun.offset_s`). The same mode asked for again meanwhile waits for the same end; any
 other mode change, a disarm, a failsafe or a new mission drops a plan under way.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
-from common.outcome import CRASH, FAILSAFE
-from common.wire.mav_enums import MAV_CMD, MAV_RESULT, MAV_SEVERITY
+from common.outcome import CRASH, FAILSAFE, INFO, Event
+from common.wire.mav_enums import MAV_RESULT, MAV_SEVERITY
 from common.wire.mission_items import MissionItem
 from common.wire.modes import Mode
+from fcu.control.tracker import Reference, VehicleState
 from fcu.mission.codes import MAV_MISSION_DENIED, result_name
-from fcu.mission.executor import MissionExecutor
+from fcu.mission.executor import MissionEvent, MissionExecutor
+from fcu.mission.limits import MissionLimits
 from fcu.mission.start import MissionPlan, PosctlFit, plan_from
-from fcu.modes import auto_plans, manual
+from fcu.modes import manual
 from fcu.modes.answer import Answer, Reply
-from fcu.modes.manual import StickSettings
-from fcu.modes.mode_references import ModeReferences
-from fcu.work import Outcome
+from fcu.modes.manual import Sticks, StickSettings
+from fcu.modes.mode_state import ModeState
+from fcu.modes.offboard_stream import AttitudeTarget, OffboardSetpoint, PositionTarget
+from fcu.modes.settings import FlightSettings
+from fcu.modes.voice import Voice
+from fcu.reference import approach
+from fcu.work import InlineWork, Outcome, Work
 
 IN_PROGRESS = MAV_RESULT.MAV_RESULT_IN_PROGRESS  # answered later, through UnderWay.end
+_FLYING = (Mode.MISSION, Mode.OFFBOARD, Mode.LAND, Mode.TAKEOFF, Mode.RTL, Mode.POSCTL)
 
 
-class Commander(ModeReferences):
-    """Arming, modes and commands: what `ModeReferences` flies next."""
+class Commander:
+    """Arming, modes and commands, and the reference of the mode in force (`reference`)."""
+
+    def __init__(self, limits: MissionLimits, offboard_timeout_s: float = 1.0,
+                 flight: FlightSettings | None = None) -> None:
+        self.limits = limits
+        self.offboard_timeout_s = offboard_timeout_s
+        self.flight = flight or FlightSettings()
+        approach.warm()  # OFFBOARD's and HOLD's planner: compiled before the first period
+        self.armed = False
+        self.flight_started = False  # lockstep: simulated time runs once this latches
+        self.state: VehicleState | None = None
+        self.last_ref: Reference | None = None  # the reference flown at the latest step
+        self.work: Work = InlineWork()  # where plans are made (`fcu.work`; the FCU's own)
+        self.voice = Voice()
+        self.offboard = OffboardSetpoint()  # OFFBOARD's stream: the latest sample
+        self.modes = ModeState(self)  # the mode in force and each mode's state
+
+    # ------------------------------------------------------------------ what others read
+
+    @property
+    def events(self) -> list[Event]:
+        return self.voice.events
+
+    @property
+    def clock_us(self) -> int:
+        """The flight clock at the latest input (events are stamped with it)."""
+        return self.voice.clock_us
+
+    @property
+    def mission(self) -> tuple[MissionItem, ...]:
+        return self.modes.mission_run.items
+
+    @property
+    def mission_current(self) -> int:
+        return self.modes.mission_run.current
+
+    @property
+    def mission_done(self) -> bool:
+        return self.modes.mission_run.done
+
+    @property
+    def mission_events(self) -> list[MissionEvent]:
+        return self.modes.mission_run.events
+
+    @property
+    def landed(self) -> bool:
+        """On the ground, as the landed state machine last concluded (`Descent`)."""
+        return self.modes.descent.on_ground
+
+    @property
+    def touchdown_speed_m_s(self) -> float:
+        """The land speed (MIS_LAND_SPD), capped by what the gains land at
+        (`fcu.modes.landing.touchdown_speed_cap`)."""
+        return self.modes.descent.speed_m_s(self.limits.land_speed_m_s)
+
+    @property
+    def under_way(self) -> MissionPlan | PosctlFit | None:
+        """The mode change whose work runs beside the loop (its waiting commands told the end)."""
+        return self.modes.mission_run.plan or self.modes.posctl.fit
+
+    @property
+    def mode(self) -> Mode:
+        return self.modes.mode
+
+    @property
+    def landing(self) -> bool:
+        """Landing or returning (`ModeState.landing`): a GCS link loss does not interrupt it."""
+        return self.modes.landing
+
+    def say(self, severity: int, text: str, kind: str = INFO) -> None:
+        self.voice.say(severity, text, kind)
+
+    # ------------------------------------------------------------------ inputs
+
+    def on_state(self, state: VehicleState, rx_us: int) -> None:
+        """A new state, received at `rx_us` (flight clock); the landed state follows it: a
+        disarmed vehicle at rest at ground level is on the ground, an armed one comes back
+        to it only through `land_detector`, never from its altitude alone (with no ground
+        below, Case II, a hover at z = 0 is not a landing)."""
+        self.state = state
+        self.voice.clock_us = rx_us
+        self.modes.descent.update_landed(self.armed, state)
+
+    def drop_state(self) -> None:
+        """No state until the next one (the state source changed)."""
+        self.state = None
+
+    def step_at(self, t_us: int) -> None:
+        """A control period begins at `t_us` (flight clock): what is said is stamped so."""
+        self.voice.clock_us = t_us
+
+    def configure(self, limits: MissionLimits, offboard_timeout_s: float,
+                  flight: FlightSettings | None) -> None:
+        """New parameters: mission limits, COM_OF_LOSS_T, the automatic modes' and POSCTL's
+        settings (new stick limits: POSCTL's set-point starts again from here)."""
+        self.limits = limits
+        self.offboard_timeout_s = offboard_timeout_s
+        if flight is not None:
+            if flight.sticks != self.flight.sticks:
+                self.modes.posctl.restart()
+            self.flight = flight
+
+    def reference(self, t_us: int) -> Reference:
+        """The desired pose, twist and acceleration at t_us (flight clock)."""
+        return self.modes.reference(t_us)
+
+    def fly(self, t_us: int) -> Reference:
+        """The reference flown this control period (`reference`), kept as `last_ref`."""
+        self.last_ref = self.modes.reference(t_us)
+        return self.last_ref
+
+    def land_detector(self, t_us: int, lift_n: float, weight_n: float) -> bool:
+        """During a touchdown: True once the vehicle is on the ground (then disarm): held up
+        and still for LANDED_STILL_S (`fcu.modes.landing.held_up_and_still`)."""
+        return self.modes.descent.detector(t_us, self.state, self.last_ref, lift_n, weight_n)
+
+    def set_touchdown_cap(self, speed_m_s: float) -> None:
+        """The touchdown speed the position loop's damping lands at (`fcu.modes.landing`)."""
+        self.modes.descent.speed_cap_m_s = speed_m_s
+
+    def offboard_position(self, now_s: float, target: PositionTarget) -> tuple[bool, str]:
+        """A position target (SET_POSITION_TARGET_LOCAL_NED, decoded by `fcu.edge.setpoint_wire`)
+        received at `now_s` (wall clock); (kept, why not)."""
+        refused = self.offboard.take_position(now_s, target, self.limits.max_distance_m)
+        return not refused, refused
+
+    def offboard_attitude(self, now_s: float, target: AttitudeTarget) -> tuple[bool, str]:
+        """An attitude target (SET_ATTITUDE_TARGET, decoded by `fcu.edge.setpoint_wire`)
+        received at `now_s` (wall clock); (kept, why not)."""
+        refused = self.offboard.take_attitude(now_s, target)
+        return not refused, refused
+
+    def manual_input(self, now_s: float, sticks: Sticks) -> None:
+        """The sticks of a MANUAL_CONTROL received at `now_s` (wall clock), as deflections
+        (decoded by `fcu.edge.setpoint_wire.sticks_from_manual_control`)."""
+        self.modes.posctl.take(now_s, sticks)
+
+    @property
+    def sticks_received_s(self) -> float:
+        """When the latest MANUAL_CONTROL came (wall clock; -inf: never)."""
+        return self.modes.posctl.received_s
+
+    def manual_fresh(self, now_s: float) -> bool:
+        """MANUAL_CONTROL heard within COM_RC_LOSS_T (wall clock)."""
+        return self.modes.posctl.fresh(now_s, self.flight.manual_timeout_s)
+
+    def _maybe_start_flight(self) -> None:
+        if self.armed and self.mode in _FLYING:
+            self.flight_started = True
 
     # ------------------------------------------------------------------ commands
 
     def arm(self) -> Answer:
+        """Arm where the vehicle is: HOLD holds there, POSCTL starts from there (its limits
+        fitted again), MISSION flies a mission started before."""
         if self.armed:
             return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, "already armed")
         if self.state is None:
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, "arming refused: no state input")
         self.last_ref = None  # hold where the vehicle is, not where an old reference was
         self.armed = True
-        self.hold = self._current_pose_ref()
-        self.touchdown = None
-        self.manual_sp = None  # POSCTL starts from where the vehicle is
+        self.modes.on_arming()
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "armed")
         if self.mode == Mode.POSCTL:
             self._fit_posctl(Mode.POSCTL)  # fitted again there
-        if self.mode == Mode.MISSION and not self.mission_running and not self.mission_done \
-                and self.mission:  # MISSION_START came first: fly it now
-            self._plan_mission(self.mission_current, "", "mission started", self._warn)
+        run = self.modes.mission_run
+        if self.mode == Mode.MISSION and not run.running and not run.done \
+                and run.items:  # MISSION_START came first: fly it now
+            self._plan_mission(run.current, "", "mission started", self._warn)
         self._maybe_start_flight()
         return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, "armed")
 
@@ -89,11 +250,8 @@ class Commander(ModeReferences):
             return Answer(MAV_RESULT.MAV_RESULT_DENIED,
                           "disarm refused: in the air (force with p2 = 21196)")
         self.armed = False  # simulated time keeps running once the flight has started
-        self.mission_running = False
+        self.modes.on_disarming()
         self._drop_under_way()
-        self.touchdown = None
-        self.land = None
-        self.auto = None
         self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING if force else MAV_SEVERITY.MAV_SEVERITY_INFO,
                  reason)
         if not landed and record_in_air:
@@ -102,7 +260,7 @@ class Commander(ModeReferences):
 
     def _mode_refusal(self, mode: Mode, now_s: float) -> str:
         """Why `mode` cannot be entered now ('' when it can, as far as its inputs go)."""
-        if mode == Mode.MISSION and not self.mission:
+        if mode == Mode.MISSION and not self.modes.mission_run.items:
             return "no mission"
         if mode == Mode.OFFBOARD and (
                 self.offboard.received_s + self.offboard_timeout_s < now_s
@@ -126,9 +284,10 @@ class Commander(ModeReferences):
         if under_way is not None and under_way.mode == mode:
             return Answer(IN_PROGRESS, "")  # the same mode asked again (another station): it waits
         self._drop_under_way()  # a start under way gives way to the newer command
-        if mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running) \
+        run = self.modes.mission_run
+        if mode == Mode.MISSION and (previous != Mode.MISSION or not run.running) \
                 and self.armed:
-            return self._plan_mission(self.mission_current,
+            return self._plan_mission(run.current,
                                       "mode MISSION" if previous != mode else "", "mode MISSION")
         if mode == Mode.POSCTL and previous != Mode.POSCTL:
             return self._fit_posctl(previous)
@@ -136,36 +295,10 @@ class Commander(ModeReferences):
 
     def _enter(self, mode: Mode, previous: Mode) -> Answer:
         """The mode in force from now (its plans made here, cheap ones: TAKEOFF, RTL)."""
-        idle = self.auto is None and self.touchdown is None  # e.g. landed, disarmed, re-armed
-        if mode == Mode.TAKEOFF and (previous != Mode.TAKEOFF or idle):
-            refused = self._start_takeoff(self.flight.takeoff_alt_m)
-            if refused:
-                return Answer(MAV_RESULT.MAV_RESULT_DENIED, refused)
-        elif mode == Mode.RTL and (previous != Mode.RTL or idle):
-            refused = self._start_rtl()
-            if refused:
-                return Answer(MAV_RESULT.MAV_RESULT_DENIED, refused)
-        self.mode = mode
-        if mode != Mode.LAND and not (mode == Mode.RTL and previous == Mode.RTL):
-            self.touchdown = None  # RTL touches down only at the end of its own plan
-            self.land = None
-        if mode not in (Mode.TAKEOFF, Mode.RTL):
-            self.auto = None
-        if mode in (Mode.TAKEOFF, Mode.RTL, Mode.POSCTL):
-            self.mission_running = False
-        if mode == Mode.POSCTL and previous != Mode.POSCTL:
-            self.manual_sp = None
-        if mode == Mode.HOLD:
-            self.hold = self._current_pose_ref()
-            self.mission_running = False
-        elif mode == Mode.MISSION and (previous != Mode.MISSION or not self.mission_running):
-            self.mission_running = False  # disarmed: it starts when armed
-        elif mode == Mode.LAND and previous != Mode.LAND:
-            self._start_landing()
-        elif mode == Mode.OFFBOARD:
-            self.mission_running = False
-            if previous != Mode.OFFBOARD:
-                self.offboard_sp = None  # the approach starts from the reference flown
+        refused = self.modes.plan_auto(mode, previous)
+        if refused:
+            return Answer(MAV_RESULT.MAV_RESULT_DENIED, refused)
+        self.modes.switch(mode, previous)
         self._maybe_start_flight()
         if previous != mode:
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"mode {mode.name}")
@@ -180,118 +313,79 @@ class Commander(ModeReferences):
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, "takeoff: not armed")
         climb = self.flight.takeoff_alt_m
         if target_up_m is not None:
-            wanted = target_up_m - self._current_pose_ref().p_enu_m[2]
+            wanted = target_up_m - self.modes.here().p_enu_m[2]
             if not math.isfinite(wanted):
                 return Answer(MAV_RESULT.MAV_RESULT_DENIED, "takeoff: altitude not finite")
             if wanted < climb:
                 self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
                          f"takeoff: using the minimum climb {climb:.1f} m")
             climb = max(climb, wanted)
-        refused = self._start_takeoff(climb)
+        refused = self.modes.plan_takeoff(climb)
         if refused:
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, refused)
         previous = self.mode
-        self.mode = Mode.TAKEOFF
-        self.touchdown = None
-        self.land = None
-        self.mission_running = False
+        self.modes.switch(Mode.TAKEOFF)
         self._maybe_start_flight()
         if previous != Mode.TAKEOFF:
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"mode {Mode.TAKEOFF.name}")
         return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, f"takeoff: climbing {climb:.1f} m")
 
-    def _start_takeoff(self, climb_m: float) -> str:
-        """Plan TAKEOFF's climb (one NAV_TAKEOFF item); a reason if refused, else ""."""
-        start = self._current_pose_ref()
-        items = auto_plans.takeoff(start.p_enu_m, climb_m, self.limits.max_distance_m)
-        if isinstance(items, str):
-            return items
-        self.auto = MissionExecutor(items, self.limits)
-        self.auto.start(self.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
-        return ""
-
-    def _start_rtl(self) -> str:
-        """Plan RTL (module docstring): climb to RTL_RETURN_ALT if lower, travel home at
-        MPC_XY_CRUISE, land; a reason if refused, else ""."""
-        start = self._current_pose_ref()
-        items = auto_plans.rtl(start.p_enu_m, self.flight.rtl_return_alt_m,
-                               self.limits.max_distance_m)
-        if isinstance(items, str):
-            return items
-        limits = replace(self.limits, cruise_speed_m_s=self.flight.rtl_cruise_m_s)
-        self.auto = MissionExecutor(items, limits)
-        self.auto.start(self.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
-        self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"RTL: return at {-items[0].z:.1f} m, then land")
-        return ""
-
     def mission_start(self, first: int = 0) -> Answer:
-        if not self.mission:
+        run = self.modes.mission_run
+        if not run.items:
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, "no mission")
-        if not 0 <= first < len(self.mission):
+        if not 0 <= first < len(run.items):
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {first}")
         self._drop_under_way()
         if self.armed:
             return self._plan_mission(first, "mission started", "mission started")
-        self.mission_current = first
-        self.mission_done = False
-        self.mission_running = False
-        self.mode = Mode.MISSION  # flown when armed
-        self.touchdown = None
-        self.land = None
-        self.auto = None
+        run.restart(first)
+        self.modes.switch(Mode.MISSION)  # flown when armed
         self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission started")
         return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")
 
     def set_mission(self, items: tuple[MissionItem, ...]) -> None:
         """A new mission (already validated by the mission protocol)."""
-        self.mission = tuple(items)
-        self.mission_current = 0
-        self.mission_done = False
-        self.executor = None
+        self.modes.mission_run.replace(items)
         self._drop_under_way()  # planned for the old one
-        if any(it.command == MAV_CMD.MAV_CMD_NAV_LAND for it in self.mission):
-            self.say_touchdown_cap()  # the landing's clamp, said when the mission is taken
+        if self.modes.mission_run.has_landing:
+            self.modes.say_touchdown_cap()  # the landing's clamp, said when the mission is taken
         if self.mode == Mode.MISSION:
-            self.mode = Mode.HOLD
-            self.hold = self._current_pose_ref()
-            self.mission_running = False
+            self.modes.switch(Mode.HOLD, touchdown_goes_on=True)
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission replaced: holding")
 
     def set_mission_current(self, seq: int) -> Answer:
-        if not 0 <= seq < len(self.mission):
+        run = self.modes.mission_run
+        if not 0 <= seq < len(run.items):
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {seq}")
-        if self.mode == Mode.MISSION and self.mission_running and self.armed:
+        if self.mode == Mode.MISSION and run.running and self.armed:
             self._drop_under_way()
             return self._plan_mission(seq, "", f"mission item {seq}")
-        self.mission_current = seq
-        self.mission_done = False
+        run.select(seq)
         return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, f"mission item {seq}")
 
-    def _maybe_start_flight(self) -> None:
-        if self.armed and self.mode in (Mode.MISSION, Mode.OFFBOARD, Mode.LAND, Mode.TAKEOFF,
-                                        Mode.RTL, Mode.POSCTL):
-            self.flight_started = True
+    # ------------------------------------------------------------------ changes under way
 
     def _fit_posctl(self, previous: Mode) -> Answer:
         """POSCTL's limits fitted to the envelope at the desired attitude (`manual.fit_envelope`,
         run by `work`); POSCTL is entered when they are (IN_PROGRESS meanwhile)."""
-        start = self._current_pose_ref()
-        fit = self.posctl_fit = PosctlFit(previous=previous)
+        start = self.modes.here()
+        fit = self.modes.posctl.fit = PosctlFit(previous=previous)
         self.work.submit(manual.fit_envelope, (self.flight.sticks, self.limits.vehicle,
                                                start.q_enu_flu),
                          lambda outcome: self._fitted(fit, outcome))
         return fit.result if fit.result is not None else Answer(IN_PROGRESS, "")
 
     def _fitted(self, fit: PosctlFit, outcome: Outcome[StickSettings]) -> None:
-        if self.posctl_fit is not fit:
+        if self.modes.posctl.fit is not fit:
             return  # dropped meanwhile
-        self.posctl_fit = None
+        self.modes.posctl.fit = None
         lim = outcome.value
         if lim is None:
             fit.end(MAV_RESULT.MAV_RESULT_DENIED,
                     f"POSCTL refused: envelope fit failed: {outcome.error}")
             return
-        self.manual_limits = lim
+        self.modes.posctl.limits = lim
         result = self._enter(Mode.POSCTL, fit.previous)
         if lim.acc_xy_m_s2 < self.flight.sticks.acc_xy_m_s2:  # said, as it is unusual
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
@@ -304,14 +398,9 @@ class Commander(ModeReferences):
         a failsafe: its command is answered MAV_RESULT_FAILED (valid, not carried out; the
         spec's MAV_RESULT_CANCELLED answers COMMAND_CANCEL only), with why."""
         dropped = self.under_way
-        self.mission_plan = self.posctl_fit = None
+        self.modes.mission_run.plan = self.modes.posctl.fit = None
         if dropped is not None:
             dropped.end(MAV_RESULT.MAV_RESULT_FAILED, "superseded by a newer command")
-
-    @property
-    def under_way(self) -> MissionPlan | PosctlFit | None:
-        """The mode change whose work runs beside the loop (its waiting commands told the end)."""
-        return self.mission_plan or self.posctl_fit
 
     def _warn(self, result: int, text: str) -> None:
         if result != MAV_RESULT.MAV_RESULT_ACCEPTED:
@@ -324,13 +413,13 @@ class Commander(ModeReferences):
         by `work`): one that no longer fits is not flown (the vehicle holds; the command is
         refused with the reason), never flown into the limits. The answer, or IN_PROGRESS
         while the plan is made beside the loop (then `reply` gets it)."""
-        start = self._current_pose_ref()
-        plan = self.mission_plan = MissionPlan(seq=seq, t_s=self.clock_us * 1e-6, start=start,
-                                               said=said, text=text)
+        start = self.modes.here()
+        plan = self.modes.mission_run.plan = MissionPlan(seq=seq, t_s=self.clock_us * 1e-6,
+                                                   start=start, said=said, text=text)
         if reply is not None:
             plan.on_end(reply)
-        self.work.submit(plan_from, (self.mission, self.limits, seq, plan.t_s, start.p_enu_m,
-                                     start.q_enu_flu),
+        self.work.submit(plan_from, (self.modes.mission_run.items, self.limits, seq, plan.t_s,
+                                     start.p_enu_m, start.q_enu_flu),
                          lambda outcome: self._planned(plan, outcome))
         return plan.result if plan.result is not None else Answer(IN_PROGRESS, "")
 
@@ -338,66 +427,37 @@ class Commander(ModeReferences):
                  outcome: Outcome[tuple[MissionExecutor | None, str]]) -> None:
         """A mission's plan taken in (at a step boundary): flown from this step on, or
         refused (the vehicle holds where the plan would have started)."""
-        if self.mission_plan is not plan:
+        run = self.modes.mission_run
+        if run.plan is not plan:
             return  # dropped meanwhile
-        self.mission_plan = None
+        run.plan = None
         executor, refused = outcome.value if outcome.value is not None else \
             (None, f"mission plan failed: {outcome.error}")
-        self.mission_current = plan.seq
-        self.mission_done = False
-        self.mode = Mode.MISSION
-        self.touchdown = None
-        self.land = None
-        self.auto = None
+        run.restart(plan.seq)
         if executor is None:
-            self.executor = None
-            self.mission_running = False
-            self.mode = Mode.HOLD
-            self.hold = plan.start
+            run.refuse()
+            self.modes.switch(Mode.HOLD, hold=plan.start)
             plan.end(MAV_RESULT.MAV_RESULT_DENIED, f"mission refused from here: "
                      f"{result_name(MAV_MISSION_DENIED)}: {refused}")
-        else:
-            self.executor = executor
-            self.mission_running = True
-            self.mission_offset_s = self.clock_us * 1e-6 - plan.t_s  # 0 when planned inline
-            self._maybe_start_flight()
-            if plan.said:
-                self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, plan.said)
-            plan.end(MAV_RESULT.MAV_RESULT_ACCEPTED, plan.text)
-
-    def _start_landing(self) -> None:
-        start = self._current_pose_ref()
-        self.land = MissionExecutor(auto_plans.land(), self.limits)
-        self.land.start(self.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
-        self.touchdown = None
+            return
+        self.modes.switch(Mode.MISSION)
+        run.begin(executor, self.clock_us * 1e-6 - plan.t_s)  # offset 0 when planned inline
+        self._maybe_start_flight()
+        if plan.said:
+            self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, plan.said)
+        plan.end(MAV_RESULT.MAV_RESULT_ACCEPTED, plan.text)
 
     # ------------------------------------------------------------------ failsafe reactions
-
-    @property
-    def landing(self) -> bool:
-        """Landing or returning: LAND or RTL mode, a touchdown, or a mission flying its
-        NAV_LAND item (a GCS link loss does not interrupt these)."""
-        if self.mode in (Mode.LAND, Mode.RTL) or self.touchdown is not None:
-            return True
-        return self.mode == Mode.MISSION and self.mission_running and \
-            0 <= self.mission_current < len(self.mission) and \
-            self.mission[self.mission_current].command == MAV_CMD.MAV_CMD_NAV_LAND
 
     def failsafe_hold(self, reason: str) -> None:
         """A failsafe reaction: stop where the vehicle should be and hold."""
         self._drop_under_way()
-        self.mode = Mode.HOLD
-        self.hold = self._current_pose_ref()
-        self.mission_running = False
-        self.touchdown = None
-        self.land = None
-        self.auto = None
+        self.modes.switch(Mode.HOLD)
         self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, reason, FAILSAFE)
 
     def failsafe_land(self, reason: str) -> None:
+        """A failsafe reaction: land where the vehicle is (unless landing already)."""
         self._drop_under_way()
         if self.mode != Mode.LAND:
-            self.mode = Mode.LAND
-            self.auto = None
-            self._start_landing()
+            self.modes.switch(Mode.LAND)
         self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, reason, FAILSAFE)

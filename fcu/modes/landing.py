@@ -17,7 +17,8 @@ ground is (`touchdown_ref`):
 
 The vehicle is on the ground once it has been still, held up and lifting little for
 `LANDED_STILL_S` (`held_up_and_still`); disarmed, at rest below `LANDED_ALTITUDE_M`
-(`landed_state`).
+(`landed_state`). `Descent` is the commander's landing state: LAND's plan, the touchdown,
+the land detector's and the landed state.
 """
 
 from __future__ import annotations
@@ -27,6 +28,9 @@ from typing import NamedTuple
 
 from fcu.control.dualquat import Quat, Vec3
 from fcu.control.tracker import Reference, VehicleState
+from fcu.mission.executor import MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.modes import auto_plans
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 LANDED_ALTITUDE_M = 0.05
@@ -105,3 +109,73 @@ def held_up_and_still(s: VehicleState, ref: Reference | None, lift_n: float,
         ref is not None and s.p_enu_m[2] - ref.p_enu_m[2] > TOUCHDOWN_BLOCKED_M)
     return not (_speed(s) >= LANDED_SPEED_M_S or not blocked or
                 lift_n > LANDED_LIFT_RATIO * weight_n)
+
+
+class Descent:
+    """The landing's state: LAND's planned descent (`plan`), the touchdown that ends a
+    landing (`touchdown`), the land detector's stillness and the landed state
+    (`on_ground`); `speed_cap_m_s` is the touchdown speed the gains land at."""
+
+    def __init__(self) -> None:
+        self.plan: MissionExecutor | None = None  # LAND's descent
+        self.touchdown: Touchdown | None = None
+        self.still_since_us: int | None = None
+        self.on_ground = True  # the landed state (`update_landed`)
+        self.speed_cap_m_s = math.inf  # set from the gains (`touchdown_speed_cap`)
+
+    def end(self) -> None:
+        """No landing under way: LAND's plan and a touchdown dropped."""
+        self.plan = None
+        self.touchdown = None
+
+    def start(self, t_s: float, start: Reference, limits: MissionLimits) -> None:
+        """LAND's descent planned from `start` at `t_s` (flight clock)."""
+        self.plan = MissionExecutor(auto_plans.land(), limits)
+        self.plan.start(t_s, start.p_enu_m, start.q_enu_flu)
+        self.touchdown = None
+
+    def step(self, t_us: int) -> tuple[Reference, bool]:
+        """LAND's planned descent at `t_us`, and whether it has ended (then the touchdown
+        begins: `begin_touchdown`)."""
+        plan = self.plan
+        assert plan is not None
+        t_s = t_us * 1e-6
+        plan.update(t_s)
+        return plan.sample(t_s), plan.completed
+
+    def begin_touchdown(self, t_us: int, ref: Reference) -> None:
+        """The set-point sinks from `ref`'s pose from `t_us` on; from here on only the land
+        detector's evidence counts."""
+        self.touchdown = Touchdown(t_us, ref.p_enu_m, ref.q_enu_flu)
+        self.still_since_us = None
+        self.on_ground = False
+
+    def speed_m_s(self, land_speed_m_s: float) -> float:
+        """The land speed (MIS_LAND_SPD), capped by what the gains land at."""
+        return min(land_speed_m_s, self.speed_cap_m_s)
+
+    def touchdown_ref(self, t_us: int, land_speed_m_s: float,
+                      state: VehicleState | None) -> Reference:
+        assert self.touchdown is not None
+        z = state.p_enu_m[2] if state is not None else None
+        return touchdown_ref(self.touchdown, t_us, self.speed_m_s(land_speed_m_s), z)
+
+    def update_landed(self, armed: bool, state: VehicleState | None) -> None:
+        """The landed state at a new state (`landed_state`)."""
+        if state is not None:
+            self.on_ground = landed_state(armed, self.on_ground, state)
+
+    def detector(self, t_us: int, state: VehicleState | None, ref: Reference | None,
+                 lift_n: float, weight_n: float) -> bool:
+        """During a touchdown: True once the vehicle is on the ground: held up and still for
+        LANDED_STILL_S (`held_up_and_still`)."""
+        if self.touchdown is None or state is None:
+            return False
+        if not held_up_and_still(state, ref, lift_n, weight_n):
+            self.still_since_us = None
+        elif self.still_since_us is None:
+            self.still_since_us = t_us
+        if self.still_since_us is not None and \
+                (t_us - self.still_since_us) * 1e-6 >= LANDED_STILL_S:
+            self.on_ground = True
+        return self.on_ground

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import StrEnum
+from enum import Enum, IntEnum, StrEnum
 
 from common.outcome import DIVERGENCE_M
 
@@ -31,6 +31,33 @@ class Failsafe(StrEnum):
     POSE_LOST = "pose source lost"
     ROTOR_SATURATION = "rotor saturation"
     GCS_LOST = "GCS link lost"
+
+
+class PoseLoss(IntEnum):
+    """How long the pose source has been lost (`pose_loss_level`): FRESH (or dead-reckoning
+    within COM_POS_LOSS_T), then HOLD, then LAND (COM_POS_LAND_T later)."""
+
+    FRESH = 0
+    HOLD = 1
+    LAND = 2
+
+
+class SaturationChange(Enum):
+    """What `SaturationMonitor.update` saw: NONE, START (held longer than COM_SAT_T), CLEAR."""
+
+    NONE = "none"
+    START = "start"
+    CLEAR = "clear"
+
+
+class LinkChange(Enum):
+    """What `GcsLinkMonitor.update` saw: NONE, LOST (COM_DL_LOSS_T), LAND (COM_DL_LAND_T
+    more), REGAINED."""
+
+    NONE = "none"
+    LOST = "lost"
+    LAND = "land"
+    REGAINED = "regained"
 
 
 # the failsafes logged as PX4's failsafe_flags.fd_critical_failure (the vehicle lost, not a
@@ -61,15 +88,15 @@ def state_lost(t_us: int, state_rx_us: int | None, settings: FailsafeSettings) -
     return (t_us - state_rx_us) * 1e-6 > settings.state_loss_s
 
 
-def pose_loss_level(t_us: int, last_fusion_us: int, settings: FailsafeSettings) -> int:
-    """0: the pose source is fresh (or dead-reckoning within COM_POS_LOSS_T), 1: HOLD,
-    2: LAND (COM_POS_LAND_T later); on the flight clock, from the last fused capture."""
+def pose_loss_level(t_us: int, last_fusion_us: int, settings: FailsafeSettings) -> PoseLoss:
+    """FRESH: the pose source is fresh (or dead-reckoning within COM_POS_LOSS_T), HOLD, then
+    LAND (COM_POS_LAND_T later); on the flight clock, from the last fused capture."""
     if last_fusion_us < 0:
-        return 0
+        return PoseLoss.FRESH
     age_s = (t_us - last_fusion_us) * 1e-6
     if age_s > settings.pose_loss_s + settings.pose_loss_land_s:
-        return 2
-    return 1 if age_s > settings.pose_loss_s else 0
+        return PoseLoss.LAND
+    return PoseLoss.HOLD if age_s > settings.pose_loss_s else PoseLoss.FRESH
 
 
 def offboard_lost(now_s: float, received_s: float, timeout_s: float) -> bool:
@@ -90,44 +117,46 @@ class SaturationMonitor:
         self.since_us: int | None = None
         self.reported = False
 
-    def update(self, t_us: int, saturated: bool, settings: FailsafeSettings) -> str:
-        """"start" once the saturation has lasted too long, "clear" when it ends, else ""."""
+    def update(self, t_us: int, saturated: bool,
+               settings: FailsafeSettings) -> SaturationChange:
+        """START once the saturation has lasted too long, CLEAR when it ends, else NONE."""
         if not saturated:
             self.since_us = None
             was = self.reported
             self.reported = False
-            return "clear" if was else ""
+            return SaturationChange.CLEAR if was else SaturationChange.NONE
         if self.since_us is None:
             self.since_us = t_us
         if not self.reported and (t_us - self.since_us) * 1e-6 > settings.saturation_s:
             self.reported = True
-            return "start"
-        return ""
+            return SaturationChange.START
+        return SaturationChange.NONE
 
 
 class GcsLinkMonitor:
     """GCS heartbeat loss (wall clock): HOLD after COM_DL_LOSS_T, LAND after COM_DL_LAND_T
-    more, "regained" when heartbeats come back."""
+    more, REGAINED when heartbeats come back."""
 
     def __init__(self) -> None:
         self.lost_since_s: float | None = None
         self.landing_ordered = False
 
-    def update(self, now_s: float, gcs_seen_s: float, settings: FailsafeSettings) -> str:
-        """"lost", "land", "regained" or ""."""
+    def update(self, now_s: float, gcs_seen_s: float,
+               settings: FailsafeSettings) -> LinkChange:
+        """LOST, LAND, REGAINED or NONE."""
         if settings.gcs_loss_s <= 0.0 or not math.isfinite(gcs_seen_s):
-            return ""
+            return LinkChange.NONE
         lost = now_s - gcs_seen_s > settings.gcs_loss_s
         if lost and self.lost_since_s is None:
             self.lost_since_s = now_s
             self.landing_ordered = False
-            return "lost"
+            return LinkChange.LOST
         if lost and not self.landing_ordered and settings.gcs_loss_land_s > 0.0 and \
                 self.lost_since_s is not None and \
                 now_s - self.lost_since_s > settings.gcs_loss_land_s:
             self.landing_ordered = True
-            return "land"
+            return LinkChange.LAND
         if not lost and self.lost_since_s is not None:
             self.lost_since_s = None
-            return "regained"
-        return ""
+            return LinkChange.REGAINED
+        return LinkChange.NONE

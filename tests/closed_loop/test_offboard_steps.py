@@ -142,5 +142,5 @@ def test_hold_at_cruise_speed_brakes_then_holds_where_it_stopped():
             state = plant.step(state, command)
     assert pipe.armed and c.mode == Mode.HOLD and pipe.saturated_steps == 0
     assert track_m < 0.05
-    assert c.hold.p_enu_m[1] > at_hold[1] + 4.0  # it braked from 5 m/s at 3 m/s^2
-    assert math.dist(state.p_enu_m, c.hold.p_enu_m) < 0.01
+    assert c.modes.brake.hold.p_enu_m[1] > at_hold[1] + 4.0  # it braked from 5 m/s at 3 m/s^2
+    assert math.dist(state.p_enu_m, c.modes.brake.hold.p_enu_m) < 0.01

@@ -38,8 +38,8 @@ def _step_attitude(f: Flight, axis) -> tuple:
                                                     (0.0,) * 3))[0]
     assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
     f.step()
-    assert c.offboard_sp is not None
-    return q_t, c.offboard_sp
+    assert c.modes.shaper.sp is not None
+    return q_t, c.modes.shaper.sp
 
 
 @pytest.mark.parametrize("vehicle", VEHICLES)
@@ -120,10 +120,10 @@ def test_hold_at_ten_metres_per_second_fits_every_actuator(vehicle):
     at_hold = c.last_ref.p_enu_m
     assert c.set_mode(Mode.HOLD, k * 0.002)[0] == 0
     f.step()
-    assert c.hold_sp is not None and c.hold_sp.plan is not None
-    plan = c.hold_sp.plan
+    assert c.modes.brake.sp is not None and c.modes.brake.sp.plan is not None
+    plan = c.modes.brake.sp.plan
     assert plan.fits and plan.duration_s >= 10.0 * 1.5 / 3.0 - 1e-9  # at MPC_ACC_HOR
-    hold = c.hold
+    hold = c.modes.brake.hold
     assert hold.p_enu_m[0] - at_hold[0] == pytest.approx(10.0 * plan.duration_s / 2, abs=0.03)
     for _ in range(round((plan.duration_s + 1.0) * 500)):
         f.step()
@@ -176,7 +176,7 @@ def test_random_offboard_steps_are_flown_in_the_envelope_or_refused_in_attitude(
                                    (0.0,) * 3))[0]
         assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
         f.step()
-        sp = c.offboard_sp
+        sp = c.modes.shaper.sp
         assert sp is not None and sp.plan is not None
         for _ in range(round((sp.plan.duration_s + 1.0) * 500)):
             f.step()
@@ -210,8 +210,8 @@ def test_random_stick_sequences_fit_every_actuator(vehicle):
             assert c.offboard_attitude(0.0, attitude_target(ATTITUDE_ONLY, q_enu_flu_to_ned_frd(q0),
                                        (0.0,) * 3))[0]
             assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
-            for _ in range(round((c.offboard_sp.plan.duration_s + 0.5) * 500)
-                           if c.offboard_sp and c.offboard_sp.plan else 500):
+            for _ in range(round((c.modes.shaper.sp.plan.duration_s + 0.5) * 500)
+                           if c.modes.shaper.sp and c.modes.shaper.sp.plan else 500):
                 f.step()
         c.manual_input(0.0, sticks_from_manual_control(0, 0, 500, 0))
         assert c.set_mode(Mode.POSCTL, 0.0)[0] == 0
@@ -224,7 +224,7 @@ def test_random_stick_sequences_fit_every_actuator(vehicle):
                 t_next = t + rng.uniform(0.2, 1.5)
             c.manual_input(t, sticks_from_manual_control(*sticks))
             f.step()
-        what = (case, f.limited_s, f.reports(), f.track_m, f.track_rad, c.manual_limits)
+        what = (case, f.limited_s, f.reports(), f.track_m, f.track_rad, c.modes.posctl.limits)
         assert f.pipe.armed and c.mode == Mode.POSCTL and f.pipe.saturated_steps == 0, what
         assert f.limited_s < LIMIT_S and not f.reports(), what
         assert f.track_m < 0.05 and f.track_rad < math.radians(3.0), what

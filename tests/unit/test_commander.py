@@ -26,7 +26,7 @@ from fcu.modes.landing import (
     touchdown_speed_cap,
 )
 from fcu.modes.manual import StickSettings
-from fcu.modes.mode_references import FlightSettings
+from fcu.modes.settings import FlightSettings
 from fcu.pipeline import Pipeline
 from fcu.safety.failsafe import FailsafeSettings
 
@@ -56,12 +56,12 @@ def test_touchdown_set_point_sinks_below_the_plan_then_stops():
     pipe = _landing_pipeline(2.0)
     c = pipe.commander
     t = 0
-    while c.touchdown is None:
+    while c.modes.descent.touchdown is None:
         t += 2000
         pipe.on_state(t, _state(0.3, -0.3), t)  # in the air, still descending
         pipe.step(t)
         assert t < 20_000_000
-    end = c.touchdown
+    end = c.modes.descent.touchdown
     samples, speeds = [], []
     z = end.p_enu_m[2]
     for _ in range(2000):  # 4 s
@@ -100,7 +100,7 @@ def _to_touchdown(pipe: Pipeline, z: float) -> int:
     """Step through the planned descent with the vehicle held at height z; the time the
     touchdown phase starts."""
     t = 0
-    while pipe.commander.touchdown is None:
+    while pipe.commander.modes.descent.touchdown is None:
         t += 2000
         pipe.on_state(t, _state(z), t)
         pipe.step(t)
@@ -134,7 +134,7 @@ def test_a_set_point_just_below_is_not_support():
     pipe = _landing_pipeline(0.3)
     start = _to_touchdown(pipe, 0.3)
     c = pipe.commander
-    c.last_ref = pose_ref((1.0, 2.0, 0.25), c.touchdown.q_enu_flu)
+    c.last_ref = pose_ref((1.0, 2.0, 0.25), c.modes.descent.touchdown.q_enu_flu)
     for t in range(start, start + 1_000_000, 2000):
         assert not c.land_detector(t, 0.0, pipe.weight_n)
     assert not c.landed
@@ -306,7 +306,7 @@ def test_posctl_needs_manual_control_and_falls_back_to_hold():
     assert c.mode == Mode.POSCTL
     pipe.check_links(14.6)  # 0.6 s after the last MANUAL_CONTROL
     assert c.mode == Mode.HOLD and pipe.events[-1].kind == FAILSAFE
-    assert c.hold.p_enu_m == pytest.approx(end)
+    assert c.modes.brake.hold.p_enu_m == pytest.approx(end)
 
 
 # ------------------------------------------------------------------ OFFBOARD

@@ -272,13 +272,14 @@ def test_land_after_a_far_offboard_target_and_a_rearm():
             break
     assert not pipe.armed and t_us > 1_000_000  # the reference moved off at bounded speed
     _command(server, 0, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-    assert pipe.commander.hold is not None and pipe.commander.hold.p_enu_m == (0.0, 0.0, 0.0)
+    hold = pipe.commander.modes.brake.hold
+    assert hold is not None and hold.p_enu_m == (0.0, 0.0, 0.0)
     parsed(links[0])
     for route in ((M.MAV_CMD_NAV_LAND,), (M.MAV_CMD_DO_SET_MODE, 1, 4, 6)):
         _command(server, 0, *route)
         acks, _ = _acks_and_texts(links[0])
         assert acks == [M.MAV_RESULT_ACCEPTED]
-    assert server.internal_errors == 0 and pipe.commander.land is not None
+    assert server.internal_errors == 0 and pipe.commander.modes.descent.plan is not None
 
 
 def test_a_forged_frame_does_not_lock_a_signed_stream_out():
@@ -442,9 +443,9 @@ def test_manual_control_for_another_system_is_ignored():
     server, _ = make_server()
     c = server.pipeline.commander
     server.handle(0, M.MAVLink_manual_control_message(2, 1000, 0, 500, 0, 0), now_s=1.0)
-    assert c.sticks == (0.0, 0.0, 0.0, 0.0) and server.ignored_messages == 1
+    assert c.modes.posctl.sticks == (0.0, 0.0, 0.0, 0.0) and server.ignored_messages == 1
     server.handle(0, M.MAVLink_manual_control_message(1, 1000, 0, 500, 0, 0), now_s=1.0)
-    assert c.sticks.forward == 1.0
+    assert c.modes.posctl.sticks.forward == 1.0
 
 
 def test_takeoff_and_rtl_commands():
@@ -508,8 +509,8 @@ def test_a_retried_command_is_answered_not_executed_again():
             1, 1, M.MAV_CMD_MISSION_START, confirmation, first, 0, 0, 0, 0, 0, 0), now_s)
 
     def started_at() -> float:
-        assert c.executor is not None
-        return c.executor._t_start
+        assert c.modes.mission_run.executor is not None
+        return c.modes.mission_run.executor._t_start
 
     _command(server, 0, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
     start(0)

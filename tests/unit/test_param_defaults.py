@@ -14,7 +14,7 @@ from common.config.scenario import Gains
 from fcu.estimator.settings import EstimatorSettings
 from fcu.mission.limits import MissionLimits
 from fcu.modes.manual import StickSettings
-from fcu.modes.mode_references import FlightSettings
+from fcu.modes.settings import FlightSettings
 from fcu.params import (
     DAMPING_CODES,
     DEFAULT_OVERRIDES,

@@ -1,4 +1,4 @@
-"""HOLD's brake and OFFBOARD's start beside the control loop (`fcu.modes.mode_references`): where
+"""HOLD's brake and OFFBOARD's start beside the control loop (`fcu.modes.shaping`): where
 the work runs beside, a step never plans an approach (`fcu.reference.approach.plan`); a reference
 that was moving coasts until its plan, made ANCHOR_LEAD_US ahead, is taken in at its time, and
 flies on continuously; a plan that does not come is made in the loop after COAST_MAX_US."""
@@ -19,7 +19,7 @@ from common.wire.modes import Mode
 from fcu.control.tracker import Reference
 from fcu.edge.setpoint_wire import position_target
 from fcu.modes import offboard
-from fcu.modes.mode_references import ANCHOR_LEAD_US, COAST_MAX_US
+from fcu.modes.shaping import ANCHOR_LEAD_US, COAST_MAX_US
 from fcu.reference import approach
 from fcu.work import Done, Outcome, Work
 from tests.unit.test_work import airborne_commander
@@ -142,16 +142,16 @@ def test_hold_from_a_moving_reference_coasts_until_its_brake_planned_beside_is_i
                 assert _coasting(ref, flown, (k - 1) * PERIOD_US * 1e-6)
             path.append(ref)
         assert plans["step"] == 0 and work.held == []
-    assert path[-1].v_enu_m_s == (0.0, 0.0, 0.0) and c.hold.p_enu_m == path[-1].p_enu_m
+    assert path[-1].v_enu_m_s == (0.0, 0.0, 0.0) and c.modes.brake.hold.p_enu_m == path[-1].p_enu_m
     # MPC_ACC_HOR 5 m/s^2 at most per 2 ms step: no jump where the brake was taken in
     assert _speed_steps(path) <= 5.0 * PERIOD_US * 1e-6 + 1e-9
-    lim, env = offboard.limits(c.flight.sticks), c._envelope()
+    lim, env = offboard.limits(c.flight.sticks), c.modes._envelope()
     _, held = offboard.brake_ahead(offboard.coast(asked, flown), asked + ANCHOR_LEAD_US, lim,
                                    env)
-    assert held == c.hold  # the brake from where the coast is at the lead
+    assert held == c.modes.brake.hold  # the brake from where the coast is at the lead
     # the brake made in the step rests a little behind (asked 10 ms sooner, accelerating)
     _, held_inline = offboard.brake(asked, flown, lim, env)
-    assert 0.0 < c.hold.p_enu_m[1] - held_inline.p_enu_m[1] < 0.1
+    assert 0.0 < c.modes.brake.hold.p_enu_m[1] - held_inline.p_enu_m[1] < 0.1
 
 
 def test_a_brake_that_does_not_come_is_planned_in_the_loop_after_coast_max_us():
@@ -167,7 +167,7 @@ def test_a_brake_that_does_not_come_is_planned_in_the_loop_after_coast_max_us():
         path.append(_fly(c, t + PERIOD_US * k))
         if k * PERIOD_US < COAST_MAX_US:
             assert _coasting(path[-1], path[0], (k - 1) * PERIOD_US * 1e-6)
-    assert c.inline_plans == 1 and [e.text for e in c.events] == \
+    assert c.modes.ahead.inline_plans == 1 and [e.text for e in c.events] == \
         ["work late: planned in the loop"]
     work.release()  # the stale brake: dropped
     for k in range(2000, 3000):
@@ -233,12 +233,13 @@ def test_the_lead_grows_after_a_late_plan_and_comes_back_after_plans_on_time():
         _fly(c, t + PERIOD_US * k)
     assert len(work.held) == 1 and work.held[0][1][1] == asked + ANCHOR_LEAD_US
     work.release()  # at t + 11 periods: 20 ms after it was asked, past its time
-    assert c.late_anchors == 1 and c.lead_us == 2 * (t + 11 * PERIOD_US - asked)
+    ahead = c.modes.ahead
+    assert ahead.late_anchors == 1 and ahead.lead_us == 2 * (t + 11 * PERIOD_US - asked)
     again = t + 12 * PERIOD_US
     _fly(c, again)
-    assert work.held[0][1][1] == again + c.lead_us  # asked again, further ahead
+    assert work.held[0][1][1] == again + c.modes.ahead.lead_us  # asked again, further ahead
     work.release()
-    assert c.late_anchors == 1 and c.lead_us == 40_000 - (40_000 - ANCHOR_LEAD_US) // 4
+    assert ahead.late_anchors == 1 and ahead.lead_us == 40_000 - (40_000 - ANCHOR_LEAD_US) // 4
     for k in range(13, 3000):
         ref = _fly(c, t + PERIOD_US * k)
-    assert c.inline_plans == 0 and ref.v_enu_m_s == (0.0, 0.0, 0.0)
+    assert c.modes.ahead.inline_plans == 0 and ref.v_enu_m_s == (0.0, 0.0, 0.0)

@@ -237,18 +237,18 @@ def test_a_mission_start_is_answered_and_shown_when_its_plan_is_taken_in():
     gets ACCEPTED, and the mission's timeline starts at that step."""
     c, work = _planned_commander()
     replies: list[tuple[int, str]] = []
-    c.clock_us = 2_000_000
+    c.step_at(2_000_000)
     result = c.mission_start(0)
-    assert result == (IN_PROGRESS, "") and c.mission_plan is not None
-    c.mission_plan.on_end(lambda r, t: replies.append((r, t)))
+    assert result == (IN_PROGRESS, "") and c.modes.mission_run.plan is not None
+    c.modes.mission_run.plan.on_end(lambda r, t: replies.append((r, t)))
     said = len(c.events)
     for k in range(5):
         c.reference(2_000_000 + 2000 * k)
-    assert c.mode == Mode.HOLD and not c.mission_running and len(c.events) == said
+    assert c.mode == Mode.HOLD and not c.modes.mission_run.running and len(c.events) == said
     work.release()
     assert replies == [(MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")]
-    assert c.mode == Mode.MISSION and c.mission_running
-    assert c.mission_offset_s == pytest.approx(0.008)
+    assert c.mode == Mode.MISSION and c.modes.mission_run.running
+    assert c.modes.mission_run.offset_s == pytest.approx(0.008)
     assert c.events[-1].text == "mission started"
 
 
@@ -258,18 +258,18 @@ def test_a_plan_under_way_gives_way_to_a_newer_command():
     c, work = _planned_commander()
     replies: list[tuple[int, str]] = []
     assert c.set_mode(Mode.MISSION, 0.0)[0] == IN_PROGRESS
-    c.mission_plan.on_end(lambda r, t: replies.append((r, t)))
+    c.modes.mission_run.plan.on_end(lambda r, t: replies.append((r, t)))
     assert c.set_mode(Mode.LAND, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
     assert replies == [(MAV_RESULT.MAV_RESULT_FAILED, "superseded by a newer command")]
     work.release()
-    assert c.mode == Mode.LAND and len(replies) == 1 and c.mission_plan is None
+    assert c.mode == Mode.LAND and len(replies) == 1 and c.modes.mission_run.plan is None
 
 
 def test_inline_work_answers_a_mission_start_at_once():
     c = airborne_commander()
     c.set_mission(tuple(_items(3)))
     assert c.mission_start(0) == (MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")
-    assert c.mode == Mode.MISSION and c.mission_offset_s == 0.0
+    assert c.mode == Mode.MISSION and c.modes.mission_run.offset_s == 0.0
 
 
 def test_posctl_is_entered_when_its_limits_are_fitted():
@@ -285,12 +285,12 @@ def test_posctl_is_entered_when_its_limits_are_fitted():
     replies: list[tuple[int, str]] = []
     c.under_way.on_end(lambda r, t: replies.append((r, t)))
     refs = [c.reference(2000 * k) for k in range(1, 4)]
-    assert c.mode == Mode.HOLD and c.manual_sp is None
+    assert c.mode == Mode.HOLD and c.modes.posctl.sp is None
     assert all(r.p_enu_m == refs[0].p_enu_m for r in refs)
     work.release()
     assert replies == [(MAV_RESULT.MAV_RESULT_ACCEPTED, "mode POSCTL")]
     assert c.mode == Mode.POSCTL and c.under_way is None
-    assert c.manual_limits == manual.fit_envelope(c.flight.sticks, c.limits.vehicle,
+    assert c.modes.posctl.limits == manual.fit_envelope(c.flight.sticks, c.limits.vehicle,
                                                   (1.0, 0.0, 0.0, 0.0))
 
 
@@ -313,7 +313,7 @@ def test_a_new_offboard_sample_is_anchored_beside_the_loop_ahead_and_flown_conti
     import math
 
     from fcu.edge.setpoint_wire import position_target
-    from fcu.modes.mode_references import ANCHOR_LEAD_US
+    from fcu.modes.shaping import ANCHOR_LEAD_US
     work = HeldWork()
     c = _offboard_commander(work)
     t = 2000
@@ -334,23 +334,23 @@ def test_a_new_offboard_sample_is_anchored_beside_the_loop_ahead_and_flown_conti
         path.append(ref.p_enu_m)
     jumps = [math.dist(a, b) / 0.002 for a, b in itertools.pairwise(path)]
     assert max(jumps) <= 5.0 + 1e-6  # MPC_VEL_MANUAL: a continuous approach
-    assert math.dist(path[-1], (0.0, 2.0, 2.0)) < 1e-6 and c.late_anchors == 0
+    assert math.dist(path[-1], (0.0, 2.0, 2.0)) < 1e-6 and c.modes.ahead.late_anchors == 0
 
 
 def test_an_anchor_that_comes_after_its_time_is_planned_again():
     """Given the anchor of a sample taken in after its time had passed, then it is not
     flown (it would jump), it is counted, and the next step asks for it again."""
-    from fcu.modes.mode_references import ANCHOR_LEAD_US
+    from fcu.modes.shaping import ANCHOR_LEAD_US
     work = HeldWork()
     c = _offboard_commander(work)
     c.reference(2000)
     for k in range(2, 2 + ANCHOR_LEAD_US // 2000 + 1):
         c.reference(2000 * k)
-    assert work.release() == 1 and c.late_anchors == 1
+    assert work.release() == 1 and c.modes.ahead.late_anchors == 1
     c.reference(2000 * 20)
     assert len(work.held) == 1  # asked again
     work.release()
-    assert c.late_anchors == 1
+    assert c.modes.ahead.late_anchors == 1
 
 
 def _command(server: Any, command: int, confirmation: int, *params: float,
@@ -436,7 +436,7 @@ def test_the_same_mode_asked_by_two_stations_under_way_is_one_change_both_answer
     work.release()
     both = in_progress + accepted
     assert _command_acks(links[0]) == both and _command_acks(links[1]) == both
-    assert c.mode == Mode.MISSION and c.mission_running
+    assert c.mode == Mode.MISSION and c.modes.mission_run.running
 
 
 def test_a_new_current_item_in_flight_is_confirmed_by_mission_current_and_its_ack():

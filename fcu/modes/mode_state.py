@@ -1,0 +1,273 @@
+"""The mode in force and each mode's state, the one table of what entering a mode resets
+(`ModeState.switch`), and the reference each mode flies at each step; pure, no I/O.
+
+Each mode's state is a part with the behaviour that belongs to it: the mission's
+(`fcu.modes.mission_run`), OFFBOARD's shaper and HOLD's brake with the plans they make
+beside the loop (`fcu.modes.shaping`), POSCTL's (`fcu.modes.posctl`), the landing's
+(`fcu.modes.landing.Descent`), and TAKEOFF's or RTL's plan (`auto`, missions of
+`fcu.modes.auto_plans` items). What the commander knows of the vehicle (arming, the state,
+the reference flown, the parameters, where work runs) is read through `Known`.
+
+Every mode change goes through `switch` (a mode command, TAKEOFF, a mission's start or
+refusal, a replaced mission, the end of TAKEOFF or of a mission, a failsafe). Entering a
+mode resets its own state, except when it is re-entered (HOLD's always):
+
+| entered  | its own state                                | also left standing            |
+|----------|----------------------------------------------|-------------------------------|
+| HOLD     | holds where the vehicle should be (always)   | -                             |
+| MISSION  | the mission's run stops unless re-entered    | -                             |
+| OFFBOARD | the shaper starts again from the reference flown | -                         |
+| POSCTL   | the set-point starts again from here         | -                             |
+| LAND     | the descent is planned from here             | the mission's run (ACTIVE)    |
+| TAKEOFF  | its climb (planned first: `plan_auto`)       | its plan                      |
+| RTL      | its return (planned first: `plan_auto`)      | its plan; re-entered, its touchdown |
+
+and what belongs to the other modes ends: the landing (LAND's plan, a touchdown), TAKEOFF's
+or RTL's plan, the mission's run. A mission replaced during its own touchdown lets that
+touchdown go on (`touchdown_goes_on`). Arming and disarming keep the mode and reset here too
+(`on_arming`, `on_disarming`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Protocol
+
+from common.wire.mav_enums import MAV_SEVERITY
+from common.wire.mission_items import MissionItem
+from common.wire.modes import Mode
+from fcu.control.dualquat import Q_IDENTITY, Vec3
+from fcu.control.tracker import Reference, VehicleState, pose_ref
+from fcu.envelope.feasibility import Envelope, envelope
+from fcu.mission.executor import MissionExecutor
+from fcu.mission.limits import MissionLimits
+from fcu.modes import auto_plans, offboard
+from fcu.modes.landing import Descent
+from fcu.modes.mission_run import MissionRun
+from fcu.modes.offboard_stream import OffboardSetpoint
+from fcu.modes.posctl import Posctl
+from fcu.modes.settings import FlightSettings
+from fcu.modes.shaping import HoldBrake, OffboardShaper, PlansAhead
+from fcu.modes.voice import Voice
+from fcu.work import Work
+
+_ZERO: Vec3 = (0.0, 0.0, 0.0)
+
+
+class Known(Protocol):
+    """What the commander knows of the vehicle, as the modes read it."""
+
+    armed: bool
+    state: VehicleState | None
+    last_ref: Reference | None  # the reference flown at the latest step
+    limits: MissionLimits
+    flight: FlightSettings
+    work: Work  # where plans are made (`fcu.work`)
+    voice: Voice
+    offboard: OffboardSetpoint  # OFFBOARD's stream: the latest sample
+
+
+class ModeState:
+    """The mode in force, each mode's state, and the reference it flies (`reference`)."""
+
+    def __init__(self, known: Known) -> None:
+        self.known = known
+        self.mode = Mode.HOLD
+        self.auto: MissionExecutor | None = None  # TAKEOFF's or RTL's plan
+        self.mission_run = MissionRun()
+        self.descent = Descent()
+        self.posctl = Posctl(known.flight.sticks)
+        self.ahead = PlansAhead(known.voice)
+        self.shaper = OffboardShaper(self.ahead, lambda: self.mode == Mode.OFFBOARD)
+        self.brake = HoldBrake(self.ahead)
+
+    # ------------------------------------------------------------------ entering a mode
+
+    def switch(self, mode: Mode, previous: Mode | None = None, hold: Reference | None = None,
+               touchdown_goes_on: bool = False) -> None:
+        """Enter `mode` from `previous` (the mode in force unless given): the one place a
+        mode change resets state (the module docstring's table). HOLD holds at `hold`
+        (None: where the vehicle should be)."""
+        previous = self.mode if previous is None else previous
+        again = mode == previous
+        self.mode = mode
+        if not (touchdown_goes_on or mode == Mode.LAND or (again and mode == Mode.RTL)):
+            self.descent.end()
+        if mode not in (Mode.TAKEOFF, Mode.RTL):
+            self.auto = None
+        if not (mode == Mode.LAND or (again and mode == Mode.MISSION)):
+            self.mission_run.stop()
+        if mode == Mode.HOLD:
+            self.brake.hold_at(hold if hold is not None else self.here())
+        elif again:
+            return
+        elif mode == Mode.OFFBOARD:
+            self.shaper.restart()
+        elif mode == Mode.POSCTL:
+            self.posctl.restart()
+        elif mode == Mode.LAND:
+            self.descent.start(self.known.voice.clock_us * 1e-6, self.here(),
+                               self.known.limits)
+
+    def on_arming(self) -> None:
+        """Armed: the mode in force starts from where the vehicle is (HOLD holds there,
+        POSCTL's set-point starts there), with no landing left over."""
+        self.brake.hold_at(self.here())
+        self.descent.end()
+        self.posctl.restart()
+
+    def on_disarming(self) -> None:
+        """Disarmed: what flew ends (the mission's run, the landing, TAKEOFF's or RTL's
+        plan); the mode stays."""
+        self.mission_run.stop()
+        self.descent.end()
+        self.auto = None
+
+    def plan_auto(self, mode: Mode, previous: Mode) -> str:
+        """TAKEOFF's or RTL's plan when entered anew, or again with nothing left to fly
+        (e.g. landed, disarmed, re-armed); a reason if refused, else ""."""
+        idle = self.auto is None and self.descent.touchdown is None
+        if mode == Mode.TAKEOFF and (previous != Mode.TAKEOFF or idle):
+            return self.plan_takeoff(self.known.flight.takeoff_alt_m)
+        if mode == Mode.RTL and (previous != Mode.RTL or idle):
+            return self._plan_rtl()
+        return ""
+
+    def plan_takeoff(self, climb_m: float) -> str:
+        """Plan TAKEOFF's climb (one NAV_TAKEOFF item); a reason if refused, else ""."""
+        start = self.here()
+        limits = self.known.limits
+        items = auto_plans.takeoff(start.p_enu_m, climb_m, limits.max_distance_m)
+        if isinstance(items, str):
+            return items
+        self._fly_auto(items, limits, start)
+        return ""
+
+    def _plan_rtl(self) -> str:
+        """Plan RTL (`fcu.modes.commander`): climb to RTL_RETURN_ALT if lower, travel home at
+        MPC_XY_CRUISE, land; a reason if refused, else ""."""
+        start, flight, limits = self.here(), self.known.flight, self.known.limits
+        items = auto_plans.rtl(start.p_enu_m, flight.rtl_return_alt_m, limits.max_distance_m)
+        if isinstance(items, str):
+            return items
+        self._fly_auto(items, replace(limits, cruise_speed_m_s=flight.rtl_cruise_m_s), start)
+        self.known.voice.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
+                             f"RTL: return at {-items[0].z:.1f} m, then land")
+        return ""
+
+    def _fly_auto(self, items: tuple[MissionItem, ...], limits: MissionLimits,
+                  start: Reference) -> None:
+        self.auto = MissionExecutor(items, limits)
+        self.auto.start(self.known.voice.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
+
+    # ------------------------------------------------------------------ what flies
+
+    @property
+    def landing(self) -> bool:
+        """Landing or returning: LAND or RTL mode, a touchdown, or a mission flying its
+        NAV_LAND item (a GCS link loss does not interrupt these)."""
+        if self.mode in (Mode.LAND, Mode.RTL) or self.descent.touchdown is not None:
+            return True
+        return self.mode == Mode.MISSION and self.mission_run.flying_landing
+
+    def here(self) -> Reference:
+        """Where the vehicle should be now: the last desired pose in flight, else the state."""
+        known = self.known
+        if known.armed and known.last_ref is not None:
+            return pose_ref(known.last_ref.p_enu_m, known.last_ref.q_enu_flu)
+        if known.state is None:
+            return pose_ref(_ZERO, Q_IDENTITY)
+        return pose_ref(known.state.p_enu_m, known.state.q_enu_flu)
+
+    def _flown(self) -> Reference | None:
+        """The reference flown in flight, else None."""
+        return self.known.last_ref if self.known.armed else None
+
+    def _envelope(self) -> Envelope | None:
+        vehicle = self.known.limits.vehicle
+        return envelope(vehicle) if vehicle is not None else None
+
+    def reference(self, t_us: int) -> Reference:
+        """The desired pose, twist and acceleration at t_us (flight clock)."""
+        self.known.voice.clock_us = t_us
+        mode, known = self.mode, self.known
+        if self.descent.touchdown is not None:
+            return self.descent.touchdown_ref(t_us, known.limits.land_speed_m_s, known.state)
+        if mode == Mode.MISSION and self.mission_run.running and \
+                self.mission_run.executor is not None:
+            return self._mission_ref(t_us * 1e-6)
+        if mode == Mode.OFFBOARD:
+            return self._offboard_ref(t_us)
+        if mode == Mode.LAND and self.descent.plan is not None:
+            ref, ended = self.descent.step(t_us)
+            if ended:
+                self._begin_touchdown(t_us, ref)
+            return ref
+        if mode in (Mode.TAKEOFF, Mode.RTL) and self.auto is not None:
+            return self._auto_ref(t_us)
+        if mode == Mode.POSCTL:
+            here = self.here() if self.posctl.sp is None else None
+            return self.posctl.step(t_us, here,
+                                    known.state.p_enu_m if known.state is not None else None)
+        return self._hold_ref(t_us)
+
+    def _offboard_ref(self, t_us: int) -> Reference:
+        """The streamed target approached from the reference flown when OFFBOARD began."""
+        start = None
+        if self.shaper.sp is None:
+            flown = self._flown()
+            start = flown if flown is not None else self.here()
+        known = self.known
+        return self.shaper.step(t_us, start, known.offboard.target(),
+                                offboard.limits(known.flight.sticks), self._envelope(),
+                                known.work)
+
+    def _hold_ref(self, t_us: int) -> Reference:
+        """HOLD: braking to where the reference comes to rest."""
+        if self.brake.hold is None:
+            self.brake.hold_at(self.here())
+        return self.brake.step(t_us, self._flown(), offboard.limits(self.known.flight.sticks),
+                               self._envelope(), self.known.work)
+
+    def _mission_ref(self, t_flight_s: float) -> Reference:
+        """The mission's reference; at its end it touches down (a last NAV_LAND) or holds."""
+        ref, completed = self.mission_run.step(t_flight_s)
+        if completed:
+            self.known.voice.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission complete")
+            if self.mission_run.ends_landing:
+                self._begin_touchdown(round(t_flight_s * 1e6), ref)
+            else:
+                self.switch(Mode.HOLD, hold=pose_ref(ref.p_enu_m, ref.q_enu_flu))
+        return ref
+
+    def _auto_ref(self, t_us: int) -> Reference:
+        """TAKEOFF's or RTL's plan; at its end TAKEOFF holds, RTL touches down."""
+        auto = self.auto
+        assert auto is not None
+        t_s = t_us * 1e-6
+        auto.update(t_s)
+        ref = auto.sample(t_s)
+        if auto.completed:
+            self.auto = None
+            if self.mode == Mode.RTL:
+                self._begin_touchdown(t_us, ref)
+            else:
+                self.switch(Mode.HOLD, hold=pose_ref(ref.p_enu_m, ref.q_enu_flu))
+                self.known.voice.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
+                                     "takeoff complete: mode HOLD")
+        return ref
+
+    def _begin_touchdown(self, t_us: int, ref: Reference) -> None:
+        self.descent.begin_touchdown(t_us, ref)
+        self.say_touchdown_cap()
+
+    def say_touchdown_cap(self) -> None:
+        """An INFO when MIS_LAND_SPD is faster than the touchdown the gains land at: faster,
+        the position loop's damping would push the rotors' thrust to reverse on the ground
+        (`fcu.modes.landing.touchdown_speed_cap`)."""
+        land_speed = self.known.limits.land_speed_m_s
+        speed = self.descent.speed_m_s(land_speed)
+        if speed < land_speed:
+            self.known.voice.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
+                                 f"touchdown capped at {speed:.2f} m/s (MIS_LAND_SPD "
+                                 f"{land_speed:.2f})")
