@@ -42,7 +42,6 @@ from benchmarks.mission_envelope import mixed
 from common.config.scenario import VehicleConfig, load_vehicle
 from common.wire.mission_items import MissionItem
 from fcu.control.dualquat import Quat, Vec3, q_exp
-from fcu.control.tracker import Reference
 from fcu.envelope import feasibility
 from fcu.envelope.feasibility import Envelope, envelope
 from fcu.mission.executor import MissionExecutor
@@ -51,6 +50,7 @@ from fcu.mission.validation import check_mission, refusal
 from fcu.modes import manual, offboard
 from fcu.modes.manual import StickSettings
 from fcu.reference import approach
+from fcu.stages import Reference
 
 ROOT = Path(__file__).resolve().parents[1]
 MISSION_ITEMS = 500

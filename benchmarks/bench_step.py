@@ -16,8 +16,8 @@ import numpy as np
 from common.config.scenario import load_scenario
 from fcu.control.core import FlightCore
 from fcu.control.dualquat import q_exp, q_mul
-from fcu.control.tracker import VehicleState
 from fcu.reference.trajectory import make_trajectory
+from fcu.stages import VehicleState
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -30,7 +30,7 @@ import numpy as np
 import gcs.run.inprocess as inprocess
 from common.config.scenario import load_scenario
 from fcu.control.dualquat import q_mul
-from fcu.control.tracker import VehicleState
+from fcu.stages import VehicleState
 from gcs.run.inprocess import apply_overrides, run_scenario
 from sitl.plant import PlantState
 

@@ -18,13 +18,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from common.config.scenario import load_scenario, load_vehicle
 from common.wire.mav_enums import MAV_CMD, MAV_FRAME
 from common.wire.mission_items import MissionItem, local_xy
-from fcu.control.tracker import pose_ref
 from fcu.envelope.feasibility import MARGIN, envelope
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import Move as _Move
 from fcu.mission.validation import check_mission
 from fcu.reference.trajectory import make_trajectory
+from fcu.stages import pose_ref
 
 ROOT = Path(__file__).resolve().parents[1]
 WAYPOINT: int = MAV_CMD.MAV_CMD_NAV_WAYPOINT

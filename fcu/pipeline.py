@@ -27,7 +27,6 @@ from common.wire.modes import Mode
 from fcu.control.core import FlightCore, StepResult
 from fcu.control.dualquat import q_normalize, q_rotate
 from fcu.control.rate_filter import ImuRateFilter
-from fcu.control.tracker import VehicleState
 from fcu.estimator.ekf import Estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
@@ -51,6 +50,7 @@ from fcu.safety.failsafe import (
     state_lost,
 )
 from fcu.safety.supervisor import Supervisor
+from fcu.stages import VehicleState
 
 ALIGN_MAX_S = 60.0  # lockstep: simulated time runs for the alignment at most this long
 

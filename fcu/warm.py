@@ -13,12 +13,12 @@ from __future__ import annotations
 from common import quaternion
 from common.config.scenario import VehicleConfig
 from common.warm_ups import warm_up
-from fcu.control.tracker import Reference
 from fcu.envelope.feasibility import envelope
 from fcu.mission.limits import MissionLimits
 from fcu.mission.start import warm as warm_mission
 from fcu.modes import manual, offboard
 from fcu.reference import approach
+from fcu.stages import Reference
 
 _MOVING = Reference((0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0), (1.0, 0.5, 0.0), (0.5, 0.0, 0.0),
                     (0.0, 0.0, 0.2), (0.0, 0.0, 0.0))

@@ -59,14 +59,9 @@ from fcu.control.layouts import (
     X_Q,
     X_SIZE,
 )
-from fcu.control.tracker import (
-    DualQuaternionTracker,
-    Reference,
-    TrackerOutput,
-    VehicleState,
-    tracker_output,
-)
+from fcu.control.tracker import DualQuaternionTracker, tracker_output
 from fcu.envelope.feasibility import nominal_wrench_kernel
+from fcu.stages import Reference, TrackerOutput, VehicleState
 
 # The fused step's buffers (fcu.control.layouts): CORE_PARAMS holds the tracker's, the
 # allocator's and the compensator's parameters; CORE_STATE the tracker's integral, the

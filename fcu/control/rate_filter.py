@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from fcu.control.tracker import VehicleState
+from fcu.stages import VehicleState
 
 Vec3 = tuple[float, float, float]
 

@@ -16,7 +16,7 @@ import numpy as np
 from common.config.scenario import VehicleConfig
 from common.jit import njit
 from fcu.control.dualquat import Quat, Vec3, cross, q_rotate_inv
-from fcu.control.tracker import Reference
+from fcu.stages import Reference
 
 
 @njit

@@ -38,9 +38,9 @@ from common.wire.simlink import (
     unpack_odometry,
     unpack_timesync,
 )
-from fcu.control.tracker import VehicleState
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.pipeline import StepOutput
+from fcu.stages import VehicleState
 
 MAX_POSITION_M = 1e6  # a state farther from the origin is refused as invalid
 MAX_RATE = 1e4  # m/s and rad/s: a state moving faster is refused as invalid

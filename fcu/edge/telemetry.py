@@ -19,10 +19,10 @@ from common.wire.mavlink import MAV
 from common.wire.mission_items import HomePosition
 from common.wire.modes import MAIN_POSCTL
 from common.wire.simlink import pose_covariance
-from fcu.control.tracker import Reference, VehicleState
 from fcu.estimator.ekf import Estimator
 from fcu.pipeline import StepOutput
 from fcu.safety.failsafe import Failsafe
+from fcu.stages import Reference, VehicleState
 
 M = MAV
 DEFAULT_INTERVALS_S: dict[int, float] = {

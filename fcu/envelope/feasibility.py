@@ -91,7 +91,6 @@ import numpy as np
 
 from common.config.scenario import VehicleConfig
 from fcu.control.allocation import allocation_matrix, pseudo_inverse
-from fcu.control.tracker import Reference
 from fcu.control.wrench import _nominal_wrench_rows as _nominal_wrench_rows
 from fcu.control.wrench import nominal_wrench as nominal_wrench
 from fcu.control.wrench import nominal_wrench_kernel as nominal_wrench_kernel
@@ -123,6 +122,7 @@ from fcu.envelope.instants import clear_orders, time_order
 from fcu.envelope.instants import figure_instants as figure_instants
 from fcu.envelope.instants import move_instants as move_instants
 from fcu.envelope.kept import Kept
+from fcu.stages import Reference
 
 MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
 TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may use

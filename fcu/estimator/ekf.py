@@ -16,7 +16,6 @@ import numpy as np
 
 from common.quaternion import Vec3
 from common.warm_ups import warm_up
-from fcu.control.tracker import VehicleState
 from fcu.estimator.align import AlignWindow
 from fcu.estimator.buffers import filter_buffers
 from fcu.estimator.filter import (
@@ -64,6 +63,7 @@ from fcu.estimator.layouts import (
 from fcu.estimator.settings import EstimatorSettings
 from fcu.estimator.status import EstimatorHealth, EstimatorStatus, positive_definite, sd_verdict
 from fcu.estimator.strapdown import N, State
+from fcu.stages import VehicleState
 
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
 _DEFAULTS = EstimatorSettings()

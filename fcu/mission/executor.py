@@ -8,12 +8,12 @@ from typing import NamedTuple
 
 from common.wire.mission_items import MissionItem
 from fcu.control.dualquat import Quat, Vec3
-from fcu.control.tracker import Reference, pose_ref
 from fcu.mission.codes import MAV_MISSION_ACCEPTED
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import envelope_reason, plan_item, with_speed
 from fcu.mission.segments import Segment
 from fcu.mission.validation import check_items, refusal
+from fcu.stages import Reference, pose_ref
 
 # Item ends are sums of float seconds; the flight clock is integer microseconds. An item
 # that ends at a step's instant ends at that step whatever the rounding of the sum.

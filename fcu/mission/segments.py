@@ -20,7 +20,6 @@ from common.frames import q_ned_frd_to_enu_flu
 from common.jit import njit
 from common.quaternion import q_exp_many
 from fcu.control.dualquat import Quat, Vec3, norm3, q_exp, q_mul
-from fcu.control.tracker import Reference, pose_ref
 from fcu.envelope.feasibility import (
     Envelope,
     TimeScaling,
@@ -36,6 +35,7 @@ from fcu.reference.trajectory import (
     quintic,
     quintic_poly,
 )
+from fcu.stages import Reference, pose_ref
 
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 

@@ -10,12 +10,12 @@ from common.wire.mav_enums import MAV_CMD, MAV_FRAME, MAV_RESULT
 from common.wire.mission_items import MissionItem
 from common.wire.modes import Mode
 from fcu.control.dualquat import Quat, Vec3
-from fcu.control.tracker import Reference
 from fcu.envelope.feasibility import envelope
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import Move
 from fcu.modes.answer import Answer, Reply
+from fcu.stages import Reference
 
 
 @dataclass(eq=False, kw_only=True)

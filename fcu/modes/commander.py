@@ -47,7 +47,6 @@ from common.outcome import CRASH, FAILSAFE, INFO, Event
 from common.wire.mav_enums import MAV_RESULT, MAV_SEVERITY
 from common.wire.mission_items import MissionItem
 from common.wire.modes import Mode
-from fcu.control.tracker import Reference, VehicleState
 from fcu.mission.codes import MAV_MISSION_DENIED, result_name
 from fcu.mission.executor import MissionEvent, MissionExecutor
 from fcu.mission.limits import MissionLimits
@@ -60,6 +59,7 @@ from fcu.modes.offboard_stream import AttitudeTarget, OffboardSetpoint, Position
 from fcu.modes.settings import FlightSettings
 from fcu.modes.voice import Voice
 from fcu.reference import approach
+from fcu.stages import Reference, VehicleState
 from fcu.work import InlineWork, Outcome, Work
 
 IN_PROGRESS = MAV_RESULT.MAV_RESULT_IN_PROGRESS  # answered later, through UnderWay.end

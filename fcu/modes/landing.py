@@ -27,10 +27,10 @@ import math
 from typing import NamedTuple
 
 from fcu.control.dualquat import Quat, Vec3
-from fcu.control.tracker import Reference, VehicleState
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.modes import auto_plans
+from fcu.stages import Reference, VehicleState
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 LANDED_ALTITUDE_M = 0.05

@@ -50,9 +50,9 @@ from common.config.scenario import VehicleConfig
 from common.frames import ned_to_enu
 from common.jit import njit
 from fcu.control.dualquat import Quat, Vec3, q_exp, q_mul, q_rotate, q_rotate_inv
-from fcu.control.tracker import Reference
 from fcu.control.wrench import wrench_matrix
 from fcu.envelope.feasibility import envelope
+from fcu.stages import Reference
 
 DEADZONE = 0.05  # share of the deflection around the centre that commands nothing
 LEAD_M = 1.0  # the set-point stays within this distance of the vehicle

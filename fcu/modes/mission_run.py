@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from common.wire.mav_enums import MAV_CMD
 from common.wire.mission_items import MissionItem
-from fcu.control.tracker import Reference
 from fcu.mission.executor import MissionEvent, MissionExecutor
 from fcu.mission.start import MissionPlan
+from fcu.stages import Reference
 
 
 class MissionRun:

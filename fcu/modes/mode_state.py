@@ -37,7 +37,6 @@ from common.wire.mav_enums import MAV_SEVERITY
 from common.wire.mission_items import MissionItem
 from common.wire.modes import Mode
 from fcu.control.dualquat import Q_IDENTITY, Vec3
-from fcu.control.tracker import Reference, VehicleState, pose_ref
 from fcu.envelope.feasibility import Envelope, envelope
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
@@ -49,6 +48,7 @@ from fcu.modes.posctl import Posctl
 from fcu.modes.settings import FlightSettings
 from fcu.modes.shaping import HoldBrake, OffboardShaper, PlansAhead
 from fcu.modes.voice import Voice
+from fcu.stages import Reference, VehicleState, pose_ref
 from fcu.work import Work
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)

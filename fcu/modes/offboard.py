@@ -52,12 +52,12 @@ from typing import NamedTuple
 
 from common.outcome import ATTITUDE_NOT_FLOWN
 from fcu.control.dualquat import Quat, Vec3, q_angle, q_conj, q_exp, q_log, q_mul, q_rotate_inv
-from fcu.control.tracker import Reference
 from fcu.envelope.excess import TILT
 from fcu.envelope.feasibility import Envelope
 from fcu.modes.manual import StickSettings
 from fcu.reference import approach
 from fcu.reference.approach import Approach, Offset, Setpoint, offset_rate
+from fcu.stages import Reference
 
 ROTATION_RATE_DEG_S = 90.0  # a rotation's approach rate, about any axis
 ROTATION_ACC_DEG_S2 = 180.0

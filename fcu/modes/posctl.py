@@ -7,10 +7,10 @@ from __future__ import annotations
 import math
 
 from fcu.control.dualquat import Vec3
-from fcu.control.tracker import Reference
 from fcu.mission.start import PosctlFit
 from fcu.modes import manual
 from fcu.modes.manual import ManualSetpoint, Sticks, StickSettings
+from fcu.stages import Reference
 
 
 class Posctl:

@@ -12,11 +12,11 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from common.wire.mav_enums import MAV_SEVERITY
-from fcu.control.tracker import Reference
 from fcu.envelope.feasibility import Envelope
 from fcu.modes import offboard
 from fcu.modes.manual import StickSettings
 from fcu.modes.voice import Voice
+from fcu.stages import Reference
 from fcu.work import Outcome, Work
 
 ANCHOR_LEAD_US = 10_000  # beside the loop: a plan is made this far ahead, at least

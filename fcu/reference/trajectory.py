@@ -26,7 +26,7 @@ import numpy as np
 from common.config.scenario import TrajectoryConfig
 from common.quaternion import q_exp_many
 from fcu.control.dualquat import Q_IDENTITY, Quat, Vec3, q_exp, q_mul, q_rotate_inv
-from fcu.control.tracker import Reference
+from fcu.stages import Reference
 
 _ZERO: Vec3 = (0.0, 0.0, 0.0)
 TWO_PI = 2.0 * math.pi

@@ -32,11 +32,11 @@ from common.wire.simlink import HilSensor, Odometry, through_wire_hil_sensor, th
 from fcu import compose
 from fcu.compose import accept_mission, arm_and_start, published_home
 from fcu.control.core import onboard_row
-from fcu.control.tracker import VehicleState
 from fcu.edge.onboard_log import OnboardLog
 from fcu.edge.sim_bridge import imu_from_hil_sensor, pose_from_odometry, valid_state
 from fcu.params import ParamError, ParamStore
 from fcu.pipeline import Pipeline, StepOutput
+from fcu.stages import VehicleState
 from gcs.report.metrics import build_metrics
 from gcs.run.runio import RunResult
 from gcs.run.scenario_mission import scenario_mission

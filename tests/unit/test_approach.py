@@ -14,13 +14,13 @@ import pytest
 
 from common.config.scenario import load_vehicle
 from common.quaternion import q_exp
-from fcu.control.tracker import Reference, pose_ref
 from fcu.envelope.feasibility import envelope
 from fcu.modes import offboard
 from fcu.modes.manual import StickSettings
 from fcu.modes.offboard import Target
 from fcu.reference import approach
 from fcu.reference.approach import Setpoint, blend
+from fcu.stages import Reference, pose_ref
 
 ROOT = Path(__file__).resolve().parents[2]
 LIM = offboard.limits(StickSettings())

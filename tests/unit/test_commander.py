@@ -15,7 +15,6 @@ from common.config.scenario import load_gains, load_vehicle
 from common.outcome import CRASH, FAILSAFE
 from common.wire.mav_enums import MAV_RESULT
 from common.wire.modes import Mode
-from fcu.control.tracker import VehicleState, pose_ref
 from fcu.edge.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
 from fcu.mission.limits import MissionLimits
 from fcu.modes.landing import (
@@ -29,6 +28,7 @@ from fcu.modes.manual import StickSettings
 from fcu.modes.settings import FlightSettings
 from fcu.pipeline import Pipeline
 from fcu.safety.failsafe import FailsafeSettings
+from fcu.stages import VehicleState, pose_ref
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -18,7 +18,7 @@ from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
 from common.wire.mission_items import MissionItem, local_xy
 from fcu.control.allocation import Allocator
 from fcu.control.dualquat import q_exp, q_rotate_inv
-from fcu.control.tracker import DualQuaternionTracker, Reference, VehicleState
+from fcu.control.tracker import DualQuaternionTracker
 from fcu.envelope.excess import KINDS, excess_kernel
 from fcu.envelope.feasibility import MARGIN, Envelope, envelope, nominal_wrench
 from fcu.mission.executor import MissionExecutor
@@ -26,6 +26,7 @@ from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import Figure as _Figure
 from fcu.mission.segments import Move as _Move
 from fcu.mission.validation import MissionCheck, check_mission, validate_mission
+from fcu.stages import Reference, VehicleState
 from gcs.run.scenario_mission import scenario_mission
 
 M = MAV

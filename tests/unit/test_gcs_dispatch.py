@@ -18,12 +18,12 @@ from common.config.scenario import load_gains, load_vehicle
 from common.links import Link, LinkUrl
 from common.wire.mavlink import MAV, encoder, pack, parser
 from common.wire.mission_items import PX4_SITL_HOME
-from fcu.control.tracker import VehicleState
 from fcu.edge.gcs_server import COMPONENT, HANDLED, GcsServer
 from fcu.edge.mission_protocol import MissionServer
 from fcu.edge.telemetry import LINK_BUDGET_MSG_S, MAX_INTERVAL_US
 from fcu.params import ParamStore, apply_params
 from fcu.pipeline import Pipeline
+from fcu.stages import VehicleState
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]

@@ -19,10 +19,11 @@ from fcu.control.allocation import (
     tilt_lead,
 )
 from fcu.control.core import FlightCore
-from fcu.control.tracker import DualQuaternionTracker, VehicleState
+from fcu.control.tracker import DualQuaternionTracker
 from fcu.params import BY_NAME, ParamError, ParamStore, apply_params
 from fcu.pipeline import Pipeline
 from fcu.reference.trajectory import make_trajectory
+from fcu.stages import VehicleState
 from sitl.plant import Plant
 
 ROOT = Path(__file__).resolve().parents[2]

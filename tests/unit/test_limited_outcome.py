@@ -14,10 +14,10 @@ from common.config.scenario import load_gains, load_scenario, load_vehicle
 from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
 from common.outcome import LIMIT, classify
 from common.wire.modes import Mode
-from fcu.control.tracker import VehicleState
 from fcu.edge.setpoint_wire import position_target
 from fcu.pipeline import Pipeline
 from fcu.safety.failsafe import FailsafeSettings
+from fcu.stages import VehicleState
 from gcs.campaign.load import load_campaign
 from gcs.campaign.report import write_report
 from gcs.report.metrics import ERROR_ROWS_RULE, build_metrics, followed_rows

@@ -13,7 +13,6 @@ from common.outcome import FAILSAFE
 from common.wire.mav_enums import MAV_CMD, MAV_FRAME, MAV_RESULT
 from common.wire.mission_items import MissionItem
 from common.wire.modes import Mode
-from fcu.control.tracker import VehicleState, pose_ref
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.start import MissionPlan
@@ -29,6 +28,7 @@ from fcu.safety.failsafe import (
     SaturationMonitor,
     pose_loss_level,
 )
+from fcu.stages import VehicleState, pose_ref
 from fcu.work import Outcome
 
 MODES = list(Mode)  # LOITER is HOLD

@@ -13,11 +13,11 @@ import pytest
 
 from common.quaternion import q_angle, q_conj, q_exp, q_mul, q_rotate
 from fcu.control.dualquat import right_jacobian_inv
-from fcu.control.tracker import Reference, pose_ref
 from fcu.modes import offboard
 from fcu.modes.manual import StickSettings
 from fcu.modes.offboard import Target
 from fcu.reference.approach import offset_rate, right_jacobian
+from fcu.stages import Reference, pose_ref
 
 LIM = StickSettings(speed_xy_m_s=5.0, speed_up_m_s=3.0, speed_down_m_s=1.5, acc_xy_m_s2=3.0,
                     acc_up_m_s2=3.0, acc_down_m_s2=2.0, yaw_rate_deg_s=90.0,

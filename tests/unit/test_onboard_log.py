@@ -9,9 +9,9 @@ from common.config.scenario import load_gains, load_vehicle
 from common.links import free_port
 from common.logs.ulog import read_topic
 from common.wire.mission_items import PX4_SITL_HOME
-from fcu.control.tracker import VehicleState
 from fcu.edge.node import FlightController
 from fcu.pipeline import Pipeline
+from fcu.stages import VehicleState
 
 ROOT = Path(__file__).resolve().parents[2]
 

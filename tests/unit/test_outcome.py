@@ -28,8 +28,8 @@ from common.outcome import (
     diverged_rows,
     touchdowns,
 )
-from fcu.control.tracker import VehicleState
 from fcu.pipeline import Pipeline
+from fcu.stages import VehicleState
 from gcs.report.metrics import build_metrics
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,7 +11,6 @@ from pathlib import Path
 from benchmarks.mission_envelope import mixed, waypoints
 from common.config.scenario import load_vehicle
 from fcu.control.dualquat import q_exp
-from fcu.control.tracker import Reference
 from fcu.envelope import feasibility
 from fcu.mission.codes import MAV_MISSION_ACCEPTED
 from fcu.mission.executor import MissionExecutor
@@ -19,6 +18,7 @@ from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
 from fcu.modes import manual, offboard
 from fcu.reference import approach
+from fcu.stages import Reference
 
 ROOT = Path(__file__).resolve().parents[2]
 TILTED = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")

@@ -16,11 +16,11 @@ import pytest
 
 from common.wire.mav_enums import MAV_RESULT
 from common.wire.modes import Mode
-from fcu.control.tracker import Reference
 from fcu.edge.setpoint_wire import position_target
 from fcu.modes import offboard
 from fcu.modes.shaping import ANCHOR_LEAD_US, COAST_MAX_US
 from fcu.reference import approach
+from fcu.stages import Reference
 from fcu.work import Done, Outcome, Work
 from tests.unit.test_work import airborne_commander
 

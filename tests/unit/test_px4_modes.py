@@ -16,7 +16,6 @@ from common.config.scenario import load_vehicle
 from common.wire.mavlink import MAV
 from common.wire.modes import ALIASES, Mode, by_name, decode, decode_custom, names
 from fcu.control.dualquat import q_angle, q_exp, q_mul
-from fcu.control.tracker import Reference
 from fcu.edge.setpoint_wire import sticks_from_manual_control
 from fcu.envelope.feasibility import envelope
 from fcu.modes import manual
@@ -31,6 +30,7 @@ from fcu.modes.manual import (
     heading_ned,
     stick_velocity,
 )
+from fcu.stages import Reference
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]

@@ -26,8 +26,9 @@ import pytest
 
 from common.config.scenario import TrajectoryConfig, load_gains, load_vehicle
 from fcu.control.dualquat import dq_ad, dq_conj, dq_from_pose, dq_log, dq_mul, q_exp, q_mul
-from fcu.control.tracker import DualQuaternionTracker, VehicleState, reference_twist
+from fcu.control.tracker import DualQuaternionTracker, reference_twist
 from fcu.reference.trajectory import FigureEight
+from fcu.stages import VehicleState
 from sitl.plant import Plant
 from sitl.plant_kernels import derivative_kernel, rotate, rotate_inv
 

@@ -22,7 +22,7 @@ from fcu.modes import manual
 from fcu.mission.limits import MissionLimits
 from fcu.pipeline import Pipeline
 from fcu.edge.setpoint_wire import position_target
-from fcu.control.tracker import VehicleState
+from fcu.stages import VehicleState
 from fcu.warm import warm
 
 def kernels():

@@ -18,13 +18,13 @@ from common.wire.mavlink import MAV
 from common.wire.mission_items import MissionItem
 from common.wire.mission_messages import item_message
 from common.wire.modes import Mode
-from fcu.control.tracker import VehicleState
 from fcu.edge.mission_protocol import MissionServer
 from fcu.edge.work_process import ProcessWork, make_work
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
 from fcu.modes.commander import IN_PROGRESS
 from fcu.pipeline import Pipeline
+from fcu.stages import VehicleState
 from fcu.work import Done, InlineWork, Outcome, Work
 from tests.unit.test_mission_protocol import waypoints
 
