@@ -83,8 +83,8 @@ from common.wire.mav_enums import MAV_CMD, MAV_FRAME
 from common.wire.mavlink import MAV
 from common.wire.mission_items import LOCAL_SCALE, MissionItem
 from common.wire.modes import Mode
-from gcs.run.inprocess import scenario_params
 from gcs.run.process_run import ChildDied, Children
+from gcs.run.scenario_mission import scenario_params
 from gcs.vehicle_link.actions import takeoff
 from gcs.vehicle_link.mission_client import MissionError, download, upload_detailed
 from gcs.vehicle_link.params import param_set, param_values

@@ -39,7 +39,7 @@ from fcu.pipeline import Pipeline, StepOutput
 from fcu.stages import VehicleState
 from gcs.report.metrics import build_metrics
 from gcs.run.runio import RunResult
-from gcs.run.scenario_mission import scenario_mission
+from gcs.run.scenario_mission import scenario_mission, scenario_params
 from sitl.plant import ActuatorCommand, PlantState, rotate_inv, truth_row
 from sitl.truth_log import TruthLog
 from sitl.world import World, obeyed_command
@@ -77,34 +77,6 @@ def apply_overrides(scenario: Scenario, *, controller: str | None = None,
         check_servable(out.sensors, 1_000_000 // out.physics_rate_hz,
                        1_000_000 // out.control_rate_hz)
     return out
-
-
-def scenario_params(scenario: Scenario) -> dict[str, float]:
-    """Parameters a run sets on the FCU beyond its defaults (the same through processes):
-    no lead for actuators without lag; with a sensor profile the estimator's noise figures
-    those of the profile's IMU and motion capture and its fusion horizon at the pose's
-    latency (as a user tunes EKF2_GYR_NOISE, EKF2_ACC_NOISE, EKF2_EVP_NOISE, EKF2_EVA_NOISE
-    and EKF2_EV_DELAY to the vehicle); the scenario's own [params]; last, with a sensor
-    profile, the estimator on. Set in this order."""
-    params = {"COM_DIV_POS": scenario.divergence_position_m}
-    if scenario.ideal_actuators:
-        params["CA_LAG_COMP"] = 0.0  # actuators without lag: nothing to lead
-    if scenario.uses_sensors:
-        assert scenario.sensors is not None
-        imu = scenario.sensors.imu
-        params["EKF_GYR_NOISE"] = max(imu.gyro_sigma_rad_s, 1e-4)  # the IMU's, per sample
-        params["EKF_ACC_NOISE"] = max(imu.accel_sigma_m_s2, 1e-3)
-        mocap = scenario.sensors.mocap
-        params["EKF_EVP_NOISE"] = max(mocap.position_noise_m, 1e-5)  # trust its covariance
-        params["EKF_EVA_NOISE"] = max(mocap.attitude_noise_rad, 1e-5)
-        params["EKF_EV_DELAY"] = mocap.latency_s
-    params.update(scenario.params)
-    if scenario.uses_sensors:
-        # Last: the estimator starts (and in lockstep simulated time runs, aligning it) once
-        # it is on, so the flight starts at the same instant however the sets were timed.
-        params.pop("EKF_EN", None)
-        params["EKF_EN"] = 1.0
-    return params
 
 
 def fcu_pipeline(scenario: Scenario) -> tuple[Pipeline, ParamStore]:

@@ -33,7 +33,6 @@ from common.process.parent import child_env
 from common.wire.mavlink import MAV, read_signing_key
 from gcs.report.metrics import add_link_timing, build_metrics, onboard_on_truth_clock
 from gcs.report.run_metrics import FleetMetrics, RunMetrics
-from gcs.run.inprocess import scenario_params
 from gcs.run.run_waits import (
     RUN_SILENCE_S,
     STOP_S,
@@ -46,7 +45,7 @@ from gcs.run.run_waits import (
     watch,
 )
 from gcs.run.runio import ONBOARD_LOG, ONBOARD_TOPIC, TRUTH_LOG, TRUTH_TOPIC, write_metrics
-from gcs.run.scenario_mission import scenario_mission
+from gcs.run.scenario_mission import scenario_mission, scenario_params
 from gcs.vehicle_link.mission_client import MissionError, upload_detailed
 from gcs.vehicle_link.params import param_set
 from gcs.vehicle_link.session import GcsError, Session

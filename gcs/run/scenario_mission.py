@@ -1,6 +1,7 @@
-"""A scenario's trajectory as a mission (local NED items), for runs through the mission
-protocol: flown by `fcu.mission.MissionExecutor` from the scenario's start it gives the
-same reference as `fcu.reference.trajectory.make_trajectory` (Case I: to rounding at every step).
+"""What a run sets on the vehicle from its scenario: its parameters (`scenario_params`) and
+its trajectory as a mission (local NED items), for runs through the mission protocol: flown
+by `fcu.mission.MissionExecutor` from the scenario's start it gives the same reference as
+`fcu.reference.trajectory.make_trajectory` (Case I: to rounding at every step).
 
 Case I (docs/model.md#scenarios): takeoff (the quintic rise), loiter at the top, the
 figure-infinity (command 31001) about the ENU axis n (sent in NED: [1, 2, 3] -> [2, 1, -3]),
@@ -57,3 +58,31 @@ def scenario_mission(scenario: Scenario) -> list[MissionItem]:
               p1=max(0.0, scenario.duration_s - traj.figure_end_s), x_m=north, y_m=east,
               z=top),
     ]
+
+
+def scenario_params(scenario: Scenario) -> dict[str, float]:
+    """Parameters a run sets on the FCU beyond its defaults (the same through processes):
+    no lead for actuators without lag; with a sensor profile the estimator's noise figures
+    those of the profile's IMU and motion capture and its fusion horizon at the pose's
+    latency (as a user tunes EKF2_GYR_NOISE, EKF2_ACC_NOISE, EKF2_EVP_NOISE, EKF2_EVA_NOISE
+    and EKF2_EV_DELAY to the vehicle); the scenario's own [params]; last, with a sensor
+    profile, the estimator on. Set in this order."""
+    params = {"COM_DIV_POS": scenario.divergence_position_m}
+    if scenario.ideal_actuators:
+        params["CA_LAG_COMP"] = 0.0  # actuators without lag: nothing to lead
+    if scenario.uses_sensors:
+        assert scenario.sensors is not None
+        imu = scenario.sensors.imu
+        params["EKF_GYR_NOISE"] = max(imu.gyro_sigma_rad_s, 1e-4)  # the IMU's, per sample
+        params["EKF_ACC_NOISE"] = max(imu.accel_sigma_m_s2, 1e-3)
+        mocap = scenario.sensors.mocap
+        params["EKF_EVP_NOISE"] = max(mocap.position_noise_m, 1e-5)  # trust its covariance
+        params["EKF_EVA_NOISE"] = max(mocap.attitude_noise_rad, 1e-5)
+        params["EKF_EV_DELAY"] = mocap.latency_s
+    params.update(scenario.params)
+    if scenario.uses_sensors:
+        # Last: the estimator starts (and in lockstep simulated time runs, aligning it) once
+        # it is on, so the flight starts at the same instant however the sets were timed.
+        params.pop("EKF_EN", None)
+        params["EKF_EN"] = 1.0
+    return params

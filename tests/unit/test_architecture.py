@@ -35,10 +35,11 @@ EDGE = (
 )
 IO = {"pymavlink", "zenoh", "serial", "socket", "select", "selectors", "time", "threading",
       "signal", "subprocess", "multiprocessing", "concurrent", "asyncio"}
-# The ground station's runners: they start the FCU and the plant (in-process, as processes,
-# in a campaign's worker, the estimator's replay), so they alone may load fcu/ and sitl/.
-RUNNERS = ("gcs.run.inprocess", "gcs.run.process_run", "gcs.run.table1_run", "gcs.run.replay",
-           "gcs.campaign.worker")
+# The ground station's runners that fly the FCU and the plant in its own process (in-process,
+# Table I's and a campaign's workers, the estimator's replay): they alone may load fcu/ and
+# sitl/. A run through processes (gcs.run.process_run) starts them as programs and loads
+# neither.
+RUNNERS = ("gcs.run.inprocess", "gcs.run.table1_run", "gcs.run.replay", "gcs.campaign.worker")
 
 
 def _under(name: str, prefixes: tuple[str, ...] | str) -> bool:
