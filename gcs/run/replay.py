@@ -31,7 +31,6 @@ import bisect
 import csv
 import json
 import math
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ import numpy as np
 
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.logs.ulog import ULogError, open_ulog, topic_rows
+from common.process.diagnostics import get_logger, say
 from common.quaternion import Quat, Vec3
 from common.wire.rounding import f32
 from fcu.control.dualquat import q_normalize
@@ -48,6 +48,8 @@ from fcu.estimator.ekf import Estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
 from fcu.params import BY_NAME, estimator_settings
+
+log = get_logger(__name__)
 
 TOLERANCE = 1e-9  # relative (to max(1, |value|)): float rounding, far below any estimate
 STATE_COLUMNS = ("px", "py", "pz", "qw", "qx", "qy", "qz", "vbx", "vby", "vbz",
@@ -294,11 +296,11 @@ def main(args: argparse.Namespace) -> int:
         overrides = parse_params(args.param or [])
         r = replay(args.log, overrides)
     except (ReplayError, ULogError) as exc:
-        print(f"gcs replay: {exc}", file=sys.stderr)
+        log.error(f"gcs replay: {exc}")
         return 2
     text, status = report(r, overrides)
-    print(text)
+    say(text)
     if args.out is not None:
         write_estimate(args.out, r)
-        print(f"  wrote {args.out}")
+        say(f"  wrote {args.out}")
     return status

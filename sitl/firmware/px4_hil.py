@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import math
 import select
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -59,6 +58,7 @@ from common.config.sensors import (
     period_us,
 )
 from common.links import LinkError, TcpServerLink, parse_url
+from common.process.diagnostics import get_logger
 from common.wire.mavlink import MAV, encoder, pack, parser
 from common.wire.mission_items import PX4_SITL_HOME, HomePosition
 from common.wire.simlink import (
@@ -86,6 +86,8 @@ from sitl.sensors import GpsModel
 from sitl.server import LOG_BATCH, SITL_COMPONENT
 from sitl.truth_log import TruthLog, flushed
 from sitl.world import start_flight
+
+log = get_logger(__name__)
 
 GPS_HZ = 5.0  # PX4's Gazebo GPS plugin
 STATE_DEFAULT_US = 5000  # HIL_STATE_QUATERNION: what PX4 asks on connecting (200 Hz)
@@ -129,7 +131,7 @@ class Server:
         self.profile = profile
         self.warning = stale_warning(profile)
         if self.warning is not None:
-            print(self.warning, file=sys.stderr, flush=True)
+            log.warning(self.warning)
         self.schedule = AnswerSchedule(self.imu_us)
         self.send_mocap = scenario.sensors is not None
         self.system_id = system_id
@@ -431,10 +433,10 @@ class Server:
         self._stalled = True
         self.stall_reports += 1
         self._flush_log()
-        print(f"sitl: no answer to the sample at t = {self.sent_us * 1e-6:.3f} s within "
-              f"{ANSWER_TIMEOUT_S:g} s (the firmware answers every {every} samples, "
-              f"{every * self.imu_us} us): advancing without it, on the wall clock until "
-              "it answers again", file=sys.stderr, flush=True)
+        log.warning(f"sitl: no answer to the sample at t = {self.sent_us * 1e-6:.3f} s within "
+                    f"{ANSWER_TIMEOUT_S:g} s (the firmware answers every {every} samples, "
+                    f"{every * self.imu_us} us): advancing without it, on the wall clock "
+                    "until it answers again")
 
     def _pace_wait(self, imu_s: float) -> bool:
         """With `speed_factor`: whether the next lockstep step is not yet due on the wall
