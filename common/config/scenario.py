@@ -160,6 +160,47 @@ def resolved_scenario_data(path: str | Path) -> dict[str, Any]:
     return data
 
 
+def _rates(t: Table, source: str) -> tuple[int, int]:
+    """[rates]: the control and physics rates (Hz), physics a multiple of control."""
+    rates = t.table("rates", {})
+    control_hz = rates.integer("control_hz", 500, lo=1, hi=1000)
+    physics_hz = rates.integer("physics_hz", 1000, lo=1, hi=100000)
+    rates.finish()
+    if physics_hz % control_hz:
+        raise ConfigError(f"{source}: key 'rates.physics_hz': expected a multiple of "
+                          f"rates.control_hz = {control_hz}, got {physics_hz}")
+    return control_hz, physics_hz
+
+
+def _trajectory(traj_t: Table, initial_p: Vec3, base: Path) -> TrajectoryConfig:
+    """[trajectory]: a hover, a mission file (relative to `base`) or a figure, checked."""
+    kind = traj_t.string("kind", choices=TRAJECTORIES)
+    if kind == "hover":
+        traj = TrajectoryConfig(kind=kind, position_enu_m=traj_t.vec3("position_enu_m",
+                                                                      initial_p))
+    elif kind == "mission":
+        mission = (base / traj_t.string("mission")).resolve()
+        if not mission.is_file():
+            raise traj_t.error("mission", f"a mission file (not found: {mission})")
+        traj = TrajectoryConfig(kind=kind, position_enu_m=initial_p,
+                                mission_file=str(mission))
+    else:
+        traj = TrajectoryConfig(
+            kind=kind,
+            position_enu_m=traj_t.vec3("position_enu_m", initial_p),
+            rise_height_m=traj_t.number("rise_height_m", 5.0),
+            rise_end_s=traj_t.number("rise_end_s", 10.0, lo=0.0, lo_open=True),
+            figure_start_s=traj_t.number("figure_start_s", 20.0, lo=0.0),
+            figure_end_s=traj_t.number("figure_end_s", 140.0, lo=0.0),
+            amplitude_m=traj_t.number("amplitude_m", 5.0, lo=0.0),
+            axis_enu=traj_t.vec3("axis_enu", (1.0, 2.0, 3.0)),
+        )
+        if not traj.rise_end_s <= traj.figure_start_s < traj.figure_end_s:
+            raise traj_t.error("figure_end_s", "rise_end_s <= figure_start_s < figure_end_s")
+    traj_t.finish()
+    return traj
+
+
 def scenario_from_data(data: dict[str, Any], path: str | Path, *,
                        firmware: bool = False) -> Scenario:
     """A scenario from its TOML data; file names are relative to `path`'s folder, and the
@@ -187,44 +228,14 @@ def scenario_from_data(data: dict[str, Any], path: str | Path, *,
     pd_of, pd_path = part("pd", gains_t, parse_gains, load_gains)
     gains_t.finish()
 
-    rates = t.table("rates", {})
-    control_hz = rates.integer("control_hz", 500, lo=1, hi=1000)
-    physics_hz = rates.integer("physics_hz", 1000, lo=1, hi=100000)
-    rates.finish()
-    if physics_hz % control_hz:
-        raise ConfigError(f"{source}: key 'rates.physics_hz': expected a multiple of "
-                          f"rates.control_hz = {control_hz}, got {physics_hz}")
+    control_hz, physics_hz = _rates(t, source)
 
     init = t.table("initial")
     start = init.string("start", choices=STARTS)
     initial_p = init.vec3("position_enu_m", (0.0, 0.0, 0.0))
     init.finish()
 
-    traj_t = t.table("trajectory")
-    kind = traj_t.string("kind", choices=TRAJECTORIES)
-    if kind == "hover":
-        traj = TrajectoryConfig(kind=kind, position_enu_m=traj_t.vec3("position_enu_m",
-                                                                      initial_p))
-    elif kind == "mission":
-        mission = rel("mission", traj_t)
-        if not mission.is_file():
-            raise traj_t.error("mission", f"a mission file (not found: {mission})")
-        traj = TrajectoryConfig(kind=kind, position_enu_m=initial_p,
-                                mission_file=str(mission))
-    else:
-        traj = TrajectoryConfig(
-            kind=kind,
-            position_enu_m=traj_t.vec3("position_enu_m", initial_p),
-            rise_height_m=traj_t.number("rise_height_m", 5.0),
-            rise_end_s=traj_t.number("rise_end_s", 10.0, lo=0.0, lo_open=True),
-            figure_start_s=traj_t.number("figure_start_s", 20.0, lo=0.0),
-            figure_end_s=traj_t.number("figure_end_s", 140.0, lo=0.0),
-            amplitude_m=traj_t.number("amplitude_m", 5.0, lo=0.0),
-            axis_enu=traj_t.vec3("axis_enu", (1.0, 2.0, 3.0)),
-        )
-        if not traj.rise_end_s <= traj.figure_start_s < traj.figure_end_s:
-            raise traj_t.error("figure_end_s", "rise_end_s <= figure_start_s < figure_end_s")
-    traj_t.finish()
+    traj = _trajectory(t.table("trajectory"), initial_p, base)
 
     dist = t.table("disturbance", {})
     force_terms = parse_terms(dist.tables("force"))
