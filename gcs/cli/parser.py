@@ -31,6 +31,8 @@ Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0
     gcs watch
     gcs view [--port 8765] [--mcap FILE] | view RUN_DIR [--speed X]   (Foxglove WebSocket)
     gcs log record FILE [--duration S]
+Every command takes -v (debug diagnostics too) or -q (only warnings and errors), before or
+after its name; diagnostics go to stderr, results to stdout.
 """
 DEFAULT_SCENARIOS = Path(__file__).resolve().parents[2] / "config" / "scenarios"
 DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
