@@ -174,6 +174,32 @@ def replay(path: str | Path, overrides: dict[str, float] | None = None) -> Repla
     notes: list[str] = []
     values = _params(ulog, items[0][0], notes)
     values.update(overrides or {})
+    settings, period_us = _settings(ulog, values, notes)
+    try:
+        dcols, drows = topic_rows(ulog, "dq_onboard")
+    except ULogError:
+        dcols, drows = ("time_us", *STATE_COLUMNS), np.zeros((0, 1 + len(STATE_COLUMNS)))
+    row_t = _column(dcols, drows, "time_us").astype(np.int64)
+    if period_us <= 0:  # an older log: the rows' spacing (lockstep: one control period)
+        steps = np.diff(row_t)
+        steps = steps[steps > 0]
+        period_us = int(np.bincount(steps).argmax()) if len(steps) else 1
+        notes.append(f"no dq_control_period_us in the log: {period_us} us from dq_onboard")
+    taken_t, taken = _estimates(items, settings, values.get("IMU_GYRO_CUTOFF", 0.0), period_us)
+    replayed = np.full((len(row_t), len(STATE_COLUMNS)), math.nan)
+    for r, t in enumerate(row_t.tolist()):
+        k = bisect.bisect_right(taken_t, t) - 1
+        if k >= 0:
+            replayed[r] = taken[k]
+    logged = np.column_stack([_column(dcols, drows, c) for c in STATE_COLUMNS]) \
+        if len(drows) else np.zeros((0, len(STATE_COLUMNS)))
+    return Replay(row_t, replayed, logged, settings, n_imu, n_pose, notes)
+
+
+def _settings(ulog: Any, values: dict[str, float],
+              notes: list[str]) -> tuple[EstimatorSettings, int]:
+    """The estimator's settings from the log's parameters and gravity, and the control
+    period the log names (0: none; notes say what was assumed)."""
     info = ulog.msg_info_dict
     try:
         gravity = float(info.get("dq_gravity_m_s2", DEFAULT_GRAVITY))
@@ -191,19 +217,16 @@ def replay(path: str | Path, overrides: dict[str, float] | None = None) -> Repla
         raise ReplayError(f"estimator settings: {exc}") from None
     if settings is None:
         raise ReplayError("EKF_EN is 0: no estimator to replay")
-    try:
-        dcols, drows = topic_rows(ulog, "dq_onboard")
-    except ULogError:
-        dcols, drows = ("time_us", *STATE_COLUMNS), np.zeros((0, 1 + len(STATE_COLUMNS)))
-    row_t = _column(dcols, drows, "time_us").astype(np.int64)
-    if period_us <= 0:  # an older log: the rows' spacing (lockstep: one control period)
-        steps = np.diff(row_t)
-        steps = steps[steps > 0]
-        period_us = int(np.bincount(steps).argmax()) if len(steps) else 1
-        notes.append(f"no dq_control_period_us in the log: {period_us} us from dq_onboard")
+    return settings, period_us
 
+
+def _estimates(items: list[tuple[int, int, int, ImuInput | PoseInput]],
+               settings: EstimatorSettings, gyro_cutoff_hz: float,
+               period_us: int) -> tuple[list[int], list[tuple[float, ...]]]:
+    """The estimator fed the log's inputs in order: its output (rates filtered as the
+    pipeline does) at every control step, with the step's time."""
     est = Estimator(settings)
-    rate_filter = ImuRateFilter(values.get("IMU_GYRO_CUTOFF", 0.0))  # as the pipeline
+    rate_filter = ImuRateFilter(gyro_cutoff_hz)  # as the pipeline
     taken_t: list[int] = []
     taken: list[tuple[float, ...]] = []
     for _, kind, _, m in items:
@@ -221,14 +244,7 @@ def replay(path: str | Path, overrides: dict[str, float] | None = None) -> Repla
                 taken_t.append(m.t_us)
                 taken.append((*s.p_enu_m, *q_normalize(s.q_enu_flu), *s.v_flu_m_s,
                               *s.omega_flu_rad_s))
-    replayed = np.full((len(row_t), len(STATE_COLUMNS)), math.nan)
-    for r, t in enumerate(row_t.tolist()):
-        k = bisect.bisect_right(taken_t, t) - 1
-        if k >= 0:
-            replayed[r] = taken[k]
-    logged = np.column_stack([_column(dcols, drows, c) for c in STATE_COLUMNS]) \
-        if len(drows) else np.zeros((0, len(STATE_COLUMNS)))
-    return Replay(row_t, replayed, logged, settings, n_imu, n_pose, notes)
+    return taken_t, taken
 
 
 def _attitude_angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
