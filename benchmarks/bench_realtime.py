@@ -75,7 +75,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common.config.scenario import load_scenario
+from common.config.scenario import Scenario, load_scenario
 from common.config.sensors import resolve_sensor_profile
 from common.links import free_port
 from common.logs.ulog import ULogError, read_topic
@@ -624,6 +624,45 @@ def take_off(sessions: list[Session], children: Children, sc: Any, opts: Options
     return hover
 
 
+def rotate_log(tl: Timeline, children: Children, folder: Path) -> bool:
+    """The timeline's log rotation: SIGHUP to fcu, which sets its onboard log aside
+    (onboard.N.ulg) and flies on; FlightFailed when none was set aside."""
+    with tl.event(0, "log rotation (SIGHUP to fcu)") as ev:
+        children.procs["fcu"].send_signal(signal.SIGHUP)
+        pause(1.0, children)
+        kept = sorted(p.name for p in folder.glob("onboard.*.ulg"))
+        ev.note = f"fcu flies on; kept {', '.join(kept)}" if kept else "fcu flies on"
+        if not kept:
+            raise FlightFailed("SIGHUP: no onboard log set aside (onboard.N.ulg)")
+    return True
+
+
+def land(a: Session, children: Children, hover_s: float) -> None:
+    """Hover `hover_s`, then LAND; FlightFailed when refused or not disarmed in 60 s."""
+    pause(hover_s, children)
+    result, why = set_mode(a, Mode.LAND)
+    if result != M.MAV_RESULT_ACCEPTED:
+        raise FlightFailed(f"LAND refused: {why}")
+    if not wait_disarmed(a, 60.0):
+        children.check()
+        raise FlightFailed("the vehicle did not land and disarm within 60 s")
+    children.check()
+
+
+def failure_notes(children: Children, said: list[dict[str, Any]]) -> str:
+    """What explains a failed flight: fcu ended by SIGHUP (it does not rotate its log), the
+    vehicle's failsafes and crashes (CRITICAL and worse)."""
+    notes = ""
+    if children.procs.get("fcu") is not None and \
+            children.procs["fcu"].returncode == -signal.SIGHUP:
+        notes += ("\n(fcu ended on SIGHUP: this fcu does not rotate its log on SIGHUP; "
+                  "run with --no-rotate-log)")
+    alarms = [f"{m['t_s']:.2f} s {m['text']}" for m in said if m["level"] <= 2]
+    if alarms:  # the vehicle's failsafes and crashes (CRITICAL and worse)
+        notes += "\n(the vehicle said: " + "; ".join(alarms) + ")"
+    return notes
+
+
 def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str], None],
         extra_sitl: tuple[str, ...] = ()) -> dict[str, Any]:
     """One flight with its timeline; the raw material of its figures."""
@@ -654,15 +693,7 @@ def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str]
         try:
             run_stations(tl, sessions, children)
             if opts.rotate_log:
-                with tl.event(0, "log rotation (SIGHUP to fcu)") as ev:
-                    children.procs["fcu"].send_signal(signal.SIGHUP)
-                    pause(1.0, children)
-                    kept = sorted(p.name for p in folder.glob("onboard.*.ulg"))
-                    rotated = bool(kept)
-                    ev.note = f"fcu flies on; kept {', '.join(kept)}" if kept else \
-                        "fcu flies on"
-                    if not kept:
-                        raise FlightFailed("SIGHUP: no onboard log set aside (onboard.N.ulg)")
+                rotated = rotate_log(tl, children, folder)
         finally:
             events = tl.events
         marks.end_us = latest_clock_us(a)
@@ -670,14 +701,7 @@ def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str]
         if beat is not None and not beat.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
             raise FlightFailed("the vehicle disarmed during the timeline")
         say(f"  timeline done in {tl.now():.1f} s; hover, then LAND")
-        pause(opts.hover_s, children)
-        result, why = set_mode(a, Mode.LAND)
-        if result != M.MAV_RESULT_ACCEPTED:
-            raise FlightFailed(f"LAND refused: {why}")
-        if not wait_disarmed(a, 60.0):
-            children.check()
-            raise FlightFailed("the vehicle did not land and disarm within 60 s")
-        children.check()
+        land(a, children, opts.hover_s)
     except (FlightFailed, GcsError, MissionError, ChildDied) as exc:
         failure = str(exc)
         try:
@@ -690,14 +714,8 @@ def fly(opts: Options, folder: Path, extra: tuple[str, ...], say: Callable[[str]
             s.close()
         children.stop()
     said = vehicle_messages(folder)
-    if failure and children.procs.get("fcu") is not None and \
-            children.procs["fcu"].returncode == -signal.SIGHUP:
-        failure += ("\n(fcu ended on SIGHUP: this fcu does not rotate its log on SIGHUP; "
-                    "run with --no-rotate-log)")
     if failure:
-        alarms = [f"{m['t_s']:.2f} s {m['text']}" for m in said if m["level"] <= 2]
-        if alarms:  # the vehicle's failsafes and crashes (CRITICAL and worse)
-            failure += "\n(the vehicle said: " + "; ".join(alarms) + ")"
+        failure += failure_notes(children, said)
     return {"folder": str(folder), "failure": failure, "marks": dataclasses.asdict(marks),
             "vehicle_messages": said,
             "events": [e.as_json() for e in events], "rotated": rotated,
@@ -895,17 +913,7 @@ def main(argv: list[str] | None = None) -> int:
         label = " + " + shlex.join(opts.compare) + (
             f" (sitl {shlex.join(opts.compare_sitl)})" if opts.compare_sitl else "")
         variants.append((label, opts.compare, opts.compare_sitl))
-    print(f"machine: {os.cpu_count()} cores, load average "
-          f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}; scenario {sc.name}, "
-          f"sensors {opts.sensors}, {sc.control_rate_hz} Hz")
-    print(f"timeline: {opts.items}-item upload, download, parameter list; "
-          f"{opts.offboard_steps} OFFBOARD steps of {opts.step_m:g} m x {opts.step_s:g} s; "
-          f"modes {' '.join(opts.modes)}; "
-          f"{'two stations (255, 254)' if opts.second_station else 'one station (255)'}; "
-          + ("log rotation by SIGHUP" if opts.rotate_log else
-             "no log rotation (--no-rotate-log)"), flush=True)
-    if opts.fcu_args:
-        print(f"fcu arguments: {shlex.join(opts.fcu_args)}")
+    print_plan(opts, sc)
     say(f"kernels compiled or loaded, a short in-process flight: {warm_kernels(sc):.1f} s")
     results: list[dict[str, Any]] = []
     started = time.monotonic()
@@ -913,44 +921,9 @@ def main(argv: list[str] | None = None) -> int:
         base = opts.out or Path(tmp)
         for load in opts.loads:
             for label, extra, extra_sitl in variants:
-                name = (load if load == "idle" else f"{opts.hogs} hogs") + label
-                say(f"{name}:")
-                folder = base / f"{load}{'_compare' if extra else ''}"
-                with hogs(opts.hogs if load == "hogs" else 0) as pids:
-                    if pids:
-                        say(f"  busy processes at nice 19: PIDs {', '.join(map(str, pids))}")
-                    load_avg = os.getloadavg()[0]
-                    run = fly(opts, folder, extra, say, extra_sitl)
-                for e in run["events"]:
-                    say(f"  {e['start_s']:6.2f}-{e['end_s']:6.2f} s  station {e['station']}  "
-                        f"{e['what']}: {'' if e['ok'] else 'FAILED: '}{e['note']}")
-                f = figures(run, period_us)
-                results.append({"condition": name, "load": load, "extra_fcu_args": list(extra),
-                                "extra_sitl_args": list(extra_sitl),
-                                "hog_pids": pids, "load_average_1min": load_avg,
-                                "failure": run["failure"], "figures": f, "run": run})
-                for g in f.get("worst_gaps") or ():
-                    say(f"  gap {g['gap_ms']:6.1f} ms at {g['at_s']:6.2f} s during: "
-                        f"{'; '.join(g['during']) or 'no event (hovering)'}")
-                if run["failure"]:
-                    say(f"  FAILED: {run['failure']}")
-                else:
-                    say(f"  flown in {run['wall_s']:.1f} s; airborne through the timeline: "
-                        f"{'yes' if f['airborne'] else 'NO'}")
-    print()
-    print(table(results))
-    print()
-    print("load: the 1-minute load average when the flight started (a shared machine)")
-    print("targets: idle p99.9 <= 4 ms, longest gap <= 10 ms, misses <= 0.1 %; beside two "
-          "nice-19 hogs: longest gap <= 20 ms, misses <= 1 % (reported, not asserted)")
-    print(f"step period from onboard.ulg's dq_onboard stamps over the timeline; misses from "
-          f"fcu --stats over the whole run ({time.monotonic() - started:.0f} s in all)")
-    for r in results:
-        for e in r["run"]["events"]:
-            if not e["ok"]:
-                print(f"{r['condition']}: station {e['station']}: {e['what']}: {e['note']}")
-        if r["failure"]:
-            print(f"{r['condition']}: FAILED: {r['failure']}")
+                results.append(fly_condition(opts, load, label, extra, extra_sitl, base,
+                                             period_us, say))
+    print_summary(results, time.monotonic() - started)
     report = {"date": time.strftime("%Y-%m-%d"), "machine": {
         "cores": os.cpu_count(), "load_average_at_start": results[0]["load_average_1min"]
         if results else None}, "options": {
@@ -963,6 +936,70 @@ def main(argv: list[str] | None = None) -> int:
         opts.json_path.parent.mkdir(parents=True, exist_ok=True)
         opts.json_path.write_text(json.dumps(report, indent=2, default=str) + "\n")
     return 1 if any(r["failure"] for r in results) else 0
+
+
+def print_plan(opts: Options, sc: Scenario) -> None:
+    """The machine, the scenario and the timeline to be flown, before the flights."""
+    print(f"machine: {os.cpu_count()} cores, load average "
+          f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}; scenario {sc.name}, "
+          f"sensors {opts.sensors}, {sc.control_rate_hz} Hz")
+    print(f"timeline: {opts.items}-item upload, download, parameter list; "
+          f"{opts.offboard_steps} OFFBOARD steps of {opts.step_m:g} m x {opts.step_s:g} s; "
+          f"modes {' '.join(opts.modes)}; "
+          f"{'two stations (255, 254)' if opts.second_station else 'one station (255)'}; "
+          + ("log rotation by SIGHUP" if opts.rotate_log else
+             "no log rotation (--no-rotate-log)"), flush=True)
+    if opts.fcu_args:
+        print(f"fcu arguments: {shlex.join(opts.fcu_args)}")
+
+
+def fly_condition(opts: Options, load: str, label: str, extra: tuple[str, ...],
+                  extra_sitl: tuple[str, ...], base: Path, period_us: int,
+                  say: Callable[[str], None]) -> dict[str, Any]:
+    """One condition (idle or beside the hogs, with a variant's arguments) flown, its
+    events, gaps and outcome said; its result row."""
+    name = (load if load == "idle" else f"{opts.hogs} hogs") + label
+    say(f"{name}:")
+    folder = base / f"{load}{'_compare' if extra else ''}"
+    with hogs(opts.hogs if load == "hogs" else 0) as pids:
+        if pids:
+            say(f"  busy processes at nice 19: PIDs {', '.join(map(str, pids))}")
+        load_avg = os.getloadavg()[0]
+        run = fly(opts, folder, extra, say, extra_sitl)
+    for e in run["events"]:
+        say(f"  {e['start_s']:6.2f}-{e['end_s']:6.2f} s  station {e['station']}  "
+            f"{e['what']}: {'' if e['ok'] else 'FAILED: '}{e['note']}")
+    f = figures(run, period_us)
+    for g in f.get("worst_gaps") or ():
+        say(f"  gap {g['gap_ms']:6.1f} ms at {g['at_s']:6.2f} s during: "
+            f"{'; '.join(g['during']) or 'no event (hovering)'}")
+    if run["failure"]:
+        say(f"  FAILED: {run['failure']}")
+    else:
+        say(f"  flown in {run['wall_s']:.1f} s; airborne through the timeline: "
+            f"{'yes' if f['airborne'] else 'NO'}")
+    return {"condition": name, "load": load, "extra_fcu_args": list(extra),
+            "extra_sitl_args": list(extra_sitl), "hog_pids": pids,
+            "load_average_1min": load_avg, "failure": run["failure"], "figures": f,
+            "run": run}
+
+
+def print_summary(results: list[dict[str, Any]], elapsed_s: float) -> None:
+    """The table of every condition, what its columns mean, and what failed."""
+    print()
+    print(table(results))
+    print()
+    print("load: the 1-minute load average when the flight started (a shared machine)")
+    print("targets: idle p99.9 <= 4 ms, longest gap <= 10 ms, misses <= 0.1 %; beside two "
+          "nice-19 hogs: longest gap <= 20 ms, misses <= 1 % (reported, not asserted)")
+    print(f"step period from onboard.ulg's dq_onboard stamps over the timeline; misses from "
+          f"fcu --stats over the whole run ({elapsed_s:.0f} s in all)")
+    for r in results:
+        for e in r["run"]["events"]:
+            if not e["ok"]:
+                print(f"{r['condition']}: station {e['station']}: {e['what']}: {e['note']}")
+        if r["failure"]:
+            print(f"{r['condition']}: FAILED: {r['failure']}")
 
 
 if __name__ == "__main__":

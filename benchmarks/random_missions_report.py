@@ -97,56 +97,14 @@ def write_report(out: Path, results: list[dict[str, Any]], mocap: list[dict[str,
              "|---|---|---|---|---|---|---|---|---|---|"]
     ok = True
     for v in vehicles:
-        rs = [r for r in results if r["vehicle"] == v]
-        acc = [r for r in rs if r["verdict"] == "accepted"]
-        bad = [r for r in acc if r.get("why")]
-        ms = [r for r in mocap if r["vehicle"] == v]
-        mbad = [r for r in ms if r.get("why")]
-        ok = ok and not bad and not mbad
-        lines.append(f"| {v} | {len(rs)} | {sum(r['regenerated'] for r in rs)} | "
-                     f"{len(rs) - len(acc)} | {len(acc)} | {sum(r['stretched'] for r in acc)} | "
-                     f"{sum('status' in r for r in acc)} | {len(bad)} | {len(ms)} | "
-                     f"{len(mbad)} |")
+        line, held = _vehicle_row(v, results, mocap)
+        lines.append(line)
+        ok = ok and held
     lines += ["", "Property (truth sensors): status completed, max |p - p_ref| <= 5 cm, max "
               "attitude error <= 3 deg from the planned end of the takeoff, no monitor event. "
-              "Mocap: position error <= truth-run error + estimation error + 2 cm.", "",
-              "## Refusal reasons", "", "| vehicle | kind | count | example |", "|---|---|---|---|"]
-    for v in vehicles:
-        kinds = Counter(r["reason_kind"] for r in results
-                        if r["vehicle"] == v and r["verdict"] == "refused")
-        for kind, n in kinds.most_common():
-            ex = next(r["reason"] for r in results if r["vehicle"] == v
-                      and r["reason_kind"] == kind)
-            lines.append(f"| {v} | {kind} | {n} | {ex} |")
-    lines += ["", "| vehicle | refused item | count |", "|---|---|---|"]
-    for v in vehicles:
-        items = Counter(r.get("refused_item", "") for r in results
-                        if r["vehicle"] == v and r["verdict"] == "refused")
-        for kind, n in items.most_common():
-            lines.append(f"| {v} | {kind or '-'} | {n} |")
-    lines += ["", "## Violations", "", "| vehicle | kind | count |", "|---|---|---|"]
-    for v in vehicles:
-        kinds = Counter(w.split(" ")[0] + (" " + w.split(" ")[1] if w.startswith(
-            ("position", "attitude", "mocap")) else "")
-            for r in [*results, *mocap] if r["vehicle"] == v for w in r.get("why", []))
-        for kind, n in kinds.most_common():
-            lines.append(f"| {v} | {kind} | {n} |")
-    lines += ["", "## Tracking errors of the flown missions", "",
-              "| vehicle | sensors | flown | median pos (cm) | max pos (cm) | median att (deg) "
-              "| max att (deg) | max estimation (cm) |", "|---|---|---|---|---|---|---|---|"]
-    for v in vehicles:
-        for label, rs in (("main", results), ("mocap sample", mocap)):
-            fl = [r for r in rs if r["vehicle"] == v and "pos_err_m" in r]
-            if not fl:
-                continue
-            pos = np.array([r["pos_err_m"] for r in fl])
-            att = np.array([r["att_err_deg"] for r in fl])
-            est = np.array([r["est_pos_err_m"] for r in fl])
-            lines.append(f"| {v} | {fl[0]['sensors']} ({label}) | {len(fl)} | "
-                         f"{_fmt(float(np.nanmedian(pos)), '', 100)} | "
-                         f"{_fmt(float(np.nanmax(pos)), '', 100)} | "
-                         f"{_fmt(float(np.nanmedian(att)))} | {_fmt(float(np.nanmax(att)))} | "
-                         f"{_fmt(float(np.nanmax(est)), '', 100)} |")
+              "Mocap: position error <= truth-run error + estimation error + 2 cm.", ""]
+    lines += [*_refusals_md(results, vehicles), *_violations_md(results, mocap, vehicles),
+              *_errors_md(results, mocap, vehicles)]
     lines += ["", "## Envelope: largest cruise speed by waypoint leg length", "",
               "Largest MIS_CRUISE_SPD among accepted missions with a waypoint leg in the bin, "
               "among those that also held the property, the largest planned leg speed (leg / "
@@ -169,3 +127,74 @@ def write_report(out: Path, results: list[dict[str, Any]], mocap: list[dict[str,
     text = "\n".join(lines) + "\n"
     (out / "summary.md").write_text(text)
     return text, ok
+
+
+def _vehicle_row(v: str, results: list[dict[str, Any]],
+                 mocap: list[dict[str, Any]]) -> tuple[str, bool]:
+    """A vehicle's row of the summary table, and whether it held the property (no
+    violation in the main runs nor in the mocap sample)."""
+    rs = [r for r in results if r["vehicle"] == v]
+    acc = [r for r in rs if r["verdict"] == "accepted"]
+    bad = [r for r in acc if r.get("why")]
+    ms = [r for r in mocap if r["vehicle"] == v]
+    mbad = [r for r in ms if r.get("why")]
+    row = (f"| {v} | {len(rs)} | {sum(r['regenerated'] for r in rs)} | "
+           f"{len(rs) - len(acc)} | {len(acc)} | {sum(r['stretched'] for r in acc)} | "
+           f"{sum('status' in r for r in acc)} | {len(bad)} | {len(ms)} | "
+           f"{len(mbad)} |")
+    return row, not bad and not mbad
+
+
+def _refusals_md(results: list[dict[str, Any]], vehicles: list[str]) -> list[str]:
+    """The refusals by reason (with an example) and by refused item, per vehicle."""
+    lines = ["## Refusal reasons", "", "| vehicle | kind | count | example |",
+             "|---|---|---|---|"]
+    for v in vehicles:
+        kinds = Counter(r["reason_kind"] for r in results
+                        if r["vehicle"] == v and r["verdict"] == "refused")
+        for kind, n in kinds.most_common():
+            ex = next(r["reason"] for r in results if r["vehicle"] == v
+                      and r["reason_kind"] == kind)
+            lines.append(f"| {v} | {kind} | {n} | {ex} |")
+    lines += ["", "| vehicle | refused item | count |", "|---|---|---|"]
+    for v in vehicles:
+        items = Counter(r.get("refused_item", "") for r in results
+                        if r["vehicle"] == v and r["verdict"] == "refused")
+        for kind, n in items.most_common():
+            lines.append(f"| {v} | {kind or '-'} | {n} |")
+    return lines
+
+
+def _violations_md(results: list[dict[str, Any]], mocap: list[dict[str, Any]],
+                   vehicles: list[str]) -> list[str]:
+    """The property's violations by kind, per vehicle (main runs and mocap sample)."""
+    lines = ["", "## Violations", "", "| vehicle | kind | count |", "|---|---|---|"]
+    for v in vehicles:
+        kinds = Counter(w.split(" ")[0] + (" " + w.split(" ")[1] if w.startswith(
+            ("position", "attitude", "mocap")) else "")
+            for r in [*results, *mocap] if r["vehicle"] == v for w in r.get("why", []))
+        for kind, n in kinds.most_common():
+            lines.append(f"| {v} | {kind} | {n} |")
+    return lines
+
+
+def _errors_md(results: list[dict[str, Any]], mocap: list[dict[str, Any]],
+               vehicles: list[str]) -> list[str]:
+    """The tracking and estimation errors of the flown missions, per vehicle and sensors."""
+    lines = ["", "## Tracking errors of the flown missions", "",
+             "| vehicle | sensors | flown | median pos (cm) | max pos (cm) | median att (deg) "
+             "| max att (deg) | max estimation (cm) |", "|---|---|---|---|---|---|---|---|"]
+    for v in vehicles:
+        for label, rs in (("main", results), ("mocap sample", mocap)):
+            fl = [r for r in rs if r["vehicle"] == v and "pos_err_m" in r]
+            if not fl:
+                continue
+            pos = np.array([r["pos_err_m"] for r in fl])
+            att = np.array([r["att_err_deg"] for r in fl])
+            est = np.array([r["est_pos_err_m"] for r in fl])
+            lines.append(f"| {v} | {fl[0]['sensors']} ({label}) | {len(fl)} | "
+                         f"{_fmt(float(np.nanmedian(pos)), '', 100)} | "
+                         f"{_fmt(float(np.nanmax(pos)), '', 100)} | "
+                         f"{_fmt(float(np.nanmedian(att)))} | {_fmt(float(np.nanmax(att)))} | "
+                         f"{_fmt(float(np.nanmax(est)), '', 100)} |")
+    return lines

@@ -23,10 +23,13 @@ from common.config.sensors import resolve_sensor_profile
 from common.links import LinkError, parse_url
 from common.process import startup
 from common.process.cliargs import OneLineParser, check_output_path
+from common.process.diagnostics import add_verbosity_options, get_logger, say, setup_logging
 from common.process.parent import stop_with_parent
 from common.process.program import STARTUP_ERRORS, serve, start_failed
 from common.process.realtime import DEFAULT_PRIORITY
 from sitl.server import SimulatorServer
+
+log = get_logger(__name__)
 
 # The simulator protocols `sitl` serves: its own link to this project's FCU, and the
 # interfaces through which external physics engines serve real firmware. Each has its own
@@ -76,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
                "--resend-ms are dqflight's only. ardupilot-json takes only the truth sensor "
                "profile (ArduPilot makes its sensors from the exact state), so --seed does "
                "nothing there.")
+    add_verbosity_options(p)
     p.add_argument("scenario", type=Path, help="scenario TOML (vehicle, start, disturbances)")
     p.add_argument("--protocol", choices=tuple(DEFAULT_LINKS), default=DQFLIGHT,
                    help="simulator protocol (default dqflight)")
@@ -147,9 +151,50 @@ def _check_protocol_options(args: argparse.Namespace) -> None:
         raise ConfigError(f"--rt-priority: expected 0..99, got {args.rt_priority}")
 
 
+def _position(text: str) -> tuple[float, float, float]:
+    """`--position X,Y,Z`: three finite ENU metres (ConfigError otherwise)."""
+    try:
+        xyz = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        xyz = ()
+    if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
+        raise ConfigError(f"--position: expected X,Y,Z in metres, got {text}")
+    return xyz[0], xyz[1], xyz[2]
+
+
+def _scenario(args: argparse.Namespace) -> Scenario:
+    """The scenario file with the command line's overrides (actuators, start position,
+    sensor profile, seed), checked."""
+    scenario = load_scenario(args.scenario, firmware=args.protocol != DQFLIGHT)
+    if args.ideal_actuators:
+        scenario = dataclasses.replace(scenario, ideal_actuators=True)
+    if args.position is not None:
+        scenario = dataclasses.replace(scenario, initial_position_enu_m=_position(args.position))
+    if args.sensors is not None:
+        scenario = dataclasses.replace(scenario, sensors=resolve_sensor_profile(args.sensors))
+    check_sensor_faults(scenario.sensor_faults, scenario.sensors, "--sensors")
+    if args.seed is not None:
+        if not 0 <= args.seed < 2**63:
+            raise ConfigError(f"--seed: expected 0..2^63-1, got {args.seed}")
+        scenario = dataclasses.replace(scenario, seed=args.seed)
+    return scenario
+
+
+def _end_time(args: argparse.Namespace, scenario: Scenario) -> float | None:
+    """Simulated seconds to serve: --end-time, else the scenario's duration for a dqflight
+    lockstep run, else no end (ConfigError for a bad value)."""
+    end: float | None = args.end_time
+    if end is None and not args.realtime and args.protocol == DQFLIGHT:
+        end = scenario.duration_s
+    if end is not None and not (math.isfinite(end) and end > 0):
+        raise ConfigError(f"--end-time: expected a positive number of seconds, got {end}")
+    return end
+
+
 def main(argv: list[str] | None = None) -> int:
     stop_with_parent()
     args = build_parser().parse_args(argv)
+    setup_logging("sitl", args)
 
     startup.guard()  # a stop while starting (loading the kernels, say) is looked at below
     try:
@@ -157,35 +202,15 @@ def main(argv: list[str] | None = None) -> int:
         parse_url(args.link)  # before anything is opened
         check_output_path("--truth-log", args.truth_log)
         check_output_path("--stats", args.stats)
-        scenario = load_scenario(args.scenario, firmware=args.protocol != DQFLIGHT)
-        if args.ideal_actuators:
-            scenario = dataclasses.replace(scenario, ideal_actuators=True)
-        if args.position is not None:
-            try:
-                xyz = tuple(float(v) for v in args.position.split(","))
-            except ValueError:
-                xyz = ()
-            if len(xyz) != 3 or not all(math.isfinite(v) for v in xyz):
-                raise ConfigError(f"--position: expected X,Y,Z in metres, got {args.position}")
-            scenario = dataclasses.replace(scenario, initial_position_enu_m=xyz)
-        if args.sensors is not None:
-            scenario = dataclasses.replace(scenario,
-                                           sensors=resolve_sensor_profile(args.sensors))
-        check_sensor_faults(scenario.sensor_faults, scenario.sensors, "--sensors")
-        if args.seed is not None:
-            if not 0 <= args.seed < 2**63:
-                raise ConfigError(f"--seed: expected 0..2^63-1, got {args.seed}")
-            scenario = dataclasses.replace(scenario, seed=args.seed)
+        scenario = _scenario(args)
         rate = args.control_rate or scenario.control_rate_hz
         if not 1 <= rate <= 1000:
             raise ConfigError(f"--control-rate: expected 1..1000 Hz, got {rate}")
-        end = args.end_time
-        if end is None and not args.realtime and args.protocol == DQFLIGHT:
-            end = scenario.duration_s
-        if end is not None and not (math.isfinite(end) and end > 0):
-            raise ConfigError(f"--end-time: expected a positive number of seconds, got {end}")
+        end = _end_time(args, scenario)
         if args.protocol != DQFLIGHT:
             return _serve_firmware(args, scenario, end)
+        log.debug("sitl: scenario %s from %s, control at %s Hz, end at %s s of simulated "
+                  "time", scenario.name, args.scenario, rate, end)
         server = SimulatorServer(scenario, args.link, truth_log=args.truth_log,
                                  end_time_s=end, realtime=args.realtime,
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
@@ -198,10 +223,10 @@ def main(argv: list[str] | None = None) -> int:
     if not serve("sitl", server, said, rt_priority=args.rt_priority if args.realtime else None,
                  stats=args.stats, stats_of=server.stats):
         return 0
-    print(f"sitl: stopped at t = {server.state.time_us * 1e-6:.3f} s after {server.steps} "
-          f"control periods; {server.resends} re-sends, {server.ignored_answers} answers "
-          f"ignored, {server.rejected_bytes} bytes rejected, {server.skipped_s:.3f} s of wall "
-          "time skipped", flush=True)
+    say(f"sitl: stopped at t = {server.state.time_us * 1e-6:.3f} s after {server.steps} "
+        f"control periods; {server.resends} re-sends, {server.ignored_answers} answers "
+        f"ignored, {server.rejected_bytes} bytes rejected, {server.skipped_s:.3f} s of wall "
+        "time skipped")
     return 0
 
 
@@ -219,7 +244,7 @@ def _serve_firmware(args: argparse.Namespace, scenario: Scenario, end_s: float |
             "by the firmware)")
     if not serve("sitl", server, said, stats=args.stats, stats_of=server.stats):
         return 0
-    print(f"sitl: {server.summary()}", flush=True)
+    say(f"sitl: {server.summary()}")
     return 0
 
 

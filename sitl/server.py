@@ -305,40 +305,52 @@ class SimulatorServer:
             due = start + (physics_steps + 1) * period
             behind = time.monotonic() - due
             if behind > MAX_LAG_S:
-                # The process was stopped or starved: the world stood still with it. Resume
-                # from now instead of replaying the missed time in a burst (with commands
-                # that arrived after it), which would hide the stall from the records.
                 start += behind
                 due += behind
-                self.skipped_s += behind
-                if self.log is not None:
-                    self.log.log(self.state.time_us, MAV.MAV_SEVERITY_WARNING,
-                                  f"simulator stalled {behind:.3f} s: resumed from here")
-            while self.running:
-                wait = due - time.monotonic()
-                readable, _, _ = select.select(self.link.filenos(), [], [], max(0.0, wait))
-                if readable:
-                    for _t, controls, mode in self._answers():
-                        self._on_answer(bool(mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED))
-                        self.command = self._command_from(controls, mode)
-                if wait <= 0.0:
-                    break
+                self._skip(behind)
+            self._answers_until(due)
             self.world.physics_step(self.command)
             physics_steps += 1
-            if self.feed is not None:  # every sample as it is due, not once a period
-                data = self._datagram([self.state])
-                if data:
-                    self.link.send(data)
-            if physics_steps % self.substeps == 0:
-                self.steps += 1
-                if self.feed is None:
-                    self._send_state()
-                elif self.log is not None:
-                    self.log.record(self.state)
-                    self.log.flush()
+            self._after_physics_step(physics_steps)
         while self.running:  # the run has ended: keep the link quiet until told to stop
             select.select(self.link.filenos(), [], [], 0.1)
             self._answers()
+
+    def _skip(self, behind: float) -> None:
+        """The process was stopped or starved: the world stood still with it. It resumes
+        from now instead of replaying the missed time in a burst (with commands that
+        arrived after it), which would hide the stall from the records: counted, logged."""
+        self.skipped_s += behind
+        if self.log is not None:
+            self.log.log(self.state.time_us, MAV.MAV_SEVERITY_WARNING,
+                          f"simulator stalled {behind:.3f} s: resumed from here")
+
+    def _answers_until(self, due: float) -> None:
+        """Take the FCU's answers (its commands) until the wall clock reaches `due`."""
+        while self.running:
+            wait = due - time.monotonic()
+            readable, _, _ = select.select(self.link.filenos(), [], [], max(0.0, wait))
+            if readable:
+                for _t, controls, mode in self._answers():
+                    self._on_answer(bool(mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED))
+                    self.command = self._command_from(controls, mode)
+            if wait <= 0.0:
+                break
+
+    def _after_physics_step(self, physics_steps: int) -> None:
+        """A sensor profile's samples sent as they are due; each control period, the state
+        sent (the truth profile) or the truth recorded."""
+        if self.feed is not None:  # every sample as it is due, not once a period
+            data = self._datagram([self.state])
+            if data:
+                self.link.send(data)
+        if physics_steps % self.substeps == 0:
+            self.steps += 1
+            if self.feed is None:
+                self._send_state()
+            elif self.log is not None:
+                self.log.record(self.state)
+                self.log.flush()
 
     def stats(self) -> dict[str, Any]:
         n = max(self.timed_steps, 1)

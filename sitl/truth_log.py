@@ -11,13 +11,15 @@ Topics (ULog, read with pyulog):
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from common.logs import px4_topics as px4
 from common.logs.columns import TRUTH_COLUMNS
 from common.logs.ulog import Topic, ULogWriter
+from common.process.diagnostics import get_logger
 from sitl.plant import PlantState, truth_row
+
+logger = get_logger(__name__)
 
 DQ_TRUTH = Topic("dq_truth", (("uint64_t", "timestamp"),
                               *(("double", c) for c in TRUTH_COLUMNS[1:])))
@@ -58,7 +60,6 @@ def flushed(log: TruthLog | None, time_us: int) -> TruthLog | None:
     log.flush()
     if not log.failed:
         return log
-    print(f"sitl: truth log stopped at t = {time_us * 1e-6:.3f} s: {log.failed}",
-          file=sys.stderr, flush=True)
+    logger.warning("sitl: truth log stopped at t = %.3f s: %s", time_us * 1e-6, log.failed)
     log.close()
     return None

@@ -239,7 +239,24 @@ class Prober:
         """Every requestable id answered (ACCEPTED) and no other; then every stream of link
         1 off, some asked at 1 kHz (the first fills the budget), and what streams read for a
         second: within the link's budget; then every stream back to its default."""
-        bad, missing = [], 0
+        bad: list[str] = []
+        missing = self._requests_answered(bad) + self._streams_off(bad)
+        fast = self.rng.sample(STREAM_IDS, self.rng.randint(3, len(STREAM_IDS)))
+        accepted = []
+        for msg_id in fast:
+            self.command(SET_IV, float(msg_id), 1.0)  # 1 us: 1 kHz, if the budget allows
+            if self.ack(SET_IV) == M.MAV_RESULT_ACCEPTED:
+                accepted.append(msg_id)
+        total = self._streams_within_budget(bad)
+        self._streams_back(accepted, bad)
+        ok = False if bad else None if missing else True
+        self._outcome("streams", ok, "; ".join(bad[:4]) + f" ({missing} commands unanswered; "
+                      f"asked at 1 us: {fast}, {total} stream msg/s)")
+
+    def _requests_answered(self, bad: list[str]) -> int:
+        """REQUEST_MESSAGE of every requestable id (ACCEPTED) and of others (UNSUPPORTED);
+        wrong answers into `bad`; how many went unanswered."""
+        missing = 0
         for msg_id in (*REQUESTABLE_IDS, *NOT_ANSWERED_IDS):
             self.command(REQUEST, float(msg_id))
             result = self.ack(REQUEST)
@@ -248,6 +265,12 @@ class Prober:
                 missing += 1
             elif result != want:
                 bad.append(f"REQUEST_MESSAGE({msg_id}): {result}, expected {want}")
+        return missing
+
+    def _streams_off(self, bad: list[str]) -> int:
+        """Every stream turned off (always possible); refusals into `bad`; how many went
+        unanswered."""
+        missing = 0
         for msg_id in STREAM_IDS:  # turning a stream off is always possible
             self.command(SET_IV, float(msg_id), -1.0)
             result = self.ack(SET_IV)
@@ -255,12 +278,11 @@ class Prober:
                 missing += 1
             elif result != M.MAV_RESULT_ACCEPTED:
                 bad.append(f"SET_MESSAGE_INTERVAL({msg_id}, -1): {result}, expected 0")
-        fast = self.rng.sample(STREAM_IDS, self.rng.randint(3, len(STREAM_IDS)))
-        accepted = []
-        for msg_id in fast:
-            self.command(SET_IV, float(msg_id), 1.0)  # 1 us: 1 kHz, if the budget allows
-            if self.ack(SET_IV) == M.MAV_RESULT_ACCEPTED:
-                accepted.append(msg_id)
+        return missing
+
+    def _streams_within_budget(self, bad: list[str]) -> int:
+        """The stream messages of one second, counted: over the link's budget, or one over
+        1 kHz, into `bad`; their total."""
         self.drain()
         counts = self._count(1.0)
         streams = {i: n for i, n in counts.items() if i in DEFAULT_INTERVALS_S}
@@ -271,15 +293,17 @@ class Prober:
         for i, n in streams.items():
             if n > 1000 * 1.15 + 5:
                 bad.append(f"message {i}: {n} in 1 s > 1 kHz")
+        return total
+
+    def _streams_back(self, accepted: list[int], bad: list[str]) -> None:
+        """The fast streams off, then every stream back to its default; refusals into
+        `bad`."""
         for msg_id in (*accepted, *STREAM_IDS):  # the fast ones off, then all to default
             self.command(SET_IV, float(msg_id), -1.0 if msg_id in accepted else 0.0)
             accepted = [i for i in accepted if i != msg_id]
             result = self.ack(SET_IV)
             if result is not None and result != M.MAV_RESULT_ACCEPTED:
                 bad.append(f"SET_MESSAGE_INTERVAL({msg_id}) back to its default: {result}")
-        ok = False if bad else None if missing else True
-        self._outcome("streams", ok, "; ".join(bad[:4]) + f" ({missing} commands unanswered; "
-                      f"asked at 1 us: {fast}, {total} stream msg/s)")
 
     def probe_heartbeat_off(self) -> None:
         """HEARTBEAT off on link 1: none there for 2.5 s while link 2 keeps its own; then

@@ -252,6 +252,18 @@ def resolved_scenario_data(path: str | Path) -> dict[str, Any]:
     return data
 
 
+def _rates(t: Table, source: str) -> tuple[int, int]:
+    """`[rates]`: the control and physics rates (Hz), physics a multiple of control."""
+    rates = SCENARIO_KEYS["rates"].read(t)
+    control_hz = RATES_KEYS["control_hz"].read(rates)
+    physics_hz = RATES_KEYS["physics_hz"].read(rates)
+    rates.finish()
+    if physics_hz % control_hz:
+        raise ConfigError(f"{source}: key 'rates.physics_hz': expected a multiple of "
+                          f"rates.control_hz = {control_hz}, got {physics_hz}")
+    return control_hz, physics_hz
+
+
 def _trajectory(traj_t: Table, initial_p: Vec3, base: Path) -> TrajectoryConfig:
     """The `[trajectory]` table's keys for its kind."""
     k = TRAJECTORY_KEYS
@@ -318,13 +330,7 @@ def scenario_from_data(data: dict[str, Any], path: str | Path, *,
     pd_of, pd_path = part(GAINS_TABLE_KEYS["pd"], gains_t, parse_gains, load_gains)
     gains_t.finish()
 
-    rates = k["rates"].read(t)
-    control_hz = RATES_KEYS["control_hz"].read(rates)
-    physics_hz = RATES_KEYS["physics_hz"].read(rates)
-    rates.finish()
-    if physics_hz % control_hz:
-        raise ConfigError(f"{source}: key 'rates.physics_hz': expected a multiple of "
-                          f"rates.control_hz = {control_hz}, got {physics_hz}")
+    control_hz, physics_hz = _rates(t, source)
 
     init = k["initial"].read(t)
     start = INITIAL_KEYS["start"].read(init)

@@ -13,9 +13,11 @@ SIGINT.
 from __future__ import annotations
 
 import importlib
-import sys
 
 from common.process import startup
+from common.process.diagnostics import get_logger
+
+log = get_logger(__name__)
 
 
 def _run(prog: str, module: str, *, loop_handles_sigint: bool) -> int:
@@ -25,18 +27,18 @@ def _run(prog: str, module: str, *, loop_handles_sigint: bool) -> int:
         if not loop_handles_sigint:
             startup.release()  # a stop recorded meanwhile raises here
     except KeyboardInterrupt:
-        print(f"{prog}: stopped while starting", file=sys.stderr, flush=True)
+        log.warning("%s: stopped while starting", prog)
         return 0
     if startup.stop_requested():
-        print(f"{prog}: stopped while starting", file=sys.stderr, flush=True)
+        log.warning("%s: stopped while starting", prog)
         return 0
     try:
         return int(main() or 0)
     except KeyboardInterrupt:  # where the program does not handle it itself
         if loop_handles_sigint:  # its loop stops on SIGINT: this came before the loop ran
-            print(f"{prog}: stopped while starting", file=sys.stderr, flush=True)
+            log.warning("%s: stopped while starting", prog)
             return 0
-        print(f"{prog}: interrupted", file=sys.stderr, flush=True)
+        log.error("%s: interrupted", prog)
         return 130
 
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
@@ -17,8 +16,11 @@ from common.config.scenario import ConfigError
 from common.links import LinkError
 from common.logs.ulog import ULogError
 from common.process import startup
+from common.process.diagnostics import get_logger, say
 from common.process.realtime import schedule_loop
 from common.wire.mavlink import SigningKeyError
+
+log = get_logger(__name__)
 
 # a program that cannot start for these says why in one line and exits 2 (`start_failed`)
 STARTUP_ERRORS = (ConfigError, SigningKeyError, ULogError)
@@ -40,16 +42,16 @@ def start_failed(prog: str, exc: BaseException) -> int:
     port, a missing device; 1: no peer), 2 for bad configuration or a file that cannot be
     written. Anything else is raised again."""
     if isinstance(exc, KeyboardInterrupt):  # Ctrl-C or SIGTERM before the loop ran
-        print(f"{prog}: stopped while starting", file=sys.stderr, flush=True)
+        log.warning("%s: stopped while starting", prog)
         return 0
     if isinstance(exc, LinkError):
-        print(f"{prog}: {exc}", file=sys.stderr)
+        log.error("%s: %s", prog, exc)
         return exc.exit_code
     if isinstance(exc, STARTUP_ERRORS):
-        print(f"{prog}: {exc}", file=sys.stderr)
+        log.error("%s: %s", prog, exc)
         return 2
     if isinstance(exc, OSError):  # a file that cannot be written
-        print(f"{prog}: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        log.error("%s: %s: %s", prog, exc.filename or '', exc.strerror or exc)
         return 2
     raise exc
 
@@ -59,12 +61,12 @@ def serve(prog: str, loop: Loop, said: str, *, rt_priority: int | None = None,
           on_hup: Callable[[], None] | None = None) -> bool:
     """Run a started program's loop; False (and the loop closed) if a stop came while it
     started. Else SIGTERM and SIGINT end the loop (SIGHUP calls `on_hup` where given),
-    `said` is printed, a real-time loop is scheduled (`rt_priority`, `common.process.realtime`),
-    the loop runs, and `stats_of()` is written to `stats` whole (a temporary file renamed)
-    when it ends; True."""
+    `said` is written (program output), a real-time loop is scheduled (`rt_priority`,
+    `common.process.realtime`), the loop runs, and `stats_of()` is written to `stats` whole
+    (a temporary file renamed) when it ends; True."""
     if startup.stop_requested():  # Ctrl-C or SIGTERM while it started: nothing flown
         loop.close()
-        print(f"{prog}: stopped while starting", file=sys.stderr, flush=True)
+        log.warning("%s: stopped while starting", prog)
         return False
 
     def stop(_signum: int, _frame: object) -> None:
@@ -74,7 +76,7 @@ def serve(prog: str, loop: Loop, said: str, *, rt_priority: int | None = None,
     signal.signal(signal.SIGINT, stop)
     if on_hup is not None:
         signal.signal(signal.SIGHUP, lambda _signum, _frame: on_hup())
-    print(said, flush=True)
+    say(said)
     if rt_priority is not None:
         schedule_loop(prog, rt_priority)
     loop.run()

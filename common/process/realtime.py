@@ -23,6 +23,8 @@ from __future__ import annotations
 import gc
 import os
 
+from common.process.diagnostics import say
+
 DEFAULT_PRIORITY = 50  # SCHED_FIFO 1..99; PX4's and ArduPilot's loops sit in the middle
 
 
@@ -42,10 +44,11 @@ def request_fifo(priority: int) -> str:
 
 
 def schedule_loop(prog: str, priority: int) -> None:
-    """`request_fifo` for a program's real-time loop, said in one line either way; the
-    objects built so far frozen out of the garbage collector's full collections."""
+    """`request_fifo` for a program's real-time loop, said in one status line (program
+    output) either way; the objects built so far frozen out of the garbage collector's full
+    collections."""
     gc.collect()
     gc.freeze()
     refused = request_fifo(priority)
-    print(f"{prog}: loop scheduled SCHED_FIFO {priority}" if not refused else
-          f"{prog}: loop at normal priority: real-time priority {refused}", flush=True)
+    say(f"{prog}: loop scheduled SCHED_FIFO {priority}" if not refused else
+        f"{prog}: loop at normal priority: real-time priority {refused}")

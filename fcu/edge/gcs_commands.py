@@ -138,73 +138,82 @@ class CommandService:
         """A command's answer, or None when it was answered here."""
         cmd = msg.command
         p = (msg.param1, msg.param2, msg.param3, msg.param4)
-        pipe = self.server.pipeline
-        c = pipe.commander
-        result = ACCEPTED
-        text = ""
+        c = self.server.pipeline.commander
         if cmd == MAV_CMD.MAV_CMD_COMPONENT_ARM_DISARM:
-            if p[0] == 1.0:
-                result, text = pipe.arm()
-            elif p[0] == 0.0:
-                result, text = c.disarm(force=p[1] == FORCE_DISARM_MAGIC)
-            else:
-                result, text = DENIED, "arm: p1 must be 0 or 1"
-        elif cmd == MAV_CMD.MAV_CMD_DO_SET_MODE:
-            base = as_int(p[0], 0, 255)
-            main = as_int(p[1], 0, 255)
-            sub = as_int(p[2], 0, 255) if math.isfinite(p[2]) else 0
-            mode = decode(main, sub or 0) if base is not None and main is not None and \
-                base & MAV_MODE_FLAG.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED else None
-            if mode is None:
-                result, text = DENIED, "unsupported mode"
-            else:
-                result, text = c.set_mode(mode, now_s)
-        elif cmd == MAV_CMD.MAV_CMD_MISSION_START:
+            return self._arm_disarm(p)
+        if cmd == MAV_CMD.MAV_CMD_DO_SET_MODE:
+            return self._set_mode(p, now_s)
+        if cmd == MAV_CMD.MAV_CMD_MISSION_START:
             first = as_int(p[0], 0, 0xFFFF) if p[0] != 0 else 0
-            if first is None:
-                result, text = DENIED, f"no mission item {p[0]:g}"
-            else:
-                result, text = c.mission_start(first)
-        elif cmd == MAV_CMD.MAV_CMD_DO_SET_MISSION_CURRENT:
+            return Answer(DENIED, f"no mission item {p[0]:g}") if first is None else \
+                c.mission_start(first)
+        if cmd == MAV_CMD.MAV_CMD_DO_SET_MISSION_CURRENT:
             seq = as_int(p[0], 0, 0xFFFF)
-            result = DENIED if seq is None else self.server.set_mission_current(seq)
-            text = f"no mission item {p[0]:g}"
-        elif cmd == MAV_CMD.MAV_CMD_NAV_LAND:
-            result, text = c.set_mode(Mode.LAND, now_s)
-        elif cmd == MAV_CMD.MAV_CMD_NAV_TAKEOFF:
-            result, text = self._takeoff(msg)
-        elif cmd == MAV_CMD.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-            result, text = c.set_mode(Mode.RTL, now_s)
-        elif cmd == MAV_CMD.MAV_CMD_SET_MESSAGE_INTERVAL:
-            msg_id = as_int(p[0], 0, 0xFFFFFF)
-            if msg_id is None:
-                result, text = DENIED, f"no message id {p[0]:g}"
-            else:
-                ok, text = self.server.schedule(index).set_interval(msg_id, p[1])
-                result = ACCEPTED if ok else DENIED
-        elif cmd == MAV_CMD.MAV_CMD_GET_MESSAGE_INTERVAL:
+            return Answer(DENIED if seq is None else self.server.set_mission_current(seq),
+                          f"no mission item {p[0]:g}")
+        if cmd == MAV_CMD.MAV_CMD_NAV_LAND:
+            return c.set_mode(Mode.LAND, now_s)
+        if cmd == MAV_CMD.MAV_CMD_NAV_TAKEOFF:
+            return self._takeoff(msg)
+        if cmd == MAV_CMD.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            return c.set_mode(Mode.RTL, now_s)
+        if cmd == MAV_CMD.MAV_CMD_SET_MESSAGE_INTERVAL:
+            return self._set_interval(index, p)
+        if cmd in (MAV_CMD.MAV_CMD_GET_MESSAGE_INTERVAL, MAV_CMD.MAV_CMD_REQUEST_MESSAGE,
+                   MAV_CMD.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            return self._send_requested(index, msg, p)
+        return Answer(UNSUPPORTED, "")
+
+    def _arm_disarm(self, p: tuple[float, float, float, float]) -> Answer:
+        """MAV_CMD_COMPONENT_ARM_DISARM: p1 1 arms, 0 disarms (p2 the magic: forced)."""
+        pipe = self.server.pipeline
+        if p[0] == 1.0:
+            return pipe.arm()
+        if p[0] == 0.0:
+            return pipe.commander.disarm(force=p[1] == FORCE_DISARM_MAGIC)
+        return Answer(DENIED, "arm: p1 must be 0 or 1")
+
+    def _set_mode(self, p: tuple[float, float, float, float], now_s: float) -> Answer:
+        """MAV_CMD_DO_SET_MODE: base mode with the custom flag, main and sub mode."""
+        base = as_int(p[0], 0, 255)
+        main = as_int(p[1], 0, 255)
+        sub = as_int(p[2], 0, 255) if math.isfinite(p[2]) else 0
+        mode = decode(main, sub or 0) if base is not None and main is not None and \
+            base & MAV_MODE_FLAG.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED else None
+        if mode is None:
+            return Answer(DENIED, "unsupported mode")
+        return self.server.pipeline.commander.set_mode(mode, now_s)
+
+    def _set_interval(self, index: int, p: tuple[float, float, float, float]) -> Answer:
+        """MAV_CMD_SET_MESSAGE_INTERVAL: a message's rate on the link `index`."""
+        msg_id = as_int(p[0], 0, 0xFFFFFF)
+        if msg_id is None:
+            return Answer(DENIED, f"no message id {p[0]:g}")
+        ok, text = self.server.schedule(index).set_interval(msg_id, p[1])
+        return Answer(ACCEPTED if ok else DENIED, text)
+
+    def _send_requested(self, index: int, msg: Command,
+                        p: tuple[float, float, float, float]) -> Answer | None:
+        """MAV_CMD_GET_MESSAGE_INTERVAL, MAV_CMD_REQUEST_MESSAGE and
+        MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: acknowledged and the message sent here
+        (None), or refused (GET_MESSAGE_INTERVAL: an answer)."""
+        cmd = msg.command
+        if cmd == MAV_CMD.MAV_CMD_GET_MESSAGE_INTERVAL:
             msg_id = as_int(p[0], 0, 0xFFFF)
             if msg_id is None:
-                result, text = DENIED, f"no message id {p[0]:g}"
-            else:
-                self.ack(index, msg, cmd, ACCEPTED)
-                self.server.send(M.MAVLink_message_interval_message(
-                    msg_id, self.server.schedule(index).interval_us(msg_id)), index)
-                return None
-        elif cmd in (MAV_CMD.MAV_CMD_REQUEST_MESSAGE,
-                     MAV_CMD.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            msg_id = M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if cmd != MAV_CMD.MAV_CMD_REQUEST_MESSAGE \
-                else as_int(p[0], 0, 0xFFFFFF)
-            if msg_id is None or (msg_id not in REQUESTABLE
-                                  and msg_id not in ALWAYS_REQUESTABLE):
-                self.ack(index, msg, cmd, UNSUPPORTED)
-                return None
+                return Answer(DENIED, f"no message id {p[0]:g}")
             self.ack(index, msg, cmd, ACCEPTED)
-            self.server.send_message(msg_id, index)
+            self.server.send(M.MAVLink_message_interval_message(
+                msg_id, self.server.schedule(index).interval_us(msg_id)), index)
             return None
-        else:
-            result = UNSUPPORTED
-        return Answer(result, text)
+        msg_id = M.MAVLINK_MSG_ID_AUTOPILOT_VERSION if cmd != MAV_CMD.MAV_CMD_REQUEST_MESSAGE \
+            else as_int(p[0], 0, 0xFFFFFF)
+        if msg_id is None or (msg_id not in REQUESTABLE and msg_id not in ALWAYS_REQUESTABLE):
+            self.ack(index, msg, cmd, UNSUPPORTED)
+            return None
+        self.ack(index, msg, cmd, ACCEPTED)
+        self.server.send_message(msg_id, index)
+        return None
 
     def _takeoff(self, msg: Command) -> Answer:
         """MAV_CMD_NAV_TAKEOFF: altitude NaN (MAVSDK's, QGC's) -> MIS_TAKEOFF_ALT above the

@@ -228,45 +228,66 @@ class GcsServer:
                 self.gcs_seen_s = now_s
             return
         if kind == "MANUAL_CONTROL":  # its target field is `target`
-            manual = as_message(msg, ManualControl)
-            if manual.target not in (0, self.system_id):
-                self.ignored_messages += 1
-                return
-            self.pipeline.commander.manual_input(
-                now_s, sticks_from_manual_control(manual.x, manual.y, manual.z, manual.r))
+            self._manual(msg, now_s)
             return
         target = getattr(msg, "target_system", 0)
         if target not in (0, self.system_id):
             self.ignored_messages += 1
             return
-        cmd = self.pipeline.commander
         if kind == "COMMAND_LONG":
             self.commands.handle(index, as_message(msg, CommandLong), now_s)
         elif kind == "COMMAND_INT":
             self.commands.handle(index, as_message(msg, CommandInt), now_s)
         elif kind.startswith("MISSION_"):
-            replies = self.missions.handle(msg, now_s)
-            if kind == "MISSION_COUNT" and any(r.get_type() == "MISSION_REQUEST_INT"
-                                               for r in replies):
-                self.mission_link = index  # an upload began: its re-requests go here
-            self._send_mission(replies, index)
-        elif kind == "PARAM_REQUEST_LIST":
+            self._mission(index, msg, now_s)
+        elif kind.startswith("PARAM_"):
+            self._param(index, msg)
+        elif kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET"):
+            self._setpoint(index, msg, now_s)
+        elif kind == "SET_MODE":
+            self._set_mode(index, msg, now_s)
+
+    def _manual(self, msg: MAV.MAVLink_message, now_s: float) -> None:
+        """MANUAL_CONTROL for this system (or all): the sticks to the commander."""
+        manual = as_message(msg, ManualControl)
+        if manual.target not in (0, self.system_id):
+            self.ignored_messages += 1
+            return
+        self.pipeline.commander.manual_input(
+            now_s, sticks_from_manual_control(manual.x, manual.y, manual.z, manual.r))
+
+    def _mission(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
+        """A mission protocol message: the mission server's replies to the link it came on
+        (an upload's re-requests too, once it began there)."""
+        replies = self.missions.handle(msg, now_s)
+        if msg.get_type() == "MISSION_COUNT" and any(r.get_type() == "MISSION_REQUEST_INT"
+                                                     for r in replies):
+            self.mission_link = index  # an upload began: its re-requests go here
+        self._send_mission(replies, index)
+
+    def _param(self, index: int, msg: MAV.MAVLink_message) -> None:
+        """PARAM_REQUEST_LIST, PARAM_REQUEST_READ and PARAM_SET to the parameter service."""
+        kind = msg.get_type()
+        if kind == "PARAM_REQUEST_LIST":
             self.param_service.request_list(index)
         elif kind == "PARAM_REQUEST_READ":
             self.param_service.param_read(index, as_message(msg, ParamRequestRead))
         elif kind == "PARAM_SET":
             self.param_service.param_set(index, as_message(msg, ParamSet))
-        elif kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET"):
-            self._setpoint(index, msg, now_s)
-        elif kind == "SET_MODE":
-            mode = decode_custom(as_message(msg, SetMode).custom_mode)
-            if mode is not None:
-                result, text = cmd.set_mode(mode, now_s)
-                under_way = cmd.under_way
-                if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and under_way is not None:
-                    under_way.on_end(lambda r, t: self._refused(r, t, index))
-                else:
-                    self._refused(result, text, index)
+
+    def _set_mode(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
+        """SET_MODE: a known custom mode to the commander; a refusal said to the link (a
+        mode under way: when it ends)."""
+        mode = decode_custom(as_message(msg, SetMode).custom_mode)
+        if mode is None:
+            return
+        cmd = self.pipeline.commander
+        result, text = cmd.set_mode(mode, now_s)
+        under_way = cmd.under_way
+        if result == MAV_RESULT.MAV_RESULT_IN_PROGRESS and under_way is not None:
+            under_way.on_end(lambda r, t: self._refused(r, t, index))
+        else:
+            self._refused(result, text, index)
 
     def _refused(self, result: int, text: str, index: int) -> None:
         if result != MAV_RESULT.MAV_RESULT_ACCEPTED and text:

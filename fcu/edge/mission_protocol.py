@@ -223,16 +223,26 @@ class MissionServer:
         if kind in ("MISSION_WRITE_PARTIAL_LIST", "MISSION_REQUEST_PARTIAL_LIST"):
             return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
         if kind == "MISSION_CLEAR_ALL":
-            if mission_type not in (MISSION, M.MAV_MISSION_TYPE_ALL):
-                return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
-            self._checking = None  # cleared after it: the check's answer would be stale
-            self._replace(())
-            return [self._ack(partner, M.MAV_MISSION_ACCEPTED, mission_type, opaque=True)]
+            return self._clear_all(partner, mission_type)
         if kind not in ("MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM",
                         "MISSION_REQUEST_LIST", "MISSION_REQUEST_INT", "MISSION_REQUEST"):
             return []
         if mission_type != MISSION:
             return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
+        return self._transfer(kind, msg, partner, now_s)
+
+    def _clear_all(self, partner: Partner, mission_type: int) -> list[MAV.MAVLink_message]:
+        """MISSION_CLEAR_ALL of the mission (or of all types): the mission emptied."""
+        if mission_type not in (MISSION, M.MAV_MISSION_TYPE_ALL):
+            return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
+        self._checking = None  # cleared after it: the check's answer would be stale
+        self._replace(())
+        return [self._ack(partner, M.MAV_MISSION_ACCEPTED, mission_type, opaque=True)]
+
+    def _transfer(self, kind: str, msg: MAV.MAVLink_message, partner: Partner,
+                  now_s: float) -> list[MAV.MAVLink_message]:
+        """An upload's count and items, a download's list and item requests (the mission
+        type's own, checked by `handle`)."""
         if kind == "MISSION_COUNT":
             return self._on_count(partner, as_message(msg, MissionCount).count, now_s)
         if kind == "MISSION_ITEM_INT":

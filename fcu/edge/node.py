@@ -25,10 +25,11 @@ from pathlib import Path
 from typing import Any
 
 from common.config.scenario import ConfigError, load_gains, load_vehicle
-from common.links import LinkError, open_link, parse_url
+from common.links import Link, LinkError, open_link, parse_url
 from common.outcome import Event
 from common.process import startup
 from common.process.cliargs import check_output_path
+from common.process.diagnostics import get_logger, say, setup_logging
 from common.process.parent import stop_with_parent
 from common.process.program import STARTUP_ERRORS, serve, start_failed
 from common.process.startup import compile_time_s
@@ -51,6 +52,7 @@ from fcu.warm import warm as warm_plans
 from fcu.work import Work
 
 M = MAV
+log = get_logger(__name__)
 HOUSEKEEPING_S = 0.002
 SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each state
 SIM_SILENT_S = 1.0  # lockstep: report a simulator silent this long (wall clock)
@@ -309,63 +311,82 @@ class FlightController:
         links = [(-1, sim_link), *enumerate(self.server.links[i].link
                                             for i in range(len(self.server.links)))]
         c = self.pipeline.commander
-        perf = time.perf_counter_ns
         fast = self.lockstep and sim_link.spin
         while self.running:
             now = time.monotonic()
             if fast and now - self.last_sim_rx_s < SPIN_S and now < next_housekeeping:
-                # Lockstep, the next state microseconds away: poll the simulator link alone
-                # (the GCS links wait for the housekeeping, at most HOUSEKEEPING_S).
-                if not select.select(sim_link.filenos(), [], [], 0.0)[0]:
-                    os.sched_yield()  # let a process that has work run on this core
-                    continue
-                self.rx_ns = perf()
-                for peer, data in sim_link.recv(1):  # one is ready; more: the next turn
-                    self._on_sim_datagram(peer, data)
-                if self.rtt_probes:
-                    self._measure_rtt()
-                if c.events or c.mission_events:
-                    self._timed_housekeeping(time.monotonic())
-                    next_housekeeping = time.monotonic() + HOUSEKEEPING_S
+                next_housekeeping = self._spin_once(sim_link, next_housekeeping)
                 continue
             fds = {fd: entry for entry in links for fd in entry[1].filenos()}
             work_fds = self.work.filenos()  # a result of work beside the loop wakes it
-            # telemetry goes out with the housekeeping (real time: after a step), not sooner
-            wake = min(max(self.server.next_due(), next_housekeeping), next_housekeeping + 0.05) \
-                if self.lockstep else next_tick
-            timeout = min(max(0.0, wake - now), 0.05)
-            if self.lockstep and sim_link.spin and now - self.last_sim_rx_s < SPIN_S:
-                timeout = 0.0  # lockstep: the next state is microseconds away, poll for it
+            timeout = self._wait_timeout(now, next_tick, next_housekeeping)
             try:
                 readable, _, _ = select.select([*fds, *work_fds], [], [], timeout)
             except InterruptedError:
                 continue
             if not readable and timeout == 0.0:
                 os.sched_yield()  # polling: let a process that has work run on this core
-            self.rx_ns = perf()
+            self.rx_ns = time.perf_counter_ns()
             if self.work.pending and self.work.take():  # results in, at a step boundary
                 next_housekeeping = 0.0  # their answers out at once (real time: after a step)
-            for index, link in {fds[fd] for fd in readable if fd in fds}:
-                for peer, data in link.recv():
-                    if index < 0:
-                        self._on_sim_datagram(peer, data)
-                    else:
-                        self.server.on_datagram(index, peer, data, time.monotonic())
+            self._read_links([fds[fd] for fd in readable if fd in fds])
             if self.rtt_probes and self.sim_heard:
                 self._measure_rtt()
             now = time.monotonic()
             stepped = self.lockstep or now >= next_tick
             if not self.lockstep and now >= next_tick:
-                next_tick = self.deadlines.step(now, next_tick, self.boot_s)
-                dt_s = min(max(now - last_tick, 0.0), MAX_DT_PERIODS * period_s) or period_s
-                last_tick = now
-                self.time_us = round((now - self.boot_s) * 1e6)
-                self._control_step(self.time_us, dt_s)
+                next_tick, last_tick = self._real_time_step(now, next_tick, last_tick, period_s)
             if stepped and (now >= next_housekeeping or c.events or c.mission_events):
                 # Link-facing work at most every few ms: the lockstep path stays lean; in
                 # real time right after a step, the most time before the next one is due.
                 self._timed_housekeeping(now)
                 next_housekeeping = now + HOUSEKEEPING_S
+
+    def _spin_once(self, sim_link: Link, next_housekeeping: float) -> float:
+        """Lockstep, the next state microseconds away: poll the simulator link alone (the GCS
+        links wait for the housekeeping); the next housekeeping's time (sooner on events)."""
+        if not select.select(sim_link.filenos(), [], [], 0.0)[0]:
+            os.sched_yield()  # let a process that has work run on this core
+            return next_housekeeping
+        self.rx_ns = time.perf_counter_ns()
+        for peer, data in sim_link.recv(1):  # one is ready; more: the next turn
+            self._on_sim_datagram(peer, data)
+        if self.rtt_probes:
+            self._measure_rtt()
+        c = self.pipeline.commander
+        if c.events or c.mission_events:
+            self._timed_housekeeping(time.monotonic())
+            return time.monotonic() + HOUSEKEEPING_S
+        return next_housekeeping
+
+    def _wait_timeout(self, now: float, next_tick: float, next_housekeeping: float) -> float:
+        """How long the loop may wait for its links: until telemetry is due with the
+        housekeeping (lockstep) or the next tick (real time); 0 to poll for a state due."""
+        # telemetry goes out with the housekeeping (real time: after a step), not sooner
+        wake = min(max(self.server.next_due(), next_housekeeping), next_housekeeping + 0.05) \
+            if self.lockstep else next_tick
+        timeout = min(max(0.0, wake - now), 0.05)
+        if self.lockstep and self.sim.link.spin and now - self.last_sim_rx_s < SPIN_S:
+            timeout = 0.0  # lockstep: the next state is microseconds away, poll for it
+        return timeout
+
+    def _read_links(self, ready: list[tuple[int, Link]]) -> None:
+        """Every datagram of the ready links: the simulator's (index -1) and the GCS's."""
+        for index, link in set(ready):
+            for peer, data in link.recv():
+                if index < 0:
+                    self._on_sim_datagram(peer, data)
+                else:
+                    self.server.on_datagram(index, peer, data, time.monotonic())
+
+    def _real_time_step(self, now: float, next_tick: float, last_tick: float,
+                        period_s: float) -> tuple[float, float]:
+        """Real time: a control step over the time since the last; the next tick, this one."""
+        next_tick = self.deadlines.step(now, next_tick, self.boot_s)
+        dt_s = min(max(now - last_tick, 0.0), MAX_DT_PERIODS * period_s) or period_s
+        self.time_us = round((now - self.boot_s) * 1e6)
+        self._control_step(self.time_us, dt_s)
+        return next_tick, now
 
     def _timed_housekeeping(self, now: float) -> None:
         if not self.done_ns:
@@ -428,6 +449,7 @@ def _quantile(samples: list[float], q: float) -> float | None:
 def main(argv: list[str] | None = None) -> int:
     stop_with_parent()
     args = build_parser().parse_args(argv)
+    setup_logging("fcu", args)
 
     startup.guard()  # a stop while starting (loading the kernels, say) is looked at below
     try:
@@ -445,6 +467,8 @@ def main(argv: list[str] | None = None) -> int:
             raise ConfigError(f"--rt-priority: expected 0..99, got {args.rt_priority}")
         pipeline, params = fcu_pipeline(load_vehicle(args.vehicle), load_gains(args.gains),
                                         args.rate)
+        log.debug("fcu: vehicle %s, gains %s, control at %s Hz", args.vehicle, args.gains,
+                  args.rate)
         key = read_signing_key(args.signing_key) if args.signing_key else None
         fc = FlightController(pipeline, args.sim, args.gcs or list(DEFAULT_GCS),
                               system_id=args.sysid, lockstep=not args.realtime,
@@ -467,9 +491,8 @@ def main(argv: list[str] | None = None) -> int:
     if not serve("fcu", fc, said, rt_priority=args.rt_priority if args.realtime else None,
                  on_hup=rotate):
         return 0
-    print(f"fcu: stopped after {fc.steps} control steps; {fc.deadlines.misses} deadline misses, "
-          f"{fc.sim.resent_answers} answers re-sent, {fc.sim.rejected_bytes} bytes rejected",
-          flush=True)
+    say(f"fcu: stopped after {fc.steps} control steps; {fc.deadlines.misses} deadline misses, "
+        f"{fc.sim.resent_answers} answers re-sent, {fc.sim.rejected_bytes} bytes rejected")
     return 0
 
 

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 from common.process.cliargs import OneLineParser
+from common.process.diagnostics import add_verbosity_options
 from common.process.realtime import DEFAULT_PRIORITY
 from common.wire.mission_items import PX4_SITL_HOME, HomePosition
 from fcu.work import KINDS
@@ -26,6 +27,7 @@ def _home(text: str) -> HomePosition:
 
 def build_parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="fcu", description="dual-quaternion flight controller")
+    add_verbosity_options(p)
     p.add_argument("--vehicle", type=Path, required=True, help="vehicle TOML")
     p.add_argument("--gains", type=Path, required=True, help="gains TOML (PID or PD)")
     p.add_argument("--sim", default="udpout:127.0.0.1:4560", help="simulator link URL")

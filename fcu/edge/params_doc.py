@@ -10,6 +10,7 @@ import argparse
 import math
 from pathlib import Path
 
+from common.process.diagnostics import say
 from fcu.params import DEFAULT_OVERRIDES, GROUPS, LOCKED_WHEN_ARMED, ParamSpec
 
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "parameters.md"
@@ -68,11 +69,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.check:
         current = PAGE.read_text() if PAGE.exists() else ""
         if current != text:
-            print("docs/parameters.md is stale: run python -m fcu.edge.params_doc")
+            say("docs/parameters.md is stale: run python -m fcu.edge.params_doc")
             return 1
         return 0
     PAGE.write_text(text)
-    print("wrote docs/parameters.md")
+    say("wrote docs/parameters.md")
     return 0
 
 

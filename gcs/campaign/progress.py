@@ -37,8 +37,9 @@ class Progress:
         decile = 10 * self.done // max(self.total, 1)
         if decile != self._last_decile or self.done == self.total:
             self._last_decile = decile
-            print(f"campaign: {self.done}/{self.total} runs, {_clock(elapsed)} elapsed, "
-                  f"ETA {_clock(eta)}  ({counts})", file=self.stream, flush=True)
+            self.stream.write(f"campaign: {self.done}/{self.total} runs, {_clock(elapsed)} "
+                              f"elapsed, ETA {_clock(eta)}  ({counts})\n")
+            self.stream.flush()
 
 
 def _clock(s: float) -> str:

@@ -63,7 +63,8 @@ def run_campaign(campaign: Campaign, out: Path, *, scheduler: str | None = None,
                 with ClusterClient(scheduler, workers, dashboard) as (dask_client, link):
                     n_workers = len(dask_client.scheduler_info().get("workers", {}))
                     if link:
-                        print(f"campaign: dashboard {link}", file=progress.stream, flush=True)
+                        progress.stream.write(f"campaign: dashboard {link}\n")
+                        progress.stream.flush()
                     dask_client.run(warm_worker)  # part of the start-up, not of the first runs
                     t_runs = time.monotonic()
                     progress.t0 = t_runs

@@ -10,10 +10,13 @@ telemetry (`telemetry`: log record, view).
 
 from __future__ import annotations
 
+import argparse
 import sys
+from collections.abc import Callable
 
 from common.config.scenario import ConfigError
 from common.links import LinkError
+from common.process.diagnostics import get_logger, setup_logging
 from gcs.cli.console import InputError
 from gcs.cli.inputs import check_input
 from gcs.cli.links import cmd_keygen, cmd_router
@@ -22,55 +25,63 @@ from gcs.cli.runs import cmd_campaign, cmd_replay, cmd_report, cmd_run, cmd_tabl
 from gcs.cli.telemetry import cmd_log, cmd_view
 from gcs.cli.vehicle import cmd_vehicle
 
+log = get_logger(__name__)
+
+# the commands that do not talk to a vehicle, by name; every other one is `cmd_vehicle`'s
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "run": cmd_run, "table1": cmd_table1, "campaign": cmd_campaign, "report": cmd_report,
+    "replay": cmd_replay, "router": cmd_router, "keygen": cmd_keygen, "log": cmd_log,
+    "view": cmd_view}
+
 
 def main(argv: list[str] | None = None) -> int:
     """Exit status: 0 done, 1 the vehicle refused or did not answer (or a link failed at
     run time), 2 bad input (arguments, URLs, files, busy ports), 130 interrupted."""
+    args = build_parser().parse_args(argv)
+    setup_logging("gcs", args)
+    caught: tuple[type[BaseException], ...] = (LinkError, KeyboardInterrupt, OSError,
+                                              *_bad_input(), *_refused())
+    try:
+        check_input(args)
+        return COMMANDS.get(args.command, cmd_vehicle)(args)
+    except caught as exc:
+        return _failed(args.command, exc)
+
+
+def _bad_input() -> tuple[type[Exception], ...]:
+    """The errors of bad input (exit status 2), imported when a command runs."""
     from common.wire.mavlink import SigningKeyError
     from gcs.mission_files.items import MissionFileError
+
+    return ConfigError, InputError, MissionFileError, SigningKeyError
+
+
+def _refused() -> tuple[type[Exception], ...]:
+    """The errors of a vehicle that refused or did not answer (exit status 1)."""
     from gcs.vehicle_link.mission_client import MissionError
     from gcs.vehicle_link.session import GcsError
 
-    args = build_parser().parse_args(argv)
-    try:
-        check_input(args)
-        if args.command == "run":
-            return cmd_run(args)
-        if args.command == "table1":
-            return cmd_table1(args)
-        if args.command == "campaign":
-            return cmd_campaign(args)
-        if args.command == "report":
-            return cmd_report(args)
-        if args.command == "replay":
-            return cmd_replay(args)
-        if args.command == "router":
-            return cmd_router(args)
-        if args.command == "keygen":
-            return cmd_keygen(args)
-        if args.command == "log":
-            return cmd_log(args)
-        if args.command == "view":
-            return cmd_view(args)
-        return cmd_vehicle(args)
-    except LinkError as exc:
-        print(f"gcs {args.command}: {exc}", file=sys.stderr)
+    return GcsError, MissionError
+
+
+def _failed(command: str, exc: BaseException) -> int:
+    """The one line (an error diagnostic) and the exit status of a command that failed:
+    a link's own status, 2 bad input, 1 the vehicle or the machine said no, 130
+    interrupted, 0 for a reader gone (`gcs ... | head`: nothing is lost)."""
+    if isinstance(exc, LinkError):
+        log.error("gcs %s: %s", command, exc)
         return exc.exit_code
-    except (ConfigError, InputError, MissionFileError, SigningKeyError) as exc:
-        print(f"gcs {args.command}: {exc}", file=sys.stderr)
-        return 2
-    except (GcsError, MissionError) as exc:
-        print(f"gcs {args.command}: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("gcs: interrupted", file=sys.stderr)
+    if isinstance(exc, KeyboardInterrupt):
+        log.error("gcs: interrupted")
         return 130
-    except BrokenPipeError:  # `gcs ... | head`: the reader has gone, nothing is lost
+    if isinstance(exc, BrokenPipeError):
         sys.stdout = None
         return 0
-    except OSError as exc:  # the file system (or the machine) said no: one line
+    if isinstance(exc, OSError):  # the file system (or the machine) said no: one line
         if exc.filename is not None:
-            print(f"gcs {args.command}: {exc.filename}: {exc.strerror}", file=sys.stderr)
+            log.error("gcs %s: %s: %s", command, exc.filename, exc.strerror)
             return 2
-        print(f"gcs {args.command}: {exc.strerror or exc}", file=sys.stderr)
+        log.error("gcs %s: %s", command, exc.strerror or exc)
         return 1
+    log.error("gcs %s: %s", command, exc)
+    return 2 if isinstance(exc, _bad_input()) else 1

@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from common.process.diagnostics import say
 from gcs.cli.parser import HEARTBEAT_WAIT_S
 
 if TYPE_CHECKING:
@@ -46,11 +47,11 @@ def print_result(what: str, result: int, session: Session | None = None) -> int:
     from common.wire.mavlink import MAV
 
     if result == MAV.MAV_RESULT_ACCEPTED:
-        print(f"{what}: MAV_RESULT_ACCEPTED")
+        say(f"{what}: MAV_RESULT_ACCEPTED")
         return 0
     if session is not None:
-        print(f"{what} refused: {session.describe(result)}")
+        say(f"{what} refused: {session.describe(result)}")
     else:
         enum = MAV.enums["MAV_RESULT"]
-        print(f"{what} refused: {enum[result].name if result in enum else result}")
+        say(f"{what} refused: {enum[result].name if result in enum else result}")
     return 1

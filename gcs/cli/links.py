@@ -4,7 +4,10 @@ MAVLink 2 signing key."""
 from __future__ import annotations
 
 import argparse
-import sys
+
+from common.process.diagnostics import get_logger, say
+
+log = get_logger(__name__)
 
 
 def cmd_keygen(args: argparse.Namespace) -> int:
@@ -12,18 +15,18 @@ def cmd_keygen(args: argparse.Namespace) -> int:
     import secrets
 
     if args.file.exists():
-        print(f"gcs keygen: {args.file} exists; not overwriting a key", file=sys.stderr)
+        log.error(f"gcs keygen: {args.file} exists; not overwriting a key")
         return 2
     try:
         fd = os.open(args.file, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     except OSError as exc:
         where = "its folder does not exist" if isinstance(exc, FileNotFoundError) \
             else exc.strerror
-        print(f"gcs keygen: cannot write {args.file}: {where}", file=sys.stderr)
+        log.error(f"gcs keygen: cannot write {args.file}: {where}")
         return 2
     with os.fdopen(fd, "w") as fh:
         fh.write(secrets.token_hex(32) + "\n")
-    print(f"wrote a 32-byte signing key to {args.file} (keep it out of version control)")
+    say(f"wrote a 32-byte signing key to {args.file} (keep it out of version control)")
     return 0
 
 
@@ -38,17 +41,17 @@ def cmd_router(args: argparse.Namespace) -> int:
     for endpoint in listen:
         problem = _endpoint_problem(endpoint)
         if problem:
-            print(f"gcs router: {problem}", file=sys.stderr)
+            log.error(f"gcs router: {problem}")
             return 2
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    print(f"gcs router: listening on {', '.join(listen)} (multicast scouting off)", flush=True)
+    say(f"gcs router: listening on {', '.join(listen)} (multicast scouting off)")
     try:
         run_router(listen, stop)
     except Exception as exc:  # zenoh reports a listener it cannot open as a plain error
-        print(f"gcs router: cannot listen on {', '.join(listen)}: "
-              f"{(str(exc).splitlines() or [type(exc).__name__])[0]}", file=sys.stderr)
+        log.error(f"gcs router: cannot listen on {', '.join(listen)}: "
+                  f"{(str(exc).splitlines() or [type(exc).__name__])[0]}")
         return 2
     return 0
 

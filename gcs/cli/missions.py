@@ -10,11 +10,13 @@ upload succeeds. A plan written for another firmware says so and what was conver
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import TYPE_CHECKING
 
+from common.process.diagnostics import get_logger, say
 from gcs.cli.connection import print_result
 from gcs.cli.console import Progress
+
+log = get_logger(__name__)
 
 if TYPE_CHECKING:
     from common.wire.mission_items import MissionItem
@@ -56,8 +58,7 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
         if frame is not None and home is None:
             if args.frame is not None or any(it.frame == MAV.MAV_FRAME_LOCAL_NED
                                              for it in items):
-                print(f"gcs mission: --frame {frame}: the vehicle sent no HOME_POSITION",
-                      file=sys.stderr)
+                log.error(f"gcs mission: --frame {frame}: the vehicle sent no HOME_POSITION")
                 return 1
             frame = None  # a plan of global items needs no conversion
         hb = session.heartbeat_msg
@@ -65,15 +66,15 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
                               home_at_seq0=at_seq0, firmware_type=pilot.firmware_type,
                               vehicle_type=hb.type)
         if args.file is None:
-            print(text, end="")
+            say(text, end="")
         else:
             args.file.write_text(text)
-            print(f"downloaded {len(items)} items to {args.file}"
-                  + (" (and home, seq 0)" if at_seq0 and home is not None else ""))
+            say(f"downloaded {len(items)} items to {args.file}"
+                + (" (and home, seq 0)" if at_seq0 and home is not None else ""))
         return 0
     if args.action == "clear":
         result = clear(session.conn, t, c, send=send)
-        print(f"clear: {result_name(result)}")
+        say(f"clear: {result_name(result)}")
         return 0 if result == MAV.MAV_MISSION_ACCEPTED else 1
     return print_result("mission start", session.command(MAV.MAV_CMD_MISSION_START), session)
 
@@ -99,10 +100,10 @@ def _upload(args: argparse.Namespace, session: Session) -> int:
     conversion = plan_conversion(doc.firmware, pilot.firmware_type, items) \
         if doc.fmt == "plan" else None
     if conversion is not None and conversion.refusal:
-        print(f"gcs mission: {conversion.refusal}", file=sys.stderr)
+        log.error(f"gcs mission: {conversion.refusal}")
         return 2
     if conversion is not None:
-        print(conversion.notice)
+        say(conversion.notice)
     wire = WireMission(list(items))
     if at_seq0:
         need_home = doc.home is None or any(it.frame == MAV.MAV_FRAME_LOCAL_NED for it in items)
@@ -110,12 +111,12 @@ def _upload(args: argparse.Namespace, session: Session) -> int:
         try:
             wire = for_ardupilot(items, doc.fmt, doc.home, vehicle_home)
         except HomeError as exc:
-            print(f"gcs mission: {exc}", file=sys.stderr)
+            log.error(f"gcs mission: {exc}")
             return 1
         h = wire.home
         assert h is not None
-        print(f"home (seq 0): lat {h.lat_deg:.7f}, lon {h.lon_deg:.7f} deg, alt "
-              f"{h.alt_m:.2f} m AMSL, from {wire.home_source}")
+        say(f"home (seq 0): lat {h.lat_deg:.7f}, lon {h.lon_deg:.7f} deg, alt "
+            f"{h.alt_m:.2f} m AMSL, from {wire.home_source}")
     progress = Progress()
     old: list[MissionItem] | None = None
     if pilot.kind == ARDUPILOT:  # not atomic: keep what it holds, to put it back
@@ -124,20 +125,20 @@ def _upload(args: argparse.Namespace, session: Session) -> int:
                 f"reading the vehicle's mission: {d}/{n} items"))
         except MissionError as exc:
             progress.done()
-            print(f"gcs mission: reading the mission the vehicle holds (to put it back if "
-                  f"the upload is refused) failed: {exc}; nothing uploaded", file=sys.stderr)
+            log.error(f"gcs mission: reading the mission the vehicle holds (to put it back if "
+                      f"the upload is refused) failed: {exc}; nothing uploaded")
             return 1
     n = len(wire.items) - (1 if at_seq0 else 0)  # the plan's items, home not counted
     answer = upload_detailed(session.conn, t, c, wire.items, send=send,
                              progress=lambda d, total: progress(f"mission: {d}/{total} items"))
     progress.done()
     if answer.accepted:
-        print(f"upload of {n} items: {result_name(answer.result)}")
+        say(f"upload of {n} items: {result_name(answer.result)}")
         return 0
     which = "the home item (seq 0)" if at_seq0 and answer.asked == 0 else \
         f"item {answer.asked + (0 if at_seq0 else 1)} of {n}"
     where = f": {which}" if answer.about_item and not answer.notes else ""
-    print(f"upload of {n} items refused: {answer.describe()}{where}")
+    say(f"upload of {n} items refused: {answer.describe()}{where}")
     if old is not None and answer.asked >= 0:  # it had begun to take the new items
         _restore(session, old, wire.items, answer, f"vehicle refused {which} "
                  f"({answer.describe()})", at_seq0)
@@ -170,7 +171,7 @@ def _restore(session: Session, old: list[MissionItem], new: list[MissionItem],
     except MissionError as exc:
         why, expected = str(exc), None
     if not why:
-        print(f"{what}; restored the {size} it held before")
+        say(f"{what}; restored the {size} it held before")
         return
     try:
         held = download(session.conn, t, c, send=send)
@@ -181,4 +182,4 @@ def _restore(session: Session, old: list[MissionItem], new: list[MissionItem],
             else ""
     now = f"the vehicle now holds {describe_held(labels, at_seq0)}{how}" \
         if labels or how else "what the vehicle now holds is unknown (it could not be read)"
-    print(f"{what}; putting back the {size} it held before failed: {why}; {now}")
+    say(f"{what}; putting back the {size} it held before failed: {why}; {now}")

@@ -4,8 +4,11 @@ read before the link was opened: `gcs.cli.inputs`)."""
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import TYPE_CHECKING
+
+from common.process.diagnostics import get_logger, say
+
+log = get_logger(__name__)
 
 if TYPE_CHECKING:
     from gcs.vehicle_link.session import Session
@@ -18,10 +21,10 @@ def param_command(args: argparse.Namespace, session: Session) -> int:
 
     if args.action == "list":
         for name, p in vl.param_values(session).items():
-            print(f"{name:<16} {p.text()}")
+            say(f"{name:<16} {p.text()}")
         return 0
     if args.action == "get":
-        print(f"{args.name} = {vl.param_read(session, args.name).text()}")
+        say(f"{args.name} = {vl.param_read(session, args.name).text()}")
         return 0
     if args.action == "save":
         return _param_save(args, session)
@@ -32,15 +35,15 @@ def param_command(args: argparse.Namespace, session: Session) -> int:
         value, texts = vl.param_set(session, args.name, args.value,
                                     param_type=current.param_type)
     except ParamValueError as exc:
-        print(f"gcs param: {exc}", file=sys.stderr)
+        log.error(f"gcs param: {exc}")
         return 2
     for text in texts:
-        print(f"vehicle: {text}")
+        say(f"vehicle: {text}")
     now = vl.ParamValue(value, current.param_type).text()
-    print(f"{args.name} = {now}")
+    say(f"{args.name} = {now}")
     if value == intended(args.name, args.value, current.param_type):
         return 0
-    print(f"not taken: the vehicle keeps {now}")  # clamped, or refused with its reason
+    say(f"not taken: the vehicle keeps {now}")  # clamped, or refused with its reason
     return 1
 
 
@@ -71,7 +74,7 @@ def _param_save(args: argparse.Namespace, session: Session) -> int:
                for name, p in sorted(values.items())]
     args.file.write_text(format_params(entries, system_id=t, stack=stack, vehicle=vehicle,
                                        version=version, git_revision=git))
-    print(f"saved {len(entries)} parameters to {args.file}")
+    say(f"saved {len(entries)} parameters to {args.file}")
     return 0
 
 
@@ -85,26 +88,26 @@ def _param_load(args: argparse.Namespace, session: Session) -> int:
     entries = [e for e in args.params if e.component_id in (c, 0)]
     others = len(args.params) - len(entries)
     if others:
-        print(f"skipped {others} parameters of other components than {c}")
+        log.info(f"skipped {others} parameters of other components than {c}")
     if any(e.system_id != t for e in entries):
-        print(f"note: the file holds parameters of another vehicle; loading into system {t}")
+        log.info(f"note: the file holds parameters of another vehicle; loading into system {t}")
     for e in entries:
         try:  # the vehicle's own type, whatever the file says (older files say 9 for all)
             ptype = vl.param_read(session, e.name).param_type
             value, texts = vl.param_set(session, e.name, e.value, param_type=ptype)
         except GcsError:
-            print(f"{e.name}: not answered (unknown to the vehicle?)")
+            say(f"{e.name}: not answered (unknown to the vehicle?)")
             refused += 1
             continue
         except ParamValueError as exc:
-            print(f"{e.name} = {e.value:g}: {exc}")
+            say(f"{e.name} = {e.value:g}: {exc}")
             refused += 1
             continue
         if value != intended(e.name, e.value, ptype):
             said = "; ".join(" ".join(str(x).split()) for x in texts)
-            print(f"{e.name} = {e.value:g}: " +
-                  (f"vehicle: {said}" if said else
-                   f"not taken (the vehicle keeps {vl.ParamValue(value, ptype).text()})"))
+            say(f"{e.name} = {e.value:g}: " +
+                (f"vehicle: {said}" if said else
+                 f"not taken (the vehicle keeps {vl.ParamValue(value, ptype).text()})"))
             refused += 1
-    print(f"loaded {len(entries) - refused} of {len(entries)} parameters from {args.file}")
+    say(f"loaded {len(entries) - refused} of {len(entries)} parameters from {args.file}")
     return 0 if refused == 0 else 1

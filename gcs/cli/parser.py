@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from common.process.cliargs import OneLineParser
+from common.process.diagnostics import add_verbosity_options
 
 USAGE = """Runs and reports:
     gcs run SCENARIO.toml [--in-process | --realtime] [--controller pid|pd]
@@ -29,6 +31,8 @@ Against a vehicle (any MAVLink 2 autopilot; --connect URL, default udpin:127.0.0
     gcs watch
     gcs view [--port 8765] [--mcap FILE] | view RUN_DIR [--speed X]   (Foxglove WebSocket)
     gcs log record FILE [--duration S]
+Every command takes -v (debug diagnostics too) or -q (only warnings and errors), before or
+after its name; diagnostics go to stderr, results to stdout.
 """
 DEFAULT_SCENARIOS = Path(__file__).resolve().parents[2] / "config" / "scenarios"
 DEFAULT_CONNECT = "udpin:127.0.0.1:14550"
@@ -65,9 +69,18 @@ def _finite(text: str) -> float:
     return value
 
 
+class SubcommandParser(OneLineParser):
+    """A subcommand's parser (and the options it shares): `-v`/`-q` taken after the
+    subcommand too (`gcs run -q ...`), once, whether or not a parent parser gave them."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if self.get_default("log_level") is None:  # not copied from a parent
+            add_verbosity_options(self, subcommand=True)
+
 
 def build_parser() -> argparse.ArgumentParser:
-    link = OneLineParser(add_help=False)
+    link = SubcommandParser(add_help=False)
     link.add_argument("--connect", default=DEFAULT_CONNECT, metavar="URL",
                       help=f"link URL: udpin/udpout/tcp/tcpin:HOST:PORT, serial:DEVICE:BAUD, "
                            f"zenoh:PREFIX[@ENDPOINT], or MAVSDK's udpin://, udp://, tcp://, "
@@ -83,7 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="gcs", description="dqflight ground station",
                                      formatter_class=argparse.RawDescriptionHelpFormatter,
                                      epilog=USAGE)
-    sub = parser.add_subparsers(dest="command", required=True)
+    add_verbosity_options(parser)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=SubcommandParser)
 
     run = sub.add_parser("run", help="fly a scenario and write DIR/metrics.json")
     run.add_argument("scenario", type=Path)

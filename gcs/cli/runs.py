@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 import time
 
 from common.config.scenario import ConfigError, load_scenario
 from common.config.sensors import resolve_sensor_profile
+from common.process.diagnostics import get_logger, say
 from gcs.cli.console import Progress
 from gcs.report.run_metrics import RunMetrics
+
+log = get_logger(__name__)
 
 
 def _summary(m: RunMetrics) -> str:
@@ -44,12 +46,12 @@ def cmd_run(args: argparse.Namespace) -> int:
                                duration_s=args.duration, sensors=args.sensors,
                                seed=args.seed)
     if args.fleet < 1:
-        print("gcs run: --fleet needs at least 1 vehicle", file=sys.stderr)
+        log.error("gcs run: --fleet needs at least 1 vehicle")
         return 2
     try:
         prepare_run_dir(args.out, args.force)
     except RunDirError as exc:
-        print(f"gcs run: {exc}", file=sys.stderr)
+        log.error(f"gcs run: {exc}")
         return 2
     progress = Progress()
     if args.in_process:
@@ -59,7 +61,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         except InProcessError as exc:
             if exc.result is None:
                 progress.done()
-                print(f"gcs run: {exc}", file=sys.stderr)
+                log.error(f"gcs run: {exc}")
                 return 1
             result = exc.result  # refused by the vehicle: recorded as a process run records it
         write_run(args.out, scenario, result)
@@ -76,27 +78,27 @@ def cmd_run(args: argparse.Namespace) -> int:
                                     signing_key_file=args.signing_key)
         except RunError as exc:
             progress.done()
-            print(f"gcs run: {exc}", file=sys.stderr)
+            log.error(f"gcs run: {exc}")
             return 1
         if args.fleet > 1:
             progress.done()
             fleet = fleet_of(outcome)
             for m in fleet["vehicles"].values():
                 _print_error(m)
-                print(f"vehicle {m['system_id']}: " + _summary(m))
-            print(f"  wrote {args.out / 'fleet.json'}")
+                say(f"vehicle {m['system_id']}: " + _summary(m))
+            say(f"  wrote {args.out / 'fleet.json'}")
             return 0 if fleet["all_completed"] else 1
         metrics = one_vehicle(outcome)
     progress.done()
     _print_error(metrics)
-    print(_summary(metrics))
-    print(f"  wrote {args.out / 'metrics.json'}")
+    say(_summary(metrics))
+    say(f"  wrote {args.out / 'metrics.json'}")
     return 0 if metrics["status"] == "completed" else 1
 
 
 def _print_error(m: RunMetrics) -> None:
     if m.get("error"):
-        print(f"gcs run: {m['error']}", file=sys.stderr)
+        log.error(f"gcs run: {m['error']}")
 
 
 def cmd_table1(args: argparse.Namespace) -> int:
@@ -109,16 +111,16 @@ def cmd_table1(args: argparse.Namespace) -> int:
             resolve_sensor_profile(args.sensors)  # a bad name: one line, before any run
     except ConfigError as exc:
         progress.done()
-        print(f"gcs table1: {exc}", file=sys.stderr)
+        log.error(f"gcs table1: {exc}")
         return 2
     table = run_table1(args.scenarios, args.out, ideal=args.ideal_actuators,
                        duration_s=args.duration, workers=args.jobs,
                        in_process=args.in_process, progress=progress,
                        lag_comp=args.lag_comp, sensors=args.sensors, seed=args.seed)
     progress.done()
-    print((args.out / "table1.md").read_text())
-    print(f"wrote {args.out / 'table1.md'}, {args.out / 'table1.json'} and "
-          f"{args.out / 'table1.png'}")
+    say((args.out / "table1.md").read_text())
+    say(f"wrote {args.out / 'table1.md'}, {args.out / 'table1.json'} and "
+        f"{args.out / 'table1.png'}")
     return 0 if table["rows"] else 1
 
 
@@ -143,29 +145,29 @@ def cmd_campaign(args: argparse.Namespace) -> int:
             raise CampaignError(f"{args.out}: not a folder")
         total = len(expand(campaign, args.out))
     except CampaignError as exc:
-        print(f"gcs campaign: {exc}", file=sys.stderr)
+        log.error(f"gcs campaign: {exc}")
         return 2
     done = len(read_journal(args.out)) if args.out.is_dir() else 0
-    print(f"campaign {campaign.name}: {total} runs ({campaign.transport}); "
-          f"{min(done, total)} recorded in {args.out} already", file=sys.stderr)
+    log.info(f"campaign {campaign.name}: {total} runs ({campaign.transport}); "
+              f"{min(done, total)} recorded in {args.out} already")
     dashboard = None if args.dashboard.lower() == "none" else args.dashboard
     try:
         outcome = run_campaign(campaign, args.out, scheduler=args.scheduler,
                                workers=args.workers, dashboard=dashboard,
                                report=not args.no_report)
     except OSError as exc:  # no scheduler at that address, a cluster that did not start
-        print(f"gcs campaign: {exc}", file=sys.stderr)
+        log.error(f"gcs campaign: {exc}")
         return 1
     flown = outcome.flown
     rate = outcome.sim_s / outcome.wall_s if outcome.wall_s > 0 and flown else 0.0
-    print(f"campaign {campaign.name}: {len(outcome.rows)}/{outcome.total} runs recorded "
-          f"({outcome.recorded_before} before, {flown} flown now in {outcome.wall_s:.1f} s "
-          f"on {outcome.workers} workers after {outcome.startup_s:.1f} s of start-up: "
-          f"{rate:.1f} simulated s per wall s)")
+    say(f"campaign {campaign.name}: {len(outcome.rows)}/{outcome.total} runs recorded "
+        f"({outcome.recorded_before} before, {flown} flown now in {outcome.wall_s:.1f} s "
+        f"on {outcome.workers} workers after {outcome.startup_s:.1f} s of start-up: "
+        f"{rate:.1f} simulated s per wall s)")
     for index, why in sorted(outcome.failed.items()):
-        print(f"gcs campaign: run {index} not executed: {why}", file=sys.stderr)
-    print(f"  wrote {args.out / 'results.csv'}"
-          + ("" if args.no_report else f" and {args.out / 'summary.md'}"))
+        log.warning(f"gcs campaign: run {index} not executed: {why}")
+    say(f"  wrote {args.out / 'results.csv'}"
+        + ("" if args.no_report else f" and {args.out / 'summary.md'}"))
     return outcome.exit_code
 
 
@@ -187,24 +189,24 @@ def cmd_report(args: argparse.Namespace) -> int:
 
     if is_table1_dir(args.run_dir):
         def warn(problem: str) -> None:
-            print(f"gcs report: {problem}", file=sys.stderr)
+            log.warning(f"gcs report: {problem}")
 
         result = make_table1_report(args.run_dir, warn=warn)
         for path in result.written:
-            print(path)
+            say(str(path))
         if result.problems:
-            print(f"gcs report: {len(result.problems)} problem(s); everything else in "
-                  f"{args.run_dir} was reported", file=sys.stderr)
+            log.error(f"gcs report: {len(result.problems)} problem(s); everything else in "
+                      f"{args.run_dir} was reported")
         return 1 if result.problems else 0
     if not (args.run_dir / "metrics.json").exists():
-        print(f"gcs report: {args.run_dir} has neither metrics.json (a run folder) nor "
-              f"{TABLE1_JSON} (a table1 folder)", file=sys.stderr)
+        log.error(f"gcs report: {args.run_dir} has neither metrics.json (a run folder) nor "
+                  f"{TABLE1_JSON} (a table1 folder)")
         return 2
     try:
         check_run_dir(args.run_dir)
     except RunDirError as exc:
-        print(f"gcs report: {exc}", file=sys.stderr)
+        log.error(f"gcs report: {exc}")
         return 2
     for path in make_report(args.run_dir):
-        print(path)
+        say(str(path))
     return 0

@@ -4,12 +4,14 @@ WebSocket view of a live vehicle or of a run folder's logs)."""
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 
+from common.process.diagnostics import get_logger, say
 from gcs.cli.connection import heartbeat_wait, open_session
 from gcs.cli.console import Progress
 from gcs.cli.parser import DEFAULT_CONNECT
+
+log = get_logger(__name__)
 
 
 def cmd_log(args: argparse.Namespace) -> int:
@@ -32,7 +34,7 @@ def cmd_log(args: argparse.Namespace) -> int:
         session.close()
         progress.done()
     # the records in the file: what was heard and what this station sent (its heartbeats)
-    print(f"recorded {tlog.records} messages to {args.file}")
+    say(f"recorded {tlog.records} messages to {args.file}")
     return 0
 
 
@@ -55,5 +57,5 @@ def cmd_view(args: argparse.Namespace) -> int:
                          vehicle_file=args.vehicle, system_id=args.sysid,
                          wait_s=heartbeat_wait(args), signing_key=key)
     except ViewError as exc:
-        print(f"gcs view: {exc}", file=sys.stderr)
+        log.error(f"gcs view: {exc}")
         return 2

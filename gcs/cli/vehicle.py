@@ -7,6 +7,7 @@ import argparse
 import math
 from typing import TYPE_CHECKING
 
+from common.process.diagnostics import say
 from gcs.cli.connection import heartbeat_wait, open_session, print_result
 from gcs.cli.console import InputError, Progress
 from gcs.cli.inputs import read_files
@@ -18,46 +19,66 @@ if TYPE_CHECKING:
 
 
 def cmd_vehicle(args: argparse.Namespace) -> int:
-    from gcs.vehicle_link.actions import arm
-    from gcs.vehicle_link.status import format_status, status, vehicles
-
+    """A command against a vehicle: its files read, the link opened, the command run, the
+    link closed."""
     read_files(args)  # a bad file is refused before any network wait
     session = open_session(args)
     try:
-        if args.command == "status":
-            if args.json:
-                import json
-
-                print(json.dumps(status(session), allow_nan=False))
-            else:
-                print("\n".join(format_status(status(session))))
-            return 0
-        if args.command == "arm":
-            return print_result("arm", arm(session, True), session)
-        if args.command == "disarm":
-            return print_result("disarm", arm(session, False, force=args.force), session)
-        if args.command == "mode":
-            return _mode(args, session)
-        if args.command == "takeoff":
-            return _takeoff(args, session)
-        if args.command == "mission":
-            return mission_command(args, session)
-        if args.command == "param":
-            return param_command(args, session)
-        if args.command == "goto":
-            return _goto(args, session)
-        if args.command == "watch":
-            from gcs.cli.watch import watch
-
-            return watch(session, refresh_hz=args.rate, duration=args.duration,
-                         all_vehicles=args.all)
-        if args.command == "vehicles":
-            for sysid in vehicles(session, heartbeat_wait(args)):
-                print(sysid)
-            return 0
-        raise AssertionError(args.command)
+        return _vehicle_command(args, session)
     finally:
         session.close()
+
+
+def _vehicle_command(args: argparse.Namespace, session: Session) -> int:
+    """`args.command` against the vehicle of `session`: its exit status."""
+    from gcs.vehicle_link.actions import arm
+
+    if args.command == "status":
+        return _status(args, session)
+    if args.command == "arm":
+        return print_result("arm", arm(session, True), session)
+    if args.command == "disarm":
+        return print_result("disarm", arm(session, False, force=args.force), session)
+    if args.command == "mode":
+        return _mode(args, session)
+    if args.command == "takeoff":
+        return _takeoff(args, session)
+    if args.command == "mission":
+        return mission_command(args, session)
+    if args.command == "param":
+        return param_command(args, session)
+    if args.command == "goto":
+        return _goto(args, session)
+    if args.command == "watch":
+        from gcs.cli.watch import watch
+
+        return watch(session, refresh_hz=args.rate, duration=args.duration,
+                     all_vehicles=args.all)
+    if args.command == "vehicles":
+        return _vehicles(args, session)
+    raise AssertionError(args.command)
+
+
+def _status(args: argparse.Namespace, session: Session) -> int:
+    """`gcs status`: the vehicle's status, as lines or one JSON document (--json)."""
+    from gcs.vehicle_link.status import format_status, status
+
+    if args.json:
+        import json
+
+        say(json.dumps(status(session), allow_nan=False))
+    else:
+        say("\n".join(format_status(status(session))))
+    return 0
+
+
+def _vehicles(args: argparse.Namespace, session: Session) -> int:
+    """`gcs vehicles`: the system id of every vehicle heard, one a line."""
+    from gcs.vehicle_link.status import vehicles
+
+    for sysid in vehicles(session, heartbeat_wait(args)):
+        say(str(sysid))
+    return 0
 
 
 def _mode(args: argparse.Namespace, session: Session) -> int:
@@ -107,7 +128,7 @@ def _takeoff(args: argparse.Namespace, session: Session) -> int:
     progress.done()
     code = print_result(f"takeoff to {args.alt:g} m", result, session)
     if code == 0 and height is not None:
-        print(f"reached: {height:.2f} m above home")
+        say(f"reached: {height:.2f} m above home")
     return code
 
 
@@ -141,5 +162,5 @@ def _goto(args: argparse.Namespace, session: Session) -> int:
                   tolerance_rad=math.radians(args.tolerance_deg), timeout=args.timeout,
                   hold_s=args.hold, report=report, full_pose=full)
     progress.done()
-    print(f"reached: position error {dp:.4f} m, attitude error {math.degrees(da):.3f} deg")
+    say(f"reached: position error {dp:.4f} m, attitude error {math.degrees(da):.3f} deg")
     return 0

@@ -17,6 +17,7 @@ import sys
 import time
 from collections.abc import Callable
 
+from common.process.diagnostics import say
 from common.wire.mavlink import MAV
 from gcs.autopilot.health import format_readiness, readiness
 from gcs.autopilot.health import health as health_text
@@ -154,48 +155,22 @@ def watch(session: Session, refresh_hz: float = 5.0, duration: float | None = No
         first.update(session.heartbeat_msg, session.heartbeat_at)
     period = 1.0 / refresh_hz
 
-    def view() -> list[Line]:
-        now = time.monotonic()
-        quality = link_quality(session)
-        lines: list[Line] = []
-        for sysid in sorted(snaps) or [session.target_system]:
-            if lines:
-                lines.append(("", PLAIN))
-            lines += view_lines(sysid, snaps.get(sysid, Snapshot()), now, quality)
-        return lines
+    def pump() -> None:
+        _pump(session, snaps, period, only)
 
     end = math.inf if duration is None else time.monotonic() + duration
     if out is not None or not sys.stdout.isatty():
-        write = out or (lambda text: print(text, flush=True))
-        try:
-            while time.monotonic() < end:
-                _pump(session, snaps, period, only)
-                write("\n".join(text + ("   [stale]" if style == "stale" else "")
-                                for text, style in view()) + "\n")
-        except KeyboardInterrupt:
-            pass
-        return 0
+        return _watch_plain(lambda: _view(session, snaps), pump, end, out or say)
 
     def loop(screen: curses.window) -> None:
         curses.curs_set(0)
         screen.nodelay(True)
-        styles = {TITLE: curses.A_BOLD, "stale": curses.A_DIM}
-        if curses.has_colors():
-            curses.start_color()
-            curses.use_default_colors()
-            for n, (style, colour) in enumerate(((OK, curses.COLOR_GREEN),
-                                                 (WARN, curses.COLOR_YELLOW),
-                                                 (ALERT, curses.COLOR_RED)), start=1):
-                curses.init_pair(n, colour, -1)
-                styles[style] = curses.color_pair(n) | (curses.A_BOLD if style == ALERT
-                                                        else 0)
-        else:
-            styles[ALERT] = curses.A_BOLD | curses.A_REVERSE
+        styles = _styles()
         while time.monotonic() < end:
-            _pump(session, snaps, period, only)
+            pump()
             screen.erase()
             height, width = screen.getmaxyx()
-            for i, (line, style) in enumerate(view()[:height - 1]):
+            for i, (line, style) in enumerate(_view(session, snaps)[:height - 1]):
                 screen.addnstr(i, 0, line, width - 1, styles.get(style, curses.A_NORMAL))
             screen.refresh()
             key = screen.getch()
@@ -207,3 +182,47 @@ def watch(session: Session, refresh_hz: float = 5.0, duration: float | None = No
     except KeyboardInterrupt:
         pass
     return 0
+
+
+def _view(session: Session, snaps: dict[int, Snapshot]) -> list[Line]:
+    """The lines of every vehicle heard (or of the session's, not yet heard), a blank line
+    between two vehicles."""
+    now = time.monotonic()
+    quality = link_quality(session)
+    lines: list[Line] = []
+    for sysid in sorted(snaps) or [session.target_system]:
+        if lines:
+            lines.append(("", PLAIN))
+        lines += view_lines(sysid, snaps.get(sysid, Snapshot()), now, quality)
+    return lines
+
+
+def _watch_plain(view: Callable[[], list[Line]], pump: Callable[[], None], end: float,
+                 write: Callable[[str], None]) -> int:
+    """Not on a terminal: the view written whole after each refresh until `end` (stale
+    lines marked) or Ctrl-C."""
+    try:
+        while time.monotonic() < end:
+            pump()
+            write("\n".join(text + ("   [stale]" if style == "stale" else "")
+                            for text, style in view()) + "\n")
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
+def _styles() -> dict[str, int]:
+    """The curses attribute of each line style: colours where the terminal has them,
+    else bold and reverse video for an alert."""
+    styles = {TITLE: curses.A_BOLD, "stale": curses.A_DIM}
+    if curses.has_colors():
+        curses.start_color()
+        curses.use_default_colors()
+        for n, (style, colour) in enumerate(((OK, curses.COLOR_GREEN),
+                                             (WARN, curses.COLOR_YELLOW),
+                                             (ALERT, curses.COLOR_RED)), start=1):
+            curses.init_pair(n, colour, -1)
+            styles[style] = curses.color_pair(n) | (curses.A_BOLD if style == ALERT else 0)
+    else:
+        styles[ALERT] = curses.A_BOLD | curses.A_REVERSE
+    return styles

@@ -73,47 +73,59 @@ def parse_params(text: str, source: str = "<params>") -> list[ParamEntry]:
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         where = f"{source}: line {n}"
-        fields = line.split("\t") if "\t" in line else line.split()
-        if len(fields) != 5:
-            raise ParamFileError(f"{where}: expected 5 tab-separated fields (Vehicle-Id "
-                                 f"Component-Id Name Value Type), got {len(fields)}")
-        sys_text, comp_text, name, value_text, type_text = (f.strip() for f in fields)
-        try:
-            system_id, component_id, param_type = int(sys_text), int(comp_text), int(type_text)
-        except ValueError:
-            raise ParamFileError(f"{where}: Vehicle-Id, Component-Id and Type must be "
-                                 "integers") from None
-        if not (0 <= system_id <= 255 and 0 <= component_id <= 255):
-            raise ParamFileError(f"{where}: Vehicle-Id and Component-Id must be 0..255")
-        if param_type not in _FLOAT_TYPES and param_type not in _INT_RANGES:
-            raise ParamFileError(f"{where}: type {param_type} is not a MAV_PARAM_TYPE")
-        if not name or len(name.encode()) > 16 or not name.isascii() or \
-                not name.isprintable():
-            raise ParamFileError(f"{where}: {name!r} is not a parameter name (1..16 ASCII "
-                                 "characters)")
-        try:
-            value = float(value_text)
-        except ValueError:
-            raise ParamFileError(f"{where}: value {value_text!r} is not a number") from None
-        if not math.isfinite(value):
-            raise ParamFileError(f"{where}: value {value_text} is not finite")
-        if param_type in _INT_RANGES:
-            lo, hi = _INT_RANGES[param_type]
-            if not (value.is_integer() and lo <= value <= hi):
-                raise ParamFileError(f"{where}: value {value_text} does not fit type "
-                                     f"{param_type}")
-        elif param_type == REAL32:
-            try:
-                struct.pack("<f", value)
-            except OverflowError:
-                raise ParamFileError(f"{where}: value {value_text} does not fit a "
-                                     "float32") from None
-        if (component_id, name) in seen:
-            raise ParamFileError(f"{where}: {name} again (first on line "
-                                 f"{seen[(component_id, name)]})")
-        seen[(component_id, name)] = n
-        entries.append(ParamEntry(system_id, component_id, name, value, param_type))
+        entry = _parse_line(line, where)
+        key = (entry.component_id, entry.name)
+        if key in seen:
+            raise ParamFileError(f"{where}: {entry.name} again (first on line {seen[key]})")
+        seen[key] = n
+        entries.append(entry)
     return entries
+
+
+def _parse_line(line: str, where: str) -> ParamEntry:
+    """One parameter line: 5 fields, tab- (or space-) separated, each checked."""
+    fields = line.split("\t") if "\t" in line else line.split()
+    if len(fields) != 5:
+        raise ParamFileError(f"{where}: expected 5 tab-separated fields (Vehicle-Id "
+                             f"Component-Id Name Value Type), got {len(fields)}")
+    sys_text, comp_text, name, value_text, type_text = (f.strip() for f in fields)
+    try:
+        system_id, component_id, param_type = int(sys_text), int(comp_text), int(type_text)
+    except ValueError:
+        raise ParamFileError(f"{where}: Vehicle-Id, Component-Id and Type must be "
+                             "integers") from None
+    if not (0 <= system_id <= 255 and 0 <= component_id <= 255):
+        raise ParamFileError(f"{where}: Vehicle-Id and Component-Id must be 0..255")
+    if param_type not in _FLOAT_TYPES and param_type not in _INT_RANGES:
+        raise ParamFileError(f"{where}: type {param_type} is not a MAV_PARAM_TYPE")
+    if not name or len(name.encode()) > 16 or not name.isascii() or \
+            not name.isprintable():
+        raise ParamFileError(f"{where}: {name!r} is not a parameter name (1..16 ASCII "
+                             "characters)")
+    value = _parse_value(value_text, param_type, where)
+    return ParamEntry(system_id, component_id, name, value, param_type)
+
+
+def _parse_value(value_text: str, param_type: int, where: str) -> float:
+    """A parameter's value: a finite number that fits its MAV_PARAM_TYPE."""
+    try:
+        value = float(value_text)
+    except ValueError:
+        raise ParamFileError(f"{where}: value {value_text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ParamFileError(f"{where}: value {value_text} is not finite")
+    if param_type in _INT_RANGES:
+        lo, hi = _INT_RANGES[param_type]
+        if not (value.is_integer() and lo <= value <= hi):
+            raise ParamFileError(f"{where}: value {value_text} does not fit type "
+                                 f"{param_type}")
+    elif param_type == REAL32:
+        try:
+            struct.pack("<f", value)
+        except OverflowError:
+            raise ParamFileError(f"{where}: value {value_text} does not fit a "
+                                 "float32") from None
+    return value
 
 
 def read_params(path: Path) -> list[ParamEntry]:

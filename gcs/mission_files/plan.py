@@ -115,6 +115,32 @@ def parse_plan(text: str, source: str = "<mission>") -> list[MissionItem]:
 def parse_plan_doc(text: str, source: str = "<mission>") -> MissionDoc:
     """`parse_plan`'s items and the plan's `plannedHomePosition` [lat, lon, alt AMSL] (None
     when absent or [0, 0, 0], which QGC and `format_plan` write when no home is known)."""
+    doc = _plan_json(text, source)
+    mission = _plan_key(doc, "mission", dict, source, "an object")
+    where = f"{source}: mission"
+    if mission.get("version") != PLAN_MISSION_VERSION:
+        raise MissionFileError(f"{where}: key 'version': only mission version "
+                               f"{PLAN_MISSION_VERSION} is supported")
+    entries = _plan_key(mission, "items", list, where, "a list")
+    home = mission.get("plannedHomePosition")
+    if home is not None and not (isinstance(home, list) and len(home) == 3 and all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in home)):
+        raise MissionFileError(f"{where}: key 'plannedHomePosition': expected [lat, lon, alt]")
+    jump_ids: dict[int, int] = {}
+    items = [_plan_item(entry, seq, f"{source}: item {seq + 1}", jump_ids)
+             for seq, entry in enumerate(entries)]
+    _resolve_jumps(items, jump_ids, source)
+    planned = None if home is None or all(v == 0 for v in home) else \
+        HomePosition(float(home[0]), float(home[1]), float(home[2]))
+    firmware = mission.get("firmwareType")
+    if firmware is not None and (isinstance(firmware, bool) or not isinstance(firmware, int)):
+        raise MissionFileError(f"{source}: mission: key 'firmwareType': expected an integer "
+                               "(MAV_AUTOPILOT)")
+    return MissionDoc(items, planned, "plan", firmware)
+
+
+def _plan_json(text: str, source: str) -> dict[str, Any]:
+    """The plan's JSON object, its file type and plan version checked."""
     try:
         doc = json.loads(text, parse_constant=_no_constant)
     except MissionFileError as exc:
@@ -129,59 +155,48 @@ def parse_plan_doc(text: str, source: str = "<mission>") -> MissionDoc:
     if doc.get("version") != PLAN_VERSION:
         raise MissionFileError(f"{source}: key 'version': only plan version {PLAN_VERSION} is "
                                f"supported, got {doc.get('version')!r}")
-    mission = _plan_key(doc, "mission", dict, source, "an object")
-    where = f"{source}: mission"
-    if mission.get("version") != PLAN_MISSION_VERSION:
-        raise MissionFileError(f"{where}: key 'version': only mission version "
-                               f"{PLAN_MISSION_VERSION} is supported")
-    entries = _plan_key(mission, "items", list, where, "a list")
-    home = mission.get("plannedHomePosition")
-    if home is not None and not (isinstance(home, list) and len(home) == 3 and all(
-            isinstance(v, int | float) and not isinstance(v, bool) for v in home)):
-        raise MissionFileError(f"{where}: key 'plannedHomePosition': expected [lat, lon, alt]")
-    items: list[MissionItem] = []
-    jump_ids: dict[int, int] = {}
-    for seq, entry in enumerate(entries):
-        where = f"{source}: item {seq + 1}"
-        if not isinstance(entry, dict):
-            raise MissionFileError(f"{where}: expected an object")
-        kind = entry.get("type")
-        if kind != "SimpleItem":
-            what = f" ({entry.get('complexItemType')})" if kind == "ComplexItem" else ""
-            raise MissionFileError(f"{where}: key 'type': only SimpleItem is supported, got "
-                                   f"{kind!r}{what}")
-        command = _plan_key(entry, "command", int, where, "an integer")
-        frame = _plan_key(entry, "frame", int, where, "an integer")
-        auto = _plan_key(entry, "autoContinue", bool, where, "true or false")
-        params = _plan_key(entry, "params", list, where, "a list of 7 numbers or null")
-        if len(params) != 7:
-            raise MissionFileError(f"{where}: key 'params': expected 7 values, got "
-                                   f"{len(params)}")
-        p = [_plan_param(v, where, n) for n, v in enumerate(params)]
-        jump_id = entry.get("doJumpId", seq + 1)
-        if isinstance(jump_id, int) and not isinstance(jump_id, bool):
-            jump_ids.setdefault(jump_id, seq)
-        try:
-            x, y = xy_int(frame, p[4]), xy_int(frame, p[5])
-        except (OverflowError, ValueError):
-            raise MissionFileError(f"{where}: x/y (params[4], params[5]) not finite") from None
-        mode, alt = entry.get("AltitudeMode"), entry.get("Altitude")
-        if mode in (ALT_MODE_RELATIVE, ALT_MODE_ABSOLUTE) and isinstance(alt, int | float) \
-                and not isinstance(alt, bool) and float(alt) != p[6]:
-            raise MissionFileError(f"{where}: 'Altitude' {alt} differs from params[6] {p[6]}")
-        items.append(checked(MissionItem(seq, frame, command, int(seq == 0), int(auto), p[0],
-                                          p[1], p[2], p[3], x, y, p[6]), where))
-    for i, it in enumerate(items):  # DO_JUMP: QGC's p1 is the target's doJumpId
+    return doc
+
+
+def _plan_item(entry: Any, seq: int, where: str, jump_ids: dict[int, int]) -> MissionItem:
+    """One SimpleItem of the plan as item `seq`, checked; its doJumpId noted in
+    `jump_ids` (the first item that has it)."""
+    if not isinstance(entry, dict):
+        raise MissionFileError(f"{where}: expected an object")
+    kind = entry.get("type")
+    if kind != "SimpleItem":
+        what = f" ({entry.get('complexItemType')})" if kind == "ComplexItem" else ""
+        raise MissionFileError(f"{where}: key 'type': only SimpleItem is supported, got "
+                               f"{kind!r}{what}")
+    command = _plan_key(entry, "command", int, where, "an integer")
+    frame = _plan_key(entry, "frame", int, where, "an integer")
+    auto = _plan_key(entry, "autoContinue", bool, where, "true or false")
+    params = _plan_key(entry, "params", list, where, "a list of 7 numbers or null")
+    if len(params) != 7:
+        raise MissionFileError(f"{where}: key 'params': expected 7 values, got "
+                               f"{len(params)}")
+    p = [_plan_param(v, where, n) for n, v in enumerate(params)]
+    jump_id = entry.get("doJumpId", seq + 1)
+    if isinstance(jump_id, int) and not isinstance(jump_id, bool):
+        jump_ids.setdefault(jump_id, seq)
+    try:
+        x, y = xy_int(frame, p[4]), xy_int(frame, p[5])
+    except (OverflowError, ValueError):
+        raise MissionFileError(f"{where}: x/y (params[4], params[5]) not finite") from None
+    mode, alt = entry.get("AltitudeMode"), entry.get("Altitude")
+    if mode in (ALT_MODE_RELATIVE, ALT_MODE_ABSOLUTE) and isinstance(alt, int | float) \
+            and not isinstance(alt, bool) and float(alt) != p[6]:
+        raise MissionFileError(f"{where}: 'Altitude' {alt} differs from params[6] {p[6]}")
+    return checked(MissionItem(seq, frame, command, int(seq == 0), int(auto), p[0], p[1], p[2],
+                               p[3], x, y, p[6]), where)
+
+
+def _resolve_jumps(items: list[MissionItem], jump_ids: dict[int, int], source: str) -> None:
+    """DO_JUMP: QGC's p1 is the target's doJumpId, made its sequence number in place."""
+    for i, it in enumerate(items):
         if it.command == MAV_CMD_DO_JUMP and math.isfinite(it.param1):
             target = jump_ids.get(int(it.param1)) if it.param1.is_integer() else None
             if target is None:
                 raise MissionFileError(f"{source}: item {i + 1}: DO_JUMP to doJumpId "
                                        f"{it.param1:g}, which no item has")
             items[i] = it._replace(param1=float(target))
-    planned = None if home is None or all(v == 0 for v in home) else \
-        HomePosition(float(home[0]), float(home[1]), float(home[2]))
-    firmware = mission.get("firmwareType")
-    if firmware is not None and (isinstance(firmware, bool) or not isinstance(firmware, int)):
-        raise MissionFileError(f"{source}: mission: key 'firmwareType': expected an integer "
-                               "(MAV_AUTOPILOT)")
-    return MissionDoc(items, planned, "plan", firmware)

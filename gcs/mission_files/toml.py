@@ -162,41 +162,48 @@ def parse_toml_doc(text: str, source: str = "<mission>") -> MissionDoc:
     items = []
     for seq, t in enumerate(tables):
         where = f"{source}: item {seq + 1}"
-        kind = t.get("type")
-        if kind == "raw":
-            extra = set(t) - _RAW_KEYS
-            if extra:
-                raise MissionFileError(f"{where}: unknown key '{sorted(extra)[0]}' for raw")
-            params = _floats(t, "params", 4, where)
-            item = MissionItem(seq, _int(t, "frame", where, M.MAV_FRAME_LOCAL_NED),
-                               _int(t, "command", where), 1 if seq == 0 else 0,
-                               _int(t, "autocontinue", where, 1), params[0], params[1],
-                               params[2], params[3], _int(t, "x", where),
-                               _int(t, "y", where), _float(t, "z", where))
-            items.append(checked(item, where))
-            continue
-        command = next((c for c, k in _KINDS.items() if k == kind), None)
-        if command is None:
-            raise MissionFileError(f"{where}: key 'type': expected one of "
-                                   f"{', '.join(sorted(_KINDS.values()))}, raw; got {kind!r}")
-        layout = dict(_LAYOUT[kind])
-        extra = set(t) - {"type", *layout}
-        if extra:
-            raise MissionFileError(f"{where}: unknown key '{sorted(extra)[0]}' for {kind}")
-        p = {"p1": 0.0, "p2": 0.0, "p3": 0.0, "p4": 0.0, "x": 0.0, "y": 0.0, "z": 0.0}
-        for key, slot in layout.items():
-            fields = _FIELDS[slot]
-            if len(fields) > 1:
-                p.update(zip(fields, _floats(t, key, len(fields), where), strict=True))
-            elif key == "yaw_deg" or (kind == "takeoff" and key == "climb_time_s"):
-                p[fields[0]] = _float(t, key, where, math.nan if key == "yaw_deg" else 0.0)
-            else:
-                p[fields[0]] = _float(t, key, where)
-        try:
-            x, y = round(p["x"] * LOCAL_SCALE), round(p["y"] * LOCAL_SCALE)
-        except (OverflowError, ValueError):
-            raise MissionFileError(f"{where}: position not finite") from None
-        items.append(checked(MissionItem(seq, M.MAV_FRAME_LOCAL_NED, command,
-                                          1 if seq == 0 else 0, 1, p["p1"], p["p2"], p["p3"],
-                                          p["p4"], x, y, p["z"]), where))
+        item = _raw_item(t, seq, where) if t.get("type") == "raw" else _kind_item(t, seq, where)
+        items.append(checked(item, where))
     return MissionDoc(items, _toml_home(data, source), "toml")
+
+
+def _raw_item(t: dict[str, Any], seq: int, where: str) -> MissionItem:
+    """An [[item]] of type raw: MAVLink's fields as they are."""
+    extra = set(t) - _RAW_KEYS
+    if extra:
+        raise MissionFileError(f"{where}: unknown key '{sorted(extra)[0]}' for raw")
+    params = _floats(t, "params", 4, where)
+    return MissionItem(seq, _int(t, "frame", where, M.MAV_FRAME_LOCAL_NED),
+                       _int(t, "command", where), 1 if seq == 0 else 0,
+                       _int(t, "autocontinue", where, 1), params[0], params[1],
+                       params[2], params[3], _int(t, "x", where),
+                       _int(t, "y", where), _float(t, "z", where))
+
+
+def _kind_item(t: dict[str, Any], seq: int, where: str) -> MissionItem:
+    """An [[item]] of a named type (waypoint, takeoff, ...): its keys in their slots, in
+    MAV_FRAME_LOCAL_NED."""
+    kind = t.get("type")
+    command = next((c for c, k in _KINDS.items() if k == kind), None)
+    if command is None:
+        raise MissionFileError(f"{where}: key 'type': expected one of "
+                               f"{', '.join(sorted(_KINDS.values()))}, raw; got {kind!r}")
+    layout = dict(_LAYOUT[_KINDS[command]])  # the kind's own
+    extra = set(t) - {"type", *layout}
+    if extra:
+        raise MissionFileError(f"{where}: unknown key '{sorted(extra)[0]}' for {kind}")
+    p = {"p1": 0.0, "p2": 0.0, "p3": 0.0, "p4": 0.0, "x": 0.0, "y": 0.0, "z": 0.0}
+    for key, slot in layout.items():
+        fields = _FIELDS[slot]
+        if len(fields) > 1:
+            p.update(zip(fields, _floats(t, key, len(fields), where), strict=True))
+        elif key == "yaw_deg" or (kind == "takeoff" and key == "climb_time_s"):
+            p[fields[0]] = _float(t, key, where, math.nan if key == "yaw_deg" else 0.0)
+        else:
+            p[fields[0]] = _float(t, key, where)
+    try:
+        x, y = round(p["x"] * LOCAL_SCALE), round(p["y"] * LOCAL_SCALE)
+    except (OverflowError, ValueError):
+        raise MissionFileError(f"{where}: position not finite") from None
+    return MissionItem(seq, M.MAV_FRAME_LOCAL_NED, command, 1 if seq == 0 else 0, 1, p["p1"],
+                       p["p2"], p["p3"], p["p4"], x, y, p["z"])

@@ -118,47 +118,69 @@ def fig7_8_figure(runs: Sequence[RunData | None], controller: str) -> Figure:
         raise ValueError(f"Fig. {number} takes {rows} runs (None for a missing one)")
     fig = new_figure(13.0)
     axes = fig.subplots(rows, 3, sharex="row")
-    ylabels = ("error angle (rad)", "error (m)", "F (N), τ (N m)")
     diverged_any = False
     for r, ((scen, label), data) in enumerate(zip(CASE2_ROWS, runs, strict=True)):
         heads = [f"({'abcdefghi'[c * rows + r]}) {label}" for c in range(3)]
         if data is None:
-            for ax, head in zip(axes[r], heads, strict=True):
-                ax.set_title(f"{head}\nno run: {scen}_{controller} is missing", fontsize=9.5,
-                             color="red")
-                ax.text(0.5, 0.5, "no run", transform=ax.transAxes, ha="center",
-                        va="center", color="red", fontsize=12)
-                ax.set_xticks([])
-                ax.set_yticks([])
+            _missing_row(axes[r], heads, f"{scen}_{controller}")
             continue
         if data.name != scen:
             raise ValueError(f"Fig. {number}, row {r + 1} ({label}) takes a {scen} run, "
                              f"not {data.name}")
-        ax_a, ax_p, ax_d = axes[r]
-        att = plot_attitude_error(ax_a, data)
-        norm = plot_position_error(ax_p, data)
-        tg, force, torque = _profiles(data)
-        plot_vec(ax_d, tg, force, "N", "F", color="darkorange")
-        plot_vec(ax_d, tg, torque, "N m", "τ", color="teal", ls="--")
-        ax_d.axhline(0.0, color="k", lw=0.6, alpha=0.5)
-        _shade_pulses(axes[r], data, named=ax_a, intervals_in_label=False)
-        pulses = _pulse_intervals(data.force_terms) + _pulse_intervals(data.torque_terms)
-        texts = [f"attitude error: {stats_text(att, 'rad')}",
-                 f"position error: {stats_text(norm, 'm')}",
-                 "disturbance applied" + (
-                     "" if pulses else f" from t = {_disturbance_start(data):g} s")
-                 + " (body FLU)"]
-        diverged = data.diverged and len(data.t) > 0
-        diverged_any |= diverged
-        for c, ax in enumerate(axes[r]):
-            title = f"{heads[c]}\n{texts[c]}"
-            if diverged:
-                title += f"\nDIVERGED at t = {end_time(data):.2f} s (the run ends there)"
-            elif data.status not in ("completed", "unknown"):
-                title += f"\n{data.status}"
-            ax.set_title(title, fontsize=9.5, color="red" if diverged else "black")
-            mark_end(ax, data)
-            style_axis(ax, ylabels[c], xlabel=r == rows - 1)
+        diverged_any |= _run_row(axes[r], heads, data, last=r == rows - 1)
+    _figure_legend(fig, axes, diverged_any)
+    name = "the PID tracker (eq. 16)" if controller == "pid" else \
+        "the PD controller (eq. 33)"
+    fig.suptitle(f"Fig. {number} – Case II, robustness to disturbance: tracking errors of "
+                 f"{name}")
+    return fig
+
+
+def _missing_row(row: Sequence[Any], heads: list[str], run_name: str) -> None:
+    """A row whose run is missing: its three axes say so, in red, without ticks."""
+    for ax, head in zip(row, heads, strict=True):
+        ax.set_title(f"{head}\nno run: {run_name} is missing", fontsize=9.5, color="red")
+        ax.text(0.5, 0.5, "no run", transform=ax.transAxes, ha="center",
+                va="center", color="red", fontsize=12)
+        ax.set_xticks([])
+        ax.set_yticks([])
+
+
+def _run_row(row: Sequence[Any], heads: list[str], data: RunData, *, last: bool) -> bool:
+    """A run's row: attitude error, position error and the applied disturbance, pulses
+    shaded, its statistics and status in the titles (x labels on the `last` row); whether
+    the run diverged."""
+    ylabels = ("error angle (rad)", "error (m)", "F (N), τ (N m)")
+    ax_a, ax_p, ax_d = row
+    att = plot_attitude_error(ax_a, data)
+    norm = plot_position_error(ax_p, data)
+    tg, force, torque = _profiles(data)
+    plot_vec(ax_d, tg, force, "N", "F", color="darkorange")
+    plot_vec(ax_d, tg, torque, "N m", "τ", color="teal", ls="--")
+    ax_d.axhline(0.0, color="k", lw=0.6, alpha=0.5)
+    _shade_pulses(row, data, named=ax_a, intervals_in_label=False)
+    pulses = _pulse_intervals(data.force_terms) + _pulse_intervals(data.torque_terms)
+    texts = [f"attitude error: {stats_text(att, 'rad')}",
+             f"position error: {stats_text(norm, 'm')}",
+             "disturbance applied" + (
+                 "" if pulses else f" from t = {_disturbance_start(data):g} s")
+             + " (body FLU)"]
+    diverged = data.diverged and len(data.t) > 0
+    for c, ax in enumerate(row):
+        title = f"{heads[c]}\n{texts[c]}"
+        if diverged:
+            title += f"\nDIVERGED at t = {end_time(data):.2f} s (the run ends there)"
+        elif data.status not in ("completed", "unknown"):
+            title += f"\n{data.status}"
+        ax.set_title(title, fontsize=9.5, color="red" if diverged else "black")
+        mark_end(ax, data)
+        style_axis(ax, ylabels[c], xlabel=last)
+    return diverged
+
+
+def _figure_legend(fig: Figure, axes: Any, diverged_any: bool) -> None:
+    """One legend below the figure: every entry of its axes once, and the divergence line
+    where a run diverged."""
     handles: dict[str, Any] = {}
     for ax in axes.ravel():
         for handle, text in zip(*ax.get_legend_handles_labels(), strict=True):
@@ -169,11 +191,6 @@ def fig7_8_figure(runs: Sequence[RunData | None], controller: str) -> Figure:
     if handles:
         fig.legend(list(handles.values()), list(handles), loc="outside lower center", ncol=5,
                    fontsize=9)
-    name = "the PID tracker (eq. 16)" if controller == "pid" else \
-        "the PD controller (eq. 33)"
-    fig.suptitle(f"Fig. {number} – Case II, robustness to disturbance: tracking errors of "
-                 f"{name}")
-    return fig
 
 
 def _disturbance_start(data: RunData) -> float:

@@ -59,6 +59,24 @@ def _estimation_md(est: dict[str, Any], figures: list[Path]) -> list[str]:
 
 
 def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Path]) -> str:
+    """report.md of a run: its summary, what it said, its errors beside the paper's, the
+    desired attitude's Euler events, its estimation and its figures."""
+    m = data.metrics
+    lines = [*_summary_md(data), *_said_md(data), *_errors_md(data), *_euler_md(events)]
+    est = m.get("estimation_error")
+    if isinstance(est, dict):
+        lines += _estimation_md(est, figures)
+    lines += ["", "## Figures", ""]
+    for fig in figures:
+        rel = f"{FIG_DIR}/{fig.name}"
+        cap = CAPTIONS.get(fig.name, fig.stem)
+        lines.append(f"- [{cap}]({rel})")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _summary_md(data: RunData) -> list[str]:
+    """The report's title and summary list: scenario, controller, status, transport, time,
+    step time, disturbances."""
     m = data.metrics
     lines = [f"# Run report: {data.name} [{data.controller.upper()}]", ""]
     scen = data.scenario
@@ -90,6 +108,13 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
                                     ("torque (N m)", data.torque_terms)) for x in terms]
         lines.append("- disturbances (body frame): " + "; ".join(desc))
     lines.append("")
+    return lines
+
+
+def _said_md(data: RunData) -> list[str]:
+    """The events the vehicle said, the divergence and the run's notes."""
+    m = data.metrics
+    lines: list[str] = []
     run_events = m.get("events", [])
     if run_events:
         lines += ["## Events", "", "Everything the vehicle said, on the flight clock.", "",
@@ -108,9 +133,14 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
     lines += [f"_{n}_" for n in data.notes]
     if data.notes:
         lines.append("")
+    return lines
 
+
+def _errors_md(data: RunData) -> list[str]:
+    """The tracking errors' table (Table I), beside the paper's where it has the scenario."""
+    m = data.metrics
     paper = PAPER.get(data.name, {}).get(data.controller)
-    lines += ["## Tracking errors (Table I)", "",
+    lines = ["## Tracking errors (Table I)", "",
               "Position error norm |p − p_d| in m, attitude error angle of q_d* q in rad, "
               "over the run" + (" (up to the divergence)" if data.diverged else "") + ".", ""]
     if paper:
@@ -132,8 +162,12 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
     elif cut_short(data):
         lines += ["(The paper's figures are for the full scenario; this run was cut short.)",
                   ""]
+    return lines
 
-    lines += ["## Z-Y-X Euler events of the desired attitude", ""]
+
+def _euler_md(events: list[tuple[float, str]]) -> list[str]:
+    """Where a Z-Y-X description of the desired attitude is singular or jumps."""
+    lines = ["## Z-Y-X Euler events of the desired attitude", ""]
     if events:
         shown = events[:30]
         lines.append(", ".join(f"{te:.3f} s ({kind})" for te, kind in shown)
@@ -144,15 +178,7 @@ def _report_md(data: RunData, events: list[tuple[float, str]], figures: list[Pat
     else:
         lines.append("None: a Z-Y-X description of the desired attitude stays regular and "
                      "continuous over this run.")
-    est = m.get("estimation_error")
-    if isinstance(est, dict):
-        lines += _estimation_md(est, figures)
-    lines += ["", "## Figures", ""]
-    for fig in figures:
-        rel = f"{FIG_DIR}/{fig.name}"
-        cap = CAPTIONS.get(fig.name, fig.stem)
-        lines.append(f"- [{cap}]({rel})")
-    return "\n".join(lines).rstrip() + "\n"
+    return lines
 
 
 def write_run_report(data: RunData) -> list[Path]:

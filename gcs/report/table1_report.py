@@ -92,6 +92,17 @@ def _table1_md(table_dir: Path, table: dict[str, Any], runs: dict[tuple[str, str
                run_figures: dict[tuple[str, str], list[Path]], figures: list[Path],
                problems: dict[tuple[str, str], str], other_problems: list[str],
                notes: list[str], from_json: list[tuple[str, str]]) -> str:
+    """report.md of a table1 folder: what was reported, the table, the runs, the figures."""
+    lines = [*_head_md(table_dir, runs, problems, other_problems, notes),
+             *_table_md(table_dir, table, from_json), *_runs_md(runs, problems),
+             *_figures_md(figures, run_figures)]
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _head_md(table_dir: Path, runs: dict[tuple[str, str], RunData],
+             problems: dict[tuple[str, str], str], other_problems: list[str],
+             notes: list[str]) -> list[str]:
+    """The title, how many runs were reported, runs cut short, what is missing, notes."""
     n_runs = len(CASES) * len(CONTROLLERS)
     lines = [f"# Table I report: {table_dir.name}", "",
              f"{len(runs)} of {n_runs} runs reported"
@@ -111,20 +122,30 @@ def _table1_md(table_dir: Path, table: dict[str, Any], runs: dict[tuple[str, str
     lines += [f"_{n}_" for n in notes]
     if notes:
         lines.append("")
+    return lines
 
+
+def _table_md(table_dir: Path, table: dict[str, Any],
+              from_json: list[tuple[str, str]]) -> list[str]:
+    """Table I, the rows taken from table1.json named, and its chart."""
     table_md = table_markdown(table).replace("# Table I", "## Table I", 1)
-    lines += [table_md.rstrip(), ""]
+    lines = [table_md.rstrip(), ""]
     if from_json:
         lines += ["Rows of run folders that are missing or unreadable are those of "
                   f"{TABLE1_JSON}: " + ", ".join(f"`{table1_run_name(*k)}`" for k in from_json)
                   + ".", ""]
     if (table_dir / TABLE1_PNG).exists():
         lines += [f"![{CAPTIONS[TABLE1_PNG]}]({TABLE1_PNG})", ""]
+    return lines
 
-    lines += ["## Runs", "", "Status, why, and what the vehicle said (events on the flight "
-              "clock, from each run's metrics.json).", "",
-              "| case | controller | run folder | status | why | events |",
-              "|---|---|---|---|---|---|"]
+
+def _runs_md(runs: dict[tuple[str, str], RunData],
+             problems: dict[tuple[str, str], str]) -> list[str]:
+    """One row per run: its status, why, and what the vehicle said (or why not reported)."""
+    lines = ["## Runs", "", "Status, why, and what the vehicle said (events on the flight "
+             "clock, from each run's metrics.json).", "",
+             "| case | controller | run folder | status | why | events |",
+             "|---|---|---|---|---|---|"]
     for label, scen in CASES:
         for ctrl in CONTROLLERS:
             key = (scen, ctrl)
@@ -141,8 +162,13 @@ def _table1_md(table_dir: Path, table: dict[str, Any], runs: dict[tuple[str, str
                 lines.append(f"| {label} | {ctrl.upper()} | `{name}` | **not reported** | "
                              f"{_md_cell(problems.get(key, 'missing'))} | — |")
     lines.append("")
+    return lines
 
-    lines += ["## Figures", ""]
+
+def _figures_md(figures: list[Path], run_figures: dict[tuple[str, str], list[Path]]
+                ) -> list[str]:
+    """The table's figures (and those not drawn, why), then each run's figures."""
+    lines = ["## Figures", ""]
     for fig in figures:
         lines.append(f"- [{CAPTIONS.get(fig.name, fig.stem)}]({fig.name})")
     drawn = {f.name for f in figures}
@@ -163,7 +189,7 @@ def _table1_md(table_dir: Path, table: dict[str, Any], runs: dict[tuple[str, str
                      f"({name}/{FIG_DIR}/{p.name})" for p in run_figures[key]]
             lines.append(f"- `{name}` (Case {label}, {ctrl.upper()}): " + ", ".join(links)
                          + f", [report]({name}/{REPORT})")
-    return "\n".join(lines).rstrip() + "\n"
+    return lines
 
 
 def _valid_row(row: Any) -> bool:
@@ -174,6 +200,51 @@ def _valid_row(row: Any) -> bool:
             and isinstance(row["status"], str) and isinstance(row["case"], str)
     except (KeyError, TypeError):
         return False
+
+
+def _saved_rows(table_dir: Path, other: list[str],
+                note: Callable[[str], None]) -> dict[tuple[str, str], Any]:
+    """table1.json's valid rows by (scenario, controller); none, and the problem noted in
+    `other` and passed to `note`, when it cannot be read."""
+    try:
+        saved = json.loads((table_dir / TABLE1_JSON).read_text())
+        return {(r["scenario"], r["controller"]): r for r in saved["rows"] if _valid_row(r)}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        other.append(f"{table_dir / TABLE1_JSON}: not readable ({exc}); the table is made "
+                     "from the run folders")
+        note(other[-1])
+        return {}
+
+
+def _merged_table(runs: dict[tuple[str, str], RunData],
+                  saved_rows: dict[tuple[str, str], Any],
+                  from_json: list[tuple[str, str]]) -> dict[str, Any]:
+    """The table: the run folders' metrics, and table1.json's rows for the runs not read
+    (`from_json`), in the table's order; the plain allocation's figures from table1.json."""
+    table = table_json({k: d.metrics for k, d in runs.items()})
+    order = {(scen, ctrl): i for i, (scen, ctrl) in
+             enumerate((s, c) for _, s in CASES for c in CONTROLLERS)}
+    table["rows"] = sorted([*table["rows"], *(saved_rows[k] for k in from_json)],
+                           key=lambda r: order[(r["scenario"], r["controller"])])
+    for r in table["rows"]:  # the plain allocation's figures (CA_LAG_COMP 0), as table1 ran them
+        plain = saved_rows.get((r["scenario"], r["controller"]), {}).get("plain")
+        if plain is not None:
+            r.setdefault("plain", plain)
+    return table
+
+
+def _table_figures(table: dict[str, Any], runs: dict[tuple[str, str], RunData],
+                   table_dir: Path) -> list[Path]:
+    """table1.png, and Figs. 5, 7 and 8 where their runs were read."""
+    figures = [table1_chart(table, table_dir / TABLE1_PNG)]
+    pd1 = runs.get((CASE1, "pd"))
+    if pd1 is not None:
+        figures.append(fig5_errors(pd1, table_dir / FIG5, reference=runs.get((CASE1, "pid"))))
+    for ctrl, (_, name) in FIG78_BY_CONTROLLER.items():
+        row_runs = [runs.get((scen, ctrl)) for scen, _ in CASE2_ROWS]
+        if any(r is not None for r in row_runs):
+            figures.append(fig7_8_case2(row_runs, ctrl, table_dir / name))
+    return figures
 
 
 def make_table1_report(table_dir: Path, *,
@@ -192,15 +263,7 @@ def make_table1_report(table_dir: Path, *,
         if warn is not None:
             warn(problem)
 
-    try:
-        saved = json.loads((table_dir / TABLE1_JSON).read_text())
-        saved_rows = {(r["scenario"], r["controller"]): r for r in saved["rows"]
-                      if _valid_row(r)}
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        other.append(f"{table_dir / TABLE1_JSON}: not readable ({exc}); the table is made "
-                     "from the run folders")
-        note(other[-1])
-        saved_rows = {}
+    saved_rows = _saved_rows(table_dir, other, note)
 
     runs: dict[tuple[str, str], RunData] = {}
     run_figures: dict[tuple[str, str], list[Path]] = {}
@@ -230,26 +293,9 @@ def make_table1_report(table_dir: Path, *,
                              f"{TABLE1_JSON} (status {old.get('status')} there, "
                              f"{row[0]['status']} here); the table shows the run folder's.")
 
-    # The table: the run folders' metrics, and table1.json's rows for the runs not read.
     from_json = [k for k in problems if k in saved_rows]
-    table = table_json({k: d.metrics for k, d in runs.items()})
-    order = {(scen, ctrl): i for i, (scen, ctrl) in
-             enumerate((s, c) for _, s in CASES for c in CONTROLLERS)}
-    table["rows"] = sorted([*table["rows"], *(saved_rows[k] for k in from_json)],
-                           key=lambda r: order[(r["scenario"], r["controller"])])
-    for r in table["rows"]:  # the plain allocation's figures (CA_LAG_COMP 0), as table1 ran them
-        plain = saved_rows.get((r["scenario"], r["controller"]), {}).get("plain")
-        if plain is not None:
-            r.setdefault("plain", plain)
-    figures = [table1_chart(table, table_dir / TABLE1_PNG)]
-
-    pd1 = runs.get((CASE1, "pd"))
-    if pd1 is not None:
-        figures.append(fig5_errors(pd1, table_dir / FIG5, reference=runs.get((CASE1, "pid"))))
-    for ctrl, (_, name) in FIG78_BY_CONTROLLER.items():
-        row_runs = [runs.get((scen, ctrl)) for scen, _ in CASE2_ROWS]
-        if any(r is not None for r in row_runs):
-            figures.append(fig7_8_case2(row_runs, ctrl, table_dir / name))
+    table = _merged_table(runs, saved_rows, from_json)
+    figures = _table_figures(table, runs, table_dir)
     report = table_dir / REPORT
     report.write_text(_table1_md(table_dir, table, runs, run_figures, figures, problems,
                                  other, notes, from_json))

@@ -360,6 +360,21 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
                        report=report if fleet == 1 else None, signing_key_file=signing_key_file)
                for plan in _plans(scenario, out, fleet, spacing_m, transport, zenoh_url,
                                   sim_route)]
+    _fly_all(flights, router)
+    for f in flights:
+        if f.error is not None and not isinstance(f.error, GcsError | MissionError | RunError):
+            raise f.error  # a bug, not something that happened to the vehicle
+    results = [f.metrics(transport) for f in flights]
+    if fleet == 1:
+        return results[0]
+    summary = _fleet_summary(results, fleet, spacing_m, transport, scenario.name)
+    (out / "fleet.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def _fly_all(flights: list[_Flight], router: Children | None) -> None:
+    """Start every flight's processes and fly them side by side (a thread each); then stop
+    them all and the router, however it ended (Ctrl-C: the flights are aborted)."""
     threads: list[threading.Thread] = []
     try:
         for f in flights:
@@ -380,18 +395,16 @@ def run_processes(scenario: Scenario, out: Path, *, realtime: bool = False,
             t.join(timeout=10.0)
         if router is not None:
             router.stop()
-    for f in flights:
-        if f.error is not None and not isinstance(f.error, GcsError | MissionError | RunError):
-            raise f.error  # a bug, not something that happened to the vehicle
-    results = [f.metrics(transport) for f in flights]
-    if fleet == 1:
-        return results[0]
-    summary: FleetMetrics = {"fleet": fleet, "spacing_m": spacing_m, "transport": transport,
-               "scenario": scenario.name,
-               "all_completed": all(m["status"] == "completed" for m in results),
-               "vehicles": {str(m["system_id"]): m for m in results}}
-    (out / "fleet.json").write_text(json.dumps(summary, indent=2) + "\n")
-    return summary
+
+
+def _fleet_summary(results: list[RunMetrics], fleet: int, spacing_m: float,
+                   transport: str, scenario: str) -> FleetMetrics:
+    """fleet.json: the fleet's settings, whether every vehicle completed, each one's
+    metrics by system id."""
+    return {"fleet": fleet, "spacing_m": spacing_m, "transport": transport,
+            "scenario": scenario,
+            "all_completed": all(m["status"] == "completed" for m in results),
+            "vehicles": {str(m["system_id"]): m for m in results}}
 
 
 def one_vehicle(metrics: RunMetrics | FleetMetrics) -> RunMetrics:

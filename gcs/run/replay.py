@@ -31,7 +31,6 @@ import bisect
 import csv
 import json
 import math
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ import numpy as np
 
 from common.frames import frd_to_flu, ned_to_enu, q_ned_frd_to_enu_flu
 from common.logs.ulog import ULogError, open_ulog, topic_rows
+from common.process.diagnostics import get_logger, say
 from common.quaternion import Quat, Vec3
 from common.wire.rounding import f32
 from fcu.control.dualquat import q_normalize
@@ -48,6 +48,8 @@ from fcu.estimator.ekf import Estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
 from fcu.params import BY_NAME, estimator_settings
+
+log = get_logger(__name__)
 
 TOLERANCE = 1e-9  # relative (to max(1, |value|)): float rounding, far below any estimate
 STATE_COLUMNS = ("px", "py", "pz", "qw", "qx", "qy", "qz", "vbx", "vby", "vbz",
@@ -172,6 +174,32 @@ def replay(path: str | Path, overrides: dict[str, float] | None = None) -> Repla
     notes: list[str] = []
     values = _params(ulog, items[0][0], notes)
     values.update(overrides or {})
+    settings, period_us = _settings(ulog, values, notes)
+    try:
+        dcols, drows = topic_rows(ulog, "dq_onboard")
+    except ULogError:
+        dcols, drows = ("time_us", *STATE_COLUMNS), np.zeros((0, 1 + len(STATE_COLUMNS)))
+    row_t = _column(dcols, drows, "time_us").astype(np.int64)
+    if period_us <= 0:  # an older log: the rows' spacing (lockstep: one control period)
+        steps = np.diff(row_t)
+        steps = steps[steps > 0]
+        period_us = int(np.bincount(steps).argmax()) if len(steps) else 1
+        notes.append(f"no dq_control_period_us in the log: {period_us} us from dq_onboard")
+    taken_t, taken = _estimates(items, settings, values.get("IMU_GYRO_CUTOFF", 0.0), period_us)
+    replayed = np.full((len(row_t), len(STATE_COLUMNS)), math.nan)
+    for r, t in enumerate(row_t.tolist()):
+        k = bisect.bisect_right(taken_t, t) - 1
+        if k >= 0:
+            replayed[r] = taken[k]
+    logged = np.column_stack([_column(dcols, drows, c) for c in STATE_COLUMNS]) \
+        if len(drows) else np.zeros((0, len(STATE_COLUMNS)))
+    return Replay(row_t, replayed, logged, settings, n_imu, n_pose, notes)
+
+
+def _settings(ulog: Any, values: dict[str, float],
+              notes: list[str]) -> tuple[EstimatorSettings, int]:
+    """The estimator's settings from the log's parameters and gravity, and the control
+    period the log names (0: none; notes say what was assumed)."""
     info = ulog.msg_info_dict
     try:
         gravity = float(info.get("dq_gravity_m_s2", DEFAULT_GRAVITY))
@@ -189,19 +217,16 @@ def replay(path: str | Path, overrides: dict[str, float] | None = None) -> Repla
         raise ReplayError(f"estimator settings: {exc}") from None
     if settings is None:
         raise ReplayError("EKF_EN is 0: no estimator to replay")
-    try:
-        dcols, drows = topic_rows(ulog, "dq_onboard")
-    except ULogError:
-        dcols, drows = ("time_us", *STATE_COLUMNS), np.zeros((0, 1 + len(STATE_COLUMNS)))
-    row_t = _column(dcols, drows, "time_us").astype(np.int64)
-    if period_us <= 0:  # an older log: the rows' spacing (lockstep: one control period)
-        steps = np.diff(row_t)
-        steps = steps[steps > 0]
-        period_us = int(np.bincount(steps).argmax()) if len(steps) else 1
-        notes.append(f"no dq_control_period_us in the log: {period_us} us from dq_onboard")
+    return settings, period_us
 
+
+def _estimates(items: list[tuple[int, int, int, ImuInput | PoseInput]],
+               settings: EstimatorSettings, gyro_cutoff_hz: float,
+               period_us: int) -> tuple[list[int], list[tuple[float, ...]]]:
+    """The estimator fed the log's inputs in order: its output (rates filtered as the
+    pipeline does) at every control step, with the step's time."""
     est = Estimator(settings)
-    rate_filter = ImuRateFilter(values.get("IMU_GYRO_CUTOFF", 0.0))  # as the pipeline
+    rate_filter = ImuRateFilter(gyro_cutoff_hz)  # as the pipeline
     taken_t: list[int] = []
     taken: list[tuple[float, ...]] = []
     for _, kind, _, m in items:
@@ -219,14 +244,7 @@ def replay(path: str | Path, overrides: dict[str, float] | None = None) -> Repla
                 taken_t.append(m.t_us)
                 taken.append((*s.p_enu_m, *q_normalize(s.q_enu_flu), *s.v_flu_m_s,
                               *s.omega_flu_rad_s))
-    replayed = np.full((len(row_t), len(STATE_COLUMNS)), math.nan)
-    for r, t in enumerate(row_t.tolist()):
-        k = bisect.bisect_right(taken_t, t) - 1
-        if k >= 0:
-            replayed[r] = taken[k]
-    logged = np.column_stack([_column(dcols, drows, c) for c in STATE_COLUMNS]) \
-        if len(drows) else np.zeros((0, len(STATE_COLUMNS)))
-    return Replay(row_t, replayed, logged, settings, n_imu, n_pose, notes)
+    return taken_t, taken
 
 
 def _attitude_angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
@@ -294,11 +312,11 @@ def main(args: argparse.Namespace) -> int:
         overrides = parse_params(args.param or [])
         r = replay(args.log, overrides)
     except (ReplayError, ULogError) as exc:
-        print(f"gcs replay: {exc}", file=sys.stderr)
+        log.error(f"gcs replay: {exc}")
         return 2
     text, status = report(r, overrides)
-    print(text)
+    say(text)
     if args.out is not None:
         write_estimate(args.out, r)
-        print(f"  wrote {args.out}")
+        say(f"  wrote {args.out}")
     return status

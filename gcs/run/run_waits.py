@@ -123,17 +123,24 @@ def watch(session: Session, children: Checked, progress: Progress, end_s: float,
                 report(progress)
         if msg is None:
             continue
-        kind = msg.get_type()
-        if kind == "ATTITUDE_QUATERNION":
-            progress.sim_time_s = msg.time_boot_ms * 1e-3
-            if msg.time_boot_ms > last_ms:
-                last_ms, last_progress = msg.time_boot_ms, now
-            if msg.time_boot_ms >= end_ms and math.isinf(ends_at):
-                ends_at = now + 0.3  # let the last mission messages arrive
-        elif kind == "MISSION_CURRENT":
-            if msg.mission_state == M.MISSION_STATE_COMPLETE and msg.total == total:
-                progress.mission_completed = True
-        elif kind == "MISSION_ITEM_REACHED" and msg.seq == total - 1:
+        if msg.get_type() != "ATTITUDE_QUATERNION":
+            _mission_news(msg, progress, total)
+            continue
+        progress.sim_time_s = msg.time_boot_ms * 1e-3
+        if msg.time_boot_ms > last_ms:
+            last_ms, last_progress = msg.time_boot_ms, now
+        if msg.time_boot_ms >= end_ms and math.isinf(ends_at):
+            ends_at = now + 0.3  # let the last mission messages arrive
+
+
+def _mission_news(msg: MAV.MAVLink_message, progress: Progress, total: int) -> None:
+    """MISSION_CURRENT or MISSION_ITEM_REACHED that show the mission of `total` items
+    completed, and STATUSTEXT, into `progress`."""
+    kind = msg.get_type()
+    if kind == "MISSION_CURRENT":
+        if msg.mission_state == M.MISSION_STATE_COMPLETE and msg.total == total:
             progress.mission_completed = True
-        elif kind == "STATUSTEXT":
-            progress.messages.append(msg.text)
+    elif kind == "MISSION_ITEM_REACHED" and msg.seq == total - 1:
+        progress.mission_completed = True
+    elif kind == "STATUSTEXT":
+        progress.messages.append(msg.text)

@@ -12,7 +12,7 @@ from common.wire.mavlink import MAV
 from gcs.autopilot import ARDUPILOT, PX4, Autopilot, ModeTarget, UnknownMode
 from gcs.autopilot import commands as _commands
 from gcs.vehicle_link.actions import arm
-from gcs.vehicle_link.descent import Unsafe, watch_for
+from gcs.vehicle_link.descent import DescentWatch, Unsafe, watch_for
 from gcs.vehicle_link.params import autopilot_version
 from gcs.vehicle_link.pose import PoseTarget, SetpointStream, pose_errors
 from gcs.vehicle_link.session import GcsError, Session
@@ -47,6 +47,40 @@ def _check_can_fly(session: Session, arm_first: bool) -> None:
                            "target (take off first: gcs takeoff)")
 
 
+class _Listener:
+    """What goto hears while it flies: the vehicle's messages into its snapshot and the
+    descent watch, and the refusals that end it (its attitude not flown, once our targets
+    stream; the set-point mode left, once it was confirmed)."""
+
+    def __init__(self, s: Session, ap: Autopilot, mode: ModeTarget, snap: Snapshot,
+                 watch: DescentWatch) -> None:
+        self.s, self.ap, self.mode, self.snap, self.watch = s, ap, mode, snap, watch
+        self.accepted_at = math.inf  # when the mode was confirmed (monotonic s)
+        self.streamed_at = math.inf  # when our targets began (monotonic s)
+
+    def __call__(self, seconds: float, until: Callable[[], bool] | None = None) -> bool:
+        """Listen `seconds`, or until `until()` (True then); GcsError on a refusal."""
+        s, snap, ap, mode = self.s, self.snap, self.ap, self.mode
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0.0:
+            msg = s.recv(None, timeout=min(0.05, left))
+            if msg is not None and msg.get_srcSystem() == s.target_system:
+                snap.update(msg)
+                self.watch.update(msg, time.monotonic())
+            # said of our targets, whichever read took it (the mode's confirmation too)
+            if (refused := s.text_since(self.streamed_at, ATTITUDE_NOT_FLOWN)) is not None:
+                raise GcsError(f"the vehicle does not fly this attitude: {refused}")
+            hb = snap.get("HEARTBEAT")
+            if hb is not None and snap.heard["HEARTBEAT"] > self.accepted_at and \
+                    not ap.same_mode(mode.custom_mode, hb.custom_mode):
+                why = f" ({snap.failsafe_text})" if snap.failsafe_text else ""
+                raise GcsError(f"the vehicle left {mode.name}: now "
+                               f"{ap.mode_name(hb.custom_mode)}{why}")
+            if until is not None and until():
+                return True
+        return False
+
+
 def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: float,
          tolerance_rad: float, timeout: float, hold_s: float, rate_hz: float = 20.0,
          report: Callable[[tuple[float, float]], None] | None = None,
@@ -70,35 +104,13 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
     _check_can_fly(s, arm_first)
     mode = ap.resolve_mode(ap.guided_mode)
     snap = Snapshot()
-    watch = watch_for(s, ap, floor="start", floor_cap_m=-target.p_ned_m[2])
-    accepted_at = math.inf  # when the mode was confirmed (monotonic s)
-    streamed_at = math.inf  # when our targets began (monotonic s)
-
-    def listen(seconds: float, until: Callable[[], bool] | None = None) -> bool:
-        end = time.monotonic() + seconds
-        while (left := end - time.monotonic()) > 0.0:
-            msg = s.recv(None, timeout=min(0.05, left))
-            if msg is not None and msg.get_srcSystem() == s.target_system:
-                snap.update(msg)
-                watch.update(msg, time.monotonic())
-            # said of our targets, whichever read took it (the mode's confirmation too)
-            if (refused := s.text_since(streamed_at, ATTITUDE_NOT_FLOWN)) is not None:
-                raise GcsError(f"the vehicle does not fly this attitude: {refused}")
-            hb = snap.get("HEARTBEAT")
-            if hb is not None and snap.heard["HEARTBEAT"] > accepted_at and \
-                    not ap.same_mode(mode.custom_mode, hb.custom_mode):
-                why = f" ({snap.failsafe_text})" if snap.failsafe_text else ""
-                raise GcsError(f"the vehicle left {mode.name}: now "
-                               f"{ap.mode_name(hb.custom_mode)}{why}")
-            if until is not None and until():
-                return True
-        return False
-
+    listen = _Listener(s, ap, mode, snap,
+                       watch_for(s, ap, floor="start", floor_cap_m=-target.p_ned_m[2]))
     stream = SetpointStream(s, target, rate_hz, attitude=full)
     try:
         with stream:
             if ap.kind == PX4:  # PX4 and this FCU need a set-point stream before OFFBOARD
-                streamed_at = time.monotonic()
+                listen.streamed_at = time.monotonic()
                 stream.start()
                 listen(0.5)
             # a vehicle arms only once it knows its state: wait for its position
@@ -106,9 +118,9 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
             if arm_first and (result := arm(s, True)) != M.MAV_RESULT_ACCEPTED:
                 raise GcsError(f"arming refused: {s.describe(result)}")
             _set_mode_or_fail(s, mode)
-            streamed_at = min(streamed_at, time.monotonic())
+            listen.streamed_at = min(listen.streamed_at, time.monotonic())
             stream.start()  # ArduPilot: the targets count only once in GUIDED
-            accepted_at = time.monotonic()
+            listen.accepted_at = time.monotonic()
             snap.failsafe_text = ""  # a failsafe from before does not explain what follows
 
             def reached() -> bool:

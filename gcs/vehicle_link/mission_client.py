@@ -275,23 +275,12 @@ def upload_detailed(conn: Connection, target_system: int, target_component: int,
                 _send(M.MAVLink_mission_ack_message(
                     target_system, target_component, M.MAV_MISSION_OPERATION_CANCELLED,
                     MISSION))
-                held = ""
-                if done < 0:
-                    what = f"answer to MISSION_COUNT({count})"
-                elif done == count - 1:
-                    what = f"MISSION_ACK after the last item ({done})"
-                    held = "; the vehicle may hold the new mission"
-                else:
-                    what = f"request for the item after {done}"
-                said = "".join(f"; the vehicle said: {t}" for t in texts.texts)
-                raise MissionError(f"mission upload to system {target_system}: no {what}"
-                                   f"{why}{wait.tries_text()}{held}{said}")
+                raise _upload_unanswered(target_system, count, done,
+                                         f"{why}{wait.tries_text()}", texts.texts)
             continue
         if msg.get_type() == "MISSION_ACK":
-            if msg.type == M.MAV_MISSION_ACCEPTED and done < count - 1:
-                continue  # the vehicle has not had every item: an earlier transaction's ACK
-            if msg.type in _ITEM_RESULTS and done < 0:
-                continue  # about an item, before we have sent one: an earlier transaction's
+            if _earlier_ack(msg.type, done, count):
+                continue
             if msg.type == M.MAV_MISSION_ACCEPTED and progress is not None:
                 progress(count, count)
             return UploadResult(msg.type, texts.texts, done)
@@ -310,6 +299,31 @@ def upload_detailed(conn: Connection, target_system: int, target_component: int,
             wait.sent()
         last = item_message(items[seq], target_system, target_component)
         _send(last)
+
+
+def _upload_unanswered(target_system: int, count: int, done: int, why: str,
+                       texts: Sequence[str]) -> MissionError:
+    """The error of an upload the vehicle stopped answering: what was awaited (with `done`
+    the highest item requested, -1 none), why the wait ended, what the vehicle said."""
+    held = ""
+    if done < 0:
+        what = f"answer to MISSION_COUNT({count})"
+    elif done == count - 1:
+        what = f"MISSION_ACK after the last item ({done})"
+        held = "; the vehicle may hold the new mission"
+    else:
+        what = f"request for the item after {done}"
+    said = "".join(f"; the vehicle said: {t}" for t in texts)
+    return MissionError(f"mission upload to system {target_system}: no {what}{why}{held}"
+                        f"{said}")
+
+
+def _earlier_ack(result: int, done: int, count: int) -> bool:
+    """Whether a MISSION_ACK during an upload belongs to an earlier transaction: accepted
+    before the vehicle had every item, or about an item before one was sent."""
+    if result == M.MAV_MISSION_ACCEPTED and done < count - 1:
+        return True  # the vehicle has not had every item: an earlier transaction's ACK
+    return result in _ITEM_RESULTS and done < 0  # about an item, before we have sent one
 
 
 def download(conn: Connection, target_system: int, target_component: int,

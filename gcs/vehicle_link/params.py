@@ -103,16 +103,8 @@ def param_values(session: Session, timeout: float = PARAM_LIST.ceiling_s
         wait.note_session(s)
         if msg is None:
             if time.monotonic() > quiet_until:
-                if count is None:  # nothing yet: ask again
-                    s.send(request)
-                    wait.sent()
-                else:
-                    missing = [i for i in range(count) if i not in values]
-                    if not missing:
-                        break
-                    for i in missing:  # the spec's recovery: request what did not arrive
-                        s.send(M.MAVLink_param_request_read_message(
-                            s.target_system, s.target_component, b"", i))
+                if _ask_again(s, request, wait, count, values):
+                    break
                 quiet_until = time.monotonic() + PARAM_LIST.resend_s
             continue
         if msg.get_srcSystem() != s.target_system:
@@ -121,12 +113,8 @@ def param_values(session: Session, timeout: float = PARAM_LIST.ceiling_s
         if count != msg.param_count:  # the first, or the vehicle's count changed
             count = msg.param_count
             values = {i: v for i, v in values.items() if i < count}
-        index = msg.param_index
-        if not 0 <= index < count:  # 65535: an echo of a set or of a read by name
+        if not _take(msg, values, msg.param_count, wait):  # count: the message's
             continue
-        if index not in values:
-            wait.start = time.monotonic()  # progress: the ceiling counts from here
-        values[index] = (msg.param_id, param_wire.raw_value(msg), msg.param_type)
         quiet_until = time.monotonic() + 0.3
         if len(values) == count:
             break
@@ -135,6 +123,34 @@ def param_values(session: Session, timeout: float = PARAM_LIST.ceiling_s
     if len(values) != count:
         raise GcsError(f"received {len(values)} of {count} parameters{why}")
     return {name: _decoded(s, raw, ptype) for _, (name, raw, ptype) in sorted(values.items())}
+
+
+def _ask_again(s: Session, request: MAV.MAVLink_message, wait: Wait, count: int | None,
+               values: dict[int, tuple[str, bytes, int]]) -> bool:
+    """The stream paused: the list asked for again (nothing heard yet) or the indices that
+    did not arrive, each by index (the spec's recovery); True when none is missing."""
+    if count is None:  # nothing yet: ask again
+        s.send(request)
+        wait.sent()
+        return False
+    missing = [i for i in range(count) if i not in values]
+    for i in missing:  # the spec's recovery: request what did not arrive
+        s.send(M.MAVLink_param_request_read_message(s.target_system, s.target_component,
+                                                    b"", i))
+    return not missing
+
+
+def _take(msg: MAV.MAVLink_message, values: dict[int, tuple[str, bytes, int]], count: int,
+          wait: Wait) -> bool:
+    """A PARAM_VALUE at an index of the list into `values` (a new index restarts the
+    wait's ceiling); False for an echo outside the list (65535: a set's or a read by name)."""
+    index = msg.param_index
+    if not 0 <= index < count:  # 65535: an echo of a set or of a read by name
+        return False
+    if index not in values:
+        wait.start = time.monotonic()  # progress: the ceiling counts from here
+    values[index] = (msg.param_id, param_wire.raw_value(msg), msg.param_type)
+    return True
 
 
 def param_list(session: Session, timeout: float = PARAM_LIST.ceiling_s) -> dict[str, float]:

@@ -12,6 +12,7 @@ from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 from common.config.scenario import ConfigError, VehicleConfig, load_vehicle
+from common.process.diagnostics import say
 from gcs.view.mavlink_input import apply_message
 from gcs.view.publisher import Outputs, Publisher
 from gcs.view.replay import ReplayLog, load_replay, replay_vehicle_path
@@ -51,11 +52,11 @@ def _load_geometry(path: Path | None) -> VehicleConfig:
 
 
 def _announce(outputs: Outputs) -> None:
-    print(f"gcs view: {outputs.url}", flush=True)
-    print("gcs view: open it in Foxglove or Lichtblick (Open connection > Foxglove WebSocket); "
-          "display frame: world", flush=True)
+    say(f"gcs view: {outputs.url}")
+    say("gcs view: open it in Foxglove or Lichtblick (Open connection > Foxglove WebSocket); "
+        "display frame: world")
     if outputs.mcap_path is not None:
-        print(f"gcs view: recording to {outputs.mcap_path}", flush=True)
+        say(f"gcs view: recording to {outputs.mcap_path}")
 
 
 def run_live(session: Session, publisher: Publisher, stop: threading.Event,
@@ -147,15 +148,14 @@ def view_live(connect: str, *, port: int = DEFAULT_PORT, mcap: Path | None = Non
             try:
                 _announce(outputs)
                 if _wait_vehicle(session, wait_s, system_id, stop):
-                    print(f"gcs view: vehicle {session.target_system} on {connect}",
-                          flush=True)
+                    say(f"gcs view: vehicle {session.target_system} on {connect}")
                     run_live(session, publisher, stop, duration_s)
             finally:
                 session.close()
     finally:
         outputs.close()
     if mcap is not None:
-        print(f"gcs view: wrote {mcap}", flush=True)
+        say(f"gcs view: wrote {mcap}")
     return 0
 
 
@@ -175,8 +175,8 @@ def view_replay(run_dir: Path, *, port: int = DEFAULT_PORT, mcap: Path | None = 
     finally:
         outputs.close()
     first, last = log.span_us
-    print(f"gcs view: replayed {(last - first) * 1e-6:.2f} s of {run_dir}"
-          + ("" if finished else " (stopped)"), flush=True)
+    say(f"gcs view: replayed {(last - first) * 1e-6:.2f} s of {run_dir}"
+        + ("" if finished else " (stopped)"))
     if mcap is not None:
-        print(f"gcs view: wrote {mcap}", flush=True)
+        say(f"gcs view: wrote {mcap}")
     return 0

@@ -22,20 +22,18 @@ SET_MESSAGE_INTERVAL (200 Hz until it asks), answered with COMMAND_ACK.
 
 In: HIL_ACTUATOR_CONTROLS (motor outputs 0..1 on PX4's hexa X order, `sitl.firmware.px4_wire`).
 
-Lockstep as PX4 runs it. The samples start when the firmware's first packet on a
-connection arrives (PX4 sends a HEARTBEAT first). PX4's clock is the time of the latest
-HIL_SENSOR; it answers only when its outputs update, at its control rate (250 Hz in
-SITL), stamped with that clock. The rule (`sitl.firmware.px4_lockstep`):
-
-where to wait is `sitl.firmware.px4_lockstep`'s (learn the cadence from the answers' stamps, step
-on the sensor clock up to the sample an answer is due at, wait there). This loop paces by
-the wall clock until the cadence is learned (one IMU sample per IMU period, as Gazebo
+Lockstep as PX4 runs it. The samples start when the firmware's first packet on a connection
+arrives (PX4 sends a HEARTBEAT first). PX4's clock is the time of the latest HIL_SENSOR; it
+answers only when its outputs update, at its control rate (250 Hz in SITL), stamped with that
+clock. Where to wait is `sitl.firmware.px4_lockstep`'s (learn the cadence from the answers'
+stamps, step on the sensor clock up to the sample an answer is due at, wait there). This loop
+paces by the wall clock until the cadence is learned (one IMU sample per IMU period, as Gazebo
 does), steps one sample past an answer due after GRACE_S (`grace_steps`), and after
 ANSWER_TIMEOUT_S says so in one line on stderr and goes back to the wall-clock pace
 (`answer_waits`, `stall_reports`). An answer stamped before the latest accepted one, or a
 second with its stamp, is counted and ignored; one stamped before the latest sample applies
-from the next step (`late_answers`). Answers without the lockstep flag (PX4 on the wall
-clock) set the held command and the plant keeps the wall-clock pace.
+from the next step (`late_answers`). Answers without the lockstep flag (PX4 on the wall clock)
+set the held command and the plant keeps the wall-clock pace.
 
 Bad input, never a crash: bytes that are no MAVLink frame are counted and skipped; other
 messages are ignored (HEARTBEAT counted); an answer from another system id is ignored; a
@@ -48,7 +46,6 @@ from __future__ import annotations
 
 import math
 import select
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -59,6 +56,7 @@ from common.config.sensors import (
     period_us,
 )
 from common.links import LinkError, TcpServerLink, parse_url
+from common.process.diagnostics import get_logger
 from common.wire.mavlink import MAV, encoder, pack, parser
 from common.wire.mission_items import PX4_SITL_HOME, HomePosition
 from common.wire.simlink import (
@@ -87,6 +85,7 @@ from sitl.server import LOG_BATCH, SITL_COMPONENT
 from sitl.truth_log import TruthLog, flushed
 from sitl.world import start_flight
 
+log = get_logger(__name__)
 GPS_HZ = 5.0  # PX4's Gazebo GPS plugin
 STATE_DEFAULT_US = 5000  # HIL_STATE_QUATERNION: what PX4 asks on connecting (200 Hz)
 MAX_LAG_S = 0.05  # wall-clock pace: further behind than this, resume from now
@@ -129,7 +128,7 @@ class Server:
         self.profile = profile
         self.warning = stale_warning(profile)
         if self.warning is not None:
-            print(self.warning, file=sys.stderr, flush=True)
+            log.warning(self.warning)
         self.schedule = AnswerSchedule(self.imu_us)
         self.send_mocap = scenario.sensors is not None
         self.system_id = system_id
@@ -377,16 +376,7 @@ class Server:
                 continue
             if not (self.locked and self.schedule.learned):  # the wall-clock pace
                 last_step_s = None
-                wait = self.due_s - time.monotonic()
-                if wait > 0.0:
-                    if select.select(link.filenos(), [], [], wait)[0]:
-                        self._receive()
-                    continue
-                if -wait > MAX_LAG_S:
-                    self.due_s = time.monotonic()
-                self._step()
-                self.paced_steps += 1
-                self.due_s += imu_s
+                self._paced_step(imu_s)
                 continue
             if select.select(link.filenos(), [], [], 0.0)[0]:
                 self._receive()  # what came meanwhile, without waiting
@@ -401,6 +391,19 @@ class Server:
                 self.locked_sim_us += self.imu_us
             last_step_s = now
         self._flush_log()
+
+    def _paced_step(self, imu_s: float) -> None:
+        """Before the lockstep holds: a step once due on the wall clock; until then, a wait."""
+        wait = self.due_s - time.monotonic()
+        if wait > 0.0:
+            if select.select(self.link.filenos(), [], [], wait)[0]:
+                self._receive()
+            return
+        if -wait > MAX_LAG_S:
+            self.due_s = time.monotonic()
+        self._step()
+        self.paced_steps += 1
+        self.due_s += imu_s
 
     def _awaiting_answer(self) -> bool:
         """In lockstep: whether the plant still waits for the answer due (having waited
@@ -431,10 +434,10 @@ class Server:
         self._stalled = True
         self.stall_reports += 1
         self._flush_log()
-        print(f"sitl: no answer to the sample at t = {self.sent_us * 1e-6:.3f} s within "
-              f"{ANSWER_TIMEOUT_S:g} s (the firmware answers every {every} samples, "
-              f"{every * self.imu_us} us): advancing without it, on the wall clock until "
-              "it answers again", file=sys.stderr, flush=True)
+        log.warning("sitl: no answer to the sample at t = %.3f s within %g s (the firmware "
+                    "answers every %s samples, %s us): advancing without it, on the wall clock "
+                    "until it answers again", self.sent_us * 1e-6, ANSWER_TIMEOUT_S, every,
+                    every * self.imu_us)
 
     def _pace_wait(self, imu_s: float) -> bool:
         """With `speed_factor`: whether the next lockstep step is not yet due on the wall
