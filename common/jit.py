@@ -32,7 +32,8 @@ KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layout
                   "fcu/mission/segments.py", "fcu/modes/manual.py",
                   "sitl/plant_kernels.py", "sitl/disturbance.py",
                   "fcu/estimator/strapdown.py", "fcu/estimator/update.py",
-                  "fcu/estimator/output.py", "fcu/estimator/filter.py")
+                  "fcu/estimator/output.py", "fcu/estimator/filter.py",
+                  "fcu/estimator/readout.py")
 
 
 def _sources_hash() -> str:

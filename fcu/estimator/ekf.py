@@ -27,11 +27,8 @@ from fcu.estimator.filter import (
     cov_step,
     fuse,
     imu_step,
-    output_values,
     pose_step,
     repropagate,
-    sd_values,
-    variance_code,
 )
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.layouts import (
@@ -60,6 +57,7 @@ from fcu.estimator.layouts import (
     EI_RESETS,
     EI_RESYNC_T,
 )
+from fcu.estimator.readout import output_values, sd_values, variance_code
 from fcu.estimator.settings import EstimatorSettings
 from fcu.estimator.status import EstimatorHealth, EstimatorStatus, positive_definite, sd_verdict
 from fcu.estimator.strapdown import N, State

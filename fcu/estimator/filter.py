@@ -1,5 +1,6 @@
 """The filter's compiled kernels on its flat buffers: prediction, the covariance step, the
-fusion's bookkeeping, the output predictor and the health verdict.
+fusion's bookkeeping and the output predictor (its values and the health verdict are read by
+`fcu.estimator.readout`).
 
 Buffers (`fcu.estimator.layouts`): `fb` floats (EF_*: states, the pose under way, the settings
 the kernels read), `ib` integers (EI_*: times in us, counters, the ring and queue lengths),
@@ -13,24 +14,20 @@ innovation covariance (`fcu.estimator.update.spd_inverse`).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from common.jit import njit
-from common.quaternion import q_conj, q_log, q_mul, q_rotate_inv
+from common.quaternion import q_conj, q_log, q_mul
 from fcu.estimator.layouts import (
     EF_ACC_B2,
     EF_ACC_N2,
     EF_C_DT2,
     EF_C_X,
-    EF_CONVERGED_VAR,
     EF_G,
     EF_GATE2,
     EF_GYRO_B2,
     EF_GYRO_N2,
     EF_H_X,
-    EF_HEALTHY_VAR,
     EF_INNOV,
     EF_LAST_W,
     EF_O_X,
@@ -39,7 +36,6 @@ from fcu.estimator.layouts import (
     EF_R_ATT_FLOOR,
     EF_R_POS_FLOOR,
     EF_RATIO,
-    EF_SD,
     EF_VAR_MAX,
     EF_VAR_MIN,
     EF_XB,
@@ -166,22 +162,44 @@ def imu_step(fb: np.ndarray, ib: np.ndarray, M: np.ndarray, pend_t: np.ndarray,
     (returns FUSE with the pose under way; call again without PUSH once it is fused), then
     (OUTPUT) the output state integrates the sample. GROW: the ring is full, nothing done."""
     ib[EI_DT_US] = dt_us
-    if mode & PUSH:
-        cap = pend_t.shape[0]
-        if ib[EI_PEND_N] == cap:
-            return GROW
-        j = (ib[EI_PEND_HEAD] + ib[EI_PEND_N]) % cap
-        pend_t[j] = t
-        pend_v[j, 0] = w0
-        pend_v[j, 1] = w1
-        pend_v[j, 2] = w2
-        pend_v[j, 3] = f0
-        pend_v[j, 4] = f1
-        pend_v[j, 5] = f2
-        ib[EI_PEND_N] += 1
-        fb[EF_LAST_W] = w0
-        fb[EF_LAST_W + 1] = w1
-        fb[EF_LAST_W + 2] = w2
+    if mode & PUSH and not _push(fb, ib, pend_t, pend_v, t, w0, w1, w2, f0, f1, f2):
+        return GROW
+    if _advance_horizon(fb, ib, M, pend_t, pend_v, pose_c, pose_v, t, dt_us) == FUSE:
+        return FUSE
+    if mode & OUTPUT:
+        _output(fb, ib, t, w0, w1, w2, f0, f1, f2)
+    return DONE
+
+
+@njit
+def _push(fb: np.ndarray, ib: np.ndarray, pend_t: np.ndarray, pend_v: np.ndarray, t: int,
+          w0: float, w1: float, w2: float, f0: float, f1: float, f2: float) -> bool:
+    """The sample buffered in the ring (False: the ring is full) and kept as the newest
+    gyro sample."""
+    cap = pend_t.shape[0]
+    if ib[EI_PEND_N] == cap:
+        return False
+    j = (ib[EI_PEND_HEAD] + ib[EI_PEND_N]) % cap
+    pend_t[j] = t
+    pend_v[j, 0] = w0
+    pend_v[j, 1] = w1
+    pend_v[j, 2] = w2
+    pend_v[j, 3] = f0
+    pend_v[j, 4] = f1
+    pend_v[j, 5] = f2
+    ib[EI_PEND_N] += 1
+    fb[EF_LAST_W] = w0
+    fb[EF_LAST_W + 1] = w1
+    fb[EF_LAST_W + 2] = w2
+    return True
+
+
+@njit
+def _advance_horizon(fb: np.ndarray, ib: np.ndarray, M: np.ndarray, pend_t: np.ndarray,
+                     pend_v: np.ndarray, pose_c: np.ndarray, pose_v: np.ndarray, t: int,
+                     dt_us: int) -> int:
+    """The horizon predicted over the buffered samples up to t - pose_delay; FUSE as soon
+    as a queued pose is due (its capture time reached), DONE when none is left to do."""
     h_lim = t - ib[EI_DELAY_US]
     half = dt_us >> 1
     while True:
@@ -203,17 +221,23 @@ def imu_step(fb: np.ndarray, ib: np.ndarray, M: np.ndarray, pend_t: np.ndarray,
                     ib[EI_FUSING] = 1
                 continue
         break
-    if mode & OUTPUT:
-        if ib[EI_PEND_N] == 0:
-            for k in range(16):
-                fb[EF_O_X + k] = fb[EF_H_X + k]
-            ib[EI_O_T] = ib[EI_H_T]
-        elif ib[EI_O_T] < t:
-            x = strapdown(load_state(fb, EF_O_X), (w0, w1, w2), (f0, f1, f2),
-                          (t - ib[EI_O_T]) * 1e-6, fb[EF_G])
-            store_state(fb, EF_O_X, x)
-            ib[EI_O_T] = t
     return DONE
+
+
+@njit
+def _output(fb: np.ndarray, ib: np.ndarray, t: int, w0: float, w1: float, w2: float,
+            f0: float, f1: float, f2: float) -> None:
+    """The output state at t: the horizon's when nothing is buffered beyond it, else
+    integrated over the newest sample."""
+    if ib[EI_PEND_N] == 0:
+        for k in range(16):
+            fb[EF_O_X + k] = fb[EF_H_X + k]
+        ib[EI_O_T] = ib[EI_H_T]
+    elif ib[EI_O_T] < t:
+        x = strapdown(load_state(fb, EF_O_X), (w0, w1, w2), (f0, f1, f2),
+                      (t - ib[EI_O_T]) * 1e-6, fb[EF_G])
+        store_state(fb, EF_O_X, x)
+        ib[EI_O_T] = t
 
 
 @njit
@@ -413,69 +437,3 @@ def fuse_end(fb: np.ndarray, ib: np.ndarray, M: np.ndarray, pend_t: np.ndarray,
             reset = True
     if ok_p or ok_a or reset:
         _correct_output(fb, ib, pend_t, pend_v, reset)
-
-
-@njit
-def output_values(fb: np.ndarray, ib: np.ndarray) -> tuple[
-        int, tuple[float, float, float], tuple[float, float, float, float],
-        tuple[float, float, float], tuple[float, float, float]]:
-    """(t_us, p, q, v_flu, bias-corrected rate) of the output state."""
-    x = fb[EF_O_X:EF_O_X + 16]
-    q = (x[6], x[7], x[8], x[9])
-    w = fb[EF_LAST_W:EF_LAST_W + 3]
-    return (ib[EI_O_T], (x[0], x[1], x[2]), q, q_rotate_inv(q, (x[3], x[4], x[5])),
-            (w[0] - x[10], w[1] - x[11], w[2] - x[12]))
-
-
-@njit
-def variance_code(fb: np.ndarray, M: np.ndarray) -> int:
-    """health()'s verdict from the largest variances of position, velocity and attitude (no
-    Cholesky test): 0 neither, 1 healthy, 3 healthy and converged. The finite test sums in
-    Python's order (math.isfinite(sum(list)))."""
-    P = M[0]
-    sd = 0.0
-    lo = P[0, 0]
-    for i in range(N):
-        sd += P[i, i]
-        if P[i, i] < lo:
-            lo = P[i, i]
-    sx = 0.0
-    for k in range(16):
-        sx += fb[EF_O_X + k]
-    if not (math.isfinite(sd) and math.isfinite(sx) and lo > 0.0):
-        return 0
-    v = np.empty(3)
-    for b in range(3):
-        m = P[3 * b, 3 * b]
-        for i in range(1, 3):
-            if P[3 * b + i, 3 * b + i] > m:
-                m = P[3 * b + i, 3 * b + i]
-        v[b] = m
-    hv = fb[EF_HEALTHY_VAR:EF_HEALTHY_VAR + 3]
-    cv = fb[EF_CONVERGED_VAR:EF_CONVERGED_VAR + 3]
-    healthy = v[0] < hv[0] and v[1] < hv[1] and v[2] < hv[2]
-    if not healthy:
-        return 0
-    if v[0] < cv[0] and v[1] < cv[1] and v[2] < cv[2]:
-        return 3
-    return 1
-
-
-@njit
-def sd_values(fb: np.ndarray, M: np.ndarray) -> bool:
-    """status()'s standard deviations into fb[EF_SD:] (sqrt of the diagonal floored at 0;
-    inf when P or the output state is not finite; np.maximum's -0.0 kept); returns whether
-    both are finite."""
-    P = M[0]
-    finite = True
-    for i in range(N):
-        for j in range(N):
-            if not math.isfinite(P[i, j]):
-                finite = False
-    for k in range(16):
-        if not math.isfinite(fb[EF_O_X + k]):
-            finite = False
-    for i in range(N):
-        d = P[i, i]
-        fb[EF_SD + i] = math.sqrt(d if d >= 0.0 else 0.0) if finite else math.inf
-    return finite

@@ -58,7 +58,7 @@ def positive_definite(P: np.ndarray) -> bool:
 def sd_verdict(st: EstimatorSettings, sd: list[float], spd: bool) -> tuple[bool, bool]:
     """(converged, healthy) from the 15 standard deviations (NaN before aligned, inf when
     not finite) and whether P is positive definite: healthy needs spd and the sd below the
-    blow-up limits (health's cheap variant: `fcu.estimator.filter.variance_code`)."""
+    blow-up limits (health's cheap variant: `fcu.estimator.readout.variance_code`)."""
     pos_sd, vel_sd, att_sd = max(sd[0:3]), max(sd[3:6]), max(sd[6:9])
     healthy = (spd and pos_sd < st.healthy_pos_sd_max_m
                and vel_sd < st.healthy_vel_sd_max_m_s and att_sd < st.healthy_att_sd_max_rad)

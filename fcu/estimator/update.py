@@ -132,6 +132,13 @@ def _np_max(a: float, b: float) -> float:
 @njit
 def bound_covariance(P: np.ndarray, var_min: np.ndarray, var_max: float) -> None:
     """Diagonal floors and the var_max clamp, in place (row/column scaling keeps P SPD)."""
+    _floor_diagonal(P, var_min)
+    _clamp_variances(P, var_max)
+
+
+@njit
+def _floor_diagonal(P: np.ndarray, var_min: np.ndarray) -> None:
+    """Each variance raised to its floor, when one is below it."""
     n = P.shape[0]
     low = False
     for i in range(n):
@@ -140,6 +147,13 @@ def bound_covariance(P: np.ndarray, var_min: np.ndarray, var_max: float) -> None
     if low:
         for i in range(n):
             P[i, i] = _np_max(P[i, i], var_min[i])
+
+
+@njit
+def _clamp_variances(P: np.ndarray, var_max: float) -> None:
+    """When a variance is above var_max, rows and columns scaled by sqrt(min(1, var_max /
+    P_ii)) each (np.sqrt(np.minimum(1.0, v)), NaN kept)."""
+    n = P.shape[0]
     high = False
     for i in range(n):
         if P[i, i] > var_max:

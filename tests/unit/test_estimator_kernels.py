@@ -13,7 +13,7 @@ import pytest
 from fcu.estimator import buffers
 from fcu.estimator.buffers import filter_buffers
 from fcu.estimator.ekf import Estimator
-from fcu.estimator.filter import cov_step, sd_values, variance_code
+from fcu.estimator.filter import cov_step
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.layouts import (
     EF_C_DT2,
@@ -27,6 +27,7 @@ from fcu.estimator.layouts import (
     EI_H_T,
     EI_N_PRED,
 )
+from fcu.estimator.readout import sd_values, variance_code
 from fcu.estimator.settings import EstimatorSettings
 from fcu.estimator.strapdown import strapdown
 from fcu.estimator.update import (
