@@ -22,6 +22,7 @@ import math
 import zlib
 from collections import deque
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -175,8 +176,7 @@ class _Triad:
         return (min(max(y0, -lim), lim), min(max(y1, -lim), lim), min(max(y2, -lim), lim))
 
 
-@dataclass(frozen=True)
-class ImuSample:
+class ImuSample(NamedTuple):
     t_s: float
     omega_flu_rad_s: Vec3
     f_flu_m_s2: Vec3
