@@ -297,16 +297,18 @@ class MocapModel:
             raise ValueError(f"capture times must not decrease: {t_s} after "
                              f"{self.queue[-1].capture_s}")
         u = float(self.rng.random())  # fixed draw count per capture, dropped or not
-        n = self.rng.normal(0.0, 1.0, 6)
+        n = self.rng.normal(0.0, 1.0, 6).tolist()
         self.captures += 1
         if u < self.cfg.dropout_probability:
             self.dropped += 1
             return
         p, q = p_enu_m, q_enu_flu
-        if self.cfg.position_noise_m > 0.0:
-            p = _vec3(np.asarray(p_enu_m) + self.cfg.position_noise_m * n[:3])
-        if self.cfg.attitude_noise_rad > 0.0:
-            q = q_mul(q_enu_flu, q_exp(_vec3(self.cfg.attitude_noise_rad * n[3:])))
+        sp, sa = self.cfg.position_noise_m, self.cfg.attitude_noise_rad
+        if sp > 0.0:  # element by element, as numpy's p + s n
+            p = (float(p_enu_m[0]) + sp * n[0], float(p_enu_m[1]) + sp * n[1],
+                 float(p_enu_m[2]) + sp * n[2])
+        if sa > 0.0:
+            q = q_mul(q_enu_flu, q_exp((sa * n[3], sa * n[4], sa * n[5])))
         self.queue.append(PoseDelivery(t_s, t_s + self.cfg.latency_s, p, q))
 
     def deliver(self, t_s: float) -> list[PoseDelivery]:
