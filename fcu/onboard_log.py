@@ -115,6 +115,7 @@ class OnboardLog(ULogWriter):
         self.last_nav_state = -1
         self.seq_reached = -1
         self._sensor_combined = self._ids["sensor_combined"]  # packed in `_imu`
+        self._dq_onboard = self._ids[DQ_ONBOARD.name]  # packed in `step`
         pipeline.estimator_inputs = []  # the pipeline keeps the estimator's inputs for us
         self.estimator_info_logged = False
         self.imu_t_us = -1  # the newest IMU sample logged
@@ -144,12 +145,13 @@ class OnboardLog(ULogWriter):
         """Queue the records of one control step at flight time t_us."""
         pipe = self.pipeline
         state = pipe.state
-        w = self
         self._estimator_inputs()
         if out.result is not None and state is not None:
             row = onboard_row(out.t_us, state, out.result, out.speed_rad_s, out.tilt_rad,
                               out.armed, step_us)
-            w.add("dq_onboard", (self.on_flight_clock(out.t_us), *row[1:], out.t_us))
+            msg_id, record = self._dq_onboard  # (stamp, row[1:], state_time_us) packed
+            self._pending.append(record.pack(record.size - 3, 68, msg_id,
+                                             self.on_flight_clock(out.t_us), *row[1:], out.t_us))
         if t_us >= self.next_px4_us:
             self.next_px4_us = (t_us // self.px4_period_us + 1) * self.px4_period_us
             self._px4(out, t_us)

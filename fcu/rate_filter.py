@@ -99,5 +99,5 @@ class ImuRateFilter:
         if lpf is None or not lpf.active or last is None:
             return state
         o, f, r = state.omega_flu_rad_s, lpf.output, last[1]
-        return state._replace(omega_flu_rad_s=(o[0] + f[0] - r[0], o[1] + f[1] - r[1],
-                                               o[2] + f[2] - r[2]))
+        return VehicleState(state.p_enu_m, state.q_enu_flu, state.v_flu_m_s,
+                            (o[0] + f[0] - r[0], o[1] + f[1] - r[1], o[2] + f[2] - r[2]))

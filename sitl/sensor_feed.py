@@ -192,8 +192,9 @@ class SensorFeed:
             alt, self._baro_alt_m = self._baro_alt_m, None
             pressure = pressure_hpa(alt)
             fields |= BARO_FIELDS
-        return HilSensor(t, flu_to_frd(imu.f_flu_m_s2), flu_to_frd(imu.omega_flu_rad_s), mag,
-                         pressure, alt, TEMPERATURE_C, fields)
+        a, g = imu.f_flu_m_s2, imu.omega_flu_rad_s  # to FRD (`flu_to_frd`)
+        return HilSensor(t, (a[0], -a[1], -a[2]), (g[0], -g[1], -g[2]), mag, pressure, alt,
+                         TEMPERATURE_C, fields)
 
     def period(self, states: Sequence[PlantState]) -> list[HilSensor | Odometry]:
         """The messages for these physics-step states (times increasing, each once): the
