@@ -99,8 +99,12 @@ class SampleClock:
         else:
             dt = t - self.last_us
         self.last_us = t
-        self.k += 1
-        self.due_us = self._jittered(self.k, t)
+        k = self.k = self.k + 1
+        if self.jitter_us:
+            self.due_us = self._jittered(k, t)
+        else:  # `_jittered` without a draw
+            due = (2 * k * self._num + self._den) // (2 * self._den)  # nominal_us(k)
+            self.due_us = due if due > t else t + 1
         return t, dt
 
 
