@@ -47,6 +47,12 @@ def f32_vec3(v: Vec3) -> Vec3:
     return (x, y, z)
 
 
+def f32_quat(q: Quat) -> Quat:
+    """A quaternion's components rounded to float32 (as `f32` each)."""
+    w, x, y, z = _F32x4.unpack(_F32x4.pack(*q))
+    return (w, x, y, z)
+
+
 def q_enu_flu_as_wire(q_enu_flu: Quat) -> Quat:
     """An ENU/FLU attitude as the wire carries it: NED/FRD (w >= 0), float32 per component,
     back to ENU/FLU (w >= 0), as ODOMETRY's q field sends it and the FCU reads it."""

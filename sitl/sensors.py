@@ -263,10 +263,11 @@ class MagModel:
         return 1.0 / self.cfg.rate_hz
 
     def sample(self, t_s: float, q_enu_flu: Quat) -> MagSample:
-        n = self.rng.normal(0.0, 1.0, 3)
+        n = self.rng.normal(0.0, 1.0, 3).tolist()
         b = q_rotate_inv(q_enu_flu, self.b_enu_gauss)
-        if self.cfg.noise_gauss > 0.0:
-            b = _vec3(np.asarray(b) + self.cfg.noise_gauss * n)
+        s = self.cfg.noise_gauss
+        if s > 0.0:  # element by element, as numpy's b + s n
+            b = (float(b[0]) + s * n[0], float(b[1]) + s * n[1], float(b[2]) + s * n[2])
         return MagSample(t_s, b)
 
 
