@@ -35,9 +35,26 @@ _Q_FLU_FRD: Quat = (0.0, 1.0, 0.0, 0.0)  # pi about x
 
 
 def q_enu_flu_to_ned_frd(q: Quat) -> Quat:
-    """q_ned_frd = q_ned_enu q_enu_flu q_flu_frd, sign chosen with w >= 0."""
-    r = q_mul(q_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
-    return r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
+    """q_ned_frd = q_ned_enu q_enu_flu q_flu_frd, sign chosen with w >= 0: `q_mul` twice
+    with the fixed rotations' components written in (the same operations in the same
+    order, so the same bits, without two compiled calls' overhead from Python); a
+    component not finite takes the compiled calls (whose NaN signs may differ)."""
+    h = _H
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    if not math.isfinite(w + x + y + z):
+        r = q_mul(q_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
+        return r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
+    # a = q_mul(_Q_NED_ENU, q), _Q_NED_ENU = (0, h, h, 0)
+    aw = 0.0 * w - h * x - h * y - 0.0 * z
+    ax = 0.0 * x + h * w + h * z - 0.0 * y
+    ay = 0.0 * y - h * z + h * w + 0.0 * x
+    az = 0.0 * z + h * y - h * x + 0.0 * w
+    # q_mul(a, _Q_FLU_FRD), _Q_FLU_FRD = (0, 1, 0, 0)
+    rw = aw * 0.0 - ax * 1.0 - ay * 0.0 - az * 0.0
+    rx = aw * 1.0 + ax * 0.0 + ay * 0.0 - az * 0.0
+    ry = aw * 0.0 - ax * 0.0 + ay * 0.0 + az * 1.0
+    rz = aw * 0.0 + ax * 0.0 - ay * 1.0 + az * 0.0
+    return (rw, rx, ry, rz) if rw >= 0.0 else (-rw, -rx, -ry, -rz)
 
 
 def q_ned_frd_to_enu_flu(q: Quat) -> Quat:

@@ -107,7 +107,8 @@ class Pipeline:
 
     def on_state(self, stamp_us: int, state: VehicleState, rx_us: int) -> None:
         """A valid state stamped `stamp_us`, received at `rx_us` on the flight clock."""
-        state = state._replace(q_enu_flu=q_normalize(state.q_enu_flu))
+        p, q, v, w = state
+        state = VehicleState(p, q_normalize(q), v, w)
         self.state = state
         self.state_time_us = stamp_us
         self.state_rx_us = rx_us

@@ -81,16 +81,16 @@ from sitl.layouts import (
     PS_V,
     PS_W,
 )
-from sitl.plant_kernels import rotate as rotate
-from sitl.plant_kernels import rotate_inv as rotate_inv
 from sitl.plant_kernels import (
+    flight_force_kernel,
     rotor_lag_kernel,
     rotor_wrench_kernel,
     step_kernel,
     steps_kernel,
     tilt_servo_kernel,
-    with_disturbance,
 )
+from sitl.plant_kernels import rotate as rotate
+from sitl.plant_kernels import rotate_inv as rotate_inv
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -240,6 +240,8 @@ class Plant:
         self.step_rows(row, np.zeros(PC_SIZE), np.empty((2, STATE_SIZE)))
         step_kernel(self.params, self._disturbance.table, row, np.zeros(PC_SIZE),
                     np.empty(STATE_SIZE))
+        flight_force_kernel(self.params, self._disturbance.table, np.zeros(2 * N_ROTORS),
+                            0.0, self.mass)
 
     @property
     def disturbance(self) -> Disturbance:
@@ -336,10 +338,12 @@ class Plant:
         if s.landed:
             f: Vec3 = rotate_inv(s.q_enu_flu, (0.0, 0.0, self.g))
         else:
-            r = rotor_wrench_kernel(self.params, _f64(s.rotor_speed_rad_s, N_ROTORS),
-                                    _f64(s.tilt_rad, N_ROTORS))
-            w = with_disturbance(self.params, self._disturbance.table, r, s.time_us * 1e-6)
-            f = (w[0] / self.mass, w[1] / self.mass, w[2] / self.mass)
+            actuators = np.array((*s.rotor_speed_rad_s, *s.tilt_rad), dtype=np.float64)
+            if actuators.shape != (2 * N_ROTORS,):
+                raise ValueError(f"expected {N_ROTORS} rotor speeds and tilts, got "
+                                 f"{len(s.rotor_speed_rad_s)} and {len(s.tilt_rad)}")
+            f = flight_force_kernel(self.params, self._disturbance.table, actuators,
+                                    s.time_us * 1e-6, self.mass)
         if contact_dv_enu == (0.0, 0.0, 0.0):
             return f
         h = self.dt_us * 1e-6 if interval_s is None else interval_s

@@ -190,6 +190,16 @@ def with_disturbance(pp: np.ndarray, dist: np.ndarray, r: tuple[float, ...],
 
 
 @njit
+def flight_force_kernel(pp: np.ndarray, dist: np.ndarray, actuators: np.ndarray, t_s: float,
+                        mass: float) -> tuple[float, float, float]:
+    """The rotor and disturbance force per mass (FLU) at t_s of the actuators' state
+    (N_ROTORS speeds, then N_ROTORS tilts): an accelerometer's reading in flight."""
+    r = rotor_wrench_kernel(pp, actuators[:N_ROTORS], actuators[N_ROTORS:])
+    w = with_disturbance(pp, dist, r, t_s)
+    return (w[0] / mass, w[1] / mass, w[2] / mass)
+
+
+@njit
 def _wrench_after(pp: np.ndarray, speed0: np.ndarray, tilt0: np.ndarray, cmd: np.ndarray,
                   tau_s: float) -> tuple[float, ...]:
     """Rotor wrench on the exact (lagged) actuator trajectory tau_s into the step."""

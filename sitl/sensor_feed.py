@@ -163,6 +163,9 @@ class SensorFeed:
 
     def _deliver(self, t_us: int, out: list[HilSensor | Odometry]) -> None:
         """The poses whose latency has passed at t_us, as ODOMETRY at their capture time."""
+        queue = self.suite.mocap.queue
+        if not queue or queue[0].delivered_s > (t_us + 0.5) * 1e-6:
+            return  # nothing due (`MocapModel.deliver` would return none)
         for pose in self.suite.mocap.deliver((t_us + 0.5) * 1e-6):
             out.append(Odometry(round(pose.capture_s * 1e6), enu_to_ned(pose.p_enu_m),
                                 q_enu_flu_to_ned_frd(pose.q_enu_flu), _NAN3, _NAN3,
@@ -189,10 +192,10 @@ class SensorFeed:
             alt, self._baro_alt_m = self._baro_alt_m, None
             pressure = pressure_hpa(alt)
             fields |= BARO_FIELDS
-        return HilSensor(t, flu_to_frd(imu.f_flu_m_s2), flu_to_frd(imu.omega_flu_rad_s), mag,
-                         pressure, alt, TEMPERATURE_C, fields)
+        a, g = imu.f_flu_m_s2, imu.omega_flu_rad_s  # to FRD (`flu_to_frd`)
+        return HilSensor(t, (a[0], -a[1], -a[2]), (g[0], -g[1], -g[2]), mag, pressure, alt,
+                         TEMPERATURE_C, fields)
 
-        dv = self._spread.take(self._contacts.take(), dt_us)
     def period(self, states: Sequence[PlantState]) -> list[HilSensor | Odometry]:
         """The messages for these physics-step states (times increasing, each once): the
         samples due since the previous state, in time order; at one instant a pose delivered
@@ -216,7 +219,7 @@ class SensorFeed:
                 te = min(imu_c.due_us, baro_c.due_us, mag_c.due_us, mocap_c.due_us)
                 if te > t:
                     break
-                at = s if prev is None else state_at(prev, s, te)
+                at = s if prev is None or te == t else state_at(prev, s, te)
                 if mocap_c.due_us == te:
                     self._capture(mocap_c.take()[0], at)
                 if mag_c.due_us == te:

@@ -22,6 +22,7 @@ import math
 import zlib
 from collections import deque
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -98,8 +99,12 @@ class SampleClock:
         else:
             dt = t - self.last_us
         self.last_us = t
-        self.k += 1
-        self.due_us = self._jittered(self.k, t)
+        k = self.k = self.k + 1
+        if self.jitter_us:
+            self.due_us = self._jittered(k, t)
+        else:  # `_jittered` without a draw
+            due = (2 * k * self._num + self._den) // (2 * self._den)  # nominal_us(k)
+            self.due_us = due if due > t else t + 1
         return t, dt
 
 
@@ -175,8 +180,7 @@ class _Triad:
         return (min(max(y0, -lim), lim), min(max(y1, -lim), lim), min(max(y2, -lim), lim))
 
 
-@dataclass(frozen=True)
-class ImuSample:
+class ImuSample(NamedTuple):
     t_s: float
     omega_flu_rad_s: Vec3
     f_flu_m_s2: Vec3
@@ -259,10 +263,11 @@ class MagModel:
         return 1.0 / self.cfg.rate_hz
 
     def sample(self, t_s: float, q_enu_flu: Quat) -> MagSample:
-        n = self.rng.normal(0.0, 1.0, 3)
+        n = self.rng.normal(0.0, 1.0, 3).tolist()
         b = q_rotate_inv(q_enu_flu, self.b_enu_gauss)
-        if self.cfg.noise_gauss > 0.0:
-            b = _vec3(np.asarray(b) + self.cfg.noise_gauss * n)
+        s = self.cfg.noise_gauss
+        if s > 0.0:  # element by element, as numpy's b + s n
+            b = (float(b[0]) + s * n[0], float(b[1]) + s * n[1], float(b[2]) + s * n[2])
         return MagSample(t_s, b)
 
 
@@ -297,16 +302,18 @@ class MocapModel:
             raise ValueError(f"capture times must not decrease: {t_s} after "
                              f"{self.queue[-1].capture_s}")
         u = float(self.rng.random())  # fixed draw count per capture, dropped or not
-        n = self.rng.normal(0.0, 1.0, 6)
+        n = self.rng.normal(0.0, 1.0, 6).tolist()
         self.captures += 1
         if u < self.cfg.dropout_probability:
             self.dropped += 1
             return
         p, q = p_enu_m, q_enu_flu
-        if self.cfg.position_noise_m > 0.0:
-            p = _vec3(np.asarray(p_enu_m) + self.cfg.position_noise_m * n[:3])
-        if self.cfg.attitude_noise_rad > 0.0:
-            q = q_mul(q_enu_flu, q_exp(_vec3(self.cfg.attitude_noise_rad * n[3:])))
+        sp, sa = self.cfg.position_noise_m, self.cfg.attitude_noise_rad
+        if sp > 0.0:  # element by element, as numpy's p + s n
+            p = (float(p_enu_m[0]) + sp * n[0], float(p_enu_m[1]) + sp * n[1],
+                 float(p_enu_m[2]) + sp * n[2])
+        if sa > 0.0:
+            q = q_mul(q_enu_flu, q_exp((sa * n[3], sa * n[4], sa * n[5])))
         self.queue.append(PoseDelivery(t_s, t_s + self.cfg.latency_s, p, q))
 
     def deliver(self, t_s: float) -> list[PoseDelivery]:

@@ -17,7 +17,7 @@ from common.logs import px4_topics as px4
 from common.logs.columns import TRUTH_COLUMNS
 from common.logs.ulog import Topic, ULogWriter
 from common.process.diagnostics import get_logger
-from sitl.plant import PlantState, truth_row
+from sitl.plant import PlantState
 
 logger = get_logger(__name__)
 
@@ -35,14 +35,17 @@ class TruthLog(ULogWriter):
     def __init__(self, sink: str | Path | bytearray, scenario_name: str) -> None:
         super().__init__(sink, TRUTH_TOPICS, info={
             "sys_name": "dqflight sitl", "ver_hw": "SITL", "sim_scenario": scenario_name})
+        self._dq_truth = self._ids[DQ_TRUTH.name]
         self.period_us = 1_000_000 // GROUNDTRUTH_HZ
         self.next_gt_us = 0
 
     def record(self, s: PlantState) -> None:
         w = self
         t = s.time_us
-        row = truth_row(s)
-        w.add("dq_truth", (t, *row[1:]))
+        msg_id, record = self._dq_truth  # the values of `truth_row`, packed here
+        self._pending.append(record.pack(
+            record.size - 3, 68, msg_id, t, *s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu,
+            *s.omega_flu_rad_s, *s.rotor_speed_rad_s, *s.tilt_rad, float(s.landed)))
         if t >= self.next_gt_us:
             self.next_gt_us = (t // self.period_us + 1) * self.period_us
             w.add(px4.VEHICLE_LOCAL_POSITION_GROUNDTRUTH.name, px4.local_position_record(

@@ -93,16 +93,17 @@ class World:
         self._substates = np.empty((self.substeps, len(TRUTH_COLUMNS)))
         self._impulses = ContactImpulses()  # ground impulses since `take_contact_dv`
 
-    def _contacts(self, before: np.ndarray, rows: np.ndarray) -> None:
-        """Add the touchdowns' velocity changes (`Plant.contact_dv_enu`) of these steps."""
-        landed = rows[:, _LANDED] != 0.0
-        if not landed.any() or (before[_LANDED] != 0.0 and landed.all()):
+    def _contacts(self, before: np.ndarray, rows: list[list[float]]) -> None:
+        """Add the touchdowns' velocity changes (`Plant.contact_dv_enu`) of these steps
+        (`rows`: the steps' state rows after `before`)."""
+        landed = [r[_LANDED] != 0.0 for r in rows]
+        if not any(landed) or (before[_LANDED] != 0.0 and all(landed)):
             return
-        for k in range(len(rows)):
-            a = before if k == 0 else rows[k - 1]
+        for k, row in enumerate(rows):
+            a = before.tolist() if k == 0 else rows[k - 1]
             if landed[k] and a[_LANDED] == 0.0:
-                self._impulses.add(self.plant.contact_dv_enu(state_of_row(a.tolist()),
-                                                             state_of_row(rows[k].tolist())))
+                self._impulses.add(self.plant.contact_dv_enu(state_of_row(a),
+                                                             state_of_row(row)))
 
     def take_contact_dv(self) -> tuple[float, float, float]:
         """The ground contact's velocity change since the last call (ENU, m/s): what an
@@ -142,12 +143,13 @@ class World:
                 row = out[k]
         else:
             self.plant.step_rows(row, command_row(command), out)
-        self._contacts(row, out)
+        rows = out.tolist()
+        self._contacts(row, rows)
         self._row = out[-1].copy()
         if self.feed is not None:
-            states = [state_of_row(r) for r in out.tolist()]
+            states = [state_of_row(r) for r in rows]
         else:
-            states = [state_of_row(self._row.tolist())]
+            states = [state_of_row(rows[-1])]
         self.state = states[-1]
         return states
 

@@ -1,4 +1,5 @@
-"""docs/configuration.md, generated from the loaders' key declarations (`common.config.keys`).
+"""docs/configuration.md, generated from the loaders' key declarations
+(`common.config.keys`).
 
 `python -m tools.config_doc` writes the page; `--check` exits 1 when the page on disk is not
 what the declarations give now (tests/unit/test_configuration_page.py runs the same

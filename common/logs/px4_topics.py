@@ -20,7 +20,7 @@ import numpy as np
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
 from common.logs.ulog import Topic
 from common.quaternion import Quat, Vec3, q_rotate, zyx_yaw
-from common.wire.rounding import f32
+from common.wire.rounding import f32_quat
 
 _T = ("uint64_t", "timestamp")
 _TS = ("uint64_t", "timestamp_sample")
@@ -289,8 +289,7 @@ def wire_q_ned_frd(q_enu_flu: Quat) -> Quat:
     below about 1e-9 of its pair's other one can still miss (the conversion lost most of
     it): then the rounding of the inverse, which agrees to float64 rounding."""
     target = _bits(q_enu_flu)
-    back = tuple(f32(c) for c in q_enu_flu_to_ned_frd(q_enu_flu))
-    q: Quat = (back[0], back[1], back[2], back[3])
+    q = f32_quat(q_enu_flu_to_ned_frd(q_enu_flu))
     if _bits(q_ned_frd_to_enu_flu(q)) == target:
         return q
     best = list(q)

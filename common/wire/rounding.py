@@ -28,10 +28,16 @@ def f32(x: float) -> float:
     return float(_F32.unpack(_F32.pack(x))[0])
 
 
+_F32N: dict[int, struct.Struct] = {}  # "<nf" by n
+
+
 def f32s(values: tuple[float, ...]) -> tuple[float, ...]:
     """Each value rounded to float32 (a message's float fields)."""
-    packer = struct.Struct(f"<{len(values)}f")
-    return tuple(packer.unpack(packer.pack(*values)))
+    n = len(values)
+    packer = _F32N.get(n)
+    if packer is None:
+        packer = _F32N[n] = struct.Struct(f"<{n}f")
+    return packer.unpack(packer.pack(*values))
 
 
 def f32_vec3(v: Vec3) -> Vec3:
@@ -39,6 +45,12 @@ def f32_vec3(v: Vec3) -> Vec3:
     frame change round the same)."""
     x, y, z = _F32x3.unpack(_F32x3.pack(*v))
     return (x, y, z)
+
+
+def f32_quat(q: Quat) -> Quat:
+    """A quaternion's components rounded to float32 (as `f32` each)."""
+    w, x, y, z = _F32x4.unpack(_F32x4.pack(*q))
+    return (w, x, y, z)
 
 
 def q_enu_flu_as_wire(q_enu_flu: Quat) -> Quat:

@@ -49,7 +49,9 @@ class GyroLowPass:
 
     def update(self, x: Vec3) -> Vec3:
         """One sample in, the filtered rate out; a non-finite sample is held out."""
-        if not all(math.isfinite(c) for c in x):
+        x0, x1, x2 = x
+        isfinite = math.isfinite
+        if not (isfinite(x0) and isfinite(x1) and isfinite(x2)):
             return self.output
         if not self.active:
             self.output = x
@@ -57,13 +59,15 @@ class GyroLowPass:
         if not self._started:
             self.reset(x)
             return x
-        y = [0.0, 0.0, 0.0]
-        for i in range(3):
-            d0 = x[i] - self._d1[i] * self.a1 - self._d2[i] * self.a2
-            y[i] = d0 * self.b0 + self._d1[i] * self.b1 + self._d2[i] * self.b2
-            self._d2[i] = self._d1[i]
-            self._d1[i] = d0
-        self.output = (y[0], y[1], y[2])
+        a1, a2, b0, b1, b2 = self.a1, self.a2, self.b0, self.b1, self.b2
+        d1, d2 = self._d1, self._d2
+        e0 = x0 - d1[0] * a1 - d2[0] * a2
+        e1 = x1 - d1[1] * a1 - d2[1] * a2
+        e2 = x2 - d1[2] * a1 - d2[2] * a2
+        self.output = (e0 * b0 + d1[0] * b1 + d2[0] * b2, e1 * b0 + d1[1] * b1 + d2[1] * b2,
+                       e2 * b0 + d1[2] * b1 + d2[2] * b2)
+        self._d2 = d1
+        self._d1 = [e0, e1, e2]
         return self.output
 
 
@@ -79,7 +83,8 @@ class ImuRateFilter:
         self.last: tuple[int, Vec3] | None = None
 
     def update(self, t_us: int, w: Vec3) -> None:
-        if not all(math.isfinite(c) for c in w):
+        isfinite = math.isfinite
+        if not (isfinite(w[0]) and isfinite(w[1]) and isfinite(w[2])):
             return
         last = self.last
         self.last = (t_us, w)
@@ -94,5 +99,5 @@ class ImuRateFilter:
         if lpf is None or not lpf.active or last is None:
             return state
         o, f, r = state.omega_flu_rad_s, lpf.output, last[1]
-        return state._replace(omega_flu_rad_s=(o[0] + f[0] - r[0], o[1] + f[1] - r[1],
-                                               o[2] + f[2] - r[2]))
+        return VehicleState(state.p_enu_m, state.q_enu_flu, state.v_flu_m_s,
+                            (o[0] + f[0] - r[0], o[1] + f[1] - r[1], o[2] + f[2] - r[2]))

@@ -115,6 +115,8 @@ class OnboardLog(ULogWriter):
         self.nav_state_since_us = 0
         self.last_nav_state = -1
         self.seq_reached = -1
+        self._sensor_combined = self._ids["sensor_combined"]  # packed in `_imu`
+        self._dq_onboard = self._ids[DQ_ONBOARD.name]  # packed in `step`
         pipeline.estimator_inputs = []  # the pipeline keeps the estimator's inputs for us
         self.estimator_info_logged = False
         self.imu_t_us = -1  # the newest IMU sample logged
@@ -144,12 +146,13 @@ class OnboardLog(ULogWriter):
         """Queue the records of one control step at flight time t_us."""
         pipe = self.pipeline
         state = pipe.state
-        w = self
         self._estimator_inputs()
         if out.result is not None and state is not None:
             row = onboard_row(out.t_us, state, out.result, out.speed_rad_s, out.tilt_rad,
                               out.armed, step_us)
-            w.add("dq_onboard", (self.on_flight_clock(out.t_us), *row[1:], out.t_us))
+            msg_id, record = self._dq_onboard  # (stamp, row[1:], state_time_us) packed
+            self._pending.append(record.pack(record.size - 3, 68, msg_id,
+                                             self.on_flight_clock(out.t_us), *row[1:], out.t_us))
         if t_us >= self.next_px4_us:
             self.next_px4_us = (t_us // self.px4_period_us + 1) * self.px4_period_us
             self._px4(out, t_us)
@@ -200,21 +203,28 @@ class OnboardLog(ULogWriter):
             self._pending.append(info_message("dq_gravity_m_s2", repr(gravity)))
             self._pending.append(info_message("dq_control_period_us", pipe.period_us))
         for m in inputs:
-            if isinstance(m, PoseInput):
+            if type(m) is ImuInput:
+                self._imu(m)
+            elif isinstance(m, PoseInput):
                 self.poses_waiting.append(m)
             elif isinstance(m, ImuInput):
                 self._imu(m)
         inputs.clear()
 
     def _imu(self, m: ImuInput) -> None:
-        t = self.on_flight_clock(m.t_us)
+        """sensor_combined of one IMU sample (`px4.sensor_combined_record`, packed here),
+        after the poses received before it."""
+        t = max(m.t_us + self.clock_offset_us, 0)  # on_flight_clock
         if self.imu_t_us >= 0:
             self.imu_dt_us = min(max(t - self.imu_t_us, 0), 0xFFFFFFFF)
-        for pose in self.poses_waiting:
-            self._pose(t, pose)
-        self.poses_waiting.clear()
-        self.add("sensor_combined", px4.sensor_combined_record(
-            t, m.omega_flu_rad_s, m.f_flu_m_s2, self.imu_dt_us))
+        if self.poses_waiting:
+            for pose in self.poses_waiting:
+                self._pose(t, pose)
+            self.poses_waiting.clear()
+        w, f, dt = m.omega_flu_rad_s, m.f_flu_m_s2, self.imu_dt_us
+        msg_id, record = self._sensor_combined
+        self._pending.append(record.pack(record.size - 3, 68, msg_id, t, w[0], -w[1], -w[2],
+                                         dt, 0, f[0], -f[1], -f[2], dt))
         self.imu_t_us = t
 
     def _pose(self, rx_us: int, m: PoseInput) -> None:

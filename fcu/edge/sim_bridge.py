@@ -101,17 +101,26 @@ def imu_from_hil_sensor(h: HilSensor) -> ImuInput:
 def pose_from_odometry(odo: Odometry) -> PoseInput | None:
     """The external pose of an ODOMETRY (ENU/FLU, its capture time and variances), or None
     when its position or attitude is not finite or the quaternion not a unit one."""
-    values = (*odo.p_ned_m, *odo.q_ned_frd)
-    if not all(map(math.isfinite, values)):
-        return None
-    if abs(math.sqrt(sum(c * c for c in odo.q_ned_frd)) - 1.0) > 0.01 or \
-            max(map(abs, odo.p_ned_m)) > MAX_POSITION_M:
-        return None
     cov = odo.pose_covariance
-    pos_var, att_var = cov[0], cov[15]
-    return PoseInput(odo.time_usec, ned_to_enu(odo.p_ned_m), q_ned_frd_to_enu_flu(odo.q_ned_frd),
-                     pos_var if math.isfinite(pos_var) and pos_var > 0.0 else math.nan,
-                     att_var if math.isfinite(att_var) and att_var > 0.0 else math.nan)
+    return pose_from_wire(odo.time_usec, odo.p_ned_m, odo.q_ned_frd, cov[0], cov[15])
+
+
+def pose_from_wire(time_usec: int, p_ned_m: Vec3, q_ned_frd: Quat, pos_var: float,
+                   att_var: float) -> PoseInput | None:
+    """`pose_from_odometry` on the fields it reads: the capture time, position, attitude
+    and the pose covariance's first position and attitude variances."""
+    px, py, pz = p_ned_m
+    qw, qx, qy, qz = q_ned_frd
+    isfinite = math.isfinite
+    if not (isfinite(px) and isfinite(py) and isfinite(pz) and isfinite(qw)
+            and isfinite(qx) and isfinite(qy) and isfinite(qz)):
+        return None
+    if abs(math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz) - 1.0) > 0.01 or \
+            max(abs(px), abs(py), abs(pz)) > MAX_POSITION_M:
+        return None
+    return PoseInput(time_usec, (py, px, -pz), q_ned_frd_to_enu_flu(q_ned_frd),
+                     pos_var if isfinite(pos_var) and pos_var > 0.0 else math.nan,
+                     att_var if isfinite(att_var) and att_var > 0.0 else math.nan)
 
 
 def actuator_controls(out: StepOutput, w_max: float, lockstep: bool) -> ActuatorControls:

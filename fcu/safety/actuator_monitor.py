@@ -54,8 +54,9 @@ def _figure(x: float) -> str:
 def unclamped_speeds(omega_sq: Sequence[float]) -> tuple[float, ...]:
     """Each rotor's speed before the clamp to w_max, from eq. (28)'s Omega (lateral and
     vertical parts per rotor): (lat^2 + ver^2)^(1/4), as the allocation computes it."""
-    return tuple(math.sqrt(math.hypot(omega_sq[2 * i], omega_sq[2 * i + 1]))
-                 for i in range(len(omega_sq) // 2))
+    sqrt, hypot = math.sqrt, math.hypot
+    return tuple([sqrt(hypot(omega_sq[2 * i], omega_sq[2 * i + 1]))
+                  for i in range(len(omega_sq) // 2)])
 
 
 class ActuatorMonitor:
@@ -95,30 +96,36 @@ class ActuatorMonitor:
         if not dt_s > 0.0:
             return []
         n, step = self.n, self.tilt_rate_max * dt_s
+        tolerance = step + TILT_TOLERANCE_RAD
         notices: list[LimitNotice] = []
-        was_reported = any(self.reported)
+        limited_s, reported = self.limited_s, self.reported
+        was_reported = any(reported)
         for i in range(n):
             c, m = tilt_cmd_rad[i], self.model_rad[i]
             gap = c - m
-            limited = abs(gap) > step + TILT_TOLERANCE_RAD and \
-                speed_unclamped_rad_s[i] >= self.hold_speed
+            limited = abs(gap) > tolerance and speed_unclamped_rad_s[i] >= self.hold_speed
             self.model_rad[i] = m + step if gap > step else (m - step if gap < -step else c)
             self.tilt_limited[i] = limited
-            if limited and self.limited_s[i] == 0.0:
+            if not limited:
+                limited_s[i], reported[i] = 0.0, False  # `_timed` of a period not limited
+                continue
+            if limited_s[i] == 0.0:
                 self.start[i] = m
             if self._timed(i, limited, dt_s, limit_s):
-                rate = abs(c - self.start[i]) / self.limited_s[i]
+                rate = abs(c - self.start[i]) / limited_s[i]
                 notices.append(LimitNotice("tilt", i, rate, self.tilt_rate_max))
         for i in range(n):
             w = speed_unclamped_rad_s[i]
             limited = w > self.speed_max
             self.rotor_limited[i] = limited
             k = n + i
-            if limited:
-                self.peak[k] = max(self.peak[k], w) if self.limited_s[k] > 0.0 else w
+            if not limited:
+                limited_s[k], reported[k] = 0.0, False
+                continue
+            self.peak[k] = max(self.peak[k], w) if limited_s[k] > 0.0 else w
             if self._timed(k, limited, dt_s, limit_s):
                 notices.append(LimitNotice("rotor", i, self.peak[k], self.speed_max))
-        if was_reported and not any(self.reported):
+        if was_reported and not any(reported):
             notices.append(LimitNotice("clear"))
         return notices
 

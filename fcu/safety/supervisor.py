@@ -37,5 +37,5 @@ class Supervisor:
         if not armed:
             return GateOutput(self.zero, self.held_tilt, "")
         w_max = self.speed_max
-        speeds = tuple(0.0 if w < 0.0 else (w_max if w > w_max else w) for w in speed_rad_s)
+        speeds = tuple([0.0 if w < 0.0 else (w_max if w > w_max else w) for w in speed_rad_s])
         return GateOutput(speeds, self.held_tilt, "")

@@ -14,6 +14,7 @@ status, events and figures.
 from __future__ import annotations
 
 import dataclasses
+import struct
 import time
 from collections.abc import Callable
 from typing import Any
@@ -28,12 +29,13 @@ from common.wire.mavlink import encoder, pack, parser
 from common.wire.mission_items import PX4_SITL_HOME, MissionItem, item_from_message
 from common.wire.mission_messages import item_message
 from common.wire.rounding import f32_vec3, f32s, q_enu_flu_as_wire, rotor_speeds_as_wire
-from common.wire.simlink import HilSensor, Odometry, through_wire_hil_sensor, through_wire_odometry
+from common.wire.simlink import HilSensor, Odometry
 from fcu import compose
 from fcu.compose import accept_mission, arm_and_start, published_home
 from fcu.control.core import onboard_row
 from fcu.edge.onboard_log import OnboardLog
-from fcu.edge.sim_bridge import imu_from_hil_sensor, pose_from_odometry, valid_state
+from fcu.edge.sim_bridge import pose_from_wire, valid_state
+from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.params import ParamError, ParamStore
 from fcu.pipeline import Pipeline, StepOutput
 from fcu.stages import VehicleState
@@ -116,18 +118,42 @@ def command_for_plant(out: StepOutput, vehicle: VehicleConfig,
                           f32s(out.tilt_rad), out.armed, state)
 
 
+_IMU_WIRE = struct.Struct("<6f")  # HIL_SENSOR's accelerometer and gyro fields
+_POSE_WIRE = struct.Struct("<9f")  # ODOMETRY's position, attitude and two variances
+
+
+def imu_for_fcu(h: HilSensor) -> ImuInput:
+    """The IMU sample the FCU takes from `h` on the simulator link:
+    `fcu.edge.sim_bridge.imu_from_hil_sensor` of `common.wire.simlink.through_wire_hil_sensor`,
+    rounding only the fields it reads (a FLU <-> FRD sign flip commutes with the rounding)."""
+    a0, a1, a2, g0, g1, g2 = _IMU_WIRE.unpack(_IMU_WIRE.pack(*h.acc_frd_m_s2,
+                                                             *h.gyro_frd_rad_s))
+    return ImuInput(h.time_usec, (g0, -g1, -g2), (a0, -a1, -a2))
+
+
+def pose_for_fcu(o: Odometry) -> PoseInput | None:
+    """The pose the FCU takes from `o` on the simulator link (None: refused):
+    `fcu.edge.sim_bridge.pose_from_odometry` of `common.wire.simlink.through_wire_odometry`,
+    rounding only the fields it reads."""
+    cov = o.pose_covariance
+    v = _POSE_WIRE.unpack(_POSE_WIRE.pack(*o.p_ned_m, *o.q_ned_frd, cov[0], cov[15]))
+    return pose_from_wire(o.time_usec, (v[0], v[1], v[2]), (v[3], v[4], v[5], v[6]), v[7],
+                          v[8])
+
+
 def feed_fcu(pipeline: Pipeline, messages: list[HilSensor | Odometry]) -> float:
     """A period's sensor messages as the FCU takes them from the simulator link (float32);
     returns the microseconds the estimator spent on them (part of the FCU's step time)."""
     spent = 0.0
     clock = time.perf_counter
     for m in messages:
-        if isinstance(m, HilSensor):
-            imu = imu_from_hil_sensor(through_wire_hil_sensor(m))
+        if type(m) is HilSensor:
+            imu = imu_for_fcu(m)
             t0 = clock()
             pipeline.on_imu(imu)
         else:
-            pose = pose_from_odometry(through_wire_odometry(m))
+            assert isinstance(m, Odometry)
+            pose = pose_for_fcu(m)
             if pose is None:
                 continue
             t0 = clock()

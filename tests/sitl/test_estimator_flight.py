@@ -164,7 +164,7 @@ def test_nan_in_sensor_frames_never_reaches_the_actuators(monkeypatch):
     still over the NaN samples), the run completes without a failsafe and every logged
     command and state is finite."""
     seen = {"imu_nan": 0, "pose_nan": 0}
-    imu_in, pose_in = inprocess.imu_from_hil_sensor, inprocess.pose_from_odometry
+    imu_in, pose_in = inprocess.imu_for_fcu, inprocess.pose_for_fcu
 
     def imu(h):
         seen["imu_nan"] += not math.isfinite(sum((*h.gyro_frd_rad_s, *h.acc_frd_m_s2)))
@@ -174,8 +174,8 @@ def test_nan_in_sensor_frames_never_reaches_the_actuators(monkeypatch):
         seen["pose_nan"] += not math.isfinite(sum((*o.p_ned_m, *o.q_ned_frd)))
         return pose_in(o)
 
-    monkeypatch.setattr(inprocess, "imu_from_hil_sensor", imu)
-    monkeypatch.setattr(inprocess, "pose_from_odometry", pose)
+    monkeypatch.setattr(inprocess, "imu_for_fcu", imu)
+    monkeypatch.setattr(inprocess, "pose_for_fcu", pose)
     r = _fly(13.5, SensorFault("imu_nan", 12.0, 12.01), SensorFault("pose_nan", 12.5, 12.55))
     assert seen == {"imu_nan": 10, "pose_nan": 10}
     m = r.metrics

@@ -85,3 +85,22 @@ def test_geodetic_home_mapping():
     lat, lon, alt = ned_to_geodetic((1.0, 0.0, -5.0), 47.0, 8.0, 400.0)
     assert math.isclose(lat - 47.0, math.degrees(1.0 / 6_378_137.0), rel_tol=1e-9)
     assert lon == 8.0 and alt == 405.0
+
+
+def test_the_written_out_conversion_is_the_two_products_to_the_bit():
+    """q_enu_flu_to_ned_frd against q_ned_enu q q_flu_frd by the compiled `q_mul`, sign
+    flipped to w >= 0: the same bits for unit, arbitrary, signed-zero and non-finite
+    components."""
+    from common.quaternion import q_mul
+
+    h = math.sqrt(0.5)
+    rng = np.random.default_rng(4)
+    special = [0.0, -0.0, 1.0, -1.0, h, math.inf, -math.inf, math.nan, 1e-300, 3e300]
+    cases = [tuple(float(c) for c in rng.normal(0.0, 1.0, 4)) for _ in range(2000)]
+    cases += [tuple(float(c) for c in rng.choice(special, 4)) for _ in range(2000)]
+    cases += [(1.0, 0.0, 0.0, 0.0), (-0.0, 0.0, -0.0, 1.0), (0.0, -0.0, 0.0, -0.0)]
+    for q in cases:
+        r = q_mul(q_mul((0.0, h, h, 0.0), (q[0], q[1], q[2], q[3])), (0.0, 1.0, 0.0, 0.0))
+        want = r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
+        got = q_enu_flu_to_ned_frd((q[0], q[1], q[2], q[3]))
+        assert np.array(got).tobytes() == np.array(want).tobytes(), q

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -364,3 +365,37 @@ def test_draws_fetched_in_blocks_are_the_stream_of_one_call_per_sample():
     calls = np.random.default_rng(7)
     for _ in range(23):
         assert blocks.take() == calls.normal(0.0, 1.0, 6).tolist()
+
+
+def test_mag_and_mocap_noise_are_numpy_element_wise_to_the_bit():
+    """The magnetometer's and the motion capture's noise added on floats give numpy's
+    element-wise p + s n to the bit (the same Generator draws, in the same order)."""
+    from common.config.sensors import MagConfig
+    field_ned = (0.216, 0.012, 0.425)
+    mag = MagModel(MagConfig(100.0, field_ned, 0.002), 3)
+    ref = np.random.default_rng(np.random.SeedSequence([3, _crc("mag")]))
+    cfg = MocapConfig(200.0, 2e-4, 1e-3, 0.0, 0.0)
+    mocap = MocapModel(cfg, 5)
+    ref_m = np.random.default_rng(np.random.SeedSequence([5, _crc("mocap")]))
+    rng = np.random.default_rng(8)
+    for k in range(300):
+        v = rng.normal(0.0, 1.0, 4)
+        q = tuple(float(c) for c in v / np.linalg.norm(v))
+        q4 = (q[0], q[1], q[2], q[3])
+        p = (float(rng.normal()), float(rng.normal()), float(rng.normal()))
+        want_b = np.asarray(q_rotate_inv(q4, ned_to_enu(field_ned))) + 0.002 * ref.normal(
+            0.0, 1.0, 3)
+        assert np.array(mag.sample(k * 0.01, q4).b_flu_gauss).tobytes() == want_b.tobytes()
+        ref_m.random()
+        n = ref_m.normal(0.0, 1.0, 6)
+        want_p = np.asarray(p) + cfg.position_noise_m * n[:3]
+        d = cfg.attitude_noise_rad * n[3:]
+        want_q = q_mul(q4, q_exp((float(d[0]), float(d[1]), float(d[2]))))
+        mocap.capture(k * 0.005, p, q4)
+        got = mocap.queue.popleft()
+        assert np.array(got.p_enu_m).tobytes() == want_p.tobytes()
+        assert np.array(got.q_enu_flu).tobytes() == np.array(want_q).tobytes()
+
+
+def _crc(name: str) -> int:
+    return zlib.crc32(name.encode())
