@@ -18,10 +18,12 @@ from common.config import load_vehicle
 from fcu import feasibility
 from fcu.dualquat import Q_IDENTITY, q_exp
 from fcu.excess import excess_kernel, excess_ratio, fits_kernel
-from fcu.feasibility import TILT_STEP_S, Envelope, TimeScaling, envelope
+from fcu.feasibility import TILT_STEP_S, Envelope, TimeScaling, at_rest, envelope
+from fcu.instants import time_order
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import envelope_reason, plan_item, with_speed
 from fcu.mission.segments import Figure, Move
+from fcu.trajectory import FigureInfinity
 
 ROOT = Path(__file__).resolve().parents[2]
 TILTED = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
@@ -193,3 +195,30 @@ def test_the_upload_check_judges_unstretched_moves_as_stretched_ones(vehicle):
             judged += 1
             t, p, q = stretched.t1, stretched.p_end, stretched.q_end
     assert judged > 300
+
+
+def _figures() -> list[Figure]:
+    """Figures from the identity, from a start attitude, and without one (q0 None)."""
+    figures = [Figure(0, 0.0, (0.0, 0.0, 3.0), q, amp, 1.0, axis)
+               for q in (Q_IDENTITY, Q0, *Q0_FLIPPED)
+               for amp, axis in ((2.0, (2.0, 1.0, -3.0)), (0.5, (0.0, 0.3, 0.2)),
+                                 (1.0, (0.0, 0.0, 1.0)))]
+    bare = Figure(0, 0.0, (1.0, 2.0, 3.0), Q_IDENTITY, 1.5, 1.0, (0.7, -0.2, 0.4))
+    bare.figure = FigureInfinity(1.5, 1.0, (0.7, -0.2, 0.4), (1.0, 2.0, 3.0))
+    return [*figures, bare]
+
+
+@pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
+def test_figure_allocations_are_those_of_its_path(vehicle):
+    """Given figures (start attitudes, amplitudes, axes; q0 None too), then the allocations
+    of their 1 s path and of its poses at rest made by the compiled kernel
+    (`Figure.unit_allocations`) are `Envelope.omega_sq` of `Figure.path` and of its poses at
+    rest, to the bit."""
+    env = envelope(vehicle)
+    for fig in _figures():
+        sigma = time_order(fig.instants()).stepped
+        feasibility.clear_caches()
+        om, hover = fig.unit_allocations(env, sigma)
+        path = fig.path(sigma)
+        assert om.tobytes() == env.omega_sq(path).tobytes(), fig.figure.q0
+        assert hover.tobytes() == env.omega_sq(at_rest(path)).tobytes(), fig.figure.q0
