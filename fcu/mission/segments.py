@@ -43,7 +43,11 @@ _NO_Q = np.zeros(0)
 
 
 def _floats(*parts: float) -> bool:
-    return all(isinstance(c, float) for c in parts)
+    """Every part a float (numpy's float64 too): a loop, faster than all() of a generator."""
+    for c in parts:
+        if not isinstance(c, float):
+            return False
+    return True
 
 
 @njit
