@@ -124,18 +124,9 @@ def scaling_parts(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: f
     `excess_kernel` lets the rotor slow to, min(floor, FLOOR_HOVER_SHARE x its hover speed),
     and at the places in `ends` (the path's ends) its tilt at rest, atan2(lat_0, ver_0);
     none of them depends on the duration."""
-    out = np.empty((om.shape[1] // 2, 10, n))
-    parts_into(om, hover, n, h2, floor, places, ends, out)
-    return out
-
-
-@njit_loops
-def parts_into(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: float,
-               places: np.ndarray, ends: np.ndarray, out: np.ndarray) -> None:
-    """`scaling_parts` (its arguments) into out (rotors x 10 x n; what it held is
-    overwritten)."""
     cols = om.shape[1]
     n_rot = cols // 2
+    out = np.empty((n_rot, 10, n))
     one = hover.shape[0] == 1
     for m in range(n):
         k = places[m]
@@ -155,6 +146,7 @@ def parts_into(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: floa
             p[9, m] = 0.0
         for m in ends:
             p[9, m] = math.atan2(p[0, m], p[1, m])
+    return out
 
 
 @njit_loops

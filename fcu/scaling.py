@@ -5,7 +5,6 @@ function of the time it is flown in, and the shortest duration that fits (the se
 from __future__ import annotations
 
 import math
-import threading
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
@@ -43,24 +42,6 @@ def _speeds(omega_sq: np.ndarray) -> np.ndarray:
 class Peak(NamedTuple):
     speed_rad_s: float  # highest rotor speed over the samples
     sample: int  # the index of the sample where it occurs
-
-
-_ROOMS = threading.local()
-
-
-def _room(rotors: int, samples: int) -> tuple[np.ndarray, np.ndarray]:
-    """This thread's room for a path's parts and a value per sample (`fits_raw`), kept for
-    the next path of as many samples (a few sizes at most)."""
-    rooms: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] | None = getattr(
-        _ROOMS, "rooms", None)
-    if rooms is None:
-        rooms = _ROOMS.rooms = {}
-    hit = rooms.get((rotors, samples))
-    if hit is None:
-        if len(rooms) >= 8:
-            rooms.clear()
-        hit = rooms[rotors, samples] = np.empty((rotors, 10, samples)), np.empty(samples)
-    return hit
 
 
 class Path(Protocol):
@@ -214,7 +195,7 @@ class TimeScaling:
             if self._parts is None:
                 om, hover = self._allocations()
                 hit = fits_raw(om, hover, 2.0 * DIFF_STEP, env.floor, o.places, o.place_gap,
-                               o.place_ends, *limits, *_room(om.shape[1] // 2, self.samples))
+                               o.place_ends, *limits)
                 if hit and self._path is not None:
                     self._raw = None  # made again from the path if the parts are asked
             else:

@@ -19,14 +19,14 @@ from benchmarks.random_mission_gen import random_cruise_speed, random_mission
 from common.config import load_vehicle
 from fcu import feasibility
 from fcu.dualquat import Q_IDENTITY, q_exp
-from fcu.excess import excess_kernel, excess_ratio, fits_kernel, parts_into
+from fcu.excess import excess_kernel, excess_ratio, fits_kernel
 from fcu.feasibility import DIFF_STEP, TILT_STEP_S, Envelope, TimeScaling, at_rest, envelope
 from fcu.instants import time_order
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import envelope_reason, plan_item, with_speed
 from fcu.mission.segments import Figure, Move
 from fcu.trajectory import FigureInfinity
-from fcu.verdict import fits_raw
+from fcu.verdict import fits_raw, rotor_parts
 
 ROOT = Path(__file__).resolve().parents[2]
 TILTED = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
@@ -230,18 +230,18 @@ def test_figure_allocations_are_those_of_its_path(vehicle):
 @pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
 def test_fits_from_the_allocations_is_fits_kernel(vehicle):
     """Given paths flown from far too fast to slow, and each limit bound alone at a path's
-    need and a few doubles either side, then `fits_raw` on the path's allocations, its room
-    filled with anything before, answers as `fits_kernel` on its parts, and `parts_into`
-    makes those parts to the bit."""
+    need and a few doubles either side, then `fits_raw` on the path's allocations answers
+    as `fits_kernel` on its parts, and `rotor_parts` makes each rotor's parts to the bit."""
     env = envelope(vehicle)
     for path in _paths():
         sc = _fresh(env, path)
         o, scratch = sc.order, np.empty(sc.samples)
         om, hover = env.allocations(path, o)
-        room = np.full(sc.parts.shape, np.nan)
-        parts_into(om, hover, sc.samples, 2.0 * DIFF_STEP, env.floor, o.places,
-                   o.place_ends, room)
-        assert room.tobytes() == sc.parts.tobytes()
+        p = np.empty((10, sc.samples))
+        for i in range(sc.parts.shape[0]):
+            rotor_parts(om, hover, sc.samples, 2.0 * DIFF_STEP, env.floor, o.places,
+                        o.place_ends, i, p)
+            assert p.tobytes() == sc.parts[i].tobytes()
         base = [env.limit, env.tau_up, env.tau_down, env.tilt_limit,
                 env.tilt_rate_max * TILT_STEP_S]
         for duration in np.geomspace(0.05, 300.0, 40):
@@ -256,10 +256,9 @@ def test_fits_from_the_allocations_is_fits_kernel(vehicle):
                           for x in (at, *np.nextafter(at, [0.0, np.inf]))]
             for args in cases:
                 for use_floor in (False, env.floor > 0.0):
-                    room.fill(math.inf if use_floor else -math.inf)
                     assert fits_raw(om, hover, 2.0 * DIFF_STEP, env.floor, o.places,
                                     o.place_gap, o.place_ends, duration, *args,
-                                    use_floor, room, np.full(sc.samples, 1.0)) == \
+                                    use_floor) == \
                         fits_kernel(sc.parts, o.place_gap, o.place_ends, duration, *args,
                                     use_floor, scratch), (path, duration, args)
 
