@@ -67,8 +67,10 @@ Evaluation: the search runs compiled (`fcu.envelope.excess.grid_kernel`, then
 `fcu.envelope.excess.bisect_kernel`), each duration judged by `fcu.envelope.excess.fits_kernel`
 (whether the largest need of `excess_kernel` is at most 1, to the bit) and a failing one of its grid
 measured by `fcu.envelope.excess.excess_ratio` (that largest need, to the bit), on the path's parts
-in time order (`fcu.envelope.excess.scaling_parts`); the allocations stay numpy's (a matrix
-product's rounding depends on its shape, so each is the one it always was). The upload
+in time order (`fcu.envelope.excess.scaling_parts`, made when first needed: a path asked only
+whether a duration fits is judged from its allocations, `fcu.envelope.verdict.fits_raw`, the same
+answer); the allocations stay numpy's (a matrix product's rounding depends on its shape, so
+each is the one it always was). `TimeScaling` lives in fcu/envelope/scaling.py. The upload
 check asks only whether a speed-timed move stretches (`TimeScaling.stretches`: the
 bisection stops once the planned duration is outside its bracket; the executor resumes
 it). Paths that depend on the same parameters (`path_key`: a 500-item mission repeats its
@@ -82,10 +84,9 @@ are numbered 1..n as the vehicle file lists its arms (the paper's i = 1..6).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from functools import lru_cache
-from typing import Any, NamedTuple, Protocol, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -95,23 +96,7 @@ from fcu.control.wrench import _nominal_wrench_rows as _nominal_wrench_rows
 from fcu.control.wrench import nominal_wrench as nominal_wrench
 from fcu.control.wrench import nominal_wrench_kernel as nominal_wrench_kernel
 from fcu.control.wrench import rows, wrench_matrix
-from fcu.envelope.excess import (
-    KINDS,
-    ROTOR_DOWN,
-    ROTOR_FLOOR,
-    ROTOR_LAG,
-    TILT,
-    TILT_STEP,
-    TINY,
-    Excess,
-    bisect_kernel,
-    excess_kernel,
-    fits_kernel,
-    grid_kernel,
-    scaling_parts,
-    speed_bound_kernel,
-    unpermuted,
-)
+from fcu.envelope.excess import ROTOR_DOWN, ROTOR_FLOOR, ROTOR_LAG, TILT, TILT_STEP, Excess
 from fcu.envelope.instants import DIFF_STEP as DIFF_STEP
 from fcu.envelope.instants import FIGURE_SAMPLES_MAX as FIGURE_SAMPLES_MAX
 from fcu.envelope.instants import FIGURE_STEP_RAD as FIGURE_STEP_RAD
@@ -122,26 +107,23 @@ from fcu.envelope.instants import clear_orders, time_order
 from fcu.envelope.instants import figure_instants as figure_instants
 from fcu.envelope.instants import move_instants as move_instants
 from fcu.envelope.kept import Kept
+from fcu.envelope.scaling import BISECT_TOL as BISECT_TOL
+from fcu.envelope.scaling import GRID_FITS as GRID_FITS
+from fcu.envelope.scaling import GRID_MAX as GRID_MAX
+from fcu.envelope.scaling import GRID_RATIO as GRID_RATIO
+from fcu.envelope.scaling import STRETCH_GUARD as STRETCH_GUARD
+from fcu.envelope.scaling import TILT_STEP_S as TILT_STEP_S
+from fcu.envelope.scaling import Path as Path
+from fcu.envelope.scaling import Peak as Peak
+from fcu.envelope.scaling import TimeScaling as TimeScaling
+from fcu.envelope.scaling import _speeds
 from fcu.stages import Reference
 
 MARGIN = 0.85  # share of w_max the feed-forward may use (module docstring)
 TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may use
 FLOOR = 0.25  # share of w_max below which the feed-forward may not slow a rotor
-TILT_STEP_S = 0.05  # a tilt step at a path's end may take the servo this long at its rate
-GRID_RATIO = 1.1  # `TimeScaling.shortest`: durations tried from the speed bound up
-GRID_FITS = 8  # ... until this many in a row fit (x 2.1 in duration)
-GRID_MAX = 1000  # ... at most this many (x 1e41)
-BISECT_TOL = 1e-4  # relative: the shortest duration found is at most this much too long
-STRETCH_GUARD = 1e-9  # relative: a stretched duration stays this far above the exact bound
 CACHE_ROWS = 16384  # `Envelope.scaling` keeps the scalings of paths up to this many samples
 CACHE_PATHS = 1024  # ... and this many paths
-
-class Path(Protocol):
-    """A segment that can be flown in any duration: its reference flown in 1 s."""
-
-    def path(self, sigma: np.ndarray) -> Reference: ...
-
-    def instants(self) -> np.ndarray: ...
 
 
 def at_rest(ref: Reference) -> Reference:
@@ -151,18 +133,11 @@ def at_rest(ref: Reference) -> Reference:
                         omega_dot_flu_rad_s2=zero)
 
 
-def _speeds(omega_sq: np.ndarray) -> np.ndarray:
-    """Rotor speeds (samples x rotors) from Omega (samples x [lat_1, ver_1, ...])."""
-    lat, ver = omega_sq[:, 0::2], omega_sq[:, 1::2]
-    return np.asarray(np.sqrt(np.sqrt(lat * lat + ver * ver)))
 
 
 T = TypeVar("T")
 
 
-class Peak(NamedTuple):
-    speed_rad_s: float  # highest rotor speed over the samples
-    sample: int  # the index of the sample where it occurs
 
 
 class Envelope:
@@ -244,21 +219,22 @@ class Envelope:
             hit: TimeScaling | None = self._scalings.get(key)
             if hit is not None:
                 return hit
-        sigma = segment.instants()
-        n = len(sigma)
-        order = time_order(sigma)
+        order = time_order(segment.instants())
+        out = TimeScaling(self, None, order, self.allocations(segment, order), segment)
+        if key is not None:
+            self._scalings.put(key, out, out.samples)
+        return out
+
+    def allocations(self, segment: Path, order: SampleOrder) -> tuple[np.ndarray, np.ndarray]:
+        """The allocations of `segment`'s 1 s path at the instants `order.stepped` and of its
+        poses at rest (`scaling`)."""
         unit_allocations = getattr(segment, "unit_allocations", None)
         pair = unit_allocations(self, order.stepped) if unit_allocations is not None else None
         if pair is None:
             unit = segment.path(order.stepped)
             pair = self.omega_sq(unit), self.omega_sq(at_rest(unit))
         om, hover = pair
-        parts = scaling_parts(om, hover, n, 2.0 * DIFF_STEP, self.floor, order.places,
-                              order.place_ends)
-        out = TimeScaling(self, parts, order)
-        if key is not None:
-            self._scalings.put(key, out, n)
-        return out
+        return om, hover
 
     def clear(self) -> None:
         """Forget the scalings and shared parts kept (`scaling`, `kept`)."""
@@ -297,168 +273,6 @@ class Envelope:
         return (f"rotor {excess.number} needs {excess.need:.0f} rad/s, limit "
                 f"{excess.limit:.0f} ({self.margin * 100:.0f}% of {self.speed_max:.0f})"
                 + (" with its lag" if excess.kind == ROTOR_LAG else ""))
-
-
-class TimeScaling:
-    """Omega(D) = Omega_0 + Omega_1 / D^2 and its rates at a path's sample instants (module
-    docstring), kept as `fcu.envelope.excess.scaling_parts` (the samples in time order: `order`);
-    Omega_0, Omega_1 and their derivatives by sample are `om0`, `om1`, `dom0`, `dom1`."""
-
-    def __init__(self, env: Envelope, parts: np.ndarray, order: SampleOrder) -> None:
-        self.env, self.limit = env, env.limit
-        self.parts, self.order = parts, order
-        self.samples = parts.shape[2]
-        self._rows: dict[int, np.ndarray] = {}
-        self._shortest: float | None = None
-        self._bracket: tuple[float, float] | None = None  # `_search`'s (lo, hi) so far
-        self._fit_at: float | None = None  # a duration `_search` found fitting
-        self._fits: dict[float, bool] = {}
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        state["_rows"] = {}  # `unpermuted` again where needed
-        return state
-
-    def _by_sample(self, row: int) -> np.ndarray:
-        out = self._rows.get(row)
-        if out is None:
-            out = self._rows[row] = unpermuted(self.parts, row, self.order.place_of)
-        return out
-
-    @property
-    def om0(self) -> np.ndarray:
-        return self._by_sample(0)
-
-    @property
-    def om1(self) -> np.ndarray:
-        return self._by_sample(2)
-
-    @property
-    def dom0(self) -> np.ndarray:
-        return self._by_sample(4)
-
-    @property
-    def dom1(self) -> np.ndarray:
-        return self._by_sample(6)
-
-    @property
-    def after(self) -> np.ndarray:
-        """The index of the next sample in time, -1 for none (`excess_kernel`)."""
-        return self.order.after
-
-    @property
-    def gap(self) -> np.ndarray:
-        """The normalised time to it (`excess_kernel`)."""
-        return self.order.gap
-
-    @property
-    def is_end(self) -> np.ndarray:
-        out = np.zeros(self.samples, dtype=np.bool_)
-        out[self.order.ends] = True
-        return out
-
-    def _omega(self, duration: float) -> tuple[np.ndarray, np.ndarray]:
-        u = 1.0 / (duration * duration) if duration > 0.0 else math.inf
-        return self.om0 + u * self.om1, self.dom0 + u * self.dom1
-
-    def speeds(self, duration: float) -> np.ndarray:
-        return _speeds(self._omega(duration)[0])
-
-    def peak(self, duration: float) -> Peak:
-        per_sample = self.speeds(duration).max(axis=1)
-        i = int(np.argmax(per_sample))
-        return Peak(float(per_sample[i]), i)
-
-    def rates(self, duration: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Rotor speeds, their rates and the tilt rates (samples x rotors) of the path flown
-        in `duration` s."""
-        om, dom = self._omega(duration)
-        lat, ver, dlat, dver = om[:, 0::2], om[:, 1::2], dom[:, 0::2], dom[:, 1::2]
-        sq = lat * lat + ver * ver
-        w = np.sqrt(np.sqrt(sq))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            w_rate = np.where(sq > TINY, (lat * dlat + ver * dver) / (2.0 * w * sq), 0.0)
-            tilt_rate = np.where(sq > TINY, (ver * dlat - lat * dver) / sq, 0.0)
-        return w, w_rate / duration, tilt_rate / duration
-
-    def excess(self, duration: float) -> Excess:
-        """The most demanding actuator of the path flown in `duration` s (module docstring;
-        `excess_kernel`)."""
-        env = self.env
-        ratio, kind, rotor, sample, need, limit = excess_kernel(
-            self.om0, self.om1, self.dom0, self.dom1, self.is_end, float(duration), env.limit,
-            env.tau_up, env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S,
-            self.after, self.gap, env.floor)
-        return Excess(ratio, KINDS[kind], rotor + 1, need, limit, sample)
-
-    def fits(self, duration: float) -> bool:
-        """excess(duration).ratio <= 1 (`excess_ratio`, stopping at the first need beyond)."""
-        duration = float(duration)
-        if duration == self._fit_at:
-            return True
-        hit = self._fits.get(duration)
-        if hit is None:
-            env = self.env
-            hit = fits_kernel(self.parts, self.order.place_gap,
-                              self.order.place_ends, duration, env.limit, env.tau_up,
-                              env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S,
-                              env.floor > 0.0, np.empty(self.samples))
-            if len(self._fits) < 16:
-                self._fits[duration] = hit
-        return hit
-
-    def shortest(self) -> float:
-        """The shortest duration D such that the path flown in D or any longer time keeps
-        every actuator within its limit (module docstring); 0 when any duration does, inf
-        when none does (hovering at some attitude of the path already exceeds the limit)."""
-        if self._shortest is None:
-            self._search(math.nan)
-        assert self._shortest is not None
-        return self._shortest
-
-    def stretches(self, duration: float) -> bool:
-        """math.isfinite(shortest()) and shortest() > duration, the same answer, with the
-        search's bisection taken only until `duration` lies outside its bracket (the rest
-        when `shortest` is asked)."""
-        bracket = self._bracket
-        if self._shortest is None and (bracket is None or bracket[0] <= duration < bracket[1]):
-            self._search(float(duration))
-        if self._shortest is not None:
-            return math.isfinite(self._shortest) and self._shortest > duration
-        assert self._bracket is not None
-        return duration < self._bracket[0]  # the bisection ends above lo, at hi or below
-
-    def _search(self, until: float) -> None:
-        """From the speed bound up: while a duration fails by a ratio r, the next tried is
-        r^(1/3) longer (no need decays faster than 1/D^3: accelerations scale by 1/D^2 and
-        rates take another 1/D, so this never jumps past the bound), at least GRID_RATIO;
-        GRID_FITS fitting durations in a row end the search, then bisection between the
-        last failing and the first fitting one (`fcu.envelope.excess.grid_kernel`,
-        `fcu.envelope.excess.bisect_kernel`), until it ends or `until` lies outside its bracket."""
-        env = self.env
-        checks = (self.parts, self.order.place_gap, self.order.place_ends, env.floor > 0.0)
-        if self._bracket is None:
-            lo, hi, fitted = grid_kernel(
-                *checks, env.limit, env.limit ** 4, env.tau_up, env.tau_down, env.tilt_limit,
-                env.tilt_rate_max * TILT_STEP_S, STRETCH_GUARD, GRID_RATIO, GRID_FITS,
-                GRID_MAX)
-            self._bracket = lo, hi
-            if math.isnan(lo):
-                self._shortest = hi
-                if fitted:
-                    self._fit_at = hi
-                return
-        lo, hi = self._bracket
-        lo, hi = bisect_kernel(*checks, env.limit, env.tau_up, env.tau_down, env.tilt_limit,
-                               env.tilt_rate_max * TILT_STEP_S, lo, hi, BISECT_TOL, until)
-        self._bracket = lo, hi
-        if not hi - lo > BISECT_TOL * hi:
-            self._shortest = self._fit_at = hi
-
-    def _speed_bound(self) -> float:
-        """Rotor speed alone (no lag): the closed form of the module docstring
-        (`fcu.envelope.excess.speed_bound_kernel`)."""
-        return speed_bound_kernel(self.parts, self.limit ** 4, STRETCH_GUARD)
 
 
 _ENVELOPES: list[Envelope] = []

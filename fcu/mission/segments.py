@@ -49,7 +49,11 @@ _NO_Q = np.zeros(0)
 
 
 def _floats(*parts: float) -> bool:
-    return all(isinstance(c, float) for c in parts)
+    """Every part a float (numpy's float64 too): a loop, faster than all() of a generator."""
+    for c in parts:
+        if not isinstance(c, float):
+            return False
+    return True
 
 
 @njit
@@ -104,6 +108,32 @@ def rest_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, qw: np.ndarray,
         f, t = nominal_wrench_kernel(m, g, inertia, q, zero, zero, zero)
         hover[i, 0], hover[i, 1], hover[i, 2] = f
         hover[i, 3], hover[i, 4], hover[i, 5] = t
+
+
+@njit
+def figure_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, turned: bool, nb: Vec3,
+                    turn_w: np.ndarray,
+                    turn_x: np.ndarray, turn_y: np.ndarray, turn_z: np.ndarray,
+                    shape: np.ndarray, unit: np.ndarray, rest: np.ndarray) -> None:
+    """The nominal wrenches of a figure's 1 s path (`Figure.path`) into `unit` and of its
+    poses at rest into `rest`, a row per instant: its attitude exp(T n) q0 from exp(T n) =
+    (turn_w, turn_x, turn_y, turn_z) (not `turned`: exp(T n) itself), its body rate T' nb and
+    its derivative T'' nb (`shape`: rows T', T'', then the acceleration's three)."""
+    zero = (0.0, 0.0, 0.0)
+    for i in range(turn_w.shape[0]):
+        q = (turn_w[i], turn_x[i], turn_y[i], turn_z[i])
+        if turned:
+            q = q_mul(q, q0)
+        dT, ddT = shape[0, i], shape[1, i]
+        w = (dT * nb[0], dT * nb[1], dT * nb[2])
+        wd = (ddT * nb[0], ddT * nb[1], ddT * nb[2])
+        f, t = nominal_wrench_kernel(m, g, inertia, q, (shape[2, i], shape[3, i], shape[4, i]),
+                                     w, wd)
+        unit[i, 0], unit[i, 1], unit[i, 2] = f
+        unit[i, 3], unit[i, 4], unit[i, 5] = t
+        f, t = nominal_wrench_kernel(m, g, inertia, q, zero, zero, zero)
+        rest[i, 0], rest[i, 1], rest[i, 2] = f
+        rest[i, 3], rest[i, 4], rest[i, 5] = t
 
 
 class MoveRest(NamedTuple):
@@ -269,8 +299,19 @@ class Figure(Segment):
         f = self.figure
         key = b"figure shape" + struct.pack("<q4d", len(sigma), f.amp, *f.n)
         shape = env.kept(key, len(sigma), lambda: figure_shape(f.amp, f.n, sigma))
-        unit = self.path(sigma, shape)
-        return env.omega_sq(unit), env.omega_sq(at_rest(unit))
+        q0 = f.q0
+        if q0 is not None and not _floats(*q0, *f.n_body):
+            unit = self.path(sigma, shape)  # `wrenches` takes such an attitude for arrays
+            return env.omega_sq(unit), env.omega_sq(at_rest(unit))
+        v, n = env.vehicle, len(sigma)
+        path_rows = np.empty((5, n))
+        path_rows[0], path_rows[1] = shape.dT, shape.ddT
+        path_rows[2], path_rows[3], path_rows[4] = shape.acceleration
+        unit_w, rest_w = np.empty((n, 6)), np.empty((n, 6))
+        figure_wrenches(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2,
+                        (1.0, 0.0, 0.0, 0.0) if q0 is None else q0, q0 is not None, f.n_body,
+                        *shape.turn, path_rows, unit_w, rest_w)
+        return env.allocate(unit_w), env.allocate(rest_w)
 
     def path_key(self) -> bytes:
         """What `path` and `instants` depend on (amplitude, axis, q0), as bytes."""

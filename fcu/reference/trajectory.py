@@ -19,6 +19,7 @@ floats or numpy arrays alike (`xp` = math or numpy), so the envelope check of
 from __future__ import annotations
 
 import math
+from functools import cached_property
 from typing import Any, NamedTuple, Protocol
 
 import numpy as np
@@ -149,8 +150,12 @@ class FigureInfinity:
                  q0: Quat | None = None) -> None:
         self.amp, self.duration, self.n, self.p0, self.q0 = amp, duration, axis_enu, p0, q0
         self.n_body = axis_enu if q0 is None else q_rotate_inv(q0, axis_enu)
-        self.start = self.at(0.0, 0.0, 0.0)
         self.end = self.at(TWO_PI, 0.0, 0.0)
+
+    @cached_property
+    def start(self) -> Reference:
+        """The reference before the figure (made when first asked)."""
+        return self.at(0.0, 0.0, 0.0)
 
     def phase(self, tau: float) -> tuple[float, float, float]:
         return figure_phase(tau, self.duration)

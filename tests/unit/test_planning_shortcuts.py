@@ -1,12 +1,14 @@
 """The mission check's shortcuts give the full computation's answers, to the bit: the yes/no
 kernel and the ratio kernel against `excess_kernel`, the search stopped early
 (`TimeScaling.stretches`) and resumed, the parts moves and figures share through
-`Envelope.kept`, and the upload check's unstretched plan (fcu/envelope/excess.py,
-fcu/envelope/feasibility.py, fcu/mission/)."""
+`Envelope.kept`, the upload check's unstretched plan, a figure's compiled allocations and the
+yes/no answer from the allocations (`fcu.envelope.verdict`) (fcu/envelope/excess.py,
+fcu/envelope/feasibility.py, fcu/envelope/scaling.py, fcu/envelope/verdict.py, fcu/mission/)."""
 
 from __future__ import annotations
 
 import math
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -18,10 +20,20 @@ from common.config.scenario import load_vehicle
 from fcu.control.dualquat import Q_IDENTITY, q_exp
 from fcu.envelope import feasibility
 from fcu.envelope.excess import excess_kernel, excess_ratio, fits_kernel
-from fcu.envelope.feasibility import TILT_STEP_S, Envelope, TimeScaling, envelope
+from fcu.envelope.feasibility import (
+    DIFF_STEP,
+    TILT_STEP_S,
+    Envelope,
+    TimeScaling,
+    at_rest,
+    envelope,
+)
+from fcu.envelope.instants import time_order
+from fcu.envelope.verdict import fits_raw, rotor_parts
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import envelope_reason, plan_item, with_speed
 from fcu.mission.segments import Figure, Move
+from fcu.reference.trajectory import FigureInfinity
 
 ROOT = Path(__file__).resolve().parents[2]
 TILTED = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
@@ -193,3 +205,84 @@ def test_the_upload_check_judges_unstretched_moves_as_stretched_ones(vehicle):
             judged += 1
             t, p, q = stretched.t1, stretched.p_end, stretched.q_end
     assert judged > 300
+
+
+def _figures() -> list[Figure]:
+    """Figures from the identity, from a start attitude, and without one (q0 None)."""
+    figures = [Figure(0, 0.0, (0.0, 0.0, 3.0), q, amp, 1.0, axis)
+               for q in (Q_IDENTITY, Q0, *Q0_FLIPPED)
+               for amp, axis in ((2.0, (2.0, 1.0, -3.0)), (0.5, (0.0, 0.3, 0.2)),
+                                 (1.0, (0.0, 0.0, 1.0)))]
+    bare = Figure(0, 0.0, (1.0, 2.0, 3.0), Q_IDENTITY, 1.5, 1.0, (0.7, -0.2, 0.4))
+    bare.figure = FigureInfinity(1.5, 1.0, (0.7, -0.2, 0.4), (1.0, 2.0, 3.0))
+    return [*figures, bare]
+
+
+@pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
+def test_figure_allocations_are_those_of_its_path(vehicle):
+    """Given figures (start attitudes, amplitudes, axes; q0 None too), then the allocations
+    of their 1 s path and of its poses at rest made by the compiled kernel
+    (`Figure.unit_allocations`) are `Envelope.omega_sq` of `Figure.path` and of its poses at
+    rest, to the bit."""
+    env = envelope(vehicle)
+    for fig in _figures():
+        sigma = time_order(fig.instants()).stepped
+        feasibility.clear_caches()
+        om, hover = fig.unit_allocations(env, sigma)
+        path = fig.path(sigma)
+        assert om.tobytes() == env.omega_sq(path).tobytes(), fig.figure.q0
+        assert hover.tobytes() == env.omega_sq(at_rest(path)).tobytes(), fig.figure.q0
+
+
+@pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
+def test_fits_from_the_allocations_is_fits_kernel(vehicle):
+    """Given paths flown from far too fast to slow, and each limit bound alone at a path's
+    need and a few doubles either side, then `fits_raw` on the path's allocations answers
+    as `fits_kernel` on its parts, and `rotor_parts` makes each rotor's parts to the bit."""
+    env = envelope(vehicle)
+    for path in _paths():
+        sc = _fresh(env, path)
+        o, scratch = sc.order, np.empty(sc.samples)
+        om, hover = env.allocations(path, o)
+        p = np.empty((10, sc.samples))
+        for i in range(sc.parts.shape[0]):
+            rotor_parts(om, hover, sc.samples, 2.0 * DIFF_STEP, env.floor, o.places,
+                        o.place_ends, i, p)
+            assert p.tobytes() == sc.parts[i].tobytes()
+        base = [env.limit, env.tau_up, env.tau_down, env.tilt_limit,
+                env.tilt_rate_max * TILT_STEP_S]
+        for duration in np.geomspace(0.05, 300.0, 40):
+            cases = [base]
+            for probed in range(5):
+                args = [1e300, 0.0, 0.0, 1e300, 1e300]
+                args[probed] = 1.0
+                need = excess_ratio(sc.parts, o.place_gap, o.place_ends, duration, *args,
+                                    False, 1e6, scratch)
+                at = 1.0 / need if probed == 2 else need
+                cases += [[*args[:probed], float(x), *args[probed + 1:]]
+                          for x in (at, *np.nextafter(at, [0.0, np.inf]))]
+            for args in cases:
+                for use_floor in (False, env.floor > 0.0):
+                    assert fits_raw(om, hover, 2.0 * DIFF_STEP, env.floor, o.places,
+                                    o.place_gap, o.place_ends, duration, *args,
+                                    use_floor) == \
+                        fits_kernel(sc.parts, o.place_gap, o.place_ends, duration, *args,
+                                    use_floor, scratch), (path, duration, args)
+
+
+def test_a_scaling_asked_fits_first_has_the_parts_of_one_made_at_once():
+    """Given paths, when a fresh scaling is asked whether durations fit (from the
+    allocations) before its parts, then its answers, its parts, its shortest duration and
+    its pickled copy are those of a scaling whose parts were made first."""
+    env = envelope(TILTED)
+    for path in _paths():
+        eager = _fresh(env, path)
+        parts = eager.parts.copy()
+        lazy = _fresh(env, path)
+        for duration in (0.3, 1.0, 4.0, 30.0):
+            assert lazy.fits(duration) == eager.fits(duration)
+        assert lazy._parts is None
+        assert lazy.parts.tobytes() == parts.tobytes()
+        assert lazy.shortest() == eager.shortest()
+        copy = pickle.loads(pickle.dumps(_fresh(env, path)))
+        assert copy.parts.tobytes() == parts.tobytes()
