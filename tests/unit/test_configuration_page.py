@@ -12,7 +12,8 @@ from typing import Any
 
 import pytest
 
-from common.config.scenario import load_scenario, reader
+from common.config import reader
+from common.config.scenario import load_scenario
 from common.config.sensors import load_sensor_profile
 from gcs.campaign import load as campaign_load
 from gcs.campaign.load import load_campaign
