@@ -28,7 +28,7 @@ KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layout
                   "fcu/control/dualquat.py", "fcu/control/tracker.py", "fcu/control/allocation.py",
                   "fcu/control/core.py", "fcu/control/wrench.py",
                   "fcu/envelope/feasibility.py", "fcu/envelope/excess.py",
-                  "fcu/envelope/verdict.py",
+                  "fcu/envelope/verdict.py", "fcu/envelope/speed_bound.py",
                   "fcu/reference/approach.py", "fcu/reference/trajectory.py",
                   "fcu/mission/segments.py", "fcu/modes/manual.py",
                   "sitl/plant_kernels.py", "sitl/disturbance.py",

@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from common.jit import njit, njit_loops
+from fcu.envelope.speed_bound import speed_bound_kernel
 
 
 class Excess(NamedTuple):
@@ -60,57 +61,88 @@ def excess_kernel(om0: np.ndarray, om1: np.ndarray, dom0: np.ndarray, dom1: np.n
     already takes it below the floor, the floor is FLOOR_HOVER_SHARE of that hover speed."""
     u = 1.0 / (duration * duration)
     inv_d = 1.0 / duration
-    best, kind, rotor, sample, need, lim = -1.0, 0, 0, 0, 0.0, 0.0
+    best = (-1.0, 0, 0, 0, 0.0, 0.0)  # (ratio, kind, rotor, sample, need, limit) so far
     for k in range(om0.shape[0]):
         j = -1 if after is None else after[k]
         for i in range(om0.shape[1] // 2):
             lat = om0[k, 2 * i] + u * om1[k, 2 * i]
             ver = om0[k, 2 * i + 1] + u * om1[k, 2 * i + 1]
             if j >= 0 and gap is not None and gap[k] > 0.0:
-                lat_j = om0[j, 2 * i] + u * om1[j, 2 * i]
-                ver_j = om0[j, 2 * i + 1] + u * om1[j, 2 * i + 1]
-                if lat * lat + ver * ver > TINY and lat_j * lat_j + ver_j * ver_j > TINY:
-                    turn = abs(math.atan2(lat * ver_j - ver * lat_j, lat * lat_j + ver * ver_j))
-                    mean_rate = turn / (gap[k] * duration)
-                    if mean_rate / tilt_limit > best:
-                        best, kind, need, lim = mean_rate / tilt_limit, 3, mean_rate, \
-                            tilt_limit
-                        rotor, sample = i, k
+                best = _turn_excess(best, om0, om1, u, j, k, i, lat, ver, gap[k] * duration,
+                                    tilt_limit)
             dlat = dom0[k, 2 * i] + u * dom1[k, 2 * i]
             dver = dom0[k, 2 * i + 1] + u * dom1[k, 2 * i + 1]
-            sq = lat * lat + ver * ver
-            w = math.sqrt(math.sqrt(sq))
-            w_rate = tilt_rate = 0.0
-            if sq > TINY:
-                w_rate = (lat * dlat + ver * dver) / (2.0 * w * sq) * inv_d
-                tilt_rate = (ver * dlat - lat * dver) / sq * inv_d
-            if floor > 0.0:
-                # at an attitude where hovering already takes a rotor below the floor, the
-                # motion may slow it to FLOOR_HOVER_SHARE of that hover speed
-                w0 = math.sqrt(math.sqrt(om0[k, 2 * i] ** 2 + om0[k, 2 * i + 1] ** 2))
-                low = min(floor, FLOOR_HOVER_SHARE * w0)
-                if low > 0.0 and low / max(w, TINY) > best:
-                    best, kind, need, lim = low / max(w, TINY), 5, w, low
-                    rotor, sample = i, k
-            c = w + tau_up * w_rate if w_rate > 0.0 else w
-            if c / limit > best:
-                best, kind, need, lim = c / limit, 1 if w <= limit < c else 0, c, limit
-                rotor, sample = i, k
-            if w_rate < 0.0 and tau_down * -w_rate / max(w, TINY) > best:
-                best, kind, need, lim = tau_down * -w_rate / max(w, TINY), 2, -w_rate, \
-                    w / tau_down
-                rotor, sample = i, k
-            if abs(tilt_rate) / tilt_limit > best:
-                best, kind, need, lim = abs(tilt_rate) / tilt_limit, 3, abs(tilt_rate), \
-                    tilt_limit
-                rotor, sample = i, k
+            best = _rotor_excess(best, om0, k, i, lat, ver, dlat, dver, inv_d, limit, tau_up,
+                                 tau_down, tilt_limit, floor)
             if is_end[k]:
-                d = math.atan2(lat, ver) - math.atan2(om0[k, 2 * i], om0[k, 2 * i + 1])
-                step = abs(math.atan2(math.sin(d), math.cos(d)))
-                if step / step_limit > best:
-                    best, kind, need, lim = step / step_limit, 4, step, step_limit
-                    rotor, sample = i, k
-    return best, kind, rotor, sample, need, lim
+                best = _step_excess(best, om0, k, i, lat, ver, step_limit)
+    return best
+
+
+Best = tuple[float, int, int, int, float, float]  # `excess_kernel`'s running maximum
+
+
+@njit
+def _turn_excess(best: Best, om0: np.ndarray, om1: np.ndarray, u: float, j: int, k: int,
+                 i: int, lat: float, ver: float, span_s: float, tilt_limit: float) -> Best:
+    """Rotor i's tilt turning from sample k to the next in time (j, `span_s` later), at its
+    mean rate, where its thrust has a direction at both."""
+    lat_j = om0[j, 2 * i] + u * om1[j, 2 * i]
+    ver_j = om0[j, 2 * i + 1] + u * om1[j, 2 * i + 1]
+    if lat * lat + ver * ver > TINY and lat_j * lat_j + ver_j * ver_j > TINY:
+        turn = abs(math.atan2(lat * ver_j - ver * lat_j, lat * lat_j + ver * ver_j))
+        mean_rate = turn / span_s
+        if mean_rate / tilt_limit > best[0]:
+            return mean_rate / tilt_limit, 3, i, k, mean_rate, tilt_limit
+    return best
+
+
+@njit
+def _rotor_excess(best: Best, om0: np.ndarray, k: int, i: int, lat: float, ver: float,
+                  dlat: float, dver: float, inv_d: float, limit: float, tau_up: float,
+                  tau_down: float, tilt_limit: float, floor: float) -> Best:
+    """Rotor i at sample k: its floor, its speed with the spin-up lead, its spin-down and its
+    tilt rate, each against its limit, in that order."""
+    sq = lat * lat + ver * ver
+    w = math.sqrt(math.sqrt(sq))
+    w_rate = tilt_rate = 0.0
+    if sq > TINY:
+        w_rate = (lat * dlat + ver * dver) / (2.0 * w * sq) * inv_d
+        tilt_rate = (ver * dlat - lat * dver) / sq * inv_d
+    if floor > 0.0:
+        best = _floor_excess(best, om0, k, i, w, floor)
+    c = w + tau_up * w_rate if w_rate > 0.0 else w
+    if c / limit > best[0]:
+        best = c / limit, 1 if w <= limit < c else 0, i, k, c, limit
+    if w_rate < 0.0 and tau_down * -w_rate / max(w, TINY) > best[0]:
+        best = tau_down * -w_rate / max(w, TINY), 2, i, k, -w_rate, w / tau_down
+    if abs(tilt_rate) / tilt_limit > best[0]:
+        best = abs(tilt_rate) / tilt_limit, 3, i, k, abs(tilt_rate), tilt_limit
+    return best
+
+
+@njit
+def _floor_excess(best: Best, om0: np.ndarray, k: int, i: int, w: float,
+                  floor: float) -> Best:
+    """Rotor i slower than the floor at sample k; at an attitude where hovering already
+    takes it below the floor, the motion may slow it to FLOOR_HOVER_SHARE of that hover
+    speed."""
+    w0 = math.sqrt(math.sqrt(om0[k, 2 * i] ** 2 + om0[k, 2 * i + 1] ** 2))
+    low = min(floor, FLOOR_HOVER_SHARE * w0)
+    if low > 0.0 and low / max(w, TINY) > best[0]:
+        return low / max(w, TINY), 5, i, k, w, low
+    return best
+
+
+@njit
+def _step_excess(best: Best, om0: np.ndarray, k: int, i: int, lat: float, ver: float,
+                 step_limit: float) -> Best:
+    """Rotor i's tilt step at a path's end (sample k) from its pose at rest."""
+    d = math.atan2(lat, ver) - math.atan2(om0[k, 2 * i], om0[k, 2 * i + 1])
+    step = abs(math.atan2(math.sin(d), math.cos(d)))
+    if step / step_limit > best[0]:
+        return step / step_limit, 4, i, k, step, step_limit
+    return best
 
 
 @njit_loops
@@ -349,52 +381,6 @@ def fits_kernel(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, duration: 
             if d != 0.0 and abs(math.atan2(math.sin(d), math.cos(d))) > step_limit:
                 return False
     return True
-
-
-@njit
-def speed_bound_kernel(parts: np.ndarray, limit4: float, guard: float) -> float:
-    """`fcu.envelope.feasibility.TimeScaling._speed_bound` (rotor speed alone, closed form, on
-    `scaling_parts`; the value does not depend on the order of the samples): w^4 = a u^2 +
-    b u + (c + L^4) with u = 1 / D^2, `limit4` = L^4, `guard` its STRETCH_GUARD."""
-    n_rot, n = parts.shape[0], parts.shape[2]
-    for i in range(n_rot):
-        for k in range(n):
-            lat0, ver0 = parts[i, 0, k], parts[i, 1, k]
-            if lat0 * lat0 + ver0 * ver0 - limit4 > 0.0:
-                return math.inf
-    any_bound = False
-    any_nan = False
-    u_max = math.inf
-    for i in range(n_rot):
-        for k in range(n):
-            lat0, ver0 = parts[i, 0, k], parts[i, 1, k]
-            lat1, ver1 = parts[i, 2, k], parts[i, 3, k]
-            a = lat1 * lat1 + ver1 * ver1
-            if not a > 0.0:
-                continue
-            any_bound = True
-            b = 2.0 * (lat0 * lat1 + ver0 * ver1)
-            c = lat0 * lat0 + ver0 * ver0 - limit4
-            disc = b * b - 4.0 * a * c
-            if disc < 0.0:  # np.maximum(disc, 0.0): NaN and -0.0 kept
-                disc = 0.0
-            sq = math.sqrt(disc)
-            num = sq - b if b < 0.0 else -2.0 * c
-            den = 2.0 * a if b < 0.0 else b + sq
-            if den <= 0.0:
-                return math.inf
-            r = num / den
-            if r != r:
-                any_nan = True
-            elif r < u_max:
-                u_max = r
-    if not any_bound:
-        return 0.0
-    if any_nan:  # np.min propagates NaN
-        u_max = math.nan
-    if u_max <= 0.0:
-        return math.inf
-    return (1.0 + guard) / math.sqrt(u_max)
 
 
 @njit_loops

@@ -18,10 +18,10 @@ from fcu.envelope.excess import (
     fits_kernel,
     grid_kernel,
     scaling_parts,
-    speed_bound_kernel,
     unpermuted,
 )
 from fcu.envelope.instants import DIFF_STEP, SampleOrder
+from fcu.envelope.speed_bound import speed_bound_kernel
 from fcu.envelope.verdict import fits_raw
 from fcu.stages import Reference
 
@@ -255,5 +255,5 @@ class TimeScaling:
 
     def _speed_bound(self) -> float:
         """Rotor speed alone (no lag): the closed form of the module docstring
-        (`fcu.envelope.excess.speed_bound_kernel`)."""
+        (`fcu.envelope.speed_bound.speed_bound_kernel`)."""
         return speed_bound_kernel(self.parts, self.limit ** 4, STRETCH_GUARD)

@@ -117,6 +117,22 @@ def with_speed(item: MissionItem, limits: MissionLimits,
     return replace(limits, land_speed_m_s=speed)
 
 
+def _speed_timed(dp: Vec3, speed: float, phi: Vec3 | None,
+                 turn_rate: float) -> tuple[Vec3, Vec3 | None, float]:
+    """A move's translation and turn with those below the tolerances dropped, and its
+    duration: max(distance / speed, turn angle / turn rate)."""
+    dist = norm3(dp)
+    if dist < POSITION_TOLERANCE_M:
+        dp, dist = ZERO, 0.0
+    angle = 0.0 if phi is None else norm3(phi)
+    if angle < ANGLE_TOLERANCE_RAD:
+        phi, angle = None, 0.0
+    travel = dist / speed if dist > 0.0 else 0.0
+    if angle > 0.0:
+        travel = max(travel, angle / turn_rate)
+    return dp, phi, travel
+
+
 def plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
               limits: MissionLimits, stretch: bool = True) -> Segment:
     """The item's segment from (t0, p0, q0); speed-timed moves stretched to what the vehicle
@@ -129,17 +145,7 @@ def plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
     turn_rate = math.radians(limits.turn_rate_deg_s)
 
     def speed_timed(dp: Vec3, speed: float, phi: Vec3 | None) -> tuple[Vec3, Vec3 | None, float]:
-        """Drop moves below the tolerances; duration = max(distance / speed, turn time)."""
-        dist = norm3(dp)
-        if dist < POSITION_TOLERANCE_M:
-            dp, dist = ZERO, 0.0
-        angle = 0.0 if phi is None else norm3(phi)
-        if angle < ANGLE_TOLERANCE_RAD:
-            phi, angle = None, 0.0
-        travel = dist / speed if dist > 0.0 else 0.0
-        if angle > 0.0:
-            travel = max(travel, angle / turn_rate)
-        return dp, phi, travel
+        return _speed_timed(dp, speed, phi, turn_rate)
 
     def move(dp: Vec3, phi: Vec3 | None, travel: float, hold: float) -> Move:
         """A speed-timed move, stretched to what the vehicle can fly."""

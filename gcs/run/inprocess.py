@@ -24,6 +24,7 @@ import numpy as np
 from common.config.scenario import Scenario, VehicleConfig, check_sensor_faults
 from common.config.sensors import check_servable, resolve_sensor_profile
 from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
+from common.outcome import Event
 from common.process.startup import compile_time_s
 from common.wire.mavlink import encoder, pack, parser
 from common.wire.mission_items import PX4_SITL_HOME, MissionItem, item_from_message
@@ -178,6 +179,40 @@ def align(pipeline: Pipeline, world: World, dt_s: float,
         feed_fcu(pipeline, world.feed.period(states))
 
 
+class _RunLogs:
+    """truth.ulg and onboard.ulg of an in-process run, as the two processes write them (none
+    without `on`); the commander's events logged once each, at the step after they came."""
+
+    def __init__(self, scenario: Scenario, pipeline: Pipeline, values: dict[str, float],
+                 on: bool) -> None:
+        self.on = on
+        self.truth_buf, self.onboard_buf = bytearray(), bytearray()
+        self.truth = TruthLog(self.truth_buf, scenario.name) if on else None
+        self.onboard = OnboardLog(self.onboard_buf, pipeline, values) if on else None
+        self.events_logged = 0
+
+    def record(self, state: PlantState) -> None:
+        if self.truth is not None:
+            self.truth.record(state)
+
+    def step(self, out: StepOutput, step_us: float, t_us: int, events: list[Event]) -> None:
+        if self.onboard is not None:
+            self.onboard.step(out, step_us, t_us)
+            if events and len(events) > self.events_logged:
+                self.onboard.events(events[self.events_logged:])
+                self.events_logged = len(events)
+
+    def close(self, events: list[Event]) -> None:
+        """The events not logged yet, then both logs closed."""
+        if self.truth is not None and self.onboard is not None:
+            self.onboard.events(events[self.events_logged:])
+            self.truth.close()
+            self.onboard.close()
+
+    def files(self) -> tuple[bytes | None, bytes | None]:
+        return (bytes(self.truth_buf), bytes(self.onboard_buf)) if self.on else (None, None)
+
+
 def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
                  logs: bool = True,
                  before_step: Callable[[int, Pipeline], None] | None = None) -> RunResult:
@@ -186,77 +221,96 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
     onboard.ulg as the two processes would write them. `before_step(t_us, pipeline)` runs
     before each control step of the flight (what a ground station does, at fixed
     simulated times)."""
-    vehicle = scenario.vehicle
     control_dt_us = 1_000_000 // scenario.control_rate_hz
     world = World(scenario, control_dt_us, sensors=scenario.sensors, seed=scenario.seed,
                   initial=initial)
     pipeline, store = fcu_pipeline(scenario)
-    cmd = pipeline.commander
-    truth_buf, onboard_buf = bytearray(), bytearray()
-    truth_log = TruthLog(truth_buf, scenario.name) if logs else None
-    onboard_log = OnboardLog(onboard_buf, pipeline, store.values) if logs else None
-    items = tuple(through_wire_item(item) for item in scenario_mission(scenario))
+    run_logs = _RunLogs(scenario, pipeline, store.values, logs)
     truth_rows: list[tuple[float, ...]] = []
+    refused = _start(scenario, pipeline, world, control_dt_us * 1e-6, run_logs, truth_rows)
+    if refused:
+        raise _aborted(scenario, world, pipeline, run_logs, truth_rows, refused)
+    world.start_flight()  # the flight's start: the scenario's clock counts from it
+    start_us = world.state.time_us
+    rows, onboard_rows, wall = _fly(scenario, world, pipeline, run_logs, start_us,
+                                    before_step)
+    cmd = pipeline.commander
+    run_logs.close(cmd.events)
+    truth = np.vstack([np.array(truth_rows, dtype=float).reshape(-1, len(TRUTH_COLUMNS)),
+                       *rows])
+    onboard = np.array(onboard_rows, dtype=float).reshape(-1, len(ONBOARD_COLUMNS))
+    events = list(cmd.events)
+    metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
+                            events=events, wall_time_s=wall, transport="in-process",
+                            lockstep=True, mission_completed=cmd.mission_done,
+                            flight_start_us=start_us, compile_time_s=compile_time_s())
+    metrics["fcu_params"] = scenario_params(scenario)
+    return RunResult(metrics, truth, onboard, events, *run_logs.files())
 
-    def aborted(why: str) -> InProcessError:
-        """The refusal, with the run as far as it went: the states so far, nothing flown,
-        status aborted (`build_metrics`, as `gcs.run.process_run` records a refused run)."""
-        truth_rows.append(truth_row(world.state))
-        if truth_log is not None and onboard_log is not None:
-            truth_log.record(world.state)
-            onboard_log.events(cmd.events)
-            truth_log.close()
-            onboard_log.close()
-        truth = np.array(truth_rows, dtype=float).reshape(-1, len(TRUTH_COLUMNS))
-        onboard = np.zeros((0, len(ONBOARD_COLUMNS)))
-        metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
-                                events=list(cmd.events), wall_time_s=0.0,
-                                transport="in-process", lockstep=True, stopped="aborted",
-                                flight_start_us=world.state.time_us,
-                                compile_time_s=compile_time_s())
-        metrics["error"] = why
-        metrics["fcu_params"] = scenario_params(scenario)
-        return InProcessError(why, RunResult(
-            metrics, truth, onboard, list(cmd.events),
-            bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None))
 
+def _start(scenario: Scenario, pipeline: Pipeline, world: World, dt_s: float,
+           run_logs: _RunLogs, truth_rows: list[tuple[float, ...]]) -> str:
+    """The scenario's mission uploaded, the estimator aligned on the ground (with a sensor
+    profile) or the first state given, the vehicle armed and started: why not, or ''."""
+    items = tuple(through_wire_item(item) for item in scenario_mission(scenario))
     refused = accept_mission(pipeline, items, published_home(PX4_SITL_HOME))
     if refused:
-        raise aborted(f"mission refused: {refused}")
-    dt_s = control_dt_us * 1e-6
-    onboard_rows: list[tuple[float, ...]] = []
-    feed = world.feed
-    if feed is not None:
+        return f"mission refused: {refused}"
+    if world.feed is not None:
         def record(s: PlantState) -> None:
             truth_rows.append(truth_row(s))
-            if truth_log is not None:
-                truth_log.record(s)
+            run_logs.record(s)
 
         def logged(out: StepOutput) -> None:
-            if onboard_log is not None:
-                onboard_log.step(out, 0.0, out.t_us)
+            if run_logs.onboard is not None:
+                run_logs.onboard.step(out, 0.0, out.t_us)
 
         align(pipeline, world, dt_s, record, logged)
     else:
         t_us = world.state.time_us
         pipeline.on_state(t_us, state_for_fcu(world.state), t_us)
-    refused = arm_and_start(pipeline)
-    if refused:
-        raise aborted(refused)
-    world.start_flight()  # the flight's start: the scenario's clock counts from it
-    start_us = world.state.time_us
+    return arm_and_start(pipeline)
+
+
+def _aborted(scenario: Scenario, world: World, pipeline: Pipeline, run_logs: _RunLogs,
+             truth_rows: list[tuple[float, ...]], why: str) -> InProcessError:
+    """The refusal, with the run as far as it went: the states so far, nothing flown,
+    status aborted (`build_metrics`, as `gcs.run.process_run` records a refused run)."""
+    cmd = pipeline.commander
+    truth_rows.append(truth_row(world.state))
+    run_logs.record(world.state)
+    run_logs.close(cmd.events)
+    truth = np.array(truth_rows, dtype=float).reshape(-1, len(TRUTH_COLUMNS))
+    onboard = np.zeros((0, len(ONBOARD_COLUMNS)))
+    metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
+                            events=list(cmd.events), wall_time_s=0.0,
+                            transport="in-process", lockstep=True, stopped="aborted",
+                            flight_start_us=world.state.time_us,
+                            compile_time_s=compile_time_s())
+    metrics["error"] = why
+    metrics["fcu_params"] = scenario_params(scenario)
+    return InProcessError(why, RunResult(metrics, truth, onboard, list(cmd.events),
+                                         *run_logs.files()))
+
+
+def _fly(scenario: Scenario, world: World, pipeline: Pipeline, run_logs: _RunLogs,
+         start_us: int, before_step: Callable[[int, Pipeline], None] | None
+         ) -> tuple[list[np.ndarray], list[tuple[float, ...]], float]:
+    """The flight to the scenario's end: (the plant's state rows, the onboard rows, the
+    wall time it took)."""
+    vehicle, feed, cmd = scenario.vehicle, world.feed, pipeline.commander
+    dt_s = (1_000_000 // scenario.control_rate_hz) * 1e-6
     end_us = start_us + round(scenario.duration_s * 1e6)
     clock = time.perf_counter
-    logged_events = 0
     input_us = 0.0  # the estimator's work on the period's inputs
     rows: list[np.ndarray] = []
+    onboard_rows: list[tuple[float, ...]] = []
     wall0 = clock()
     while True:
         state = world.state
         t_us = state.time_us
         rows.append(world.row)
-        if truth_log is not None:
-            truth_log.record(state)
+        run_logs.record(state)
         if feed is None:
             pipeline.on_state(t_us, state_for_fcu(state), t_us)
         if before_step is not None:
@@ -267,11 +321,7 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
         if out.result is not None and pipeline.state is not None:
             onboard_rows.append(onboard_row(t_us, pipeline.state, out.result, out.speed_rad_s,
                                             out.tilt_rad, out.armed, step_us))
-        if onboard_log is not None:
-            onboard_log.step(out, step_us, t_us)
-            if cmd.events and len(cmd.events) > logged_events:
-                onboard_log.events(cmd.events[logged_events:])
-                logged_events = len(cmd.events)
+        run_logs.step(out, step_us, t_us, cmd.events)
         # The step's mission events consumed, as the FCU process's housekeeping consumes
         # them (MISSION_ITEM_REACHED): the log reads only the new ones at its next step.
         cmd.mission_events.clear()
@@ -280,20 +330,4 @@ def run_scenario(scenario: Scenario, *, initial: PlantState | None = None,
         states = world.advance(command_for_plant(out, vehicle, state))
         if feed is not None:
             input_us = feed_fcu(pipeline, feed.period(states))
-    wall = clock() - wall0
-
-    if truth_log is not None and onboard_log is not None:
-        onboard_log.events(cmd.events[logged_events:])
-        truth_log.close()
-        onboard_log.close()
-    truth = np.vstack([np.array(truth_rows, dtype=float).reshape(-1, len(TRUTH_COLUMNS)),
-                       *rows])
-    onboard = np.array(onboard_rows, dtype=float).reshape(-1, len(ONBOARD_COLUMNS))
-    events = list(cmd.events)
-    metrics = build_metrics(scenario, TRUTH_COLUMNS, truth, ONBOARD_COLUMNS, onboard,
-                            events=events, wall_time_s=wall, transport="in-process",
-                            lockstep=True, mission_completed=cmd.mission_done,
-                            flight_start_us=start_us, compile_time_s=compile_time_s())
-    metrics["fcu_params"] = scenario_params(scenario)
-    return RunResult(metrics, truth, onboard, events,
-                     bytes(truth_buf) if logs else None, bytes(onboard_buf) if logs else None)
+    return rows, onboard_rows, clock() - wall0
