@@ -55,7 +55,9 @@ def impulse_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def diverged_dir(tmp_path_factory) -> Path:
-    out = _run(tmp_path_factory.mktemp("sine_pd"), "case2_sine", controller="pd")
+    # 8 s: PD diverges at 4.1 s, and the run's figures stop there (60 s give the same).
+    out = _run(tmp_path_factory.mktemp("sine_pd"), "case2_sine", controller="pd",
+               duration_s=8.0)
     assert json.loads((out / "metrics.json").read_text())["status"] == "diverged"
     return out
 
