@@ -25,6 +25,8 @@ test: venv
 	$(PY) -m mypy benchmarks tools
 	$(PY) -m pytest -q -n auto --dist loadgroup --durations=20 tests
 
+# tests/unit: tests/sitl and tests/docs start programs (`process`), tests/closed_loop flies
+# (`slow`); a test of this tier that starts a process fails (tests/conftest.py).
 test-fast: venv
 	$(PY) -m pytest -q -n auto --dist loadgroup -m "not slow and not process" tests
 

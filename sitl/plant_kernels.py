@@ -210,7 +210,7 @@ def _wrench_after(pp: np.ndarray, speed0: np.ndarray, tilt0: np.ndarray, cmd: np
     return rotor_wrench_kernel(pp, sp, ti)
 
 
-# C901 (21 > 20): one compiled physics step, its branches the piecewise RK4's sub-intervals
+# C901 (21 > 12): one compiled physics step, its branches the piecewise RK4's sub-intervals
 # and the ground contact; a helper kernel per branch would cost a call per piece in the
 # loop that dominates a flight's time, for the same arithmetic.
 @njit

@@ -1,50 +1,155 @@
-"""Suite-wide set-up: the flight core's kernels are compiled (a clean clone) or loaded once
-in the controlling process before any worker starts, so that the workers and the `fcu` and
-`sitl` processes the tests start load them from the cache instead of each compiling them.
+"""Suite-wide set-up: the tiers by folder, a guard that keeps programs out of the fast tier,
+and the flight core's kernels compiled on demand.
 
-Tiers: every test that starts a program (`sitl`, `fcu`, `gcs`, a writer to kill) is marked
-`process`: all of tests/sitl/, the README and docs blocks that run, tests using the module
-fixtures that fly through `gcs` (PROCESS_FIXTURES), and the few marked by hand. `make
-test-fast` runs the rest (`-m "not slow and not process"`); `make test` runs everything."""
+Tiers: a test that starts a program (`sitl`, `fcu`, `gcs`, a subprocess or a worker process
+of ours) lives under tests/sitl/ or tests/docs/ (the README and docs blocks that run), and
+is marked `process` here by its folder; the closed-loop flights of tests/closed_loop are marked
+`slow` by theirs. `make test-fast` runs the rest (`-m "not slow and not process"`: the unit
+tests); `make test` runs everything. A test outside those folders that starts a program
+fails (`ProgramStarted`), and a `process` mark outside them stops the run.
+
+Kernels: the first test that flies (tests/sitl, tests/docs, tests/closed_loop, or a module
+that imports a flight's entry point) flies a 3 s mission once (`compiled_kernels`), under a
+file lock in numba's cache folder, so that the kernels are compiled once into the on-disk
+cache (`common/jit.py`) and every other worker and every `fcu` and `sitl` process the tests
+start loads them from there. A test that flies nothing starts and flies nothing."""
 
 from __future__ import annotations
 
+import fcntl
+import json
+import multiprocessing.util
+import os
+import subprocess
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-CASE1 = Path(__file__).resolve().parents[1] / "config" / "scenarios" / "case1_figure8.toml"
+ROOT = Path(__file__).resolve().parents[1]
+CASE1 = ROOT / "config" / "scenarios" / "case1_figure8.toml"
 TESTS = Path(__file__).resolve().parent
-PROCESS_FIXTURES = {"est_run", "truth_run"}  # tests/unit/test_estimator_logs.py: `gcs run`
+PROCESS_DIRS = (TESTS / "sitl", TESTS / "docs")  # the `process` tier, by folder
+FLYING_DIRS = (*PROCESS_DIRS, TESTS / "closed_loop")
+# A module that imports one of these flies the flight core in the worker.
+FLIGHT_ENTRIES = ("run_scenario", "fcu_pipeline", "Plant", "run_table1")
+
+
+def _under(item: pytest.Item, dirs: tuple[Path, ...]) -> bool:
+    parents = Path(str(item.fspath)).parents
+    return any(d in parents for d in dirs)
+
+
+def _flies(item: pytest.Item) -> bool:
+    module = getattr(item, "module", None)
+    return _under(item, FLYING_DIRS) or any(hasattr(module, name) for name in FLIGHT_ENTRIES)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark the tests that start programs `process` (module docstring)."""
+    """Mark the tests of tests/sitl and tests/docs `process` (refused elsewhere), those of
+    tests/closed_loop `slow`; a test that flies gets `compiled_kernels` first."""
+    misplaced = []
     for item in items:
-        path = Path(str(item.fspath))
-        if (TESTS / "sitl") in path.parents or \
-                item.name.startswith("test_block_runs_as_written") or \
-                PROCESS_FIXTURES & set(getattr(item, "fixturenames", ())):
+        if isinstance(item, pytest.Function) and _flies(item) and \
+                "compiled_kernels" not in item.fixturenames:
+            item.fixturenames.insert(0, "compiled_kernels")  # set up before the others
+        if _under(item, (TESTS / "closed_loop",)):
+            item.add_marker(pytest.mark.slow)
+        if _under(item, PROCESS_DIRS):
             item.add_marker(pytest.mark.process)
+        elif item.get_closest_marker("process") is not None:
+            misplaced.append(item.nodeid)
+    if misplaced:
+        raise pytest.UsageError(f"{len(misplaced)} tests are marked process outside tests/sitl "
+                                f"and tests/docs (e.g. {misplaced[0]}): move them there")
 
 
-def pytest_configure(config: pytest.Config) -> None:
-    if hasattr(config, "workerinput"):  # an xdist worker: the controller has done it
-        return
+class ProgramStarted(RuntimeError):
+    """A test of the fast tier started a program."""
+
+
+def _refuse(what: str) -> Callable[..., Any]:
+    def refuse(*args: object, **kwargs: object) -> Any:
+        raise ProgramStarted(f"{what} in a test outside tests/sitl and tests/docs: a test "
+                             "that starts a program belongs to the process tier (move it)")
+    return refuse
+
+
+@contextmanager
+def no_programs() -> Iterator[None]:
+    """Every way this suite's code starts a process (subprocess, multiprocessing's fork and
+    spawn, os.system, posix_spawn) raises ProgramStarted meanwhile."""
+    patches: list[tuple[object, str]] = [
+        (subprocess.Popen, "_execute_child"), (os, "fork"), (os, "system"),
+        (os, "posix_spawn"), (os, "posix_spawnp"), (multiprocessing.util, "spawnv_passfds")]
+    with ExitStack() as stack:
+        for owner, name in patches:
+            old = getattr(owner, name)
+            setattr(owner, name, _refuse(f"{getattr(owner, '__name__', owner)}.{name}"))
+            stack.callback(setattr, owner, name, old)
+        yield
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    """A test not marked `process` (its fixtures' set-up and teardown too) starts no
+    program: the guard of the fast tier."""
+    if item.get_closest_marker("process") is not None:
+        return (yield)
+    with no_programs():
+        return (yield)
+
+
+def _kernel_stamps() -> dict[str, list[float]]:
+    """What numba checks a cached kernel against: each kernel module's mtime and size."""
+    from common.jit import KERNEL_MODULES
+
+    return {name: [(ROOT / name).stat().st_mtime, (ROOT / name).stat().st_size]
+            for name in KERNEL_MODULES}
+
+
+def _fly_warm_up() -> None:
+    """The kernels' warm-ups, then a 3 s mission: the mission executor's kernels compile for
+    their callers' types (a rotation sampled at many instants at once) on first use."""
     from common.config.scenario import load_scenario
-    from gcs.run.inprocess import fcu_pipeline
+    from gcs.run.inprocess import apply_overrides, fcu_pipeline, run_scenario
     from sitl.plant import Plant
 
     scenario = load_scenario(CASE1)
     Plant(scenario.vehicle)
     fcu_pipeline(scenario)
-    # Kernels compiled for a caller's types on first use (the mission executor samples a
-    # rotation at many instants at once): flown here once, not first inside a real-time
-    # flight of some test, where a compilation would stall the loop.
-    from gcs.run.inprocess import apply_overrides, run_scenario
-
     run_scenario(apply_overrides(load_scenario(CASE1.parent / "mission_tour.toml"),
                                  duration_s=3.0), logs=False)
+
+
+def build_kernels() -> bool:
+    """Compile the kernels into numba's cache unless a run already did for these sources
+    (a stamp file beside them); True if this call flew the warm-up. One process at a time:
+    the others wait on the lock, then find the stamp."""
+    import numba
+
+    import common.jit  # noqa: F401  (sets numba's cache folder)
+
+    cache = Path(numba.config.CACHE_DIR)
+    cache.mkdir(parents=True, exist_ok=True)
+    stamp = cache / "warm-up.json"
+    with (cache / "warm-up.lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        want = _kernel_stamps()
+        if stamp.exists() and json.loads(stamp.read_text()) == want:
+            return False
+        _fly_warm_up()
+        stamp.write_text(json.dumps(want))
+        return True
+
+
+@pytest.fixture(scope="session")
+def compiled_kernels() -> bool:
+    """The kernels in numba's on-disk cache before the first flight (`build_kernels`): the
+    first fixture of every test that flies (`pytest_collection_modifyitems`)."""
+    return build_kernels()
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:

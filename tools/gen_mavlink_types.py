@@ -8,7 +8,7 @@ This script reads the field names and C types that pymavlink's ardupilotmega dia
 superset of common) declares for each message in MESSAGES and writes one `typing.Protocol`
 per message, with `msgname` and every field typed (integers int, floats float, char arrays
 str, other arrays Sequence). `common.wire.mavlink_types.as_message` narrows a received message to
-its view after checking its type at run time. tests/unit/test_mavlink_types.py fails when the
+its view after checking its type at run time. tests/sitl/test_mavlink_types.py fails when the
 generated modules differ from what this script writes now (a new pymavlink, a new message).
 """
 

@@ -9,12 +9,14 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from common.config.scenario import load_scenario
 from gcs import cli
 from gcs.report.metrics import ERROR_ROWS_RULE
 from gcs.run.inprocess import apply_overrides, run_scenario
 
+from .. import reference_runs
 from .conftest import SCENARIOS
 from .test_actuator_limits import LEG
 
@@ -53,12 +55,13 @@ def test_gcs_run_of_a_limited_flight_says_limited_and_exits_1(tmp_path, capsys):
         f"leg [pid] limited ({m['status_reason']})"
 
 
+@pytest.mark.xdist_group(reference_runs.TOUR_GROUP)
 def test_a_landing_is_judged_in_the_air_not_pressed_into_the_ground():
     """Given the tour mission (it lands and disarms), then its errors are those of the rows
     error_rows counts, which are every joined row but those on the ground (the plant's
     contact) with the set-point below it; recomputed here from the logs, and within
     centimetres (counting the ground rows gave 0.151 m: the landing set-point's sink)."""
-    r = run_scenario(load_scenario(SCENARIOS / "mission_tour.toml"), logs=False)
+    r = reference_runs.tour_run()  # flown once with test_landing's
     m = r.metrics
     assert m["status"] == "completed" and m["mission_completed"], m["status_reason"]
     rows = m["error_rows"]

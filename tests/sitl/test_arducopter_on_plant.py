@@ -41,113 +41,139 @@ CHECKED_PARAMS = ("FRAME_TYPE", "MOT_PWM_MIN", "MOT_BAT_VOLT_MAX", "ATC_RAT_YAW_
 # ------------------------------------------------------------------ the MAVLink side
 
 
-def drive(url: str, timeout_s: float) -> dict[str, Any]:
-    """Fly ArduCopter over `url`: GUIDED, arm once the EKF lets it, take off to ALT_M, fly
-    NORTH_M north, land, wait for the disarm. Returns what it saw, ArduPilot's boot times in
-    seconds (its simulated clock)."""
-    from pymavlink import mavutil
+class Copter:
+    """ArduCopter over MAVLink: the last message of each kind, the texts and heights seen."""
 
-    mav = mavutil.mavlink
-    conn = mavutil.mavlink_connection(url, source_system=245, dialect="ardupilotmega")
-    deadline = time.monotonic() + timeout_s
-    hb = conn.wait_heartbeat(timeout=timeout_s)
-    if hb is None:
-        raise RuntimeError("no HEARTBEAT from ArduCopter")
-    sysid, compid = hb.get_srcSystem(), hb.get_srcComponent()
-    out: dict[str, Any] = {"texts": [], "heights": []}
-    seen: dict[str, Any] = {}
+    def __init__(self, url: str, timeout_s: float) -> None:
+        from pymavlink import mavutil
 
-    def pump(wait_s: float = 0.2) -> None:
-        if time.monotonic() > deadline:
-            raise TimeoutError(f"flight not done within {timeout_s:g} s: {out}")
-        msg = conn.recv_match(blocking=True, timeout=wait_s)
+        self.mav = mavutil.mavlink
+        self.conn = mavutil.mavlink_connection(url, source_system=245,
+                                               dialect="ardupilotmega")
+        self.timeout_s = timeout_s
+        self.deadline = time.monotonic() + timeout_s
+        hb = self.conn.wait_heartbeat(timeout=timeout_s)
+        if hb is None:
+            raise RuntimeError("no HEARTBEAT from ArduCopter")
+        self.sysid, self.compid = hb.get_srcSystem(), hb.get_srcComponent()
+        self.out: dict[str, Any] = {"texts": [], "heights": []}
+        self.seen: dict[str, Any] = {}
+
+    def pump(self, wait_s: float = 0.2) -> None:
+        if time.monotonic() > self.deadline:
+            raise TimeoutError(f"flight not done within {self.timeout_s:g} s: {self.out}")
+        msg = self.conn.recv_match(blocking=True, timeout=wait_s)
         while msg is not None:
             kind = msg.get_type()
-            seen[kind] = msg
+            self.seen[kind] = msg
             if kind == "LOCAL_POSITION_NED":  # EKF3's height, on ArduPilot's clock
-                out["heights"].append((msg.time_boot_ms, -msg.z))
+                self.out["heights"].append((msg.time_boot_ms, -msg.z))
             if kind == "STATUSTEXT":
-                out["texts"].append(msg.text)
-            msg = conn.recv_match(blocking=False)
+                self.out["texts"].append(msg.text)
+            msg = self.conn.recv_match(blocking=False)
 
-    def boot_s() -> float:
-        st = seen.get("SYSTEM_TIME")
+    def boot_s(self) -> float:
+        st = self.seen.get("SYSTEM_TIME")
         return st.time_boot_ms * 1e-3 if st is not None else math.nan
 
-    def until(cond: Any, what: str, limit_s: float = 60.0) -> None:
+    def until(self, cond: Any, what: str, limit_s: float = 60.0) -> None:
         end = time.monotonic() + limit_s
         while not cond():
             if time.monotonic() > end:
                 raise TimeoutError(f"{what} not within {limit_s:g} s; last texts "
-                                   f"{out['texts'][-5:]}")
-            pump()
+                                   f"{self.out['texts'][-5:]}")
+            self.pump()
 
-    def command(cmd: int, *params: float) -> None:
+    def command(self, cmd: int, *params: float) -> None:
         p = [*params, *([0.0] * (7 - len(params)))]
-        conn.mav.command_long_send(sysid, compid, cmd, 0, *p)
+        self.conn.mav.command_long_send(self.sysid, self.compid, cmd, 0, *p)
 
-    def mode_is(number: int) -> bool:
-        h = seen.get("HEARTBEAT")
-        return h is not None and h.get_srcSystem() == sysid and h.custom_mode == number
+    def mode_is(self, number: int) -> bool:
+        h = self.seen.get("HEARTBEAT")
+        return h is not None and h.get_srcSystem() == self.sysid and h.custom_mode == number
 
-    def armed() -> bool:
-        h = seen.get("HEARTBEAT")
-        return h is not None and bool(h.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+    def armed(self) -> bool:
+        h = self.seen.get("HEARTBEAT")
+        return h is not None and bool(h.base_mode & self.mav.MAV_MODE_FLAG_SAFETY_ARMED)
 
-    for msg_id in (mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mav.MAVLINK_MSG_ID_SYSTEM_TIME,
-                   mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT):
-        command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id,
-                20_000 if msg_id == mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED else 100_000)
-    until(lambda: "SYSTEM_TIME" in seen and "LOCAL_POSITION_NED" in seen, "telemetry")
-    out["params"] = {}
-    for name in CHECKED_PARAMS:
-        seen.pop("PARAM_VALUE", None)
-        conn.mav.param_request_read_send(sysid, compid, name.encode(), -1)
-        until(lambda name=name: getattr(seen.get("PARAM_VALUE"), "param_id", "") == name,
-              f"parameter {name}", 10.0)
-        out["params"][name] = seen["PARAM_VALUE"].param_value
-    command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, GUIDED)
-    until(lambda: mode_is(GUIDED), "GUIDED")
-    need = mav.EKF_PRED_POS_HORIZ_ABS | mav.EKF_POS_HORIZ_ABS | mav.EKF_VELOCITY_HORIZ
+    def set_mode(self, number: int, what: str) -> None:
+        self.command(self.mav.MAV_CMD_DO_SET_MODE, self.mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                     number)
+        self.until(lambda: self.mode_is(number), what)
 
-    def ekf_ready() -> bool:
-        e = seen.get("EKF_STATUS_REPORT")
+    def ekf_ready(self) -> bool:
+        mav = self.mav
+        need = mav.EKF_PRED_POS_HORIZ_ABS | mav.EKF_POS_HORIZ_ABS | mav.EKF_VELOCITY_HORIZ
+        e = self.seen.get("EKF_STATUS_REPORT")
         return e is not None and e.flags & need == need and not e.flags & mav.EKF_UNINITIALIZED
 
-    until(ekf_ready, "EKF3 position estimate", 60.0)
-    out["ekf_ready_s"] = boot_s()
-    last_try = 0.0
-    while not armed():  # the pre-arm checks pass a little after the EKF is ready
-        if time.monotonic() - last_try > 1.0:
-            command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-            last_try = time.monotonic()
-        pump()
-    out["armed_s"] = boot_s()
-    command(mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, ALT_M)
-    until(lambda: -seen["LOCAL_POSITION_NED"].z > ALT_M - 0.3, "takeoff to 10 m")
-    out["at_altitude_s"] = boot_s()
-    ignore = (mav.POSITION_TARGET_TYPEMASK_VX_IGNORE | mav.POSITION_TARGET_TYPEMASK_VY_IGNORE
-              | mav.POSITION_TARGET_TYPEMASK_VZ_IGNORE | mav.POSITION_TARGET_TYPEMASK_AX_IGNORE
-              | mav.POSITION_TARGET_TYPEMASK_AY_IGNORE | mav.POSITION_TARGET_TYPEMASK_AZ_IGNORE
-              | mav.POSITION_TARGET_TYPEMASK_YAW_IGNORE
-              | mav.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE)
-
-    def there() -> bool:
-        p = seen["LOCAL_POSITION_NED"]
-        conn.mav.set_position_target_local_ned_send(0, sysid, compid, mav.MAV_FRAME_LOCAL_NED,
-                                                    ignore, NORTH_M, 0, -ALT_M, 0, 0, 0, 0,
-                                                    0, 0, 0, 0)
+    def there(self) -> bool:
+        """At NORTH_M north, ALT_M up, nearly still (the target sent again each time)."""
+        mav = self.mav
+        ignore = (mav.POSITION_TARGET_TYPEMASK_VX_IGNORE
+                  | mav.POSITION_TARGET_TYPEMASK_VY_IGNORE
+                  | mav.POSITION_TARGET_TYPEMASK_VZ_IGNORE
+                  | mav.POSITION_TARGET_TYPEMASK_AX_IGNORE
+                  | mav.POSITION_TARGET_TYPEMASK_AY_IGNORE
+                  | mav.POSITION_TARGET_TYPEMASK_AZ_IGNORE
+                  | mav.POSITION_TARGET_TYPEMASK_YAW_IGNORE
+                  | mav.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE)
+        p = self.seen["LOCAL_POSITION_NED"]
+        self.conn.mav.set_position_target_local_ned_send(
+            0, self.sysid, self.compid, mav.MAV_FRAME_LOCAL_NED, ignore, NORTH_M, 0, -ALT_M,
+            0, 0, 0, 0, 0, 0, 0, 0)
         return (math.hypot(p.x - NORTH_M, p.y) < 0.3 and abs(p.z + ALT_M) < 0.3
                 and math.sqrt(p.vx ** 2 + p.vy ** 2 + p.vz ** 2) < 0.2)
 
-    until(there, "10 m north")
-    out["north_s"] = boot_s()
-    command(mav.MAV_CMD_DO_SET_MODE, mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, LAND)
-    until(lambda: mode_is(LAND), "LAND")
-    until(lambda: not armed(), "landed and disarmed", 90.0)
-    out["disarmed_s"] = boot_s()
-    out["texts"] = out["texts"][-20:]
-    return out
+
+def _telemetry_and_params(c: Copter) -> None:
+    """Position and time at their rates; CHECKED_PARAMS read back."""
+    mav = c.mav
+    for msg_id in (mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mav.MAVLINK_MSG_ID_SYSTEM_TIME,
+                   mav.MAVLINK_MSG_ID_EKF_STATUS_REPORT):
+        c.command(mav.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id,
+                  20_000 if msg_id == mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED else 100_000)
+    c.until(lambda: "SYSTEM_TIME" in c.seen and "LOCAL_POSITION_NED" in c.seen, "telemetry")
+    c.out["params"] = {}
+    for name in CHECKED_PARAMS:
+        c.seen.pop("PARAM_VALUE", None)
+        c.conn.mav.param_request_read_send(c.sysid, c.compid, name.encode(), -1)
+        c.until(lambda name=name: getattr(c.seen.get("PARAM_VALUE"), "param_id", "") == name,
+                f"parameter {name}", 10.0)
+        c.out["params"][name] = c.seen["PARAM_VALUE"].param_value
+
+
+def _arm(c: Copter) -> None:
+    """GUIDED, then arm once the EKF is ready (the pre-arm checks pass a little after)."""
+    c.set_mode(GUIDED, "GUIDED")
+    c.until(c.ekf_ready, "EKF3 position estimate", 60.0)
+    c.out["ekf_ready_s"] = c.boot_s()
+    last_try = 0.0
+    while not c.armed():
+        if time.monotonic() - last_try > 1.0:
+            c.command(c.mav.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+            last_try = time.monotonic()
+        c.pump()
+    c.out["armed_s"] = c.boot_s()
+
+
+def drive(url: str, timeout_s: float) -> dict[str, Any]:
+    """Fly ArduCopter over `url`: GUIDED, arm once the EKF lets it, take off to ALT_M, fly
+    NORTH_M north, land, wait for the disarm. Returns what it saw, ArduPilot's boot times in
+    seconds (its simulated clock)."""
+    c = Copter(url, timeout_s)
+    _telemetry_and_params(c)
+    _arm(c)
+    c.command(c.mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, ALT_M)
+    c.until(lambda: -c.seen["LOCAL_POSITION_NED"].z > ALT_M - 0.3, "takeoff to 10 m")
+    c.out["at_altitude_s"] = c.boot_s()
+    c.until(c.there, "10 m north")
+    c.out["north_s"] = c.boot_s()
+    c.set_mode(LAND, "LAND")
+    c.until(lambda: not c.armed(), "landed and disarmed", 90.0)
+    c.out["disarmed_s"] = c.boot_s()
+    c.out["texts"] = c.out["texts"][-20:]
+    return c.out
 
 
 # ------------------------------------------------------------------ the test

@@ -332,6 +332,64 @@ def _fcu_sim_address(log: Path) -> tuple[str, int]:
     raise AssertionError(log.read_text())
 
 
+class _WireSim:
+    """A simulator of our own on a socket: the sensor feed's frames of each period sent to
+    the FCU (the NaN ones counted), its HIL_ACTUATOR_CONTROLS awaited."""
+
+    def __init__(self, sim: socket.socket, fcu: tuple[str, int], feed: SensorFeed) -> None:
+        self.sim, self.fcu, self.feed = sim, fcu, feed
+        self.seq = self.nan_imu = self.nan_pose = 0
+
+    def send(self, states) -> int:
+        parts = []
+        for msg in self.feed.period(states):
+            self.seq = (self.seq + 1) & 0xFF
+            if isinstance(msg, HilSensor):
+                self.nan_imu += not math.isfinite(sum(msg.gyro_frd_rad_s))
+                parts.append(pack_hil_sensor(msg, self.seq, 1, 200))
+            else:
+                self.nan_pose += not math.isfinite(sum(msg.p_ned_m))
+                parts.append(pack_odometry(msg, self.seq, 1, 200))
+        self.sim.sendto(b"".join(parts), self.fcu)
+        return states[-1].time_us
+
+    def answer(self, t_us: int):
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            try:
+                data, _ = self.sim.recvfrom(65535)
+            except TimeoutError:
+                continue
+            for f in split_frames(data)[0]:
+                if f.msg_id == HIL_ACTUATOR_CONTROLS_ID:
+                    a = unpack_actuator_controls(f.payload)
+                    if a.time_usec == t_us:
+                        return a
+        return None
+
+
+def _periods_until_unanswered(wire: _WireSim, state) -> tuple[list[int], list[int]]:
+    """Control periods sent until one is not answered (or 3 s): the answered periods' times
+    (each finite and disarmed), then the first unanswered one's."""
+    answered: list[int] = []
+    unanswered: list[int] = []
+    t_us = wire.send([state])
+    while t_us <= 3_000_000:
+        a = wire.answer(t_us)
+        if a is None:
+            unanswered.append(t_us)
+            break  # aligned: the world waits for the flight
+        assert all(math.isfinite(c) for c in a.controls)
+        assert not a.mode & M.MAV_MODE_FLAG_SAFETY_ARMED
+        answered.append(t_us)
+        states = []
+        for _ in range(2):
+            state = state._replace(time_us=state.time_us + 1000)
+            states.append(state)
+        t_us = wire.send(states)
+    return answered, unanswered
+
+
 def test_nan_frames_on_the_wire_are_skipped_and_the_lockstep_answers(tmp_path):
     """A simulator of our own sends an FCU (EKF_EN = 1, lockstep) the sensors of a vehicle at
     rest, aligning, with 50 ms of ODOMETRY poses carrying NaN and then 10 ms of HIL_SENSOR
@@ -355,55 +413,9 @@ def test_nan_frames_on_the_wire_are_skipped_and_the_lockstep_answers(tmp_path):
         feed = SensorFeed(resolve_sensor_profile(PROFILE), 5, plant, 2000)
         feed.start_flight(0, (SensorFault("pose_nan", 0.2, 0.25),
                               SensorFault("imu_nan", 0.3, 0.31)))
-        state = initial_state(scenario, plant)
-        seq = 0
-        nan_imu = nan_pose = 0
-        answered: list[int] = []
-        unanswered: list[int] = []
-
-        def send(states) -> int:
-            nonlocal seq, nan_imu, nan_pose
-            parts = []
-            for msg in feed.period(states):
-                seq = (seq + 1) & 0xFF
-                if isinstance(msg, HilSensor):
-                    nan_imu += not math.isfinite(sum(msg.gyro_frd_rad_s))
-                    parts.append(pack_hil_sensor(msg, seq, 1, 200))
-                else:
-                    nan_pose += not math.isfinite(sum(msg.p_ned_m))
-                    parts.append(pack_odometry(msg, seq, 1, 200))
-            sim.sendto(b"".join(parts), fcu)
-            return states[-1].time_us
-
-        def answer(t_us: int):
-            end = time.monotonic() + 1.0
-            while time.monotonic() < end:
-                try:
-                    data, _ = sim.recvfrom(65535)
-                except TimeoutError:
-                    continue
-                for f in split_frames(data)[0]:
-                    if f.msg_id == HIL_ACTUATOR_CONTROLS_ID:
-                        a = unpack_actuator_controls(f.payload)
-                        if a.time_usec == t_us:
-                            return a
-            return None
-
-        t_us = send([state])
-        while t_us <= 3_000_000:
-            a = answer(t_us)
-            if a is None:
-                unanswered.append(t_us)
-                break  # aligned: the world waits for the flight
-            assert all(math.isfinite(c) for c in a.controls)
-            assert not a.mode & M.MAV_MODE_FLAG_SAFETY_ARMED
-            answered.append(t_us)
-            states = []
-            for _ in range(2):
-                state = state._replace(time_us=state.time_us + 1000)
-                states.append(state)
-            t_us = send(states)
-        assert nan_imu == 10 and nan_pose == 10
+        wire = _WireSim(sim, fcu, feed)
+        answered, unanswered = _periods_until_unanswered(wire, initial_state(scenario, plant))
+        assert wire.nan_imu == 10 and wire.nan_pose == 10
         assert answered == list(range(0, answered[-1] + 1, 2000))
         assert {300_000, 302_000, 304_000, 306_000, 308_000} <= set(answered)
         # aligned (not answered any more: the world waits for the flight) after the NaN,

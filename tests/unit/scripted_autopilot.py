@@ -116,7 +116,13 @@ class ScriptedAutopilot:
         kind = msg.get_type()
         if kind == "COMMAND_LONG":
             self._command(msg)
-        elif kind == "MISSION_COUNT" and self.mute:
+        elif kind.startswith("MISSION_"):
+            self._mission_message(kind, msg)
+        elif kind.startswith("PARAM_"):
+            self._param_message(kind, msg)
+
+    def _mission_message(self, kind: str, msg) -> None:
+        if kind == "MISSION_COUNT" and self.mute:
             self._send(M.MAVLink_statustext_message(M.MAV_SEVERITY_WARNING,
                                                     self.mute.encode()))
         elif kind == "MISSION_COUNT":
@@ -127,17 +133,22 @@ class ScriptedAutopilot:
         elif kind == "MISSION_REQUEST_LIST":
             self._send(M.MAVLink_mission_count_message(255, 0, len(self.mission), 0))
         elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-            if 0 <= msg.seq < len(self.mission):
-                it = self.mission[msg.seq]
-                if self.kind == "ardupilot" and msg.seq == 0 and self.home is not None:
-                    lat, lon, alt = self.home  # its own home, whatever was uploaded
-                    it = it._replace(frame=0, command=16, x=round(lat * 1e7),
-                                     y=round(lon * 1e7), z=alt)
-                self._send(item_message(self._as_stored(it), 255, 0))
+            self._answer_request(msg.seq)
         elif kind == "MISSION_CLEAR_ALL":
             self.mission = []
             self._send(M.MAVLink_mission_ack_message(255, 0, M.MAV_MISSION_ACCEPTED, 0))
-        elif kind == "PARAM_REQUEST_LIST":
+
+    def _answer_request(self, seq: int) -> None:
+        if 0 <= seq < len(self.mission):
+            it = self.mission[seq]
+            if self.kind == "ardupilot" and seq == 0 and self.home is not None:
+                lat, lon, alt = self.home  # its own home, whatever was uploaded
+                it = it._replace(frame=0, command=16, x=round(lat * 1e7),
+                                 y=round(lon * 1e7), z=alt)
+            self._send(item_message(self._as_stored(it), 255, 0))
+
+    def _param_message(self, kind: str, msg) -> None:
+        if kind == "PARAM_REQUEST_LIST":
             for i in range(len(self.names)):
                 self._param_value(i)
         elif kind == "PARAM_REQUEST_READ":

@@ -1,14 +1,11 @@
 """The ULog writer, proven with pyulog (the reference reader): layouts, information,
-parameters, logged strings, and records that survive SIGKILL of their writer."""
+parameters, logged strings, a log cut anywhere (the writers killed or stopped by a full
+disk in a process of their own: tests/sitl/test_ulog_writers.py)."""
 
 from __future__ import annotations
 
 import math
 import os
-import signal
-import subprocess
-import sys
-import time
 
 import numpy as np
 import pytest
@@ -20,21 +17,6 @@ from common.logs.ulog import Topic, ULogError, ULogWriter, open_ulog, read_topic
 POSE = Topic("pose", (("uint64_t", "timestamp"), ("double", "x"), ("float", "q", 4),
                       ("int8_t", "flag"), ("bool", "ok")))
 RATE = Topic("rate", (("uint64_t", "timestamp"), ("double", "w")))
-
-WRITER = """
-import sys
-from common.logs.ulog import Topic, ULogWriter
-t = Topic("row", (("uint64_t", "timestamp"), ("double", "a"), ("double", "b")))
-w = ULogWriter(sys.argv[1], [t])
-i = 0
-while True:
-    w.add("row", (i, 2.0 * i, -i))
-    i += 1
-    if i % 3 == 0:
-        w.flush()  # the processes flush once per control period
-    if i % 999 == 0:
-        print(i, flush=True)
-"""
 
 
 def test_records_info_params_and_strings_read_back_by_pyulog(tmp_path):
@@ -99,31 +81,6 @@ def test_record_conversions_to_ned_frd():
     assert att[2:6] == pytest.approx((h, 0.0, 0.0, h))  # yaw +90 deg about NED down
     assert px4.angular_velocity_record(1, 1, (0.1, 0.2, 0.3))[2:] == (0.1, -0.2, -0.3)
 
-
-@pytest.mark.process
-def test_records_survive_sigkill_of_the_writer(tmp_path):
-    """Given a writer killed with SIGKILL mid-stream, then pyulog reads every record it had
-    flushed, in order, without a torn record, and `tail_record` finds the same last one."""
-    path = tmp_path / "killed.ulg"
-    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path)], stdout=subprocess.PIPE,
-                            text=True, cwd=os.getcwd())
-    try:
-        written = 0
-        deadline = time.monotonic() + 30
-        while written < 30000 and time.monotonic() < deadline:
-            written = int(proc.stdout.readline())
-    finally:
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
-    u = open_ulog(path)
-    assert not u.file_corruption
-    rows = u.get_dataset("row").data
-    n = len(rows["timestamp"])
-    assert n >= written
-    assert np.array_equal(rows["timestamp"], np.arange(n))
-    assert np.array_equal(rows["a"], 2.0 * np.arange(n))
-    cols, last = tail_record(path, "row")
-    assert cols == ("time_us", "a", "b") and last == (n - 1, 2.0 * (n - 1), -(n - 1.0))
 
 
 def test_a_log_cut_anywhere_reads_to_its_last_complete_record(tmp_path):
@@ -267,44 +224,6 @@ def test_tail_record_is_not_fooled_by_a_record_inside_another_payload(tmp_path):
 
 # ------------------------------------------------------------------------ a failing disk
 
-FULL_DISK = """
-import resource, signal, sys
-from common.logs.ulog import Topic, ULogWriter
-signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, 100_000))
-t = Topic("row", (("uint64_t", "timestamp"), ("double", "a"), ("double", "b")))
-w = ULogWriter(sys.argv[1], [t])
-for i in range(20_000):
-    for _ in range(3):
-        w.add("row", (i, 2.0 * i, -i))
-    w.flush()
-    if w.failed:
-        break
-w.add("row", (i + 1, 0.0, 0.0))
-w.flush()  # after a failure: dropped, never appended after a torn record
-w.close()
-print(w.failed, i)
-"""
-
-
-@pytest.mark.process
-def test_a_write_that_fails_stops_the_log_at_its_last_complete_record(tmp_path):
-    """A full disk (here the file size limit) in the middle of a flush: the writer says why,
-    cuts the torn record off and writes nothing more; pyulog reads every complete record."""
-    path = tmp_path / "full.ulg"
-    out = subprocess.run([sys.executable, "-c", FULL_DISK, str(path)], capture_output=True,
-                         text=True, cwd=os.getcwd(), timeout=60, check=True).stdout.split()
-    assert out[0] == "File" and "large" in out  # "File too large"
-    u = open_ulog(path)
-    assert not u.file_corruption
-    rows = u.get_dataset("row").data
-    n = len(rows["timestamp"])
-    assert 3000 < n and path.stat().st_size <= 100_000
-    assert np.array_equal(rows["a"], 2.0 * (np.arange(n) // 3))
-    empty = tmp_path / "empty.ulg"
-    ULogWriter(empty, [Topic("row", (("uint64_t", "timestamp"), ("double", "a"),
-                                     ("double", "b")))]).close()
-    assert path.stat().st_size == empty.stat().st_size + 29 * n  # no torn record left
 
 
 def test_a_close_beside_returns_before_its_fsync_and_the_file_ends_complete(tmp_path,

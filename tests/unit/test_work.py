@@ -4,8 +4,6 @@ work is done, and the vehicle flying the mode in force meanwhile."""
 
 from __future__ import annotations
 
-import os
-import signal
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -21,7 +19,6 @@ from common.wire.modes import Mode
 from fcu.edge.mission_protocol import MissionServer
 from fcu.edge.work_process import ProcessWork, make_work
 from fcu.mission.limits import MissionLimits
-from fcu.mission.validation import check_mission
 from fcu.modes.commander import IN_PROGRESS
 from fcu.pipeline import Pipeline
 from fcu.stages import VehicleState
@@ -93,50 +90,6 @@ def _kinds(msgs: list[MAV.MAVLink_message]) -> list[str]:
 
 
 # ---------------------------------------------------------------------- the workers
-
-
-def test_a_worker_process_gives_the_inline_result_and_says_why_a_job_failed():
-    """Given the mission check of 500 items, then the worker process's outcome equals the
-    inline one (exactly); a job that raises comes back with its exception's text, and the
-    worker goes on with the next."""
-    items = tuple(_items(500))
-    limits = MissionLimits()
-    inline: list[Outcome[Any]] = []
-    InlineWork().submit(check_mission, (items, limits, None), inline.append)
-    beside: list[Outcome[Any]] = []
-    work = ProcessWork(wait=True)
-    try:
-        work.submit(check_mission, (items, limits, None), beside.append)
-        work.submit(int, ("not a number",), beside.append)
-        work.submit(check_mission, (items[:3], limits, None), beside.append)
-    finally:
-        work.close()
-    assert beside[0] == inline[0] and inline[0].value[0] == M.MAV_MISSION_ACCEPTED
-    assert beside[1].value is None and beside[1].error.startswith("ValueError: invalid")
-    assert beside[2].value[0] == M.MAV_MISSION_ACCEPTED
-    assert (work.submitted, work.failed) == (3, 1)
-    assert [h[0] for h in work.history] == ["check_mission", "int", "check_mission"]
-
-
-def test_a_worker_that_dies_fails_its_job_with_the_reason_and_is_started_again():
-    """Given a worker killed while its job runs, then the job's outcome says the worker
-    stopped (with its exit code), and the next job runs in a new worker."""
-    import time
-    work = ProcessWork()
-    got: list[Outcome[Any]] = []
-    try:
-        work.submit(time.sleep, (30.0,), got.append)
-        assert work.pending == 1
-        os.kill(work._proc.pid, signal.SIGKILL)
-        work._proc.join(timeout=10)
-        while not got:
-            work.take()
-        assert got[0].value is None and "worker stopped (exit code -9)" in got[0].error
-        work.wait = True
-        work.submit(abs, (-2,), got.append)
-        assert got[1] == Outcome(2) and work.restarts == 1 and work.pending == 0
-    finally:
-        work.close()
 
 
 def test_make_work_names_the_two_kinds():

@@ -36,9 +36,9 @@ from pathlib import Path
 
 import pytest
 
-from .terminal import sigint_default
+from ..terminal import sigint_default
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 PAGES = [README, *sorted((ROOT / "docs").glob("**/*.md"))]
 NOT_RUN = re.compile(r"<!--\s*not-run:\s*(.*?)\s*-->")
@@ -164,36 +164,49 @@ def _parser(prog: str):
     return build_parser()
 
 
-def static_problems(block: Block) -> list[str]:
+def _program_problems(command: str, prog: str, argv: list[str]) -> list[str]:
+    """`gcs`, `fcu`, `sitl`: the program's own parser accepts the line, its config paths
+    exist."""
     problems = []
-    makefile = (ROOT / "Makefile").read_text()
-    for command in commands(block.text):
-        for argv in argvs(command):
-            prog = program(argv)
-            notation = [a for a in argv if a.startswith("[") or a.endswith("]") or a == "..."]
-            if notation:
-                problems.append(f"{command!r}: {' '.join(notation)} is notation, not an "
-                                "argument (a reader would type it as it stands)")
-            if prog in ("gcs", "fcu", "sitl"):
-                err = io.StringIO()
-                try:
-                    with contextlib.redirect_stderr(err), \
-                            contextlib.redirect_stdout(io.StringIO()):
-                        _parser(prog).parse_args(argv[1:])
-                except SystemExit as exc:
-                    if exc.code:
-                        problems.append(f"{command!r}: {err.getvalue().strip()}")
-                for arg in argv[1:]:
-                    if arg.startswith("config/") and not (ROOT / arg).exists():
-                        problems.append(f"{command!r}: {arg} does not exist")
-            elif prog not in SHELL_WORDS and shutil.which(prog) is None:
-                problems.append(f"{command!r}: {prog}: no such command")
-            if prog == "make":
-                for target in argv[1:]:
-                    if "=" not in target and not re.search(rf"^{re.escape(target)}:",
-                                                           makefile, re.M):
-                        problems.append(f"{command!r}: no target {target} in the Makefile")
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            _parser(prog).parse_args(argv[1:])
+    except SystemExit as exc:
+        if exc.code:
+            problems.append(f"{command!r}: {err.getvalue().strip()}")
+    for arg in argv[1:]:
+        if arg.startswith("config/") and not (ROOT / arg).exists():
+            problems.append(f"{command!r}: {arg} does not exist")
     return problems
+
+
+def _make_problems(command: str, argv: list[str], makefile: str) -> list[str]:
+    """`make`: every target is in the Makefile."""
+    return [f"{command!r}: no target {target} in the Makefile" for target in argv[1:]
+            if "=" not in target and not re.search(rf"^{re.escape(target)}:", makefile, re.M)]
+
+
+def _argv_problems(command: str, argv: list[str], makefile: str) -> list[str]:
+    problems = []
+    prog = program(argv)
+    notation = [a for a in argv if a.startswith("[") or a.endswith("]") or a == "..."]
+    if notation:
+        problems.append(f"{command!r}: {' '.join(notation)} is notation, not an "
+                        "argument (a reader would type it as it stands)")
+    if prog in ("gcs", "fcu", "sitl"):
+        problems += _program_problems(command, prog, argv)
+    elif prog not in SHELL_WORDS and shutil.which(prog) is None:
+        problems.append(f"{command!r}: {prog}: no such command")
+    if prog == "make":
+        problems += _make_problems(command, argv, makefile)
+    return problems
+
+
+def static_problems(block: Block) -> list[str]:
+    makefile = (ROOT / "Makefile").read_text()
+    return [problem for command in commands(block.text) for argv in argvs(command)
+            for problem in _argv_problems(command, argv, makefile)]
 
 
 BLOCKS = [block for path in PAGES
