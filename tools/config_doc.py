@@ -8,13 +8,13 @@ comparison, and checks that every key the loaders read is declared).
 
 from __future__ import annotations
 
-import argparse
 import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 
 from common.config import gains, scenario, scenario_terms, sensors, vehicle
 from common.config.keys import Key, KeyTable
+from common.process.generated_page import page_main
 from gcs.campaign import model as campaign
 
 PAGE = Path(__file__).resolve().parents[1] / "docs" / "configuration.md"
@@ -173,20 +173,7 @@ def render() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tools.config_doc", description=__doc__)
-    parser.add_argument("--check", action="store_true",
-                        help="exit 1 if the page differs from the declarations, write nothing")
-    args = parser.parse_args(argv)
-    text = render()
-    if args.check:
-        current = PAGE.read_text() if PAGE.exists() else ""
-        if current != text:
-            print("docs/configuration.md is stale: run python -m tools.config_doc")
-            return 1
-        return 0
-    PAGE.write_text(text)
-    print("wrote docs/configuration.md")
-    return 0
+    return page_main("python -m tools.config_doc", __doc__, PAGE, render, "the declarations", argv)
 
 
 if __name__ == "__main__":

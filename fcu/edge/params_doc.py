@@ -6,11 +6,10 @@ what the table gives now (tests/unit/test_parameters_page.py runs the same compa
 
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 
-from common.process.diagnostics import say
+from common.process.generated_page import page_main
 from fcu.params import DEFAULT_OVERRIDES, GROUPS, LOCKED_WHEN_ARMED, ParamSpec
 
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "parameters.md"
@@ -61,20 +60,7 @@ def render() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m fcu.edge.params_doc", description=__doc__)
-    parser.add_argument("--check", action="store_true",
-                        help="exit 1 if the page differs from the table, write nothing")
-    args = parser.parse_args(argv)
-    text = render()
-    if args.check:
-        current = PAGE.read_text() if PAGE.exists() else ""
-        if current != text:
-            say("docs/parameters.md is stale: run python -m fcu.edge.params_doc")
-            return 1
-        return 0
-    PAGE.write_text(text)
-    say("wrote docs/parameters.md")
-    return 0
+    return page_main("python -m fcu.edge.params_doc", __doc__, PAGE, render, "the table", argv)
 
 
 if __name__ == "__main__":
