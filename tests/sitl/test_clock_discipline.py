@@ -86,8 +86,8 @@ def _children(pid: int) -> dict[str, int]:
             continue
         for kid in map(int, kids):
             cmd = _cmdline(kid)
-            for name in ("sitl", "fcu"):
-                if f"-m {name}.node" in cmd:
+            for name, module in (("sitl", "sitl.node"), ("fcu", "fcu.edge.node")):
+                if f"-m {module}" in cmd:
                     found[name] = kid
     return found
 
