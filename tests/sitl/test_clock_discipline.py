@@ -76,6 +76,9 @@ def _cmdline(pid: int) -> str:
         return ""
 
 
+MODULES = {"sitl": "sitl.node", "fcu": "fcu.edge.node"}  # each child's `python -m` module
+
+
 def _children(pid: int) -> dict[str, int]:
     """The `sitl` and `fcu` children of process pid, by name."""
     found: dict[str, int] = {}
@@ -86,7 +89,7 @@ def _children(pid: int) -> dict[str, int]:
             continue
         for kid in map(int, kids):
             cmd = _cmdline(kid)
-            for name, module in (("sitl", "sitl.node"), ("fcu", "fcu.edge.node")):
+            for name, module in MODULES.items():
                 if f"-m {module}" in cmd:
                     found[name] = kid
     return found
@@ -119,7 +122,7 @@ class Run:
                              f"(found {self.children}):\n{self.output()}")
 
     def _ours(self, pid: int, name: str) -> bool:
-        return _alive(pid) and f"-m {name}.node" in _cmdline(pid)
+        return _alive(pid) and f"-m {MODULES[name]}" in _cmdline(pid)
 
     def pause(self, name: str) -> None:
         pid = self.children[name]
