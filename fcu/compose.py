@@ -50,7 +50,7 @@ def accept_mission(pipeline: Pipeline, items: Sequence[MissionItem],
     name, the item and the reason: "MAV_MISSION_UNSUPPORTED: item 2: command 177 is not
     supported"), "" if taken."""
     check = check_mission(items, pipeline.commander.limits, home)
-    if check.result != 0:
+    if refusal(check):
         return refusal(check)
     pipeline.commander.set_mission(localize(items, home))
     return ""

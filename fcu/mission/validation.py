@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mav_enums import MAV_MISSION_RESULT as MISSION_RESULT
 from common.wire.mission_items import (
     GEO_FRAMES,
     INT32_MAX,
@@ -68,10 +69,20 @@ FIGURE_EXTENT = math.sqrt(5.0)  # max |[sin 2T, sin T, 1 - cos 2T]|
 SCALED_LOCAL_M = 1000.0
 
 
+class Verdict(NamedTuple):
+    """One check of an item: its MAV_MISSION_RESULT and why, for a person ("" if accepted)."""
+
+    result: MISSION_RESULT
+    reason: str = ""
+
+
+ACCEPTED = Verdict(MAV_MISSION_ACCEPTED)
+
+
 class MissionCheck(NamedTuple):
     """The outcome of validating a mission."""
 
-    result: int  # MAV_MISSION_RESULT
+    result: MISSION_RESULT
     seq: int | None  # the offending item, if any
     reason: str = ""  # why, for a person: set for every refusal, "" when accepted
 
@@ -141,7 +152,7 @@ def _name(enum: type[MAV_CMD] | type[MAV_FRAME], value: int) -> str:
 
 # The parameters each command uses, in the order they are checked (the first failing one is
 # the result): (MissionItem field, its rule, the refusal).
-_PARAM_RULES: dict[int, tuple[tuple[str, Callable[[float], bool], int], ...]] = {
+_PARAM_RULES: dict[int, tuple[tuple[str, Callable[[float], bool], MISSION_RESULT], ...]] = {
     MAV_CMD_NAV_TAKEOFF: (("param2", _time_s, MAV_MISSION_INVALID_PARAM2),
                           ("param4", _yaw, MAV_MISSION_INVALID_PARAM4),
                           ("z", _finite, MAV_MISSION_INVALID_PARAM7)),
@@ -182,52 +193,54 @@ def compared(above: float, below: float) -> tuple[str, str]:
     return repr(above), repr(below)
 
 
-def _outside(seq: int, reach_m: float, r: float) -> tuple[int, str]:
+def _outside(seq: int, reach_m: float, r: float) -> Verdict:
     """MAV_MISSION_DENIED for an item reaching `reach_m` from the origin, beyond radius r:
     the distance that went beyond it, precise enough that the comparison reads true."""
     reach, fence = compared(reach_m, r)
-    return MAV_MISSION_DENIED, f"item {seq}: beyond the geofence ({reach} m > {fence} m)"
+    return Verdict(MAV_MISSION_DENIED,
+                   f"item {seq}: beyond the geofence ({reach} m > {fence} m)")
 
 
-def _scaled(item: MissionItem, r: float) -> tuple[int, str]:
+def _scaled(item: MissionItem, r: float) -> Verdict:
     """A local item whose x, y lie beyond the geofence and at least SCALED_LOCAL_M away:
     most likely a local-frame WPL file loaded by MAVProxy, which scales x and y by 1e7 in
     every frame (1.5 m arrives as 15,000,000, read as 1500 m), where local frames take 1e4."""
-    return MAV_MISSION_DENIED, (
+    return Verdict(MAV_MISSION_DENIED, (
         f"item {item.seq}: x {item.x_m:.0f} m, y {item.y_m:.0f} m, beyond the geofence "
-        f"({r:.0f} m): a local WPL file scaled by 1e7 (MAVProxy)? use a global frame")
+        f"({r:.0f} m): a local WPL file scaled by 1e7 (MAVProxy)? use a global frame"))
 
 
-def _carried_result(item: MissionItem) -> tuple[int, str]:
-    """(MAV_MISSION_RESULT, reason) of the command, the frame and x, y (which must fit
+def _carried_result(item: MissionItem) -> Verdict:
+    """The verdict on the command, the frame and x, y (which must fit
     MISSION_ITEM_INT even where the command ignores them)."""
     if item.command not in SUPPORTED_COMMANDS:
-        return MAV_MISSION_UNSUPPORTED, (f"item {item.seq}: command "
-                                         f"{_name(MAV_CMD, item.command)} is not supported")
+        return Verdict(MAV_MISSION_UNSUPPORTED, (
+            f"item {item.seq}: command {_name(MAV_CMD, item.command)} is not supported"))
     if item.frame != MAV_FRAME_LOCAL_NED and item.command not in FRAMELESS_COMMANDS:
-        return MAV_MISSION_UNSUPPORTED_FRAME, (
+        return Verdict(MAV_MISSION_UNSUPPORTED_FRAME, (
             f"item {item.seq}: frame {_name(MAV_FRAME, item.frame)} is not supported (local "
-            "NED, or global with an altitude)")
+            "NED, or global with an altitude)"))
     for field, v, result in (("x", item.x, MAV_MISSION_INVALID_PARAM5_X),
                              ("y", item.y, MAV_MISSION_INVALID_PARAM6_Y)):
         if not _int32(v):
-            return result, f"item {item.seq}: {field} {v} does not fit MISSION_ITEM_INT's int32"
-    return MAV_MISSION_ACCEPTED, ""
+            return Verdict(result, f"item {item.seq}: {field} {v} does not fit "
+                                   "MISSION_ITEM_INT's int32")
+    return ACCEPTED
 
 
-def _params_result(item: MissionItem) -> tuple[int, str]:
-    """(MAV_MISSION_RESULT, reason) of the parameters the item's command uses
+def _params_result(item: MissionItem) -> Verdict:
+    """The verdict on the parameters the item's command uses
     (`_PARAM_RULES`)."""
     for field, rule, result in _PARAM_RULES[item.command]:
         value: float = getattr(item, field)
         if not rule(value):
-            return result, (f"item {item.seq}: {_FIELD_TEXT[field]} {value:g}: must be "
-                            f"{_RULE_TEXT[rule]}")
-    return MAV_MISSION_ACCEPTED, ""
+            return Verdict(result, (f"item {item.seq}: {_FIELD_TEXT[field]} {value:g}: "
+                                    f"must be {_RULE_TEXT[rule]}"))
+    return ACCEPTED
 
 
 def _fly_to(item: MissionItem, target_ned_m: list[float], pos: list[float],
-            r: float) -> tuple[int, str]:
+            r: float) -> Verdict:
     """An item ending at `target_ned_m`: inside the geofence radius r, `pos` moves there."""
     reach = norm3((target_ned_m[0], target_ned_m[1], target_ned_m[2]))
     if reach > r:
@@ -236,44 +249,44 @@ def _fly_to(item: MissionItem, target_ned_m: list[float], pos: list[float],
             return _scaled(item, r)
         return _outside(item.seq, reach, r)
     pos[:] = target_ned_m
-    return MAV_MISSION_ACCEPTED, ""
+    return ACCEPTED
 
 
-def _take_off(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+def _take_off(item: MissionItem, pos: list[float], r: float) -> Verdict:
     """NAV_TAKEOFF: climbs to z over the planned x, y."""
     return _fly_to(item, [pos[0], pos[1], item.z], pos, r)
 
 
-def _go_to(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+def _go_to(item: MissionItem, pos: list[float], r: float) -> Verdict:
     """NAV_WAYPOINT, NAV_LOITER_TIME and the pose keyframe: fly to x, y, z."""
     return _fly_to(item, [item.x_m, item.y_m, item.z], pos, r)
 
 
-def _land(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+def _land(item: MissionItem, pos: list[float], r: float) -> Verdict:
     """NAV_LAND: down to z = 0 where it is (always inside the geofence)."""
     pos[2] = 0.0
-    return MAV_MISSION_ACCEPTED, ""
+    return ACCEPTED
 
 
-def _stay(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+def _stay(item: MissionItem, pos: list[float], r: float) -> Verdict:
     """An item without motion (DO_CHANGE_SPEED)."""
-    return MAV_MISSION_ACCEPTED, ""
+    return ACCEPTED
 
 
-def _figure_eight(item: MissionItem, pos: list[float], r: float) -> tuple[int, str]:
+def _figure_eight(item: MissionItem, pos: list[float], r: float) -> Verdict:
     """The figure-infinity: an axis (p3, p4, z) not zero, its reach (amplitude p1 times
     FIGURE_EXTENT from the start) inside the geofence; it ends where it started (T = 2 pi)."""
     if item.param3 == 0.0 and item.param4 == 0.0 and item.z == 0.0:
-        return MAV_MISSION_INVALID_PARAM3, (f"item {item.seq}: the figure's axis (p3, p4, z) "
-                                            "is zero")
+        return Verdict(MAV_MISSION_INVALID_PARAM3,
+                       f"item {item.seq}: the figure's axis (p3, p4, z) is zero")
     reach = norm3((pos[0], pos[1], pos[2])) + item.param1 * FIGURE_EXTENT
     if reach > r:
         return _outside(item.seq, reach, r)
-    return MAV_MISSION_ACCEPTED, ""
+    return ACCEPTED
 
 
 # Where each command's item goes, with its geofence check: (item, pos, radius r) -> result.
-_MOTIONS: dict[int, Callable[[MissionItem, list[float], float], tuple[int, str]]] = {
+_MOTIONS: dict[int, Callable[[MissionItem, list[float], float], Verdict]] = {
     MAV_CMD_NAV_TAKEOFF: _take_off,
     MAV_CMD_NAV_WAYPOINT: _go_to,
     MAV_CMD_NAV_LOITER_TIME: _go_to,
@@ -285,41 +298,40 @@ _MOTIONS: dict[int, Callable[[MissionItem, list[float], float], tuple[int, str]]
 
 
 def _check_item(item: MissionItem, limits: MissionLimits, pos: list[float],
-                geofence: bool = True) -> tuple[int, str]:
-    """(MAV_MISSION_RESULT, reason) of one item's parameters and geofence; `pos` (planned NED
-    position) moves to its end."""
-    result, reason = _carried_result(item)
-    if result == MAV_MISSION_ACCEPTED:
-        result, reason = _params_result(item)
-    if result != MAV_MISSION_ACCEPTED:
-        return result, reason
+                geofence: bool = True) -> Verdict:
+    """The verdict on one item's parameters and geofence; `pos` (planned NED position) moves
+    to its end."""
+    verdict = _carried_result(item)
+    if verdict.result == MAV_MISSION_ACCEPTED:
+        verdict = _params_result(item)
+    if verdict.result != MAV_MISSION_ACCEPTED:
+        return verdict
     r = limits.max_distance_m if geofence else math.inf
     return _MOTIONS[item.command](item, pos, r)
 
 
 def _localized(item: MissionItem, home: HomePosition | None,
-               limits: MissionLimits) -> tuple[MissionItem, int, str]:
-    """(the item in the local frame, MAV_MISSION_RESULT, reason): a GEO_FRAMES item with a
+               limits: MissionLimits) -> tuple[MissionItem, Verdict]:
+    """(the item in the local frame, the verdict): a GEO_FRAMES item with a
     supported command converted through `home` (none: MAV_MISSION_UNSUPPORTED_FRAME), its
     latitude and longitude checked first; any other item as it is."""
     if item.frame not in GEO_FRAMES or item.command not in SUPPORTED_COMMANDS or \
             item.command in FRAMELESS_COMMANDS:
-        return item, MAV_MISSION_ACCEPTED, ""
+        return item, ACCEPTED
     if home is None:
-        return item, MAV_MISSION_UNSUPPORTED_FRAME, (
-            f"item {item.seq}: frame {_name(MAV_FRAME, item.frame)} needs the vehicle's home")
+        return item, Verdict(MAV_MISSION_UNSUPPORTED_FRAME, (
+            f"item {item.seq}: frame {_name(MAV_FRAME, item.frame)} needs the vehicle's home"))
     if not (isinstance(item.x, int) and -900_000_000 <= item.x <= 900_000_000):
-        return item, MAV_MISSION_INVALID_PARAM5_X, (
-            f"item {item.seq}: latitude {item.x} (1e-7 deg) beyond +-90 deg")
+        return item, Verdict(MAV_MISSION_INVALID_PARAM5_X,
+                             f"item {item.seq}: latitude {item.x} (1e-7 deg) beyond +-90 deg")
     if not (isinstance(item.y, int) and -1_800_000_000 <= item.y <= 1_800_000_000):
-        return item, MAV_MISSION_INVALID_PARAM6_Y, (
-            f"item {item.seq}: longitude {item.y} (1e-7 deg) beyond +-180 deg")
+        return item, Verdict(MAV_MISSION_INVALID_PARAM6_Y,
+                             f"item {item.seq}: longitude {item.y} (1e-7 deg) beyond +-180 deg")
     local = to_local(item, home)
     if item.command in XY_COMMANDS and not local.xy_fit_int32:  # farther than 214 km
         north, east, _ = local_ned(item, home)
-        result, reason = _outside(item.seq, math.hypot(north, east), limits.max_distance_m)
-        return item, result, reason
-    return local, MAV_MISSION_ACCEPTED, ""
+        return item, _outside(item.seq, math.hypot(north, east), limits.max_distance_m)
+    return local, ACCEPTED
 
 
 def localize(items: Sequence[MissionItem],
@@ -364,7 +376,7 @@ def too_many(count: int, limits: MissionLimits) -> str:
 
 
 def validate_mission(items: Sequence[MissionItem], limits: MissionLimits,
-                     home: HomePosition | None = None) -> tuple[int, int | None]:
+                     home: HomePosition | None = None) -> tuple[MISSION_RESULT, int | None]:
     """(MAV_MISSION_RESULT, offending seq or None) of `check_mission`."""
     check = check_mission(items, limits, home)
     return check.result, check.seq
@@ -382,12 +394,11 @@ def check_items(items: Sequence[MissionItem], limits: MissionLimits, geofence: b
             return MissionCheck(MAV_MISSION_INVALID_SEQUENCE, item.seq,
                                 f"item {item.seq} sent as item {i} (seq must be 0..n-1 in "
                                 "order)")
-        item, result, reason = _localized(item, home, limits)
-        if result != MAV_MISSION_ACCEPTED:
-            return MissionCheck(result, item.seq, reason)
-        result, reason = _check_item(item, limits, pos, geofence)
-        if result != MAV_MISSION_ACCEPTED:
-            return MissionCheck(result, item.seq, reason)
+        item, verdict = _localized(item, home, limits)
+        if verdict.result == MAV_MISSION_ACCEPTED:
+            verdict = _check_item(item, limits, pos, geofence)
+        if verdict.result != MAV_MISSION_ACCEPTED:
+            return MissionCheck(verdict.result, item.seq, verdict.reason)
         planned = with_speed(item, planned, limits)
         if envelope_check:
             seg = plan_item(item, t, p, q, planned, stretch=False)

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 import fcu.mission.codes as mission_mod
 from common.config.scenario import load_scenario
 from common.frames import enu_to_ned, ned_to_enu, q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
+from common.wire.mav_enums import MAV_MISSION_RESULT
 from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
 from common.wire.mission_items import MissionItem, local_xy
 from fcu.control.dualquat import q_angle, q_conj, q_exp, q_mul, q_norm, q_rotate_inv
@@ -21,7 +22,7 @@ from fcu.mission import validation
 from fcu.mission.executor import MissionEvent, MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.segments import level_attitude
-from fcu.mission.validation import validate_mission
+from fcu.mission.validation import check_mission, refusal, validate_mission
 from fcu.reference.trajectory import FigureEight, make_trajectory
 from gcs.run.scenario_mission import scenario_mission
 
@@ -423,6 +424,11 @@ def test_validation_names_the_slot(what, bad, result):
             item(1, WP, p1=1.0, p4=30.0, north=3.0, z=-5.0)]
     items = [*good, bad.with_seq(2), item(3, M.MAV_CMD_NAV_LAND, p4=NAN)]
     assert validate_mission(items, LIMITS) == (result, 2), what
+    check = check_mission(items, LIMITS)
+    assert type(check.result) is MAV_MISSION_RESULT, "a MAV_MISSION_RESULT member, not an int"
+    assert refusal(check) == f"{check.result.name}: {check.reason}"
+    assert check.reason.startswith("item 2: ") and check.reason.count("item 2") == 1, \
+        check.reason
 
 
 def test_validation_sequence_count_and_fence():
