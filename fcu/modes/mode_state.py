@@ -25,7 +25,7 @@ mode resets its own state, except when it is re-entered (HOLD's always):
 and what belongs to the other modes ends: the landing (LAND's plan, a touchdown), TAKEOFF's
 or RTL's plan, the mission's run. A mission replaced during its own touchdown lets that
 touchdown go on (`touchdown_goes_on`). Arming and disarming keep the mode and reset here too
-(`on_arming`, `on_disarming`).
+(`on_arming`: HOLD, POSCTL and OFFBOARD start from where the vehicle is; `on_disarming`).
 """
 
 from __future__ import annotations
@@ -111,10 +111,14 @@ class ModeState:
 
     def on_arming(self) -> None:
         """Armed: the mode in force starts from where the vehicle is (HOLD holds there,
-        POSCTL's set-point starts there), with no landing left over."""
+        POSCTL's set-point and OFFBOARD's approach start there: nothing shaped before a
+        disarm, possibly in the air, is flown on), with no landing left over. LAND re-armed
+        holds where it is; a descent is planned only when LAND is entered from another
+        mode."""
         self.brake.hold_at(self.here())
         self.descent.end()
         self.posctl.restart()
+        self.shaper.restart()
 
     def on_disarming(self) -> None:
         """Disarmed: what flew ends (the mission's run, the landing, TAKEOFF's or RTL's

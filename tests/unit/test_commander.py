@@ -15,6 +15,7 @@ from common.config.scenario import load_gains, load_vehicle
 from common.outcome import CRASH, FAILSAFE
 from common.wire.mav_enums import MAV_RESULT
 from common.wire.modes import Mode
+from fcu.control.dualquat import norm3 as norm
 from fcu.edge.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
 from fcu.mission.limits import MissionLimits
 from fcu.modes.landing import (
@@ -343,6 +344,50 @@ def test_offboard_approaches_a_pose_from_the_reference_flown_without_a_yaw_stick
                                (0.0,) * 3, (0.0,) * 3, 0.0))[0]
     more = [x[1] for x in _kinematic(pipe, track[-1][0], 6.0, ground=False)]
     assert math.dist(more[0], p[-1]) < 1e-4 and math.dist(more[-1], (0.0, 12.0, 3.0)) < 1e-3
+
+
+def test_rearmed_in_offboard_the_approach_starts_where_the_vehicle_is():
+    """Given OFFBOARD flying toward a pose 10 m north, when the vehicle is disarmed in the air
+    (a kill) and re-armed on the ground 5 m away, then the first reference is where the
+    vehicle is, at rest: nothing shaped before the disarm is flown on."""
+    pipe = _on_ground()
+    c = pipe.commander
+    assert pipe.arm()[0] == 0
+    assert c.offboard_position(0.0, position_target(1, 0b0000_1101_1111_1000, (10.0, 0.0, -3.0),
+                               (0.0,) * 3, (0.0,) * 3, 0.0))[0]
+    assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == 0
+    track = _kinematic(pipe, 0, 1.5)
+    assert c.last_ref is not None and norm(c.last_ref.v_enu_m_s) > 1.0  # under way
+    assert c.disarm(force=True).result == MAV_RESULT.MAV_RESULT_ACCEPTED
+    t = track[-1][0] + 2_000_000
+    ground = (5.0, -5.0, 0.0)
+    pipe.on_state(t, VehicleState(ground, (1.0, 0.0, 0.0, 0.0), (0.0,) * 3, (0.0,) * 3), t)
+    assert pipe.arm()[0] == 0 and c.mode is Mode.OFFBOARD
+    pipe.step(t + 2000)
+    assert c.last_ref is not None
+    assert math.dist(c.last_ref.p_enu_m, ground) < 1e-3, c.last_ref.p_enu_m
+    assert norm(c.last_ref.v_enu_m_s) < 1e-2, c.last_ref.v_enu_m_s
+
+
+def test_land_rearmed_after_landing_holds_where_it_is():
+    """Given a vehicle that landed in LAND and disarmed, when it is re-armed (the mode stays
+    LAND) and LAND is asked again, then no descent is planned: it holds where it is."""
+    pipe = _landing_pipeline(0.3)
+    c = pipe.commander
+    t = _to_touchdown(pipe, 0.3)  # the plan ends on the ground, 0.3 m below
+    while pipe.armed:
+        t += 2000
+        pipe.on_state(t, _state(0.3), t)
+        pipe.step(t)
+        assert t < 30_000_000, "never landed"
+    assert c.mode is Mode.LAND and pipe.arm()[0] == 0
+    assert c.set_mode(Mode.LAND, t * 1e-6)[0] == 0
+    assert c.modes.descent.plan is None and c.modes.descent.touchdown is None
+    for _ in range(50):
+        t += 2000
+        pipe.on_state(t, _state(0.3), t)
+        pipe.step(t)
+        assert c.last_ref is not None and c.last_ref.p_enu_m == pytest.approx((1.0, 2.0, 0.3))
 
 
 def test_a_land_speed_the_gains_cannot_land_at_is_capped_and_said():

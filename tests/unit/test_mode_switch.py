@@ -185,7 +185,7 @@ def test_arming_restarts_hold_and_posctl_and_disarming_ends_what_flew():
     assert c.arm().result == MAV_RESULT.MAV_RESULT_ACCEPTED
     assert m.brake.hold == pose_ref(HERE, Q) and m.posctl.sp is None
     assert m.descent.plan is None and m.descent.touchdown is None
-    assert m.shaper.sp is d.shaped and m.auto is d.auto and c.mode is Mode.OFFBOARD
+    assert m.shaper.sp is None and m.auto is d.auto and c.mode is Mode.OFFBOARD
 
 
 # ---------------------------------------------------------------------- failsafe enums
