@@ -125,12 +125,14 @@ class KeyTable:
     """The keys of one TOML table, in the order the page lists them. `path` is the table's
     name in the file ("" for the top level, `disturbance.force[]` for an array of tables);
     `any_key`: besides its declared keys the table takes names of its own (one `Key`, named
-    `*`, declares them); `also`: other tables that take the same keys."""
+    `*`, declares them); `also`: other tables that take the same keys; `title`: how the page
+    heads the table, where its path alone does not tell it (an array of tables by kind)."""
 
     path: str
     keys: tuple[Key, ...]
     note: str = ""
     also: tuple[str, ...] = ()
+    title: str = ""
 
     def __getitem__(self, name: str) -> Key:
         for k in self.keys:

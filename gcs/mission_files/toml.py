@@ -9,11 +9,14 @@ import tomllib
 from collections.abc import Sequence
 from typing import Any
 
+from common.config.keys import REQUIRED, Key, KeyTable
+from common.wire.mav_enums import MAV_CMD as CMD
 from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
 from common.wire.mission_items import LOCAL_SCALE, HomePosition, MissionItem
 from gcs.mission_files.items import MissionDoc, MissionFileError, checked, float_text
 
 M = MAV
+FORMAT = "dqflight-mission-1"
 _KINDS = {
     M.MAV_CMD_NAV_TAKEOFF: "takeoff",
     M.MAV_CMD_NAV_WAYPOINT: "waypoint",
@@ -22,16 +25,64 @@ _KINDS = {
     MAV_CMD_POSE_KEYFRAME: "keyframe",
     MAV_CMD_FIGURE_EIGHT: "figure_eight",
 }
-# TOML keys per kind: (key, slot) with slot one of p1..p4, xyz (a triple x, y, z), p34z
-# (a triple p3, p4, z), p234 (a triple p2, p3, p4). Unlisted slots must be 0 (or NaN for p4).
-_LAYOUT: dict[str, tuple[tuple[str, str], ...]] = {
-    "takeoff": (("altitude_ned_z_m", "z"), ("climb_time_s", "p2"), ("yaw_deg", "p4")),
-    "waypoint": (("position_ned_m", "xyz"), ("hold_s", "p1"), ("yaw_deg", "p4")),
-    "loiter": (("position_ned_m", "xyz"), ("time_s", "p1")),
-    "land": (("yaw_deg", "p4"),),
-    "keyframe": (("position_ned_m", "xyz"), ("time_s", "p1"), ("rotvec_ned_frd_rad", "p234")),
-    "figure_eight": (("amplitude_m", "p1"), ("duration_s", "p2"), ("axis_ned", "p34z")),
+_NAN = math.nan
+_YAW = Key("yaw_deg", "number", "heading, NED (nan: keep the attitude)", "deg", _NAN)
+_POSITION = Key("position_ned_m", "vec3", "target north, east, down from home", "m")
+# The keys of each kind with their MAVLink slots: p1..p4, z, xyz (a triple x, y, z), p34z (a
+# triple p3, p4, z), p234 (a triple p2, p3, p4). Unlisted slots are 0. The file reader checks
+# the types and fills the defaults; the vehicle checks the ranges at upload
+# (docs/missions.md#upload-and-check-a-mission).
+_LAYOUT: dict[str, tuple[tuple[Key, str], ...]] = {
+    "takeoff": ((Key("altitude_ned_z_m", "number", "target NED z (3 m up: -3)", "m"), "z"),
+                (Key("climb_time_s", "number", "climb time (0: at MIS_TKO_SPD)", "s", 0.0,
+                     lo=0.0), "p2"),
+                (_YAW, "p4")),
+    "waypoint": ((_POSITION, "xyz"),
+                 (Key("hold_s", "number", "hold after arrival", "s", lo=0.0), "p1"),
+                 (_YAW, "p4")),
+    "loiter": ((_POSITION, "xyz"),
+               (Key("time_s", "number", "hold time (travelled to first at MIS_CRUISE_SPD)",
+                    "s", lo=0.0), "p1")),
+    "land": ((_YAW, "p4"),),
+    "keyframe": ((_POSITION, "xyz"),
+                 (Key("time_s", "number", "time to reach the pose", "s", lo=0.0,
+                      lo_open=True), "p1"),
+                 (Key("rotvec_ned_frd_rad", "vec3", "the NED-to-FRD attitude as a rotation "
+                      "vector", "rad"), "p234")),
+    "figure_eight": ((Key("amplitude_m", "number", "amplitude A of the figure-infinity", "m",
+                          lo=0.0), "p1"),
+                     (Key("duration_s", "number", "its duration", "s", lo=0.0, lo_open=True),
+                      "p2"),
+                     (Key("axis_ned", "vec3", "the rotation axis n (not normalised; not "
+                          "zero)"), "p34z")),
 }
+_RAW = KeyTable("item[]", (
+    Key("type", "string", "an item of any command, MAVLink's fields as they are", choices=(
+        "raw",)),
+    Key("command", "integer", "MAV_CMD"),
+    Key("frame", "integer", "MAV_FRAME", default=int(M.MAV_FRAME_LOCAL_NED)),
+    Key("autocontinue", "integer", "MISSION_ITEM_INT's autocontinue", default=1),
+    Key("params", "numbers", "p1 to p4", n=4),
+    Key("x", "integer", "MISSION_ITEM_INT's x (local: 1e-4 m; global: 1e-7 deg)"),
+    Key("y", "integer", "MISSION_ITEM_INT's y"),
+    Key("z", "number", "MISSION_ITEM_INT's z", "m")), title='`[[item]]` with `type = "raw"`')
+_HOME = KeyTable("home", (
+    Key("lat_deg", "number", "latitude", "deg", lo=-90.0, hi=90.0),
+    Key("lon_deg", "number", "longitude", "deg", lo=-180.0, hi=180.0),
+    Key("alt_m", "number", "altitude above mean sea level (finite)", "m")),
+    note="The vehicle's home, optional (ArduPilot's mission seq 0).")
+TOP_KEYS = KeyTable("", (
+    Key("format", "string", "the file's format", default=FORMAT, choices=(FORMAT,)),
+    Key("item", "tables", "the items, in order (one table per item, `type` naming it)",
+        default=()),
+    Key("home", "table", "the vehicle's home (below)", default_doc="none")))
+# Every table of the file, as docs/configuration.md lists them (`python -m tools.config_doc`).
+MISSION_KEYS: tuple[KeyTable, ...] = (
+    TOP_KEYS, _HOME,
+    *(KeyTable("item[]", (Key("type", "string", f"`{CMD(c).name}` ({c})", choices=(kind,)),
+                          *(k for k, _ in _LAYOUT[kind])),
+               title=f'`[[item]]` with `type = "{kind}"`') for c, kind in _KINDS.items()),
+    _RAW)
 
 
 def _toml_value(v: Any) -> str:
@@ -63,7 +114,7 @@ def _item_table(it: MissionItem) -> dict[str, Any]:
         for key, slot in _LAYOUT[kind]:
             fields = _FIELDS[slot]
             used.update(fields)
-            table[key] = [values[f] for f in fields] if len(fields) > 1 else values[fields[0]]
+            table[key.name] = [values[f] for f in fields] if len(fields) > 1 else values[fields[0]]
         if all(v == 0.0 for f, v in values.items() if f not in used):
             return table
     return {"type": "raw", "command": it.command, "frame": it.frame,
@@ -116,11 +167,8 @@ def _int(t: dict[str, Any], key: str, where: str, default: int | None = None) ->
     return v
 
 
-_RAW_KEYS = {"type", "command", "frame", "autocontinue", "params", "x", "y", "z"}
-FORMAT = "dqflight-mission-1"
-
-
-_HOME_KEYS = ("lat_deg", "lon_deg", "alt_m")
+_RAW_KEYS = {k.name for k in _RAW.keys}
+_HOME_KEYS = tuple(k.name for k in _HOME.keys)
 
 
 def _toml_home(data: dict[str, Any], source: str) -> HomePosition | None:
@@ -188,19 +236,18 @@ def _kind_item(t: dict[str, Any], seq: int, where: str) -> MissionItem:
     if command is None:
         raise MissionFileError(f"{where}: key 'type': expected one of "
                                f"{', '.join(sorted(_KINDS.values()))}, raw; got {kind!r}")
-    layout = dict(_LAYOUT[_KINDS[command]])  # the kind's own
-    extra = set(t) - {"type", *layout}
+    layout = _LAYOUT[_KINDS[command]]  # the kind's own
+    extra = set(t) - {"type", *(k.name for k, _ in layout)}
     if extra:
         raise MissionFileError(f"{where}: unknown key '{sorted(extra)[0]}' for {kind}")
     p = {"p1": 0.0, "p2": 0.0, "p3": 0.0, "p4": 0.0, "x": 0.0, "y": 0.0, "z": 0.0}
-    for key, slot in layout.items():
+    for key, slot in layout:
         fields = _FIELDS[slot]
         if len(fields) > 1:
-            p.update(zip(fields, _floats(t, key, len(fields), where), strict=True))
-        elif key == "yaw_deg" or (kind == "takeoff" and key == "climb_time_s"):
-            p[fields[0]] = _float(t, key, where, math.nan if key == "yaw_deg" else 0.0)
+            p.update(zip(fields, _floats(t, key.name, len(fields), where), strict=True))
         else:
-            p[fields[0]] = _float(t, key, where)
+            p[fields[0]] = _float(t, key.name, where,
+                                  None if key.default is REQUIRED else key.default)
     try:
         x, y = round(p["x"] * LOCAL_SCALE), round(p["y"] * LOCAL_SCALE)
     except (OverflowError, ValueError):

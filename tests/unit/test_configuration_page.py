@@ -4,6 +4,7 @@ shipped file and files that use every optional key records what `Table` reads.""
 
 from __future__ import annotations
 
+import math
 import re
 import shutil
 import tomllib
@@ -13,11 +14,15 @@ from typing import Any
 import pytest
 
 from common.config import reader
+from common.config.keys import REQUIRED, KeyTable
 from common.config.scenario import load_scenario
 from common.config.sensors import load_sensor_profile
+from common.wire.mission_items import MissionItem
 from gcs.campaign import load as campaign_load
 from gcs.campaign.load import load_campaign
 from gcs.campaign.model import DISTRIBUTIONS, DRAW_KEYS
+from gcs.mission_files.items import MissionFileError
+from gcs.mission_files.toml import MISSION_KEYS, parse_toml, parse_toml_doc
 from tools import config_doc
 
 CONFIG = Path(__file__).resolve().parents[2] / "config"
@@ -222,7 +227,7 @@ def test_every_key_the_loaders_read_is_declared_and_every_declared_key_is_read(
     load_scenario(every_key_files / "scenarios" / "mission.toml")
     documented = _documented()
     read = {(kind, path, "*" if path == "params" else key) for kind, path, key in seen}
-    declared = {(kind, path, key) for kind in documented if kind != "campaign"
+    declared = {(kind, path, key) for kind in documented if kind not in ("campaign", "mission")
                 for path, key in documented[kind]}
     assert read - declared == set(), "read by a loader but not on the page"
     assert declared - read == set(), "on the page but read by no loader"
@@ -283,3 +288,60 @@ def test_a_key_reads_as_declared_and_prints_its_declaration():
         Key("x", "float", "")
     with pytest.raises(KeyError, match="no key 'y' declared"):
         KeyTable("t", (k,))["y"]
+
+
+# ------------------------------------------------------------------ mission files
+
+_SAMPLE = {"number": "1.5", "integer": "0", "vec3": "[1.0, 2.0, -3.0]",
+           "numbers": "[0.0, 0.0, 0.0, 0.0]"}
+
+
+def _item(table: KeyTable, drop: str = "", extra: str = "") -> str:
+    lines = ['format = "dqflight-mission-1"', "[[item]]"]
+    for k in table.keys:
+        if k.name != drop:
+            value = f'"{k.choices[0]}"' if k.type == "string" else _SAMPLE[k.type]
+            lines.append(f"{k.name} = {value}")
+    return "\n".join([*lines, extra])
+
+
+def test_the_mission_reader_takes_the_declared_keys_and_their_defaults():
+    """Every [[item]] table on the page parses with all its keys; without a required key it
+    is refused naming the key, without a defaulted one it takes the page's default; a key
+    the page does not list for that type is refused."""
+    tables = [t for t in MISSION_KEYS if t.path == "item[]"]
+    assert {t.keys[0].choices[0] for t in tables} == {
+        "takeoff", "waypoint", "loiter", "land", "keyframe", "figure_eight", "raw"}
+    for t in tables:
+        full = parse_toml(_item(t))[0]
+        for k in t.keys[1:]:
+            if k.default is REQUIRED:
+                with pytest.raises(MissionFileError, match=f"key '{k.name}'"):
+                    parse_toml(_item(t, drop=k.name))
+            else:
+                item = parse_toml(_item(t, drop=k.name))[0]
+                changed = {f for f in MissionItem._fields
+                           if getattr(item, f) != getattr(full, f)
+                           and getattr(item, f) == getattr(item, f)}  # NaN != NaN
+                fields = changed | {f for f in MissionItem._fields
+                                    if getattr(item, f) != getattr(item, f)}
+                assert len(fields) == 1, (t.title, k.name, fields)
+                got = getattr(item, fields.pop())
+                assert got == k.default or (math.isnan(got) and math.isnan(k.default)), \
+                    (t.title, k.name, got)
+        with pytest.raises(MissionFileError, match="unknown key 'undeclared'"):
+            parse_toml(_item(t, extra="undeclared = 1"))
+
+
+def test_the_mission_files_home_and_top_level_are_the_declared_ones():
+    home = next(t for t in MISSION_KEYS if t.path == "home")
+    text = _item(next(t for t in MISSION_KEYS if t.path == "item[]"))
+    with_home = text + "\n[home]\n" + "\n".join(f"{k.name} = 1.0" for k in home.keys)
+    assert parse_toml_doc(with_home).home is not None
+    for k in home.keys:
+        with pytest.raises(MissionFileError, match=f"key '{k.name}'"):
+            parse_toml_doc(with_home.replace(f"{k.name} = 1.0", ""))
+    top = {k.name for t in MISSION_KEYS if t.path == "" for k in t.keys}
+    assert top == {"format", "item", "home"}
+    with pytest.raises(MissionFileError, match="unknown key 'items'"):
+        parse_toml("items = 1\n")
