@@ -14,7 +14,8 @@ import argparse
 from pathlib import Path
 
 from common.config.scenario import load_scenario
-from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.overrides import apply_overrides
 
 ROOT = Path(__file__).resolve().parent.parent
 

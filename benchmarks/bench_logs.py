@@ -18,7 +18,8 @@ from pathlib import Path
 
 from common.config.scenario import load_scenario
 from common.logs.ulog import open_ulog
-from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.overrides import apply_overrides
 from gcs.run.runio import ONBOARD_LOG, TRUTH_LOG, read_run_logs, write_run
 
 ROOT = Path(__file__).resolve().parents[1]

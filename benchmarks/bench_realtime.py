@@ -888,7 +888,8 @@ def warm_kernels(sc: Any) -> float:
     fly a short mission in-process (kernels compiled on first use), as the test suite does
     first: a fresh checkout would otherwise compile inside the first real-time flight, whose
     loop then stalls (state input lost before the take-off). The seconds it took."""
-    from gcs.run.inprocess import apply_overrides, fcu_pipeline, run_scenario
+    from gcs.run.inprocess import fcu_pipeline, run_scenario
+    from gcs.run.overrides import apply_overrides
     from sitl.plant import Plant
 
     t0 = time.monotonic()

@@ -125,7 +125,8 @@ def stack_runs(duration_s: float, repeats: int) -> list[dict[str, float]]:
     if str(ROOT) not in sys.path:
         sys.path.insert(0, str(ROOT))
     from common.config.scenario import load_scenario
-    from gcs.run.inprocess import apply_overrides, run_scenario
+    from gcs.run.inprocess import run_scenario
+    from gcs.run.overrides import apply_overrides
 
     runs = []
     for _ in range(repeats):

@@ -31,7 +31,8 @@ import gcs.run.inprocess as inprocess
 from common.config.scenario import load_scenario
 from fcu.control.dualquat import q_mul
 from fcu.stages import VehicleState
-from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.overrides import apply_overrides
 from sitl.plant import PlantState
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -60,11 +60,11 @@ from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
 from gcs.mission_files import read_mission, write_mission
 from gcs.run.inprocess import (
-    apply_overrides,
     fcu_pipeline,
     run_scenario,
     through_wire_item,
 )
+from gcs.run.overrides import apply_overrides
 
 ROOT = Path(__file__).resolve().parents[1]
 VEHICLES = ("hexa_tilted", "hexa_planar")

@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Any
 
 from common.config.scenario import load_scenario
-from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.overrides import apply_overrides
 
 ROOT = Path(__file__).resolve().parent.parent
 CASE1 = ROOT / "config" / "scenarios" / "case1_figure8.toml"

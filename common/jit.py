@@ -52,9 +52,21 @@ if not _config.CACHE_DIR:  # NUMBA_CACHE_DIR set by the user wins
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+def _real_file(fn: F) -> F:
+    """`fn` with its code's file name resolved: numba files a cached kernel under its
+    source's path, so a module imported through a symlinked folder (a checkout reached by a
+    link, `python -m` run from one) finds the kernels cached for the real file instead of
+    compiling them all again."""
+    code = fn.__code__
+    real = str(Path(code.co_filename).resolve())
+    if real != code.co_filename:
+        fn.__code__ = code.replace(co_filename=real)
+    return fn
+
+
 def njit(fn: F) -> F:
     """`numba.njit(cache=True)` with the signature of `fn` kept for the type checker."""
-    return cast(F, numba.njit(cache=True)(fn))
+    return cast(F, numba.njit(cache=True)(_real_file(fn)))
 
 
 def njit_loops(fn: F) -> F:
@@ -62,4 +74,4 @@ def njit_loops(fn: F) -> F:
     IEEE 754 says instead of raising ZeroDivisionError. Without that check in its body a
     loop that divides can be vectorised (every value that does not divide by zero is the
     same, to the bit)."""
-    return cast(F, numba.njit(cache=True, error_model="numpy")(fn))
+    return cast(F, numba.njit(cache=True, error_model="numpy")(_real_file(fn)))

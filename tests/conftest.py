@@ -114,7 +114,8 @@ def _fly_warm_up() -> None:
     """The kernels' warm-ups, then a 3 s mission: the mission executor's kernels compile for
     their callers' types (a rotation sampled at many instants at once) on first use."""
     from common.config.scenario import load_scenario
-    from gcs.run.inprocess import apply_overrides, fcu_pipeline, run_scenario
+    from gcs.run.inprocess import fcu_pipeline, run_scenario
+    from gcs.run.overrides import apply_overrides
     from sitl.plant import Plant
 
     scenario = load_scenario(CASE1)

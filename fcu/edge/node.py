@@ -44,6 +44,7 @@ from fcu.edge.onboard_log import OnboardLog, set_aside
 from fcu.edge.sim_bridge import Resent, SimBridge, StateSample
 from fcu.edge.telemetry import heartbeat
 from fcu.edge.work_process import make_work
+from fcu.estimator.ekf import warm as warm_estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.mission.limits import MissionLimits
 from fcu.params import ParamStore, apply_params
@@ -123,6 +124,8 @@ class FlightController:
         self.done_ns = 0  # when the last control step's work (answer, log records) was done
         self.work.steps = lambda: self.steps
         warm_plans(pipeline.commander.limits)  # before the loop, not in its first plan
+        if not lockstep:  # EKF_EN may turn the estimator on later: making it must not stall
+            warm_estimator()
         if not self.work.immediate:  # the worker started and warmed before the flight
             self.work.submit(warm_plans, (pipeline.commander.limits,), lambda _: None)
         if lockstep:  # offboard loss judged on the flight clock too (fcu.modes.offboard_stream)

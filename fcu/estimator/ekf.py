@@ -77,7 +77,7 @@ class Estimator:
         self._g = s.gravity_m_s2
         self._delay_us = round(s.pose_delay_s * 1e6)
         self._align_us = round(s.align_time_s * 1e6)
-        warm_up("fcu.estimator", _warm_up)
+        warm()
         self.reset()
 
     # ------------------------------------------------------------------------------------
@@ -444,6 +444,8 @@ def _warm_up() -> None:
     est.status()
 
 
-# Loaded (or compiled, on a fresh cache) when the module is imported, as the FCU process
-# starts: an Estimator made later, when EKF_EN turns it on over the link, starts at once.
-warm_up("fcu.estimator", _warm_up)
+def warm() -> None:
+    """Load (or compile, on a fresh cache) the estimator's kernels once per process: every
+    Estimator made does; the FCU calls it as it starts in real time, so that an Estimator
+    made later, when EKF_EN turns it on over the link, starts at once."""
+    warm_up("fcu.estimator", _warm_up)

@@ -36,7 +36,7 @@ def _summary(m: RunMetrics) -> str:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Exit 0 when the run completed, 1 for any other status, 2 for bad input."""
-    from gcs.run.inprocess import InProcessError, apply_overrides, run_scenario
+    from gcs.run.overrides import apply_overrides
     from gcs.run.process_run import Progress as RunProgress
     from gcs.run.process_run import RunError, fleet_of, one_vehicle, run_processes
     from gcs.run.runio import RunDirError, prepare_run_dir, write_run
@@ -55,6 +55,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         return 2
     progress = Progress()
     if args.in_process:
+        from gcs.run.inprocess import InProcessError, run_scenario  # loads the FCU and plant
+
         progress(f"{scenario.name}: running {scenario.duration_s:.0f} s in-process ...")
         try:
             result = run_scenario(scenario)

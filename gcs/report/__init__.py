@@ -1,7 +1,9 @@
 """Run reports: the paper's figures and a one-page report.md for a run folder or for a
-folder written by `gcs table1 --out DIR`.
+folder written by `gcs table1 --out DIR`. The functions are in `run_report`,
+`table1_report` and `chart`, which load matplotlib; this package loads none of them, so the
+ground station's other commands start without it.
 
-`make_report(run_dir)` reads metrics.json, scenario.toml and the two ULogs written by
+`make_report(run_dir)` (`run_report`) reads metrics.json, scenario.toml and the two ULogs written by
 `gcs run ... --out DIR` (in-process or through processes) and writes `DIR/figures/*.png`
 and `DIR/report.md`:
 
@@ -24,8 +26,9 @@ and `DIR/report.md`:
   (estimator_innovation_test_ratios, the gate at 1). report.md gets the estimation_error
   figures beside them.
 
-`make_table1_report(dir)` does the above for each of the 8 run folders of a table1 folder
-(`<scenario>_<controller>`, e.g. `case2_impulse_pd`) and writes, in the table1 folder itself:
+`make_table1_report(dir)` (`table1_report`) does the above for each of the 8 run folders of
+a table1 folder (`<scenario>_<controller>`, e.g. `case2_impulse_pd`) and writes, in the
+table1 folder itself:
 
 - table1.png: the Table I chart (`table1_chart`), redrawn from the run folders.
 - fig5_pd_tracking_errors.png: Fig. 5 from `case1_figure8_pd`, with the PID run's errors
@@ -41,7 +44,7 @@ and `DIR/report.md`:
 - report.md: Table I (ours beside the paper), every run's status, why, and its events, links
   to every figure, and the run folders that are missing or could not be read.
 
-`table1_chart(table, png)` draws `gcs.report.table1.table_json` output as grouped bars.
+`table1_chart(table, png)` (`chart`) draws `gcs.report.table1.table_json` output as grouped bars.
 
 The parts, one job each: names (file names, captions), rundata (loading a run folder), plot
 (shared plot helpers), tracking_figures (Figs. 3-6), disturbance_figures (Figs. 7 and 8),
@@ -51,11 +54,3 @@ folder's) and chart (the Table I chart).
 Figures are drawn on matplotlib's Agg canvas directly (never pyplot, never a screen); long
 series are thinned to every bucket's first, minimum and maximum sample, so peaks survive.
 """
-
-from __future__ import annotations
-
-from gcs.report.chart import table1_chart
-from gcs.report.run_report import make_report
-from gcs.report.table1_report import make_table1_report
-
-__all__ = ["make_report", "make_table1_report", "table1_chart"]

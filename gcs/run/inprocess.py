@@ -13,16 +13,13 @@ status, events and figures.
 
 from __future__ import annotations
 
-import dataclasses
 import struct
 import time
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
-from common.config.scenario import Scenario, VehicleConfig, check_sensor_faults
-from common.config.sensors import check_servable, resolve_sensor_profile
+from common.config.scenario import Scenario, VehicleConfig
 from common.logs.columns import ONBOARD_COLUMNS, TRUTH_COLUMNS
 from common.outcome import Event
 from common.process.startup import compile_time_s
@@ -56,30 +53,6 @@ class InProcessError(RuntimeError):
     def __init__(self, message: str, result: RunResult | None = None) -> None:
         super().__init__(message)
         self.result = result
-
-
-def apply_overrides(scenario: Scenario, *, controller: str | None = None,
-                    ideal_actuators: bool | None = None,
-                    duration_s: float | None = None, sensors: str | None = None,
-                    seed: int | None = None) -> Scenario:
-    """The scenario with the command line's choices (a sensor profile by name or file)."""
-    changes: dict[str, Any] = {}
-    if sensors is not None:
-        changes["sensors"] = resolve_sensor_profile(sensors)
-    if seed is not None:
-        changes["seed"] = seed
-    if controller is not None:
-        changes["controller"] = controller
-    if ideal_actuators is not None:
-        changes["ideal_actuators"] = ideal_actuators
-    if duration_s is not None:
-        changes["duration_s"] = min(duration_s, scenario.duration_s)
-    out = dataclasses.replace(scenario, **changes)
-    check_sensor_faults(out.sensor_faults, out.sensors, "--sensors")
-    if out.sensors is not None:  # refused before any run, processes or in-process
-        check_servable(out.sensors, 1_000_000 // out.physics_rate_hz,
-                       1_000_000 // out.control_rate_hz)
-    return out
 
 
 def fcu_pipeline(scenario: Scenario) -> tuple[Pipeline, ParamStore]:

@@ -22,7 +22,7 @@ PLAIN_DIR = "plain"  # the run folders of the plain allocation (CA_LAG_COMP 0), 
 def _run_one(job: tuple[str, str, bool, float | None, str, bool, float | None, str | None,
                         int | None]) -> RunMetrics:
     from common.config.scenario import load_scenario
-    from gcs.run.inprocess import apply_overrides, run_scenario
+    from gcs.run.overrides import apply_overrides
     from gcs.run.process_run import one_vehicle, run_processes
     from gcs.run.runio import prepare_run_dir, write_run
 
@@ -36,6 +36,8 @@ def _run_one(job: tuple[str, str, bool, float | None, str, bool, float | None, s
                                        params={**scenario.params, "CA_LAG_COMP": lag_comp})
     if not in_process:
         return one_vehicle(run_processes(scenario, Path(out)))
+    from gcs.run.inprocess import run_scenario  # loads the FCU and the plant
+
     result = run_scenario(scenario)
     write_run(Path(out), scenario, result)
     return result.metrics

@@ -14,7 +14,8 @@ import pytest
 from common.config.scenario import load_scenario
 from gcs import cli
 from gcs.report.metrics import ERROR_ROWS_RULE
-from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.overrides import apply_overrides
 
 from .. import reference_runs
 from .conftest import SCENARIOS

@@ -15,7 +15,8 @@ from typing import Any
 import pytest
 
 from common.config.scenario import load_scenario
-from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.overrides import apply_overrides
 
 from .. import reference_runs
 from .conftest import SCENARIOS

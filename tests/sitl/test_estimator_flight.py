@@ -39,7 +39,8 @@ from common.wire.simlink import (
 )
 from fcu.edge.onboard_log import DQ_ONBOARD_COLUMNS
 from gcs.report.metrics import attitude_error_rad, join_logs
-from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.overrides import apply_overrides
 from gcs.run.runio import RunResult
 from gcs.vehicle_link.params import param_set
 from gcs.vehicle_link.session import Session

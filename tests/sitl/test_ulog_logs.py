@@ -20,7 +20,8 @@ from pyulog.px4 import PX4ULog
 from common.config.scenario import load_scenario
 from common.logs.ulog import open_ulog, read_topic, tail_record
 from gcs.report.metrics import build_metrics
-from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.overrides import apply_overrides
 from gcs.run.runio import read_run_logs
 
 from .conftest import ROOT, SCENARIOS, launch, stop

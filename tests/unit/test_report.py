@@ -27,7 +27,8 @@ from gcs.report.names import (
 from gcs.report.plot import thin_indices
 from gcs.report.run_report import make_report
 from gcs.report.table1 import CASES, CONTROLLERS, PAPER, table_json
-from gcs.run.inprocess import apply_overrides, run_scenario
+from gcs.run.inprocess import run_scenario
+from gcs.run.overrides import apply_overrides
 from gcs.run.runio import RunDirError, write_metrics, write_run
 from sitl.disturbance import Disturbance
 

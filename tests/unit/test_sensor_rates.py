@@ -262,7 +262,7 @@ def test_the_loader_refuses_what_no_plant_serves_naming_file_and_key(tmp_path, e
 def test_a_scenario_refuses_a_profile_its_plant_cannot_serve(tmp_path, edits, message):
     """At the scenario's load (key `sensors`) and when --sensors overrides it, before any
     run: the message names the profile's file and its key."""
-    from gcs.run.inprocess import apply_overrides
+    from gcs.run.overrides import apply_overrides
 
     path = _write(tmp_path, "mocap-fast.toml", *edits)
     profile = load_sensor_profile(path)  # loads: it is the scenario's rates it cannot meet
