@@ -227,9 +227,15 @@ class Unreadable(NonAtomicArduPilot):
             super()._handle(msg)
 
 
-def test_unreadable_mission_is_exit_1_nothing_sent(vehicles, capsys, tmp_path):
+def test_unreadable_mission_is_exit_1_nothing_sent(vehicles, capsys, tmp_path, monkeypatch):
     """Given an ArduPilot-like vehicle whose mission cannot be read, then the upload is
-    exit 1 with the reason and no MISSION_COUNT is sent (nothing could be put back)."""
+    exit 1 with the reason and no MISSION_COUNT is sent (nothing could be put back). (The
+    vehicle is heard throughout: the download gives up at its ceiling, 3 s here, 30 s as
+    shipped.)"""
+    import gcs.vehicle_link.mission_client as client
+
+    assert client.download.__kwdefaults__["ceiling_s"] == 30.0
+    monkeypatch.setitem(client.download.__kwdefaults__, "ceiling_s", 3.0)
     v = vehicles(Unreadable, refuse=REFUSE)
     v.mission = list(OLD)
     code, out, err = gcs(capsys, v, "mission", "upload", str(plan_file(tmp_path, NEW)))
