@@ -49,3 +49,24 @@ def test_sitl_error_line_is_the_same_and_verbose_adds_its_arguments(tmp_path):
     assert len(err["-v"]) == 2 and err["-v"][1] == line
     assert err["-v"][0].startswith("sitl: arguments control_rate=None, ")
     assert f"scenario={missing}, " in err["-v"][0]
+
+
+def test_fcu_error_line_is_the_same_and_verbose_adds_its_arguments(tmp_path):
+    """The real `fcu` with a vehicle file that does not exist: exit 2 and the same one error
+    line by default, with -q and with -v; -v writes the parsed arguments (debug) first."""
+    missing = tmp_path / "nope.toml"
+    gains = ROOT / "config" / "gains" / "pid_eq30.toml"
+    err = {}
+    for flag in ("", "-q", "-v"):
+        proc = subprocess.run([sys.executable, "-m", "fcu.edge.node",
+                               *([flag] if flag else []), "--vehicle", str(missing),
+                               "--gains", str(gains)], cwd=tmp_path,
+                              env={**os.environ, "PYTHONPATH": str(ROOT)},
+                              capture_output=True, text=True, timeout=90)
+        assert (proc.returncode, proc.stdout) == (2, ""), proc.stderr
+        err[flag] = proc.stderr.splitlines()
+    line = f"fcu: {missing}: file not found"
+    assert err[""] == err["-q"] == [line]
+    assert len(err["-v"]) == 2 and err["-v"][1] == line
+    assert err["-v"][0].startswith(f"fcu: arguments gains={gains}, ")
+    assert f"vehicle={missing}, " in err["-v"][0]
