@@ -189,10 +189,7 @@ class FlightController:
         is first heard: before the flight, both processes otherwise idle."""
         n, self.rtt_probes = self.rtt_probes, 0
         rt = self.sim.round_trips(n)
-        median = rt.median_us
-        self.rtt = {"median_us": median, "samples": len(rt.samples_us), "lost": rt.lost,
-                    "p10_us": _quantile(rt.samples_us, 0.1),
-                    "p90_us": _quantile(rt.samples_us, 0.9)}
+        self.rtt = rt.summary()
         for peer, data in rt.other:
             self._on_sim_datagram(peer, data)
         self.last_sim_rx_s = time.monotonic()
@@ -442,11 +439,6 @@ class FlightController:
         for link in (self.sim.link, *(gl.link for gl in self.server.links)):
             link.close()
         self.work.close()
-
-
-def _quantile(samples: list[float], q: float) -> float | None:
-    ordered = sorted(samples)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else None
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -58,6 +58,16 @@ class RoundTrips(NamedTuple):
     def median_us(self) -> float | None:
         return statistics.median(self.samples_us) if len(self.samples_us) >= 10 else None
 
+    def quantile_us(self, q: float) -> float | None:
+        ordered = sorted(self.samples_us)
+        return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else None
+
+    def summary(self) -> dict[str, float | int | None]:
+        """As the FCU's stats file records it (`sim_rtt`)."""
+        return {"median_us": self.median_us, "samples": len(self.samples_us),
+                "lost": self.lost, "p10_us": self.quantile_us(0.1),
+                "p90_us": self.quantile_us(0.9)}
+
 
 class StateSample(NamedTuple):
     stamp_us: int

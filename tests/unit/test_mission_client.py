@@ -39,7 +39,9 @@ NAN = math.nan
 
 class UdpVehicle:
     """A MissionServer on 127.0.0.1:<free port>; drops each reply with probability `drop`
-    (seeded). Ticks the server every 10 ms."""
+    (seeded). Ticks the server every 10 ms and, as a vehicle does, sends a HEARTBEAT each
+    second once it has heard the station (never dropped: the station then waits on a
+    vehicle it knows is alive, however the drops fall)."""
 
     def __init__(self, drop: float = 0.0, seed: int = 0,
                  limits: MissionLimits | None = None) -> None:
@@ -59,10 +61,16 @@ class UdpVehicle:
 
     def _run(self) -> None:
         peer = None
+        heartbeat_due = 0.0
         try:
             while not self._stop.is_set():
                 readable, _, _ = select.select([self.sock], [], [], 0.01)
                 now = time.monotonic()
+                if peer is not None and now >= heartbeat_due:
+                    self.sock.sendto(pack(self.mav, M.MAVLink_heartbeat_message(
+                        M.MAV_TYPE_QUADROTOR, M.MAV_AUTOPILOT_PX4, 0, 0,
+                        M.MAV_STATE_STANDBY, 3)), peer)
+                    heartbeat_due = now + 1.0
                 replies = []
                 if readable:
                     data, peer = self.sock.recvfrom(65535)
