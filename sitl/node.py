@@ -118,10 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--position", metavar="X,Y,Z",
                    help="start position in ENU metres (default: the scenario's)")
     p.add_argument("--speed-factor", type=float, metavar="X",
-                   help="px4-hil only: pace the lockstep at X times the wall clock (1: real "
-                        "time, as PX4's Gazebo runs by default; default: as fast as PX4 "
-                        "answers). PX4's timers run on simulated time, a ground station's on "
-                        "the wall clock: with a person or a script at `gcs`, use 1")
+                   help="pace the lockstep (dqflight, px4-hil) at X times the wall clock "
+                        "(1: real time, as PX4's Gazebo runs by default; default: as fast as "
+                        "the FCU or PX4 answers). A ground station's timers run on the wall "
+                        "clock: with a person or a script at `gcs`, use 1 to a few")
     return p
 
 
@@ -134,9 +134,11 @@ def _check_protocol_options(args: argparse.Namespace) -> None:
             raise ConfigError(f"{flag} does not apply to --protocol {args.protocol}: the "
                               "firmware sets the rates and drives simulated time")
     if args.speed_factor is not None:
-        if args.protocol != "px4-hil":
-            raise ConfigError("--speed-factor applies to --protocol px4-hil only (dqflight: "
-                              "--realtime; ArduPilot paces itself: its --speedup)")
+        if args.protocol == "ardupilot-json" or args.realtime:
+            raise ConfigError("--speed-factor paces a lockstep (dqflight, px4-hil): not with "
+                              + ("--realtime" if args.realtime else
+                                 "--protocol ardupilot-json (ArduPilot paces itself: its "
+                                 "--speedup)"))
         if not (math.isfinite(args.speed_factor) and args.speed_factor > 0.0):
             raise ConfigError(f"--speed-factor {args.speed_factor:g}: a positive number")
     if args.link is None:
@@ -215,7 +217,8 @@ def main(argv: list[str] | None = None) -> int:
                                  end_time_s=end, realtime=args.realtime,
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,
                                  resend_ms=args.resend_ms, system_id=args.sysid,
-                                 sensors=scenario.sensors, seed=scenario.seed)
+                                 sensors=scenario.sensors, seed=scenario.seed,
+                                 speed_factor=args.speed_factor)
     except (KeyboardInterrupt, LinkError, *STARTUP_ERRORS, OSError) as exc:
         return start_failed("sitl", exc)
     said = (f"sitl: serving {scenario.name} on {args.link} "

@@ -16,6 +16,10 @@ aligns on the ground before it may arm: the FCU answers those periods disarmed, 
 world stands still (time and sensors run) until the first armed answer, the flight's start,
 from which the scenario's clock (disturbances, duration) counts (`sitl.world`).
 
+Lockstep paced (`--speed-factor X`): the same exchange, each state sent no sooner than X
+times real time allows (simulated time at most X times the wall clock's pace): for a person
+or a script at a ground station, with the results of lockstep.
+
 Real time (`--realtime`): physics paced by the monotonic clock, the latest command held; a
 process stopped or starved for longer than MAX_LAG_S resumes from where it stood instead of
 replaying the missed wall time in a burst. With a sensor profile each sample goes out as it
@@ -81,7 +85,7 @@ class SimulatorServer:
                  end_time_s: float | None, realtime: bool, control_rate_hz: int,
                  hil_sensor_hz: float, resend_ms: float, system_id: int,
                  home_alt_m: float = 0.0, sensors: SensorProfile | None = None,
-                 seed: int = 0) -> None:
+                 seed: int = 0, speed_factor: float | None = None) -> None:
         self.scenario = scenario
         self.control_dt_us = 1_000_000 // control_rate_hz
         self.world = World(scenario, self.control_dt_us, sensors=sensors, seed=seed,
@@ -114,6 +118,8 @@ class SimulatorServer:
         self.timed_steps = 0
         self._unflushed = 0
         self.skipped_s = 0.0  # real time: wall time not simulated (the process was stopped)
+        self.speed_factor = speed_factor  # lockstep paced at this x the wall clock, or free
+        self.pace_due_s = 0.0  # paced: when the next state may go out (monotonic)
         self.running = True
         self._last_datagram = b""
 
@@ -286,6 +292,7 @@ class SimulatorServer:
                 self.command = self._command_from(controls, mode)
                 t0 = perf()
                 states = self._advance()
+                self._pace()
                 if timed:
                     ns["wait"] += rx_ns - sent_ns
                     ns["rx"] += parsed_ns - rx_ns
@@ -295,6 +302,19 @@ class SimulatorServer:
                 sent_ns = perf()
                 last_progress = time.monotonic()
             fds = link.filenos()
+
+    def _pace(self) -> None:
+        """With `speed_factor`: wait until the next state is due, no faster than X times the
+        wall clock (a process starved for longer than MAX_LAG_S goes on from now instead of
+        catching up in a burst). Nothing else is waited for meanwhile: in lockstep the FCU
+        is waiting for this state."""
+        if self.speed_factor is None:
+            return
+        now = time.monotonic()
+        self.pace_due_s = max(self.pace_due_s, now - MAX_LAG_S) + \
+            self.control_dt_us * 1e-6 / self.speed_factor
+        if self.pace_due_s > now:
+            time.sleep(self.pace_due_s - now)
 
     def _run_realtime(self) -> None:
         period = self.plant.dt_us * 1e-6

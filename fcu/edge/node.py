@@ -32,7 +32,6 @@ from common.process.cliargs import check_output_path
 from common.process.diagnostics import get_logger, say, setup_logging
 from common.process.parent import stop_with_parent
 from common.process.program import STARTUP_ERRORS, serve, start_failed
-from common.process.startup import compile_time_s
 from common.wire.mavlink import MAV, encoder, pack, read_signing_key
 from common.wire.mission_items import HomePosition
 from fcu.compose import fcu_pipeline, param_store, published_home
@@ -41,6 +40,7 @@ from fcu.edge.gcs_server import COMPONENT, GcsServer
 from fcu.edge.mission_protocol import MissionServer
 from fcu.edge.node_args import DEFAULT_GCS, build_parser
 from fcu.edge.onboard_log import OnboardLog, set_aside
+from fcu.edge.run_stats import run_stats
 from fcu.edge.sim_bridge import Resent, SimBridge, StateSample
 from fcu.edge.telemetry import heartbeat
 from fcu.edge.work_process import make_work
@@ -55,7 +55,8 @@ from fcu.work import Work
 M = MAV
 log = get_logger(__name__)
 HOUSEKEEPING_S = 0.002
-SPIN_S = 0.002  # lockstep: poll instead of sleeping this long after each state
+SPIN_S = 0.002  # lockstep: poll this long after each state if it came within SPIN_GAP_S
+SPIN_GAP_S = 0.0005  # of the one before (a paced simulator is waited for in select)
 SIM_SILENT_S = 1.0  # lockstep: report a simulator silent this long (wall clock)
 MAX_DT_PERIODS = 5  # real time: the integrated period is clamped to this many periods
 # Per-step stages timed in lockstep flight (`stage_us` in the stats): waiting for the next
@@ -113,6 +114,7 @@ class FlightController:
         self.events: list[Event] = []  # everything the pipeline said, on the flight clock
         self.sim_heartbeat_due = 0.0
         self.last_sim_rx_s = time.monotonic()
+        self.sim_gap_s = 0.0  # between the last two datagrams of the simulator
         self.sim_silent = False
         # TIMESYNC round trips at the simulator's first word; lockstep only
         self.rtt_probes = rtt_probes if lockstep else 0
@@ -196,7 +198,8 @@ class FlightController:
 
     def _on_sim_datagram(self, peer: object, data: bytes) -> None:
         self.sim_heard = True
-        self.last_sim_rx_s = time.monotonic()
+        now = time.monotonic()
+        self.sim_gap_s, self.last_sim_rx_s = now - self.last_sim_rx_s, now
         pipe = self.pipeline
         for sample in self.sim.receive(peer, data):
             if not self.lockstep and self.log is not None and \
@@ -314,7 +317,7 @@ class FlightController:
         fast = self.lockstep and sim_link.spin
         while self.running:
             now = time.monotonic()
-            if fast and now - self.last_sim_rx_s < SPIN_S and now < next_housekeeping:
+            if fast and self._state_due(now) and now < next_housekeeping:
                 next_housekeeping = self._spin_once(sim_link, next_housekeeping)
                 continue
             fds = {fd: entry for entry in links for fd in entry[1].filenos()}
@@ -359,6 +362,10 @@ class FlightController:
             return time.monotonic() + HOUSEKEEPING_S
         return next_housekeeping
 
+    def _state_due(self, now: float) -> bool:
+        """Lockstep: the next state is microseconds away (worth polling for)."""
+        return now - self.last_sim_rx_s < SPIN_S and self.sim_gap_s < SPIN_GAP_S
+
     def _wait_timeout(self, now: float, next_tick: float, next_housekeeping: float) -> float:
         """How long the loop may wait for its links: until telemetry is due with the
         housekeeping (lockstep) or the next tick (real time); 0 to poll for a state due."""
@@ -366,7 +373,7 @@ class FlightController:
         wake = min(max(self.server.next_due(), next_housekeeping), next_housekeeping + 0.05) \
             if self.lockstep else next_tick
         timeout = min(max(0.0, wake - now), 0.05)
-        if self.lockstep and self.sim.link.spin and now - self.last_sim_rx_s < SPIN_S:
+        if self.lockstep and self.sim.link.spin and self._state_due(now):
             timeout = 0.0  # lockstep: the next state is microseconds away, poll for it
         return timeout
 
@@ -399,29 +406,8 @@ class FlightController:
         self.done_ns += spent  # not waiting meanwhile
 
     def stats(self) -> dict[str, Any]:
-        pipe, server, sim = self.pipeline, self.server, self.sim
-        return {"steps": self.steps, "deadline_misses": self.deadlines.misses,
-                "misses": self.deadlines.first,
-                "compile_time_s": compile_time_s(),
-                "signing_rejects": server.signing_rejects,
-                "resent_answers": sim.resent_answers,
-                "repeated_commands": server.repeated_commands,
-                "flight_start_us": pipe.flight_start_us,
-                "rejected_bytes": server.rejected_bytes + sim.rejected_bytes,
-                "ignored_messages": server.ignored_messages + sim.ignored_messages,
-                "internal_errors": server.internal_errors,
-                "mission_completed": pipe.commander.mission_done,
-                "saturated_steps": pipe.saturated_steps,
-                "tilt_rate_limited_steps": pipe.tilt_rate_limited_steps,
-                "lockstep": self.lockstep,
-                "sim_rtt": self.rtt,
-                "work": {**self.work.stats(),
-                         "late_anchors": pipe.commander.modes.ahead.late_anchors,
-                         "inline_plans": pipe.commander.modes.ahead.inline_plans},
-                "timed_steps": self.timed_steps,
-                "stage_us": {k: v / max(self.timed_steps, 1) * 1e-3
-                             for k, v in self.stage_ns.items()},
-                "events": [e.as_json() for e in self.events]}
+        """What the stats file records at exit (`fcu.edge.run_stats`)."""
+        return run_stats(self)
 
     def close(self) -> None:
         c = self.pipeline.commander

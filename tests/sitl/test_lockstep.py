@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import socket
 import subprocess
 import sys
@@ -240,3 +241,49 @@ def test_udp_rtt_is_measured_between_the_two_processes(tmp_path):
     # Both processes loaded their kernels before their loops ran, and say how long it took.
     assert 0.0 < m["fcu"]["compile_time_s"] < 120.0 and 0.0 < m["sitl"]["compile_time_s"]
     assert m["compile_time_s"] == m["fcu"]["compile_time_s"] + m["sitl"]["compile_time_s"]
+
+
+def _sim_per_wall(stack, wall_s: float) -> float:
+    """Simulated seconds per wall second over `wall_s`, from the FCU's ATTITUDE_QUATERNION
+    (stamped with the flight clock, simulated time in lockstep)."""
+    points = []
+    end = time.monotonic() + wall_s
+    while time.monotonic() < end:
+        msg = stack.session.recv(["ATTITUDE_QUATERNION"], timeout=1.0)
+        if msg is not None:
+            points.append((time.monotonic(), msg.time_boot_ms * 1e-3))
+    (w0, t0), (w1, t1) = points[0], points[-1]
+    return (t1 - t0) / (w1 - w0)
+
+
+@pytest.mark.parametrize("factor", [1.0, 2.0])
+def test_speed_factor_paces_the_lockstep_by_the_wall_clock(tmp_path, factor):
+    """Given `sitl --speed-factor X` (dqflight), when Case II's mission flies, then simulated
+    time runs at X times the wall clock's pace, no faster (and does run: a quarter of it even
+    on a loaded machine), and neither process spins while it waits: together they use well
+    under the two cores a free-running lockstep takes."""
+    stack = launch(tmp_path, sitl_args=("--end-time", "3600", "--speed-factor", f"{factor:g}"))
+    try:
+        s = stack.session
+        mission = scenario_mission(load_scenario(SCENARIOS / "case2_impulse.toml"))
+        assert upload(s.conn, s.target_system, s.target_component, mission, send=s.send) == 0
+        assert s.command(MAV.MAV_CMD_COMPONENT_ARM_DISARM, 1) == MAV.MAV_RESULT_ACCEPTED
+        assert s.command(MAV.MAV_CMD_MISSION_START) == MAV.MAV_RESULT_ACCEPTED
+        _sim_per_wall(stack, 0.5)  # under way
+        cpu0 = sum(_cpu_s(p.pid) for p in stack.procs.values())
+        t0 = time.monotonic()
+        rate = _sim_per_wall(stack, 3.0)
+        cores = (sum(_cpu_s(p.pid) for p in stack.procs.values()) - cpu0) / \
+            (time.monotonic() - t0)
+        assert 0.25 * factor <= rate <= 1.02 * factor, rate
+        assert cores < 1.0, f"{cores:.2f} cores at {factor:g} x real time"
+    finally:
+        stack.session.close()
+        stop(stack.procs)
+
+
+def _cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) of process `pid` so far."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
