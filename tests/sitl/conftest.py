@@ -64,6 +64,12 @@ def stop(procs: dict[str, subprocess.Popen]) -> None:
             proc.wait()
 
 
+# A lockstep stack driven by a test through MAVLink is paced (`sitl --speed-factor`): the
+# station's timers run on the wall clock, and a free-running pair would take both cores
+# while the test waits on them. The flight is the same at any pace.
+PACE = ("--speed-factor", "4")
+
+
 def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = False,
            sitl: bool = True, sim_port: int | None = None, fcu_args: tuple[str, ...] = (),
            sitl_args: tuple[str, ...] = (), fcu_preexec: Callable[[], None] | None = None) -> Stack:
@@ -71,6 +77,8 @@ def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = 
     gcs_port = free_port()
     procs: dict[str, subprocess.Popen] = {}
     rt = ["--realtime"] if realtime else []
+    if not realtime and "--speed-factor" not in sitl_args:
+        sitl_args = (*PACE, *sitl_args)
     session = Session(f"udpin:127.0.0.1:{gcs_port}", tlog=tmp_path / "flight.tlog")
     try:
         if sitl:

@@ -27,7 +27,7 @@ from gcs.mission_files.toml import format_toml
 from gcs.mission_files.wpl import format_wpl
 from gcs.run.scenario_mission import scenario_mission
 
-from .conftest import PID, ROOT, SCENARIOS, VEHICLE, start, stop
+from .conftest import PACE, PID, ROOT, SCENARIOS, VEHICLE, start, stop
 from .waits import until
 
 pytestmark = pytest.mark.timeout(180)
@@ -47,11 +47,12 @@ class Vehicle:
 
 @pytest.fixture
 def vehicle(tmp_path) -> Iterator[Vehicle]:
-    """sitl (Case I start: on the ground, lockstep) and fcu sending to a free GCS port."""
+    """sitl (Case I start: on the ground, lockstep paced: `PACE`) and fcu sending to a free
+    GCS port."""
     sim, gcs = free_port(), free_port()
     procs = {
         "sitl": start("sitl", ["sitl.node", str(SCENARIOS / "case1_figure8.toml"), "--link",
-                               f"udpin:127.0.0.1:{sim}", "--end-time", "600"], tmp_path),
+                               f"udpin:127.0.0.1:{sim}", "--end-time", "600", *PACE], tmp_path),
         "fcu": start("fcu", ["fcu.edge.node", "--vehicle", str(VEHICLE), "--gains", str(PID),
                              "--sim", f"udpout:127.0.0.1:{sim}", "--gcs",
                              f"udpout:127.0.0.1:{gcs}"], tmp_path),
