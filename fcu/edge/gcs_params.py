@@ -70,14 +70,20 @@ class ParamService:
         return name.rstrip("\x00")
 
     def param_read(self, index: int, msg: ParamRequestRead) -> None:
-        """PARAM_REQUEST_READ: by index, or by name when the index is -1."""
+        """PARAM_REQUEST_READ: by index, or by name when the index is -1. A parameter that
+        does not exist is answered, to the link that asked, with PARAM_ERROR
+        (MAV_PARAM_ERROR_DOES_NOT_EXIST, the id and index as asked), as the parameter
+        protocol says a get error is: the station need not wait for its timeout."""
         if msg.param_index >= 0:
             if msg.param_index < len(SPECS):
                 self.send_param(msg.param_index, index)
+                return
+        elif self._param_name(msg) in self.params.values:
+            self.send_param(self.params.index(self._param_name(msg)), index)
             return
-        name = self._param_name(msg)
-        if name in self.params.values:
-            self.send_param(self.params.index(name), index)
+        self.send(M.MAVLink_param_error_message(
+            msg.get_srcSystem(), msg.get_srcComponent(), self._param_id(msg)[:16],
+            msg.param_index, MAV_PARAM_ERROR.MAV_PARAM_ERROR_DOES_NOT_EXIST), index)
 
     def param_set(self, index: int, msg: ParamSet) -> None:
         """A set in force is echoed (PARAM_VALUE) to every link. A refusal answers the link

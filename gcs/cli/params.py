@@ -95,6 +95,10 @@ def _param_load(args: argparse.Namespace, session: Session) -> int:
         try:  # the vehicle's own type, whatever the file says (older files say 9 for all)
             ptype = vl.param_read(session, e.name).param_type
             value, texts = vl.param_set(session, e.name, e.value, param_type=ptype)
+        except vl.ParamRefused as exc:
+            say(f"{e.name}: {exc.reason}")
+            refused += 1
+            continue
         except GcsError:
             say(f"{e.name}: not answered (unknown to the vehicle?)")
             refused += 1

@@ -13,6 +13,7 @@ import weakref
 from dataclasses import dataclass
 from typing import Any
 
+from common.wire.mav_enums import MAV_PARAM_ERROR
 from common.wire.mavlink import MAV
 from gcs.autopilot import ARDUPILOT, autopilot_of
 from gcs.vehicle_link import param_wire
@@ -158,20 +159,41 @@ def param_list(session: Session, timeout: float = PARAM_LIST.ceiling_s) -> dict[
     return {name: p.value for name, p in param_values(session, timeout).items()}
 
 
+class ParamRefused(GcsError):
+    """The vehicle answered a parameter with PARAM_ERROR; `reason` says its error."""
+
+    def __init__(self, name: str, reason: str) -> None:
+        super().__init__(f"parameter {name}: {reason}")
+        self.reason = reason
+
+
+def param_error_text(error: int) -> str:
+    """A PARAM_ERROR's error for a person: "does not exist (MAV_PARAM_ERROR_DOES_NOT_EXIST)"."""
+    try:
+        member = MAV_PARAM_ERROR(error)
+    except ValueError:
+        return f"PARAM_ERROR {error}"
+    return f"{member.name.removeprefix('MAV_PARAM_ERROR_').lower().replace('_', ' ')} " \
+        f"({member.name})"
+
+
 def param_read(session: Session, name: str, timeout: float = PARAM.ceiling_s) -> ParamValue:
     """One parameter with its type (PARAM_REQUEST_READ by name, re-sent each
-    PARAM.resend_s); GcsError when the vehicle falls silent or at the ceiling `timeout`
-    (a vehicle that does not know the name does not answer)."""
+    PARAM.resend_s); GcsError at once on a PARAM_ERROR for it (this FCU, newer autopilots),
+    else when the vehicle falls silent or at the ceiling `timeout` (PX4 and ArduPilot do
+    not answer a name they do not know)."""
     s = session
     request = M.MAVLink_param_request_read_message(s.target_system, s.target_component,
                                                    name.encode(), -1)
     s.send(request)
     wait = Wait(PARAM.but(ceiling_s=timeout))
     while not (why := wait.expired()):
-        msg = s.recv(["PARAM_VALUE"], timeout=min(0.1, wait.left()))
+        msg = s.recv(["PARAM_VALUE", "PARAM_ERROR"], timeout=min(0.1, wait.left()))
         wait.note_session(s)
         if msg is not None and msg.param_id == name and \
                 msg.get_srcSystem() == s.target_system:
+            if msg.get_type() == "PARAM_ERROR":
+                raise ParamRefused(name, param_error_text(msg.error))
             return _decoded(s, param_wire.raw_value(msg), msg.param_type)
         if wait.due() and not wait.expired():
             s.send(request)

@@ -207,7 +207,8 @@ def test_parameters(vehicle):
     assert refused.returncode == 1
     assert "violates k_p k_d > k_i" in refused.stdout and "DQ_KID_Y = 0.1" in refused.stdout
     missing = vehicle.gcs("param", "get", "NO_SUCH_PARAM")
-    assert missing.returncode == 1 and "not answered" in missing.stderr
+    assert missing.returncode == 1 and "parameter NO_SUCH_PARAM: does not exist " \
+        "(MAV_PARAM_ERROR_DOES_NOT_EXIST)" in missing.stderr, missing.stderr
 
 
 def test_goto_reaches_a_six_dof_pose(vehicle):

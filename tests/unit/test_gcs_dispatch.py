@@ -399,6 +399,28 @@ def test_refused_param_set_answers_param_error_first():
     assert server.pipeline.commander.flight.takeoff_alt_m == 4.0
 
 
+def test_a_read_of_a_parameter_that_does_not_exist_answers_param_error():
+    """Given PARAM_REQUEST_READs of an unknown name and of an index past the table, then the
+    link that asked gets PARAM_ERROR DOES_NOT_EXIST with the id and index as asked (the
+    parameter protocol's get error) and nothing else; the other link hears nothing; a
+    known name is answered with its PARAM_VALUE."""
+    server, links = make_server()
+    for link in links:
+        parsed(link)
+    read = encoder(245, 190)
+    for request in (M.MAVLink_param_request_read_message(1, 1, b"NO_SUCH", -1),
+                    M.MAVLink_param_request_read_message(1, 1, b"", 5000)):
+        server.handle(0, parser().parse_buffer(pack(read, request))[0], now_s=1.0)
+    msgs = [m for m in parsed(links[0]) if m.get_type().startswith("PARAM_")]
+    assert [(m.get_type(), m.param_id, m.param_index, m.error) for m in msgs] == [
+        ("PARAM_ERROR", "NO_SUCH", -1, M.MAV_PARAM_ERROR_DOES_NOT_EXIST),
+        ("PARAM_ERROR", "", 5000, M.MAV_PARAM_ERROR_DOES_NOT_EXIST)]
+    assert all((e.target_system, e.target_component) == (245, 190) for e in msgs)
+    assert parsed(links[1]) == []
+    server.handle(0, M.MAVLink_param_request_read_message(1, 1, b"MIS_LAND_SPD", -1), now_s=1.0)
+    assert [m.param_id for m in _sent(links[0], "PARAM_VALUE")] == ["MIS_LAND_SPD"]
+
+
 def test_heartbeat_and_sys_status_tell_the_truth():
     """HEARTBEAT: MAV_AUTOPILOT_PX4, PX4's custom mode and base flags (MANUAL_INPUT in
     POSCTL). SYS_STATUS: present = the simulated IMU, barometer, external pose, AHRS,
