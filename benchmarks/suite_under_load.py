@@ -4,7 +4,8 @@
         [-- pytest args]
 
 Runs `make test`'s steps (ruff, mypy over the packages, then benchmarks/ and tools/, then pytest
-over tests/ with xdist) N times in a row
+with the arguments given, by default `make test`'s: `-n 3 --dist loadgroup tests`) N times in
+a row
 beside K busy-looping children at nice P (default 19; `--busy 8 --nice 0` is a load of 8 at
 normal priority), prints each run's wall time and result, stops at the first failure, and
 exits with that run's code (0 when all passed). The busy children are this script's own and
@@ -33,8 +34,8 @@ def _busy_children(count: int, niceness: int = 19) -> list[subprocess.Popen[byte
 def _suite(pytest_args: list[str]) -> int:
     steps = [[sys.executable, "-m", "ruff", "check", "."], [sys.executable, "-m", "mypy"],
              [sys.executable, "-m", "mypy", "benchmarks", "tools"],
-             [sys.executable, "-m", "pytest", "-q", "-n", "auto", "--dist", "loadgroup",
-              *(pytest_args or ["tests"])]]
+             [sys.executable, "-m", "pytest", "-q",
+              *(pytest_args or ["-n", "3", "--dist", "loadgroup", "tests"])]]
     for step in steps:
         code = subprocess.call(step, cwd=ROOT)
         if code != 0:
