@@ -32,41 +32,35 @@ def test_gcs_keygen_output_is_the_same_and_verbose_adds_a_debug_line(tmp_path):
     assert lines["-v"] == f"gcs: arguments command=keygen, file={tmp_path / 'key-v'}\n"
 
 
-def test_sitl_error_line_is_the_same_and_verbose_adds_its_arguments(tmp_path):
-    """The real `sitl` with a scenario that does not exist: exit 2 and the same one error
-    line by default, with -q and with -v; -v writes the parsed arguments (debug) first."""
+GAINS = ROOT / "config" / "gains" / "pid_eq30.toml"
+# (program, its module, its arguments with a file that does not exist (MISSING), the start of
+# -v's arguments line, a field of it naming that file)
+PROGRAMS = [
+    ("sitl", "sitl.node", ["MISSING"], "arguments control_rate=None, ", "scenario"),
+    ("fcu", "fcu.edge.node", ["--vehicle", "MISSING", "--gains", str(GAINS)],
+     f"arguments gains={GAINS}, ", "vehicle"),
+]
+
+
+@pytest.mark.parametrize(("program", "module", "argv", "first", "field"), PROGRAMS,
+                         ids=[p[0] for p in PROGRAMS])
+def test_error_line_is_the_same_and_verbose_adds_its_arguments(tmp_path, program, module,
+                                                               argv, first, field):
+    """The real `sitl` and `fcu` given a file that does not exist: exit 2 and the same one
+    error line by default, with -q and with -v; -v writes the parsed arguments (debug)
+    first."""
     missing = tmp_path / "nope.toml"
+    args = [str(missing) if a == "MISSING" else a for a in argv]
     err = {}
     for flag in ("", "-q", "-v"):
-        proc = subprocess.run([sys.executable, "-m", "sitl.node",
-                               *([flag] if flag else []), str(missing)], cwd=tmp_path,
+        proc = subprocess.run([sys.executable, "-m", module, *([flag] if flag else []),
+                               *args], cwd=tmp_path,
                               env={**os.environ, "PYTHONPATH": str(ROOT)},
                               capture_output=True, text=True, timeout=90)
         assert (proc.returncode, proc.stdout) == (2, ""), proc.stderr
         err[flag] = proc.stderr.splitlines()
-    line = f"sitl: {missing}: file not found"
+    line = f"{program}: {missing}: file not found"
     assert err[""] == err["-q"] == [line]
     assert len(err["-v"]) == 2 and err["-v"][1] == line
-    assert err["-v"][0].startswith("sitl: arguments control_rate=None, ")
-    assert f"scenario={missing}, " in err["-v"][0]
-
-
-def test_fcu_error_line_is_the_same_and_verbose_adds_its_arguments(tmp_path):
-    """The real `fcu` with a vehicle file that does not exist: exit 2 and the same one error
-    line by default, with -q and with -v; -v writes the parsed arguments (debug) first."""
-    missing = tmp_path / "nope.toml"
-    gains = ROOT / "config" / "gains" / "pid_eq30.toml"
-    err = {}
-    for flag in ("", "-q", "-v"):
-        proc = subprocess.run([sys.executable, "-m", "fcu.edge.node",
-                               *([flag] if flag else []), "--vehicle", str(missing),
-                               "--gains", str(gains)], cwd=tmp_path,
-                              env={**os.environ, "PYTHONPATH": str(ROOT)},
-                              capture_output=True, text=True, timeout=90)
-        assert (proc.returncode, proc.stdout) == (2, ""), proc.stderr
-        err[flag] = proc.stderr.splitlines()
-    line = f"fcu: {missing}: file not found"
-    assert err[""] == err["-q"] == [line]
-    assert len(err["-v"]) == 2 and err["-v"][1] == line
-    assert err["-v"][0].startswith(f"fcu: arguments gains={gains}, ")
-    assert f"vehicle={missing}, " in err["-v"][0]
+    assert err["-v"][0].startswith(f"{program}: {first}")
+    assert f"{field}={missing}, " in err["-v"][0]
