@@ -12,31 +12,7 @@ import math
 import numpy as np
 
 from common.jit import njit_loops
-from fcu.envelope.excess import FLOOR_HOVER_SHARE, _rotor_beyond, _turn, _turn_flags
-
-
-@njit_loops
-def rotor_parts(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: float,
-                places: np.ndarray, ends: np.ndarray, i: int, p: np.ndarray) -> None:
-    """Rotor i's rows of `fcu.envelope.excess.scaling_parts` (its arguments) into p (10 x n), from
-    the same expressions."""
-    one = hover.shape[0] == 1
-    for m in range(n):
-        k = places[m]
-        h, lo, hi = (0, 0, 0) if one else (k, n + k, 2 * n + k)
-        for v in range(2):
-            c = 2 * i + v
-            p[v, m] = hover[h, c]
-            p[2 + v, m] = om[k, c] - hover[h, c]
-            p[4 + v, m] = (hover[hi, c] - hover[lo, c]) / h2
-            p[6 + v, m] = ((om[2 * n + k, c] - hover[hi, c]) -
-                           (om[n + k, c] - hover[lo, c])) / h2
-    for m in range(n):
-        w0 = math.sqrt(math.sqrt(p[0, m] ** 2 + p[1, m] ** 2))
-        p[8, m] = min(floor, FLOOR_HOVER_SHARE * w0)
-        p[9, m] = 0.0
-    for m in ends:
-        p[9, m] = math.atan2(p[0, m], p[1, m])
+from fcu.envelope.excess import _rotor_beyond, _turn, _turn_flags, rotor_parts
 
 
 @njit_loops
