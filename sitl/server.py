@@ -292,12 +292,12 @@ class SimulatorServer:
                 self.command = self._command_from(controls, mode)
                 t0 = perf()
                 states = self._advance()
-                self._pace()
                 if timed:
                     ns["wait"] += rx_ns - sent_ns
                     ns["rx"] += parsed_ns - rx_ns
                     ns["plant"] += perf() - t0
                     self.timed_steps += 1
+                self._pace()  # not in the plant's time: it waits for the wall clock
                 self._send_state(states, batch=True, timed=timed)
                 sent_ns = perf()
                 last_progress = time.monotonic()

@@ -262,7 +262,9 @@ def test_speed_factor_paces_the_lockstep_by_the_wall_clock(tmp_path, factor):
     time runs at X times the wall clock's pace, no faster (and does run: a quarter of it even
     on a loaded machine), and neither process spins while it waits: together they use well
     under the two cores a free-running lockstep takes."""
-    stack = launch(tmp_path, sitl_args=("--end-time", "3600", "--speed-factor", f"{factor:g}"))
+    stats = tmp_path / "sitl_stats.json"
+    stack = launch(tmp_path, sitl_args=("--end-time", "3600", "--speed-factor", f"{factor:g}",
+                                        "--stats", str(stats)))
     try:
         s = stack.session
         mission = scenario_mission(load_scenario(SCENARIOS / "case2_impulse.toml"))
@@ -280,6 +282,8 @@ def test_speed_factor_paces_the_lockstep_by_the_wall_clock(tmp_path, factor):
     finally:
         stack.session.close()
         stop(stack.procs)
+    # the wait for the wall clock is not the plant's time (a period is 2 ms / X)
+    assert json.loads(stats.read_text())["stage_us"]["plant"] < 500.0
 
 
 def _cpu_s(pid: int) -> float:
