@@ -354,6 +354,11 @@ BAD_INPUT = [
     (("gcs", "report", "/nonexistent/run"), "/nonexistent/run"),
     (("fcu", *FCU_ARGS, "--stats", "/nonexistent/folder/s.json"), "does not exist"),
     (("sitl", CASE1, "--truth-log", "/nonexistent/folder/t.ulg"), "does not exist"),
+    (("sitl", CASE1, "--speed-factor", "2", "--realtime"),
+     "--speed-factor paces a lockstep (dqflight, px4-hil): not with --realtime"),
+    (("sitl", CASE1, "--speed-factor", "2", "--protocol", "ardupilot-json"),
+     "not with --protocol ardupilot-json"),
+    (("sitl", CASE1, "--speed-factor", "-1"), "--speed-factor -1: a positive number"),
     (("gcs", "router", "--listen", "tcp/127.0.0.1"), "expected PROTO/HOST:PORT"),
 ]
 
