@@ -7,6 +7,11 @@ OUT ?= runs/demo
 
 .PHONY: venv demo test test-fast test-under-load bench lint clean
 
+# Python caches compiled modules (ours, and pytest's rewritten tests) in __pycache__ folders,
+# even where the environment says not to (PYTHONDONTWRITEBYTECODE): the suite starts some
+# hundreds of programs, and each would otherwise compile every module it imports again.
+export PYTHONDONTWRITEBYTECODE :=
+
 venv: $(STAMP)
 
 $(STAMP): pyproject.toml
@@ -48,3 +53,4 @@ lint: venv
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
+	find . -name __pycache__ -not -path './$(VENV)/*' -prune -exec rm -rf {} +

@@ -8,8 +8,10 @@ attitude in ENU/FLU (body x east) is yaw = +90 deg in NED.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from common.quaternion import Quat, Vec3, q_mul
+if TYPE_CHECKING:  # common.quaternion compiles with numba: a ground station needs neither
+    from common.quaternion import Quat, Vec3
 
 _H = math.sqrt(0.5)
 
@@ -42,6 +44,8 @@ def q_enu_flu_to_ned_frd(q: Quat) -> Quat:
     h = _H
     w, x, y, z = q[0], q[1], q[2], q[3]
     if not math.isfinite(w + x + y + z):
+        from common.quaternion import q_mul  # the compiled product, loaded when first needed
+
         r = q_mul(q_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
         return r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
     # a = q_mul(_Q_NED_ENU, q), _Q_NED_ENU = (0, h, h, 0)
@@ -61,29 +65,3 @@ def q_ned_frd_to_enu_flu(q: Quat) -> Quat:
     """Inverse of `q_enu_flu_to_ned_frd`, which is the same map (both fixed rotations are
     their own inverses up to sign), sign chosen with w >= 0."""
     return q_enu_flu_to_ned_frd(q)
-
-
-# Geodetic home: a local tangent plane (flat-earth) approximation around the home point,
-# ample for the few kilometres a SITL flies.
-EARTH_RADIUS_M = 6_378_137.0
-
-
-def ned_to_geodetic(p_ned: Vec3, home_lat_deg: float, home_lon_deg: float,
-                    home_alt_m: float) -> tuple[float, float, float]:
-    """(lat deg, lon deg, alt m AMSL) of a local NED position relative to the home."""
-    lat = home_lat_deg + math.degrees(p_ned[0] / EARTH_RADIUS_M)
-    lon = home_lon_deg + math.degrees(
-        p_ned[1] / (EARTH_RADIUS_M * math.cos(math.radians(home_lat_deg))))
-    return lat, lon, home_alt_m - p_ned[2]
-
-
-def geodetic_to_ned(lat_deg: float, lon_deg: float, alt_m: float, home_lat_deg: float,
-                    home_lon_deg: float, home_alt_m: float) -> Vec3:
-    """The local NED position (m) of a geodetic point (lat deg, lon deg, alt m AMSL) relative
-    to the home: the exact inverse of `ned_to_geodetic` (the same tangent plane), so a
-    position taken there and back agrees to float rounding (nanometres at the kilometres a
-    SITL flies; tests/unit/test_frames.py)."""
-    north = math.radians(lat_deg - home_lat_deg) * EARTH_RADIUS_M
-    east = math.radians(lon_deg - home_lon_deg) * (
-        EARTH_RADIUS_M * math.cos(math.radians(home_lat_deg)))
-    return north, east, home_alt_m - alt_m

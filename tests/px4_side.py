@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from common.config.scenario import VehicleConfig
-from common.frames import geodetic_to_ned
+from common.geodetic import geodetic_to_ned
 from common.wire.mavlink import MAV, encoder, pack, parser
 
 ACCEL = 0b111

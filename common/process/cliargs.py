@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import NoReturn
 
-from common.config.scenario import ConfigError
+from common.config.reader import ConfigError
 
 
 class OneLineParser(argparse.ArgumentParser):

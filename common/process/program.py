@@ -12,7 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
 
-from common.config.scenario import ConfigError
+from common.config.reader import ConfigError
 from common.links import LinkError
 from common.logs.ulog import ULogError
 from common.process import startup

@@ -9,7 +9,7 @@ flight code can use `MissionItem` without one.
 
 Global frames and the local one meet at the home position (`HomePosition`, as HOME_POSITION
 publishes it): `to_local` and `to_global` convert the items whose slots hold a position
-(`common.frames.geodetic_to_ned` / `ned_to_geodetic`, one tangent plane), so the vehicle and
+(`common.geodetic.geodetic_to_ned` / `ned_to_geodetic`, one tangent plane), so the vehicle and
 the ground station convert alike.
 """
 
@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from common.frames import geodetic_to_ned, ned_to_geodetic
+from common.geodetic import geodetic_to_ned, ned_to_geodetic
 from common.wire.mav_enums import MAV_CMD, MAV_FRAME, MAV_MISSION_TYPE
 from common.wire.mavlink_types import as_message
 from common.wire.mavlink_types.protocol import MissionItem as LegacyMissionItem

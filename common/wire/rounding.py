@@ -14,9 +14,12 @@ OverflowError, as packing it into a message would.
 from __future__ import annotations
 
 import struct
+from typing import TYPE_CHECKING
 
 from common.frames import q_enu_flu_to_ned_frd, q_ned_frd_to_enu_flu
-from common.quaternion import Quat, Vec3
+
+if TYPE_CHECKING:
+    from common.quaternion import Quat, Vec3
 
 _F32 = struct.Struct("<f")
 _F32x3 = struct.Struct("<3f")

@@ -11,7 +11,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
+from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
+from common.geodetic import ned_to_geodetic
 from common.quaternion import zyx_euler, zyx_yaw
 from common.wire.identity import FLIGHT_CUSTOM_VERSION
 from common.wire.mav_enums import ATTITUDE_TARGET_TYPEMASK, MAV_FRAME, POSITION_TARGET_TYPEMASK

@@ -14,7 +14,7 @@ import argparse
 import sys
 from collections.abc import Callable
 
-from common.config.scenario import ConfigError
+from common.config.reader import ConfigError
 from common.links import LinkError
 from common.process.diagnostics import get_logger, setup_logging
 from gcs.cli.console import InputError

@@ -7,8 +7,7 @@ import argparse
 import dataclasses
 import time
 
-from common.config.scenario import ConfigError, load_scenario
-from common.config.sensors import resolve_sensor_profile
+from common.config.reader import ConfigError
 from common.process.diagnostics import get_logger, say
 from gcs.cli.console import Progress
 from gcs.report.run_metrics import RunMetrics
@@ -36,6 +35,7 @@ def _summary(m: RunMetrics) -> str:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Exit 0 when the run completed, 1 for any other status, 2 for bad input."""
+    from common.config.scenario import load_scenario  # numba: only for the commands that fly
     from gcs.run.overrides import apply_overrides
     from gcs.run.process_run import Progress as RunProgress
     from gcs.run.process_run import RunError, fleet_of, one_vehicle, run_processes
@@ -104,6 +104,7 @@ def _print_error(m: RunMetrics) -> None:
 
 
 def cmd_table1(args: argparse.Namespace) -> int:
+    from common.config.sensors import resolve_sensor_profile
     from gcs.run.table1_run import run_table1
 
     progress = Progress()

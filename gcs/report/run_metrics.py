@@ -6,9 +6,10 @@ run does not have is absent (total=False below the required ones).
 
 from __future__ import annotations
 
-from typing import Any, TypedDict, cast
+from typing import TYPE_CHECKING, Any, TypedDict, cast
 
-from common.outcome import Event
+if TYPE_CHECKING:  # the type only: reading a run folder needs no flight code (nor numba)
+    from common.outcome import Event
 
 
 class ErrorStats(TypedDict):

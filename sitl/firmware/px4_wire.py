@@ -23,7 +23,8 @@ from typing import NamedTuple
 
 from common.config.scenario import VehicleConfig
 from common.config.sensors import EXACT_GPS, GpsConfig
-from common.frames import enu_to_ned, flu_to_frd, ned_to_geodetic, q_enu_flu_to_ned_frd
+from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
+from common.geodetic import ned_to_geodetic
 from common.wire.mission_items import HomePosition
 from sitl.firmware.rotor_layout import rotors_for_outputs
 from sitl.plant import ActuatorCommand, PlantState

@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from common.frames import ned_to_geodetic
+from common.geodetic import ned_to_geodetic
 from common.wire.mav_enums import MAV_CMD
 from gcs.mission_files.param_files import parse_params
 from tests.arducopter import ROOT, namespace, needs_arducopter, start_arducopter, wait_port

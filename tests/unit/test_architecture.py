@@ -5,6 +5,9 @@ ground station loads the flight code only in the runners that start it."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from functools import cache
+
 import pytest
 
 from tools.codemap import (
@@ -19,9 +22,17 @@ from tools.codemap import (
     path_to,
 )
 
-MODULES = module_paths()
-GRAPH = import_graph(MODULES)
-LOADS = loading_graph(GRAPH)  # importing a.b.c also runs a and a.b
+MODULES = module_paths()  # names only at collection; the graph is parsed when a test asks
+
+
+@cache
+def graph() -> Graph:
+    return import_graph(MODULES)
+
+
+@cache
+def loads() -> Graph:
+    return loading_graph(graph())  # importing a.b.c also runs a and a.b
 
 # The I/O edges, by package: every other module of common/, fcu/ and sitl/ is pure (no
 # MAVLink library, no links, no clocks, no threads, no processes, not even through the
@@ -47,8 +58,8 @@ def _under(name: str, prefixes: tuple[str, ...] | str) -> bool:
     return any(name == p or name.startswith(p + ".") for p in prefixes)
 
 
-def pure_modules(graph: Graph) -> list[str]:
-    return sorted(m for m in graph if _under(m, ("common", "fcu", "sitl")) and m != "common"
+def pure_modules(modules: Iterable[str]) -> list[str]:
+    return sorted(m for m in modules if _under(m, ("common", "fcu", "sitl")) and m != "common"
                   and not _under(m, EDGE) and m not in ("fcu", "sitl"))
 
 
@@ -69,11 +80,11 @@ def forbidden_loads(loads: Graph, module: str, forbidden: tuple[str, ...],
             if _under(m, forbidden)]
 
 
-@pytest.mark.parametrize("module", pure_modules(GRAPH))
+@pytest.mark.parametrize("module", pure_modules(MODULES))
 def test_pure_modules_load_no_io(module):
     """Given a module outside every edge, then nothing it loads, directly or through other
     modules, is a MAVLink library, a link, a clock, a thread, a process or an edge module."""
-    assert io_loaded(LOADS, module) == []
+    assert io_loaded(loads(), module) == []
 
 
 @pytest.mark.parametrize(("package", "forbidden", "why"), [
@@ -84,27 +95,27 @@ def test_pure_modules_load_no_io(module):
 def test_package_loads_none_of_the_packages_it_stays_apart_from(package, forbidden, why):
     """Given every module of a package, then its whole import closure holds none of the
     packages it must stay apart from."""
-    found = [chain for m in GRAPH if _under(m, package)
-             for chain in forbidden_loads(LOADS, m, forbidden)]
+    found = [chain for m in graph() if _under(m, package)
+             for chain in forbidden_loads(loads(), m, forbidden)]
     assert found == [], why
 
 
 def test_only_the_fcu_edge_and_the_runners_load_the_fcu_edge():
     """Given every module, then only fcu/edge itself and the ground station's runners (which
     are the process edge of an FCU they run in-process) load a module of fcu/edge."""
-    found = [chain for m in GRAPH if not _under(m, ("fcu.edge", *RUNNERS, "gcs"))
-             for chain in forbidden_loads(LOADS, m, ("fcu.edge",))]
+    found = [chain for m in graph() if not _under(m, ("fcu.edge", *RUNNERS, "gcs"))
+             for chain in forbidden_loads(loads(), m, ("fcu.edge",))]
     assert found == []
 
 
 def test_gcs_loads_the_flight_code_only_through_its_runners():
     """Given every module of gcs/, then fcu/ and sitl/ are loaded only through a runner; and
     the reports, which read run folders, load neither even through a runner."""
-    found = [chain for m in GRAPH if _under(m, "gcs") and not _under(m, RUNNERS)
-             for chain in forbidden_loads(LOADS, m, ("fcu", "sitl"), through=RUNNERS)]
+    found = [chain for m in graph() if _under(m, "gcs") and not _under(m, RUNNERS)
+             for chain in forbidden_loads(loads(), m, ("fcu", "sitl"), through=RUNNERS)]
     assert found == []
-    reports = [chain for m in GRAPH if _under(m, "gcs.report")
-               for chain in forbidden_loads(LOADS, m, ("fcu", "sitl"))]
+    reports = [chain for m in graph() if _under(m, "gcs.report")
+               for chain in forbidden_loads(loads(), m, ("fcu", "sitl"))]
     assert reports == []
 
 
@@ -130,8 +141,8 @@ def test_the_edges_exist_and_the_rule_covers_the_core():
     """Given the edge and runner lists, then each names a module that exists (a renamed edge
     would silently become pure-checked or unchecked), and the core is under the rule."""
     for name in (*EDGE, *RUNNERS):
-        assert name in GRAPH, f"{name} does not exist"
-    pure = pure_modules(GRAPH)
+        assert name in MODULES, f"{name} does not exist"
+    pure = pure_modules(MODULES)
     for core in ("fcu.control.tracker", "fcu.control.allocation", "fcu.pipeline",
                  "sitl.plant", "common.frames", "fcu.modes.commander", "fcu.estimator.ekf",
                  "fcu.mission.validation", "common.jit", "common.warm_ups"):
@@ -161,7 +172,7 @@ def test_circle_finder_finds_hidden_circles(tmp_path):
 def test_no_import_circle():
     """Given every import in common, fcu, sitl and gcs, wherever it is written, then no
     module reaches itself through its imports."""
-    assert circles({m: t & GRAPH.keys() for m, t in GRAPH.items()}) == []
+    assert circles({m: t & graph().keys() for m, t in graph().items()}) == []
 
 
 MAX_LINES = 500  # one job per file: past this a module has several (split it by job)

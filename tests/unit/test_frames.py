@@ -14,10 +14,10 @@ from common.frames import (
     flu_to_frd,
     frd_to_flu,
     ned_to_enu,
-    ned_to_geodetic,
     q_enu_flu_to_ned_frd,
     q_ned_frd_to_enu_flu,
 )
+from common.geodetic import ned_to_geodetic
 from fcu.control.dualquat import cross, q_exp, q_mul, q_rotate
 
 finite = st.floats(-100.0, 100.0, allow_nan=False)

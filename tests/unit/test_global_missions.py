@@ -1,4 +1,4 @@
-"""Missions in global frames: the geodetic <-> local conversion (common/frames.py), items
+"""Missions in global frames: the geodetic <-> local conversion (common/geodetic.py), items
 converted through the home (common/wire/mission_items.py), the vehicle's acceptance of global
 items and its refusal of local items that MAVProxy scaled by 1e7 (fcu/mission/,
 fcu/edge/mission_protocol.py)."""
@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from common.config.scenario import load_vehicle
-from common.frames import EARTH_RADIUS_M, geodetic_to_ned, ned_to_geodetic
+from common.geodetic import EARTH_RADIUS_M, geodetic_to_ned, ned_to_geodetic
 from common.wire.mavlink import MAV, MAV_CMD_FIGURE_EIGHT, MAV_CMD_POSE_KEYFRAME
 from common.wire.mission_items import (
     GEO_FRAMES,
