@@ -47,7 +47,7 @@ from gcs.vehicle_link.session import Session
 from sitl.plant import Plant, initial_state
 from sitl.sensor_feed import SensorFeed
 
-from .conftest import PID, ROOT, SCENARIOS, VEHICLE, launch, start, stop
+from .conftest import PACE, PID, ROOT, SCENARIOS, VEHICLE, launch, start, stop
 
 M = MAV
 CASE1 = SCENARIOS / "case1_figure8.toml"
@@ -299,7 +299,7 @@ def test_arming_is_refused_until_the_estimator_has_aligned(tmp_path):
         assert any("estimator" in t and "not aligned" in t for t in s.last_texts), s.last_texts
         procs["sitl"] = start("sitl", ["sitl.node", str(CASE1), "--link",
                                        f"udpin:127.0.0.1:{sim_port}", "--sensors", PROFILE,
-                                       "--seed", "2"], tmp_path)
+                                       "--seed", "2", *PACE], tmp_path)
         deadline = time.monotonic() + 30.0
         refusals = 0
         while ack != M.MAV_RESULT_ACCEPTED and time.monotonic() < deadline:

@@ -16,7 +16,7 @@ from common.config.scenario import load_scenario
 from gcs.mission_files.toml import format_toml
 from gcs.run.scenario_mission import scenario_mission
 
-from .conftest import PID, ROOT, SCENARIOS, VEHICLE
+from .conftest import PACE, PID, ROOT, SCENARIOS, VEHICLE
 from .waits import until
 
 pytestmark = pytest.mark.timeout(180)
@@ -82,7 +82,7 @@ def test_ground_station_in_another_namespace_flies_the_vehicle(namespaces, tmp_p
               (tmp_path / "router.log").read_text(), "the router listening")
         assert procs[0].poll() is None, (tmp_path / "router.log").read_text()
         procs += [in_ns(ns_v, "sitl", "sitl.node", str(SCENARIOS / "case1_figure8.toml"),
-                        "--link", url, "--end-time", "600"),
+                        "--link", url, "--end-time", "600", *PACE),
                   in_ns(ns_v, "fcu", "fcu.edge.node", "--vehicle", str(VEHICLE), "--gains",
                         str(PID), "--sim", url, "--gcs", url)]
         status = gcs("status")

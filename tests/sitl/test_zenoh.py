@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import pytest
 import zenoh
@@ -20,7 +21,7 @@ from common.links import free_port
 from common.links.zenoh_link import client_config, router_running
 from gcs.run.process_run import run_processes
 
-from .conftest import ROOT, SCENARIOS
+from .conftest import PACE, ROOT, SCENARIOS
 
 CASE1 = SCENARIOS / "case1_figure8.toml"
 pytestmark = pytest.mark.timeout(300)
@@ -28,9 +29,10 @@ pytestmark = pytest.mark.timeout(300)
 FIGURES = ("position_error_m", "attitude_error_rad", "samples", "sim_time_s")
 
 
-@pytest.fixture
+@pytest.fixture(scope="module")
 def router() -> Iterator[str]:
-    """A `gcs router` of this test's own on a free port; yields its endpoint."""
+    """A `gcs router` of this module's own on a free port (each test its own key prefix);
+    yields its endpoint."""
     endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
     proc = subprocess.Popen([sys.executable, "-m", "gcs.cli", "router", "--listen", endpoint],
                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
@@ -45,21 +47,42 @@ def router() -> Iterator[str]:
         proc.wait(timeout=10)
 
 
-def _short(seconds: float):
-    return dataclasses.replace(load_scenario(CASE1), duration_s=seconds)
+SHORT_S = 6.0  # the climb of Case I: every flight of this module is this long
+# The flights share one single-vehicle Zenoh run (`single`): they run on one worker.
+FLIGHTS = pytest.mark.xdist_group("zenoh_flights")
 
 
-def test_case1_over_zenoh_equals_udp_exactly(tmp_path, router):
-    """GCS and simulator links both on Zenoh, lockstep: the error figures of the UDP run."""
-    sc = _short(12.0)
-    udp = run_processes(sc, tmp_path / "udp")
-    zen = run_processes(sc, tmp_path / "zenoh", transport="zenoh",
-                        zenoh_url=f"zenoh:t1@{router}")
+def _short():
+    return dataclasses.replace(load_scenario(CASE1), duration_s=SHORT_S)
+
+
+@dataclasses.dataclass(frozen=True)
+class Single:
+    out: Path
+    metrics: dict
+
+
+@pytest.fixture(scope="module")
+def single(router, tmp_path_factory) -> Single:
+    """Case I's first SHORT_S over Zenoh (GCS and simulator links), one vehicle, lockstep:
+    what the UDP run and every vehicle of a fleet are compared with."""
+    out = tmp_path_factory.mktemp("zenoh") / "single"
+    m = run_processes(_short(), out, transport="zenoh", zenoh_url=f"zenoh:single@{router}")
+    return Single(out, dict(m))
+
+
+@FLIGHTS
+def test_case1_over_zenoh_equals_udp_exactly(tmp_path, single):
+    """GCS and simulator links both on Zenoh, lockstep: the error figures and the truth log
+    of the UDP run."""
+    udp = run_processes(_short(), tmp_path / "udp")
+    zen = single.metrics
     assert zen["transport"] == "zenoh" and zen["lockstep"] and zen["status"] == "completed"
+    assert udp["transport"] == "udp"
     for key in FIGURES:
         assert zen[key] == udp[key]
     assert (tmp_path / "udp" / "truth.ulg").read_bytes() == \
-        (tmp_path / "zenoh" / "truth.ulg").read_bytes()
+        (single.out / "truth.ulg").read_bytes()
 
 
 def _observer(router: str, prefix: str, seen: dict, done: Callable[[], bool],
@@ -86,16 +109,15 @@ def _observer(router: str, prefix: str, seen: dict, done: Callable[[], bool],
     session.close()
 
 
-def test_fleet_of_four_flies_like_one_with_observers(tmp_path, router):
+@FLIGHTS
+def test_fleet_of_four_flies_like_one_with_observers(tmp_path, router, single):
     """A fleet of 4 (ids 1..4) completes with each vehicle's figures equal to the single
     run; an observer joining late and one leaving early change nothing; a plain subscriber
     decodes HEARTBEAT and ATTITUDE_QUATERNION from every vehicle's out key."""
-    sc = _short(8.0)
     url = f"zenoh:fleet@{router}"
-    single = run_processes(sc, tmp_path / "single", transport="zenoh", zenoh_url=url)
     seen_early: dict = {}
     seen_late: dict = {}
-    # On the fleet's flight clock (8 s): the late observer joins at 2 s, the early one
+    # On the fleet's flight clock (6 s): the late observer joins at 2 s, the early one
     # leaves at 4 s once it has heard every vehicle; both leave when the fleet has landed.
     clock_s: dict = {}
     ended = threading.Event()
@@ -121,7 +143,7 @@ def test_fleet_of_four_flies_like_one_with_observers(tmp_path, router):
     early.start()
     late.start()
     try:
-        fleet = run_processes(sc, tmp_path / "fleet", transport="zenoh", zenoh_url=url,
+        fleet = run_processes(_short(), tmp_path / "fleet", transport="zenoh", zenoh_url=url,
                               fleet=4)
     finally:
         ended.set()
@@ -132,7 +154,7 @@ def test_fleet_of_four_flies_like_one_with_observers(tmp_path, router):
         m = json.loads((tmp_path / "fleet" / f"vehicle{n}" / "metrics.json").read_text())
         assert m["system_id"] == n
         for key in FIGURES:
-            assert m[key] == single[key], (n, key)
+            assert m[key] == single.metrics[key], (n, key)
     assert json.loads((tmp_path / "fleet" / "fleet.json").read_text())["fleet"] == 4
     for n in range(1, 5):
         assert seen_early.get((f"fleet/{n}/out", "HEARTBEAT"), 0) >= 1
@@ -140,19 +162,18 @@ def test_fleet_of_four_flies_like_one_with_observers(tmp_path, router):
     assert seen_late  # the late observer heard the fleet too
 
 
-def test_fleet_with_spacing_within_a_micrometre(tmp_path, router):
+@FLIGHTS
+def test_fleet_with_spacing_within_a_micrometre(tmp_path, router, single):
     """Spread 3 m apart, each vehicle flies its own offset copy of the mission."""
-    sc = _short(6.0)
     url = f"zenoh:spaced@{router}"
-    single = run_processes(sc, tmp_path / "single", transport="zenoh", zenoh_url=url)
-    fleet = run_processes(sc, tmp_path / "fleet", transport="zenoh", zenoh_url=url, fleet=2,
-                          spacing_m=3.0)
+    fleet = run_processes(_short(), tmp_path / "fleet", transport="zenoh", zenoh_url=url,
+                          fleet=2, spacing_m=3.0)
     assert fleet["all_completed"]
     two = fleet["vehicles"]["2"]
     assert two["start_position_enu_m"] == [3.0, 0.0, 0.0]
     for part in ("position_error_m", "attitude_error_rad"):
         for stat in ("max", "mean", "rmse"):
-            assert abs(two[part][stat] - single[part][stat]) < 1e-6
+            assert abs(two[part][stat] - single.metrics[part][stat]) < 1e-6
 
 
 def test_ground_station_discovers_and_picks_vehicles(tmp_path, router):
@@ -164,7 +185,7 @@ def test_ground_station_discovers_and_picks_vehicles(tmp_path, router):
     procs = {}
     for n in (3, 7):
         procs[f"sitl{n}"] = start(f"sitl{n}", ["sitl.node", str(CASE1), "--link", url,
-                                               "--sysid", str(n)], tmp_path)
+                                               "--sysid", str(n), *PACE], tmp_path)
         procs[f"fcu{n}"] = start(f"fcu{n}", ["fcu.edge.node", "--vehicle", str(VEHICLE), "--gains",
                                              str(PID), "--sim", url, "--gcs", url, "--sysid",
                                              str(n)], tmp_path)
