@@ -94,7 +94,8 @@ def _param_load(args: argparse.Namespace, session: Session) -> int:
     for e in entries:
         try:  # the vehicle's own type, whatever the file says (older files say 9 for all)
             ptype = vl.param_read(session, e.name).param_type
-            value, texts = vl.param_set(session, e.name, e.value, param_type=ptype)
+            value, texts = vl.param_set(session, e.name, e.value, param_type=ptype,
+                                        linger=False)
         except vl.ParamRefused as exc:
             say(f"{e.name}: {exc.reason}")
             refused += 1

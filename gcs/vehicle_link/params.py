@@ -207,15 +207,17 @@ def param_get(session: Session, name: str, timeout: float = PARAM.ceiling_s) -> 
 
 
 def param_set(session: Session, name: str, value: float, timeout: float = PARAM.ceiling_s, *,
-              param_type: int | None = None) -> tuple[float, list[str]]:
+              param_type: int | None = None, linger: bool = True) -> tuple[float, list[str]]:
     """Set a parameter in its real type (read first unless `param_type` is given), encoded
     as the vehicle carries it; returns (value now in force, STATUSTEXTs heard meanwhile).
     PARAM_SET is re-sent each PARAM.resend_s without an echo (the same value again: the
     parameter protocol's recovery); GcsError when the vehicle falls silent or at the
     ceiling `timeout`. The value in force is the echo that equals what was sent if one
     came within ECHO_QUIET_S of the first (a stale answer to the read may come first),
-    else the last echo: a vehicle that clamps the value echoes the clamped one.
-    ParamValueError for a value the type cannot carry."""
+    else the last echo: a vehicle that clamps the value echoes the clamped one. Without
+    `linger` (a file loaded item by item) an echo of the value sent ends the wait at once,
+    with no time left for a note sent after it. ParamValueError for a value the type cannot
+    carry."""
     s = session
     if param_type is None:
         param_type = param_read(s, name, timeout).param_type
@@ -243,6 +245,8 @@ def param_set(session: Session, name: str, value: float, timeout: float = PARAM.
             elif msg.param_id == name:
                 echoes.append(param_wire.decode(param_wire.raw_value(msg), param_type,
                                                 encoding))
+                if not linger and echoes[-1] == want:
+                    break  # taken as sent
                 quiet_until = time.monotonic() + ECHO_QUIET_S  # a refusal may come after
         if quiet_until is None and wait.due() and not wait.expired():
             s.send(request)

@@ -131,3 +131,19 @@ def test_save_load_round_trip_keeps_types_and_values(vehicles, capsys, tmp_path,
     assert v.params == params
     assert sorted((n, t) for n, t, _ in v.param_sets) == sorted((n, t) for n, (_, t) in
                                                                params.items())
+
+
+@pytest.mark.timeout(25)
+def test_load_takes_each_echo_of_the_value_sent_at_once(vehicles, capsys, tmp_path,
+                                                        monkeypatch):
+    """Given a file loaded item by item, then a set whose echo is the value sent ends there:
+    with the wait for a note after an echo (`ECHO_QUIET_S`, for `gcs param set`) made 30 s,
+    the load of the vehicle's parameters still ends within the test's 25 s."""
+    from gcs.vehicle_link import params as vl
+
+    v = vehicles("ardupilot", ARDU_PARAMS)
+    saved = tmp_path / "ardupilot.params"
+    assert gcs(capsys, v, "param", "save", str(saved))[0] == 0
+    monkeypatch.setattr(vl, "ECHO_QUIET_S", 30.0)
+    code, out, _ = gcs(capsys, v, "param", "load", str(saved))
+    assert code == 0 and f"loaded {len(ARDU_PARAMS)} of {len(ARDU_PARAMS)}" in out, out
