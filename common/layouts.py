@@ -3,12 +3,16 @@
 Each array is a `Layout`: its fields in order, as (name, size). The integer offsets the
 kernels index with are module constants taken from those tables where the arrays are
 declared (`fcu.control.layouts`, `fcu.estimator.layouts`, `sitl.layouts`): numba freezes a
-module's globals when it compiles a kernel, so `x[X_Q + 1]` costs what `x[4]` does, and the
-Python code that packs and unpacks the arrays uses the same constants. Frames and units are
-those of the field names (world ENU, body FLU, SI).
+module's globals when it compiles a kernel, so `x[X_Q + 1]` costs what `x[4]` does. The
+Python code that fills, reads and shares the arrays takes a field by name from the same
+table (`view`: a view of the field, so that the parts of a fused kernel's buffers are the
+buffers of the stages that make it up). Frames and units are those of the field names
+(world ENU, body FLU, SI).
 """
 
 from __future__ import annotations
+
+import numpy as np
 
 
 class Layout:
@@ -18,6 +22,7 @@ class Layout:
     def __init__(self, *fields: tuple[str, int]) -> None:
         self.fields = fields
         self._offsets: dict[str, int] = {}
+        self._sizes = dict(fields)
         offset = 0
         for name, size in fields:
             self._offsets[name] = offset
@@ -27,6 +32,19 @@ class Layout:
     def at(self, name: str) -> int:
         """The offset of field `name`."""
         return self._offsets[name]
+
+    def span(self, name: str) -> slice:
+        """The slice of field `name` in the array."""
+        offset = self._offsets[name]
+        return slice(offset, offset + self._sizes[name])
+
+    def view(self, array: np.ndarray, name: str) -> np.ndarray:
+        """Field `name` of `array` (of this layout's size) as a view: writing it writes the
+        array."""
+        if array.shape != (self.size,):
+            raise ValueError(f"an array of {array.shape} is not of this layout's "
+                             f"({self.size},)")
+        return array[self.span(name)]
 
     def names(self) -> tuple[str, ...]:
         return tuple(name for name, _ in self.fields)

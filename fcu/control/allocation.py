@@ -28,6 +28,7 @@ from fcu.control.layouts import (
     A_SIZE,
     A_WMAX,
     ALLOC_OUT,
+    ALLOC_PARAMS,
     AO_OMEGA,
     AO_SATURATED,
     AO_SIZE,
@@ -36,12 +37,13 @@ from fcu.control.layouts import (
     AO_TILT_RAW,
     L_HOLD,
     L_LEAD_MAX,
-    L_PINV,
     L_SIZE,
     L_TAU_DOWN,
     L_TAU_UP,
     L_TILT_RATE,
     L_WMAX,
+    LAG_PARAMS,
+    LAG_STATE,
     LS_A_LAST,
     LS_BIAS,
     LS_HAS_LAST,
@@ -49,7 +51,6 @@ from fcu.control.layouts import (
     LS_MODEL,
     LS_SIZE,
     LS_W_LAST,
-    PINV_SIZE,
 )
 
 TWO_PI = 2.0 * math.pi
@@ -159,7 +160,7 @@ class Allocator:
         self.speed_max = vehicle.rotor_speed_max_rad_s
         self.hold_speed = hold_speed_rad_s
         self.params = np.zeros(A_SIZE)
-        self.params[A_PINV:A_PINV + PINV_SIZE] = pinv_params(vehicle)
+        ALLOC_PARAMS.view(self.params, "pinv")[:] = pinv_params(vehicle)
         self.params[A_WMAX], self.params[A_HOLD] = self.speed_max, hold_speed_rad_s
         self.tilt_array = np.array(initial_tilt_rad or (0.0,) * self.n, dtype=np.float64)
 
@@ -301,7 +302,7 @@ class LagCompensator:
         self.lead_max = LEAD_MAX_SHARE * self.speed_max
         self.hold_speed = hold_speed_rad_s
         cp = self.params = np.zeros(L_SIZE)
-        cp[L_PINV:L_PINV + PINV_SIZE] = pinv_params(vehicle)
+        LAG_PARAMS.view(cp, "pinv")[:] = pinv_params(vehicle)
         cp[L_WMAX], cp[L_LEAD_MAX], cp[L_HOLD] = self.speed_max, self.lead_max, hold_speed_rad_s
         cp[L_TAU_UP], cp[L_TAU_DOWN], cp[L_TILT_RATE] = self.figures
         self.state = np.zeros(LS_SIZE)
@@ -322,12 +323,12 @@ class LagCompensator:
     def model(self) -> list[float] | None:
         """The rotors' speeds by the internal model (None before the first command)."""
         cs = self.state
-        return cs[LS_MODEL:LS_MODEL + N_ROTORS].tolist() if cs[LS_HAS_MODEL] else None
+        return LAG_STATE.view(cs, "model_rad_s").tolist() if cs[LS_HAS_MODEL] else None
 
     @property
     def mean_bias(self) -> list[float]:
         """The mean correction b_i."""
-        return list(self.state[LS_BIAS:LS_BIAS + N_ROTORS].tolist())
+        return list(LAG_STATE.view(self.state, "bias_rad_s").tolist())
 
     def nominal(self, force_flu_n: Vec3,
                 torque_flu_nm: Vec3) -> tuple[tuple[float, ...], tuple[float, ...]]:

@@ -38,6 +38,10 @@ from fcu.control.layouts import (
     CO_ALLOC,
     CO_SIZE,
     CO_TRACKER,
+    CORE_IN,
+    CORE_OUT,
+    CORE_PARAMS,
+    CORE_STATE,
     CP_ALLOC,
     CP_LAG,
     CP_SIZE,
@@ -146,9 +150,14 @@ class FlightCore:
         self.lag_compensation = lag_compensation
         self.params = np.zeros(PARAMS_SIZE)
         self.state = np.zeros(STATE_SIZE)
-        self.tracker.bind(self.params[CP_TRACKER:CP_ALLOC], self.state[CS_INTEGRAL:CS_TILT])
-        self.allocator.bind(self.params[CP_ALLOC:CP_LAG], self.state[CS_TILT:CS_LAG])
-        self.compensator.bind(self.params[CP_LAG:CP_SIZE], self.state[CS_LAG:CS_SIZE])
+        # the stages keep their parameters and state in the fused step's buffers
+        params, state = self.params, self.state
+        self.tracker.bind(CORE_PARAMS.view(params, "tracker"),
+                          CORE_STATE.view(state, "integral"))
+        self.allocator.bind(CORE_PARAMS.view(params, "allocator"),
+                            CORE_STATE.view(state, "tilt_rad"))
+        self.compensator.bind(CORE_PARAMS.view(params, "compensator"),
+                              CORE_STATE.view(state, "compensator"))
         self.inp = np.zeros(IN_SIZE)
         self.out = np.zeros(OUT_SIZE)
         warm_up("fcu.control.core", self._warm_up)
@@ -182,9 +191,11 @@ class FlightCore:
         """One control period of dt_s (default: the nominal period): desired wrench
         (eq. 16/33), then speeds and tilts (eq. 28-29), led for the actuators' lag when
         lag compensation is on."""
-        self.inp[CI_X:CI_DT] = (*state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
-                          *state.omega_flu_rad_s, *ref.p_enu_m, *ref.q_enu_flu, *ref.v_enu_m_s,
-                          *ref.a_enu_m_s2, *ref.omega_flu_rad_s, *ref.omega_dot_flu_rad_s2)
-        out = self.step_arrays(self.dt_s if dt_s is None else float(dt_s)).tolist()
-        return StepResult(ref, tracker_output(out[CO_TRACKER:CO_ALLOC]),
-                          allocation_result(out[CO_ALLOC:CO_SIZE]))
+        CORE_IN.view(self.inp, "state")[:] = (*state.p_enu_m, *state.q_enu_flu,
+                                              *state.v_flu_m_s, *state.omega_flu_rad_s)
+        CORE_IN.view(self.inp, "reference")[:] = (
+            *ref.p_enu_m, *ref.q_enu_flu, *ref.v_enu_m_s, *ref.a_enu_m_s2,
+            *ref.omega_flu_rad_s, *ref.omega_dot_flu_rad_s2)
+        out = self.step_arrays(self.dt_s if dt_s is None else float(dt_s))
+        return StepResult(ref, tracker_output(CORE_OUT.view(out, "tracker").tolist()),
+                          allocation_result(CORE_OUT.view(out, "allocation").tolist()))

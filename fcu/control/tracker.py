@@ -52,6 +52,7 @@ from fcu.control.layouts import (
     T_TORQUE,
     T_XI,
     TRACKER_OUT,
+    TRACKER_PARAMS,
     VEHICLE_STATE,
     X_P,
     X_Q,
@@ -193,7 +194,7 @@ class DualQuaternionTracker:
         self.gravity = vehicle.gravity_m_s2
         self.params = np.zeros(K_SIZE)
         self.params[K_MASS] = self.mass
-        self.params[K_J:K_J + 3] = self.inertia
+        TRACKER_PARAMS.view(self.params, "inertia_diag_kg_m2")[:] = self.inertia
         self.params[K_G] = self.gravity
         self.integral_array = np.zeros(DUAL_VEC_SIZE)  # the kernel's integral of ln q_hat_e
         self.set_gains(gains)
@@ -213,9 +214,9 @@ class DualQuaternionTracker:
     def set_gains(self, gains: Gains) -> None:
         self.gains = gains
         k = self.params
-        k[K_P:K_P + DUAL_VEC_SIZE] = (*gains.kp_r, *gains.kp_d)
-        k[K_I:K_I + DUAL_VEC_SIZE] = (*gains.ki_r, *gains.ki_d)
-        k[K_D:K_D + DUAL_VEC_SIZE] = (*gains.kd_r, *gains.kd_d)
+        TRACKER_PARAMS.view(k, "kp")[:] = (*gains.kp_r, *gains.kp_d)
+        TRACKER_PARAMS.view(k, "ki")[:] = (*gains.ki_r, *gains.ki_d)
+        TRACKER_PARAMS.view(k, "kd")[:] = (*gains.kd_r, *gains.kd_d)
         k[K_IS_PD] = 1.0 if gains.is_pd else 0.0
         k[K_LOG_RATE] = 1.0 if gains.damping == "log_rate" else 0.0
 
