@@ -1,5 +1,7 @@
-"""Lockstep runs through the three processes: the same flight as in-process, deterministic,
-unchanged by loss on the simulator link, and a repeated state answered from store."""
+"""Lockstep runs through the three processes: the same flight as in-process, over TCP as
+over UDP, paced by the wall clock when asked, and a repeated state answered from store.
+(Loss on the simulator link, which changes the timing and not one byte of the flight:
+tests/sitl/test_lossy_lockstep.py.)"""
 
 from __future__ import annotations
 
@@ -32,7 +34,6 @@ from gcs.run.scenario_mission import scenario_mission
 from gcs.vehicle_link.mission_client import upload
 
 from .. import reference_runs
-from ..udp_proxy import Impairment, UdpProxy
 from .conftest import ROOT, SCENARIOS, launch, stop
 
 M = MAV
@@ -79,45 +80,6 @@ def test_case1_through_processes_matches_in_process(tmp_path):
         worst = max(worst, float(np.max(np.abs(row[idx] - expected))))
     assert worst < 1e-9
     assert (out / "flight.tlog").stat().st_size > 10_000
-
-
-def test_lockstep_runs_are_deterministic(tmp_path):
-    """Two lockstep runs of the same scenario: identical error figures and truth logs."""
-    a, b = tmp_path / "a", tmp_path / "b"
-    for out in (a, b):
-        proc = _gcs_run(out, "--duration", "12")
-        assert proc.returncode == 0, proc.stdout + proc.stderr
-    ma, mb = (json.loads((d / "metrics.json").read_text()) for d in (a, b))
-    for key in ("position_error_m", "attitude_error_rad", "sim_time_s", "samples"):
-        assert ma[key] == mb[key]
-    assert ma["sim_time_s"] == pytest.approx(12.0)
-    assert (a / "truth.ulg").read_bytes() == (b / "truth.ulg").read_bytes()
-
-
-def test_loss_on_the_simulator_link_changes_timing_not_results(tmp_path):
-    """5 % of datagrams dropped both ways (and some duplicated): Case I's first 20 s
-    complete without deadlock and give exactly the figures of the loss-free run."""
-    scenario = dataclasses.replace(load_scenario(CASE1), duration_s=20.0)
-    clean = run_processes(scenario, tmp_path / "clean")
-    proxies = []
-
-    def route(port):
-        proxy = UdpProxy(port, Impairment(drop=0.05, duplicate=0.02), seed=7)
-        proxies.append(proxy)
-        return proxy.port
-
-    try:
-        lossy = run_processes(scenario, tmp_path / "lossy", sim_route=route)
-    finally:
-        for p in proxies:
-            p.close()
-    assert proxies[0].counts["dropped"] > 100
-    assert lossy["status"] == "completed" and lossy["sim_time_s"] == pytest.approx(20.0)
-    for key in ("position_error_m", "attitude_error_rad", "samples"):
-        assert lossy[key] == clean[key]
-    assert lossy["fcu"]["resent_answers"] > 0
-    assert (tmp_path / "clean" / "truth.ulg").read_bytes() == \
-        (tmp_path / "lossy" / "truth.ulg").read_bytes()
 
 
 def test_repeated_state_gets_the_stored_answer(tmp_path):

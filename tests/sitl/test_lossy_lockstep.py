@@ -41,7 +41,8 @@ def _lossy_run(scenario, out, seed: int) -> tuple[dict, dict[str, int]]:
 def test_ten_percent_loss_with_duplication_and_reordering_gives_the_same_flight(tmp_path):
     """Case I's first 30 s with 10 % of the simulator link's datagrams dropped both ways,
     5 % duplicated and 5 % held back behind the next ones: no deadlock, and exactly the
-    loss-free run's figures, samples, truth log and onboard log (but its step times)."""
+    loss-free run's figures, samples, truth log and onboard log (but its step times). (Two
+    lockstep runs are one flight: the same bytes whatever the link does to their timing.)"""
     scenario = dataclasses.replace(load_scenario(CASE1), duration_s=30.0)
     t0 = time.monotonic()
     clean = run_processes(scenario, tmp_path / "clean")
