@@ -38,8 +38,6 @@ from fcu.control.layouts import (
     CO_ALLOC,
     CO_SIZE,
     CO_TRACKER,
-    CORE_IN,
-    CORE_OUT,
     CORE_PARAMS,
     CORE_STATE,
     CP_ALLOC,
@@ -191,11 +189,12 @@ class FlightCore:
         """One control period of dt_s (default: the nominal period): desired wrench
         (eq. 16/33), then speeds and tilts (eq. 28-29), led for the actuators' lag when
         lag compensation is on."""
-        CORE_IN.view(self.inp, "state")[:] = (*state.p_enu_m, *state.q_enu_flu,
-                                              *state.v_flu_m_s, *state.omega_flu_rad_s)
-        CORE_IN.view(self.inp, "reference")[:] = (
-            *ref.p_enu_m, *ref.q_enu_flu, *ref.v_enu_m_s, *ref.a_enu_m_s2,
-            *ref.omega_flu_rad_s, *ref.omega_dot_flu_rad_s2)
-        out = self.step_arrays(self.dt_s if dt_s is None else float(dt_s))
-        return StepResult(ref, tracker_output(CORE_OUT.view(out, "tracker").tolist()),
-                          allocation_result(CORE_OUT.view(out, "allocation").tolist()))
+        # the control step's hot path: one slice for state and reference (CORE_IN's first
+        # two fields), plain offsets rather than views by name
+        self.inp[CI_X:CI_DT] = (*state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
+                                *state.omega_flu_rad_s, *ref.p_enu_m, *ref.q_enu_flu,
+                                *ref.v_enu_m_s, *ref.a_enu_m_s2, *ref.omega_flu_rad_s,
+                                *ref.omega_dot_flu_rad_s2)
+        out = self.step_arrays(self.dt_s if dt_s is None else float(dt_s)).tolist()
+        return StepResult(ref, tracker_output(out[CO_TRACKER:CO_ALLOC]),
+                          allocation_result(out[CO_ALLOC:CO_SIZE]))
