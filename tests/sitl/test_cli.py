@@ -11,6 +11,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,8 +46,8 @@ class Vehicle:
                               timeout=timeout, check=False)
 
 
-@pytest.fixture
-def vehicle(tmp_path) -> Iterator[Vehicle]:
+@contextmanager
+def _vehicle(tmp_path: Path) -> Iterator[Vehicle]:
     """sitl (Case I start: on the ground, lockstep paced: `PACE`) and fcu sending to a free
     GCS port."""
     sim, gcs = free_port(), free_port()
@@ -73,6 +74,25 @@ def vehicle(tmp_path) -> Iterator[Vehicle]:
         stop(procs)
 
 
+@pytest.fixture
+def vehicle(tmp_path) -> Iterator[Vehicle]:
+    """A vehicle of the test's own, for a test that arms, flies or stops it."""
+    with _vehicle(tmp_path) as v:
+        yield v
+
+
+# The tests that leave the vehicle on the ground, disarmed in HOLD, share one (their group
+# runs on one worker, in the file's order): each uploads its own mission or none.
+ON_THE_GROUND = pytest.mark.xdist_group("cli_ground_vehicle")
+
+
+@pytest.fixture(scope="module")
+def ground_vehicle(tmp_path_factory) -> Iterator[Vehicle]:
+    """One vehicle for the module's tests that keep it on the ground."""
+    with _vehicle(tmp_path_factory.mktemp("ground_vehicle")) as v:
+        yield v
+
+
 def test_status_arm_mode_disarm(vehicle):
     """status shows identity and state, formatted (no Python notation, millimetres);
     arm, mode and disarm report the vehicle's answer, a refusal with its reason."""
@@ -95,7 +115,8 @@ def test_status_arm_mode_disarm(vehicle):
     assert vehicle.gcs("disarm").stdout.strip() == "disarm: MAV_RESULT_ACCEPTED"
 
 
-def test_status_asks_for_what_is_not_streamed(vehicle):
+@ON_THE_GROUND
+def test_status_asks_for_what_is_not_streamed(ground_vehicle):
     """Given a link on which the vehicle no longer streams EXTENDED_SYS_STATE and
     MISSION_CURRENT (SET_MESSAGE_INTERVAL -1), when status runs, then it still shows the
     landed state and the mission: it asks for them (REQUEST_MESSAGE) rather than hoping
@@ -104,7 +125,7 @@ def test_status_asks_for_what_is_not_streamed(vehicle):
 
     from gcs.vehicle_link.session import Session
 
-    session = Session(vehicle.connect)
+    session = Session(ground_vehicle.connect)
     try:
         session.wait_vehicle(timeout=30.0)
         for msg_id in (M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, M.MAVLINK_MSG_ID_MISSION_CURRENT):
@@ -115,14 +136,15 @@ def test_status_asks_for_what_is_not_streamed(vehicle):
     finally:
         session.close()
     for _ in range(3):
-        out = vehicle.gcs("status")
+        out = ground_vehicle.gcs("status")
         assert out.returncode == 0, out.stderr
         assert "landed: on ground" in out.stdout and "mission: none" in out.stdout, out.stdout
 
 
-def test_status_json_is_one_document(vehicle):
+@ON_THE_GROUND
+def test_status_json_is_one_document(ground_vehicle):
     """status --json prints one JSON document with float32 values in their shortest form."""
-    out = vehicle.gcs("status", "--json")
+    out = ground_vehicle.gcs("status", "--json")
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
     assert doc["system"] == 1 and doc["mode"] == "HOLD" and doc["armed"] is False
@@ -132,8 +154,9 @@ def test_status_json_is_one_document(vehicle):
     assert set(doc["link"]) == {"loss_percent", "received", "lost"}
 
 
+@ON_THE_GROUND
 @pytest.mark.parametrize("fmt", ["wpl", "toml"])
-def test_mission_files_round_trip_through_the_vehicle(vehicle, tmp_path, fmt):
+def test_mission_files_round_trip_through_the_vehicle(ground_vehicle, tmp_path, fmt):
     """A mission file uploads and downloads back unchanged, byte for byte, in both formats;
     clear empties the vehicle's mission; a broken file is refused before any upload."""
     items = [*scenario_mission(load_scenario(SCENARIOS / "case1_figure8.toml")),
@@ -142,24 +165,26 @@ def test_mission_files_round_trip_through_the_vehicle(vehicle, tmp_path, fmt):
     text = format_wpl(items) if fmt == "wpl" else format_toml(items)
     src = tmp_path / f"mission.{'waypoints' if fmt == 'wpl' else 'toml'}"
     src.write_text(text)
-    up = vehicle.gcs("mission", "upload", str(src))
+    up = ground_vehicle.gcs("mission", "upload", str(src))
     assert up.returncode == 0 and "5 items: MAV_MISSION_ACCEPTED" in up.stdout, up.stderr
     back = tmp_path / f"back{src.suffix}"
-    assert vehicle.gcs("mission", "download", str(back)).returncode == 0
+    assert ground_vehicle.gcs("mission", "download", str(back)).returncode == 0
     assert back.read_text() == text
-    shown = vehicle.gcs("mission", "download", "--format", fmt)
+    shown = ground_vehicle.gcs("mission", "download", "--format", fmt)
     assert shown.stdout == text
     broken = tmp_path / "broken.toml"
     broken.write_text('[[item]]\ntype = "keyframe"\ntime_s = 1.0\n')
-    refused = vehicle.gcs("mission", "upload", str(broken))
+    refused = ground_vehicle.gcs("mission", "upload", str(broken))
     assert refused.returncode == 2 and "position_ned_m" in refused.stderr
-    assert vehicle.gcs("mission", "download", str(back)).returncode == 0
+    assert ground_vehicle.gcs("mission", "download", str(back)).returncode == 0
     assert back.read_text() == text  # the refused file changed nothing
-    assert vehicle.gcs("mission", "clear").returncode == 0
-    assert vehicle.gcs("mission", "download", "--format", "wpl").stdout == "QGC WPL 110\n"
+    assert ground_vehicle.gcs("mission", "clear").returncode == 0
+    assert ground_vehicle.gcs("mission", "download", "--format",
+                              "wpl").stdout == "QGC WPL 110\n"
 
 
-def test_mission_the_vehicle_cannot_fly_is_refused_with_the_reason(vehicle, tmp_path):
+@ON_THE_GROUND
+def test_mission_the_vehicle_cannot_fly_is_refused_with_the_reason(ground_vehicle, tmp_path):
     """A keyframe 2 m away in 0.5 s (about 46 m/s^2 at its peak) is refused at upload, and
     `gcs mission upload` shows the vehicle's reason (the item and the rotor limit); 2 m legs
     at the cruise speed are accepted (the vehicle stretches them)."""
@@ -167,7 +192,7 @@ def test_mission_the_vehicle_cannot_fly_is_refused_with_the_reason(vehicle, tmp_
     src.write_text('format = "dqflight-mission-1"\n[[item]]\ntype = "keyframe"\n'
                    "time_s = 0.5\nposition_ned_m = [2.0, 0.0, -3.0]\n"
                    "rotvec_ned_frd_rad = [0.0, 0.0, 1.5707963267948966]\n")
-    up = vehicle.gcs("mission", "upload", str(src))
+    up = ground_vehicle.gcs("mission", "upload", str(src))
     assert up.returncode == 1, up.stdout + up.stderr
     assert "MAV_MISSION_DENIED" in up.stdout and "item 0" in up.stdout, up.stdout
     assert "rad/s" in up.stdout and "lengthen p1" in up.stdout, up.stdout
@@ -175,7 +200,7 @@ def test_mission_the_vehicle_cannot_fly_is_refused_with_the_reason(vehicle, tmp_
     legs.write_text('format = "dqflight-mission-1"\n' + "".join(
         f'[[item]]\ntype = "waypoint"\nposition_ned_m = [{x}, 0.0, -3.0]\nhold_s = 0.0\n'
         "yaw_deg = nan\n" for x in (2.0, 4.0, 6.0)))
-    ok = vehicle.gcs("mission", "upload", str(legs))
+    ok = ground_vehicle.gcs("mission", "upload", str(legs))
     assert ok.returncode == 0 and "MAV_MISSION_ACCEPTED" in ok.stdout, ok.stdout
 
 
@@ -194,19 +219,20 @@ def test_mission_start_flies_the_mission(vehicle, tmp_path):
     assert "mode: MISSION" in status and "MISSION_STATE_ACTIVE" in status
 
 
-def test_parameters(vehicle):
+@ON_THE_GROUND
+def test_parameters(ground_vehicle):
     """param list, get, set; an unstable gain is refused with the vehicle's reason."""
-    listing = vehicle.gcs("param", "list")
+    listing = ground_vehicle.gcs("param", "list")
     assert listing.returncode == 0
     names = [line.split()[0] for line in listing.stdout.splitlines()]
     assert len(names) == len(SPECS) and "DQ_KPR_X" in names and "MIS_ENV_CHK" in names
-    assert vehicle.gcs("param", "get", "DQ_KDD_Z").stdout.strip() == "DQ_KDD_Z = 10"
-    ok = vehicle.gcs("param", "set", "MIS_CRUISE_SPD", "3.5")
+    assert ground_vehicle.gcs("param", "get", "DQ_KDD_Z").stdout.strip() == "DQ_KDD_Z = 10"
+    ok = ground_vehicle.gcs("param", "set", "MIS_CRUISE_SPD", "3.5")
     assert ok.returncode == 0 and "MIS_CRUISE_SPD = 3.5" in ok.stdout
-    refused = vehicle.gcs("param", "set", "DQ_KID_Y", "50")
+    refused = ground_vehicle.gcs("param", "set", "DQ_KID_Y", "50")
     assert refused.returncode == 1
     assert "violates k_p k_d > k_i" in refused.stdout and "DQ_KID_Y = 0.1" in refused.stdout
-    missing = vehicle.gcs("param", "get", "NO_SUCH_PARAM")
+    missing = ground_vehicle.gcs("param", "get", "NO_SUCH_PARAM")
     assert missing.returncode == 1 and "parameter NO_SUCH_PARAM: does not exist " \
         "(MAV_PARAM_ERROR_DOES_NOT_EXIST)" in missing.stderr, missing.stderr
 
@@ -240,21 +266,25 @@ def test_goto_a_roll_that_would_flip_tilts_ends_with_the_vehicles_reason(vehicle
     assert abs(roll) < 2 and abs(pitch) < 2 and abs(yaw - 60) < 2
 
 
-def test_watch_in_a_terminal_quits_on_q(vehicle):
+@ON_THE_GROUND
+def test_watch_in_a_terminal_quits_on_q(ground_vehicle):
     """watch draws a live view in a pseudo-terminal and quits cleanly on q."""
     pid, fd = pty.fork()
     if pid == 0:  # the child: gcs watch on the pty
         os.chdir(ROOT)
         os.environ["TERM"] = "xterm"
         os.execv(sys.executable, [sys.executable, "-m", "gcs.cli", "watch", "--connect",
-                                  vehicle.connect])
+                                  ground_vehicle.connect])
     screen = b""
     try:
+        def drawn() -> bool:  # a vehicle on the ground sends no actuator outputs yet
+            return b"mode" in screen and b"HOLD" in screen and b"link" in screen
+
         deadline = time.monotonic() + 20
-        while time.monotonic() < deadline and b"rotors" not in screen:
+        while time.monotonic() < deadline and not drawn():
             if select.select([fd], [], [], 0.2)[0]:
                 screen += os.read(fd, 65536)
-        assert b"mode" in screen and b"HOLD" in screen and b"link" in screen
+        assert drawn(), screen
         time.sleep(1.0)  # deliberate: a few redraws, so that q comes to a running view
         os.write(fd, b"q")
         deadline = time.monotonic() + 10
@@ -278,10 +308,11 @@ def test_watch_in_a_terminal_quits_on_q(vehicle):
         os.close(fd)
 
 
-def test_log_record_writes_a_readable_tlog(vehicle, tmp_path):
+@ON_THE_GROUND
+def test_log_record_writes_a_readable_tlog(ground_vehicle, tmp_path):
     """log record for 2 s writes a tlog that pymavlink reads back."""
     tlog = tmp_path / "rec.tlog"
-    out = vehicle.gcs("log", "record", str(tlog), "--duration", "2")
+    out = ground_vehicle.gcs("log", "record", str(tlog), "--duration", "2")
     assert out.returncode == 0, out.stderr
     log = mavutil.mavlink_connection(str(tlog))
     kinds = set()
