@@ -34,13 +34,27 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "view": cmd_view}
 
 
+# The commands whose work loads numba (flights, reports, the live view, goto's poses): a
+# ground station that only talks to a vehicle does without it.
+NUMERIC = frozenset({"run", "table1", "campaign", "report", "replay", "view", "goto"})
+
+
 def main(argv: list[str] | None = None) -> int:
     """Exit status: 0 done, 1 the vehicle refused or did not answer (or a link failed at
     run time), 2 bad input (arguments, URLs, files, busy ports), 130 interrupted."""
+    from common.process.startup import sigint_deferred
+
     args = build_parser().parse_args(argv)
     setup_logging("gcs", args)
-    caught: tuple[type[BaseException], ...] = (LinkError, KeyboardInterrupt, OSError,
-                                              *_bad_input(), *_refused())
+    # The libraries load here, a Ctrl-C meanwhile raised after them, not inside (an import
+    # a KeyboardInterrupt broke off leaves numpy half made, and numba drops one that lands
+    # in its ctypes callbacks): pymavlink and numpy for every command, numba for those that
+    # need it, as `fcu` and `sitl` load theirs.
+    with sigint_deferred():
+        caught: tuple[type[BaseException], ...] = (LinkError, KeyboardInterrupt, OSError,
+                                                  *_bad_input(), *_refused())
+        if args.command in NUMERIC:
+            import common.config.scenario  # noqa: F401  (numba and the scenario's loaders)
     try:
         check_input(args)
         return COMMANDS.get(args.command, cmd_vehicle)(args)

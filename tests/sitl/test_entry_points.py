@@ -4,6 +4,7 @@ and loading the kernels included: exit 0 and one line, never a KeyboardInterrupt
 
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import sys
@@ -51,3 +52,54 @@ def test_ctrl_c_while_starting_is_exit_0_without_a_traceback(prog, delay_s, tmp_
     # verdict of a stopped flight, or 130 "interrupted"
     assert proc.returncode in ((0, 1, 130) if prog == "gcs" else (0,)), (proc.returncode, out,
                                                                         err)
+
+
+
+_LOADS = """
+import contextlib, json, sys
+import common.process.startup as startup
+inside, loaded = [False], {}
+deferred = startup.sigint_deferred
+
+@contextlib.contextmanager
+def recording():
+    inside[0] = True
+    try:
+        with deferred():
+            yield
+    finally:
+        inside[0] = False
+
+startup.sigint_deferred = recording
+
+class Finder:
+    def find_spec(self, name, path=None, target=None):
+        if name in ("numpy", "numba", "pymavlink", "scipy") and name not in loaded:
+            loaded[name] = inside[0]
+
+sys.meta_path.insert(0, Finder())
+from gcs.cli import main
+code = main(sys.argv[1:])
+print(json.dumps({"code": code, "loaded": loaded}))
+"""
+
+
+@pytest.mark.parametrize(("argv", "libraries"), [
+    (["run", "no/such/scenario.toml", "--out", "OUT"], {"numpy", "numba", "pymavlink"}),
+    (["goto", "1", "2", "-3", "--connect", "udpin:127.0.0.1:BAD"], {"numpy", "numba"}),
+    (["status", "--connect", "udpin:127.0.0.1:BAD"], {"numpy", "pymavlink"}),
+])
+def test_gcs_loads_its_libraries_with_ctrl_c_deferred(argv, libraries, tmp_path):
+    """`gcs` loads pymavlink, numpy and (for the commands that need it) numba after parsing
+    its command line: each of them first loads inside `sigint_deferred`, so a Ctrl-C then is
+    raised after the import, not inside it (a KeyboardInterrupt inside numpy's import once
+    left it half made, and `gcs run` failed on `np.logical_and` with a traceback). Judged on
+    where each library's import starts, not on a timed Ctrl-C."""
+    argv = [a.replace("OUT", str(tmp_path / "run")) for a in argv]
+    proc = subprocess.run([sys.executable, "-c", _LOADS, *argv], cwd=Path(__file__).resolve()
+                          .parents[2], capture_output=True, text=True, timeout=60,
+                          check=False)
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert result["code"] == 2, proc.stdout + proc.stderr  # bad input, after the loads
+    assert libraries <= result["loaded"].keys(), result
+    assert all(result["loaded"].values()), result
