@@ -47,24 +47,9 @@ def _flies(item: pytest.Item) -> bool:
     return _under(item, FLYING_DIRS) or any(hasattr(module, name) for name in FLIGHT_ENTRIES)
 
 
-# The order the tiers run in: the process tests first, the unit tests last. Under
-# pytest-xdist the end of a run is what the workers have left; many short tests there leave
-# no core idle while one long test runs alone.
-TIER_ORDER = ("sitl", "docs", "closed_loop", "unit")
-
-
-def _tier(item: pytest.Item) -> int:
-    for rank, tier in enumerate(TIER_ORDER):
-        if _under(item, (TESTS / tier,)):
-            return rank
-    return len(TIER_ORDER)
-
-
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Mark the tests of tests/sitl and tests/docs `process` (refused elsewhere), those of
-    tests/closed_loop `slow`; a test that flies gets `compiled_kernels` first; the tiers in
-    `TIER_ORDER` (a stable sort: each module's tests stay together, in order)."""
-    items.sort(key=_tier)
+    tests/closed_loop `slow`; a test that flies gets `compiled_kernels` first."""
     misplaced = []
     for item in items:
         if isinstance(item, pytest.Function) and _flies(item) and \
