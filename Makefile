@@ -53,4 +53,4 @@ lint: venv
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache
-	find . -name __pycache__ -not -path './$(VENV)/*' -prune -exec rm -rf {} +
+	find . -path ./$(VENV) -prune -o -name __pycache__ -prune -exec rm -rf {} +
