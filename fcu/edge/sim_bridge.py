@@ -51,7 +51,8 @@ class RoundTrips(NamedTuple):
     """TIMESYNC round trips with the simulator (`SimBridge.round_trips`)."""
 
     samples_us: list[float]
-    lost: int
+    lost: int  # requests never answered
+    late: int  # requests answered after their `timeout_s` (not timed; counted apart)
     other: list[tuple[object, bytes]]  # what else came meanwhile, to be handled as usual
 
     @property
@@ -65,7 +66,7 @@ class RoundTrips(NamedTuple):
     def summary(self) -> dict[str, float | int | None]:
         """As the FCU's stats file records it (`sim_rtt`)."""
         return {"median_us": self.median_us, "samples": len(self.samples_us),
-                "lost": self.lost, "p10_us": self.quantile_us(0.1),
+                "lost": self.lost, "late": self.late, "p10_us": self.quantile_us(0.1),
                 "p90_us": self.quantile_us(0.9)}
 
 
@@ -227,18 +228,21 @@ class SimBridge:
         round trip between the two processes, with the least work on either side (a
         pre-built frame each way; the simulator answers before anything else).
 
-        Stops after `max_lost` requests without an answer within `timeout_s` (a simulator
-        that does not answer TIMESYNC) or after `budget_s`. Everything else that arrives
-        meanwhile is returned in `other`, in order, for the caller to handle."""
+        A request unanswered within `timeout_s` counts as lost until its answer comes, during
+        a later wait (a process preempted on a busy machine): then it counts as late, untimed,
+        since another request was already out. Stops after `max_lost` requests lost at once
+        (a simulator that does not answer TIMESYNC) or after `budget_s`. Everything else that
+        arrives meanwhile is returned in `other`, in order, for the caller to handle."""
         link = self.link
         stream = link.is_stream
         reader = FrameReader(stream)  # sees the bytes the bridge's reader will see later
         samples: list[float] = []
         other: list[tuple[object, bytes]] = []
-        lost = 0
+        timed_out: set[int] = set()  # stamps of requests not answered in time
+        late = 0
         clock = time.monotonic_ns
         end = clock() + round(budget_s * 1e9)
-        while len(samples) < n and lost < max_lost and clock() < end:
+        while len(samples) < n and len(timed_out) < max_lost and clock() < end:
             self.seq = (self.seq + 1) & 0xFF
             t0 = clock()
             link.send(pack_timesync(0, t0, self.seq, self.system_id, self.component_id))
@@ -253,18 +257,21 @@ class SimBridge:
                     frames, rejected = reader.feed(peer, data)
                     only_answer = not stream and not rejected and len(frames) == 1
                     for f in frames:
-                        if f.msg_id != TIMESYNC_ID or f.sysid != self.system_id:
-                            only_answer = False
-                            continue
-                        tc1, ts1 = unpack_timesync(f.payload)
+                        tc1, ts1 = (unpack_timesync(f.payload) if f.msg_id == TIMESYNC_ID
+                                    and f.sysid == self.system_id else (0, 0))
                         if tc1 != 0 and ts1 == t0 and not answered:
                             samples.append((t1 - t0) * 1e-3)
                             answered = True
+                        elif tc1 != 0 and ts1 in timed_out:
+                            timed_out.discard(ts1)
+                            late += 1
+                        else:  # not an answer to one of ours: handed on
+                            only_answer = False
                     if not only_answer:
                         other.append((peer, data))
             if not answered:
-                lost += 1
-        return RoundTrips(samples, lost, other)
+                timed_out.add(t0)
+        return RoundTrips(samples, len(timed_out), late, other)
 
     def repeat(self, t_us: int) -> bool:
         """A state or sample taken before came again (lockstep): if it was answered, send

@@ -177,17 +177,19 @@ def test_tcp_simulator_link_flies_the_same_run(tmp_path):
 def test_udp_rtt_is_measured_between_the_two_processes(tmp_path):
     """Given a lockstep run through processes over UDP, then metrics.json has the simulator
     link's round trip as timed between the FCU and the SITL before the flight: every
-    TIMESYNC probe answered by the SITL process, a median that is positive, finite and below
-    10 ms with a spread (measured, not a constant), and the step's wall time and its ratio
-    to that round trip beside it."""
+    TIMESYNC probe answered by the SITL process (some late on a busy machine: they are
+    counted, not timed), at most the probes asked for within the probe's 1 s, a median
+    that is positive, finite and below 10 ms with a spread (measured, not a constant), and
+    the step's wall time and its ratio to that round trip beside it."""
     from gcs.run.process_run import RTT_PROBES
 
     scenario = dataclasses.replace(load_scenario(CASE1), duration_s=2.0)
     m = run_processes(scenario, tmp_path / "run")
     assert m["status"] == "completed"
     rtt = m["fcu"]["sim_rtt"]
-    assert rtt["samples"] == RTT_PROBES and rtt["lost"] == 0
-    assert m["sitl"]["timesync_answers"] >= RTT_PROBES  # the other process answered them
+    assert 100 <= rtt["samples"] <= RTT_PROBES and rtt["lost"] == 0
+    # the other process answered every probe sent
+    assert m["sitl"]["timesync_answers"] == rtt["samples"] + rtt["late"]
     assert m["udp_rtt_us"] == m["link_rtt_us"] == rtt["median_us"]
     assert math.isfinite(m["udp_rtt_us"]) and 0.0 < m["udp_rtt_us"] < 10_000.0
     assert 0.0 < rtt["p10_us"] <= m["udp_rtt_us"] <= rtt["p90_us"]
