@@ -19,7 +19,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar, cast
 
-import numba
+from common.blas import load_cython_blas
+
+load_cython_blas()  # before numba's import, which would run all of scipy.linalg for it
+import numba  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layouts.py",

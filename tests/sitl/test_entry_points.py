@@ -107,3 +107,35 @@ def test_gcs_loads_its_libraries_with_ctrl_c_deferred(argv, libraries, tmp_path)
     assert all(result["loaded"].values()), result
     if "numba" not in libraries:  # a command that only talks to a vehicle does without it
         assert "numba" not in result["loaded"], result
+
+
+_BLAS = r"""
+import json, sys
+import numpy as np
+import common.jit
+from fcu.estimator.update import joseph_gain  # a kernel of numba's BLAS (np.dot)
+P, H, r = np.diag([1.0, 2.0, 3.0]), np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 2.0]]), np.ones(2)
+pht, _ = joseph_gain(P, H, r)
+dot = bool(np.allclose(pht, P @ H.T))
+kernels = "scipy.linalg" not in sys.modules
+numba_blas = __import__("numba.np.arraymath", fromlist=["_HAVE_BLAS"])._HAVE_BLAS
+import scipy.linalg
+from scipy.linalg import cython_blas
+print(json.dumps({"without_package": kernels, "numba_blas": numba_blas, "dot": dot,
+                  "same": cython_blas is sys.modules["scipy.linalg.cython_blas"],
+                  "linalg": bool(np.allclose(scipy.linalg.inv(np.eye(2) * 2.0),
+                                             np.eye(2) * 0.5))}))
+"""
+
+
+def test_numba_gets_its_blas_without_scipy_linalgs_package():
+    """A program that loads the kernels gets numba's BLAS from `scipy.linalg.cython_blas`
+    loaded alone (`common.blas`), without running `scipy.linalg`'s package (0.3 s of CPU at
+    every start); a later `import scipy.linalg` works and shares that module."""
+    proc = subprocess.run([sys.executable, "-c", _BLAS], cwd=Path(__file__).resolve()
+                          .parents[2], capture_output=True, text=True, timeout=120,
+                          check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) == {
+        "without_package": True, "numba_blas": True, "dot": True, "same": True,
+        "linalg": True}
