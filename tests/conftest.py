@@ -111,18 +111,32 @@ def _kernel_stamps() -> dict[str, list[float]]:
 
 
 def _fly_warm_up() -> None:
-    """The kernels' warm-ups, then a 3 s mission: the mission executor's kernels compile for
-    their callers' types (a rotation sampled at many instants at once) on first use."""
+    """Every kernel the suite's programs load, compiled here once rather than by several
+    programs at once on a fresh cache: the plant's and the pipeline's warm-ups, the planners'
+    (`fcu.warm`: missions, approach, POSCTL) and the estimator's, then a 3 s mission (the
+    mission executor's kernels compile for their callers' types, a rotation sampled at many
+    instants at once, on first use) and 1 s on mocap-indoor sensors (the sensor feed's and
+    the estimator's in flight)."""
+    import dataclasses
+
     from common.config.scenario import load_scenario
+    from common.config.sensors import resolve_sensor_profile
+    from fcu.estimator.ekf import warm as warm_estimator
+    from fcu.warm import warm as warm_plans
     from gcs.run.inprocess import fcu_pipeline, run_scenario
     from gcs.run.overrides import apply_overrides
     from sitl.plant import Plant
 
     scenario = load_scenario(CASE1)
     Plant(scenario.vehicle)
-    fcu_pipeline(scenario)
+    pipeline, _ = fcu_pipeline(scenario)
+    warm_plans(pipeline.commander.limits)
+    warm_estimator()
     run_scenario(apply_overrides(load_scenario(CASE1.parent / "mission_tour.toml"),
                                  duration_s=3.0), logs=False)
+    run_scenario(dataclasses.replace(scenario, duration_s=1.0,
+                                     sensors=resolve_sensor_profile("mocap-indoor")),
+                 logs=True)
 
 
 def build_kernels() -> bool:
