@@ -179,7 +179,7 @@ def test_udp_rtt_is_measured_between_the_two_processes(tmp_path):
     link's round trip as timed between the FCU and the SITL before the flight: every
     TIMESYNC probe answered by the SITL process (some late on a busy machine: they are
     counted, not timed), at most the probes asked for within the probe's 1 s, a median
-    that is positive, finite and below 10 ms with a spread (measured, not a constant), and
+    that is positive, finite and below 100 ms with a spread (measured, not a constant), and
     the step's wall time and its ratio to that round trip beside it."""
     from gcs.run.process_run import RTT_PROBES
 
@@ -191,7 +191,9 @@ def test_udp_rtt_is_measured_between_the_two_processes(tmp_path):
     # the other process answered every probe sent
     assert m["sitl"]["timesync_answers"] == rtt["samples"] + rtt["late"]
     assert m["udp_rtt_us"] == m["link_rtt_us"] == rtt["median_us"]
-    assert math.isfinite(m["udp_rtt_us"]) and 0.0 < m["udp_rtt_us"] < 10_000.0
+    # in microseconds: a loopback round trip is tens of them idle, milliseconds on a machine
+    # starved for CPU, never 0.1 s (what nanoseconds taken for microseconds would give)
+    assert math.isfinite(m["udp_rtt_us"]) and 0.0 < m["udp_rtt_us"] < 100_000.0
     assert 0.0 < rtt["p10_us"] <= m["udp_rtt_us"] <= rtt["p90_us"]
     assert rtt["p10_us"] < rtt["p90_us"]
     assert m["step_wall_us"] == pytest.approx(m["wall_time_s"] / m["samples"] * 1e6)
