@@ -61,6 +61,11 @@ class TcpClientLink(Link):
     def connected(self) -> bool:
         return self.sock is not None and not self.connecting
 
+    @property
+    def unsent_bytes(self) -> int:
+        """The end of the last write the socket did not take yet (sent before anything new)."""
+        return len(self._tail)
+
     def _poll(self) -> None:
         """Start an attempt if one is due, or see whether the one in progress is done."""
         if self.sock is None:

@@ -6,6 +6,7 @@ case is deterministic."""
 from __future__ import annotations
 
 import math
+import select
 import threading
 import time
 
@@ -133,7 +134,9 @@ def test_a_late_duplicate_of_an_earlier_answer_is_dropped_before_the_next_upload
     """The failure seen in tests/sitl/test_lossy_missions.py: a copy of the previous
     upload's MISSION_ACK, held back by the link a few ms, arrived after the next upload had
     begun; the client returned that result although the vehicle took the new mission. The
-    client now lets such answers pass (50 ms without one) before it starts."""
+    client now lets such answers pass (SETTLE_S, 50 ms, without one) before it starts: one
+    already waiting when the upload starts, and one that comes within the settling time
+    (a settling time of 1 s here, so that a busy machine's late timer still falls in it)."""
     vehicle = SlowVehicle(0.01)
     conn = connect(vehicle)
     stale = pack(encoder(*VEHICLE), M.MAVLink_mission_ack_message(
@@ -142,19 +145,25 @@ def test_a_late_duplicate_of_an_earlier_answer_is_dropped_before_the_next_upload
     def send_stale() -> None:  # to the client's port, bound by its first send
         vehicle.sock.sendto(stale, ("127.0.0.1", conn.port.getsockname()[1]))
 
-    def late_duplicate() -> threading.Timer:
-        timer = threading.Timer(0.02, send_stale)
-        timer.start()
-        return timer
+    def arrived(timeout_s: float = 5.0) -> None:
+        """Until the stale answer waits in the client's socket."""
+        assert select.select([conn.port], [], [], timeout_s)[0], "the stale answer is lost"
 
     assert upload(conn, *VEHICLE, _mission(1)) == M.MAV_MISSION_ACCEPTED  # the previous one
     items = _mission(3)
-    timer = late_duplicate()
+    send_stale()
+    arrived()
     assert upload(conn, *VEHICLE, items) == M.MAV_MISSION_ACCEPTED
+    assert same_items(vehicle.server.mission, items)
+    timer = threading.Timer(0.02, send_stale)
+    timer.start()
+    items = _mission(2)
+    assert upload(conn, *VEHICLE, items, settle_s=1.0) == M.MAV_MISSION_ACCEPTED
     timer.join()
     assert same_items(vehicle.server.mission, items)
-    # without the settling time, the very same late answer is taken for the upload's
-    other = _mission(3, z=-5.0)
-    timer = late_duplicate()
-    assert upload(conn, *VEHICLE, other, settle_s=0.0) == M.MAV_MISSION_OPERATION_CANCELLED
-    timer.join()
+    # without the settling time, the very same stale answer is taken for the upload's
+    send_stale()
+    arrived()
+    assert upload(conn, *VEHICLE, _mission(3, z=-5.0), settle_s=0.0) == \
+        M.MAV_MISSION_OPERATION_CANCELLED
+    assert same_items(vehicle.server.mission, items)
