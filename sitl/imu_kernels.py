@@ -13,8 +13,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import literal_unroll
 
 from common.jit import njit
+from common.vehicle_constants import N_ROTORS
 from sitl.plant_kernels import flight_force_kernel, rotate_inv
 
 TRIAD_TURN_ON = 0  # 3: the turn-on bias
@@ -61,8 +63,9 @@ def triad_kernel(tri: np.ndarray, draws: np.ndarray, k: int, x0: float, x1: floa
 
 
 @njit
-def imu_sample_kernel(pp: np.ndarray, dist: np.ndarray, actuators: np.ndarray,
-                      state_t_s: float, mass: float, g: float, landed: bool,
+def imu_sample_kernel(pp: np.ndarray, dist: np.ndarray, speeds_rad_s: tuple[float, ...],
+                      tilts_rad: tuple[float, ...], state_t_s: float, mass: float, g: float,
+                      landed: bool,
                       q_enu_flu: tuple[float, float, float, float],
                       omega_flu_rad_s: tuple[float, float, float],
                       contact_dv_enu: tuple[float, float, float], interval_s: float,
@@ -72,11 +75,19 @@ def imu_sample_kernel(pp: np.ndarray, dist: np.ndarray, actuators: np.ndarray,
                                  tuple[float, float, float]]:
     """(true specific force, gyro reading, accelerometer reading), FLU: `Plant.specific_
     force_flu` of the state (resting: R^T g up; in flight the rotor and disturbance force
-    per mass of `actuators` at state_t_s; plus the contact impulse over interval_s), then the
-    gyro's and the accelerometer's `triad_kernel` over dt_s."""
+    per mass of the rotors' N_ROTORS speeds and tilts at state_t_s; plus the contact impulse
+    over interval_s), then the gyro's and the accelerometer's `triad_kernel` over dt_s."""
     if landed:
         f = rotate_inv(q_enu_flu, (0.0, 0.0, g))
     else:
+        actuators = np.empty(2 * N_ROTORS)  # as np.array((*speeds, *tilts), float64)
+        k = 0
+        for x in literal_unroll(speeds_rad_s):
+            actuators[k] = x
+            k += 1
+        for x in literal_unroll(tilts_rad):
+            actuators[k] = x
+            k += 1
         f = flight_force_kernel(pp, dist, actuators, state_t_s, mass)
     dv = contact_dv_enu
     if not (dv[0] == 0.0 and dv[1] == 0.0 and dv[2] == 0.0):

@@ -52,7 +52,8 @@ MAG_FIELDS = 0x1C0  # HIL_SENSOR_UPDATED_{X,Y,Z}MAG
 BARO_FIELDS = 0x200 | 0x800 | 0x1000  # ABS_PRESSURE | PRESSURE_ALT | TEMPERATURE
 _NAN3 = (float("nan"),) * 3
 _NAN4 = (float("nan"),) * 4
-_NO_ACTUATORS = np.zeros(2 * N_ROTORS)  # resting: the kernel reads none
+_ZERO3 = (0.0, 0.0, 0.0)
+_ZERO6 = (0.0,) * N_ROTORS
 
 
 def pressure_hpa(alt_amsl_m: float) -> float:
@@ -124,7 +125,7 @@ class SensorFeed:
         tri, draws = np.zeros(TRIAD_SIZE), np.zeros((1, 6))
         tri[TRIAD_TAU] = math.nan
         for landed in (True, False):
-            imu_sample_kernel(self.plant.params, self.plant.disturbance.table, _NO_ACTUATORS,
+            imu_sample_kernel(self.plant.params, self.plant.disturbance.table, _ZERO6, _ZERO6,
                               0.0, 1.0, 9.81, landed, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
                               (0.0, 0.0, 0.0), 1e-3, 1e-3, tri, draws, 0, tri.copy(), draws, 0)
 
@@ -196,14 +197,13 @@ class SensorFeed:
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
         plant, imu = self.plant, self.suite.imu
-        actuators = _NO_ACTUATORS if s.landed else \
-            np.array((*s.rotor_speed_rad_s, *s.tilt_rad), dtype=np.float64)
-        if not s.landed and actuators.shape != (2 * N_ROTORS,):
+        speeds, tilts = s.rotor_speed_rad_s, s.tilt_rad
+        if len(speeds) != N_ROTORS or len(tilts) != N_ROTORS:
             raise ValueError(f"expected {N_ROTORS} rotor speeds and tilts, got "
-                             f"{len(s.rotor_speed_rad_s)} and {len(s.tilt_rad)}")
+                             f"{len(speeds)} and {len(tilts)}")
         gyro_block, gk = imu.gyro.draws.take_row()
         accel_block, ak = imu.accel.draws.take_row()
-        return imu_sample_kernel(plant.params, plant.disturbance.table, actuators,
+        return imu_sample_kernel(plant.params, plant.disturbance.table, speeds, tilts,
                                  s.time_us * 1e-6, plant.mass, plant.g, s.landed, s.q_enu_flu,
                                  s.omega_flu_rad_s, contact_dv_enu, dt_s, dt_s, imu.gyro.row,
                                  gyro_block, gk, imu.accel.row, accel_block, ak)
@@ -250,7 +250,9 @@ class SensorFeed:
             elif t <= prev.time_us:
                 raise ValueError(f"sensor feed: time {t} us after {prev.time_us} us")
             self._prev = s
-            dv = (0.0, 0.0, 0.0) if prev is None else self.plant.contact_dv_enu(prev, s)
+            # `Plant.contact_dv_enu`, zero unless the step ended resting from flight
+            dv = _ZERO3 if prev is None or not s.landed or prev.landed else \
+                self.plant.contact_dv_enu(prev, s)
             while True:
                 te = min(imu_c.due_us, baro_c.due_us, mag_c.due_us, mocap_c.due_us)
                 if te > t:
@@ -267,7 +269,7 @@ class SensorFeed:
                 if imu_c.due_us == te:
                     if te == t:  # the step's impulse, at its end
                         self._contacts.add(dv)
-                        dv = (0.0, 0.0, 0.0)
+                        dv = _ZERO3
                     self._deliver(te, out)
                     out.append(self._hil_sensor(at))
             self._contacts.add(dv)
