@@ -71,9 +71,10 @@ class _TimedLog(OnboardLog):
 
         pipeline.step = timed_step
 
-    def step(self, out: Any, step_us: float, t_us: int) -> None:
+    def step(self, out: Any, step_us: float, t_us: int,
+             row: tuple[float, ...] | None = None) -> None:
         t0 = time.perf_counter()
-        super().step(out, step_us, t_us)
+        super().step(out, step_us, t_us, row)
         self.spent_us[t_us] = self.spent_us.get(t_us, 0.0) + (time.perf_counter() - t0) * 1e6
 
 

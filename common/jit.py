@@ -34,7 +34,7 @@ KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layout
                   "fcu/envelope/verdict.py", "fcu/envelope/speed_bound.py",
                   "fcu/reference/approach.py", "fcu/reference/trajectory.py",
                   "fcu/mission/segments.py", "fcu/modes/manual.py",
-                  "sitl/plant_kernels.py", "sitl/disturbance.py",
+                  "sitl/plant_kernels.py", "sitl/disturbance.py", "sitl/imu_kernels.py",
                   "fcu/estimator/strapdown.py", "fcu/estimator/update.py",
                   "fcu/estimator/output.py", "fcu/estimator/filter.py",
                   "fcu/estimator/readout.py")

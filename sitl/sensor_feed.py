@@ -31,12 +31,17 @@ import dataclasses
 import math
 from collections.abc import Sequence
 
+import numpy as np
+
 from common.config.scenario import SENSOR_FAULT_KINDS, ConfigError, SensorFault
 from common.config.sensors import IMU_RATE_MIN_HZ, SensorProfile, check_servable
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
 from common.quaternion import Vec3, q_conj, q_exp, q_log, q_mul, q_normalize
+from common.vehicle_constants import N_ROTORS
+from common.warm_ups import warm_up
 from common.wire.mavlink import MAV
 from common.wire.simlink import HilSensor, Odometry, pose_covariance
+from sitl.imu_kernels import TRIAD_SIZE, TRIAD_TAU, imu_sample_kernel
 from sitl.plant import ContactImpulses, ContactSpread, Plant, PlantState
 from sitl.sensors import ImuSample, SampleClock, SensorSuite, sensor_rng
 
@@ -47,6 +52,8 @@ MAG_FIELDS = 0x1C0  # HIL_SENSOR_UPDATED_{X,Y,Z}MAG
 BARO_FIELDS = 0x200 | 0x800 | 0x1000  # ABS_PRESSURE | PRESSURE_ALT | TEMPERATURE
 _NAN3 = (float("nan"),) * 3
 _NAN4 = (float("nan"),) * 4
+_ZERO3 = (0.0, 0.0, 0.0)
+_ZERO6 = (0.0,) * N_ROTORS
 
 
 def pressure_hpa(alt_amsl_m: float) -> float:
@@ -110,6 +117,17 @@ class SensorFeed:
         self.flight_start_us: int | None = None
         # The faults as windows on the simulation clock [start_us, end_us) (end None: open).
         self._faults: list[tuple[str, int, int | None, Vec3]] = []
+        warm_up("sitl.imu_kernels", self._warm_up)
+
+    def _warm_up(self) -> None:
+        """The IMU sample's kernel once, resting and in flight, on scratch triads (their
+        types as in a run; no draw taken from the sensors' streams)."""
+        tri, draws = np.zeros(TRIAD_SIZE), np.zeros((1, 6))
+        tri[TRIAD_TAU] = math.nan
+        for landed in (True, False):
+            imu_sample_kernel(self.plant.params, self.plant.disturbance.table, _ZERO6, _ZERO6,
+                              0.0, 1.0, 9.81, landed, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                              (0.0, 0.0, 0.0), 1e-3, 1e-3, tri, draws, 0, tri.copy(), draws, 0)
 
     def start_flight(self, t0_us: int, faults: Sequence[SensorFault] = ()) -> None:
         """The flight starts at t0_us (simulation clock): the faults' times count from it."""
@@ -171,17 +189,35 @@ class SensorFeed:
                                 q_enu_flu_to_ned_frd(pose.q_enu_flu), _NAN3, _NAN3,
                                 MAV.MAV_ESTIMATOR_TYPE_MOCAP, self.mocap_cov))
 
+    def _imu_reading(self, s: PlantState, contact_dv_enu: Vec3, dt_s: float
+                     ) -> tuple[Vec3, Vec3, Vec3]:
+        """(true specific force, gyro, accelerometer) of the IMU sample at s over dt_s, FLU:
+        `Plant.specific_force_flu` (the contact impulse over the sample's interval), then
+        `ImuModel.sample`, in one compiled call (`imu_sample_kernel`)."""
+        if not dt_s > 0.0:
+            raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
+        plant, imu = self.plant, self.suite.imu
+        speeds, tilts = s.rotor_speed_rad_s, s.tilt_rad
+        if len(speeds) != N_ROTORS or len(tilts) != N_ROTORS:
+            raise ValueError(f"expected {N_ROTORS} rotor speeds and tilts, got "
+                             f"{len(speeds)} and {len(tilts)}")
+        gyro_block, gk = imu.gyro.draws.take_row()
+        accel_block, ak = imu.accel.draws.take_row()
+        return imu_sample_kernel(plant.params, plant.disturbance.table, speeds, tilts,
+                                 s.time_us * 1e-6, plant.mass, plant.g, s.landed, s.q_enu_flu,
+                                 s.omega_flu_rad_s, contact_dv_enu, dt_s, dt_s, imu.gyro.row,
+                                 gyro_block, gk, imu.accel.row, accel_block, ak)
+
     def _hil_sensor(self, s: PlantState) -> HilSensor:
         """The IMU sample at s.time_us (taken now), with the newest magnetometer and
         barometer samples not sent yet."""
         t, dt_us = self.imu_clock.take()
-        t_s = t * 1e-6
         dv = self._spread.take(self._contacts.take(), dt_us)
-        f = self.plant.specific_force_flu(s, contact_dv_enu=dv, interval_s=dt_us * 1e-6)
+        f, g, a = self._imu_reading(s, dv, dt_us * 1e-6)
         self.true_f_flu_m_s2 = f
-        imu = self.suite.imu.sample(t_s, dt_us * 1e-6, s.omega_flu_rad_s, f)
         if self._faults:
-            imu = self._imu_faults(t, imu)
+            imu = self._imu_faults(t, ImuSample(t * 1e-6, g, a))
+            a, g = imu.f_flu_m_s2, imu.omega_flu_rad_s
         fields = IMU_FIELDS
         mag = _NAN3
         if self._mag is not None:
@@ -192,7 +228,7 @@ class SensorFeed:
             alt, self._baro_alt_m = self._baro_alt_m, None
             pressure = pressure_hpa(alt)
             fields |= BARO_FIELDS
-        a, g = imu.f_flu_m_s2, imu.omega_flu_rad_s  # to FRD (`flu_to_frd`)
+        # to FRD (`flu_to_frd`)
         return HilSensor(t, (a[0], -a[1], -a[2]), (g[0], -g[1], -g[2]), mag, pressure, alt,
                          TEMPERATURE_C, fields)
 
@@ -214,7 +250,9 @@ class SensorFeed:
             elif t <= prev.time_us:
                 raise ValueError(f"sensor feed: time {t} us after {prev.time_us} us")
             self._prev = s
-            dv = (0.0, 0.0, 0.0) if prev is None else self.plant.contact_dv_enu(prev, s)
+            # `Plant.contact_dv_enu`, zero unless the step ended resting from flight
+            dv = _ZERO3 if prev is None or not s.landed or prev.landed else \
+                self.plant.contact_dv_enu(prev, s)
             while True:
                 te = min(imu_c.due_us, baro_c.due_us, mag_c.due_us, mocap_c.due_us)
                 if te > t:
@@ -231,7 +269,7 @@ class SensorFeed:
                 if imu_c.due_us == te:
                     if te == t:  # the step's impulse, at its end
                         self._contacts.add(dv)
-                        dv = (0.0, 0.0, 0.0)
+                        dv = _ZERO3
                     self._deliver(te, out)
                     out.append(self._hil_sensor(at))
             self._contacts.add(dv)

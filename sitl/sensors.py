@@ -39,6 +39,16 @@ from common.config.sensors import (
 )
 from common.frames import ned_to_enu
 from common.quaternion import Quat, Vec3, q_exp, q_mul, q_rotate_inv
+from sitl.imu_kernels import (
+    TRIAD_LIMIT,
+    TRIAD_RANDOM_WALK,
+    TRIAD_SIZE,
+    TRIAD_TAU,
+    TRIAD_TURN_ON,
+    TRIAD_WALK,
+    TRIAD_WHITE,
+    triad_kernel,
+)
 
 
 def sensor_rng(seed: int, name: str) -> np.random.Generator:
@@ -121,21 +131,32 @@ class _Normals:
         self.rng = rng
         self.width = width
         self.block = block
-        self._rows: list[list[float]] = []
+        self._block = np.empty((0, width))
+        self._rows: list[list[float]] | None = []
         self._next = 0
 
     def take(self) -> list[float]:
+        block, i = self.take_row()
+        rows = self._rows
+        if rows is None:
+            rows = self._rows = block.tolist()
+        return rows[i]
+
+    def take_row(self) -> tuple[np.ndarray, int]:
+        """The next draws as (the block that holds them, their row in it), for a kernel."""
         i = self._next
-        if i == len(self._rows):
-            self._rows = self.rng.normal(0.0, 1.0, (self.block, self.width)).tolist()
+        if i == len(self._block):
+            self._block = self.rng.normal(0.0, 1.0, (self.block, self.width))
+            self._rows = None
             i = 0
         self._next = i + 1
-        return self._rows[i]
+        return self._block, i
 
 
 class _Triad:
     """One three-axis inertial sensor: turn-on bias, bias random walk (unbounded, or
-    Gauss-Markov with a correlation time), white noise, range."""
+    Gauss-Markov with a correlation time), white noise, range; its state and settings in
+    one row (`sitl.imu_kernels.TRIAD_*`) for the compiled sample."""
 
     def __init__(self, rng: np.random.Generator, *, white_sigma: float, turn_on_sigma: float,
                  random_walk: float, limit: float,
@@ -146,8 +167,17 @@ class _Triad:
         self.limit = limit
         self.correlation_time_s = correlation_time_s
         self.turn_on_bias: Vec3 = _vec3(rng.normal(0.0, 1.0, 3) * turn_on_sigma)
-        self.walk: Vec3 = (0.0, 0.0, 0.0)
-        self._draws = _Normals(rng, 6)  # always six per sample: the stream stays aligned
+        self.row = np.zeros(TRIAD_SIZE)
+        self.row[TRIAD_TURN_ON:TRIAD_TURN_ON + 3] = self.turn_on_bias
+        self.row[TRIAD_WHITE] = white_sigma
+        self.row[TRIAD_RANDOM_WALK] = random_walk
+        self.row[TRIAD_LIMIT] = limit
+        self.row[TRIAD_TAU] = math.nan if correlation_time_s is None else correlation_time_s
+        self.draws = _Normals(rng, 6)  # always six per sample: the stream stays aligned
+
+    @property
+    def walk(self) -> Vec3:
+        return _vec3(self.row[TRIAD_WALK:TRIAD_WALK + 3])
 
     @property
     def bias(self) -> Vec3:
@@ -155,29 +185,13 @@ class _Triad:
         return (b[0] + w[0], b[1] + w[1], b[2] + w[2])
 
     def sample(self, truth: Vec3, dt_s: float) -> Vec3:
-        """One reading. Scalar arithmetic in the order numpy's element-wise form had (the
-        same floats, to the last bit), without its per-call cost on three elements."""
+        """One reading (`sitl.imu_kernels.triad_kernel`): the same floats, to the last bit,
+        as numpy's element-wise form."""
         if not dt_s > 0.0:
             raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
-        d = self._draws.take()
-        tau = self.correlation_time_s
-        w = self.walk
-        if tau is None:
-            k = self.random_walk * math.sqrt(dt_s)
-            w = (w[0] + k * d[3], w[1] + k * d[4], w[2] + k * d[5])
-        else:  # the exact discretisation of db/dt = -b/tau + s_rw w over dt
-            sigma = self.random_walk * math.sqrt(-0.5 * tau * math.expm1(-2.0 * dt_s / tau))
-            a = math.exp(-dt_s / tau)
-            w = (a * w[0] + sigma * d[3], a * w[1] + sigma * d[4], a * w[2] + sigma * d[5])
-        self.walk = w
-        b, lim, s = self.turn_on_bias, self.limit, self.white_sigma
-        y0 = float(truth[0]) + b[0] + w[0]
-        y1 = float(truth[1]) + b[1] + w[1]
-        y2 = float(truth[2]) + b[2] + w[2]
-        if s > 0.0:
-            y0, y1, y2 = y0 + s * d[0], y1 + s * d[1], y2 + s * d[2]
-        # np.clip's minimum(maximum(y, -lim), lim); a NaN stays NaN in both
-        return (min(max(y0, -lim), lim), min(max(y1, -lim), lim), min(max(y2, -lim), lim))
+        block, k = self.draws.take_row()
+        return triad_kernel(self.row, block, k, float(truth[0]), float(truth[1]),
+                            float(truth[2]), dt_s)
 
 
 class ImuSample(NamedTuple):

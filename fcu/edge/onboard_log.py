@@ -142,14 +142,17 @@ class OnboardLog(ULogWriter):
         """A source's sample stamp on the flight clock (never before its start)."""
         return max(stamp_us + self.clock_offset_us, 0)
 
-    def step(self, out: StepOutput, step_us: float, t_us: int) -> None:
-        """Queue the records of one control step at flight time t_us."""
+    def step(self, out: StepOutput, step_us: float, t_us: int,
+             row: tuple[float, ...] | None = None) -> None:
+        """Queue the records of one control step at flight time t_us; `row`: its
+        `onboard_row` when the caller made it already (stamped out.t_us)."""
         pipe = self.pipeline
         state = pipe.state
         self._estimator_inputs()
         if out.result is not None and state is not None:
-            row = onboard_row(out.t_us, state, out.result, out.speed_rad_s, out.tilt_rad,
-                              out.armed, step_us)
+            if row is None:
+                row = onboard_row(out.t_us, state, out.result, out.speed_rad_s, out.tilt_rad,
+                                  out.armed, step_us)
             msg_id, record = self._dq_onboard  # (stamp, row[1:], state_time_us) packed
             self._pending.append(record.pack(record.size - 3, 68, msg_id,
                                              self.on_flight_clock(out.t_us), *row[1:], out.t_us))

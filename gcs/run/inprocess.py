@@ -168,9 +168,10 @@ class _RunLogs:
         if self.truth is not None:
             self.truth.record(state)
 
-    def step(self, out: StepOutput, step_us: float, t_us: int, events: list[Event]) -> None:
+    def step(self, out: StepOutput, step_us: float, t_us: int, events: list[Event],
+             row: tuple[float, ...] | None = None) -> None:
         if self.onboard is not None:
-            self.onboard.step(out, step_us, t_us)
+            self.onboard.step(out, step_us, t_us, row)
             if events and len(events) > self.events_logged:
                 self.onboard.events(events[self.events_logged:])
                 self.events_logged = len(events)
@@ -291,10 +292,13 @@ def _fly(scenario: Scenario, world: World, pipeline: Pipeline, run_logs: _RunLog
         t0 = clock()
         out = pipeline.step(t_us, dt_s)
         step_us = (clock() - t0) * 1e6 + input_us
+        row = None
         if out.result is not None and pipeline.state is not None:
-            onboard_rows.append(onboard_row(t_us, pipeline.state, out.result, out.speed_rad_s,
-                                            out.tilt_rad, out.armed, step_us))
-        run_logs.step(out, step_us, t_us, cmd.events)
+            row = onboard_row(t_us, pipeline.state, out.result, out.speed_rad_s, out.tilt_rad,
+                              out.armed, step_us)
+            onboard_rows.append(row)
+        # the onboard log's row is the same but for its stamp, out.t_us
+        run_logs.step(out, step_us, t_us, cmd.events, row if out.t_us == t_us else None)
         # The step's mission events consumed, as the FCU process's housekeeping consumes
         # them (MISSION_ITEM_REACHED): the log reads only the new ones at its next step.
         cmd.mission_events.clear()

@@ -32,9 +32,10 @@ def test_onboard_log_reads_only_the_new_mission_events(tmp_path, monkeypatch):
     seen: list[int] = []
 
     class CountingLog(inprocess.OnboardLog):
-        def step(self, out: Any, step_us: float, t_us: int) -> None:
+        def step(self, out: Any, step_us: float, t_us: int,
+                 row: tuple[float, ...] | None = None) -> None:
             seen.append(len(self.pipeline.commander.mission_events))
-            super().step(out, step_us, t_us)
+            super().step(out, step_us, t_us, row)
 
     monkeypatch.setattr(inprocess, "OnboardLog", CountingLog)
     result = inprocess.run_scenario(scenario)
