@@ -30,10 +30,13 @@ demo: venv
 WORKERS := -n 3 --dist loadgroup
 FAST_WORKERS := -n 4 --dist loadgroup
 
+# The kernels are compiled into numba's cache (tests/kernels.py) beside mypy, before pytest
+# starts: on a fresh clone that is a minute of compilation that no test's timeout counts.
 test: venv
 	$(VENV)/bin/ruff check .
-	$(PY) -m mypy
-	$(PY) -m mypy benchmarks tools
+	@$(PY) -m tests.kernels & kernels=$$!; \
+	$(PY) -m mypy && $(PY) -m mypy benchmarks tools; types=$$?; \
+	wait $$kernels && exit $$types
 	$(PY) -m pytest -q $(WORKERS) --durations=20 tests
 
 # tests/unit: tests/sitl and tests/docs start programs (`process`), tests/closed_loop flies

@@ -3,10 +3,10 @@
     .venv/bin/python benchmarks/suite_under_load.py [--times N] [--busy K] [--nice P]
         [-- pytest args]
 
-Runs `make test`'s steps (ruff, mypy over the packages, then benchmarks/ and tools/, then pytest
-with the arguments given, by default `make test`'s: `-n 3 --dist loadgroup tests`) N times in
-a row
-beside K busy-looping children at nice P (default 19; `--busy 8 --nice 0` is a load of 8 at
+Runs `make test`'s steps (ruff, mypy over the packages, then benchmarks/ and tools/, the
+kernels into numba's cache (`tests/kernels.py`), then pytest with the arguments given, by
+default `make test`'s: `-n 3 --dist loadgroup tests`) N times in a row beside K busy-looping
+children at nice P (default 19; `--busy 8 --nice 0` is a load of 8 at
 normal priority), prints each run's wall time and result, stops at the first failure, and
 exits with that run's code (0 when all passed). The busy children are this script's own and
 are stopped, by their process ids, on every way out, Ctrl-C included.
@@ -34,6 +34,7 @@ def _busy_children(count: int, niceness: int = 19) -> list[subprocess.Popen[byte
 def _suite(pytest_args: list[str]) -> int:
     steps = [[sys.executable, "-m", "ruff", "check", "."], [sys.executable, "-m", "mypy"],
              [sys.executable, "-m", "mypy", "benchmarks", "tools"],
+             [sys.executable, "-m", "tests.kernels"],
              [sys.executable, "-m", "pytest", "-q",
               *(pytest_args or ["-n", "3", "--dist", "loadgroup", "tests"])]]
     for step in steps:
