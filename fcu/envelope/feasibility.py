@@ -106,7 +106,7 @@ from fcu.envelope.instants import SampleOrder as SampleOrder
 from fcu.envelope.instants import clear_orders, time_order
 from fcu.envelope.instants import figure_instants as figure_instants
 from fcu.envelope.instants import move_instants as move_instants
-from fcu.envelope.kept import Kept
+from fcu.envelope.kept import Buffers, Kept
 from fcu.envelope.scaling import BISECT_TOL as BISECT_TOL
 from fcu.envelope.scaling import GRID_FITS as GRID_FITS
 from fcu.envelope.scaling import GRID_MAX as GRID_MAX
@@ -124,6 +124,7 @@ TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may 
 FLOOR = 0.25  # share of w_max below which the feed-forward may not slow a rotor
 CACHE_ROWS = 16384  # `Envelope.scaling` keeps the scalings of paths up to this many samples
 CACHE_PATHS = 1024  # ... and this many paths
+SCRATCH_MIN = 16384  # `Envelope.scratch`: arrays of this many values or more are reused
 
 
 def at_rest(ref: Reference) -> Reference:
@@ -160,6 +161,7 @@ class Envelope:
         self.pinv_t = pseudo_inverse(allocation_matrix(vehicle)).T  # 6 x 2n
         self._scalings = Kept(CACHE_ROWS, CACHE_PATHS)
         self._kept = Kept(CACHE_ROWS, CACHE_PATHS)
+        self._buffers = Buffers(SCRATCH_MIN, 4, 8)
 
     def omega_sq(self, ref: Reference) -> np.ndarray:
         """Omega = A^+ [f_b; tau_b] per sample (samples x 2n); a float reference is 1 sample."""
@@ -193,8 +195,16 @@ class Envelope:
         return Peak(float(per_sample[i]), i)
 
     def allocate(self, wrenches: np.ndarray) -> np.ndarray:
-        """Omega = A^+ [f_b; tau_b] of wrench rows (`wrenches`; samples x 2n)."""
-        return np.asarray(wrenches @ self.pinv_t)
+        """Omega = A^+ [f_b; tau_b] of wrench rows (`wrenches`; samples x 2n), into a
+        `scratch` array (the same product, to the bit)."""
+        pinv_t = self.pinv_t
+        out = self.scratch(wrenches.shape[0], pinv_t.shape[1])
+        return np.asarray(np.matmul(wrenches, pinv_t, out=out))
+
+    def scratch(self, rows: int, cols: int) -> np.ndarray:
+        """A rows x cols array (values undefined), a large one reused once nothing holds it
+        (`fcu.envelope.kept.Buffers`)."""
+        return self._buffers.take(rows, cols)
 
     def kept(self, key: bytes, rows: int, make: Callable[[], T]) -> T:
         """What make() returns, kept by key (`CACHE_ROWS`, `CACHE_PATHS`; `rows`: the samples
@@ -247,6 +257,7 @@ class Envelope:
         state = self.__dict__.copy()
         state["_scalings"] = Kept(CACHE_ROWS, CACHE_PATHS)
         state["_kept"] = Kept(CACHE_ROWS, CACHE_PATHS)
+        state["_buffers"] = Buffers(SCRATCH_MIN, 4, 8)
         return state
 
     def describe(self, speed_rad_s: float) -> str:

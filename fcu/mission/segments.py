@@ -304,10 +304,10 @@ class Figure(Segment):
             unit = self.path(sigma, shape)  # `wrenches` takes such an attitude for arrays
             return env.omega_sq(unit), env.omega_sq(at_rest(unit))
         v, n = env.vehicle, len(sigma)
-        path_rows = np.empty((5, n))
+        path_rows = env.scratch(5, n)
         path_rows[0], path_rows[1] = shape.dT, shape.ddT
         path_rows[2], path_rows[3], path_rows[4] = shape.acceleration
-        unit_w, rest_w = np.empty((n, 6)), np.empty((n, 6))
+        unit_w, rest_w = env.scratch(n, 6), env.scratch(n, 6)
         figure_wrenches(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2,
                         (1.0, 0.0, 0.0, 0.0) if q0 is None else q0, q0 is not None, f.n_body,
                         *shape.turn, path_rows, unit_w, rest_w)
@@ -320,4 +320,17 @@ class Figure(Segment):
         return struct.pack("<?8d", f.q0 is None, f.amp, *f.n, *q0) + b"figure"
 
     def instants(self) -> np.ndarray:
-        return figure_instants(norm3(self.figure.n), self.figure.phase_instants)
+        """`fcu.envelope.feasibility.figure_instants` (read-only), kept per axis length: the
+        phases' instants do not depend on the figure's other parameters."""
+        axis_norm = norm3(self.figure.n)
+        out = _FIGURE_INSTANTS.get(axis_norm)
+        if out is None:
+            out = figure_instants(axis_norm, self.figure.phase_instants)
+            out.flags.writeable = False
+            if len(_FIGURE_INSTANTS) >= 64:
+                _FIGURE_INSTANTS.clear()
+            _FIGURE_INSTANTS[axis_norm] = out
+        return out
+
+
+_FIGURE_INSTANTS: dict[float, np.ndarray] = {}  # `Figure.instants`
