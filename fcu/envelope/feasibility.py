@@ -72,9 +72,11 @@ whether a duration fits is judged from its allocations, `fcu.envelope.verdict.fi
 answer); the allocations stay numpy's (a matrix product's rounding depends on its shape, so
 each is the one it always was). `TimeScaling` lives in fcu/envelope/scaling.py. The upload
 check asks only whether a speed-timed move stretches (`TimeScaling.stretches`: the
-bisection stops once the planned duration is outside its bracket; the executor resumes
-it). Paths that depend on the same parameters (`path_key`: a 500-item mission repeats its
-figures) share one scaling, and paths that share a part (`Envelope.kept`: a move's
+bisection stops once the planned duration is outside its bracket), and so does the executor
+first, resuming the bisection for a move that stretches. Large allocations are written into
+arrays reused once free (`Envelope.scratch`: no page faults of fresh memory). Paths that
+depend on the same parameters (`path_key`: a 500-item mission repeats its figures) share
+one scaling, and paths that share a part (`Envelope.kept`: a move's
 attitudes and poses at rest depend on q0 and phi, not on dp; a figure's shape on its
 amplitude and axis, not on its start pose) share that part; `clear_caches` forgets them.
 
