@@ -197,9 +197,11 @@ class Envelope:
         return Peak(float(per_sample[i]), i)
 
     def allocate(self, wrenches: np.ndarray) -> np.ndarray:
-        """Omega = A^+ [f_b; tau_b] of wrench rows (`wrenches`; samples x 2n), into a
-        `scratch` array (the same product, to the bit)."""
+        """Omega = A^+ [f_b; tau_b] of wrench rows (`wrenches`; samples x 2n), a large one
+        into a `scratch` array (the same product, to the bit)."""
         pinv_t = self.pinv_t
+        if wrenches.shape[0] * pinv_t.shape[1] < SCRATCH_MIN:
+            return np.asarray(wrenches @ pinv_t)
         out = self.scratch(wrenches.shape[0], pinv_t.shape[1])
         return np.asarray(np.matmul(wrenches, pinv_t, out=out))
 
