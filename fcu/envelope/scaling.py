@@ -250,8 +250,10 @@ class TimeScaling:
                     self._fit_at = hi
                 return
         lo, hi = self._bracket
-        lo, hi = bisect_kernel(*checks, env.limit, env.tau_up, env.tau_down, env.tilt_limit,
-                               env.tilt_rate_max * TILT_STEP_S, lo, hi, BISECT_TOL, until)
+        if until != until or lo <= until < hi:  # else the bisection takes no step
+            lo, hi = bisect_kernel(*checks, env.limit, env.tau_up, env.tau_down,
+                                   env.tilt_limit, env.tilt_rate_max * TILT_STEP_S, lo, hi,
+                                   BISECT_TOL, until)
         self._bracket = lo, hi
         if not hi - lo > BISECT_TOL * hi:
             self._shortest = self._fit_at = hi
