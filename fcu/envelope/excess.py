@@ -146,27 +146,30 @@ def _step_excess(best: Best, om0: np.ndarray, k: int, i: int, lat: float, ver: f
 
 
 @njit_loops
-def rotor_parts(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: float,
-                places: np.ndarray, ends: np.ndarray, i: int, p: np.ndarray) -> None:
-    """Rotor i's rows of `scaling_parts` (its arguments) into p (10 x n); the upload
-    check's yes/no verdict (`fcu.envelope.verdict`) makes them one rotor at a time."""
+def parts_into(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: float,
+               places: np.ndarray, ends: np.ndarray, out: np.ndarray) -> None:
+    """`scaling_parts` (its arguments) into out (rotors x 10 x n, every value written),
+    sample by sample: each row of the allocations is read once for all rotors (the upload
+    check's yes/no verdict, `fcu.envelope.verdict`, makes them into an array it reuses)."""
     one = hover.shape[0] == 1
     for m in range(n):
         k = places[m]
         h, lo, hi = (0, 0, 0) if one else (k, n + k, 2 * n + k)
-        for v in range(2):
-            c = 2 * i + v
-            p[v, m] = hover[h, c]
-            p[2 + v, m] = om[k, c] - hover[h, c]
-            p[4 + v, m] = (hover[hi, c] - hover[lo, c]) / h2
-            p[6 + v, m] = ((om[2 * n + k, c] - hover[hi, c]) -
-                           (om[n + k, c] - hover[lo, c])) / h2
-    for m in range(n):
-        w0 = math.sqrt(math.sqrt(p[0, m] ** 2 + p[1, m] ** 2))
-        p[8, m] = min(floor, FLOOR_HOVER_SHARE * w0)
-        p[9, m] = 0.0
-    for m in ends:
-        p[9, m] = math.atan2(p[0, m], p[1, m])
+        for c in range(om.shape[1]):
+            i = c // 2
+            v = c - 2 * i
+            out[i, v, m] = hover[h, c]
+            out[i, 2 + v, m] = om[k, c] - hover[h, c]
+            out[i, 4 + v, m] = (hover[hi, c] - hover[lo, c]) / h2
+            out[i, 6 + v, m] = ((om[2 * n + k, c] - hover[hi, c]) -
+                                (om[n + k, c] - hover[lo, c])) / h2
+    for i in range(om.shape[1] // 2):
+        for m in range(n):
+            w0 = math.sqrt(math.sqrt(out[i, 0, m] ** 2 + out[i, 1, m] ** 2))
+            out[i, 8, m] = min(floor, FLOOR_HOVER_SHARE * w0)
+            out[i, 9, m] = 0.0
+        for m in ends:
+            out[i, 9, m] = math.atan2(out[i, 0, m], out[i, 1, m])
 
 
 @njit_loops
@@ -179,11 +182,9 @@ def scaling_parts(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: f
     Omega_1 = Omega - Omega_0 and of their central differences (steps h2), the lowest speed
     `excess_kernel` lets the rotor slow to, min(floor, FLOOR_HOVER_SHARE x its hover speed),
     and at the places in `ends` (the path's ends) its tilt at rest, atan2(lat_0, ver_0);
-    none of them depends on the duration."""
-    n_rot = om.shape[1] // 2
-    out = np.empty((n_rot, 10, n))
-    for i in range(n_rot):
-        rotor_parts(om, hover, n, h2, floor, places, ends, i, out[i])
+    none of them depends on the duration (`parts_into`)."""
+    out = np.empty((om.shape[1] // 2, 10, n))
+    parts_into(om, hover, n, h2, floor, places, ends, out)
     return out
 
 

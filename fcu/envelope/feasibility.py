@@ -72,9 +72,11 @@ whether a duration fits is judged from its allocations, `fcu.envelope.verdict.fi
 answer); the allocations stay numpy's (a matrix product's rounding depends on its shape, so
 each is the one it always was). `TimeScaling` lives in fcu/envelope/scaling.py. The upload
 check asks only whether a speed-timed move stretches (`TimeScaling.stretches`: the
-bisection stops once the planned duration is outside its bracket; the executor resumes
-it). Paths that depend on the same parameters (`path_key`: a 500-item mission repeats its
-figures) share one scaling, and paths that share a part (`Envelope.kept`: a move's
+bisection stops once the planned duration is outside its bracket), and so does the executor
+first, resuming the bisection for a move that stretches. Large allocations are written into
+arrays reused once free (`Envelope.scratch`: no page faults of fresh memory). Paths that
+depend on the same parameters (`path_key`: a 500-item mission repeats its figures) share
+one scaling, and paths that share a part (`Envelope.kept`: a move's
 attitudes and poses at rest depend on q0 and phi, not on dp; a figure's shape on its
 amplitude and axis, not on its start pose) share that part; `clear_caches` forgets them.
 
@@ -106,7 +108,7 @@ from fcu.envelope.instants import SampleOrder as SampleOrder
 from fcu.envelope.instants import clear_orders, time_order
 from fcu.envelope.instants import figure_instants as figure_instants
 from fcu.envelope.instants import move_instants as move_instants
-from fcu.envelope.kept import Kept
+from fcu.envelope.kept import Buffers, Kept
 from fcu.envelope.scaling import BISECT_TOL as BISECT_TOL
 from fcu.envelope.scaling import GRID_FITS as GRID_FITS
 from fcu.envelope.scaling import GRID_MAX as GRID_MAX
@@ -124,6 +126,7 @@ TILT_MARGIN = 0.75  # share of the tilt servos' rate limit the feed-forward may 
 FLOOR = 0.25  # share of w_max below which the feed-forward may not slow a rotor
 CACHE_ROWS = 16384  # `Envelope.scaling` keeps the scalings of paths up to this many samples
 CACHE_PATHS = 1024  # ... and this many paths
+SCRATCH_MIN = 16384  # `Envelope.scratch`: arrays of this many values or more are reused
 
 
 def at_rest(ref: Reference) -> Reference:
@@ -160,6 +163,7 @@ class Envelope:
         self.pinv_t = pseudo_inverse(allocation_matrix(vehicle)).T  # 6 x 2n
         self._scalings = Kept(CACHE_ROWS, CACHE_PATHS)
         self._kept = Kept(CACHE_ROWS, CACHE_PATHS)
+        self._buffers = Buffers(SCRATCH_MIN, 4, 8)
 
     def omega_sq(self, ref: Reference) -> np.ndarray:
         """Omega = A^+ [f_b; tau_b] per sample (samples x 2n); a float reference is 1 sample."""
@@ -193,8 +197,18 @@ class Envelope:
         return Peak(float(per_sample[i]), i)
 
     def allocate(self, wrenches: np.ndarray) -> np.ndarray:
-        """Omega = A^+ [f_b; tau_b] of wrench rows (`wrenches`; samples x 2n)."""
-        return np.asarray(wrenches @ self.pinv_t)
+        """Omega = A^+ [f_b; tau_b] of wrench rows (`wrenches`; samples x 2n), a large one
+        into a `scratch` array (the same product, to the bit)."""
+        pinv_t = self.pinv_t
+        if wrenches.shape[0] * pinv_t.shape[1] < SCRATCH_MIN:
+            return np.asarray(wrenches @ pinv_t)
+        out = self.scratch(wrenches.shape[0], pinv_t.shape[1])
+        return np.asarray(np.matmul(wrenches, pinv_t, out=out))
+
+    def scratch(self, rows: int, cols: int) -> np.ndarray:
+        """A rows x cols array (values undefined), a large one reused once nothing holds it
+        (`fcu.envelope.kept.Buffers`)."""
+        return self._buffers.take(rows, cols)
 
     def kept(self, key: bytes, rows: int, make: Callable[[], T]) -> T:
         """What make() returns, kept by key (`CACHE_ROWS`, `CACHE_PATHS`; `rows`: the samples
@@ -247,6 +261,7 @@ class Envelope:
         state = self.__dict__.copy()
         state["_scalings"] = Kept(CACHE_ROWS, CACHE_PATHS)
         state["_kept"] = Kept(CACHE_ROWS, CACHE_PATHS)
+        state["_buffers"] = Buffers(SCRATCH_MIN, 4, 8)
         return state
 
     def describe(self, speed_rad_s: float) -> str:

@@ -71,12 +71,28 @@ class SampleOrder(NamedTuple):
 _ORDERS: dict[bytes, SampleOrder] = {}
 
 
+_BY_ARRAY: dict[int, tuple[np.ndarray, SampleOrder]] = {}  # read-only instants, by identity
+
+
 def time_order(sigma: np.ndarray) -> SampleOrder:
-    """The time order of a path's check instants (`SampleOrder`), kept per set of instants."""
+    """The time order of a path's check instants (`SampleOrder`), kept per set of instants
+    (a read-only array, as `move_instants` gives, found by identity first)."""
+    same = _BY_ARRAY.get(id(sigma))
+    if same is not None and same[0] is sigma:
+        return same[1]
     key = sigma.tobytes()
     hit = _ORDERS.get(key)
-    if hit is not None:
-        return hit
+    if hit is None:
+        hit = _time_order(sigma, key)
+    if not sigma.flags.writeable:
+        if len(_BY_ARRAY) >= 256:
+            _BY_ARRAY.clear()
+        _BY_ARRAY[id(sigma)] = sigma, hit  # kept alive with it: its id is not reused
+    return hit
+
+
+def _time_order(sigma: np.ndarray, key: bytes) -> SampleOrder:
+    """`time_order` made (and kept by `key`, the bytes of sigma)."""
     n = len(sigma)
     ends = np.flatnonzero((sigma == 0.0) | (sigma == 1.0))
     order = np.argsort(sigma, kind="stable")
@@ -101,3 +117,4 @@ def time_order(sigma: np.ndarray) -> SampleOrder:
 def clear_orders() -> None:
     """Forget the orders kept (`time_order`)."""
     _ORDERS.clear()
+    _BY_ARRAY.clear()

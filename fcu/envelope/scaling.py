@@ -65,6 +65,8 @@ class Envelope(Protocol):
     def allocations(self, segment: Path, order: SampleOrder
                     ) -> tuple[np.ndarray, np.ndarray]: ...
 
+    def scratch(self, rows: int, cols: int) -> np.ndarray: ...
+
 
 class TimeScaling:
     """Omega(D) = Omega_0 + Omega_1 / D^2 and its rates at a path's sample instants (module
@@ -194,8 +196,9 @@ class TimeScaling:
                       env.tilt_rate_max * TILT_STEP_S, env.floor > 0.0)
             if self._parts is None:
                 om, hover = self._allocations()
+                room = env.scratch(om.shape[1] * 5, self.samples)  # rotors x 10 rows
                 hit = fits_raw(om, hover, 2.0 * DIFF_STEP, env.floor, o.places, o.place_gap,
-                               o.place_ends, *limits)
+                               o.place_ends, *limits, room)
                 if hit and self._path is not None:
                     self._raw = None  # made again from the path if the parts are asked
             else:
@@ -247,8 +250,10 @@ class TimeScaling:
                     self._fit_at = hi
                 return
         lo, hi = self._bracket
-        lo, hi = bisect_kernel(*checks, env.limit, env.tau_up, env.tau_down, env.tilt_limit,
-                               env.tilt_rate_max * TILT_STEP_S, lo, hi, BISECT_TOL, until)
+        if until != until or lo <= until < hi:  # else the bisection takes no step
+            lo, hi = bisect_kernel(*checks, env.limit, env.tau_up, env.tau_down,
+                                   env.tilt_limit, env.tilt_rate_max * TILT_STEP_S, lo, hi,
+                                   BISECT_TOL, until)
         self._bracket = lo, hi
         if not hi - lo > BISECT_TOL * hi:
             self._shortest = self._fit_at = hi

@@ -48,10 +48,8 @@ def _stretched(seg: Move, vehicle: VehicleConfig | None, stretch: bool = True) -
     if vehicle is None or not seg.moves:
         return seg
     scaling = envelope(vehicle).scaling(seg)
-    if stretch:
-        shortest = scaling.shortest()
-        if math.isfinite(shortest) and shortest > seg.travel:
-            seg = seg.retimed(shortest)
+    if stretch and scaling.stretches(seg.travel):  # the search's bisection only as needed
+        seg = seg.retimed(scaling.shortest())
     seg.scaling = scaling
     return seg
 

@@ -71,33 +71,36 @@ def quintic_rows(sigma: np.ndarray) -> np.ndarray:
 
 
 @njit
-def move_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, dp: Vec3, phi: Vec3,
-                  quintic: np.ndarray, qw: np.ndarray, qx: np.ndarray, qy: np.ndarray,
-                  qz: np.ndarray, moving: np.ndarray) -> None:
+def move_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, dp: Vec3, quintic: np.ndarray,
+                  turned: np.ndarray, torque: np.ndarray, moving: np.ndarray) -> None:
     """The nominal wrenches (`fcu.envelope.feasibility.Envelope.wrenches`) of a move's 1 s path
     (`Move.path`) at the instants of `quintic` (`quintic_rows`) into `moving`: its attitude
-    q0 where it keeps it (qw empty), else q0 exp(s phi) from exp(s phi) = (qw, qx, qy, qz)."""
+    q0 where it keeps it (`turned` empty), else each instant's attitude q0 exp(s phi) and the
+    torque of its rates from `turned` and `torque` (`rest_wrenches`, the same values)."""
     zero = (0.0, 0.0, 0.0)
-    turns = qw.shape[0] > 0
+    turns = turned.shape[0] > 0
     for i in range(quintic.shape[1]):
-        ds, dds = quintic[1, i], quintic[2, i]
+        dds = quintic[2, i]
         a = (dp[0] * dds / 1.0, dp[1] * dds / 1.0, dp[2] * dds / 1.0)
         if turns:
-            q = q_mul(q0, (qw[i], qx[i], qy[i], qz[i]))
-            w = (phi[0] * ds / 1.0, phi[1] * ds / 1.0, phi[2] * ds / 1.0)
-            wd = (phi[0] * dds / 1.0, phi[1] * dds / 1.0, phi[2] * dds / 1.0)
+            q = (turned[i, 0], turned[i, 1], turned[i, 2], turned[i, 3])
+            f, _ = nominal_wrench_kernel(m, g, inertia, q, a, zero, zero)
+            moving[i, 0], moving[i, 1], moving[i, 2] = f
+            moving[i, 3], moving[i, 4], moving[i, 5] = torque[i, 0], torque[i, 1], torque[i, 2]
         else:
-            q, w, wd = q0, zero, zero
-        f, t = nominal_wrench_kernel(m, g, inertia, q, a, w, wd)
-        moving[i, 0], moving[i, 1], moving[i, 2] = f
-        moving[i, 3], moving[i, 4], moving[i, 5] = t
+            f, t = nominal_wrench_kernel(m, g, inertia, q0, a, zero, zero)
+            moving[i, 0], moving[i, 1], moving[i, 2] = f
+            moving[i, 3], moving[i, 4], moving[i, 5] = t
 
 
 @njit
-def rest_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, qw: np.ndarray,
-                  qx: np.ndarray, qy: np.ndarray, qz: np.ndarray, hover: np.ndarray) -> None:
+def rest_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, phi: Vec3, quintic: np.ndarray,
+                  qw: np.ndarray, qx: np.ndarray, qy: np.ndarray, qz: np.ndarray,
+                  hover: np.ndarray, turned: np.ndarray, torque: np.ndarray) -> None:
     """The nominal wrenches of a move's poses at rest into `hover`: one row where it keeps
-    its attitude q0 (qw empty), else a row per instant, q0 exp(s phi) as `move_wrenches`."""
+    its attitude q0 (qw empty), else a row per instant at q0 exp(s phi) from exp(s phi) =
+    (qw, qx, qy, qz), that attitude into `turned` (a row per instant) and the torque of the
+    rates s' phi, s'' phi (`quintic`'s rows) into `torque`: what `move_wrenches` shares."""
     zero = (0.0, 0.0, 0.0)
     if qw.shape[0] == 0:
         f, t = nominal_wrench_kernel(m, g, inertia, q0, zero, zero, zero)
@@ -108,6 +111,12 @@ def rest_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, qw: np.ndarray,
         f, t = nominal_wrench_kernel(m, g, inertia, q, zero, zero, zero)
         hover[i, 0], hover[i, 1], hover[i, 2] = f
         hover[i, 3], hover[i, 4], hover[i, 5] = t
+        turned[i, 0], turned[i, 1], turned[i, 2], turned[i, 3] = q
+        ds, dds = quintic[1, i], quintic[2, i]
+        w = (phi[0] * ds / 1.0, phi[1] * ds / 1.0, phi[2] * ds / 1.0)
+        wd = (phi[0] * dds / 1.0, phi[1] * dds / 1.0, phi[2] * dds / 1.0)
+        _, t = nominal_wrench_kernel(m, g, inertia, q, zero, w, wd)
+        torque[i, 0], torque[i, 1], torque[i, 2] = t
 
 
 @njit
@@ -138,12 +147,14 @@ def figure_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, turned: bool, n
 
 class MoveRest(NamedTuple):
     """What a move's path at its instants shares with every move of the same q0 and phi
-    (`Move.unit_allocations`): the quintic's rows there (`quintic_rows`), exp(s phi) there
-    (four arrays, empty where it keeps its attitude) and the allocation of its poses at
-    rest (one row where it keeps its attitude)."""
+    (`Move.unit_allocations`): the quintic's rows there (`quintic_rows`), the attitudes
+    q0 exp(s phi) and the torques of the rates there (`rest_wrenches`; empty where it keeps
+    its attitude) and the allocation of its poses at rest (one row where it keeps its
+    attitude)."""
 
     quintic: np.ndarray
-    turn: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    turned: np.ndarray
+    torque: np.ndarray
     hover: np.ndarray
 
 
@@ -239,26 +250,27 @@ class Move(Segment):
         vehicle = env.vehicle
         moving = np.empty((len(sigma), 6))
         move_wrenches(vehicle.mass_kg, vehicle.gravity_m_s2, vehicle.inertia_diag_kg_m2, q0,
-                      dp, ZERO if phi is None else (float(phi[0]), float(phi[1]),
-                                                    float(phi[2])),
-                      rest.quintic, *rest.turn, moving)
+                      dp, rest.quintic, rest.turned, rest.torque, moving)
         return env.allocate(moving), rest.hover
 
     def _rest(self, env: Envelope, sigma: np.ndarray) -> MoveRest:
         """The `MoveRest` of this move's path at sigma."""
         quintic = quintic_rows(sigma)
         phi = self.phi
+        n = len(sigma)
         if phi is None:
             turn = (_NO_Q, _NO_Q, _NO_Q, _NO_Q)
-            hover = np.empty((1, 6))
+            hover, turned, torque = np.empty((1, 6)), np.empty((0, 4)), np.empty((0, 3))
         else:
             s = quintic[0]
             turn = q_exp_many(s * phi[0], s * phi[1], s * phi[2])
-            hover = np.empty((len(sigma), 6))
+            hover, turned, torque = np.empty((n, 6)), np.empty((n, 4)), np.empty((n, 3))
         v = env.vehicle
         q0 = (float(self.q0[0]), float(self.q0[1]), float(self.q0[2]), float(self.q0[3]))
-        rest_wrenches(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, q0, *turn, hover)
-        return MoveRest(quintic, turn, env.allocate(hover))
+        phi_f = ZERO if phi is None else (float(phi[0]), float(phi[1]), float(phi[2]))
+        rest_wrenches(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, q0, phi_f, quintic,
+                      *turn, hover, turned, torque)
+        return MoveRest(quintic, turned, torque, env.allocate(hover))
 
     def instants(self) -> np.ndarray:
         return move_instants(0.0 if self.phi is None else norm3(self.phi))
@@ -304,10 +316,10 @@ class Figure(Segment):
             unit = self.path(sigma, shape)  # `wrenches` takes such an attitude for arrays
             return env.omega_sq(unit), env.omega_sq(at_rest(unit))
         v, n = env.vehicle, len(sigma)
-        path_rows = np.empty((5, n))
+        path_rows = env.scratch(5, n)
         path_rows[0], path_rows[1] = shape.dT, shape.ddT
         path_rows[2], path_rows[3], path_rows[4] = shape.acceleration
-        unit_w, rest_w = np.empty((n, 6)), np.empty((n, 6))
+        unit_w, rest_w = env.scratch(n, 6), env.scratch(n, 6)
         figure_wrenches(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2,
                         (1.0, 0.0, 0.0, 0.0) if q0 is None else q0, q0 is not None, f.n_body,
                         *shape.turn, path_rows, unit_w, rest_w)
@@ -320,4 +332,17 @@ class Figure(Segment):
         return struct.pack("<?8d", f.q0 is None, f.amp, *f.n, *q0) + b"figure"
 
     def instants(self) -> np.ndarray:
-        return figure_instants(norm3(self.figure.n), self.figure.phase_instants)
+        """`fcu.envelope.feasibility.figure_instants` (read-only), kept per axis length: the
+        phases' instants do not depend on the figure's other parameters."""
+        axis_norm = norm3(self.figure.n)
+        out = _FIGURE_INSTANTS.get(axis_norm)
+        if out is None:
+            out = figure_instants(axis_norm, self.figure.phase_instants)
+            out.flags.writeable = False
+            if len(_FIGURE_INSTANTS) >= 64:
+                _FIGURE_INSTANTS.clear()
+            _FIGURE_INSTANTS[axis_norm] = out
+        return out
+
+
+_FIGURE_INSTANTS: dict[float, np.ndarray] = {}  # `Figure.instants`

@@ -241,7 +241,11 @@ def _params_result(item: MissionItem) -> Verdict:
 
 def _fly_to(item: MissionItem, target_ned_m: list[float], pos: list[float],
             r: float) -> Verdict:
-    """An item ending at `target_ned_m`: inside the geofence radius r, `pos` moves there."""
+    """An item ending at `target_ned_m`: inside the geofence radius r, `pos` moves there
+    (no geofence, r = inf: always)."""
+    if r == math.inf:
+        pos[:] = target_ned_m
+        return ACCEPTED
     reach = norm3((target_ned_m[0], target_ned_m[1], target_ned_m[2]))
     if reach > r:
         if item.command in XY_COMMANDS and \

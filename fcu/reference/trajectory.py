@@ -19,6 +19,7 @@ floats or numpy arrays alike (`xp` = math or numpy), so the envelope check of
 from __future__ import annotations
 
 import math
+import struct
 from functools import cached_property
 from typing import Any, NamedTuple, Protocol
 
@@ -150,7 +151,7 @@ class FigureInfinity:
                  q0: Quat | None = None) -> None:
         self.amp, self.duration, self.n, self.p0, self.q0 = amp, duration, axis_enu, p0, q0
         self.n_body = axis_enu if q0 is None else q_rotate_inv(q0, axis_enu)
-        self.end = self.at(TWO_PI, 0.0, 0.0)
+        self.end = self._end()
 
     @cached_property
     def start(self) -> Reference:
@@ -174,6 +175,23 @@ class FigureInfinity:
         nb = self.n_body
         q = turn if self.q0 is None else q_mul(turn, self.q0)
         return q, (dT * nb[0], dT * nb[1], dT * nb[2]), (ddT * nb[0], ddT * nb[1], ddT * nb[2])
+
+    def _end(self) -> Reference:
+        """`at(TWO_PI, 0.0, 0.0)`, the same values: what depends on the amplitude and the
+        axis alone is kept by their bits (`_END_SHAPES`: a mission repeats its figures)."""
+        key = struct.pack("<4d", self.amp, *self.n)
+        shape = _END_SHAPES.get(key)
+        if shape is None:
+            n = self.n
+            shape = (figure_path(self.amp, TWO_PI, 0.0, 0.0),
+                     q_exp((TWO_PI * n[0], TWO_PI * n[1], TWO_PI * n[2])))
+            if len(_END_SHAPES) >= 64:
+                _END_SHAPES.clear()
+            _END_SHAPES[key] = shape
+        (off, v, acc), turn = shape
+        q, w, wd = self._turned(turn, 0.0, 0.0)
+        x0, y0, z0 = self.p0
+        return Reference((x0 + off[0], y0 + off[1], z0 + off[2]), q, v, acc, w, wd)
 
     def at(self, T: float, dT: float, ddT: float) -> Reference:
         """The reference at phase T with derivatives T', T''."""
@@ -204,6 +222,9 @@ class FigureInfinity:
     def phase_instants(self, T: np.ndarray) -> np.ndarray:
         """Normalised times sigma = tau / D at which the phase takes the values T in [0, 2 pi]."""
         return np.arccos(np.clip(1.0 - T / math.pi, -1.0, 1.0)) / math.pi
+
+
+_END_SHAPES: dict[bytes, tuple[tuple[tuple[float, float, float], ...], Quat]] = {}
 
 
 # ----------------------------------------------------------------------------------------

@@ -19,7 +19,7 @@ from benchmarks.random_mission_gen import random_cruise_speed, random_mission
 from common.config.scenario import load_vehicle
 from fcu.control.dualquat import Q_IDENTITY, q_exp
 from fcu.envelope import feasibility
-from fcu.envelope.excess import excess_kernel, excess_ratio, fits_kernel
+from fcu.envelope.excess import excess_kernel, excess_ratio, fits_kernel, parts_into
 from fcu.envelope.feasibility import (
     DIFF_STEP,
     TILT_STEP_S,
@@ -29,7 +29,7 @@ from fcu.envelope.feasibility import (
     envelope,
 )
 from fcu.envelope.instants import time_order
-from fcu.envelope.verdict import fits_raw, rotor_parts
+from fcu.envelope.verdict import fits_raw
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import envelope_reason, plan_item, with_speed
 from fcu.mission.segments import Figure, Move
@@ -238,17 +238,17 @@ def test_figure_allocations_are_those_of_its_path(vehicle):
 def test_fits_from_the_allocations_is_fits_kernel(vehicle):
     """Given paths flown from far too fast to slow, and each limit bound alone at a path's
     need and a few doubles either side, then `fits_raw` on the path's allocations answers
-    as `fits_kernel` on its parts, and `rotor_parts` makes each rotor's parts to the bit."""
+    as `fits_kernel` on its parts, and `parts_into` makes the parts to the bit into an array
+    whatever it held before (`fits_raw` reuses one)."""
     env = envelope(vehicle)
     for path in _paths():
         sc = _fresh(env, path)
         o, scratch = sc.order, np.empty(sc.samples)
         om, hover = env.allocations(path, o)
-        p = np.empty((10, sc.samples))
-        for i in range(sc.parts.shape[0]):
-            rotor_parts(om, hover, sc.samples, 2.0 * DIFF_STEP, env.floor, o.places,
-                        o.place_ends, i, p)
-            assert p.tobytes() == sc.parts[i].tobytes()
+        room = np.full((om.shape[1] * 5, sc.samples), np.nan)
+        parts_into(om, hover, sc.samples, 2.0 * DIFF_STEP, env.floor, o.places, o.place_ends,
+                   room.reshape(sc.parts.shape))
+        assert room.tobytes() == sc.parts.tobytes()
         base = [env.limit, env.tau_up, env.tau_down, env.tilt_limit,
                 env.tilt_rate_max * TILT_STEP_S]
         for duration in np.geomspace(0.05, 300.0, 40):
@@ -265,7 +265,7 @@ def test_fits_from_the_allocations_is_fits_kernel(vehicle):
                 for use_floor in (False, env.floor > 0.0):
                     assert fits_raw(om, hover, 2.0 * DIFF_STEP, env.floor, o.places,
                                     o.place_gap, o.place_ends, duration, *args,
-                                    use_floor) == \
+                                    use_floor, room) == \
                         fits_kernel(sc.parts, o.place_gap, o.place_ends, duration, *args,
                                     use_floor, scratch), (path, duration, args)
 
@@ -286,3 +286,22 @@ def test_a_scaling_asked_fits_first_has_the_parts_of_one_made_at_once():
         assert lazy.shortest() == eager.shortest()
         copy = pickle.loads(pickle.dumps(_fresh(env, path)))
         assert copy.parts.tobytes() == parts.tobytes()
+
+
+def test_a_scratch_array_is_handed_out_again_only_once_free():
+    """Given an envelope's scratch arrays, when one large array is held (directly or
+    through a view) it is not handed out again, and once dropped it is; a small one is
+    always new."""
+    env = Envelope(TILTED)
+    held = env.scratch(60, 400)
+    view = env.scratch(60, 400)[1:]
+    third = env.scratch(60, 400)
+    assert len({id(held), id(view.base), id(third)}) == 3
+    freed = {id(view.base)}
+    del view
+    assert id(env.scratch(60, 400)) in freed
+    freed.add(id(third))
+    del third
+    again = env.scratch(60, 400)
+    assert id(again) in freed and again is not held
+    assert env.scratch(2, 6) is not env.scratch(2, 6)
