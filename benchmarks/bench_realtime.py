@@ -20,21 +20,23 @@ runs a timeline of ground-station work while hovering:
 
 A second station (system id 254 on the FCU's second GCS link; the first is 255) does the
 same work at the same time: its upload is refused while the first one's runs (the FCU takes
-one upload at a time), so it asks again until it is taken; the OFFBOARD targets and the
-mode changes follow one shared schedule, so both stations ask for the same thing at the same
-moment. A piece of work that fails (a refusal, no answer) is recorded in its event and the
-timeline goes on (`timeline_complete` in the JSON says whether all of it was done). Then the
-vehicle lands, the processes are stopped, and the figures are computed over the timeline
-(from its start to its end, on the flight clock as the vehicle's telemetry gave it) from the
-FCU's onboard log (`dq_onboard`, one record per control step in flight; every file the log
-was rotated into) and its `--stats` (deadline misses over the control steps of the whole
-run, from start to stop): the step period's p50, p99 and p99.9, the longest gap between two
-steps, the deadline misses, and the largest position and attitude errors (the log's state
-against its reference). A `dq_onboard` record is stamped with the state its step acted on,
-moved onto the flight clock (fcu/edge/onboard_log.py), not with the step's own time: a step on
-the same state as the step before repeats the stamp (counted as `repeated_stamps`), and the
-periods are those between distinct stamps, in whole control periods: how often the loop
-acted on a new state. The longest gaps are printed with the events under way.
+one upload at a time), so it asks again until it is taken, for at most `TAKEN_WITHIN_S` (on
+a busy machine the other upload's check, at a lower priority than the loop, takes longer);
+the OFFBOARD targets and the mode changes follow one shared schedule, so both stations ask
+for the same thing at the same moment. A piece of work that fails (a refusal, no answer) is
+recorded in its event and the timeline goes on (`timeline_complete` in the JSON says whether
+all of it was done). Then the vehicle lands, the processes are stopped, and the figures are
+computed over the timeline (from its start to its end, on the flight clock as the vehicle's
+telemetry gave it) from the FCU's onboard log (`dq_onboard`, one record per control step in
+flight; every file the log was rotated into) and its `--stats` (deadline misses over the
+control steps of the whole run, from start to stop): the step period's p50, p99 and p99.9,
+the longest gap between two steps, the deadline misses, and the largest position and
+attitude errors (the log's state against its reference). A `dq_onboard` record is stamped
+with the state its step acted on, moved onto the flight clock (fcu/edge/onboard_log.py), not
+with the step's own time: a step on the same state as the step before repeats the stamp
+(counted as `repeated_stamps`), and the periods are those between distinct stamps, in whole
+control periods: how often the loop acted on a new state. The longest gaps are printed with
+the events under way.
 
 The flight is flown twice: idle, and beside `--hogs` busy processes at nice 19 that this
 script starts and kills by PID. `--compare ARG` flies every condition twice, plain and with
@@ -98,6 +100,8 @@ HOVER_M = 3.0
 STREAM_HZ = 25.0  # OFFBOARD set-points and MANUAL_CONTROL (PX4 wants more than 2 Hz)
 STATIONS = (255, 254)  # the ground stations' system ids
 VEHICLE_ID = 1
+TAKEN_WITHIN_S = 120.0  # how long a station asks again while another station's upload runs
+RETRY_S = 0.1
 MODES = ("MISSION", "POSCTL", "OFFBOARD", "TAKEOFF", "RTL", "LAND", "HOLD")
 LOCAL_NED: int = MAV_FRAME.MAV_FRAME_LOCAL_NED
 WAYPOINT: int = MAV_CMD.MAV_CMD_NAV_WAYPOINT
@@ -407,19 +411,21 @@ def station_work(tl: Timeline, session: Session, station: int) -> None:
     tl.sync()
     # 1. mission upload, download, parameter list
     with tl.event(station, f"mission upload ({len(items)} items)") as ev:
-        tries = 0
+        tries, ceiling = 0, time.monotonic() + TAKEN_WITHIN_S
         while True:
             tries += 1
             answer = upload_detailed(s.conn, s.target_system, s.target_component, items,
                                      send=s.send)
             if answer.accepted:
                 break
-            if answer.result == M.MAV_MISSION_DENIED and answer.asked < 0 and tries < 100:
+            if (answer.result == M.MAV_MISSION_DENIED and answer.asked < 0
+                    and time.monotonic() < ceiling):
                 # refused before any item was asked for: the FCU is taking another
                 # station's upload (one at a time); ask again
-                time.sleep(0.1)
+                time.sleep(RETRY_S)
                 continue
-            raise FlightFailed(f"mission upload refused: {answer.describe()}")
+            raise FlightFailed(f"mission upload refused after {tries} tries: "
+                               f"{answer.describe()}")
         ev.note = f"accepted after {tries} tries" if tries > 1 else "accepted"
     with tl.event(station, "mission download") as ev:
         got = download(s.conn, s.target_system, s.target_component, send=s.send)
