@@ -8,13 +8,14 @@ calls at a step boundary (`take`), never half-way through a step. Two kinds:
 - `InlineWork`: the job runs at once in the loop's thread, and its callback with it. This is
   the lockstep default: simulated time stands still while it runs (the simulator waits for
   the answer), so nothing flies on stale outputs, and a run is what it always was.
-- `ProcessWork` (`fcu.edge.work_process`, the I/O edge): the job runs in a worker process at a
-  lower priority (nice +10). A process, not a thread: the checks are Python and numpy
-  code that would hold the GIL for milliseconds at a time; a process keeps them off the
-  loop's GIL and below its priority whatever they cost. This is the real-time default:
-  the loop keeps flying the reference it has and takes the result in at the first step
-  boundary after it came. With `wait=True` (lockstep through the worker) `submit` waits
-  for the result and calls back at once: the same results as `InlineWork`, to the bit.
+- `ProcessWork` (`fcu.edge.work_process`, the I/O edge): the job runs in a worker process at
+  a lower priority (nice +10; a warm-up before the flight at the loop's). A process, not a
+  thread: the checks are Python and numpy code that would hold the GIL for milliseconds at a
+  time; a process keeps them off the loop's GIL and below its priority whatever they cost.
+  This is the real-time default: the loop keeps flying the reference it has and takes the
+  result in at the first step boundary after it came. With `wait=True` (lockstep through the
+  worker) `submit` waits for the result and calls back at once: the same results as
+  `InlineWork`, to the bit.
 
 A worker that dies fails its jobs with the reason (and the next job starts a new worker);
 a job that raises fails with the exception's text; neither stops the loop.
@@ -68,8 +69,14 @@ class Work:
         """Jobs submitted whose callback has not been called yet."""
         return len(self._finished)
 
-    def submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done) -> None:
-        """Run `fn(*args)` where this work runs; `done(outcome)` at a step boundary."""
+    def submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done, *,
+               warm_up: bool = False) -> None:
+        """Run `fn(*args)` where this work runs; `done(outcome)` at a step boundary.
+
+        `warm_up`: the job loads what later jobs need (kernels) before the flight, so it runs
+        at the loop's priority: a worker lowers its own only before its first other job (on
+        a busy machine a start-up at nice +10 took a minute, and the first mission's check
+        waited behind it)."""
         self.submitted += 1
         name, at = getattr(fn, "__name__", "job"), self.steps()
 
@@ -79,9 +86,10 @@ class Work:
             self.history.append((name, self.steps() - at))
             done(outcome)
 
-        self._submit(fn, args, tracked)
+        self._submit(fn, args, tracked, warm_up)
 
-    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done) -> None:
+    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done,
+                warm_up: bool) -> None:
         raise NotImplementedError
 
     def filenos(self) -> list[int]:
@@ -120,5 +128,6 @@ class InlineWork(Work):
     def immediate(self) -> bool:
         return True
 
-    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done) -> None:
+    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done,
+                warm_up: bool) -> None:
         done(run_job(fn, args))

@@ -129,7 +129,8 @@ class FlightController:
         if not lockstep:  # EKF_EN may turn the estimator on later: making it must not stall
             warm_estimator()
         if not self.work.immediate:  # the worker started and warmed before the flight
-            self.work.submit(warm_plans, (pipeline.commander.limits,), lambda _: None)
+            self.work.submit(warm_plans, (pipeline.commander.limits,), lambda _: None,
+                             warm_up=True)
         if lockstep:  # offboard loss judged on the flight clock too (fcu.modes.offboard_stream)
             off = pipeline.commander.offboard
             off.flight_clock, off.wall_clock = (lambda: self.time_us * 1e-6), time.monotonic

@@ -17,18 +17,26 @@ NICE = 10  # the worker's priority below the loop's
 POLL_S = 1.0  # wait=True: how often the worker is looked at while its job runs
 
 
-def _serve(conn: Connection, nice: int) -> None:
-    """The worker process: jobs in, outcomes out, until the pipe closes."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the FCU's to act on
+def _lower(nice: int) -> None:
     try:
         os.nice(nice)
     except OSError:
         pass
+
+
+def _serve(conn: Connection, nice: int) -> None:
+    """The worker process: jobs in, outcomes out, until the pipe closes. It runs warm-ups at
+    the priority it started with, and lowers it by `nice` before its first other job."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the FCU's to act on
+    lowered = False
     while True:
         try:
-            job_id, fn, args = conn.recv()
+            job_id, fn, args, warm_up = conn.recv()
         except (EOFError, OSError):
             return  # the FCU closed the pipe (or is gone)
+        if not (warm_up or lowered):
+            _lower(nice)
+            lowered = True
         outcome = run_job(fn, args)
         try:
             conn.send((job_id, outcome))
@@ -38,7 +46,8 @@ def _serve(conn: Connection, nice: int) -> None:
 
 class ProcessWork(Work):
     """Jobs run in one worker process (started on the first job, spawned: nothing of the
-    loop's state is inherited), at nice +NICE; callbacks from `take`."""
+    loop's state is inherited), at nice +NICE but for warm-ups before any other job;
+    callbacks from `take`."""
 
     kind = "beside"
 
@@ -76,11 +85,12 @@ class ProcessWork(Work):
         """Start the worker now (it is otherwise started by the first job)."""
         self._start()
 
-    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done) -> None:
+    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done,
+                warm_up: bool) -> None:
         job_id = self._next_id = self._next_id + 1
         self._jobs[job_id] = done
         try:
-            self._start().send((job_id, fn, args))
+            self._start().send((job_id, fn, args, warm_up))
         except Exception as exc:  # the pipe is gone (the worker died) or args unpicklable
             self._lost(f"job not sent: {exc}")
             return

@@ -1,5 +1,6 @@
 """The worker process beside the loop (`fcu/edge/work_process.py`): its outcome is the inline
-one, a job that raises says why, and a worker that dies fails its job and is started again."""
+one, a job that raises says why, a worker that dies fails its job and is started again, and
+its warm-ups run at the loop's priority, every other job below it."""
 
 from __future__ import annotations
 
@@ -59,3 +60,21 @@ def test_a_worker_that_dies_fails_its_job_with_the_reason_and_is_started_again()
         assert got[1] == Outcome(2) and work.restarts == 1 and work.pending == 0
     finally:
         work.close()
+
+
+def test_warm_ups_run_at_the_loops_priority_and_every_other_job_below_it():
+    """Given a worker whose first jobs are warm-ups, then they run at the priority the FCU
+    runs at; the first other job, and every job after it (a warm-up too), at nice +NICE."""
+    work = ProcessWork(wait=True)
+    got: list[Outcome[Any]] = []
+    try:
+        work.submit(os.nice, (0,), got.append, warm_up=True)  # os.nice(0): the niceness
+        work.submit(os.nice, (0,), got.append, warm_up=True)
+        work.submit(os.nice, (0,), got.append)
+        work.submit(os.nice, (0,), got.append, warm_up=True)
+    finally:
+        work.close()
+    loop = os.nice(0)
+    lowered = min(loop + work.nice, 19)
+    assert [o.value for o in got] == [loop, loop, lowered, lowered]
+    assert lowered > loop
