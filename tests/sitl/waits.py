@@ -4,8 +4,9 @@ passes."""
 
 from __future__ import annotations
 
+import subprocess
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -26,6 +27,39 @@ def until(value: Callable[[], T], what: str, timeout: float = 60.0,
         if time.monotonic() > deadline:
             raise AssertionError(f"{what}: not within {timeout:g} s")
         time.sleep(poll_s)
+
+
+def run_progressing(argv: Sequence[str], progress: Callable[[], object], what: str, *,
+                    stall_s: float = 180.0, poll_s: float = 1.0,
+                    **popen: Any) -> subprocess.CompletedProcess[str]:
+    """Run `argv` to its end (text output captured) for as long as `progress()` keeps
+    changing: a loaded machine makes a lockstep flight slower, never different, so only a
+    run that stops progressing for `stall_s` is stopped, with an AssertionError naming
+    `what` and the last progress seen."""
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            **popen)
+    seen, changed = progress(), time.monotonic()
+    while True:
+        try:
+            out, err = proc.communicate(timeout=poll_s)
+            return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+        except subprocess.TimeoutExpired:
+            now_seen = progress()
+            if now_seen != seen:
+                seen, changed = now_seen, time.monotonic()
+            elif time.monotonic() - changed > stall_s:
+                proc.kill()
+                out, err = proc.communicate()
+                raise AssertionError(f"{what}: no progress for {stall_s:g} s (last: {seen})"
+                                     f"\n{out[-2000:]}{err[-2000:]}") from None
+
+
+def file_size(path: Path) -> int:
+    """A growing file's size (-1 while it does not exist): progress for `run_progressing`."""
+    try:
+        return path.stat().st_size
+    except OSError:
+        return -1
 
 
 def flown_to(stack, t_s: float, timeout: float = 60.0):
