@@ -85,12 +85,17 @@ def fits_kernel_many(m: float, g: float, inertia: tuple[float, float, float],
                              tilt_limit, step_limit, use_floor, np.empty(parts.shape[2]))
 
 
+def compiled_product(env: Envelope) -> bool:
+    """Whether numpy's product can be called from compiled code with A^+ laid out as
+    `Envelope` makes it."""
+    return AVAILABLE and env.pinv_t.T.flags.c_contiguous and env.pinv_t.shape[1] > 1
+
+
 def batched(env: Envelope, seg: Move) -> bool:
     """Whether `fits_many` judges this move itself (else the caller asks its scaling): a
-    move whose allocations `Move.unit_allocations` makes (a float q0 and dp), where numpy's
-    product can be called from compiled code and A^+ is laid out as `Envelope` makes it."""
-    return AVAILABLE and env.pinv_t.T.flags.c_contiguous and env.pinv_t.shape[1] > 1 and \
-        _floats(*seg.q0) and _floats(*seg.dp)
+    move whose allocations `Move.unit_allocations` makes (a float q0 and dp), where
+    `compiled_product`."""
+    return compiled_product(env) and _floats(*seg.q0) and _floats(*seg.dp)
 
 
 def pack(env: Envelope, moves: Sequence[Move]) -> Packed:
@@ -100,19 +105,25 @@ def pack(env: Envelope, moves: Sequence[Move]) -> Packed:
     and how many: 0 where it keeps its attitude, of its rows of hover and how many: 1 or 3n,
     of its places and gaps, of its ends and how many); the groups' arrays one after
     another."""
-    groups: dict[tuple[int, int], int] = {}
+    groups: dict[int, int] = {}  # by the `MoveRest` (kept in members): its q0, phi, instants
+    same: dict[tuple[float, ...], int] = {}  # the group of each q0 and phi met (no zero:
+    # 0.0 and -0.0 are equal keys, different rests)
     members: list[tuple[MoveRest, np.ndarray, np.ndarray, np.ndarray, int]] = []
     group_of: list[int] = []
     poses: list[tuple[float, ...]] = []
     for seg in moves:
-        order = time_order(seg.instants())
-        rest = seg.rest(env, order.stepped)
-        key = id(order), id(rest)
-        gi = groups.get(key)
-        if gi is None:
-            gi = groups[key] = len(members)
-            members.append((rest, order.places, order.place_gap, order.place_ends,
-                            len(order.places)))
+        turn = (*seg.q0, *(seg.phi if seg.phi is not None else ()))
+        gi = same.get(turn)
+        if gi is None:  # the instants follow from phi, the rest from q0 and phi
+            order = time_order(seg.instants())
+            rest = seg.rest(env, order.stepped)
+            gi = groups.get(id(rest))
+            if gi is None:
+                gi = groups[id(rest)] = len(members)
+                members.append((rest, order.places, order.place_gap, order.place_ends,
+                                len(order.places)))
+            if 0.0 not in turn:
+                same[turn] = gi
         group_of.append(gi)
         poses.append((*seg.q0, *seg.dp, seg.duration))
     index = np.empty((len(members), 9), dtype=_I)
@@ -160,7 +171,7 @@ def _judged_here(seg: Segment, limits: MissionLimits) -> Envelope | None:
             not seg.duration > 0.0 or not seg.moves:
         return None
     env = envelope(limits.vehicle)
-    return env if batched(env, seg) else None
+    return env if compiled_product(env) and _floats(*seg.q0, *seg.dp) else None
 
 
 def first_refusal(planned: Sequence[Planned]) -> tuple[int, str]:
