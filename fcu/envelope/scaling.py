@@ -229,6 +229,19 @@ class TimeScaling:
         assert self._bracket is not None
         return duration < self._bracket[0]  # the bisection ends above lo, at hi or below
 
+    def searched(self, lo: float, hi: float, shortest: float, fit_at: float) -> None:
+        """The state `_search` leaves, given by a search made elsewhere with the same kernels
+        (`fcu.mission.stretch`): its bracket (lo, hi), the shortest duration once it ended and
+        a duration it found fitting (NaN: none yet)."""
+        self._bracket = lo, hi
+        self._shortest = None if math.isnan(shortest) else shortest
+        self._fit_at = None if math.isnan(fit_at) else fit_at
+
+    def knows(self, duration: float, fits: bool) -> None:
+        """`fits(duration)`, judged elsewhere by the same kernel (`fcu.mission.stretch`)."""
+        if len(self._fits) < 16:
+            self._fits[float(duration)] = fits
+
     def _search(self, until: float) -> None:
         """From the speed bound up: while a duration fails by a ratio r, the next tried is
         r^(1/3) longer (no need decays faster than 1/D^3: accelerations scale by 1/D^2 and

@@ -4,15 +4,18 @@ from __future__ import annotations
 
 import bisect
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 from common.wire.mission_items import MissionItem
 from fcu.control.dualquat import Quat, Vec3
+from fcu.envelope.feasibility import Envelope, envelope
 from fcu.mission.codes import MAV_MISSION_ACCEPTED
 from fcu.mission.limits import MissionLimits
-from fcu.mission.planning import envelope_reason, plan_item, with_speed
-from fcu.mission.segments import Segment
+from fcu.mission.planning import plan_item, speed_timed, stretched, with_speed
+from fcu.mission.segments import Move, Segment
+from fcu.mission.stretch import stretch_many
 from fcu.mission.validation import check_items, refusal
+from fcu.mission.verdicts import batched, first_refusal
 from fcu.stages import Reference, pose_ref
 
 # Item ends are sums of float seconds; the flight clock is integer microseconds. An item
@@ -24,6 +27,40 @@ class MissionEvent(NamedTuple):
     kind: str  # "current" | "reached" | "completed"
     seq: int
 
+
+
+def plan(items: Sequence[MissionItem], seq: int, t_s: float, p: Vec3, q: Quat,
+         limits: MissionLimits) -> list[Segment]:
+    """The segments of items seq.. from (t_s, p, q), as `plan_item` makes them one after
+    another (item k from the end of item k - 1), speed-timed moves stretched: the poses
+    first (they do not depend on how long a move takes), the moves that the envelope can
+    stretch at once stretched then (`stretch_many`), each segment then moved to its start."""
+    planned = limits  # with the speeds of the DO_CHANGE_SPEED items before seq
+    for item in items[:seq]:
+        planned = with_speed(item, planned, limits)
+    segments: list[Segment] = []
+    to_stretch: dict[int, tuple[Envelope, list[int]]] = {}
+    for item in items[seq:]:
+        planned = with_speed(item, planned, limits)
+        seg = plan_item(item, t_s, p, q, planned, stretch=False, scaled=False)
+        if isinstance(seg, Move) and planned.vehicle is not None and seg.moves and \
+                speed_timed(item):
+            env = envelope(planned.vehicle)
+            if batched(env, seg):
+                to_stretch.setdefault(id(env), (env, []))[1].append(len(segments))
+            else:
+                seg = stretched(seg, planned.vehicle)
+        segments.append(seg)
+        p, q = seg.p_end, seg.q_end
+    for env, ks in to_stretch.values():
+        moves = stretch_many(env, [cast(Move, segments[k]) for k in ks])
+        for k, seg in zip(ks, moves, strict=True):
+            segments[k] = seg
+    t = t_s
+    for seg in segments:
+        seg.starting(t)
+        t = seg.t1
+    return segments
 
 
 class MissionExecutor:
@@ -70,18 +107,8 @@ class MissionExecutor:
         q: Quat = (q_enu_flu[0], q_enu_flu[1], q_enu_flu[2], q_enu_flu[3])
         self._start_ref = pose_ref(p, q)
         self._t_start = t_s
-        segments: list[Segment] = []
-        t = t_s
-        limits = self.limits  # with the speeds of the DO_CHANGE_SPEED items before seq
-        for item in self.items[:seq]:
-            limits = with_speed(item, limits, self.limits)
-        for item in self.items[seq:]:
-            limits = with_speed(item, limits, self.limits)
-            seg = plan_item(item, t, p, q, limits)
-            segments.append(seg)
-            t, p, q = seg.t1, seg.p_end, seg.q_end
-        self._segments = segments
-        self._ends = [seg.t1 for seg in segments]
+        self._segments = plan(self.items, seq, t_s, p, q, self.limits)
+        self._ends = [seg.t1 for seg in self._segments]
         self._announced = 0
         self._reached = 0
         self._completed = False
@@ -93,11 +120,7 @@ class MissionExecutor:
         fails (`fcu.mission.planning.envelope_reason`): a user-timed item that fitted from
         the origin may not from the vehicle's actual pose."""
         items = {item.seq: item for item in self.items}
-        for seg in self._segments:
-            reason = envelope_reason(items[seg.seq], seg, self.limits)
-            if reason:
-                return reason
-        return ""
+        return first_refusal([(items[seg.seq], seg, self.limits) for seg in self._segments])[1]
 
     @property
     def started(self) -> bool:

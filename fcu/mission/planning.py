@@ -40,18 +40,26 @@ def _turn(q0: Quat, yaw_deg: float) -> Vec3 | None:
     return phi if norm3(phi) > 0.0 else None
 
 
-def _stretched(seg: Move, vehicle: VehicleConfig | None, stretch: bool = True) -> Move:
+def stretched(seg: Move, vehicle: VehicleConfig | None, stretch: bool = True,
+               scaled: bool = True) -> Move:
     """A speed-timed move, its travel lengthened to the shortest flyable time if it is
     shorter (`fcu.envelope.feasibility.TimeScaling.shortest`); as it is without a vehicle, when it
     does not move, or when no duration helps; as planned, with its scaling, where not `stretch`
-    (`envelope_reason` tells whether it would be)."""
-    if vehicle is None or not seg.moves:
+    (`envelope_reason` tells whether it would be), and without it where not `scaled` either."""
+    if vehicle is None or not seg.moves or not (stretch or scaled):
         return seg
     scaling = envelope(vehicle).scaling(seg)
     if stretch and scaling.stretches(seg.travel):  # the search's bisection only as needed
         seg = seg.retimed(scaling.shortest())
     seg.scaling = scaling
     return seg
+
+
+def speed_timed(item: MissionItem) -> bool:
+    """Whether `plan_item` times the item's move by a speed (and stretches it)."""
+    if item.command == MAV_CMD_NAV_TAKEOFF:
+        return not item.param2 > 0.0
+    return item.command in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME, MAV_CMD_NAV_LAND)
 
 
 # The parameter that gives the duration of user-timed items.
@@ -132,11 +140,12 @@ def _speed_timed(dp: Vec3, speed: float, phi: Vec3 | None,
 
 
 def plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
-              limits: MissionLimits, stretch: bool = True) -> Segment:
+              limits: MissionLimits, stretch: bool = True, scaled: bool = True) -> Segment:
     """The item's segment from (t0, p0, q0); speed-timed moves stretched to what the vehicle
     can fly, or, where not `stretch` (the upload check, whose outcome does not depend on
     how long a stretched move becomes), as planned with their scaling (`envelope_reason`
-    then accepts one that the stretch would make fit)."""
+    then accepts one that the stretch would make fit), or without it where not `scaled`
+    either (`envelope_reason` makes it where it is needed)."""
     cmd = item.command
     if cmd == MAV_CMD_DO_CHANGE_SPEED:  # no motion: it changes how later items are planned
         return Move(item.seq, t0, p0, ZERO, q0, None, 0.0, 0.0)
@@ -147,8 +156,8 @@ def plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
 
     def move(dp: Vec3, phi: Vec3 | None, travel: float, hold: float) -> Move:
         """A speed-timed move, stretched to what the vehicle can fly."""
-        return _stretched(Move(item.seq, t0, p0, dp, q0, phi, travel, hold), limits.vehicle,
-                          stretch)
+        return stretched(Move(item.seq, t0, p0, dp, q0, phi, travel, hold), limits.vehicle,
+                          stretch, scaled)
 
     if cmd == MAV_CMD_NAV_TAKEOFF:
         dp = (0.0, 0.0, -item.z - p0[2])

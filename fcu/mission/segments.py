@@ -174,6 +174,10 @@ class Segment:
     def sample(self, tau: float) -> Reference:  # pragma: no cover - overridden
         raise NotImplementedError
 
+    def starting(self, t0: float) -> None:  # pragma: no cover - overridden
+        """Start at t0 instead (the same segment and timing)."""
+        raise NotImplementedError
+
     def path(self, sigma: np.ndarray) -> Reference:  # pragma: no cover - overridden
         """The moving part flown in 1 s, at normalised times sigma (arrays)."""
         raise NotImplementedError
@@ -199,6 +203,12 @@ class Move(Segment):
 
     def retimed(self, travel: float) -> Move:
         return Move(self.seq, self.t0, self.p0, self.dp, self.q0, self.phi, travel, self.hold)
+
+    def starting(self, t0: float) -> None:
+        """Start at t0 instead (the same move and timing): planned before the durations of
+        the items before it were known."""
+        self.t0 = t0
+        self.t1 = t0 + self.travel + self.hold
 
     def _at(self, s: Any, ds: Any, dds: Any, d: float, many: bool = False) -> Reference:
         p0, dp = self.p0, self.dp
@@ -243,15 +253,22 @@ class Move(Segment):
             return None  # `wrenches` takes such an attitude for arrays
         q0 = (float(self.q0[0]), float(self.q0[1]), float(self.q0[2]), float(self.q0[3]))
         dp = (float(self.dp[0]), float(self.dp[1]), float(self.dp[2]))
-        phi = self.phi
-        key = b"move rest" + struct.pack("<q4d", len(sigma), *q0) + (
-            struct.pack("<3d", *phi) if phi is not None else b"")
-        rest = env.kept(key, len(sigma), lambda: self._rest(env, sigma))
+        rest = self.rest(env, sigma)
         vehicle = env.vehicle
         moving = np.empty((len(sigma), 6))
         move_wrenches(vehicle.mass_kg, vehicle.gravity_m_s2, vehicle.inertia_diag_kg_m2, q0,
                       dp, rest.quintic, rest.turned, rest.torque, moving)
         return env.allocate(moving), rest.hover
+
+    def rest(self, env: Envelope, sigma: np.ndarray) -> MoveRest:
+        """The `MoveRest` of this move's path at sigma, kept in the envelope (`Envelope.kept`)
+        for the moves of the same q0 and phi (a float q0)."""
+        q0 = self.q0
+        phi = self.phi
+        key = b"move rest" + struct.pack("<q4d", len(sigma), *q0) + (
+            struct.pack("<3d", *phi) if phi is not None else b"")
+        out: MoveRest = env.kept(key, len(sigma), lambda: self._rest(env, sigma))
+        return out
 
     def _rest(self, env: Envelope, sigma: np.ndarray) -> MoveRest:
         """The `MoveRest` of this move's path at sigma."""
@@ -291,6 +308,11 @@ class Figure(Segment):
         self.t1 = t0 + duration
         self.end_ref = self.figure.end
         self.p_end, self.q_end = self.end_ref.p_enu_m, self.end_ref.q_enu_flu
+
+    def starting(self, t0: float) -> None:
+        """Start at t0 instead (`Move.starting`)."""
+        self.t0 = t0
+        self.t1 = t0 + self.duration
 
     def phase(self, tau: float) -> tuple[float, float, float]:
         return self.figure.phase(tau)

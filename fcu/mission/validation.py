@@ -57,11 +57,11 @@ from fcu.mission.planning import (
     SPEED_DEFAULT,
     SPEED_FIELDS,
     SPEED_NO_CHANGE,
-    envelope_reason,
     plan_item,
     with_speed,
 )
 from fcu.mission.segments import ZERO
+from fcu.mission.verdicts import Planned, first_refusal
 
 FIGURE_EXTENT = math.sqrt(5.0)  # max |[sin 2T, sin T, 1 - cos 2T]|
 # MAVProxy's `wp load` scales local x, y by 1e7 instead of 1e4: 1 m in a file arrives as
@@ -389,26 +389,40 @@ def validate_mission(items: Sequence[MissionItem], limits: MissionLimits,
 def check_items(items: Sequence[MissionItem], limits: MissionLimits, geofence: bool,
                  envelope_check: bool = False,
                  home: HomePosition | None = None) -> MissionCheck:
-    """`check_mission` without the item count, the geofence optional."""
+    """`check_mission` without the item count, the geofence optional. The envelope is
+    judged once every item before the first refused one is planned (`first_refusal`: the
+    plan from the origin does not depend on it), the first item it refuses reported before
+    any later refusal."""
     pos = [0.0, 0.0, 0.0]
     t, p, q = 0.0, ZERO, Q_IDENTITY
     planned = limits  # with the speeds of the DO_CHANGE_SPEED items so far
+    plan: list[Planned] = []
+    refused = MissionCheck(MAV_MISSION_ACCEPTED, None)
+    failed: Exception | None = None
     for i, item in enumerate(items):
         if item.seq != i:
-            return MissionCheck(MAV_MISSION_INVALID_SEQUENCE, item.seq,
-                                f"item {item.seq} sent as item {i} (seq must be 0..n-1 in "
-                                "order)")
+            refused = MissionCheck(MAV_MISSION_INVALID_SEQUENCE, item.seq,
+                                   f"item {item.seq} sent as item {i} (seq must be 0..n-1 "
+                                   "in order)")
+            break
         item, verdict = _localized(item, home, limits)
         if verdict.result == MAV_MISSION_ACCEPTED:
             verdict = _check_item(item, limits, pos, geofence)
         if verdict.result != MAV_MISSION_ACCEPTED:
-            return MissionCheck(verdict.result, item.seq, verdict.reason)
+            refused = MissionCheck(verdict.result, item.seq, verdict.reason)
+            break
         planned = with_speed(item, planned, limits)
         if envelope_check:
-            seg = plan_item(item, t, p, q, planned, stretch=False)
-            reason = envelope_reason(item, seg, planned)
-            if reason:
-                return MissionCheck(MAV_MISSION_DENIED, item.seq, reason)
+            try:
+                seg = plan_item(item, t, p, q, planned, stretch=False, scaled=False)
+            except Exception as e:  # raised once the items before it pass
+                failed = e
+                break
+            plan.append((item, seg, planned))
             t, p, q = seg.t1, seg.p_end, seg.q_end
-    return MissionCheck(MAV_MISSION_ACCEPTED, None)
-
+    k, reason = first_refusal(plan)
+    if reason:
+        return MissionCheck(MAV_MISSION_DENIED, plan[k][0].seq, reason)
+    if failed is not None:
+        raise failed
+    return refused

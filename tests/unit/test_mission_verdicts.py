@@ -1,0 +1,124 @@
+"""The moves of a mission judged at once (`fcu.mission.verdicts`) and stretched at once
+(`fcu.mission.stretch`): numpy's own product in compiled code (`common.gemm.gemm_nt`) is
+numpy's `@` to the bit, every move's verdict is its scaling's (`TimeScaling.fits`), a
+mission's first refusal is still the first item that fails, whether the envelope or a
+parameter refuses it, and the executor's plan is the one made item by item."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.mission_envelope import mixed
+from common.config.scenario import load_vehicle
+from common.gemm import AVAILABLE, gemm_nt
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME
+from common.wire.mission_items import MissionItem, local_xy
+from fcu.control.dualquat import Q_IDENTITY
+from fcu.envelope.feasibility import clear_caches, envelope
+from fcu.mission.codes import MAV_MISSION_DENIED, MAV_MISSION_INVALID_PARAM1
+from fcu.mission.executor import plan
+from fcu.mission.limits import MissionLimits
+from fcu.mission.planning import plan_item, with_speed
+from fcu.mission.segments import ZERO, Move, Segment
+from fcu.mission.validation import check_mission
+from fcu.mission.verdicts import batched, fits_many
+
+ROOT = Path(__file__).resolve().parents[2]
+VEHICLES = {name: load_vehicle(ROOT / f"config/vehicles/{name}.toml")
+            for name in ("hexa_tilted", "hexa_planar")}
+LOCAL = int(MAV_FRAME.MAV_FRAME_LOCAL_NED)
+KEYFRAME = int(MAV_CMD.MAV_CMD_WAYPOINT_USER_1)
+
+
+@pytest.mark.skipif(not AVAILABLE, reason="numpy's BLAS not found under its wheel's name")
+def test_the_compiled_product_is_numpys_to_the_bit() -> None:
+    rng = np.random.default_rng(3)
+    for rows in (2, 3, 67, 201, 921, 5538):
+        a = rng.standard_normal((rows, 6)) * rng.uniform(0.1, 100.0)
+        b = rng.standard_normal((12, 6))
+        out = np.empty((rows, 12))
+        gemm_nt(a, b, out)
+        assert np.array_equal((a @ b.T).view(np.int64), out.view(np.int64))
+
+
+def _moves(limits: MissionLimits, scale: float) -> list[Move]:
+    """The moves of a mixed mission planned from the origin, their durations scaled."""
+    t, p, q = 0.0, ZERO, Q_IDENTITY
+    planned, out = limits, []
+    for item in mixed(60):
+        planned = with_speed(item, planned, limits)
+        seg = plan_item(item, t, p, q, planned, stretch=False, scaled=False)
+        t, p, q = seg.t1, seg.p_end, seg.q_end
+        if isinstance(seg, Move) and seg.moves and seg.duration > 0.0:
+            seg.travel = seg.duration = seg.duration * scale
+            out.append(seg)
+    return out
+
+
+@pytest.mark.parametrize("name", sorted(VEHICLES))
+def test_each_moves_verdict_is_its_scalings(name: str) -> None:
+    env = envelope(VEHICLES[name])
+    verdicts: list[bool] = []
+    for scale in (0.1, 0.3, 1.0, 3.0):
+        moves = _moves(MissionLimits(vehicle=VEHICLES[name]), scale)
+        assert all(batched(env, m) for m in moves)
+        got = fits_many(env, moves)
+        clear_caches()
+        assert got == [env.scaling(m).fits(m.duration) for m in moves]
+        verdicts += got
+    assert any(verdicts) and not all(verdicts)
+
+
+def _keyframe(seq: int, seconds: float, north_m: float = 2.0) -> MissionItem:
+    return MissionItem(seq, LOCAL, KEYFRAME, 0, 1, seconds, 0.0, 0.0, 0.0, local_xy(north_m),
+                       0, -3.0)
+
+
+def test_the_first_failing_item_is_reported_whatever_refuses_it() -> None:
+    limits = MissionLimits(vehicle=VEHICLES["hexa_tilted"])
+    slow, fast, bad = _keyframe(1, 20.0), _keyframe(2, 0.05, 20.0), _keyframe(3, -1.0)
+    takeoff = MissionItem(0, LOCAL, int(MAV_CMD.MAV_CMD_NAV_TAKEOFF), 1, 1, 0.0, 0.0, 0.0,
+                          math.nan, 0, 0, -3.0)
+    assert check_mission([takeoff, slow], limits).result == 0
+    envelope_first = check_mission([takeoff, slow, fast, bad], limits)
+    assert (envelope_first.result, envelope_first.seq) == (MAV_MISSION_DENIED, 2)
+    bad, fast = bad._replace(seq=2), fast._replace(seq=3)
+    params_first = check_mission([takeoff, slow, bad, fast], limits)
+    assert (params_first.result, params_first.seq) == (MAV_MISSION_INVALID_PARAM1, 2)
+
+
+def _one_by_one(items: list[MissionItem], limits: MissionLimits) -> list[Segment]:
+    """The executor's plan made item by item, each move stretched as it is planned."""
+    t, p, q = 1.0, (0.03, -0.02, 0.0), (0.99, 0.01, -0.02, 0.1)
+    planned, out = limits, []
+    for item in items:
+        planned = with_speed(item, planned, limits)
+        seg = plan_item(item, t, p, q, planned)
+        out.append(seg)
+        t, p, q = seg.t1, seg.p_end, seg.q_end
+    return out
+
+
+@pytest.mark.parametrize("name", sorted(VEHICLES))
+def test_the_executors_plan_is_the_one_made_item_by_item(name: str) -> None:
+    """The moves stretched at once (`fcu.mission.stretch`): the same timeline to the bit, the
+    same scalings (their parts, their shortest durations, their verdicts)."""
+    for cruise in (1.0, 5.0, 20.0):
+        limits = MissionLimits(vehicle=VEHICLES[name], cruise_speed_m_s=cruise)
+        items = mixed(40)
+        clear_caches()
+        expected = _one_by_one(items, limits)
+        clear_caches()
+        got = plan(items, 0, 1.0, (0.03, -0.02, 0.0), (0.99, 0.01, -0.02, 0.1), limits)
+        assert [(s.seq, s.t0, s.t1, s.duration, s.p_end, s.q_end) for s in got] == \
+            [(s.seq, s.t0, s.t1, s.duration, s.p_end, s.q_end) for s in expected]
+        for a, b in zip(got, expected, strict=True):
+            assert (a.scaling is None) == (b.scaling is None)
+            if a.scaling is not None and b.scaling is not None:
+                assert a.scaling.parts.tobytes() == b.scaling.parts.tobytes()
+                assert a.scaling.shortest() == b.scaling.shortest()
+                assert a.scaling.fits(a.duration) == b.scaling.fits(b.duration)
