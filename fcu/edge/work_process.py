@@ -25,8 +25,9 @@ def _lower(nice: int) -> None:
 
 
 def _serve(conn: Connection, nice: int) -> None:
-    """The worker process: jobs in, outcomes out, until the pipe closes. It runs warm-ups at
-    the priority it started with, and lowers it by `nice` before its first other job."""
+    """The worker process: jobs in, outcomes out, until the pipe closes. A warm-up that comes
+    first runs at the priority the worker started with (the loop's); the worker lowers it by
+    `nice` after that, or before its first job if that is no warm-up."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the FCU's to act on
     lowered = False
     while True:
@@ -38,6 +39,9 @@ def _serve(conn: Connection, nice: int) -> None:
             _lower(nice)
             lowered = True
         outcome = run_job(fn, args)
+        if not lowered:
+            _lower(nice)
+            lowered = True
         try:
             conn.send((job_id, outcome))
         except Exception as exc:  # an unpicklable result: said, not lost

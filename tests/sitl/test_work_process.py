@@ -1,6 +1,6 @@
 """The worker process beside the loop (`fcu/edge/work_process.py`): its outcome is the inline
 one, a job that raises says why, a worker that dies fails its job and is started again, and
-its warm-ups run at the loop's priority, every other job below it."""
+a first warm-up runs at the loop's priority, every other job below it."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import signal
 from typing import Any
 
 from common.wire.mavlink import MAV
-from fcu.edge.work_process import ProcessWork
+from fcu.edge.work_process import NICE, ProcessWork
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
 from fcu.work import InlineWork, Outcome
@@ -62,19 +62,21 @@ def test_a_worker_that_dies_fails_its_job_with_the_reason_and_is_started_again()
         work.close()
 
 
-def test_warm_ups_run_at_the_loops_priority_and_every_other_job_below_it():
-    """Given a worker whose first jobs are warm-ups, then they run at the priority the FCU
-    runs at; the first other job, and every job after it (a warm-up too), at nice +NICE."""
-    work = ProcessWork(wait=True)
-    got: list[Outcome[Any]] = []
-    try:
-        work.submit(os.nice, (0,), got.append, warm_up=True)  # os.nice(0): the niceness
-        work.submit(os.nice, (0,), got.append, warm_up=True)
-        work.submit(os.nice, (0,), got.append)
-        work.submit(os.nice, (0,), got.append, warm_up=True)
-    finally:
-        work.close()
-    loop = os.nice(0)
-    lowered = min(loop + work.nice, 19)
-    assert [o.value for o in got] == [loop, loop, lowered, lowered]
+def test_a_first_warm_up_runs_at_the_loops_priority_and_every_other_job_below_it():
+    """Given a worker whose first job is a warm-up, then it runs at the priority the FCU runs
+    at, and every job after it (a warm-up too) at nice +NICE; given a worker whose first job
+    is no warm-up, then that job runs at nice +NICE already."""
+    loop = os.nice(0)  # os.nice(0): the niceness
+    lowered = min(loop + NICE, 19)
+    for warm_first, expected in ((True, [loop, lowered, lowered]),
+                                 (False, [lowered, lowered, lowered])):
+        work = ProcessWork(wait=True)
+        got: list[Outcome[Any]] = []
+        try:
+            work.submit(os.nice, (0,), got.append, warm_up=warm_first)
+            work.submit(os.nice, (0,), got.append, warm_up=True)
+            work.submit(os.nice, (0,), got.append)
+        finally:
+            work.close()
+        assert [o.value for o in got] == expected, warm_first
     assert lowered > loop

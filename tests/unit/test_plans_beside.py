@@ -44,7 +44,8 @@ class HeldWork(Work):
     def pending(self) -> int:
         return len(self.held) + len(self._finished)
 
-    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done) -> None:
+    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done,
+                warm_up: bool) -> None:
         self.held.append((fn, args, done))
 
     def names(self) -> list[str]:

@@ -46,7 +46,8 @@ class HeldWork(Work):
     def pending(self) -> int:
         return len(self.held) + len(self._finished)
 
-    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done) -> None:
+    def _submit(self, fn: Callable[..., Any], args: tuple[Any, ...], done: Done,
+                warm_up: bool) -> None:
         self.held.append((done, Outcome(fn(*args))))
 
     def release(self) -> int:
@@ -150,7 +151,7 @@ def test_a_new_upload_drops_the_pending_check_and_another_gcs_is_denied():
 
 def test_a_check_that_failed_is_a_mission_error_with_why():
     class Broken(Work):
-        def _submit(self, fn, args, done):
+        def _submit(self, fn, args, done, warm_up):
             done(Outcome(None, "the worker stopped (exit code -9)"))
 
     server = MissionServer(*VEHICLE, MissionLimits(), work=Broken())
