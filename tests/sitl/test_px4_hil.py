@@ -390,7 +390,9 @@ def test_bad_input_gets_safe_reactions(tmp_path):
         t4 = px4.next_sample()
         assert (t3, t4) == (t2 + IMU_US, t2 + 2 * IMU_US)
         assert time.monotonic() - start >= 0.9 * GRACE_S
-        assert server.grace_steps >= 2 and server.answer_waits == 0
+        # at least t4 stepped past its due answer (a busy machine can teach the plant a
+        # longer answer interval while locking in: t3 is then no answer due)
+        assert server.grace_steps >= 1 and server.answer_waits == 0
         px4.close()
 
 

@@ -118,6 +118,8 @@ def test_realtime_offboard_samples_are_anchored_beside_the_loop(tmp_path):
     anchors = [j["steps"] for j in work["history"] if j["job"] == "advance"]
     assert len(anchors) >= 3 and min(anchors) >= 1 and work["failed"] == 0, work
     brakes = [j["steps"] for j in work["history"] if j["job"] == "brake_ahead"]
-    # one brake, or more where one came after its time on a busy machine (planned again)
-    assert brakes and min(brakes) >= 1 and work["inline_plans"] == 0, work
-    assert len(brakes) <= 1 + work["late_anchors"], work
+    # one brake, or more where one came after its time on a busy machine (planned again);
+    # a plan the starved worker had not sent within COAST_MAX_US is made in the loop, the
+    # documented reaction (pinned in tests/unit/test_plans_beside.py), and judged there
+    assert brakes and min(brakes) >= 1, work
+    assert len(brakes) <= 1 + work["late_anchors"] + work["inline_plans"], work
