@@ -22,7 +22,15 @@ from fcu.mission.codes import (
     MAV_CMD_POSE_KEYFRAME,
 )
 from fcu.mission.limits import MissionLimits
-from fcu.mission.segments import ZERO, Figure, Move, Segment, level_attitude
+from fcu.mission.segments import (
+    ZERO,
+    Figure,
+    Move,
+    Segment,
+    _floats,
+    keyframe_turn,
+    level_attitude,
+)
 
 POSITION_TOLERANCE_M = 1e-3  # well above the wire's resolution (1e-4 m for x, y; float32 z)
 ANGLE_TOLERANCE_RAD = 1e-4
@@ -150,34 +158,35 @@ def plan_item(item: MissionItem, t0: float, p0: Vec3, q0: Quat,
     if cmd == MAV_CMD_DO_CHANGE_SPEED:  # no motion: it changes how later items are planned
         return Move(item.seq, t0, p0, ZERO, q0, None, 0.0, 0.0)
     turn_rate = math.radians(limits.turn_rate_deg_s)
-
-    def speed_timed(dp: Vec3, speed: float, phi: Vec3 | None) -> tuple[Vec3, Vec3 | None, float]:
-        return _speed_timed(dp, speed, phi, turn_rate)
-
-    def move(dp: Vec3, phi: Vec3 | None, travel: float, hold: float) -> Move:
-        """A speed-timed move, stretched to what the vehicle can fly."""
-        return stretched(Move(item.seq, t0, p0, dp, q0, phi, travel, hold), limits.vehicle,
-                          stretch, scaled)
-
+    vehicle = limits.vehicle
     if cmd == MAV_CMD_NAV_TAKEOFF:
         dp = (0.0, 0.0, -item.z - p0[2])
         phi = _turn(q0, item.param4)
         if item.param2 > 0.0:
             return Move(item.seq, t0, p0, dp, q0, phi, item.param2, 0.0)
-        dp, phi, travel = speed_timed(dp, limits.takeoff_speed_m_s, phi)
-        return move(dp, phi, travel, 0.0)
+        dp, phi, travel = _speed_timed(dp, limits.takeoff_speed_m_s, phi, turn_rate)
+        return stretched(Move(item.seq, t0, p0, dp, q0, phi, travel, 0.0), vehicle, stretch,
+                         scaled)
     if cmd in (MAV_CMD_NAV_WAYPOINT, MAV_CMD_NAV_LOITER_TIME):
         target = ned_to_enu((item.x_m, item.y_m, item.z))
         phi = _turn(q0, item.param4) if cmd == MAV_CMD_NAV_WAYPOINT else None
-        dp, phi, travel = speed_timed(_sub(target, p0), limits.cruise_speed_m_s, phi)
-        return move(dp, phi, travel, item.param1)
+        dp, phi, travel = _speed_timed(_sub(target, p0), limits.cruise_speed_m_s, phi,
+                                       turn_rate)
+        return stretched(Move(item.seq, t0, p0, dp, q0, phi, travel, item.param1), vehicle,
+                         stretch, scaled)
     if cmd == MAV_CMD_NAV_LAND:
-        dp, phi, travel = speed_timed((0.0, 0.0, -p0[2]), limits.land_speed_m_s,
-                                      _turn(q0, item.param4))
-        return move(dp, phi, travel, 0.0)
+        dp, phi, travel = _speed_timed((0.0, 0.0, -p0[2]), limits.land_speed_m_s,
+                                       _turn(q0, item.param4), turn_rate)
+        return stretched(Move(item.seq, t0, p0, dp, q0, phi, travel, 0.0), vehicle, stretch,
+                         scaled)
     if cmd == MAV_CMD_POSE_KEYFRAME:
         target = ned_to_enu((item.x_m, item.y_m, item.z))
-        q1 = q_ned_frd_to_enu_flu(q_exp((item.param2, item.param3, item.param4)))
+        rot = (item.param2, item.param3, item.param4)
+        if _floats(*q0, *rot):  # in one compiled call: the same values
+            phi, turns, q_end = keyframe_turn(q0, *rot)
+            return Move(item.seq, t0, p0, _sub(target, p0), q0, phi if turns else None,
+                        item.param1, 0.0, q_end)
+        q1 = q_ned_frd_to_enu_flu(q_exp(rot))
         phi = q_log(q_mul(q_conj(q0), q1))  # shortest path
         return Move(item.seq, t0, p0, _sub(target, p0), q0,
                      phi if norm3(phi) > 0.0 else None, item.param1, 0.0)

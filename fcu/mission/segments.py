@@ -19,7 +19,7 @@ import numpy as np
 from common.frames import q_ned_frd_to_enu_flu
 from common.jit import njit
 from common.quaternion import q_exp_many
-from fcu.control.dualquat import Quat, Vec3, norm3, q_exp, q_mul
+from fcu.control.dualquat import Quat, Vec3, norm3, q_conj, q_exp, q_log, q_mul
 from fcu.envelope.feasibility import (
     Envelope,
     TimeScaling,
@@ -145,6 +145,38 @@ def figure_wrenches(m: float, g: float, inertia: Vec3, q0: Quat, turned: bool, n
         rest[i, 3], rest[i, 4], rest[i, 5] = t
 
 
+_H = math.sqrt(0.5)
+
+
+@njit
+def keyframe_turn(q0: Quat, rx: float, ry: float, rz: float) -> tuple[Vec3, bool, Quat]:
+    """A pose keyframe's turn from q0 to the NED/FRD attitude exp((rx, ry, rz)): (phi, the
+    shortest rotation; whether it turns, |phi| > 0; its end q0 exp(phi), or q0), as
+    `fcu.mission.planning.plan_item` and `Move` make them from `q_exp`,
+    `common.frames.q_ned_frd_to_enu_flu` (its operations written out, its non-finite branch
+    through `q_mul`), `q_log` and `q_mul`, in one compiled call."""
+    q = q_exp((rx, ry, rz))
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    if not math.isfinite(w + x + y + z):
+        r = q_mul(q_mul((0.0, _H, _H, 0.0), q), (0.0, 1.0, 0.0, 0.0))
+        q1 = r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
+    else:
+        h = _H
+        aw = 0.0 * w - h * x - h * y - 0.0 * z
+        ax = 0.0 * x + h * w + h * z - 0.0 * y
+        ay = 0.0 * y - h * z + h * w + 0.0 * x
+        az = 0.0 * z + h * y - h * x + 0.0 * w
+        rw = aw * 0.0 - ax * 1.0 - ay * 0.0 - az * 0.0
+        rx_ = aw * 1.0 + ax * 0.0 + ay * 0.0 - az * 0.0
+        ry_ = aw * 0.0 - ax * 0.0 + ay * 0.0 + az * 1.0
+        rz_ = aw * 0.0 + ax * 0.0 - ay * 1.0 + az * 0.0
+        q1 = (rw, rx_, ry_, rz_) if rw >= 0.0 else (-rw, -rx_, -ry_, -rz_)
+    phi = q_log(q_mul(q_conj(q0), q1))
+    if norm3(phi) > 0.0:
+        return phi, True, q_mul(q0, q_exp(phi))
+    return phi, False, q0
+
+
 class MoveRest(NamedTuple):
     """What a move's path at its instants shares with every move of the same q0 and phi
     (`Move.unit_allocations`): the quintic's rows there (`quintic_rows`), the attitudes
@@ -191,14 +223,17 @@ class Move(Segment):
     """Quintic move p0 -> p0 + dp, q0 -> q0 exp(phi) in `travel` s, then hold `hold` s."""
 
     def __init__(self, seq: int, t0: float, p0: Vec3, dp: Vec3, q0: Quat, phi: Vec3 | None,
-                 travel: float, hold: float) -> None:
+                 travel: float, hold: float, q_end: Quat | None = None) -> None:
+        """`q_end`: q0 exp(phi) where the caller has it (`keyframe_turn`)."""
         self.seq, self.t0 = seq, t0
         self.p0, self.dp, self.q0, self.phi = p0, dp, q0, phi
         self.travel = self.duration = travel
         self.hold = hold
         self.t1 = t0 + travel + hold
         self.p_end = (p0[0] + dp[0], p0[1] + dp[1], p0[2] + dp[2])
-        self.q_end = q0 if phi is None else q_mul(q0, q_exp(phi))
+        if q_end is None:
+            q_end = q0 if phi is None else q_mul(q0, q_exp(phi))
+        self.q_end = q_end
         self.end_ref = pose_ref(self.p_end, self.q_end)
 
     def retimed(self, travel: float) -> Move:

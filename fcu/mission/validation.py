@@ -220,6 +220,8 @@ def _carried_result(item: MissionItem) -> Verdict:
         return Verdict(MAV_MISSION_UNSUPPORTED_FRAME, (
             f"item {item.seq}: frame {_name(MAV_FRAME, item.frame)} is not supported (local "
             "NED, or global with an altitude)"))
+    if _int32(item.x) and _int32(item.y):
+        return ACCEPTED
     for field, v, result in (("x", item.x, MAV_MISSION_INVALID_PARAM5_X),
                              ("y", item.y, MAV_MISSION_INVALID_PARAM6_Y)):
         if not _int32(v):
@@ -246,7 +248,11 @@ def _fly_to(item: MissionItem, target_ned_m: list[float], pos: list[float],
     if r == math.inf:
         pos[:] = target_ned_m
         return ACCEPTED
-    reach = norm3((target_ned_m[0], target_ned_m[1], target_ned_m[2]))
+    x, y, z = target_ned_m
+    if isinstance(x, float) and isinstance(y, float) and isinstance(z, float):
+        reach = math.sqrt(x * x + y * y + z * z)  # `norm3`'s operations, without its call
+    else:
+        reach = norm3((x, y, z))
     if reach > r:
         if item.command in XY_COMMANDS and \
                 math.hypot(item.x_m, item.y_m) > max(r, SCALED_LOCAL_M):

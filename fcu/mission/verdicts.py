@@ -9,6 +9,7 @@ explain only a move that does not fit (`fcu.mission.planning.envelope_reason`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import cast
 
@@ -17,7 +18,7 @@ import numpy as np
 from common.gemm import AVAILABLE, gemm_nt
 from common.jit import njit_loops
 from common.wire.mission_items import MissionItem
-from fcu.envelope.excess import fits_kernel, parts_into
+from fcu.envelope.excess import FLOOR_HOVER_SHARE, fits_kernel, parts_into
 from fcu.envelope.feasibility import DIFF_STEP, TILT_STEP_S, Envelope, envelope
 from fcu.envelope.instants import time_order
 from fcu.mission.limits import MissionLimits
@@ -70,19 +71,79 @@ def rooms(pinv: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
 
 
 @njit_loops
+def rest_rows_into(hover: np.ndarray, n: int, h2: float, floor: float, places: np.ndarray,
+                   ends: np.ndarray, out: np.ndarray) -> None:
+    """The rows of `parts_into` (its arguments, its expressions) that follow from the poses
+    at rest alone, the same for every move of a group: Omega_0, its difference, the lowest
+    speed and the tilt at rest (rows 0, 1, 4, 5, 8, 9)."""
+    one = hover.shape[0] == 1
+    for m in range(n):
+        k = places[m]
+        h, lo, hi = (0, 0, 0) if one else (k, n + k, 2 * n + k)
+        for c in range(hover.shape[1]):
+            i = c // 2
+            v = c - 2 * i
+            out[i, v, m] = hover[h, c]
+            out[i, 4 + v, m] = (hover[hi, c] - hover[lo, c]) / h2
+    for i in range(hover.shape[1] // 2):
+        for m in range(n):
+            w0 = math.sqrt(math.sqrt(out[i, 0, m] ** 2 + out[i, 1, m] ** 2))
+            out[i, 8, m] = min(floor, FLOOR_HOVER_SHARE * w0)
+            out[i, 9, m] = 0.0
+        for m in ends:
+            out[i, 9, m] = math.atan2(out[i, 0, m], out[i, 1, m])
+
+
+@njit_loops
+def moving_rows_into(om: np.ndarray, hover: np.ndarray, n: int, h2: float,
+                     places: np.ndarray, out: np.ndarray) -> None:
+    """The other rows of `parts_into` (2, 3, 6, 7: Omega_1 and its difference), its
+    expressions."""
+    one = hover.shape[0] == 1
+    for m in range(n):
+        k = places[m]
+        h, lo, hi = (0, 0, 0) if one else (k, n + k, 2 * n + k)
+        for c in range(om.shape[1]):
+            i = c // 2
+            v = c - 2 * i
+            out[i, 2 + v, m] = om[k, c] - hover[h, c]
+            out[i, 6 + v, m] = ((om[2 * n + k, c] - hover[hi, c]) -
+                                (om[n + k, c] - hover[lo, c])) / h2
+
+
+@njit_loops
 def fits_kernel_many(m: float, g: float, inertia: tuple[float, float, float],
                      pinv: np.ndarray, packed: Packed, h2: float, floor: float,
                      limit: float, tau_up: float, tau_down: float, tilt_limit: float,
                      step_limit: float, use_floor: bool, out: np.ndarray) -> None:
-    """out[j] = whether move j of `packed` fits in its duration: its parts (`move_parts`)
-    judged by `fits_kernel`."""
+    """out[j] = whether move j of `packed` fits in its duration: its parts (`move_parts`'
+    values) judged by `fits_kernel`. The moves are taken group by group, and the rows of
+    the parts that a group shares (`rest_rows_into`) are made once per group."""
     moving_room, om_room, room = rooms(pinv, packed[2])
-    poses = packed[0]
-    for j in range(poses.shape[0]):
-        parts, gap, ends = move_parts(j, m, g, inertia, pinv, packed, h2, floor, moving_room,
-                                      om_room, room)
-        out[j] = fits_kernel(parts, gap, ends, poses[j, 7], limit, tau_up, tau_down,
-                             tilt_limit, step_limit, use_floor, np.empty(parts.shape[2]))
+    poses, groups, index, quintic, turned, torque, hover, places, gap, ends = packed
+    cols = pinv.shape[0]
+    last = -1
+    for j in np.argsort(groups, kind="mergesort"):
+        gi = groups[j]
+        row = index[gi]
+        n, rows = row[0], 3 * row[0]
+        parts = room[:(cols // 2) * 10 * n].reshape((cols // 2, 10, n))
+        its_hover = hover[row[4]:row[4] + row[5]]
+        its_places = places[row[6]:row[6] + n]
+        its_ends = ends[row[7]:row[7] + row[8]]
+        if gi != last:
+            rest_rows_into(its_hover, n, h2, floor, its_places, its_ends, parts)
+            last = gi
+        moving = moving_room[:rows]
+        pose = poses[j]
+        move_wrenches(m, g, inertia, (pose[0], pose[1], pose[2], pose[3]),
+                      (pose[4], pose[5], pose[6]), quintic[:, row[1]:row[1] + rows],
+                      turned[row[2]:row[2] + row[3]], torque[row[2]:row[2] + row[3]], moving)
+        om = om_room[:rows]
+        gemm_nt(moving, pinv, om)
+        moving_rows_into(om, its_hover, n, h2, its_places, parts)
+        out[j] = fits_kernel(parts, gap[row[6]:row[6] + n], its_ends, pose[7], limit, tau_up,
+                             tau_down, tilt_limit, step_limit, use_floor, np.empty(n))
 
 
 def compiled_product(env: Envelope) -> bool:
@@ -164,14 +225,20 @@ def fits_many(env: Envelope, moves: Sequence[Move]) -> list[bool]:
 Planned = tuple[MissionItem, Segment, MissionLimits]  # an item, its segment, its limits
 
 
-def _judged_here(seg: Segment, limits: MissionLimits) -> Envelope | None:
-    """The envelope where `envelope_reason` of this segment is "" exactly when its scaling
-    fits its duration and `fits_many` can tell that (an unscaled move), else None."""
-    if limits.vehicle is None or not isinstance(seg, Move) or seg.scaling is not None or \
-            not seg.duration > 0.0 or not seg.moves:
+def _judging(limits: MissionLimits) -> Envelope | None:
+    """The envelope `fits_many` judges the moves planned with `limits` in (None: none)."""
+    if limits.vehicle is None:
         return None
     env = envelope(limits.vehicle)
-    return env if compiled_product(env) and _floats(*seg.q0, *seg.dp) else None
+    return env if compiled_product(env) else None
+
+
+def _judged_here(seg: Segment) -> bool:
+    """Whether `envelope_reason` of this segment, planned with limits that `_judging` gives
+    an envelope for, is "" exactly when its scaling fits its duration and `fits_many` can
+    tell that (an unscaled move)."""
+    return isinstance(seg, Move) and seg.scaling is None and seg.duration > 0.0 and \
+        seg.moves and _floats(*seg.q0, *seg.dp)
 
 
 def first_refusal(planned: Sequence[Planned]) -> tuple[int, str]:
@@ -180,9 +247,14 @@ def first_refusal(planned: Sequence[Planned]) -> tuple[int, str]:
     judged at once, then, in order, each of the others and each move that does not fit
     explained as before (the same reasons)."""
     by_env: dict[int, tuple[Envelope, list[int]]] = {}
+    envs: dict[int, Envelope | None] = {}  # `_judging` by the limits (the same few)
     for k, (_, seg, limits) in enumerate(planned):
-        env = _judged_here(seg, limits)
-        if env is not None:
+        key = id(limits)
+        if key in envs:
+            env = envs[key]
+        else:
+            env = envs[key] = _judging(limits)
+        if env is not None and _judged_here(seg):
             by_env.setdefault(id(env), (env, []))[1].append(k)
     fits: dict[int, bool] = {}
     for env, ks in by_env.values():
