@@ -146,11 +146,34 @@ def _step_excess(best: Best, om0: np.ndarray, k: int, i: int, lat: float, ver: f
 
 
 @njit_loops
-def parts_into(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: float,
-               places: np.ndarray, ends: np.ndarray, out: np.ndarray) -> None:
-    """`scaling_parts` (its arguments) into out (rotors x 10 x n, every value written),
-    sample by sample: each row of the allocations is read once for all rotors (the upload
-    check's yes/no verdict, `fcu.envelope.verdict`, makes them into an array it reuses)."""
+def rest_rows_into(hover: np.ndarray, n: int, h2: float, floor: float, places: np.ndarray,
+                   ends: np.ndarray, out: np.ndarray) -> None:
+    """The rows of `parts_into` (its arguments) that follow from the poses at rest alone, the
+    same for every path from the same rest (the mission check's moves of a group, made once
+    for all of them): Omega_0, its difference, the lowest speed and the tilt at rest (rows
+    0, 1, 4, 5, 8, 9)."""
+    one = hover.shape[0] == 1
+    for m in range(n):
+        k = places[m]
+        h, lo, hi = (0, 0, 0) if one else (k, n + k, 2 * n + k)
+        for c in range(hover.shape[1]):
+            i = c // 2
+            v = c - 2 * i
+            out[i, v, m] = hover[h, c]
+            out[i, 4 + v, m] = (hover[hi, c] - hover[lo, c]) / h2
+    for i in range(hover.shape[1] // 2):
+        for m in range(n):
+            w0 = math.sqrt(math.sqrt(out[i, 0, m] ** 2 + out[i, 1, m] ** 2))
+            out[i, 8, m] = min(floor, FLOOR_HOVER_SHARE * w0)
+            out[i, 9, m] = 0.0
+        for m in ends:
+            out[i, 9, m] = math.atan2(out[i, 0, m], out[i, 1, m])
+
+
+@njit_loops
+def moving_rows_into(om: np.ndarray, hover: np.ndarray, n: int, h2: float,
+                     places: np.ndarray, out: np.ndarray) -> None:
+    """The other rows of `parts_into` (2, 3, 6, 7: Omega_1 and its difference)."""
     one = hover.shape[0] == 1
     for m in range(n):
         k = places[m]
@@ -158,18 +181,19 @@ def parts_into(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: floa
         for c in range(om.shape[1]):
             i = c // 2
             v = c - 2 * i
-            out[i, v, m] = hover[h, c]
             out[i, 2 + v, m] = om[k, c] - hover[h, c]
-            out[i, 4 + v, m] = (hover[hi, c] - hover[lo, c]) / h2
             out[i, 6 + v, m] = ((om[2 * n + k, c] - hover[hi, c]) -
                                 (om[n + k, c] - hover[lo, c])) / h2
-    for i in range(om.shape[1] // 2):
-        for m in range(n):
-            w0 = math.sqrt(math.sqrt(out[i, 0, m] ** 2 + out[i, 1, m] ** 2))
-            out[i, 8, m] = min(floor, FLOOR_HOVER_SHARE * w0)
-            out[i, 9, m] = 0.0
-        for m in ends:
-            out[i, 9, m] = math.atan2(out[i, 0, m], out[i, 1, m])
+
+
+@njit_loops
+def parts_into(om: np.ndarray, hover: np.ndarray, n: int, h2: float, floor: float,
+               places: np.ndarray, ends: np.ndarray, out: np.ndarray) -> None:
+    """`scaling_parts` (its arguments) into out (rotors x 10 x n, every value written),
+    sample by sample: each row of the allocations is read once for all rotors (the upload
+    check's yes/no verdict, `fcu.envelope.verdict`, makes them into an array it reuses)."""
+    rest_rows_into(hover, n, h2, floor, places, ends, out)
+    moving_rows_into(om, hover, n, h2, places, out)
 
 
 @njit_loops

@@ -9,7 +9,6 @@ explain only a move that does not fit (`fcu.mission.planning.envelope_reason`).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from typing import cast
 
@@ -18,7 +17,7 @@ import numpy as np
 from common.gemm import AVAILABLE, gemm_nt
 from common.jit import njit_loops
 from common.wire.mission_items import MissionItem
-from fcu.envelope.excess import FLOOR_HOVER_SHARE, fits_kernel, parts_into
+from fcu.envelope.excess import fits_kernel, moving_rows_into, parts_into, rest_rows_into
 from fcu.envelope.feasibility import DIFF_STEP, TILT_STEP_S, Envelope, envelope
 from fcu.envelope.instants import time_order
 from fcu.mission.limits import MissionLimits
@@ -33,17 +32,15 @@ Packed = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.nd
 
 
 @njit_loops
-def move_parts(j: int, m: float, g: float, inertia: tuple[float, float, float],
-               pinv: np.ndarray, packed: Packed, h2: float, floor: float,
-               moving_room: np.ndarray, om_room: np.ndarray, room: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(the parts, gaps and ends of move j of `packed`), the parts (`parts_into`, rotors x 10
-    x n) into the start of `room`: its wrenches (`move_wrenches` from its q0, dp and its
-    group's `MoveRest`) and their allocation (A^+ = pinv, rotors' rows x 6, as numpy's
-    product), into the starts of `moving_room` and `om_room`."""
-    poses, groups, index, quintic, turned, torque, hover, places, gap, ends = packed
+def allocated(j: int, m: float, g: float, inertia: tuple[float, float, float],
+              pinv: np.ndarray, packed: Packed, moving_room: np.ndarray,
+              om_room: np.ndarray) -> np.ndarray:
+    """Move j of `packed`: its wrenches (`move_wrenches` from its q0, dp and its group's
+    `MoveRest`) into the start of `moving_room`, and their allocation (A^+ = pinv, rotors'
+    rows x 6, as numpy's product) into the start of `om_room`, which is returned."""
+    poses, groups, index, quintic, turned, torque = packed[:6]
     row = index[groups[j]]
-    n, rows = row[0], 3 * row[0]
+    rows = 3 * row[0]
     moving = moving_room[:rows]
     pose = poses[j]
     move_wrenches(m, g, inertia, (pose[0], pose[1], pose[2], pose[3]),
@@ -51,6 +48,20 @@ def move_parts(j: int, m: float, g: float, inertia: tuple[float, float, float],
                   turned[row[2]:row[2] + row[3]], torque[row[2]:row[2] + row[3]], moving)
     om = om_room[:rows]
     gemm_nt(moving, pinv, om)
+    return om
+
+
+@njit_loops
+def move_parts(j: int, m: float, g: float, inertia: tuple[float, float, float],
+               pinv: np.ndarray, packed: Packed, h2: float, floor: float,
+               moving_room: np.ndarray, om_room: np.ndarray, room: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the parts, gaps and ends of move j of `packed`), the parts (`parts_into`, rotors x 10
+    x n) into the start of `room`, from its allocation (`allocated`)."""
+    hover, places, gap, ends = packed[6:]
+    row = packed[2][packed[1][j]]
+    n = row[0]
+    om = allocated(j, m, g, inertia, pinv, packed, moving_room, om_room)
     cols = pinv.shape[0]
     parts = room[:(cols // 2) * 10 * n].reshape((cols // 2, 10, n))
     its_ends = ends[row[7]:row[7] + row[8]]
@@ -71,47 +82,6 @@ def rooms(pinv: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
 
 
 @njit_loops
-def rest_rows_into(hover: np.ndarray, n: int, h2: float, floor: float, places: np.ndarray,
-                   ends: np.ndarray, out: np.ndarray) -> None:
-    """The rows of `parts_into` (its arguments, its expressions) that follow from the poses
-    at rest alone, the same for every move of a group: Omega_0, its difference, the lowest
-    speed and the tilt at rest (rows 0, 1, 4, 5, 8, 9)."""
-    one = hover.shape[0] == 1
-    for m in range(n):
-        k = places[m]
-        h, lo, hi = (0, 0, 0) if one else (k, n + k, 2 * n + k)
-        for c in range(hover.shape[1]):
-            i = c // 2
-            v = c - 2 * i
-            out[i, v, m] = hover[h, c]
-            out[i, 4 + v, m] = (hover[hi, c] - hover[lo, c]) / h2
-    for i in range(hover.shape[1] // 2):
-        for m in range(n):
-            w0 = math.sqrt(math.sqrt(out[i, 0, m] ** 2 + out[i, 1, m] ** 2))
-            out[i, 8, m] = min(floor, FLOOR_HOVER_SHARE * w0)
-            out[i, 9, m] = 0.0
-        for m in ends:
-            out[i, 9, m] = math.atan2(out[i, 0, m], out[i, 1, m])
-
-
-@njit_loops
-def moving_rows_into(om: np.ndarray, hover: np.ndarray, n: int, h2: float,
-                     places: np.ndarray, out: np.ndarray) -> None:
-    """The other rows of `parts_into` (2, 3, 6, 7: Omega_1 and its difference), its
-    expressions."""
-    one = hover.shape[0] == 1
-    for m in range(n):
-        k = places[m]
-        h, lo, hi = (0, 0, 0) if one else (k, n + k, 2 * n + k)
-        for c in range(om.shape[1]):
-            i = c // 2
-            v = c - 2 * i
-            out[i, 2 + v, m] = om[k, c] - hover[h, c]
-            out[i, 6 + v, m] = ((om[2 * n + k, c] - hover[hi, c]) -
-                                (om[n + k, c] - hover[lo, c])) / h2
-
-
-@njit_loops
 def fits_kernel_many(m: float, g: float, inertia: tuple[float, float, float],
                      pinv: np.ndarray, packed: Packed, h2: float, floor: float,
                      limit: float, tau_up: float, tau_down: float, tilt_limit: float,
@@ -120,13 +90,14 @@ def fits_kernel_many(m: float, g: float, inertia: tuple[float, float, float],
     values) judged by `fits_kernel`. The moves are taken group by group, and the rows of
     the parts that a group shares (`rest_rows_into`) are made once per group."""
     moving_room, om_room, room = rooms(pinv, packed[2])
-    poses, groups, index, quintic, turned, torque, hover, places, gap, ends = packed
+    poses, groups, index = packed[:3]
+    hover, places, gap, ends = packed[6:]
     cols = pinv.shape[0]
     last = -1
     for j in np.argsort(groups, kind="mergesort"):
         gi = groups[j]
         row = index[gi]
-        n, rows = row[0], 3 * row[0]
+        n = row[0]
         parts = room[:(cols // 2) * 10 * n].reshape((cols // 2, 10, n))
         its_hover = hover[row[4]:row[4] + row[5]]
         its_places = places[row[6]:row[6] + n]
@@ -134,16 +105,10 @@ def fits_kernel_many(m: float, g: float, inertia: tuple[float, float, float],
         if gi != last:
             rest_rows_into(its_hover, n, h2, floor, its_places, its_ends, parts)
             last = gi
-        moving = moving_room[:rows]
-        pose = poses[j]
-        move_wrenches(m, g, inertia, (pose[0], pose[1], pose[2], pose[3]),
-                      (pose[4], pose[5], pose[6]), quintic[:, row[1]:row[1] + rows],
-                      turned[row[2]:row[2] + row[3]], torque[row[2]:row[2] + row[3]], moving)
-        om = om_room[:rows]
-        gemm_nt(moving, pinv, om)
+        om = allocated(j, m, g, inertia, pinv, packed, moving_room, om_room)
         moving_rows_into(om, its_hover, n, h2, its_places, parts)
-        out[j] = fits_kernel(parts, gap[row[6]:row[6] + n], its_ends, pose[7], limit, tau_up,
-                             tau_down, tilt_limit, step_limit, use_floor, np.empty(n))
+        out[j] = fits_kernel(parts, gap[row[6]:row[6] + n], its_ends, poses[j, 7], limit,
+                             tau_up, tau_down, tilt_limit, step_limit, use_floor, np.empty(n))
 
 
 def compiled_product(env: Envelope) -> bool:
