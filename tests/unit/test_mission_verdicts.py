@@ -122,3 +122,28 @@ def test_the_executors_plan_is_the_one_made_item_by_item(name: str) -> None:
                 assert a.scaling.parts.tobytes() == b.scaling.parts.tobytes()
                 assert a.scaling.shortest() == b.scaling.shortest()
                 assert a.scaling.fits(a.duration) == b.scaling.fits(b.duration)
+
+
+@pytest.mark.parametrize("name", sorted(VEHICLES))
+def test_without_numpys_blas_function_the_old_path_gives_the_same(name: str,
+                                                                monkeypatch) -> None:
+    """Where numpy's build does not export the BLAS function (`AVAILABLE` False), every move
+    is judged and stretched by its own scaling: the same verdicts, refusals and plan."""
+    import fcu.mission.verdicts as verdicts
+
+    results = []
+    for available in (True, False):
+        monkeypatch.setattr(verdicts, "AVAILABLE", available)
+        assert batched(envelope(VEHICLES[name]), _moves(MissionLimits(
+            vehicle=VEHICLES[name]), 1.0)[0]) is available
+        limits = MissionLimits(vehicle=VEHICLES[name], cruise_speed_m_s=5.0)
+        clear_caches()
+        items = mixed(40)
+        fast = _keyframe(len(items), 0.05, 20.0)  # a refused keyframe after the mixed ones
+        checked = [check_mission(items, limits), check_mission([*items, fast], limits)]
+        clear_caches()
+        got = plan(items, 0, 1.0, (0.03, -0.02, 0.0), (0.99, 0.01, -0.02, 0.1), limits)
+        results.append(([(c.result, c.seq, c.reason) for c in checked],
+                        [(s.seq, s.t0, s.t1, s.duration, s.p_end, s.q_end) for s in got]))
+    assert results[0] == results[1]
+    assert results[0][0][0][0] == 0 and results[0][0][1][0] == MAV_MISSION_DENIED
