@@ -74,9 +74,9 @@ class Work:
         """Run `fn(*args)` where this work runs; `done(outcome)` at a step boundary.
 
         `warm_up`: the job loads what later jobs need (kernels) before the flight; as a
-        worker's first job it runs at the loop's priority, and the worker lowers its own
-        after it (on a busy machine a warm-up at nice +10 took a minute, and the first
-        mission's check waited behind it)."""
+        worker's first job it runs at the FCU's niceness (normal scheduling), and the worker
+        lowers its own after it (on a busy machine a warm-up at nice +10 took a minute, and
+        the first mission's check waited behind it)."""
         self.submitted += 1
         name, at = getattr(fn, "__name__", "job"), self.steps()
 
