@@ -11,7 +11,9 @@ approach planner and POSCTL's envelope fit.
    earlier round is reused. Then MISSION_START as `fcu.modes.commander` does it:
    `MissionExecutor(...)`, `set_current(0, ...)` from a pose 3 cm off the origin, slightly
    tilted and yawed, and `refusal()`; once right after the upload check (the caches as that
-   left them, the order of a flight) and once with the caches emptied.
+   left them, the order of a flight) and once with the caches emptied. The batch kernels
+   (`fcu.mission.batches`) run on two threads as the FCU's worker process runs them
+   (`fcu.edge.threads`), and again in one thread.
 2. `fcu.reference.approach.plan` over a spread of OFFBOARD and HOLD plans on both vehicle files
 (steps
    from a hover up to 20 m and 180 deg, HOLD from a moving reference, OFFBOARD's entry, a new
@@ -42,8 +44,10 @@ from benchmarks.mission_envelope import mixed
 from common.config.scenario import VehicleConfig, load_vehicle
 from common.wire.mission_items import MissionItem
 from fcu.control.dualquat import Quat, Vec3, q_exp
+from fcu.edge.threads import install_side_by_side
 from fcu.envelope import feasibility
 from fcu.envelope.feasibility import Envelope, envelope
+from fcu.mission import batches
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission, refusal
@@ -195,11 +199,17 @@ def bench_fit(rounds: int, vehicles: dict[str, VehicleConfig]) -> list[float]:
 
 def main(rounds: int) -> None:
     vehicles = _vehicles()
+    one = bench_mission(rounds, vehicles["hexa_tilted"])
+    ways = install_side_by_side()  # as the FCU's worker process runs them
     mission = bench_mission(rounds, vehicles["hexa_tilted"])
+    batches.install(batches.in_turn, 1)
     print(f"mission upload check, {MISSION_ITEMS} items (caches emptied): "
           f"{_figures(mission['check'])}")
     print(f"MISSION_START re-check after the upload check: {_figures(mission['start'])}")
     print(f"MISSION_START re-check, caches emptied: {_figures(mission['start_cold'])}")
+    print(f"(the batch kernels on {ways} thread{'s' if ways > 1 else ''}, as the FCU's worker "
+          f"runs them; in one thread: upload check {_figures(one['check'])}, re-check "
+          f"{_figures(one['start'])}, caches emptied {_figures(one['start_cold'])})")
     print(f"approach.plan: {_figures(bench_approach(rounds, vehicles))}")
     print(f"manual.fit_envelope: {_figures(bench_fit(rounds, vehicles))}")
     print(f"(median of the mission check {statistics.median(mission['check']):.1f} ms; "

@@ -5,7 +5,7 @@
 
 Runs `make test`'s steps (ruff, mypy over the packages, then benchmarks/ and tools/, the
 kernels into numba's cache (`tests/kernels.py`), then pytest with the arguments given, by
-default `make test`'s: `-n 3 --dist loadgroup tests`) N times in a row beside K busy-looping
+default `make test`'s: `-n 4 --dist loadgroup tests`) N times in a row beside K busy-looping
 children at nice P (default 19; `--busy 8 --nice 0` is a load of 8 at
 normal priority), prints each run's wall time and result, stops at the first failure, and
 exits with that run's code (0 when all passed). The busy children are this script's own and
@@ -36,7 +36,7 @@ def _suite(pytest_args: list[str]) -> int:
              [sys.executable, "-m", "mypy", "benchmarks", "tools"],
              [sys.executable, "-m", "tests.kernels"],
              [sys.executable, "-m", "pytest", "-q",
-              *(pytest_args or ["-n", "3", "--dist", "loadgroup", "tests"])]]
+              *(pytest_args or ["-n", "4", "--dist", "loadgroup", "tests"])]]
     for step in steps:
         code = subprocess.call(step, cwd=ROOT)
         if code != 0:

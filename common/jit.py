@@ -79,3 +79,9 @@ def njit_loops(fn: F) -> F:
     loop that divides can be vectorised (every value that does not divide by zero is the
     same, to the bit)."""
     return cast(F, numba.njit(cache=True, error_model="numpy")(_real_file(fn)))
+
+
+def njit_released(fn: F) -> F:
+    """`njit_loops` that releases the GIL while it runs: a batch kernel whose calls other
+    threads may make at the same time (`fcu.mission.batches`)."""
+    return cast(F, numba.njit(cache=True, error_model="numpy", nogil=True)(_real_file(fn)))

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
+from fcu.edge.threads import install_side_by_side
 from fcu.work import Done, InlineWork, Outcome, Work, run_job
 
 NICE = 10  # the worker's priority below the loop's
@@ -24,10 +25,18 @@ def _lower(nice: int) -> None:
         pass
 
 
+def _lower_and_share(nice: int) -> None:
+    """Lower the worker by `nice`, then give the mission check's batch kernels their threads
+    (`fcu.edge.threads`), made now so that they run at the lowered priority too."""
+    _lower(nice)
+    install_side_by_side()
+
+
 def _serve(conn: Connection, nice: int) -> None:
     """The worker process: jobs in, outcomes out, until the pipe closes. A warm-up that comes
-    first runs at the priority the worker started with (the loop's); the worker lowers it by
-    `nice` after that, or before its first job if that is no warm-up."""
+    first runs at the priority the worker started with (the loop's), in one thread; the
+    worker lowers it by `nice` after that, or before its first job if that is no warm-up,
+    and from then on the mission check's batch kernels run on two threads."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the FCU's to act on
     lowered = False
     while True:
@@ -36,11 +45,11 @@ def _serve(conn: Connection, nice: int) -> None:
         except (EOFError, OSError):
             return  # the FCU closed the pipe (or is gone)
         if not (warm_up or lowered):
-            _lower(nice)
+            _lower_and_share(nice)
             lowered = True
         outcome = run_job(fn, args)
         if not lowered:
-            _lower(nice)
+            _lower_and_share(nice)
             lowered = True
         try:
             conn.send((job_id, outcome))

@@ -3,18 +3,20 @@
 duration as far as `TimeScaling.stretches` and `TimeScaling.shortest` take it, the move
 retimed where it stretches), from the same allocations by the same kernels
 (`fcu.mission.verdicts.move_parts`, `fcu.envelope.excess.grid_kernel`,
-`fcu.envelope.excess.bisect_kernel`), in one compiled call (`search_kernel_many`). The executor
-plans a mission with it (`MissionExecutor.set_current`).
+`fcu.envelope.excess.bisect_kernel`), by a compiled call (`search_kernel_many`) per share of
+the moves (`fcu.mission.batches`). The executor plans a mission with it
+(`MissionExecutor.set_current`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from functools import partial
 
 import numpy as np
 
-from common.jit import njit_loops
+from common.jit import njit_loops, njit_released
 from fcu.envelope.excess import bisect_kernel, fits_kernel, grid_kernel
 from fcu.envelope.feasibility import (
     BISECT_TOL,
@@ -28,8 +30,9 @@ from fcu.envelope.feasibility import (
     TimeScaling,
 )
 from fcu.envelope.instants import time_order
+from fcu.mission import batches
 from fcu.mission.segments import Move
-from fcu.mission.verdicts import Packed, move_parts, pack, rooms
+from fcu.mission.verdicts import Packed, move_parts, pack, rooms, samples
 
 
 @njit_loops
@@ -58,19 +61,20 @@ def _search(parts: np.ndarray, gap: np.ndarray, ends: np.ndarray, use_floor: boo
     return lo, hi, math.nan, math.nan
 
 
-@njit_loops
+@njit_released
 def search_kernel_many(m: float, g: float, inertia: tuple[float, float, float],
                        pinv: np.ndarray, packed: Packed, h2: float, floor: float,
                        limit: float, limit4: float, tau_up: float, tau_down: float,
                        tilt_limit: float, step_limit: float, use_floor: bool,
-                       starts: np.ndarray, parts: np.ndarray, out: np.ndarray) -> None:
-    """Each move j of `packed` (its duration: the travel planned): its parts (`move_parts`)
-    into parts[starts[j]:], in out[j, :4] the state its search leaves (`_search`) and in
-    out[j, 4] whether it fits in its travel where it does not stretch (1 or 0; NaN where it
-    stretches: then flown at the duration the search found fitting)."""
+                       starts: np.ndarray, order: np.ndarray, parts: np.ndarray,
+                       out: np.ndarray) -> None:
+    """Each move j of `order` (of `packed`; its duration: the travel planned): its parts
+    (`move_parts`) into parts[starts[j]:], in out[j, :4] the state its search leaves
+    (`_search`) and in out[j, 4] whether it fits in its travel where it does not stretch (1
+    or 0; NaN where it stretches: then flown at the duration the search found fitting)."""
     moving_room, om_room, _ = rooms(pinv, packed[2])
     poses = packed[0]
-    for j in range(poses.shape[0]):
+    for j in order:
         its, gap, ends = move_parts(j, m, g, inertia, pinv, packed, h2, floor, moving_room,
                                     om_room, parts[starts[j]:])
         travel = poses[j, 7]
@@ -98,10 +102,13 @@ def stretch_many(env: Envelope, moves: Sequence[Move]) -> list[Move]:
     parts = np.empty(sum(sizes))
     out = np.empty((len(moves), 5))
     v = env.vehicle
-    search_kernel_many(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, env.pinv_t.T, packed,
-                       2.0 * DIFF_STEP, env.floor, env.limit, env.limit ** 4, env.tau_up,
-                       env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S,
-                       env.floor > 0.0, starts, parts, out)
+    every = np.arange(len(moves))
+    batches.run([partial(search_kernel_many, v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2,
+                         env.pinv_t.T, packed, 2.0 * DIFF_STEP, env.floor, env.limit,
+                         env.limit ** 4, env.tau_up, env.tau_down, env.tilt_limit,
+                         env.tilt_rate_max * TILT_STEP_S, env.floor > 0.0, starts, share,
+                         parts, out)
+                 for share in batches.shares(every, samples(packed, every))])
     stretched: list[Move] = []
     for seg, order, start, size, state in zip(moves, orders, starts, sizes, out.tolist(),
                                               strict=True):

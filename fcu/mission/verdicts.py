@@ -1,25 +1,28 @@
 """Whether planned moves fit the envelope in their planned durations, many at once
 (`fits_many`): what `fcu.envelope.scaling.TimeScaling.fits` answers for each, from the same
-allocations by the same kernels, in one compiled call (`fits_kernel_many`) instead of a
-scaling, three compiled calls and numpy's product per move. The product is numpy's own BLAS
-call (`common.gemm.gemm_nt`), so every allocation is the one `Envelope.allocate` makes, to the
-bit. The mission check and the re-check at MISSION_START ask this of every move first, and
-explain only a move that does not fit (`fcu.mission.planning.envelope_reason`).
+allocations by the same kernels, in a compiled call (`fits_kernel_many`) per share of the
+moves (`fcu.mission.batches`) instead of a scaling, three compiled calls and numpy's product
+per move. The product is numpy's own BLAS call (`common.gemm.gemm_nt`), so every allocation is
+the one `Envelope.allocate` makes, to the bit. The mission check and the re-check at
+MISSION_START ask this of every move first, and explain only a move that does not fit
+(`fcu.mission.planning.envelope_reason`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 from typing import cast
 
 import numpy as np
 
 from common.gemm import AVAILABLE, gemm_nt
-from common.jit import njit_loops
+from common.jit import njit_loops, njit_released
 from common.wire.mission_items import MissionItem
 from fcu.envelope.excess import fits_kernel, moving_rows_into, parts_into, rest_rows_into
 from fcu.envelope.feasibility import DIFF_STEP, TILT_STEP_S, Envelope, envelope
 from fcu.envelope.instants import time_order
+from fcu.mission import batches
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import envelope_reason
 from fcu.mission.segments import Move, MoveRest, Segment, _floats, move_wrenches
@@ -81,20 +84,21 @@ def rooms(pinv: np.ndarray, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
             np.empty((cols // 2) * 10 * most))
 
 
-@njit_loops
+@njit_released
 def fits_kernel_many(m: float, g: float, inertia: tuple[float, float, float],
                      pinv: np.ndarray, packed: Packed, h2: float, floor: float,
                      limit: float, tau_up: float, tau_down: float, tilt_limit: float,
-                     step_limit: float, use_floor: bool, out: np.ndarray) -> None:
-    """out[j] = whether move j of `packed` fits in its duration: its parts (`move_parts`'
-    values) judged by `fits_kernel`. The moves are taken group by group, and the rows of
-    the parts that a group shares (`rest_rows_into`) are made once per group."""
+                     step_limit: float, use_floor: bool, order: np.ndarray,
+                     out: np.ndarray) -> None:
+    """out[j] = whether move j of `packed` fits in its duration, for each j of `order`: its
+    parts (`move_parts`' values) judged by `fits_kernel`. With the moves in `group_order`,
+    the rows of the parts that a group shares (`rest_rows_into`) are made once per group."""
     moving_room, om_room, room = rooms(pinv, packed[2])
     poses, groups, index = packed[:3]
     hover, places, gap, ends = packed[6:]
     cols = pinv.shape[0]
     last = -1
-    for j in np.argsort(groups, kind="mergesort"):
+    for j in order:
         gi = groups[j]
         row = index[gi]
         n = row[0]
@@ -109,6 +113,17 @@ def fits_kernel_many(m: float, g: float, inertia: tuple[float, float, float],
         moving_rows_into(om, its_hover, n, h2, its_places, parts)
         out[j] = fits_kernel(parts, gap[row[6]:row[6] + n], its_ends, poses[j, 7], limit,
                              tau_up, tau_down, tilt_limit, step_limit, use_floor, np.empty(n))
+
+
+def group_order(packed: Packed) -> np.ndarray:
+    """The moves of `packed` group by group, each group's in their own order."""
+    return np.argsort(packed[1], kind="mergesort")
+
+
+def samples(packed: Packed, order: np.ndarray) -> np.ndarray:
+    """The samples of each move of `order` (the work a kernel does on it)."""
+    index, groups = packed[2], packed[1]
+    return np.asarray(index[groups[order], 0])
 
 
 def compiled_product(env: Envelope) -> bool:
@@ -175,15 +190,18 @@ def pack(env: Envelope, moves: Sequence[Move]) -> Packed:
 
 def fits_many(env: Envelope, moves: Sequence[Move]) -> list[bool]:
     """`env.scaling(move).fits(move.duration)` of each move (each one `batched`), the same
-    answers, in one compiled call."""
+    answers, by a compiled call per share of the moves (`fcu.mission.batches`)."""
     if not moves:
         return []
     out = np.empty(len(moves), dtype=np.bool_)
     v = env.vehicle
-    fits_kernel_many(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, env.pinv_t.T,
-                     pack(env, moves), 2.0 * DIFF_STEP, env.floor, env.limit, env.tau_up,
-                     env.tau_down, env.tilt_limit, env.tilt_rate_max * TILT_STEP_S,
-                     env.floor > 0.0, out)
+    packed = pack(env, moves)
+    order = group_order(packed)
+    batches.run([partial(fits_kernel_many, v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2,
+                         env.pinv_t.T, packed, 2.0 * DIFF_STEP, env.floor, env.limit,
+                         env.tau_up, env.tau_down, env.tilt_limit,
+                         env.tilt_rate_max * TILT_STEP_S, env.floor > 0.0, share, out)
+                 for share in batches.shares(order, samples(packed, order))])
     return [bool(x) for x in out]
 
 

@@ -1,6 +1,7 @@
 """The worker process beside the loop (`fcu/edge/work_process.py`): its outcome is the inline
 one, a job that raises says why, a worker that dies fails its job and is started again, and
-a first warm-up runs at the loop's priority, every other job below it."""
+a first warm-up runs at the loop's priority, every other job below it, the mission check's
+batch kernels on two threads below it too."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from typing import Any
 
 from common.wire.mavlink import MAV
 from fcu.edge.work_process import NICE, ProcessWork
+from fcu.mission import batches
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
 from fcu.work import InlineWork, Outcome
@@ -80,3 +82,30 @@ def test_a_first_warm_up_runs_at_the_loops_priority_and_every_other_job_below_it
             work.close()
         assert [o.value for o in got] == expected, warm_first
     assert lowered > loop
+
+
+def shares_seen() -> tuple[int, list[int]]:
+    """In the worker: how many ways the batch kernels' moves are cut, and the niceness each
+    share of a batch runs at (its thread's)."""
+    seen: list[int] = []
+    batches.run([lambda: seen.append(os.nice(0)) for _ in range(batches.ways())])
+    return batches.ways(), sorted(seen)
+
+
+def test_after_its_warm_up_the_worker_runs_the_checks_shares_on_two_threads_below_the_loop():
+    """Given a worker whose first job is a warm-up, then that job runs its shares in one
+    thread at the loop's priority, and every later job on min(2, CPUs) threads, each at nice
+    +NICE (the threads made after the worker lowered itself)."""
+    loop = os.nice(0)
+    lowered = min(loop + NICE, 19)
+    ways = min(2, len(os.sched_getaffinity(0)))
+    work = ProcessWork(wait=True)
+    got: list[Outcome[Any]] = []
+    try:
+        work.submit(shares_seen, (), got.append, warm_up=True)
+        work.submit(shares_seen, (), got.append)
+        work.submit(shares_seen, (), got.append)
+    finally:
+        work.close()
+    assert [o.value for o in got] == [(1, [loop]), (ways, [lowered] * ways),
+                                      (ways, [lowered] * ways)]

@@ -18,7 +18,9 @@ from common.gemm import AVAILABLE, gemm_nt
 from common.wire.mav_enums import MAV_CMD, MAV_FRAME
 from common.wire.mission_items import MissionItem, local_xy
 from fcu.control.dualquat import Q_IDENTITY
+from fcu.edge.threads import SideBySide
 from fcu.envelope.feasibility import clear_caches, envelope
+from fcu.mission import batches
 from fcu.mission.codes import MAV_MISSION_DENIED, MAV_MISSION_INVALID_PARAM1
 from fcu.mission.executor import plan
 from fcu.mission.limits import MissionLimits
@@ -147,3 +149,63 @@ def test_without_numpys_blas_function_the_old_path_gives_the_same(name: str,
                         [(s.seq, s.t0, s.t1, s.duration, s.p_end, s.q_end) for s in got]))
     assert results[0] == results[1]
     assert results[0][0][0][0] == 0 and results[0][0][1][0] == MAV_MISSION_DENIED
+
+
+def test_shares_cover_the_order_in_contiguous_pieces_of_about_equal_work() -> None:
+    order = np.arange(100)[::-1].copy()
+    work = np.r_[np.full(50, 3.0), np.full(50, 1.0)]
+    try:
+        assert [len(p) for p in batches.shares(order, work)] == [100]  # one way installed
+        batches.install(batches.in_turn, 2)
+        pieces = batches.shares(order, work)
+        assert np.array_equal(np.concatenate(pieces), order)
+        assert [len(p) for p in pieces] == [33, 67]  # work 99 and 101 of 200
+        assert [len(p) for p in batches.shares(order[:31], work[:31])] == [31]  # too few
+        batches.install(batches.in_turn, 3)
+        assert len(batches.shares(order, work)) == 3
+        with pytest.raises(ValueError):
+            batches.install(batches.in_turn, 0)
+    finally:
+        batches.install(batches.in_turn, 1)
+
+
+def _check_and_plan(limits: MissionLimits) -> tuple[object, ...]:
+    items = mixed(150)
+    fast = _keyframe(len(items), 0.05, 20.0)  # a refused keyframe after the mixed ones
+    clear_caches()
+    checked = [check_mission(items, limits), check_mission([*items, fast], limits)]
+    clear_caches()
+    got = plan(items, 0, 1.0, (0.03, -0.02, 0.0), (0.99, 0.01, -0.02, 0.1), limits)
+    return ([(c.result, c.seq, c.reason) for c in checked],
+            [(s.seq, s.t0, s.t1, s.duration, s.p_end, s.q_end) for s in got],
+            [(s.scaling.parts.tobytes(), s.scaling.shortest()) for s in got
+             if s.scaling is not None])
+
+
+@pytest.mark.parametrize("name", sorted(VEHICLES))
+def test_however_the_moves_are_shared_out_and_run_the_results_are_the_same(name: str) -> None:
+    """Given the batch kernels' moves cut two or three ways, the shares run in reverse order
+    or side by side on threads, then the verdicts, refusals, plan and scalings are the ones
+    made in one call, to the bit."""
+    limits = MissionLimits(vehicle=VEHICLES[name], cruise_speed_m_s=5.0)
+    expected = _check_and_plan(limits)
+    assert expected[0][0][0] == 0 and expected[0][1][0] == MAV_MISSION_DENIED
+    side_by_side = SideBySide(2)
+    shared: list[int] = []
+
+    def backwards(calls):
+        shared.append(len(calls))
+        batches.in_turn(list(calls)[::-1])
+
+    def threads(calls):
+        shared.append(len(calls))
+        side_by_side(calls)
+
+    try:
+        for runner, ways in ((backwards, 3), (threads, 2)):
+            shared.clear()
+            batches.install(runner, ways)
+            assert _check_and_plan(limits) == expected, ways
+            assert max(shared) == ways  # the moves were shared out
+    finally:
+        batches.install(batches.in_turn, 1)
