@@ -47,8 +47,8 @@ def run(calls: Sequence[Call]) -> None:
 
 def shares(order: np.ndarray, work: np.ndarray) -> list[np.ndarray]:
     """`order` (move indices, in the order a kernel takes them) cut into at most `ways()`
-    contiguous pieces of about equal `work` (one value per entry of `order`), each with at
-    least LEAST_PER_SHARE moves."""
+    contiguous pieces of about equal `work` (one value per entry of `order`): a piece per
+    LEAST_PER_SHARE moves at most, and no cut within the first or the last LEAST_PER_SHARE."""
     count = min(ways(), len(order) // LEAST_PER_SHARE)
     if count <= 1:
         return [order]
