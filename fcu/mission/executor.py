@@ -122,6 +122,14 @@ class MissionExecutor:
         items = {item.seq: item for item in self.items}
         return first_refusal([(items[seg.seq], seg, self.limits) for seg in self._segments])[1]
 
+    def drop_scalings(self) -> None:
+        """Forget the envelope scalings of the planned segments: they serve the check alone
+        (`refusal` makes any it needs again), and a worker's plan of 500 legs carried 16 MB
+        of them, unpickled in the loop's thread: `benchmarks/bench_realtime.py` saw the
+        loop stop for 48-60 ms at mode MISSION."""
+        for seg in self._segments:
+            seg.scaling = None
+
     @property
     def started(self) -> bool:
         return self._start_ref is not None

@@ -68,11 +68,15 @@ def plan_from(items: Sequence[MissionItem], limits: MissionLimits, seq: int, t_s
               p_enu_m: Vec3, q_enu_flu: Quat) -> tuple[MissionExecutor | None, str]:
     """The mission planned from item `seq` at `t_s` from the pose given, checked again with
     the upload's envelope (`MissionExecutor.refusal`): (the executor, '') or (None, why
-    it does not fit from there)."""
+    it does not fit from there). The executor comes without its segments' envelope
+    scalings (`MissionExecutor.drop_scalings`): the loop takes it in between two steps."""
     executor = MissionExecutor(items, limits)
     executor.set_current(seq, t_s, p_enu_m, q_enu_flu)
     refused = executor.refusal()
-    return (None, refused) if refused else (executor, "")
+    if refused:
+        return None, refused
+    executor.drop_scalings()
+    return executor, ""
 
 
 def warm(limits: MissionLimits) -> None:

@@ -2,17 +2,20 @@
 (`fcu.mission.stretch`): numpy's own product in compiled code (`common.gemm.gemm_nt`) is
 numpy's `@` to the bit, every move's verdict is its scaling's (`TimeScaling.fits`), a
 mission's first refusal is still the first item that fails, whether the envelope or a
-parameter refuses it, and the executor's plan is the one made item by item."""
+parameter refuses it, and the executor's plan is the one made item by item, however the
+moves are shared out between threads (`fcu.mission.batches`); the plan a worker hands the
+loop carries no scalings."""
 
 from __future__ import annotations
 
 import math
+import pickle
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from benchmarks.mission_envelope import mixed
+from benchmarks.mission_envelope import mixed, waypoints
 from common.config.scenario import load_vehicle
 from common.gemm import AVAILABLE, gemm_nt
 from common.wire.mav_enums import MAV_CMD, MAV_FRAME
@@ -22,10 +25,11 @@ from fcu.edge.threads import SideBySide
 from fcu.envelope.feasibility import clear_caches, envelope
 from fcu.mission import batches
 from fcu.mission.codes import MAV_MISSION_DENIED, MAV_MISSION_INVALID_PARAM1
-from fcu.mission.executor import plan
+from fcu.mission.executor import MissionExecutor, plan
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import plan_item, with_speed
 from fcu.mission.segments import ZERO, Move, Segment
+from fcu.mission.start import plan_from
 from fcu.mission.validation import check_mission
 from fcu.mission.verdicts import batched, fits_many
 
@@ -209,3 +213,23 @@ def test_however_the_moves_are_shared_out_and_run_the_results_are_the_same(name:
             assert max(shared) == ways  # the moves were shared out
     finally:
         batches.install(batches.in_turn, 1)
+
+
+def test_the_plan_handed_to_the_loop_flies_the_same_and_carries_no_scalings() -> None:
+    """Given a 500-waypoint mission planned at its start (`plan_from`, a worker's job), then
+    its executor samples the same references as one that kept its scalings, holds none, and
+    pickles to less than a megabyte (with them, 16 MB, unpickled in the loop's thread)."""
+    limits = MissionLimits(vehicle=VEHICLES["hexa_tilted"])
+    items = waypoints(500)
+    start = (1.0, (0.03, -0.02, 3.0), (0.99, 0.01, -0.02, 0.1))
+    handed, why = plan_from(items, limits, 0, *start)
+    assert handed is not None and why == ""
+    kept = MissionExecutor(items, limits)
+    kept.set_current(0, *start)
+    assert sum(seg.scaling is not None for seg in kept._segments) == 500
+    assert all(seg.scaling is None for seg in handed._segments)
+    assert handed.schedule == kept.schedule
+    for t_s in np.linspace(0.5, kept.end_time_s + 1.0, 997):
+        assert handed.sample(float(t_s)) == kept.sample(float(t_s))
+    assert len(pickle.dumps(handed, protocol=pickle.HIGHEST_PROTOCOL)) < 1_000_000
+    assert len(pickle.dumps(kept, protocol=pickle.HIGHEST_PROTOCOL)) > 10_000_000
