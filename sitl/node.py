@@ -6,6 +6,10 @@ interfaces through which external physics engines serve real firmware
 (`sitl.firmware.ardupilot_json`, `sitl.firmware.px4_hil`), where the firmware drives simulated time.
 
 The ground-truth log (one row per state sent) is the run's reference for every metric.
+
+The options are parsed and checked before the scenario's and the plant's code and their
+libraries load (numpy, numba, pymavlink): `sitl --help` and a bad command line are answered
+at once.
 """
 
 from __future__ import annotations
@@ -16,10 +20,9 @@ import importlib
 import math
 import sys
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
-from common.config.scenario import ConfigError, Scenario, check_sensor_faults, load_scenario
-from common.config.sensors import resolve_sensor_profile
+from common.config.reader import ConfigError
 from common.links import LinkError, parse_url
 from common.process import startup
 from common.process.cliargs import OneLineParser, check_output_path
@@ -27,7 +30,9 @@ from common.process.diagnostics import add_verbosity_options, get_logger, say, s
 from common.process.parent import stop_with_parent
 from common.process.program import STARTUP_ERRORS, serve, start_failed
 from common.process.realtime import DEFAULT_PRIORITY
-from sitl.server import SimulatorServer
+
+if TYPE_CHECKING:
+    from common.config.scenario import Scenario
 
 log = get_logger(__name__)
 
@@ -167,6 +172,11 @@ def _position(text: str) -> tuple[float, float, float]:
 def _scenario(args: argparse.Namespace) -> Scenario:
     """The scenario file with the command line's overrides (actuators, start position,
     sensor profile, seed), checked."""
+    # The scenario's code and its libraries (numpy, numba) load here, after the command
+    # line's own checks
+    from common.config.scenario import check_sensor_faults, load_scenario
+    from common.config.sensors import resolve_sensor_profile
+
     scenario = load_scenario(args.scenario, firmware=args.protocol != DQFLIGHT)
     if args.ideal_actuators:
         scenario = dataclasses.replace(scenario, ideal_actuators=True)
@@ -213,6 +223,8 @@ def main(argv: list[str] | None = None) -> int:
             return _serve_firmware(args, scenario, end)
         log.debug("sitl: scenario %s from %s, control at %s Hz, end at %s s of simulated "
                   "time", scenario.name, args.scenario, rate, end)
+        from sitl.server import SimulatorServer
+
         server = SimulatorServer(scenario, args.link, truth_log=args.truth_log,
                                  end_time_s=end, realtime=args.realtime,
                                  control_rate_hz=rate, hil_sensor_hz=args.hil_sensor_hz,

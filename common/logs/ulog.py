@@ -25,6 +25,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from common.logs.errors import ULogError as ULogError  # raised here, named by the callers
+
 MAGIC = b"ULog\x01\x12\x35"
 VERSION = 1
 _HEADER = struct.Struct("<HB")  # msg_size, msg_type
@@ -32,10 +34,6 @@ _CODES = {"uint64_t": "Q", "int64_t": "q", "uint32_t": "I", "int32_t": "i",
           "uint16_t": "H", "int16_t": "h", "uint8_t": "B", "int8_t": "b",
           "float": "f", "double": "d", "bool": "?", "char": "c"}
 MAX_PAYLOAD = 0xFFFF
-
-
-class ULogError(ValueError):
-    """A ULog file that cannot be read, or a topic it does not hold."""
 
 
 @dataclass(frozen=True)

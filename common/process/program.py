@@ -14,7 +14,7 @@ from typing import Any, Protocol
 
 from common.config.reader import ConfigError
 from common.links import LinkError
-from common.logs.ulog import ULogError
+from common.logs.errors import ULogError
 from common.process import startup
 from common.process.diagnostics import get_logger, say
 from common.process.realtime import schedule_loop

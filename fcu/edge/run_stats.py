@@ -15,7 +15,8 @@ from fcu.work import Work
 
 
 class Run(Protocol):
-    """What the statistics read of the FCU's process (`fcu.edge.node.FlightController`)."""
+    """What the statistics read of the FCU's process
+    (`fcu.edge.flight_controller.FlightController`)."""
 
     pipeline: Pipeline
     server: GcsServer

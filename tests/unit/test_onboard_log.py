@@ -9,7 +9,7 @@ from common.config.scenario import load_gains, load_vehicle
 from common.links import free_port
 from common.logs.ulog import read_topic
 from common.wire.mission_items import PX4_SITL_HOME
-from fcu.edge.node import FlightController
+from fcu.edge.flight_controller import FlightController
 from fcu.pipeline import Pipeline
 from fcu.stages import VehicleState
 
