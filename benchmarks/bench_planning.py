@@ -13,7 +13,7 @@ approach planner and POSCTL's envelope fit.
    tilted and yawed, and `refusal()`; once right after the upload check (the caches as that
    left them, the order of a flight) and once with the caches emptied. The batch kernels
    (`fcu.mission.batches`) run on two threads as the FCU's worker process runs them
-   (`fcu.edge.threads`), and again in one thread.
+   (`fcu.edge.work_process`), and again in one thread.
 2. `fcu.reference.approach.plan` over a spread of OFFBOARD and HOLD plans on both vehicle files
 (steps
    from a hover up to 20 m and 180 deg, HOLD from a moving reference, OFFBOARD's entry, a new
@@ -44,7 +44,7 @@ from benchmarks.mission_envelope import mixed
 from common.config.scenario import VehicleConfig, load_vehicle
 from common.wire.mission_items import MissionItem
 from fcu.control.dualquat import Quat, Vec3, q_exp
-from fcu.edge.threads import install_side_by_side
+from fcu.edge.work_process import install_side_by_side
 from fcu.envelope import feasibility
 from fcu.envelope.feasibility import Envelope, envelope
 from fcu.mission import batches

@@ -1,5 +1,8 @@
 """`ProcessWork`: jobs of `fcu.work` in a worker process beside the control loop (the edge:
-a process, a pipe, select), and `make_work` for `fcu --work`."""
+a process, a pipe, select), `make_work` for `fcu --work`, and `SideBySide`, the runner of
+`fcu.mission.batches` that the worker installs (`install_side_by_side`): a batch kernel's
+shares at once, one in the calling thread and the others on a pool of threads the kernels
+run on while they hold no GIL."""
 
 from __future__ import annotations
 
@@ -7,14 +10,16 @@ import multiprocessing
 import os
 import select
 import signal
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from multiprocessing.connection import Connection
 from typing import Any
 
-from fcu.edge.threads import install_side_by_side
+from fcu.mission import batches
 from fcu.work import Done, InlineWork, Outcome, Work, run_job
 
 NICE = 10  # the worker's priority below the loop's
+MOST_WAYS = 2  # the mission check's shares at once: enough for the 2-core boards in use
 POLL_S = 1.0  # wait=True: how often the worker is looked at while its job runs
 
 
@@ -25,9 +30,44 @@ def _lower(nice: int) -> None:
         pass
 
 
+class SideBySide:
+    """Runs `calls[0]` in the calling thread and the others on `ways - 1` pool threads. The
+    pool's threads are made by the thread that makes this runner, and take its priority."""
+
+    def __init__(self, ways: int) -> None:
+        self.ways = ways
+        self._pool = ThreadPoolExecutor(max_workers=max(1, ways - 1),
+                                        thread_name_prefix="fcu-check")
+
+    def __call__(self, calls: Sequence[batches.Call]) -> None:
+        futures = [self._pool.submit(call) for call in calls[1:]]
+        try:
+            if calls:
+                calls[0]()
+        finally:
+            for future in futures:
+                future.result()  # every share done (its error raised) before returning
+
+
+def usable_cpus() -> int:
+    """The CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def install_side_by_side(most: int = MOST_WAYS) -> int:
+    """Install a `SideBySide` of min(most, `usable_cpus()`) ways (none for 1); the ways."""
+    ways = min(most, usable_cpus())
+    if ways > 1:
+        batches.install(SideBySide(ways), ways)
+    return ways
+
+
 def _lower_and_share(nice: int) -> None:
     """Lower the worker by `nice`, then give the mission check's batch kernels their threads
-    (`fcu.edge.threads`), made now so that they run at the lowered priority too."""
+    (`SideBySide`), made now so that they run at the lowered priority too."""
     _lower(nice)
     install_side_by_side()
 

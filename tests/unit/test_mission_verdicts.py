@@ -21,7 +21,7 @@ from common.gemm import AVAILABLE, gemm_nt
 from common.wire.mav_enums import MAV_CMD, MAV_FRAME
 from common.wire.mission_items import MissionItem, local_xy
 from fcu.control.dualquat import Q_IDENTITY
-from fcu.edge.threads import SideBySide
+from fcu.edge.work_process import SideBySide
 from fcu.envelope.feasibility import clear_caches, envelope
 from fcu.mission import batches
 from fcu.mission.codes import MAV_MISSION_DENIED, MAV_MISSION_INVALID_PARAM1
