@@ -17,10 +17,11 @@ import pytest
 
 from benchmarks.mission_envelope import mixed, waypoints
 from common.config.scenario import load_vehicle
+from common.frames import q_ned_frd_to_enu_flu
 from common.gemm import AVAILABLE, gemm_nt
 from common.wire.mav_enums import MAV_CMD, MAV_FRAME
 from common.wire.mission_items import MissionItem, local_xy
-from fcu.control.dualquat import Q_IDENTITY
+from fcu.control.dualquat import Q_IDENTITY, norm3, q_conj, q_exp, q_log, q_mul
 from fcu.edge.work_process import SideBySide
 from fcu.envelope.feasibility import clear_caches, envelope
 from fcu.mission import batches
@@ -28,7 +29,7 @@ from fcu.mission.codes import MAV_MISSION_DENIED, MAV_MISSION_INVALID_PARAM1
 from fcu.mission.executor import MissionExecutor, plan
 from fcu.mission.limits import MissionLimits
 from fcu.mission.planning import plan_item, with_speed
-from fcu.mission.segments import ZERO, Move, Segment
+from fcu.mission.segments import ZERO, Move, Segment, keyframe_turn
 from fcu.mission.start import plan_from
 from fcu.mission.validation import check_mission
 from fcu.mission.verdicts import batched, fits_many
@@ -233,3 +234,32 @@ def test_the_plan_handed_to_the_loop_flies_the_same_and_carries_no_scalings() ->
         assert handed.sample(float(t_s)) == kept.sample(float(t_s))
     assert len(pickle.dumps(handed, protocol=pickle.HIGHEST_PROTOCOL)) < 1_000_000
     assert len(pickle.dumps(kept, protocol=pickle.HIGHEST_PROTOCOL)) > 10_000_000
+
+
+def test_the_keyframes_compiled_turn_is_the_frame_conversion_and_quaternion_maths_to_the_bit():
+    """`keyframe_turn` writes `common.frames.q_ned_frd_to_enu_flu`'s products out inside its
+    kernel; given start attitudes and NED/FRD rotations at random and at the extremes (none,
+    a half turn, the axes' half turns, tiny angles), then its turn, whether it turns and its
+    end attitude are those of `q_exp`, `q_ned_frd_to_enu_flu`, `q_log` and `q_mul`, to the
+    bit: a change of the frame convention in one place and not the other fails here."""
+    rng = np.random.default_rng(11)
+    rots = [(0.0, 0.0, 0.0), (math.pi, 0.0, 0.0), (0.0, math.pi, 0.0), (0.0, 0.0, math.pi),
+            (1e-12, 0.0, -1e-12), (0.3, -0.2, 0.5), (-math.pi, 0.0, 0.0),
+            *(tuple(float(v) for v in rng.uniform(-3.2, 3.2, 3)) for _ in range(200))]
+    starts = [Q_IDENTITY, q_exp((0.01, -0.02, 0.3)), q_exp((math.pi, 0.0, 0.0)),
+              q_ned_frd_to_enu_flu(q_exp((0.3, -0.2, 0.5))),  # already there: no turn
+              *(q_exp(tuple(float(v) for v in rng.uniform(-3.2, 3.2, 3))) for _ in range(20))]
+    turned = 0
+    for q0 in starts:
+        for rot in rots:
+            q1 = q_ned_frd_to_enu_flu(q_exp(rot))
+            phi = q_log(q_mul(q_conj(q0), q1))
+            turns = norm3(phi) > 0.0
+            expected = (phi, turns, q_mul(q0, q_exp(phi)) if turns else q0)
+            got = keyframe_turn(q0, *rot)
+            assert np.array_equal(np.array([*got[0], *got[2]]).view(np.int64),
+                                  np.array([*expected[0], *expected[2]]).view(np.int64)), \
+                (q0, rot)
+            assert got[1] == expected[1]
+            turned += turns
+    assert 0 < turned < len(starts) * len(rots)
