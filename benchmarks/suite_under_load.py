@@ -26,9 +26,18 @@ ROOT = Path(__file__).resolve().parents[1]
 BUSY = "while True:\n    pass\n"
 
 
-def _busy_children(count: int, niceness: int = 19) -> list[subprocess.Popen[bytes]]:
+def busy_children(count: int, niceness: int = 19) -> list[subprocess.Popen[bytes]]:
+    """`count` busy-looping children at `niceness` (stop them with `stop_children`)."""
     return [subprocess.Popen([sys.executable, "-c", BUSY], preexec_fn=lambda: os.nice(niceness),
                              stdin=subprocess.DEVNULL) for _ in range(count)]
+
+
+def stop_children(children: list[subprocess.Popen[bytes]]) -> None:
+    """Stop these children, by their process ids, and reap them."""
+    for child in children:
+        child.send_signal(signal.SIGTERM)
+    for child in children:
+        child.wait()
 
 
 def _suite(pytest_args: list[str]) -> int:
@@ -55,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.times < 1 or args.busy < 0:
         parser.error("--times must be at least 1 and --busy at least 0")
-    busy = _busy_children(args.busy, args.nice)
+    busy = busy_children(args.busy, args.nice)
     code = 0
     try:
         for run in range(1, args.times + 1):
@@ -70,10 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         code = 130
     finally:
-        for child in busy:
-            child.send_signal(signal.SIGTERM)
-        for child in busy:
-            child.wait()
+        stop_children(busy)
     return code
 
 
