@@ -4,13 +4,16 @@ in lockstep as a user runs them, beside a CPU load.
     .venv/bin/python benchmarks/scenarios_under_load.py [--busy K] [--nice P] [--jobs J]
         [--sensors PROFILE] [--out DIR] [scenario.toml ...]
 
-Starts K busy-looping children at nice P (default 8 at nice 0: a normal-priority load of 8),
-runs `gcs run SCENARIO --out DIR/NAME` for each scenario, J at a time (default 2), and prints
-each run's exit code, the status its metrics.json gives, the simulated and wall time; the
-exit code is 1 when any run did not exit 0 with status `completed`. In lockstep a loaded
-machine makes a flight slower, never different: the property is that no run fails for wall
-time the flight did not need. The busy children are this script's own and are stopped, by
-their process ids, on every way out, Ctrl-C included.
+First flies each scenario in-process (`gcs run --in-process`, before any load): its status
+there is the flight's own outcome (Case II sine diverges by design). Then starts K
+busy-looping children at nice P (default 8 at nice 0: a normal-priority load of 8), runs
+`gcs run SCENARIO --out DIR/NAME` through the processes for each scenario, J at a time
+(default 2), and prints each run's exit code, the status its metrics.json gives, the
+simulated and wall time. In lockstep a loaded machine makes a flight slower, never
+different: a run passes when its status is the in-process one and its exit code says so (0
+for `completed`, else 1); the script exits 1 when any run did not pass. The busy children
+are this script's own and are stopped, by their process ids, on every way out, Ctrl-C
+included.
 """
 
 from __future__ import annotations
@@ -32,10 +35,12 @@ from benchmarks.suite_under_load import ROOT, busy_children, stop_children
 SCENARIOS = ROOT / "config" / "scenarios"
 
 
-def _run(scenario: Path, out: Path, sensors: str | None) -> tuple[str, int, str, float, float]:
-    """(name, exit code, status, simulated s, wall s) of one `gcs run`."""
+def _run(scenario: Path, out: Path, sensors: str | None, *extra: str
+         ) -> tuple[str, int, str, float, float, str]:
+    """(name, exit code, status, simulated s, wall s, the last line of its stderr) of one
+    `gcs run`."""
     argv = [str(ROOT / ".venv" / "bin" / "gcs"), "run", str(scenario), "--out",
-            str(out / scenario.stem), "--force", "-q"]
+            str(out / scenario.stem), "--force", "-q", *extra]
     if sensors:
         argv += ["--sensors", sensors]
     start = time.monotonic()
@@ -46,10 +51,8 @@ def _run(scenario: Path, out: Path, sensors: str | None) -> tuple[str, int, str,
     if metrics.is_file():
         m = json.loads(metrics.read_text())
         status, sim = str(m.get("status")), float(m.get("sim_time_s", float("nan")))
-    if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ["(no stderr)"])[-1]
-        status = f"{status}: {tail}"
-    return scenario.stem, proc.returncode, status, sim, wall
+    tail = (proc.stderr.strip().splitlines() or [""])[-1]
+    return scenario.stem, proc.returncode, status, sim, wall, tail
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -74,17 +77,22 @@ def main(argv: list[str] | None = None) -> int:
           f"{args.jobs} at a time; load average "
           f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
     failed = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        expected = {name: status for name, _, status, _, _, _ in (
+            _run(s, Path(tmp) / "in-process", args.sensors, "--in-process") for s in scenarios)}
+    print("in-process: " + ", ".join(f"{k} {v}" for k, v in expected.items()), flush=True)
     busy = busy_children(args.busy, args.nice)
     try:
         with tempfile.TemporaryDirectory() as tmp:
             out = args.out or Path(tmp)
             with ThreadPoolExecutor(args.jobs) as pool:
-                for name, code, status, sim, wall in pool.map(
+                for name, code, status, sim, wall, tail in pool.map(
                         lambda s: _run(s, out, args.sensors), scenarios):
-                    ok = code == 0 and status == "completed"
+                    ok = status == expected[name] and code == (status != "completed")
                     failed += not ok
                     print(f"{name:18s} exit {code}  {status:10s}  {sim:6.1f} s simulated in "
-                          f"{wall:6.1f} s wall{'' if ok else '  FAILED'}", flush=True)
+                          f"{wall:6.1f} s wall" + ("" if ok else f"  FAILED: {tail}"),
+                          flush=True)
     except KeyboardInterrupt:
         return 130
     finally:
