@@ -13,7 +13,9 @@ from pathlib import Path
 import pytest
 
 from common.links import free_port
-from gcs.vehicle_link.session import Session
+from gcs.vehicle_link.session import GcsError, Session
+
+from .waits import cpu_s, until_progressing
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "config" / "scenarios"
@@ -70,6 +72,20 @@ def stop(procs: dict[str, subprocess.Popen]) -> None:
 PACE = ("--speed-factor", "4")
 
 
+def _heard(session: Session, procs: dict[str, subprocess.Popen], kind: str | None) -> bool:
+    """Whether the vehicle's HEARTBEAT (`kind` None: the Session then targets it) or a
+    message of `kind` came within a second; AssertionError if a process has ended."""
+    for name, proc in procs.items():
+        assert proc.poll() is None, f"{name} exited with {proc.returncode} while starting"
+    if kind is not None:
+        return session.recv([kind], timeout=1.0) is not None
+    try:
+        session.wait_vehicle(timeout=1.0)
+    except GcsError:
+        return False
+    return True
+
+
 def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = False,
            sitl: bool = True, sim_port: int | None = None, fcu_args: tuple[str, ...] = (),
            sitl_args: tuple[str, ...] = (), fcu_preexec: Callable[[], None] | None = None) -> Stack:
@@ -93,9 +109,16 @@ def launch(tmp_path: Path, scenario: str = "case2_impulse", *, realtime: bool = 
                                      f"udpout:127.0.0.1:{gcs_port}", *rt, *fcu_args,
                                      "--onboard-log", str(tmp_path / "onboard.ulg")],
                              tmp_path, fcu_preexec)
-        session.wait_vehicle(timeout=15.0)
+        # waited for while the processes start up (their CPU time grows: a loaded machine
+        # starts them slowly), not for a fixed time
+        started = lambda: cpu_s(*(p.pid for p in procs.values()))  # noqa: E731
+        until_progressing(lambda: _heard(session, procs, None), started,
+                          "the FCU's first HEARTBEAT", stall_s=15.0, ceiling_s=180.0,
+                          poll_s=0.0)
         if sitl:  # the FCU reports attitude once the simulator's first state has arrived
-            assert session.recv(["ATTITUDE_QUATERNION"], timeout=15.0) is not None
+            until_progressing(lambda: _heard(session, procs, "ATTITUDE_QUATERNION"),
+                              started, "the FCU's first ATTITUDE_QUATERNION", stall_s=15.0,
+                              ceiling_s=180.0, poll_s=0.0)
     except BaseException:
         session.close()
         stop(procs)

@@ -34,3 +34,25 @@ def test_a_run_that_stops_progressing_is_stopped_with_the_reason(tmp_path):
         run_progressing([sys.executable, "-c", "import time; time.sleep(60)"],
                         lambda: file_size(path), "stalled", stall_s=1.0, poll_s=0.1)
     assert time.monotonic() - t0 < 30.0
+
+
+def test_a_state_is_waited_for_while_progress_grows_and_not_past_its_budget():
+    """Given a progress that grows by 1 each poll, then a state that comes at progress 5 is
+    returned, one not reached within a budget of 3 fails naming it, and a progress that
+    stands still fails after the stall limit."""
+    from .waits import until_progressing
+
+    clock = iter(range(1000))
+    seen = [0]
+
+    def progress() -> float:
+        seen[0] = next(clock)
+        return seen[0]
+
+    assert until_progressing(lambda: seen[0] >= 5, progress, "five", poll_s=0.0)
+    with pytest.raises(AssertionError, match=r"never: not within 3 of progress"):
+        until_progressing(lambda: False, progress, "never", within=3.0, poll_s=0.0)
+    t0 = time.monotonic()
+    with pytest.raises(AssertionError, match=r"still: no progress for 0.3 s"):
+        until_progressing(lambda: False, lambda: 1.0, "still", stall_s=0.3, poll_s=0.05)
+    assert time.monotonic() - t0 < 5.0

@@ -4,6 +4,7 @@ passes."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import time
 from collections.abc import Callable, Sequence
@@ -26,6 +27,37 @@ def until(value: Callable[[], T], what: str, timeout: float = 60.0,
             return got
         if time.monotonic() > deadline:
             raise AssertionError(f"{what}: not within {timeout:g} s")
+        time.sleep(poll_s)
+
+
+def until_progressing(value: Callable[[], T], progress: Callable[[], float], what: str, *,
+                      within: float | None = None, stall_s: float = 30.0,
+                      ceiling_s: float = 1800.0, poll_s: float = 0.2) -> T:
+    """The first truthy `value()`, polled every `poll_s` for as long as `progress()` (a
+    measure that grows while the run advances: a flight clock, CPU seconds) keeps growing: a
+    loaded machine runs slower, never differently, so only a stall is a failure.
+    AssertionError naming `what` (the state waited for) when `progress()` has grown by
+    `within` since the wait began (the state's budget in the run's own measure: late in
+    the flight, not on the wall clock), stands still for `stall_s` of wall time, or
+    `ceiling_s` of wall time passes."""
+    t0 = time.monotonic()
+    start = seen = progress()
+    changed = t0
+    while True:
+        got = value()
+        if got:
+            return got
+        now, at = time.monotonic(), progress()
+        if at != seen:
+            seen, changed = at, now
+        if within is not None and at - start >= within:
+            raise AssertionError(f"{what}: not within {within:g} of progress "
+                                 f"(from {start:g} to {at:g})")
+        if now - changed > stall_s:
+            raise AssertionError(f"{what}: no progress for {stall_s:g} s (last: {seen:g})")
+        if now - t0 > ceiling_s:
+            raise AssertionError(f"{what}: not within the ceiling of {ceiling_s:g} s "
+                                 f"(progress from {start:g} to {at:g})")
         time.sleep(poll_s)
 
 
@@ -60,6 +92,53 @@ def file_size(path: Path) -> int:
         return path.stat().st_size
     except OSError:
         return -1
+
+
+def cpu_s(*pids: int) -> float:
+    """CPU seconds (user + system) processes `pids` have used so far, 0 for one that has
+    ended: progress for `until_progressing` while a process starts up."""
+    total = 0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        total += int(fields[11]) + int(fields[12])
+    return total / os.sysconf("SC_CLK_TCK")
+
+
+class FlightClock:
+    """The vehicle's flight clock as a test's Session hears it: the latest time_boot_ms of
+    the target's messages, in seconds (-1 before any). In lockstep it is simulated time: it
+    advances while the flight does, however slowly a loaded machine runs it. Messages read
+    by other waits count (pymavlink keeps the latest of each type); with `take_in`,
+    calling it also reads (and drops) what has arrived, for waits that read nothing from
+    the Session."""
+
+    def __init__(self, session: Any, *, take_in: bool = True) -> None:
+        self.session = session
+        self.take_in = take_in
+
+    def __call__(self) -> float:
+        conn = self.session.conn
+        while self.take_in and conn.recv_match(blocking=False) is not None:
+            pass
+        target = conn.sysid_state.get(self.session.target_system)
+        latest = [getattr(m, "time_boot_ms", -1000) for m in
+                  (target.messages.values() if target is not None else ())]
+        return max(latest, default=-1000) * 1e-3
+
+
+def flight_wait(stack, types: list[str], predicate: Callable[[Any], bool], what: str, *,
+                within_s: float, stall_s: float = 30.0, ceiling_s: float = 1800.0) -> Any:
+    """The first message of `types` satisfying `predicate`, waited for while the vehicle's
+    flight clock advances: AssertionError naming `what` when `within_s` simulated seconds
+    pass without it (the state's budget in the flight's time), or the clock stands still
+    for `stall_s` of wall time (or at `ceiling_s`)."""
+    return until_progressing(lambda: stack.wait_for(types, predicate, timeout=0.2),
+                             FlightClock(stack.session, take_in=False), what, within=within_s,
+                             stall_s=stall_s, ceiling_s=ceiling_s, poll_s=0.0)
 
 
 def flown_to(stack, t_s: float, timeout: float = 60.0):
