@@ -20,6 +20,7 @@ from common.wire.mavlink import MAV
 from common.wire.modes import Mode
 
 from .conftest import launch, stop
+from .waits import FlightClock, flight_wait, until_progressing
 
 M = MAV
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
@@ -73,6 +74,13 @@ class MavProxy:
             time.sleep(0.05)
         return needle in self.text()[since:]
 
+    def flown_to(self, needle: str, since: int, clock: FlightClock, within_s: float) -> bool:
+        """Whether `needle` appears after `since` within `within_s` of the flight's time
+        (simulated in lockstep), waited for while the flight clock advances."""
+        until_progressing(lambda: needle in self.text()[since:], clock, repr(needle),
+                          within=within_s, stall_s=30.0, ceiling_s=600.0)
+        return True
+
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.terminate()
@@ -91,9 +99,12 @@ def _mode(stack, mode: Mode, armed: bool, timeout: float = 10.0):
                           bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED) == armed, timeout)
 
 
-def _at(stack, ned: tuple[float, float, float], timeout: float = 10.0):
-    return stack.wait_for(["LOCAL_POSITION_NED"], lambda m: max(
-        abs(m.x - ned[0]), abs(m.y - ned[1]), abs(m.z - ned[2])) < 0.05, timeout)
+def _at(stack, ned: tuple[float, float, float], within_s: float = 10.0):
+    """The FCU's next LOCAL_POSITION_NED within 5 cm of `ned`, within `within_s` of the
+    flight's time."""
+    return flight_wait(stack, ["LOCAL_POSITION_NED"], lambda m: max(
+        abs(m.x - ned[0]), abs(m.y - ned[1]), abs(m.z - ned[2])) < 0.05, f"at {ned}",
+        within_s=within_s)
 
 
 def test_mavproxy_names_and_changes_px4_modes(tmp_path):
@@ -129,14 +140,15 @@ def test_mavproxy_names_and_changes_px4_modes(tmp_path):
         assert mp.wait_for("ARMED", mark), mp.text()[mark:]
         mark = mp.send("mode TAKEOFF")
         assert mp.wait_for("DO_SET_MODE: ACCEPTED", mark), mp.text()[mark:]
-        assert mp.wait_for("takeoff complete", mark, 20), mp.text()[mark:]
+        clock = FlightClock(stack.session)
+        assert mp.flown_to("takeoff complete", mark, clock, 20.0), mp.text()[mark:]
         assert _mode(stack, Mode.HOLD, armed=True) is not None
         assert _at(stack, (0.0, 0.0, -2.5)) is not None  # MIS_TAKEOFF_ALT
 
         mark = mp.send("mode RTL")
         assert mp.wait_for("RTL>", mark), mp.text()[mark:]
         assert _mode(stack, Mode.RTL, armed=True) is not None
-        assert mp.wait_for("DISARMED", mark, 60), mp.text()[mark:]
+        assert mp.flown_to("DISARMED", mark, clock, 60.0), mp.text()[mark:]
         assert _mode(stack, Mode.RTL, armed=False) is not None
         assert _at(stack, (0.0, 0.0, 0.0)) is not None
 
