@@ -21,7 +21,10 @@ CASE1 = SCENARIOS / "case1_figure8.toml"
 
 def _lossy_run(scenario, out, seed: int) -> tuple[dict, dict[str, int]]:
     """The run through a proxy on the simulator link that drops 10 % of the datagrams both
-    ways, duplicates 5 % and holds 5 % back; its metrics and the proxy's counts."""
+    ways, duplicates 5 % and holds 5 % back; its metrics and the proxy's counts. No
+    wall-clock limit: a lockstep run whose clock stands still for STALL_S ends (a
+    deadlock fails the run), one that advances slowly on a loaded machine is the same
+    flight."""
     proxies: list[UdpProxy] = []
 
     def route(port: int) -> int:
@@ -30,14 +33,14 @@ def _lossy_run(scenario, out, seed: int) -> tuple[dict, dict[str, int]]:
         return proxy.port
 
     try:
-        metrics = run_processes(scenario, out, sim_route=route, wall_timeout_s=150.0)
+        metrics = run_processes(scenario, out, sim_route=route)
     finally:
         for p in proxies:
             p.close()
     return metrics, proxies[0].counts
 
 
-@pytest.mark.timeout(240)
+@pytest.mark.timeout(1800)  # a ceiling: the runs are judged by their progress (STALL_S)
 def test_ten_percent_loss_with_duplication_and_reordering_gives_the_same_flight(tmp_path):
     """Case I's first 30 s with 10 % of the simulator link's datagrams dropped both ways,
     5 % duplicated and 5 % held back behind the next ones: no deadlock, and exactly the
@@ -67,7 +70,7 @@ def test_ten_percent_loss_with_duplication_and_reordering_gives_the_same_flight(
     assert np.array_equal(clean_rows[:, keep], lossy_rows[:, keep])
 
 
-@pytest.mark.timeout(240)
+@pytest.mark.timeout(1800)  # a ceiling: the runs are judged by their progress (STALL_S)
 def test_loss_with_sensors_gives_the_same_flight(tmp_path):
     """With a sensor profile (HIL_SENSOR per IMU sample, delayed poses, the estimator's
     alignment before the flight) the same impairments change timing, never results: every
