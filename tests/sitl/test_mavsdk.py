@@ -101,6 +101,30 @@ async def _first(stream: AsyncGenerator, predicate, timeout: float):
         await stream.aclose()
 
 
+async def _first_advancing(stream: AsyncGenerator, predicate, what: str,
+                           stall_s: float = 30.0):
+    """The first item of a stamped MAVSDK stream (`timestamp_us`: simulated time in
+    lockstep) that satisfies `predicate`, waited for while the stamps advance: a loaded
+    machine flies slower, never differently. AssertionError naming `what` when no item
+    with a later stamp comes for `stall_s` of wall time; the stream is closed."""
+    items = stream.__aiter__()
+    latest, advanced = -1, time.monotonic()
+    try:
+        while True:
+            left = advanced + stall_s - time.monotonic()
+            try:
+                item = await asyncio.wait_for(items.__anext__(), max(left, 0.0))
+            except TimeoutError:
+                raise AssertionError(f"{what}: the stamps stood still at {latest} us for "
+                                     f"{stall_s:g} s") from None
+            if predicate(item):
+                return item
+            if item.timestamp_us > latest:
+                latest, advanced = item.timestamp_us, time.monotonic()
+    finally:
+        await stream.aclose()
+
+
 async def _until(condition, timeout: float, what: str) -> None:
     deadline = time.monotonic() + timeout
     while not condition():
@@ -149,9 +173,11 @@ async def _fly(grpc_port: int, end_us: int) -> dict:
         start = got["pos"][-1][1]
         await drone.action.arm()
         await drone.mission_raw.start_mission()
-        # The plant stops at the scenario's duration and its last state stays: wait for it.
-        end_att = await _first(drone.telemetry.attitude_quaternion(),
-                               lambda q: q.timestamp_us >= end_us, 120)
+        # The plant stops at the scenario's duration and its last state stays: wait for it
+        # while the flight advances.
+        end_att = await _first_advancing(drone.telemetry.attitude_quaternion(),
+                                         lambda q: q.timestamp_us >= end_us,
+                                         "the scenario's end")
         await asyncio.sleep(0.5)  # a few more samples of the final state
         finished = await drone.mission_raw.is_mission_finished()
         armed = await _first(drone.telemetry.armed(), lambda _: True, 5)
@@ -163,7 +189,7 @@ async def _fly(grpc_port: int, end_us: int) -> dict:
             "armed": armed, **got}
 
 
-@pytest.mark.timeout(180)
+@pytest.mark.timeout(1200)  # a ceiling: the flight is waited for while it advances
 def test_mavsdk_uploads_downloads_arms_flies_and_reads_telemetry(tmp_path):
     """Given the FCU with a second GCS link served by mavsdk_server, when MAVSDK connects,
     uploads a LOITER_TIME + pose keyframe mission with mission_raw, downloads it, arms and
@@ -177,7 +203,7 @@ def test_mavsdk_uploads_downloads_arms_flies_and_reads_telemetry(tmp_path):
     try:
         server = MavsdkServer(f"udpin://127.0.0.1:{port}", tmp_path / "mavsdk_server.log")
         grpc_port = server.grpc_port(timeout=30)
-        r = asyncio.run(asyncio.wait_for(_fly(grpc_port, end_us), 150))
+        r = asyncio.run(asyncio.wait_for(_fly(grpc_port, end_us), 1080))
 
         def at_end(msg) -> bool:
             return msg.time_boot_ms >= end_us // 1000
