@@ -80,6 +80,7 @@ class Report:
     odometry: list[object] = field(default_factory=list)  # motion capture (MOCAP)
     other: list[str] = field(default_factory=list)
     answers: list[int] = field(default_factory=list)  # time_usec of each answer sent
+    answer_wall_s: list[float] = field(default_factory=list)  # and when (monotonic s)
     published: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("accel", "gyro", "mag", "baro", "diff_press"), 0))
     violations: list[str] = field(default_factory=list)
@@ -202,6 +203,10 @@ class ScriptedPX4:
         self.clock_us = 0
         self.hsq: object | None = None
         self.sock: socket.socket | None = None
+        # where the plant gave up waiting for an answer, as a test records it from the
+        # plant in the same process: (sample us, latest answer accepted us, wall s the
+        # wait began, wall s given up)
+        self.plant_gave_up: list[tuple[int, int, float, float]] = []
 
     def connect(self, timeout_s: float = 20.0) -> None:
         deadline = time.monotonic() + timeout_s
@@ -257,6 +262,7 @@ class ScriptedPX4:
             report.stalls += 1
         self.send(pack(self.mav, msg))
         report.answers.append(self.clock_us)
+        report.answer_wall_s.append(time.monotonic())
 
     def _hil_sensor(self, m: object, report: Report) -> None:
         f = m.fields_updated  # type: ignore[attr-defined]
