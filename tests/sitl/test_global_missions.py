@@ -181,6 +181,7 @@ def _key(item) -> tuple:
     return tuple("nan" if isinstance(v, float) and math.isnan(v) else v for v in item)
 
 
+@pytest.mark.timeout(1200)  # a ceiling: the flight is waited for while it advances
 def test_global_wpl_through_mavproxy_is_flown_to_the_intended_points(rig):
     """Given a local mission (points off the 1e-7 deg grid), when `gcs mission download
     --frame global` writes it as WPL and MAVProxy's `wp load` uploads that file, then the

@@ -236,9 +236,9 @@ def test_speed_factor_paces_the_lockstep_by_the_wall_clock(tmp_path, factor):
     processes got (/proc schedstat): simulated time runs at 0.8 X or more, or, on a machine
     too busy for that, the processes were running or queued for a CPU for at least 0.8 of
     the wall time: a starved run is slow because it waited for a CPU, a wrongly paced one
-    (a factor inverted or applied twice) because it slept. Not spinning is judged per
-    process the same way: each ran for well under the wall time it was not queued for a
-    CPU (a busy wait runs all of it)."""
+    (a factor inverted or applied twice) because it slept. Neither spins: together they
+    ran for well under the two cores a free-running lockstep takes (a starved machine
+    gives them less, never more)."""
     stats = tmp_path / "sitl_stats.json"
     stack = launch(tmp_path, sitl_args=("--end-time", "3600", "--speed-factor", f"{factor:g}",
                                         "--stats", str(stats)))
@@ -264,9 +264,8 @@ def test_speed_factor_paces_the_lockstep_by_the_wall_clock(tmp_path, factor):
     assert sim_s > 0.0, "simulated time stood still"
     assert rate >= 0.8 * factor or busy >= 0.8, \
         f"{rate:.3f} x real time, the processes busy for {busy:.2f} of the wall time"
-    for name, (ran_s, queued) in sched.items():
-        assert ran_s < 0.5 * (wall_s - queued), \
-            f"{name} ran {ran_s:.2f} s of the {wall_s - queued:.2f} s it was not queued"
+    cores = sum(ran for ran, _ in sched.values()) / wall_s
+    assert cores < 1.0, f"{cores:.2f} cores at {factor:g} x real time"
     # the wait for the wall clock is not the plant's time (a period is 2 ms / X)
     assert json.loads(stats.read_text())["stage_us"]["plant"] < 500.0
 

@@ -107,6 +107,7 @@ def _at(stack, ned: tuple[float, float, float], within_s: float = 10.0):
         within_s=within_s)
 
 
+@pytest.mark.timeout(1200)  # a ceiling: the flight is waited for while it advances
 def test_mavproxy_names_and_changes_px4_modes(tmp_path):
     """Given MAVProxy (default modules) on a second link of the FCU (Case I, on the ground),
     then it names the mode LOITER (prompt and mode printout) and prints no fence warning at
