@@ -519,6 +519,19 @@ def _not_the_peers(r, gave_up: list[tuple[int, int, float, float]]) -> list[str]
     return wrong
 
 
+
+def _gave_up_only_on_a_late_peer(s: dict, r, side: ScriptedPX4) -> bool:
+    """Assert that each wait the plant gave up (`answer_waits`, one stall line each) was on
+    an answer the scripted PX4 sent ANSWER_TIMEOUT_S or more late (`_not_the_peers`: a
+    starved peer, never on an idle machine); whether there was any. After one, that peer's
+    backlog of answers comes late by design: a test then skips its cadence counts. A stall
+    line is said once per run of give-ups."""
+    waits, lines = s["answer_waits"], s["stall_reports"]
+    assert waits == len(side.plant_gave_up) and (lines > 0) == (waits > 0) and lines <= waits
+    assert _not_the_peers(r, side.plant_gave_up) == []
+    return waits > 0
+
+
 TAKEOFF_HOLD_LAND = ((1.0, (0.0, 0.0, -1.5)), (5.0, (0.0, 0.0, 0.5)))
 
 
@@ -536,13 +549,12 @@ def test_imu_rates_fly_takeoff_hold_land(tmp_path, imu_hz, period):
     s = server.stats()
     assert r.violations == [] and r.stale == {}
     assert s["answer_period_samples"] == period
-    assert s["answer_waits"] == len(side.plant_gave_up)
-    assert _not_the_peers(r, side.plant_gave_up) == []
+    gave_up = _gave_up_only_on_a_late_peer(s, r, side)
     assert (s["stale_answers"], s["extra_answers"]) == (0, 0)
     # late only where it stepped past a slow answer (a busy machine), a few times at most;
     # after giving up on a starved peer, also while that peer works off its backlog
     assert s["slow_waits"] <= 4
-    if s["answer_waits"] == 0:
+    if not gave_up:
         assert s["late_answers"] == s["slow_answers"]
     assert s["sim_time_s"] == 8.0
     assert np.all(np.diff(r.answers) % (period * round(1e6 / imu_hz)) == 0)
@@ -558,11 +570,12 @@ def test_rate_limited_answers_fly_takeoff_hold_land(tmp_path, imu_hz, intervals)
     or 3 samples), then the plant learns the longest interval, waits only there, never
     where no answer comes (no stall), and the takeoff to 1.5 m, the hold and the landing
     fly."""
-    r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
-                                 waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0)
+    r, server, rows, c, side = _fly(tmp_path, _profile(imu_hz), 8.0,
+                                    waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0)
     s = server.stats()
     assert r.violations == [] and r.stale == {}
-    assert (s["answer_waits"], s["stall_reports"], s["sim_time_s"]) == (0, 0, 8.0)
+    _gave_up_only_on_a_late_peer(s, r, side)
+    assert s["sim_time_s"] == 8.0
     longest = max(intervals)
     assert (s["answer_period_samples"], s["answer_interval_longest"]) == (longest, longest)
     assert set(np.diff(r.answers[2:]) // round(1e6 / imu_hz)) == intervals
@@ -582,9 +595,9 @@ def test_one_answer_not_sent_is_stepped_past_without_a_stall(tmp_path, capfd):
                                     waypoints=TAKEOFF_HOLD_LAND, withhold_at_s=2.0)
     s = server.stats()
     assert side.withheld == 2_000_000
-    assert "no answer" not in capfd.readouterr().err
-    assert (s["answer_waits"], s["stall_reports"]) == (0, 0)
-    assert s["grace_steps"] - s["slow_steps"] == 4  # slow answers (a busy machine) aside
+    if not _gave_up_only_on_a_late_peer(s, r, side):
+        assert "no answer" not in capfd.readouterr().err
+        assert s["grace_steps"] - s["slow_steps"] == 4  # slow answers (a busy machine) aside
     assert (s["answer_period_samples"], s["answer_interval_longest"]) == (4, 8)
     assert s["sim_time_s"] == 4.0 and r.violations == []
     assert rows[-1, 0] == 4_000_000
@@ -618,14 +631,15 @@ def test_px4s_start_up_cadence_is_outgrown_without_a_stall(tmp_path, capfd, imu_
     plant steps past each answer that needs one more sample after GRACE_S, lengthens the
     interval it waits for to the cadence's longest, and flies the takeoff, hold and
     landing in lockstep without a stall."""
-    r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
-                                 waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0,
-                                 every_sample_until_s=0.6)
+    r, server, rows, c, side = _fly(tmp_path, _profile(imu_hz), 8.0,
+                                    waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0,
+                                    every_sample_until_s=0.6)
     s = server.stats()
-    assert "no answer" not in capfd.readouterr().err
-    assert (s["answer_waits"], s["stall_reports"], s["sim_time_s"]) == (0, 0, 8.0)
+    if not _gave_up_only_on_a_late_peer(s, r, side):
+        assert "no answer" not in capfd.readouterr().err
+        assert 1 <= s["grace_steps"] - s["slow_steps"] <= longest
+    assert s["sim_time_s"] == 8.0
     assert s["answer_period_samples"] == 1 and s["answer_interval_longest"] == longest
-    assert 1 <= s["grace_steps"] - s["slow_steps"] <= longest
     assert r.violations == [] and r.stale == {}
     assert s["steps"] > 0.85 * 8.0 * imu_hz  # in lockstep, not on the wall clock
     t, z = rows[:, c["time_us"]], rows[:, c["pz"]]
@@ -651,11 +665,12 @@ def test_a_speed_factor_paces_the_lockstep(tmp_path):
     """Given --speed-factor 2, then PX4's simulated time runs at most twice as fast as the
     wall clock once locked (PX4's timers run on simulated time, a ground station's on the wall
     clock), still one answer per answer period and the same flight."""
-    r, server, rows, c, _ = _fly(tmp_path, _profile(250.0), 3.0, speed_factor=2.0,
-                                 waypoints=TAKEOFF_HOLD_LAND)
+    r, server, rows, c, side = _fly(tmp_path, _profile(250.0), 3.0, speed_factor=2.0,
+                                    waypoints=TAKEOFF_HOLD_LAND)
     s = server.stats()
     assert r.violations == [] and s["speed_factor"] == 2.0
-    assert s["sim_time_s"] == 3.0 and s["answer_waits"] == 0
+    assert s["sim_time_s"] == 3.0
+    _gave_up_only_on_a_late_peer(s, r, side)
     # no faster than 2x once locked (a slow machine only makes it slower); the pace may
     # catch up 50 ms it fell behind, which the 2.1 allows over these 2.7 s
     assert 1.0 < s["real_time_factor"] <= 2.1, s
