@@ -24,7 +24,7 @@ import pytest
 from common.logs.ulog import read_topic, tail_record
 
 from .conftest import ROOT, SCENARIOS
-from .waits import until
+from .waits import cpu_s, until
 
 CASE1 = SCENARIOS / "case1_figure8.toml"
 DURATION_S = 26.0  # lockstep runs: the climb, the hover and 6 s of the figure-infinity
@@ -265,12 +265,6 @@ def _state(pid: int) -> str:
     return _stat(pid)[0]
 
 
-def _cpu_s(pid: int) -> float:
-    """The CPU time (s, user and system) a process has used so far."""
-    fields = _stat(pid)
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def _stop_hogs(hogs: list[subprocess.Popen]) -> None:
     for h in hogs:
         if h.poll() is None:
@@ -324,7 +318,7 @@ def test_lockstep_run_is_unchanged_by_starvation(quiet, tmp_path, starvation):
     try:
         if starvation == "cpu-hog":
             hogs = _hog(2)
-            until(lambda: all(_cpu_s(h.pid) >= 0.2 for h in hogs),
+            until(lambda: all(cpu_s(h.pid) >= 0.2 for h in hogs),
                   "the hogs spinning before the run starts", 30.0, poll_s=0.05)
         run = _start(out, "--duration", f"{duration_s:g}")
         if hogs:  # before it starts its sitl and fcu (they inherit the CPU)
