@@ -357,7 +357,7 @@ def test_bad_input_gets_safe_reactions(tmp_path):
         step = server._step
 
         def timed_step() -> None:
-            step()
+            step()  # the sample is out before this stamp: the reader may come first
             sent_s[server.state.time_us] = time.monotonic()
 
         server._step = timed_step  # type: ignore[method-assign]
@@ -398,6 +398,7 @@ def test_bad_input_gets_safe_reactions(tmp_path):
         t3 = px4.next_sample()
         t4 = px4.next_sample()
         assert (t3, t4) == (t2 + IMU_US, t2 + 2 * IMU_US)
+        _until(lambda: t4 in sent_s)  # stamped once the plant's step returns
         assert sent_s[t4] - sent_s[t3] >= 0.9 * GRACE_S
         # at least t4 stepped past its due answer (a busy machine can teach the plant a
         # longer answer interval while locking in: t3 is then no answer due)
