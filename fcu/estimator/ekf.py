@@ -57,9 +57,9 @@ from fcu.estimator.layouts import (
     EI_RESETS,
     EI_RESYNC_T,
 )
-from fcu.estimator.readout import output_values, sd_values, variance_code
+from fcu.estimator.readout import output_values, positive_definite, sd_values, variance_code
 from fcu.estimator.settings import EstimatorSettings
-from fcu.estimator.status import EstimatorHealth, EstimatorStatus, positive_definite, sd_verdict
+from fcu.estimator.status import EstimatorHealth, EstimatorStatus, sd_verdict
 from fcu.estimator.strapdown import N, State
 from fcu.stages import VehicleState
 
@@ -403,7 +403,7 @@ class Estimator:
         if self._aligned:
             finite = sd_values(fb, self._M)
             sd = fb[EF_SD:EF_SD + N].tolist()
-            spd = finite and positive_definite(self._M[0])
+            spd = finite and positive_definite(self._M)
         else:
             sd = [math.nan] * N
             spd = False

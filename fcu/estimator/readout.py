@@ -1,7 +1,8 @@
 """What the filter's buffers say, read by compiled kernels (`fcu.estimator.filter`'s
 buffers, `fcu.estimator.layouts`): the output state's values, the health verdict from the
-largest variances, and the standard deviations of the status. Same arithmetic and order as
-the interpreted reads they replace (no fastmath).
+largest variances, the standard deviations of the status and its positive-definiteness test.
+Same arithmetic and order as the interpreted reads they replace (no fastmath), but for that
+test's factorisation (`positive_definite`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from fcu.estimator.layouts import (
     EI_O_T,
 )
 from fcu.estimator.strapdown import N
+from fcu.estimator.update import cholesky_lower
 
 
 @njit
@@ -87,3 +89,18 @@ def sd_values(fb: np.ndarray, M: np.ndarray) -> bool:
         d = P[i, i]
         fb[EF_SD + i] = math.sqrt(d if d >= 0.0 else 0.0) if finite else math.inf
     return finite
+
+
+@njit
+def positive_definite(M: np.ndarray) -> bool:
+    """Whether the covariance P = M[0], symmetrised ((P + P^T) / 2, as numpy computes it),
+    has a Cholesky factor (`update.cholesky_lower`). numpy's LAPACK factorises in another
+    order, so the two verdicts can differ only for a P whose smallest pivot is within
+    rounding of zero (tests/unit/test_estimator_kernels.py compares them)."""
+    P = M[0]
+    n = P.shape[0]
+    S = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            S[i, j] = 0.5 * (P[i, j] + P[j, i])
+    return cholesky_lower(S, np.zeros((n, n)))

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numpy as np
-
 from common.quaternion import Vec3
 from fcu.estimator.settings import EstimatorSettings
 
@@ -44,15 +42,6 @@ class EstimatorStatus(NamedTuple):
     pose_ignored: int = 0  # poses refused (non-finite, too old, future, queue full)
     resets: int = 0  # position or attitude resets to the pose after the gate timeout
 
-
-
-def positive_definite(P: np.ndarray) -> bool:
-    """Whether numpy's Cholesky factorises (P + P^T) / 2."""
-    try:
-        np.linalg.cholesky(0.5 * (P + P.T))
-    except np.linalg.LinAlgError:
-        return False
-    return True
 
 
 def sd_verdict(st: EstimatorSettings, sd: list[float], spd: bool) -> tuple[bool, bool]:

@@ -36,17 +36,16 @@ def joseph_gain(P: np.ndarray, H: np.ndarray, r: np.ndarray) -> tuple[np.ndarray
 
 
 @njit
-def spd_inverse(S: np.ndarray) -> tuple[bool, np.ndarray]:
-    """(True, S^-1) for a symmetric positive definite S, by Cholesky (S = L L^T, S^-1 =
-    L^-T L^-1, exactly symmetric); (False, NaNs) when S is not (a pivot <= 0 or NaN)."""
+def cholesky_lower(S: np.ndarray, L: np.ndarray) -> bool:
+    """S = L L^T into the zeroed lower-triangular L (S symmetric, its lower triangle read);
+    False at the first pivot <= 0 or NaN (S is not positive definite; L then partial)."""
     n = S.shape[0]
-    L = np.zeros((n, n))
     for j in range(n):
         d = S[j, j]
         for k in range(j):
             d -= L[j, k] * L[j, k]
         if not d > 0.0:
-            return False, np.full((n, n), np.nan)
+            return False
         d = math.sqrt(d)
         L[j, j] = d
         for i in range(j + 1, n):
@@ -54,6 +53,17 @@ def spd_inverse(S: np.ndarray) -> tuple[bool, np.ndarray]:
             for k in range(j):
                 t -= L[i, k] * L[j, k]
             L[i, j] = t / d
+    return True
+
+
+@njit
+def spd_inverse(S: np.ndarray) -> tuple[bool, np.ndarray]:
+    """(True, S^-1) for a symmetric positive definite S, by Cholesky (S = L L^T, S^-1 =
+    L^-T L^-1, exactly symmetric); (False, NaNs) when S is not (a pivot <= 0 or NaN)."""
+    n = S.shape[0]
+    L = np.zeros((n, n))
+    if not cholesky_lower(S, L):
+        return False, np.full((n, n), np.nan)
     Li = np.zeros((n, n))  # L^-1, lower triangular
     for i in range(n):
         Li[i, i] = 1.0 / L[i, i]

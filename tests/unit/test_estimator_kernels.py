@@ -27,7 +27,7 @@ from fcu.estimator.layouts import (
     EI_H_T,
     EI_N_PRED,
 )
-from fcu.estimator.readout import sd_values, variance_code
+from fcu.estimator.readout import positive_definite, sd_values, variance_code
 from fcu.estimator.settings import EstimatorSettings
 from fcu.estimator.strapdown import strapdown
 from fcu.estimator.update import (
@@ -234,6 +234,41 @@ def test_innovation_covariance_inverse_is_numpys_within_rounding(H):
 def test_inverse_refuses_a_matrix_that_is_not_positive_definite(S):
     ok, inv = spd_inverse(S)
     assert not ok and np.isnan(inv).all()
+
+
+def _numpy_says_positive_definite(P: np.ndarray) -> bool:
+    try:
+        np.linalg.cholesky(0.5 * (P + P.T))
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def test_status_positive_definiteness_is_numpys_verdict():
+    """Given covariances that are positive definite (well and badly conditioned, slightly
+    asymmetric), indefinite (one eigenvalue pushed below zero by a margin), singular, with
+    then the compiled test on (P + P^T) / 2 says what numpy's LAPACK Cholesky says, for
+    each; with a NaN or an infinity it says no (numpy's passes a NaN: status() tests
+    finiteness first)."""
+    rng = np.random.default_rng(RNG_SEED + 11)
+    cases = []
+    for _ in range(200):
+        P = _spd(rng)
+        cases.append(P)
+        cases.append(P + rng.normal(0, 1e-9, P.shape))  # asymmetric by rounding-sized noise
+        w, v = np.linalg.eigh(P)
+        w[rng.integers(15)] = -rng.uniform(1e-6, 1e-2) * w.max()
+        cases.append((v * w) @ v.T)  # indefinite
+        w[:] = 10.0 ** rng.uniform(-14, 0, 15)  # condition numbers up to 1e14
+        cases.append((v * w) @ v.T)
+    cases += [np.zeros((15, 15)), np.diag([1.0] * 14 + [0.0]), np.diag([1.0] * 14 + [-1.0])]
+    said = [positive_definite(P[None]) for P in cases]
+    assert said == [_numpy_says_positive_definite(P) for P in cases]
+    assert 0 < sum(said) < len(said)
+    for bad in (math.nan, math.inf, -math.inf):
+        P = _spd(rng)
+        P[3, 5] = bad
+        assert not positive_definite(P[None])
 
 
 def test_injection_and_bounds_against_numpy():
