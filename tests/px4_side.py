@@ -203,10 +203,6 @@ class ScriptedPX4:
         self.clock_us = 0
         self.hsq: object | None = None
         self.sock: socket.socket | None = None
-        # where the plant gave up waiting for an answer, as a test records it from the
-        # plant in the same process: (sample us, latest answer accepted us, wall s the
-        # wait began, wall s given up)
-        self.plant_gave_up: list[tuple[int, int, float, float]] = []
 
     def connect(self, timeout_s: float = 20.0) -> None:
         deadline = time.monotonic() + timeout_s

@@ -472,6 +472,10 @@ class Server:
                 "connects": self.connects, "disconnects": self.disconnects,
                 "refused_clients": self.link.refused_clients,
                 "answer_waits": self.answer_waits, "stall_reports": self.stall_reports,
+                "answer_give_ups": [
+                    {"sample_us": g.sample_us, "answered_us": g.answered_us,
+                     "waited_s": round(g.gave_up_s - g.began_s, 6)}
+                    for g in self.schedule.give_ups],
                 "grace_steps": self.grace_steps,
                 "slow_answers": self.schedule.slow_answers,
                 "slow_waits": self.schedule.slow_waits,

@@ -34,14 +34,22 @@ The rule, in samples between the stamps of accepted answers (`intervals`, a hist
   follow. A firmware that stops answering (no outputs to publish) keeps running on the
   wall clock until it answers again.
   Within a learned cadence the longest interval only grows.
+
+Each give-up is recorded (`give_ups`, the latest MAX_GIVE_UPS_KEPT): the sample the plant
+waited at, the latest answer accepted when the wait began (the answer owed is the next one)
+and the wall times the wait began and ended, so that a run can be judged on which answer
+was missing and for how long.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from enum import Enum
+from typing import NamedTuple
 
 LEARN_WINDOW = 8  # intervals in each half of the learning window
 MAX_GRACE_SCALE = 8  # the grace grows to at most this many times the caller's
+MAX_GIVE_UPS_KEPT = 100  # the latest give-ups kept in `give_ups` (all are counted)
 
 
 class Answer(Enum):
@@ -60,6 +68,15 @@ class Wait(Enum):
     GIVE_UP = "give_up"  # the timeout has passed: learn again (`skip`)
 
 
+class GiveUp(NamedTuple):
+    """One wait the plant gave up (`AnswerSchedule.wait_at` returned GIVE_UP)."""
+
+    sample_us: int  # the sample the plant waited at
+    answered_us: int | None  # the latest accepted answer when the wait began (None: none)
+    began_s: float  # wall time (the caller's clock) the wait began
+    gave_up_s: float  # and was given up
+
+
 class AnswerSchedule:
     """The longest interval in samples between the firmware's answers, from their stamps."""
 
@@ -72,6 +89,7 @@ class AnswerSchedule:
         self.slow_answers = 0  # answers that came after the plant stepped past them
         self.slow_waits = 0  # waits that ended so (each doubled the grace)
         self.slow_steps = 0  # the steps taken past them (in those waits)
+        self.give_ups: deque[GiveUp] = deque(maxlen=MAX_GIVE_UPS_KEPT)  # the run's latest
         self.reset()
 
     def reset(self) -> None:
@@ -158,6 +176,7 @@ class AnswerSchedule:
             self._wait_s = self._grace_s = now_s
             self._wait_from_us = self.last_us
         if now_s - self._wait_s >= timeout_s:
+            self.give_ups.append(GiveUp(sent_us, self._wait_from_us, self._wait_s, now_s))
             self.skip()
             return Wait.GIVE_UP, now_s
         if now_s - self._grace_s >= grace_s:

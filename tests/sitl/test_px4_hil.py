@@ -15,7 +15,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -28,7 +28,7 @@ from common.links import free_port
 from common.logs.ulog import read_topic
 from common.wire.mavlink import MAV, encoder, pack, parser
 from sitl.firmware.px4_hil import ANSWER_TIMEOUT_S, GRACE_S, Server
-from sitl.firmware.px4_lockstep import LEARN_WINDOW, Wait
+from sitl.firmware.px4_lockstep import LEARN_WINDOW, GiveUp
 from tests.px4_side import ACCEL, BARO, DIFF_PRESS, GYRO, MAG, ScriptedPX4
 
 from .conftest import ROOT, SCENARIOS, start, stop
@@ -478,7 +478,6 @@ def _fly(tmp_path: Path, profile, end_s: float, speed_factor: float | None = Non
     server = Server(scenario, f"tcpin:127.0.0.1:{port}", truth_log=tmp_path / "truth.ulg",
                     end_time_s=end_s, system_id=1, speed_factor=speed_factor)
     side = ScriptedPX4(port, scenario.vehicle, **side_options)
-    _record_give_ups(server, side.plant_gave_up)
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
     try:
@@ -492,25 +491,7 @@ def _fly(tmp_path: Path, profile, end_s: float, speed_factor: float | None = Non
     return report, server, rows, {name: i for i, name in enumerate(cols)}, side
 
 
-def _record_give_ups(server: Server, into: list[tuple[int, int, float, float]]) -> None:
-    """Record each wait for an answer that the plant gives up into `into`: the sample it
-    gave up at, the latest answer accepted when the wait began (the one owed is the
-    next), and the wall times the wait began and was given up."""
-    schedule = server.schedule
-    wait_at = schedule.wait_at
-
-    def recorded(sent_us: int, now_s: float, grace_s: float,
-                 timeout_s: float) -> tuple[Wait, float]:
-        began_s, answered_us = schedule._wait_s, schedule._wait_from_us
-        got = wait_at(sent_us, now_s, grace_s, timeout_s)
-        if got[0] is Wait.GIVE_UP and began_s is not None and answered_us is not None:
-            into.append((sent_us, answered_us, began_s, now_s))
-        return got
-
-    schedule.wait_at = recorded  # type: ignore[method-assign]
-
-
-def _not_the_peers(r, gave_up: list[tuple[int, int, float, float]]) -> list[str]:
+def _not_the_peers(r, gave_up: Iterable[GiveUp]) -> list[str]:
     """The plant's give-ups that the scripted PX4 did not cause. A plant that waits rightly
     gives up only on an answer owed (the peer's next answer after the latest accepted one,
     stamped at or before the sample it waits at) that was sent ANSWER_TIMEOUT_S or more
@@ -520,7 +501,8 @@ def _not_the_peers(r, gave_up: list[tuple[int, int, float, float]]) -> list[str]
     wrong = []
     for sample_us, answered_us, began_s, _ in gave_up:
         owed = [(t_us, sent_s) for t_us, sent_s in zip(r.answers, r.answer_wall_s,
-                                                       strict=True) if t_us > answered_us]
+                                                       strict=True)
+                if answered_us is None or t_us > answered_us]
         if not owed or owed[0][0] > sample_us:
             wrong.append(f"gave up at {sample_us} us, before the sample an answer is due at")
         elif owed[0][1] - began_s < ANSWER_TIMEOUT_S:
@@ -530,15 +512,17 @@ def _not_the_peers(r, gave_up: list[tuple[int, int, float, float]]) -> list[str]
 
 
 
-def _gave_up_only_on_a_late_peer(s: dict, r, side: ScriptedPX4) -> bool:
+def _gave_up_only_on_a_late_peer(s: dict, r, server: Server) -> bool:
     """Assert that each wait the plant gave up (`answer_waits`, one stall line each) was on
     an answer the scripted PX4 sent ANSWER_TIMEOUT_S or more late (`_not_the_peers`: a
     starved peer, never on an idle machine); whether there was any. After one, that peer's
     backlog of answers comes late by design: a test then skips its cadence counts. A stall
     line is said once per run of give-ups."""
     waits, lines = s["answer_waits"], s["stall_reports"]
-    assert waits == len(side.plant_gave_up) and (lines > 0) == (waits > 0) and lines <= waits
-    assert _not_the_peers(r, side.plant_gave_up) == []
+    gave_up = server.schedule.give_ups  # the schedule's record (`GiveUp`), all of a short run
+    assert waits == len(gave_up) == len(s["answer_give_ups"])
+    assert (lines > 0) == (waits > 0) and lines <= waits
+    assert _not_the_peers(r, gave_up) == []
     return waits > 0
 
 
@@ -554,12 +538,12 @@ def test_imu_rates_fly_takeoff_hold_land(tmp_path, imu_hz, period):
     scripted PX4, starved on a busy machine, sent ANSWER_TIMEOUT_S late), applies each
     answer from its own sample, and the takeoff to 1.5 m, the hold and the landing fly;
     no sensor goes stale."""
-    r, server, rows, c, side = _fly(tmp_path, _profile(imu_hz), 8.0,
+    r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
                                     waypoints=TAKEOFF_HOLD_LAND)
     s = server.stats()
     assert r.violations == [] and r.stale == {}
     assert s["answer_period_samples"] == period
-    gave_up = _gave_up_only_on_a_late_peer(s, r, side)
+    gave_up = _gave_up_only_on_a_late_peer(s, r, server)
     assert (s["stale_answers"], s["extra_answers"]) == (0, 0)
     # late only where it stepped past a slow answer (a busy machine), a few times at most;
     # after giving up on a starved peer, also while that peer works off its backlog
@@ -580,11 +564,11 @@ def test_rate_limited_answers_fly_takeoff_hold_land(tmp_path, imu_hz, intervals)
     or 3 samples), then the plant learns the longest interval, waits only there, never
     where no answer comes (no stall), and the takeoff to 1.5 m, the hold and the landing
     fly."""
-    r, server, rows, c, side = _fly(tmp_path, _profile(imu_hz), 8.0,
+    r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
                                     waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0)
     s = server.stats()
     assert r.violations == [] and r.stale == {}
-    _gave_up_only_on_a_late_peer(s, r, side)
+    _gave_up_only_on_a_late_peer(s, r, server)
     assert s["sim_time_s"] == 8.0
     longest = max(intervals)
     assert (s["answer_period_samples"], s["answer_interval_longest"]) == (longest, longest)
@@ -605,7 +589,7 @@ def test_one_answer_not_sent_is_stepped_past_without_a_stall(tmp_path, capfd):
                                     waypoints=TAKEOFF_HOLD_LAND, withhold_at_s=2.0)
     s = server.stats()
     assert side.withheld == 2_000_000
-    if not _gave_up_only_on_a_late_peer(s, r, side):
+    if not _gave_up_only_on_a_late_peer(s, r, server):
         assert "no answer" not in capfd.readouterr().err
         assert s["grace_steps"] - s["slow_steps"] == 4  # slow answers (a busy machine) aside
     assert (s["answer_period_samples"], s["answer_interval_longest"]) == (4, 8)
@@ -641,11 +625,11 @@ def test_px4s_start_up_cadence_is_outgrown_without_a_stall(tmp_path, capfd, imu_
     plant steps past each answer that needs one more sample after GRACE_S, lengthens the
     interval it waits for to the cadence's longest, and flies the takeoff, hold and
     landing in lockstep without a stall."""
-    r, server, rows, c, side = _fly(tmp_path, _profile(imu_hz), 8.0,
+    r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
                                     waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0,
                                     every_sample_until_s=0.6)
     s = server.stats()
-    if not _gave_up_only_on_a_late_peer(s, r, side):
+    if not _gave_up_only_on_a_late_peer(s, r, server):
         assert "no answer" not in capfd.readouterr().err
         assert 1 <= s["grace_steps"] - s["slow_steps"] <= longest
     assert s["sim_time_s"] == 8.0
@@ -675,12 +659,12 @@ def test_a_speed_factor_paces_the_lockstep(tmp_path):
     """Given --speed-factor 2, then PX4's simulated time runs at most twice as fast as the
     wall clock once locked (PX4's timers run on simulated time, a ground station's on the wall
     clock), still one answer per answer period and the same flight."""
-    r, server, rows, c, side = _fly(tmp_path, _profile(250.0), 3.0, speed_factor=2.0,
+    r, server, rows, c, _ = _fly(tmp_path, _profile(250.0), 3.0, speed_factor=2.0,
                                     waypoints=TAKEOFF_HOLD_LAND)
     s = server.stats()
     assert r.violations == [] and s["speed_factor"] == 2.0
     assert s["sim_time_s"] == 3.0
-    _gave_up_only_on_a_late_peer(s, r, side)
+    _gave_up_only_on_a_late_peer(s, r, server)
     # no faster than 2x once locked (a slow machine only makes it slower); the pace may
     # catch up 50 ms it fell behind, which the 2.1 allows over these 2.7 s
     assert 1.0 < s["real_time_factor"] <= 2.1, s

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,7 @@ from common.config.sensors import (
 from common.frames import flu_to_frd
 from common.wire.mission_items import PX4_SITL_HOME
 from sitl.firmware.px4_hil import physics_step_us, px4_sensor_profile, stale_warning
-from sitl.firmware.px4_lockstep import LEARN_WINDOW, Answer, AnswerSchedule
+from sitl.firmware.px4_lockstep import LEARN_WINDOW, Answer, AnswerSchedule, GiveUp
 from sitl.firmware.px4_wire import (
     MODE_ARMED,
     command_from_outputs,
@@ -285,8 +286,8 @@ def test_a_cadence_learned_too_short_grows_one_sample_at_a_time():
 def test_the_wait_for_an_answer_steps_past_then_gives_up_on_the_wall_clock():
     """Given a learned cadence of 1 sample and no answer at the sample due, then the schedule
     says wait until the grace has passed, then step one sample past it, again each grace,
-    and give up (learned again) once the timeout has passed since the wait began; an answer
-    that comes ends the wait, and the next one starts afresh."""
+    and give up (learned again, and recorded) once the timeout has passed since the wait
+    began; an answer that comes ends the wait, and the next one starts afresh."""
     from sitl.firmware.px4_lockstep import Wait
     s = AnswerSchedule(1000)
     for k in range(1, 2 * LEARN_WINDOW + 2):
@@ -307,7 +308,11 @@ def test_the_wait_for_an_answer_steps_past_then_gives_up_on_the_wall_clock():
         wait, _ = s.wait_at(sent, 11.0 + 0.06 * k, 0.05, 1.0)
         assert wait is Wait.STEP_PAST
         sent = s.due_us
+    assert s.give_ups == deque()
     assert s.wait_at(sent, 12.0, 0.05, 1.0)[0] is Wait.GIVE_UP and not s.learned
+    # recorded: the sample waited at, the answer accepted before (the next was owed), the
+    # wall times the wait began and ended
+    assert list(s.give_ups) == [GiveUp(sent, t + 2000, 11.0, 12.0)]
 
 
 def test_an_answer_that_was_only_slow_doubles_the_grace():
