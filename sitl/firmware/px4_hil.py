@@ -472,21 +472,10 @@ class Server:
                 "connects": self.connects, "disconnects": self.disconnects,
                 "refused_clients": self.link.refused_clients,
                 "answer_waits": self.answer_waits, "stall_reports": self.stall_reports,
-                "answer_give_ups": [
-                    {"sample_us": g.sample_us, "answered_us": g.answered_us,
-                     "waited_s": round(g.gave_up_s - g.began_s, 6)}
-                    for g in self.schedule.give_ups],
-                "grace_steps": self.grace_steps,
-                "slow_answers": self.schedule.slow_answers,
-                "slow_waits": self.schedule.slow_waits,
-                "slow_steps": self.schedule.slow_steps,
+                "grace_steps": self.grace_steps, **self.schedule.stats(),
                 "grace_s": min(GRACE_S * self.schedule.grace_scale, 0.5 * ANSWER_TIMEOUT_S),
                 "speed_factor": self.speed_factor,
                 "late_answers": self.late_answers,
-                "answer_period_samples": self.schedule.period,
-                "answer_interval_longest": self.schedule.longest,
-                "answer_intervals": {str(k): n for k, n in
-                                     sorted(self.schedule.intervals.items())},
                 "state_interval_us": self.state_interval_us,
                 "lockstep_wall_s": wall,
                 "real_time_factor": self.locked_sim_us * 1e-6 / wall if wall > 0 else None}
