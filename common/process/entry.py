@@ -8,20 +8,26 @@ starting" and exits 0. `fcu` and `sitl` go on recording until their loops stop o
 SIGTERM themselves (in `main` before the loop: the same words). From `gcs`, once imported, a
 Ctrl-C is a KeyboardInterrupt again: "gcs: interrupted", exit 130, the shell's code for
 SIGINT.
+
+The guard is set as this module loads, before its other imports: what comes before it is
+the interpreter's own start (tens of milliseconds of CPU), where a Ctrl-C is Python's.
 """
 
 from __future__ import annotations
 
-import importlib
-
 from common.process import startup
-from common.process.diagnostics import get_logger
+
+startup.guard()  # first: a stop from here on is recorded, not raised
+
+import importlib  # noqa: E402  (after the guard, on purpose)
+
+from common.process.diagnostics import get_logger  # noqa: E402
 
 log = get_logger(__name__)
 
 
 def _run(prog: str, module: str, *, loop_handles_sigint: bool) -> int:
-    startup.guard()
+    startup.guard()  # idempotent (the import set it)
     try:
         main = importlib.import_module(module).main
         if not loop_handles_sigint:

@@ -409,11 +409,17 @@ class Server:
         """In lockstep: whether the plant still waits for the answer due (having waited
         briefly for what arrives); False once it may step (`AnswerSchedule.wait_at`: no
         answer due, GRACE_S passed, or ANSWER_TIMEOUT_S since the wait began)."""
-        if self.schedule.last_us == self.sent_us:
+        schedule = self.schedule
+        # what came is read before deciding: a plant starved past the grace or the timeout
+        # steps past or gives up on no answer that came meanwhile
+        if schedule.last_us != self.sent_us and schedule.waits_at(self.sent_us) and \
+                select.select(self.link.filenos(), [], [], 0.0)[0]:
+            self._receive()
+        if schedule.last_us == self.sent_us:
             self._stalled = False
-        every = self.schedule.longest or 0
+        every = schedule.longest or 0
         now = time.monotonic()
-        wait, until_s = self.schedule.wait_at(self.sent_us, now, GRACE_S, ANSWER_TIMEOUT_S)
+        wait, until_s = schedule.wait_at(self.sent_us, now, GRACE_S, ANSWER_TIMEOUT_S)
         if wait is Wait.WAIT:
             if select.select(self.link.filenos(), [], [], until_s - now)[0]:
                 self._receive()

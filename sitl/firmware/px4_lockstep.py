@@ -188,12 +188,14 @@ class AnswerSchedule:
     def stats(self) -> dict[str, object]:
         """The schedule's figures for a stats file: the slow answers, the cadence learned,
         the intervals seen, and each give-up kept (the sample waited at, the latest answer
-        accepted before it: the one owed is the next, the seconds waited)."""
+        accepted before it: the one owed is the next, when the wait began on the caller's
+        clock and the seconds waited)."""
         return {"slow_answers": self.slow_answers, "slow_waits": self.slow_waits,
                 "slow_steps": self.slow_steps, "answer_period_samples": self.period,
                 "answer_interval_longest": self.longest,
                 "answer_intervals": {str(k): n for k, n in sorted(self.intervals.items())},
                 "answer_give_ups": [{"sample_us": g.sample_us, "answered_us": g.answered_us,
+                                     "began_s": g.began_s,
                                      "waited_s": round(g.gave_up_s - g.began_s, 6)}
                                     for g in self.give_ups]}
 

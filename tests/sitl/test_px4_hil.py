@@ -189,8 +189,10 @@ def test_units_and_frames_at_rest(flight):
 def test_lockstep_held_over_the_flight(flight):
     """Then (250 Hz IMU, PX4 answering at its 250 Hz control rate: every sample) once the
     answers' period was learned the plant advanced one IMU period per answer and never
-    without one (it stayed silent through every held-back answer), no answer was stale,
-    extra or late, and each answer was stamped with the sample it answered."""
+    without one (it stayed silent through every held-back answer, and gave up on none but
+    an answer the scripted PX4 sent ANSWER_TIMEOUT_S late), no answer was stale or extra,
+    none late but after a slow one, and each answer was stamped with the sample it
+    answered."""
     r, s = flight["report"], flight["stats"]
     assert r.violations == []
     assert r.stalls >= 25
@@ -203,11 +205,14 @@ def test_lockstep_held_over_the_flight(flight):
     assert s["paced_steps"] >= first // IMU_US + 2  # the period: two equal intervals
     assert (s["stale_answers"], s["extra_answers"], s["time_mismatches"]) == (0, 0, 0)
     # late answers only where the plant stepped past an answer that was slow (a busy
-    # machine), each doubling the grace: a few per run at most
-    assert s["late_answers"] == s["slow_answers"] and s["slow_waits"] <= 4
-    assert s["stall_reports"] == 0
+    # machine), each doubling the grace: a few per run at most; after giving up on the
+    # scripted PX4 (a thread of the test's process, starved on a busy machine), also while
+    # it works off its backlog
+    if not _gave_up_only_on_a_late_peer(s, r):
+        assert s["late_answers"] == s["slow_answers"]
+    assert s["slow_waits"] <= 4
     assert s["sent"]["hil_sensor"] == len(r.samples)
-    assert (s["rejected_bytes"], s["other_messages"], s["answer_waits"]) == (0, 0, 0)
+    assert (s["rejected_bytes"], s["other_messages"]) == (0, 0)
     print(f"px4-hil lockstep: {s['steps']} steps, {s['sent']['hil_sensor']} HIL_SENSOR, "
           f"{s['sent']['hil_gps']} HIL_GPS, {s['sent']['hil_state_quaternion']} "
           f"HIL_STATE_QUATERNION in {s['sim_time_s']:.1f} s; real-time factor "
@@ -512,15 +517,18 @@ def _not_the_peers(r, gave_up: Iterable[GiveUp]) -> list[str]:
 
 
 
-def _gave_up_only_on_a_late_peer(s: dict, r, server: Server) -> bool:
+def _gave_up_only_on_a_late_peer(s: dict, r) -> bool:
     """Assert that each wait the plant gave up (`answer_waits`, one stall line each) was on
     an answer the scripted PX4 sent ANSWER_TIMEOUT_S or more late (`_not_the_peers`: a
-    starved peer, never on an idle machine); whether there was any. After one, that peer's
-    backlog of answers comes late by design: a test then skips its cadence counts. A stall
-    line is said once per run of give-ups."""
+    starved peer, never on an idle machine), from the plant's stats `s` (its record of each
+    give-up, `answer_give_ups`: all of a short run; the wait's start on the host's
+    monotonic clock, the scripted PX4's clock); whether there was any. After one, that
+    peer's backlog of answers comes late by design: a test then skips its cadence counts. A
+    stall line is said once per run of give-ups."""
     waits, lines = s["answer_waits"], s["stall_reports"]
-    gave_up = server.schedule.give_ups  # the schedule's record (`GiveUp`), all of a short run
-    assert waits == len(gave_up) == len(s["answer_give_ups"])
+    gave_up = [GiveUp(g["sample_us"], g["answered_us"], g["began_s"],
+                      g["began_s"] + g["waited_s"]) for g in s["answer_give_ups"]]
+    assert waits == len(gave_up)
     assert (lines > 0) == (waits > 0) and lines <= waits
     assert _not_the_peers(r, gave_up) == []
     return waits > 0
@@ -543,7 +551,7 @@ def test_imu_rates_fly_takeoff_hold_land(tmp_path, imu_hz, period):
     s = server.stats()
     assert r.violations == [] and r.stale == {}
     assert s["answer_period_samples"] == period
-    gave_up = _gave_up_only_on_a_late_peer(s, r, server)
+    gave_up = _gave_up_only_on_a_late_peer(s, r)
     assert (s["stale_answers"], s["extra_answers"]) == (0, 0)
     # late only where it stepped past a slow answer (a busy machine), a few times at most;
     # after giving up on a starved peer, also while that peer works off its backlog
@@ -568,7 +576,7 @@ def test_rate_limited_answers_fly_takeoff_hold_land(tmp_path, imu_hz, intervals)
                                     waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0)
     s = server.stats()
     assert r.violations == [] and r.stale == {}
-    _gave_up_only_on_a_late_peer(s, r, server)
+    _gave_up_only_on_a_late_peer(s, r)
     assert s["sim_time_s"] == 8.0
     longest = max(intervals)
     assert (s["answer_period_samples"], s["answer_interval_longest"]) == (longest, longest)
@@ -589,7 +597,7 @@ def test_one_answer_not_sent_is_stepped_past_without_a_stall(tmp_path, capfd):
                                     waypoints=TAKEOFF_HOLD_LAND, withhold_at_s=2.0)
     s = server.stats()
     assert side.withheld == 2_000_000
-    if not _gave_up_only_on_a_late_peer(s, r, server):
+    if not _gave_up_only_on_a_late_peer(s, r):
         assert "no answer" not in capfd.readouterr().err
         assert s["grace_steps"] - s["slow_steps"] == 4  # slow answers (a busy machine) aside
     assert (s["answer_period_samples"], s["answer_interval_longest"]) == (4, 8)
@@ -629,7 +637,7 @@ def test_px4s_start_up_cadence_is_outgrown_without_a_stall(tmp_path, capfd, imu_
                                     waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0,
                                     every_sample_until_s=0.6)
     s = server.stats()
-    if not _gave_up_only_on_a_late_peer(s, r, server):
+    if not _gave_up_only_on_a_late_peer(s, r):
         assert "no answer" not in capfd.readouterr().err
         assert 1 <= s["grace_steps"] - s["slow_steps"] <= longest
     assert s["sim_time_s"] == 8.0
@@ -664,7 +672,7 @@ def test_a_speed_factor_paces_the_lockstep(tmp_path):
     s = server.stats()
     assert r.violations == [] and s["speed_factor"] == 2.0
     assert s["sim_time_s"] == 3.0
-    _gave_up_only_on_a_late_peer(s, r, server)
+    _gave_up_only_on_a_late_peer(s, r)
     # no faster than 2x once locked (a slow machine only makes it slower); the pace may
     # catch up 50 ms it fell behind, which the 2.1 allows over these 2.7 s
     assert 1.0 < s["real_time_factor"] <= 2.1, s

@@ -314,7 +314,7 @@ def test_the_wait_for_an_answer_steps_past_then_gives_up_on_the_wall_clock():
     # wall times the wait began and ended
     assert list(s.give_ups) == [GiveUp(sent, t + 2000, 11.0, 12.0)]
     assert s.stats()["answer_give_ups"] == [{"sample_us": sent, "answered_us": t + 2000,
-                                             "waited_s": 1.0}]
+                                             "began_s": 11.0, "waited_s": 1.0}]
 
 
 def test_an_answer_that_was_only_slow_doubles_the_grace():
