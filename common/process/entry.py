@@ -27,7 +27,6 @@ log = get_logger(__name__)
 
 
 def _run(prog: str, module: str, *, loop_handles_sigint: bool) -> int:
-    startup.guard()  # idempotent (the import set it)
     try:
         main = importlib.import_module(module).main
         if not loop_handles_sigint:

@@ -516,7 +516,6 @@ def _not_the_peers(r, gave_up: Iterable[GiveUp]) -> list[str]:
     return wrong
 
 
-
 def _gave_up_only_on_a_late_peer(s: dict, r) -> bool:
     """Assert that each wait the plant gave up (`answer_waits`, one stall line each) was on
     an answer the scripted PX4 sent ANSWER_TIMEOUT_S or more late (`_not_the_peers`: a
@@ -547,7 +546,7 @@ def test_imu_rates_fly_takeoff_hold_land(tmp_path, imu_hz, period):
     answer from its own sample, and the takeoff to 1.5 m, the hold and the landing fly;
     no sensor goes stale."""
     r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
-                                    waypoints=TAKEOFF_HOLD_LAND)
+                                 waypoints=TAKEOFF_HOLD_LAND)
     s = server.stats()
     assert r.violations == [] and r.stale == {}
     assert s["answer_period_samples"] == period
@@ -573,7 +572,7 @@ def test_rate_limited_answers_fly_takeoff_hold_land(tmp_path, imu_hz, intervals)
     where no answer comes (no stall), and the takeoff to 1.5 m, the hold and the landing
     fly."""
     r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
-                                    waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0)
+                                 waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0)
     s = server.stats()
     assert r.violations == [] and r.stale == {}
     _gave_up_only_on_a_late_peer(s, r)
@@ -634,8 +633,8 @@ def test_px4s_start_up_cadence_is_outgrown_without_a_stall(tmp_path, capfd, imu_
     interval it waits for to the cadence's longest, and flies the takeoff, hold and
     landing in lockstep without a stall."""
     r, server, rows, c, _ = _fly(tmp_path, _profile(imu_hz), 8.0,
-                                    waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0,
-                                    every_sample_until_s=0.6)
+                                 waypoints=TAKEOFF_HOLD_LAND, rate_max_hz=400.0,
+                                 every_sample_until_s=0.6)
     s = server.stats()
     if not _gave_up_only_on_a_late_peer(s, r):
         assert "no answer" not in capfd.readouterr().err
@@ -668,7 +667,7 @@ def test_a_speed_factor_paces_the_lockstep(tmp_path):
     wall clock once locked (PX4's timers run on simulated time, a ground station's on the wall
     clock), still one answer per answer period and the same flight."""
     r, server, rows, c, _ = _fly(tmp_path, _profile(250.0), 3.0, speed_factor=2.0,
-                                    waypoints=TAKEOFF_HOLD_LAND)
+                                 waypoints=TAKEOFF_HOLD_LAND)
     s = server.stats()
     assert r.violations == [] and s["speed_factor"] == 2.0
     assert s["sim_time_s"] == 3.0
