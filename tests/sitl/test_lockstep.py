@@ -8,7 +8,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import socket
 import subprocess
 import sys
@@ -35,7 +34,7 @@ from gcs.vehicle_link.mission_client import upload
 
 from .. import reference_runs
 from .conftest import ROOT, SCENARIOS, launch, stop
-from .waits import file_size, run_progressing
+from .waits import file_size, run_progressing, sched_s
 
 M = MAV
 CASE1 = SCENARIOS / "case1_figure8.toml"
@@ -249,11 +248,11 @@ def test_speed_factor_paces_the_lockstep_by_the_wall_clock(tmp_path, factor):
         assert s.command(MAV.MAV_CMD_COMPONENT_ARM_DISARM, 1) == MAV.MAV_RESULT_ACCEPTED
         assert s.command(MAV.MAV_CMD_MISSION_START) == MAV.MAV_RESULT_ACCEPTED
         _sim_per_wall(stack, 0.5)  # under way
-        sched0 = {name: _sched_s(p.pid) for name, p in stack.procs.items()}
+        sched0 = {name: sched_s(p.pid) for name, p in stack.procs.items()}
         t0 = time.monotonic()
         rate, sim_s = _sim_per_wall(stack, 3.0)
         wall_s = time.monotonic() - t0
-        sched = {name: np.subtract(_sched_s(p.pid), sched0[name])
+        sched = {name: np.subtract(sched_s(p.pid), sched0[name])
                  for name, p in stack.procs.items()}
     finally:
         stack.session.close()
@@ -269,13 +268,3 @@ def test_speed_factor_paces_the_lockstep_by_the_wall_clock(tmp_path, factor):
     # the wait for the wall clock is not the plant's time (a period is 2 ms / X)
     assert json.loads(stats.read_text())["stage_us"]["plant"] < 500.0
 
-
-def _sched_s(pid: int) -> tuple[float, float]:
-    """Seconds process `pid` (all its threads) has run so far, and spent runnable but
-    queued for a CPU (/proc/PID/task/TID/schedstat)."""
-    ran = queued = 0
-    for task in os.listdir(f"/proc/{pid}/task"):
-        with open(f"/proc/{pid}/task/{task}/schedstat") as f:
-            run_ns, wait_ns, _ = f.read().split()
-        ran, queued = ran + int(run_ns), queued + int(wait_ns)
-    return ran * 1e-9, queued * 1e-9

@@ -108,6 +108,18 @@ def cpu_s(*pids: int) -> float:
     return total / os.sysconf("SC_CLK_TCK")
 
 
+def sched_s(pid: int, tids: Sequence[int] | None = None) -> tuple[float, float]:
+    """Seconds process `pid`'s threads (all, or those of `tids`) have run so far, and spent
+    runnable but queued for a CPU (/proc/PID/task/TID/schedstat): what a starved machine
+    gave them, to judge a pace by."""
+    ran = queued = 0
+    for task in os.listdir(f"/proc/{pid}/task") if tids is None else tids:
+        with open(f"/proc/{pid}/task/{task}/schedstat") as f:
+            run_ns, wait_ns, _ = f.read().split()
+        ran, queued = ran + int(run_ns), queued + int(wait_ns)
+    return ran * 1e-9, queued * 1e-9
+
+
 class FlightClock:
     """The vehicle's flight clock as a test's Session hears it: the latest time_boot_ms of
     the target's messages, in seconds (-1 before any). In lockstep it is simulated time: it
