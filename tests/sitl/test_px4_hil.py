@@ -11,11 +11,13 @@ import json
 import math
 import os
 import re
+import select
 import socket
 import subprocess
 import sys
 import threading
 import time
+import types
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -28,6 +30,7 @@ from common.config.sensors import resolve_sensor_profile
 from common.links import free_port
 from common.logs.ulog import read_topic
 from common.wire.mavlink import MAV, encoder, pack, parser
+from sitl.firmware import px4_hil
 from sitl.firmware.px4_hil import ANSWER_TIMEOUT_S, GRACE_S, Server
 from sitl.firmware.px4_lockstep import LEARN_WINDOW, AnswerSchedule, GiveUp
 from tests.px4_side import ACCEL, BARO, DIFF_PRESS, GYRO, MAG, ScriptedPX4
@@ -420,6 +423,46 @@ def _stepped_past(sent: dict[int, tuple[float, int, int]], after_us: int) -> lis
     steps grew with them), from the samples as sent: (wall s, grace steps, give-ups)."""
     return [t for t in sorted(sent) if t > after_us and t - IMU_US in sent and
             sent[t][1] > sent[t - IMU_US][1]]
+
+
+def test_an_answer_that_came_while_the_plant_was_starved_is_taken(tmp_path, monkeypatch):
+    """Given the plant waiting for an answer due, held off the CPU (its thread stopped
+    before it decides again) while the answer arrives and its wall clock runs past
+    ANSWER_TIMEOUT_S, then it reads the answer before deciding: no give-up, no step past,
+    and it steps on from that answer in lockstep."""
+    offset_s = [0.0]  # the plant's wall clock runs this far ahead of the real one
+    monkeypatch.setattr(px4_hil, "time", types.SimpleNamespace(
+        monotonic=lambda: time.monotonic() + offset_s[0]))
+    with serving(tmp_path) as (server, port):
+        calls: dict[int, int] = {}  # the plant's decisions at each sample
+        held, release = threading.Event(), threading.Event()
+        starve = threading.Event()
+        awaiting = server._awaiting_answer
+
+        def starved_awaiting() -> bool:
+            sample = server.sent_us
+            calls[sample] = calls.get(sample, 0) + 1
+            # held once its wait at a sample not yet answered has begun
+            if starve.is_set() and calls[sample] >= 2 and server.schedule.last_us != sample:
+                starve.clear()
+                held.set()
+                release.wait(10.0)
+            return awaiting()
+
+        server._awaiting_answer = starved_awaiting  # type: ignore[method-assign]
+        px4 = Peer(port)
+        px4.answer(lock_in(px4, server))
+        starve.set()
+        assert held.wait(5.0)
+        due, grace, waits = server.sent_us, server.grace_steps, server.answer_waits
+        px4.answer(due)
+        assert select.select(server.link.filenos(), [], [], 5.0)[0]  # in its socket
+        offset_s[0] = 2 * ANSWER_TIMEOUT_S
+        release.set()
+        _until(lambda: server.sent_us > due)  # stepped on
+        assert server.schedule.last_us == due  # from that answer
+        assert (server.grace_steps, server.answer_waits) == (grace, waits) == (grace, 0)
+        px4.close()
 
 
 def test_disconnect_and_reconnect(tmp_path):
