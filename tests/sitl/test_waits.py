@@ -25,6 +25,28 @@ def test_a_run_slower_than_the_stall_limit_but_progressing_is_waited_for(tmp_pat
     assert proc.returncode == 0 and proc.stdout == "done\n" and file_size(path) == 8
 
 
+BUSY = ("import time\n"
+        "t = time.process_time()\n"
+        "while time.process_time() - t < 2.5:\n"
+        "    pass\n"
+        "print('done')")
+
+
+@pytest.mark.parametrize("cpu", [True, False])
+def test_a_run_that_only_computes_progresses_by_its_cpu_time(tmp_path, cpu):
+    """Given a program that computes for 2.5 s of CPU and writes nothing until its end, and a
+    stall limit of 1.5 s, then with `cpu` it runs to its end, and without it is stopped."""
+    path = tmp_path / "never"
+    argv = [sys.executable, "-c", BUSY]
+    if cpu:
+        proc = run_progressing(argv, lambda: file_size(path), "busy", stall_s=1.5,
+                               poll_s=0.1, cpu=True)
+        assert proc.returncode == 0 and proc.stdout == "done\n"
+    else:
+        with pytest.raises(AssertionError, match=r"busy: no progress for 1\.5 s"):
+            run_progressing(argv, lambda: file_size(path), "busy", stall_s=1.5, poll_s=0.1)
+
+
 def test_a_run_that_stops_progressing_is_stopped_with_the_reason(tmp_path):
     """Given a program that never progresses and a stall limit of 1 s, then it is stopped
     after about 1 s, and the error names the run and the last progress seen."""

@@ -62,21 +62,27 @@ def until_progressing(value: Callable[[], T], progress: Callable[[], float], wha
 
 
 def run_progressing(argv: Sequence[str], progress: Callable[[], object], what: str, *,
-                    stall_s: float = 180.0, poll_s: float = 1.0,
+                    stall_s: float = 180.0, poll_s: float = 1.0, cpu: bool = False,
                     **popen: Any) -> subprocess.CompletedProcess[str]:
     """Run `argv` to its end (text output captured) for as long as `progress()` keeps
     changing: a loaded machine makes a lockstep flight slower, never different, so only a
     run that stops progressing for `stall_s` is stopped, with an AssertionError naming
-    `what` and the last progress seen."""
+    `what` and the last progress seen. With `cpu`, the CPU seconds the process has used
+    count as progress too (a run that writes nothing until its end: an in-process
+    flight)."""
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             **popen)
-    seen, changed = progress(), time.monotonic()
+
+    def now() -> object:
+        return (progress(), cpu_s(proc.pid)) if cpu else progress()
+
+    seen, changed = now(), time.monotonic()
     while True:
         try:
             out, err = proc.communicate(timeout=poll_s)
             return subprocess.CompletedProcess(argv, proc.returncode, out, err)
         except subprocess.TimeoutExpired:
-            now_seen = progress()
+            now_seen = now()
             if now_seen != seen:
                 seen, changed = now_seen, time.monotonic()
             elif time.monotonic() - changed > stall_s:
