@@ -30,7 +30,7 @@ from gcs.mission_files.wpl import format_wpl
 from gcs.run.scenario_mission import scenario_mission
 
 from .conftest import PACE, PID, ROOT, SCENARIOS, VEHICLE, start, stop
-from .waits import until
+from .waits import sched_s, until
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -350,15 +350,14 @@ def _cmd(*argv: str, timeout: float = 30.0) -> tuple[subprocess.CompletedProcess
                     raise subprocess.TimeoutExpired(proc.args, timeout)
                 time.sleep(0.01)
             took = time.monotonic() - t0
-            with open(f"/proc/{proc.pid}/schedstat") as f:  # the exited main thread's
-                ran_ns, queued_ns, _ = f.read().split()
+            ran_s, queued_s = sched_s(proc.pid, (proc.pid,))  # the exited main thread's
         finally:
             proc.kill()
             proc.wait()
         out.seek(0)
         err.seek(0)
         result = subprocess.CompletedProcess(proc.args, proc.returncode, out.read(), err.read())
-    return result, took - (int(ran_ns) + int(queued_ns)) * 1e-9
+    return result, took - ran_s - queued_s
 
 
 def _one_line_error(out: subprocess.CompletedProcess, code: int, *texts: str) -> None:
