@@ -38,7 +38,8 @@ The rule, in samples between the stamps of accepted answers (`intervals`, a hist
 Each give-up is recorded (`give_ups`, the latest MAX_GIVE_UPS_KEPT): the sample the plant
 waited at, the latest answer accepted when the wait began (the answer owed is the next one)
 and the wall times the wait began and ended, so that a run can be judged on which answer
-was missing and for how long.
+was missing and for how long. Each step past is recorded so too (`step_pasts`, the latest
+MAX_STEP_PASTS_KEPT): the sample it left and the wall times its grace began and ended.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ from typing import NamedTuple
 LEARN_WINDOW = 8  # intervals in each half of the learning window
 MAX_GRACE_SCALE = 8  # the grace grows to at most this many times the caller's
 MAX_GIVE_UPS_KEPT = 100  # the latest give-ups kept in `give_ups` (all are counted)
+MAX_STEP_PASTS_KEPT = 100  # the latest steps past kept in `step_pasts` (all are counted)
 
 
 class Answer(Enum):
@@ -77,6 +79,14 @@ class GiveUp(NamedTuple):
     gave_up_s: float  # and was given up
 
 
+class StepPast(NamedTuple):
+    """One step past an answer due (`AnswerSchedule.wait_at` returned STEP_PAST)."""
+
+    sample_us: int  # the sample stepped past (its answer was due)
+    began_s: float  # wall time (the caller's clock) the grace began
+    stepped_s: float  # and the plant stepped past
+
+
 class AnswerSchedule:
     """The longest interval in samples between the firmware's answers, from their stamps."""
 
@@ -90,6 +100,7 @@ class AnswerSchedule:
         self.slow_waits = 0  # waits that ended so (each doubled the grace)
         self.slow_steps = 0  # the steps taken past them (in those waits)
         self.give_ups: deque[GiveUp] = deque(maxlen=MAX_GIVE_UPS_KEPT)  # the run's latest
+        self.step_pasts: deque[StepPast] = deque(maxlen=MAX_STEP_PASTS_KEPT)  # and these
         self.reset()
 
     def reset(self) -> None:
@@ -180,6 +191,7 @@ class AnswerSchedule:
             self.skip()
             return Wait.GIVE_UP, now_s
         if now_s - self._grace_s >= grace_s:
+            self.step_pasts.append(StepPast(sent_us, self._grace_s, now_s))
             self.step_past()
             self._grace_s = now_s
             return Wait.STEP_PAST, now_s
@@ -187,9 +199,10 @@ class AnswerSchedule:
 
     def stats(self) -> dict[str, object]:
         """The schedule's figures for a stats file: the slow answers, the cadence learned,
-        the intervals seen, and each give-up kept (the sample waited at, the latest answer
+        the intervals seen, each give-up kept (the sample waited at, the latest answer
         accepted before it: the one owed is the next, when the wait began on the caller's
-        clock and the seconds waited)."""
+        clock and the seconds waited) and each step past kept (the sample left, when its
+        grace began and the seconds it lasted)."""
         return {"slow_answers": self.slow_answers, "slow_waits": self.slow_waits,
                 "slow_steps": self.slow_steps, "answer_period_samples": self.period,
                 "answer_interval_longest": self.longest,
@@ -197,7 +210,10 @@ class AnswerSchedule:
                 "answer_give_ups": [{"sample_us": g.sample_us, "answered_us": g.answered_us,
                                      "began_s": g.began_s,
                                      "waited_s": round(g.gave_up_s - g.began_s, 6)}
-                                    for g in self.give_ups]}
+                                    for g in self.give_ups],
+                "answer_step_pasts": [{"sample_us": p.sample_us, "began_s": p.began_s,
+                                       "waited_s": round(p.stepped_s - p.began_s, 6)}
+                                      for p in self.step_pasts]}
 
     def step_past(self) -> None:
         """The answer due has not come yet: wait for it one sample later."""

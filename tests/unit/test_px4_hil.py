@@ -287,8 +287,9 @@ def test_the_wait_for_an_answer_steps_past_then_gives_up_on_the_wall_clock():
     """Given a learned cadence of 1 sample and no answer at the sample due, then the schedule
     says wait until the grace has passed, then step one sample past it, again each grace,
     and give up (learned again, and recorded) once the timeout has passed since the wait
-    began; an answer that comes ends the wait, and the next one starts afresh."""
-    from sitl.firmware.px4_lockstep import Wait
+    began; an answer that comes ends the wait, and the next one starts afresh. Each step
+    past is recorded: the sample left, when its grace began and ended."""
+    from sitl.firmware.px4_lockstep import StepPast, Wait
     s = AnswerSchedule(1000)
     for k in range(1, 2 * LEARN_WINDOW + 2):
         s.accept(1000 * k, 1000 * k)
@@ -304,10 +305,15 @@ def test_the_wait_for_an_answer_steps_past_then_gives_up_on_the_wall_clock():
     assert s.accept(sent, sent) is Answer.ON_TIME and s.longest == 2
     sent += 2000
     assert s.wait_at(sent, 11.0, 0.05, 1.0) == (Wait.WAIT, 11.05)  # a new wait
+    expected = [StepPast(t + 1000, 10.0, 10.05)]
     for k in range(1, 17):
         wait, _ = s.wait_at(sent, 11.0 + 0.06 * k, 0.05, 1.0)
         assert wait is Wait.STEP_PAST
+        expected.append(StepPast(sent, 11.0 + 0.06 * (k - 1), 11.0 + 0.06 * k))
         sent = s.due_us
+    assert list(s.step_pasts) == expected
+    assert s.stats()["answer_step_pasts"][0] == {"sample_us": t + 1000, "began_s": 10.0,
+                                                 "waited_s": 0.05}
     assert s.give_ups == deque()
     assert s.wait_at(sent, 12.0, 0.05, 1.0)[0] is Wait.GIVE_UP and not s.learned
     # recorded: the sample waited at, the answer accepted before (the next was owed), the
