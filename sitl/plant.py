@@ -176,6 +176,8 @@ class ContactSpread:
             return dv
         if dv != (0.0, 0.0, 0.0):
             self._spreading.append((dv, self.spread_us))
+        elif not self._spreading:
+            return (0.0, 0.0, 0.0)
         out = [0.0, 0.0, 0.0]
         left = []
         for whole, rest_us in self._spreading:

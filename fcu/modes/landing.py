@@ -54,7 +54,8 @@ class Touchdown(NamedTuple):
 
 
 def _speed(s: VehicleState) -> float:
-    return math.sqrt(sum(v * v for v in s.v_flu_m_s))
+    v = s.v_flu_m_s
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
 def landed_state(armed: bool, on_ground: bool, s: VehicleState) -> bool:
