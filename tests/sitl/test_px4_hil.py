@@ -468,6 +468,33 @@ def test_an_answer_that_came_while_the_plant_was_starved_is_taken(tmp_path, monk
         px4.close()
 
 
+def test_answers_to_samples_paced_out_before_the_cadence_was_learned_are_not_late(tmp_path):
+    """Given a firmware that falls behind while the plant still paces by the wall clock (the
+    answer that completes the learning comes several samples after its own), then its
+    answers to the samples already sent apply from the next step but are not late: the
+    plant did not wait for them. An answer the plant stepped past in lockstep is."""
+    with serving(tmp_path) as (server, port):
+        px4 = Peer(port)
+        for _ in range(2 * LEARN_WINDOW):
+            px4.answer(px4.next_sample())
+        last = px4.next_sample()
+        _until(lambda: server.sent_us >= last + 4 * IMU_US)  # paced on meanwhile
+        px4.answer(last)  # the cadence learned (every sample), four samples behind
+        _until(lambda: server.schedule.learned)
+        learned_at = server.learned_at_us
+        assert learned_at >= last + 4 * IMU_US
+        while (t := px4.next_sample()) < learned_at:
+            px4.answer(t)  # applied from the next step: stamped before the latest sample
+        assert t == learned_at  # where the plant waits
+        grace = server.grace_steps
+        _until(lambda: server.grace_steps > grace)  # stepped past it, waiting at the next
+        px4.answer(t)  # late, and slow: the plant stepped past it
+        _until(lambda: server.schedule.last_us == t)
+        assert (server.late_answers, server.schedule.slow_answers) == (1, 1)
+        assert (server.stale_answers, server.extra_answers, server.answer_waits) == (0, 0, 0)
+        px4.close()
+
+
 def test_disconnect_and_reconnect(tmp_path):
     """Given PX4 gone while locked in, then the world stands still and its rotors are
     commanded off; given PX4 back, then it starts on the wall-clock pace from where the
