@@ -267,12 +267,11 @@ class SensorFeed:
                     self._baro_alt_m = self.home_alt_m + suite.baro.sample(
                         baro_c.take()[0] * 1e-6, at.p_enu_m).alt_m
                 if imu_c.due_us == te:
-                    if te == t and dv is not _ZERO3:  # the step's impulse, at its end
+                    if te == t:  # the step's impulse, at its end
                         self._contacts.add(dv)
                         dv = _ZERO3
                     self._deliver(te, out)
                     out.append(self._hil_sensor(at))
-            if dv is not _ZERO3:  # (adding a zero changes no sum: none is -0.0)
-                self._contacts.add(dv)
+            self._contacts.add(dv)
             self._deliver(t, out)
         return out
