@@ -32,10 +32,8 @@ does), steps one sample past an answer due after GRACE_S (`grace_steps`), and af
 ANSWER_TIMEOUT_S says so in one line on stderr and goes back to the wall-clock pace
 (`answer_waits`, `stall_reports`). An answer stamped before the latest accepted one, or a
 second with its stamp, is counted and ignored; one stamped before the latest sample applies
-from the next step (`late_answers`, counted from the sample the plant waited at when the
-cadence was learned: a firmware behind the wall-clock pace then still answers samples sent
-before it). Answers without the lockstep flag (PX4 on the wall clock) set the held command
-and the plant keeps the wall-clock pace.
+from the next step (`AnswerSchedule.late_answers`). Answers without the lockstep flag (PX4 on
+the wall clock) set the held command and the plant keeps the wall-clock pace.
 
 Bad input, never a crash: bytes that are no MAVLink frame are counted and skipped; other
 messages are ignored (HEARTBEAT counted); an answer from another system id is ignored; a
@@ -149,10 +147,6 @@ class Server:
         self.locked = False  # a lockstep answer has come
         self.command = ActuatorCommand((0.0,) * vehicle.n_rotors, (0.0,) * vehicle.n_rotors)
         self.sent_us = -1  # the latest HIL_SENSOR's time
-        # the latest sample sent when the cadence was last learned: the plant waits from it
-        # on; those before it went out on the wall-clock pace, and an answer to one of them
-        # is late against no cadence
-        self.learned_at_us = -1
         self.due_s = 0.0  # wall-clock pace: when the next step is due
         self.speed_factor = speed_factor  # lockstep paced at this x the wall clock, or free
         self.pace_due_s = 0.0  # paced lockstep: when the next step is due
@@ -171,9 +165,6 @@ class Server:
         self.answers = 0
         self.stale_answers = 0
         self.extra_answers = 0
-        # stamped before the latest sample: applied from the next; counted from the sample
-        # waited at when the cadence was learned (`learned_at_us`)
-        self.late_answers = 0
         self.time_mismatches = 0  # accepted answers stamped later than their sample
         self.ignored_answers = 0  # from another system id
         self.nonfinite_outputs = 0
@@ -293,10 +284,7 @@ class Server:
         self.nonfinite_outputs += cmd.nonfinite
         if flags & LOCKSTEP_FLAG:
             self.locked = True  # from the first lockstep answer on, as Gazebo does
-            learned = self.schedule.learned  # late only against a known cadence
-            kind = self.schedule.accept(time_usec, self.sent_us)
-            if not learned and self.schedule.learned:
-                self.learned_at_us = self.sent_us
+            kind = self.schedule.accept(time_usec, self.sent_us)  # late: counted there
             if kind is Answer.STALE:
                 self.stale_answers += 1  # before the latest accepted answer
                 return
@@ -305,8 +293,6 @@ class Server:
                 return
             if time_usec > self.sent_us:
                 self.time_mismatches += 1
-            if kind is Answer.LATE and learned and time_usec >= self.learned_at_us:
-                self.late_answers += 1  # to a sample sent by the cadence, not the pace
         else:
             self.locked = False
         self.command = cmd.command
@@ -491,7 +477,6 @@ class Server:
                 "grace_steps": self.grace_steps, **self.schedule.stats(),
                 "grace_s": min(GRACE_S * self.schedule.grace_scale, 0.5 * ANSWER_TIMEOUT_S),
                 "speed_factor": self.speed_factor,
-                "late_answers": self.late_answers,
                 "state_interval_us": self.state_interval_us,
                 "lockstep_wall_s": wall,
                 "real_time_factor": self.locked_sim_us * 1e-6 / wall if wall > 0 else None}

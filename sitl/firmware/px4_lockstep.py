@@ -99,6 +99,10 @@ class AnswerSchedule:
         self.slow_answers = 0  # answers that came after the plant stepped past them
         self.slow_waits = 0  # waits that ended so (each doubled the grace)
         self.slow_steps = 0  # the steps taken past them (in those waits)
+        # answers stamped before the latest sample sent (applied from the next step), from
+        # the sample waited at when the cadence was learned (`learned_at_us`) on: a firmware
+        # behind the wall-clock pace answers the samples sent on that pace after it
+        self.late_answers = 0
         self.give_ups: deque[GiveUp] = deque(maxlen=MAX_GIVE_UPS_KEPT)  # the run's latest
         self.step_pasts: deque[StepPast] = deque(maxlen=MAX_STEP_PASTS_KEPT)  # and these
         self.reset()
@@ -115,6 +119,7 @@ class AnswerSchedule:
         self._grace_s = 0.0  # wall time of the latest `step_past` (or the wait's start)
         self._steps_past = 0  # `step_past` calls since the latest accepted answer
         self._past_us: int | None = None  # the latest sample stepped to past an answer due
+        self.learned_at_us: int | None = None  # the latest sample sent when learned
 
     @property
     def learned(self) -> bool:
@@ -128,12 +133,17 @@ class AnswerSchedule:
             return Answer.STALE
         if last is not None and stamp_us == last:
             return Answer.EXTRA
+        learned = self.period is not None
         if last is not None:
             self._interval((stamp_us - last) // self.imu_us)
+            if not learned and self.period is not None:
+                self.learned_at_us = sent_us
         self.last_us = stamp_us
         if self.longest is not None:
             self.due_us = self._next_due(stamp_us, sent_us)
         kind = Answer.ON_TIME if stamp_us == sent_us else Answer.LATE
+        if kind is Answer.LATE and learned and stamp_us >= (self.learned_at_us or 0):
+            self.late_answers += 1
         past = self._past_us
         if past is not None and stamp_us < past:  # slow, not longer: the plant stepped past
             self.slow_answers += 1
@@ -203,7 +213,8 @@ class AnswerSchedule:
         accepted before it: the one owed is the next, when the wait began on the caller's
         clock and the seconds waited) and each step past kept (the sample left, when its
         grace began and the seconds it lasted)."""
-        return {"slow_answers": self.slow_answers, "slow_waits": self.slow_waits,
+        return {"late_answers": self.late_answers,
+                "slow_answers": self.slow_answers, "slow_waits": self.slow_waits,
                 "slow_steps": self.slow_steps, "answer_period_samples": self.period,
                 "answer_interval_longest": self.longest,
                 "answer_intervals": {str(k): n for k, n in sorted(self.intervals.items())},

@@ -481,7 +481,7 @@ def test_answers_to_samples_paced_out_before_the_cadence_was_learned_are_not_lat
         _until(lambda: server.sent_us >= last + 4 * IMU_US)  # paced on meanwhile
         px4.answer(last)  # the cadence learned (every sample), four samples behind
         _until(lambda: server.schedule.learned)
-        learned_at = server.learned_at_us
+        learned_at = server.schedule.learned_at_us
         assert learned_at >= last + 4 * IMU_US
         while (t := px4.next_sample()) < learned_at:
             px4.answer(t)  # applied from the next step: stamped before the latest sample
@@ -490,7 +490,7 @@ def test_answers_to_samples_paced_out_before_the_cadence_was_learned_are_not_lat
         _until(lambda: server.grace_steps > grace)  # stepped past it, waiting at the next
         px4.answer(t)  # late, and slow: the plant stepped past it
         _until(lambda: server.schedule.last_us == t)
-        assert (server.late_answers, server.schedule.slow_answers) == (1, 1)
+        assert (server.schedule.late_answers, server.schedule.slow_answers) == (1, 1)
         assert (server.stale_answers, server.extra_answers, server.answer_waits) == (0, 0, 0)
         px4.close()
 
