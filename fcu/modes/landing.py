@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+from common.quaternion import norm3
 from fcu.control.dualquat import Quat, Vec3
 from fcu.mission.executor import MissionExecutor
 from fcu.mission.limits import MissionLimits
@@ -54,8 +55,7 @@ class Touchdown(NamedTuple):
 
 
 def _speed(s: VehicleState) -> float:
-    v = s.v_flu_m_s
-    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return norm3(s.v_flu_m_s)
 
 
 def landed_state(armed: bool, on_ground: bool, s: VehicleState) -> bool:

@@ -119,7 +119,7 @@ class AnswerSchedule:
         self._grace_s = 0.0  # wall time of the latest `step_past` (or the wait's start)
         self._steps_past = 0  # `step_past` calls since the latest accepted answer
         self._past_us: int | None = None  # the latest sample stepped to past an answer due
-        self.learned_at_us: int | None = None  # the latest sample sent when learned
+        self.learned_at_us = -1  # the latest sample sent when learned (-1: not learned)
 
     @property
     def learned(self) -> bool:
@@ -142,7 +142,7 @@ class AnswerSchedule:
         if self.longest is not None:
             self.due_us = self._next_due(stamp_us, sent_us)
         kind = Answer.ON_TIME if stamp_us == sent_us else Answer.LATE
-        if kind is Answer.LATE and learned and stamp_us >= (self.learned_at_us or 0):
+        if kind is Answer.LATE and learned and stamp_us >= self.learned_at_us:
             self.late_answers += 1
         past = self._past_us
         if past is not None and stamp_us < past:  # slow, not longer: the plant stepped past
