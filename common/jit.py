@@ -34,7 +34,7 @@ KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layout
                   "fcu/envelope/verdict.py", "fcu/envelope/speed_bound.py",
                   "fcu/reference/approach.py", "fcu/reference/trajectory.py",
                   "fcu/mission/segments.py", "fcu/mission/verdicts.py", "fcu/mission/stretch.py",
-                  "fcu/modes/manual.py",
+                  "fcu/modes/manual.py", "fcu/safety/actuator_monitor.py",
                   "sitl/plant_kernels.py", "sitl/disturbance.py", "sitl/imu_kernels.py",
                   "fcu/estimator/strapdown.py", "fcu/estimator/update.py",
                   "fcu/estimator/output.py", "fcu/estimator/filter.py",

@@ -325,14 +325,13 @@ class Pipeline:
         event of kind LIMIT: the run's status is `limited`), an INFO when they all cleared;
         reports only, the commands are not changed."""
         limit_s = self.settings.actuator_limit_s
-        for notice in self.actuators.update(dt_s, tilt_rad, unclamped_speeds(omega_sq),
-                                            limit_s):
+        for notice in self.actuators.update_from_allocation(dt_s, tilt_rad, omega_sq, limit_s):
             if notice.kind == "clear":
                 self.commander.say(MAV_SEVERITY.MAV_SEVERITY_INFO, notice.text(limit_s), INFO)
             else:
                 self.commander.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, notice.text(limit_s),
                                    LIMIT)
-        if any(self.actuators.tilt_limited):
+        if self.actuators.any_tilt_limited:
             self.tilt_rate_limited_steps += 1
 
     def _check_saturation(self, t_us: int, saturated: bool,
