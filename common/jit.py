@@ -35,6 +35,7 @@ KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layout
                   "fcu/reference/approach.py", "fcu/reference/trajectory.py",
                   "fcu/mission/segments.py", "fcu/mission/verdicts.py", "fcu/mission/stretch.py",
                   "fcu/modes/manual.py", "fcu/safety/actuator_monitor.py",
+                  "fcu/control/rate_filter.py",
                   "sitl/plant_kernels.py", "sitl/disturbance.py", "sitl/imu_kernels.py",
                   "fcu/estimator/strapdown.py", "fcu/estimator/update.py",
                   "fcu/estimator/output.py", "fcu/estimator/filter.py",

@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+from common.jit import njit
+from common.warm_ups import warm_up
 from fcu.stages import VehicleState
 
 Vec3 = tuple[float, float, float]
@@ -71,33 +75,95 @@ class GyroLowPass:
         return self.output
 
 
+# ImuRateFilter's state, one array for its compiled sample (`rate_filter_step`)
+RF_CUTOFF = 0  # IMU_GYRO_CUTOFF, Hz (0: off)
+RF_BUILT = 1  # 1: the low-pass is built (at the IMU's rate, from the first two samples)
+RF_ACTIVE = 2  # 1: it filters (GyroLowPass.active)
+RF_STARTED = 3  # 1: started at rest on its first sample
+RF_COEF = 4  # 5: a1, a2, b0, b1, b2
+RF_D1 = 9  # 3: the delay line, newest
+RF_D2 = 12  # 3: and the one before
+RF_OUT = 15  # 3: the filtered rate
+RF_HAS_LAST = 18  # 1: a finite sample was seen
+RF_LAST_T = 19  # its time, us
+RF_LAST_W = 20  # 3: its rate
+RF_SIZE = 23
+
+
+@njit
+def rate_filter_step(st: np.ndarray, t_us: int, w0: float, w1: float, w2: float) -> bool:
+    """One gyro sample through `ImuRateFilter.update`'s rules (`GyroLowPass.update`'s
+    arithmetic in its order); True: the low-pass must be built first, at the interval since
+    the last sample (RF_LAST_T), nothing done yet (build it, then call again)."""
+    if not (math.isfinite(w0) and math.isfinite(w1) and math.isfinite(w2)):
+        return False
+    if st[RF_BUILT] == 0.0:
+        if st[RF_HAS_LAST] != 0.0 and st[RF_CUTOFF] != 0.0 and t_us > st[RF_LAST_T]:
+            return True
+    st[RF_HAS_LAST], st[RF_LAST_T] = 1.0, t_us
+    st[RF_LAST_W], st[RF_LAST_W + 1], st[RF_LAST_W + 2] = w0, w1, w2
+    if st[RF_BUILT] == 0.0:
+        return False
+    if st[RF_ACTIVE] == 0.0 or st[RF_STARTED] == 0.0:  # pass through, or start at rest
+        if st[RF_ACTIVE] != 0.0:
+            den = 1.0 + st[RF_COEF] + st[RF_COEF + 1]
+            st[RF_D1], st[RF_D1 + 1], st[RF_D1 + 2] = w0 / den, w1 / den, w2 / den
+            st[RF_D2:RF_D2 + 3] = st[RF_D1:RF_D1 + 3]
+            st[RF_STARTED] = 1.0
+        st[RF_OUT], st[RF_OUT + 1], st[RF_OUT + 2] = w0, w1, w2
+        return False
+    a1, a2, b0, b1, b2 = (st[RF_COEF], st[RF_COEF + 1], st[RF_COEF + 2], st[RF_COEF + 3],
+                          st[RF_COEF + 4])
+    x = (w0, w1, w2)
+    for i in range(3):
+        d1, d2 = st[RF_D1 + i], st[RF_D2 + i]
+        e = x[i] - d1 * a1 - d2 * a2
+        st[RF_OUT + i] = e * b0 + d1 * b1 + d2 * b2
+        st[RF_D2 + i], st[RF_D1 + i] = d1, e
+    return False
+
+
 class ImuRateFilter:
     """IMU_GYRO_CUTOFF on the estimator's rate: every finite gyro sample goes through a
-    GyroLowPass built at the IMU's own rate (from the first two samples); `apply` gives a
-    state whose rate is the newest sample less the bias (the estimator's output) the
-    filtered rate less the same bias. The pipeline and a log replay share it."""
+    GyroLowPass built at the IMU's own rate (from the first two samples), one compiled call
+    a sample (`rate_filter_step`, its state in one array); `apply` gives a state whose
+    rate is the newest sample less the bias (the estimator's output) the filtered rate
+    less the same bias. The pipeline and a log replay share it."""
 
     def __init__(self, cutoff_hz: float) -> None:
         self.cutoff_hz = cutoff_hz
         self.lpf: GyroLowPass | None = None
-        self.last: tuple[int, Vec3] | None = None
+        self.st = np.zeros(RF_SIZE)
+        self.st[RF_CUTOFF] = cutoff_hz
+        warm_up("fcu.control.rate_filter", _warm_up)
+
+    @property
+    def last(self) -> tuple[int, Vec3] | None:
+        """The newest finite sample (t_us, rate), None before one."""
+        st = self.st
+        if st[RF_HAS_LAST] == 0.0:
+            return None
+        return int(st[RF_LAST_T]), (float(st[RF_LAST_W]), float(st[RF_LAST_W + 1]),
+                                    float(st[RF_LAST_W + 2]))
 
     def update(self, t_us: int, w: Vec3) -> None:
-        isfinite = math.isfinite
-        if not (isfinite(w[0]) and isfinite(w[1]) and isfinite(w[2])):
-            return
-        last = self.last
-        self.last = (t_us, w)
-        if self.lpf is None:
-            if last is None or not self.cutoff_hz or t_us <= last[0]:
-                return
-            self.lpf = GyroLowPass(1e6 / (t_us - last[0]), self.cutoff_hz)
-        self.lpf.update(w)
+        st = self.st
+        if rate_filter_step(st, t_us, w[0], w[1], w[2]):
+            lpf = self.lpf = GyroLowPass(1e6 / (t_us - int(st[RF_LAST_T])), self.cutoff_hz)
+            st[RF_COEF:RF_COEF + 5] = (lpf.a1, lpf.a2, lpf.b0, lpf.b1, lpf.b2)
+            st[RF_BUILT], st[RF_ACTIVE] = 1.0, float(lpf.active)
+            rate_filter_step(st, t_us, w[0], w[1], w[2])
 
     def apply(self, state: VehicleState) -> VehicleState:
-        lpf, last = self.lpf, self.last
-        if lpf is None or not lpf.active or last is None:
+        st = self.st
+        if st[RF_ACTIVE] == 0.0 or st[RF_HAS_LAST] == 0.0:
             return state
-        o, f, r = state.omega_flu_rad_s, lpf.output, last[1]
+        o = state.omega_flu_rad_s
+        f, r = st[RF_OUT:RF_OUT + 3].tolist(), st[RF_LAST_W:RF_LAST_W + 3].tolist()
         return VehicleState(state.p_enu_m, state.q_enu_flu, state.v_flu_m_s,
                             (o[0] + f[0] - r[0], o[1] + f[1] - r[1], o[2] + f[2] - r[2]))
+
+
+def _warm_up() -> None:
+    st = np.zeros(RF_SIZE)
+    rate_filter_step(st, 1, 0.0, 0.0, 0.0)
