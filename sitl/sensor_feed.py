@@ -180,10 +180,8 @@ class SensorFeed:
                                                   q_enu_flu=_NAN4)
 
     def _deliver(self, t_us: int, out: list[HilSensor | Odometry]) -> None:
-        """The poses whose latency has passed at t_us, as ODOMETRY at their capture time."""
-        queue = self.suite.mocap.queue
-        if not queue or queue[0].delivered_s > (t_us + 0.5) * 1e-6:
-            return  # nothing due (`MocapModel.deliver` would return none)
+        """The poses whose latency has passed at t_us, as ODOMETRY at their capture time
+        (called when the oldest is due: `period` looks first)."""
         for pose in self.suite.mocap.deliver((t_us + 0.5) * 1e-6):
             out.append(Odometry(round(pose.capture_s * 1e6), enu_to_ned(pose.p_enu_m),
                                 q_enu_flu_to_ned_frd(pose.q_enu_flu), _NAN3, _NAN3,
@@ -232,13 +230,25 @@ class SensorFeed:
         return HilSensor(t, (a[0], -a[1], -a[2]), (g[0], -g[1], -g[2]), mag, pressure, alt,
                          TEMPERATURE_C, fields)
 
+    def _slow_samples(self, te: int, at: PlantState) -> None:
+        """The motion capture, magnetometer and barometer samples due at te (state `at`)."""
+        suite = self.suite
+        if self.mocap_clock.due_us == te:
+            self._capture(self.mocap_clock.take()[0], at)
+        if self.mag_clock.due_us == te:
+            self._mag = flu_to_frd(suite.mag.sample(self.mag_clock.take()[0] * 1e-6,
+                                                    at.q_enu_flu).b_flu_gauss)
+        if self.baro_clock.due_us == te:
+            self._baro_alt_m = self.home_alt_m + suite.baro.sample(
+                self.baro_clock.take()[0] * 1e-6, at.p_enu_m).alt_m
+
     def period(self, states: Sequence[PlantState]) -> list[HilSensor | Odometry]:
         """The messages for these physics-step states (times increasing, each once): the
         samples due since the previous state, in time order; at one instant a pose delivered
         then goes before the IMU sample, and the magnetometer and barometer ride on the
         IMU's HIL_SENSOR (flagged in its fields)."""
         out: list[HilSensor | Odometry] = []
-        suite = self.suite
+        queue = self.suite.mocap.queue  # the poses captured, not delivered yet (`_deliver`)
         imu_c, baro_c, mag_c, mocap_c = (self.imu_clock, self.baro_clock, self.mag_clock,
                                          self.mocap_clock)
         for s in states:
@@ -258,20 +268,16 @@ class SensorFeed:
                 if te > t:
                     break
                 at = s if prev is None or te == t else state_at(prev, s, te)
-                if mocap_c.due_us == te:
-                    self._capture(mocap_c.take()[0], at)
-                if mag_c.due_us == te:
-                    self._mag = flu_to_frd(suite.mag.sample(mag_c.take()[0] * 1e-6,
-                                                            at.q_enu_flu).b_flu_gauss)
-                if baro_c.due_us == te:
-                    self._baro_alt_m = self.home_alt_m + suite.baro.sample(
-                        baro_c.take()[0] * 1e-6, at.p_enu_m).alt_m
+                if te != imu_c.due_us or te in (mocap_c.due_us, mag_c.due_us, baro_c.due_us):
+                    self._slow_samples(te, at)
                 if imu_c.due_us == te:
                     if te == t:  # the step's impulse, at its end
                         self._contacts.add(dv)
                         dv = _ZERO3
-                    self._deliver(te, out)
+                    if queue and queue[0].delivered_s <= (te + 0.5) * 1e-6:
+                        self._deliver(te, out)
                     out.append(self._hil_sensor(at))
             self._contacts.add(dv)
-            self._deliver(t, out)
+            if queue and queue[0].delivered_s <= (t + 0.5) * 1e-6:
+                self._deliver(t, out)
         return out
