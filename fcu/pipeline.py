@@ -26,7 +26,7 @@ from common.wire.mav_enums import MAV_RESULT, MAV_SEVERITY
 from common.wire.modes import Mode
 from fcu.control.core import FlightCore, StepResult
 from fcu.control.dualquat import q_normalize, q_rotate
-from fcu.control.rate_filter import ImuRateFilter
+from fcu.control.rate_filter import ImuRateFilter, flown_values
 from fcu.estimator.ekf import Estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
@@ -108,7 +108,10 @@ class Pipeline:
     def on_state(self, stamp_us: int, state: VehicleState, rx_us: int) -> None:
         """A valid state stamped `stamp_us`, received at `rx_us` on the flight clock."""
         p, q, v, w = state
-        state = VehicleState(p, q_normalize(q), v, w)
+        self._take_state(stamp_us, VehicleState(p, q_normalize(q), v, w), rx_us)
+
+    def _take_state(self, stamp_us: int, state: VehicleState, rx_us: int) -> None:
+        """`on_state` of a state whose attitude is normalized."""
         self.state = state
         self.state_time_us = stamp_us
         self.state_rx_us = rx_us
@@ -176,15 +179,11 @@ class Pipeline:
         return False
 
     def _take_estimate(self) -> None:
-        est = self.estimator
-        if est is None:
-            return
-        out = est.output()
-        if out is not None:
-            t_us, state = out
-            state = self.rate_filter.apply(state)
+        arrays = None if self.estimator is None else self.estimator.output_arrays()
+        if arrays is not None:  # its output, low-passed and normalized: one compiled call
+            t_us, p, q, v, w = flown_values(arrays[0], arrays[1], self.rate_filter.st)
             stamp = self.state_time_us
-            self.on_state(t_us, state, t_us)
+            self._take_state(t_us, VehicleState(p, q, v, w), t_us)
             self.state_time_us = max(stamp, t_us)
 
     def configure(self, gains: Gains, limits: MissionLimits, failsafes: FailsafeSettings,

@@ -12,7 +12,11 @@ import math
 import numpy as np
 
 from common.jit import njit
+from common.quaternion import q_normalize
 from common.warm_ups import warm_up
+from fcu.estimator.buffers import filter_buffers
+from fcu.estimator.readout import output_values
+from fcu.estimator.settings import EstimatorSettings
 from fcu.stages import VehicleState
 
 Vec3 = tuple[float, float, float]
@@ -164,6 +168,23 @@ class ImuRateFilter:
                             (o[0] + f[0] - r[0], o[1] + f[1] - r[1], o[2] + f[2] - r[2]))
 
 
+@njit
+def flown_values(fb: np.ndarray, ib: np.ndarray, st: np.ndarray) -> tuple[
+        int, tuple[float, float, float], tuple[float, float, float, float],
+        tuple[float, float, float], tuple[float, float, float]]:
+    """The state the controller flies on, in one compiled call: the estimator's output
+    (`fcu.estimator.readout.output_values` of its arrays fb, ib), the low-pass of `st`
+    applied to its rate (`ImuRateFilter.apply`), the attitude normalized (as
+    `Pipeline.on_state` does): (t_us, p, q, v_flu, rate)."""
+    t, p, q, v, w = output_values(fb, ib)
+    if st[RF_ACTIVE] != 0.0 and st[RF_HAS_LAST] != 0.0:
+        w = (w[0] + st[RF_OUT] - st[RF_LAST_W], w[1] + st[RF_OUT + 1] - st[RF_LAST_W + 1],
+             w[2] + st[RF_OUT + 2] - st[RF_LAST_W + 2])
+    return t, p, q_normalize(q), v, w
+
+
 def _warm_up() -> None:
     st = np.zeros(RF_SIZE)
     rate_filter_step(st, 1, 0.0, 0.0, 0.0)
+    fb, ib = filter_buffers(EstimatorSettings())[:2]
+    flown_values(fb, ib, st)

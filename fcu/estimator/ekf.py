@@ -389,6 +389,11 @@ class Estimator:
         t, p, q, v, w = output_values(self._fb, self._ib)
         return t, VehicleState(p, q, v, w)
 
+    def output_arrays(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The arrays `readout.output_values` reads (fb, ib), for a caller's compiled
+        readout of the output state; None before aligned."""
+        return (self._fb, self._ib) if self._aligned else None
+
     def health(self) -> EstimatorHealth:
         """What the failsafes and arming need each control period, without status()'s
         Cholesky test (the covariance is kept positive definite by construction; status()
