@@ -254,8 +254,10 @@ class Pipeline:
         result = self.core.step(state, ref, dt_s)
         alloc = result.allocation
         err = math.dist(state.p_enu_m, ref.p_enu_m)
-        finite = all(map(math.isfinite, (*state.p_enu_m, *state.q_enu_flu, *state.v_flu_m_s,
-                                          *state.omega_flu_rad_s)))
+        p, q, v, w = state  # a finite sum: all finite; else (NaN, inf, overflow) each one
+        finite = math.isfinite(p[0] + p[1] + p[2] + q[0] + q[1] + q[2] + q[3] + v[0] + v[1] +
+                               v[2] + w[0] + w[1] + w[2]) or all(map(math.isfinite,
+                                                                      (*p, *q, *v, *w)))
         if diverged(err, finite, self.settings.divergence_m):
             self.failsafe = Failsafe.DIVERGED
             cmd.say(MAV_SEVERITY.MAV_SEVERITY_EMERGENCY, f"failsafe: diverged ({err:.1f} m)",

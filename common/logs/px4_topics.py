@@ -288,9 +288,12 @@ def wire_q_ned_frd(q_enu_flu: Quat) -> Quat:
     (w, z) and (x, y), is searched over the float32 values next to it and 0. A component
     below about 1e-9 of its pair's other one can still miss (the conversion lost most of
     it): then the rounding of the inverse, which agrees to float64 rounding."""
-    target = _bits(q_enu_flu)
     q = f32_quat(q_enu_flu_to_ned_frd(q_enu_flu))
-    if _bits(q_ned_frd_to_enu_flu(q)) == target:
+    back = q_ned_frd_to_enu_flu(q)
+    if back == q_enu_flu and 0.0 not in back:  # equal and no zero whose sign could differ
+        return q
+    target = _bits(q_enu_flu)
+    if _bits(back) == target:
         return q
     best = list(q)
     for i, j in ((0, 3), (1, 2)):  # (w, z) makes components 0 and 3 of the result, (x, y) 1, 2
