@@ -30,7 +30,9 @@ class Supervisor:
     def gate(self, armed: bool, speed_rad_s: tuple[float, ...],
              tilt_rad: tuple[float, ...]) -> GateOutput:
         """What reaches the actuators for a command and the arming state."""
-        finite = all(map(math.isfinite, speed_rad_s)) and all(map(math.isfinite, tilt_rad))
+        # a finite sum: all finite; else (NaN, inf, overflow) each one
+        finite = math.isfinite(sum(speed_rad_s) + sum(tilt_rad)) or (
+            all(map(math.isfinite, speed_rad_s)) and all(map(math.isfinite, tilt_rad)))
         if not finite:
             return GateOutput(self.zero, self.held_tilt, "non-finite actuator command")
         self.held_tilt = tuple(tilt_rad)
