@@ -211,13 +211,15 @@ class ActuatorMonitor:
 
     @property
     def model_rad(self) -> list[float]:
-        return self.st[MODEL, :self.n].tolist()
+        values: list[float] = self.st[MODEL, :self.n].tolist()
+        return values
 
     @property
     def limited_s(self) -> list[float]:
         """Per actuator (tilts, then rotors): the current episode's consecutive limited
         time."""
-        return self.st[LIMITED_S].tolist()
+        values: list[float] = self.st[LIMITED_S].tolist()
+        return values
 
     @property
     def reported(self) -> list[bool]:
