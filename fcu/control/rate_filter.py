@@ -136,24 +136,15 @@ class ImuRateFilter:
 
     def __init__(self, cutoff_hz: float) -> None:
         self.cutoff_hz = cutoff_hz
-        self.lpf: GyroLowPass | None = None
         self.st = np.zeros(RF_SIZE)
         self.st[RF_CUTOFF] = cutoff_hz
         warm_up("fcu.control.rate_filter", _warm_up)
 
-    @property
-    def last(self) -> tuple[int, Vec3] | None:
-        """The newest finite sample (t_us, rate), None before one."""
-        st = self.st
-        if st[RF_HAS_LAST] == 0.0:
-            return None
-        return int(st[RF_LAST_T]), (float(st[RF_LAST_W]), float(st[RF_LAST_W + 1]),
-                                    float(st[RF_LAST_W + 2]))
-
     def update(self, t_us: int, w: Vec3) -> None:
         st = self.st
         if rate_filter_step(st, t_us, w[0], w[1], w[2]):
-            lpf = self.lpf = GyroLowPass(1e6 / (t_us - int(st[RF_LAST_T])), self.cutoff_hz)
+            # the low-pass's coefficients (its state lives in the array)
+            lpf = GyroLowPass(1e6 / (t_us - int(st[RF_LAST_T])), self.cutoff_hz)
             st[RF_COEF:RF_COEF + 5] = (lpf.a1, lpf.a2, lpf.b0, lpf.b1, lpf.b2)
             st[RF_BUILT], st[RF_ACTIVE] = 1.0, float(lpf.active)
             rate_filter_step(st, t_us, w[0], w[1], w[2])

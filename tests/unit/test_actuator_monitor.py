@@ -212,3 +212,26 @@ def test_texts_fit_statustext():
                   LimitNotice("clear")):
             assert len(n.text(limit_s)) <= 50
     assert LimitNotice("clear").text(T) == "actuator limits cleared"
+
+
+def test_the_allocations_omega_gives_what_its_unclamped_speeds_give():
+    """Given random commands with rotors pushed past w_max now and then, fed once as the
+    allocation's Omega pairs (the control step's path) and once as `unclamped_speeds` of
+    them, then both monitors say the same notices with the same figures, period by period,
+    and hold the same state."""
+    rng = random.Random(11)
+    by_omega, by_speed = _monitor(), _monitor()
+    said = []
+    w = [800.0] * 6
+    for k in range(3000):
+        if k % 80 == 0:  # speeds held 80 periods (0.16 s), some past w_max
+            w = [rng.choice((800.0, 1650.0, 1750.0, 1900.0)) for _ in ROTORS]
+        a = [rng.uniform(-0.3, 0.3) for _ in ROTORS]
+        omega = tuple(x for wi, ai in zip(w, a, strict=True)
+                      for x in (wi * wi * math.sin(ai), wi * wi * math.cos(ai)))
+        tilts = tuple(0.5 * math.sin(0.001 * k + i) for i in ROTORS)  # within the rate
+        got = by_omega.update_from_allocation(DT, tilts, omega, T)
+        assert got == by_speed.update(DT, tilts, unclamped_speeds(omega), T), k
+        said += got
+    assert by_omega.st.tobytes() == by_speed.st.tobytes()
+    assert {"rotor", "clear"} <= {n.kind for n in said}

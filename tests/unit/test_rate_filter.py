@@ -77,3 +77,38 @@ def test_each_output_is_the_per_axis_recursion_to_the_bit():
             continue
         want = _reference_update(lpf, d1, d2, x)
         assert np.array(got).tobytes() == np.array(want).tobytes()
+
+
+def test_the_pipelines_filter_is_the_low_pass_at_the_imus_rate_to_the_bit():
+    """Given gyro samples at 1 kHz with non-finite ones among them, then `ImuRateFilter`
+    (one compiled call a sample) gives through `apply` what a GyroLowPass built at the rate
+    of the first two finite samples gives, sample by sample, to the bit; before its second
+    finite sample, and with the cut-off at 0, the state passes unchanged."""
+    from fcu.control.rate_filter import ImuRateFilter
+    from fcu.stages import VehicleState
+
+    rng = np.random.default_rng(5)
+    rf, off = ImuRateFilter(40.0), ImuRateFilter(0.0)
+    ref: GyroLowPass | None = None
+    last: tuple[int, tuple[float, float, float]] | None = None
+    for k in range(1500):
+        v = rng.normal(0.0, 1.0, 3)
+        w = (float(v[0]), math.inf if k % 211 == 7 else float(v[1]), float(v[2]))
+        t_us = 3_000 + 1_000 * k
+        rf.update(t_us, w)
+        off.update(t_us, w)
+        if all(math.isfinite(c) for c in w):
+            if ref is None and last is not None:
+                ref = GyroLowPass(1e6 / (t_us - last[0]), 40.0)
+            if ref is not None:
+                ref.update(w)
+            last = (t_us, w)
+        s = VehicleState((0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0), (0.0,) * 3, (0.1, -0.2, 0.3))
+        assert off.apply(s) is s
+        if ref is None or last is None:
+            assert rf.apply(s) is s
+            continue
+        f, r = ref.output, last[1]
+        want = (0.1 + f[0] - r[0], -0.2 + f[1] - r[1], 0.3 + f[2] - r[2])
+        got = rf.apply(s).omega_flu_rad_s
+        assert np.array(got).tobytes() == np.array(want).tobytes(), k
