@@ -26,7 +26,7 @@ from common.wire.mav_enums import MAV_RESULT, MAV_SEVERITY
 from common.wire.modes import Mode
 from fcu.control.core import FlightCore, StepResult
 from fcu.control.dualquat import q_normalize, q_rotate
-from fcu.control.rate_filter import ImuRateFilter, flown_values
+from fcu.control.rate_filter import ImuRateFilter
 from fcu.estimator.ekf import Estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
 from fcu.estimator.settings import EstimatorSettings
@@ -179,11 +179,11 @@ class Pipeline:
         return False
 
     def _take_estimate(self) -> None:
-        arrays = None if self.estimator is None else self.estimator.output_arrays()
-        if arrays is not None:  # its output, low-passed and normalized: one compiled call
-            t_us, p, q, v, w = flown_values(arrays[0], arrays[1], self.rate_filter.st)
+        out = None if self.estimator is None else self.rate_filter.flown(self.estimator)
+        if out is not None:  # its output, low-passed and normalized: one compiled call
+            t_us, state = out
             stamp = self.state_time_us
-            self._take_state(t_us, VehicleState(p, q, v, w), t_us)
+            self._take_state(t_us, state, t_us)
             self.state_time_us = max(stamp, t_us)
 
     def configure(self, gains: Gains, limits: MissionLimits, failsafes: FailsafeSettings,

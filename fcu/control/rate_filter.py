@@ -15,6 +15,7 @@ from common.jit import njit
 from common.quaternion import q_normalize
 from common.warm_ups import warm_up
 from fcu.estimator.buffers import filter_buffers
+from fcu.estimator.ekf import Estimator
 from fcu.estimator.readout import output_values
 from fcu.estimator.settings import EstimatorSettings
 from fcu.stages import VehicleState
@@ -150,13 +151,31 @@ class ImuRateFilter:
             rate_filter_step(st, t_us, w[0], w[1], w[2])
 
     def apply(self, state: VehicleState) -> VehicleState:
-        st = self.st
-        if st[RF_ACTIVE] == 0.0 or st[RF_HAS_LAST] == 0.0:
+        """`state` with its rate filtered (`filtered_rate`)."""
+        if self.st[RF_ACTIVE] == 0.0 or self.st[RF_HAS_LAST] == 0.0:
             return state
-        o = state.omega_flu_rad_s
-        f, r = st[RF_OUT:RF_OUT + 3].tolist(), st[RF_LAST_W:RF_LAST_W + 3].tolist()
-        return VehicleState(state.p_enu_m, state.q_enu_flu, state.v_flu_m_s,
-                            (o[0] + f[0] - r[0], o[1] + f[1] - r[1], o[2] + f[2] - r[2]))
+        return state._replace(omega_flu_rad_s=filtered_rate(self.st, state.omega_flu_rad_s))
+
+    def flown(self, est: Estimator) -> tuple[int, VehicleState] | None:
+        """The estimator's output as the controller flies on it (`flown_values`), None
+        before it is aligned: the pipeline's and a log replay's one path."""
+        arrays = est.output_arrays()
+        if arrays is None:
+            return None
+        t_us, p, q, v, w = flown_values(arrays[0], arrays[1], self.st)
+        return t_us, VehicleState(p, q, v, w)
+
+
+@njit
+def filtered_rate(st: np.ndarray, w: tuple[float, float, float]
+                  ) -> tuple[float, float, float]:
+    """A rate less the newest sample, plus the filtered one (the newest sample less the
+    bias becomes the filtered rate less the same bias); w itself while the low-pass is
+    off or has no sample."""
+    if st[RF_ACTIVE] == 0.0 or st[RF_HAS_LAST] == 0.0:
+        return w
+    return (w[0] + st[RF_OUT] - st[RF_LAST_W], w[1] + st[RF_OUT + 1] - st[RF_LAST_W + 1],
+            w[2] + st[RF_OUT + 2] - st[RF_LAST_W + 2])
 
 
 @njit
@@ -168,10 +187,7 @@ def flown_values(fb: np.ndarray, ib: np.ndarray, st: np.ndarray) -> tuple[
     applied to its rate (`ImuRateFilter.apply`), the attitude normalized (as
     `Pipeline.on_state` does): (t_us, p, q, v_flu, rate)."""
     t, p, q, v, w = output_values(fb, ib)
-    if st[RF_ACTIVE] != 0.0 and st[RF_HAS_LAST] != 0.0:
-        w = (w[0] + st[RF_OUT] - st[RF_LAST_W], w[1] + st[RF_OUT + 1] - st[RF_LAST_W + 1],
-             w[2] + st[RF_OUT + 2] - st[RF_LAST_W + 2])
-    return t, p, q_normalize(q), v, w
+    return t, p, q_normalize(q), v, filtered_rate(st, w)
 
 
 def _warm_up() -> None:
@@ -179,3 +195,4 @@ def _warm_up() -> None:
     rate_filter_step(st, 1, 0.0, 0.0, 0.0)
     fb, ib = filter_buffers(EstimatorSettings())[:2]
     flown_values(fb, ib, st)
+    filtered_rate(st, (0.0, 0.0, 0.0))

@@ -42,7 +42,6 @@ from common.logs.ulog import ULogError, open_ulog, topic_rows
 from common.process.diagnostics import get_logger, say
 from common.quaternion import Quat, Vec3
 from common.wire.rounding import f32
-from fcu.control.dualquat import q_normalize
 from fcu.control.rate_filter import ImuRateFilter
 from fcu.estimator.ekf import Estimator
 from fcu.estimator.inputs import ImuInput, PoseInput
@@ -238,12 +237,11 @@ def _estimates(items: list[tuple[int, int, int, ImuInput | PoseInput]],
         est.on_imu(m)
         rate_filter.update(m.t_us, m.omega_flu_rad_s)
         if m.t_us % period_us == 0:
-            out = est.output()
+            out = rate_filter.flown(est)  # filtered and normalized, as the pipeline
             if out is not None:
-                s = rate_filter.apply(out[1])
+                s = out[1]
                 taken_t.append(m.t_us)
-                taken.append((*s.p_enu_m, *q_normalize(s.q_enu_flu), *s.v_flu_m_s,
-                              *s.omega_flu_rad_s))
+                taken.append((*s.p_enu_m, *s.q_enu_flu, *s.v_flu_m_s, *s.omega_flu_rad_s))
     return taken_t, taken
 
 
