@@ -133,10 +133,10 @@ class AnswerSchedule:
             return Answer.STALE
         if last is not None and stamp_us == last:
             return Answer.EXTRA
-        learned = self.period is not None
+        learned = self.learned
         if last is not None:
             self._interval((stamp_us - last) // self.imu_us)
-            if not learned and self.period is not None:
+            if not learned and self.learned:
                 self.learned_at_us = sent_us
         self.last_us = stamp_us
         if self.longest is not None:
