@@ -187,13 +187,16 @@ class SensorFeed:
                                 q_enu_flu_to_ned_frd(pose.q_enu_flu), _NAN3, _NAN3,
                                 MAV.MAV_ESTIMATOR_TYPE_MOCAP, self.mocap_cov))
 
-    def _imu_reading(self, s: PlantState, contact_dv_enu: Vec3, dt_s: float
-                     ) -> tuple[Vec3, Vec3, Vec3]:
-        """(true specific force, gyro, accelerometer) of the IMU sample at s over dt_s, FLU:
-        `Plant.specific_force_flu` (the contact impulse over the sample's interval), then
-        `ImuModel.sample`, in one compiled call (`imu_sample_kernel`)."""
-        if not dt_s > 0.0:
-            raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
+    def _hil_sensor(self, s: PlantState) -> HilSensor:
+        """The IMU sample at s.time_us (taken now), with the newest magnetometer and
+        barometer samples not sent yet. Its true specific force, gyro and accelerometer
+        readings (FLU) are one compiled call (`imu_sample_kernel`): `Plant.specific_force_
+        flu` (the contact impulses since the last sample, over its interval), then
+        `ImuModel.sample`."""
+        t, dt_us = self.imu_clock.take()  # dt_us >= 1: a clock's samples are 1 us apart
+        dv = self._contacts.take()
+        if self._spread.spread_us > 0:
+            dv = self._spread.take(dv, dt_us)
         plant, imu = self.plant, self.suite.imu
         speeds, tilts = s.rotor_speed_rad_s, s.tilt_rad
         if len(speeds) != N_ROTORS or len(tilts) != N_ROTORS:
@@ -201,21 +204,16 @@ class SensorFeed:
                              f"{len(speeds)} and {len(tilts)}")
         gyro_block, gk = imu.gyro.draws.take_row()
         accel_block, ak = imu.accel.draws.take_row()
-        return imu_sample_kernel(plant.params, plant.disturbance.table, speeds, tilts,
-                                 s.time_us * 1e-6, plant.mass, plant.g, s.landed, s.q_enu_flu,
-                                 s.omega_flu_rad_s, contact_dv_enu, dt_s, dt_s, imu.gyro.row,
-                                 gyro_block, gk, imu.accel.row, accel_block, ak)
-
-    def _hil_sensor(self, s: PlantState) -> HilSensor:
-        """The IMU sample at s.time_us (taken now), with the newest magnetometer and
-        barometer samples not sent yet."""
-        t, dt_us = self.imu_clock.take()
-        dv = self._spread.take(self._contacts.take(), dt_us)
-        f, g, a = self._imu_reading(s, dv, dt_us * 1e-6)
+        dt_s = dt_us * 1e-6
+        f, g, a = imu_sample_kernel(plant.params, plant.disturbance.table, speeds, tilts,
+                                    s.time_us * 1e-6, plant.mass, plant.g, s.landed,
+                                    s.q_enu_flu, s.omega_flu_rad_s, dv, dt_s, dt_s,
+                                    imu.gyro.row, gyro_block, gk, imu.accel.row, accel_block,
+                                    ak)
         self.true_f_flu_m_s2 = f
         if self._faults:
-            imu = self._imu_faults(t, ImuSample(t * 1e-6, g, a))
-            a, g = imu.f_flu_m_s2, imu.omega_flu_rad_s
+            imu_s = self._imu_faults(t, ImuSample(t * 1e-6, g, a))
+            a, g = imu_s.f_flu_m_s2, imu_s.omega_flu_rad_s
         fields = IMU_FIELDS
         mag = _NAN3
         if self._mag is not None:
@@ -248,36 +246,46 @@ class SensorFeed:
         then goes before the IMU sample, and the magnetometer and barometer ride on the
         IMU's HIL_SENSOR (flagged in its fields)."""
         out: list[HilSensor | Odometry] = []
-        queue = self.suite.mocap.queue  # the poses captured, not delivered yet (`_deliver`)
-        imu_c, baro_c, mag_c, mocap_c = (self.imu_clock, self.baro_clock, self.mag_clock,
-                                         self.mocap_clock)
         for s in states:
             t = s.time_us
             prev = self._prev
             if prev is None:
-                for c in (imu_c, baro_c, mag_c, mocap_c):
+                for c in (self.imu_clock, self.baro_clock, self.mag_clock, self.mocap_clock):
                     c.start(t)
             elif t <= prev.time_us:
                 raise ValueError(f"sensor feed: time {t} us after {prev.time_us} us")
             self._prev = s
-            # `Plant.contact_dv_enu`, zero unless the step ended resting from flight
-            dv = _ZERO3 if prev is None or not s.landed or prev.landed else \
-                self.plant.contact_dv_enu(prev, s)
-            while True:
-                te = min(imu_c.due_us, baro_c.due_us, mag_c.due_us, mocap_c.due_us)
-                if te > t:
-                    break
-                at = s if prev is None or te == t else state_at(prev, s, te)
-                if te != imu_c.due_us or te in (mocap_c.due_us, mag_c.due_us, baro_c.due_us):
-                    self._slow_samples(te, at)
-                if imu_c.due_us == te:
-                    if te == t:  # the step's impulse, at its end
-                        self._contacts.add(dv)
-                        dv = _ZERO3
-                    if queue and queue[0].delivered_s <= (te + 0.5) * 1e-6:
-                        self._deliver(te, out)
-                    out.append(self._hil_sensor(at))
-            self._contacts.add(dv)
-            if queue and queue[0].delivered_s <= (t + 0.5) * 1e-6:
-                self._deliver(t, out)
+            self._step_samples(prev, s, out)
         return out
+
+    def _step_samples(self, prev: PlantState | None, s: PlantState,
+                      out: list[HilSensor | Odometry]) -> None:
+        """`period`'s messages for the samples due in (prev, s], appended to out."""
+        queue = self.suite.mocap.queue  # the poses captured, not delivered yet (`_deliver`)
+        imu_c, baro_c, mag_c, mocap_c = (self.imu_clock, self.baro_clock, self.mag_clock,
+                                         self.mocap_clock)
+        t = s.time_us
+        # `Plant.contact_dv_enu`, zero unless the step ended resting from flight
+        dv = _ZERO3 if prev is None or not s.landed or prev.landed else \
+            self.plant.contact_dv_enu(prev, s)
+        slow_us = min(baro_c.due_us, mag_c.due_us, mocap_c.due_us)
+        while True:
+            imu_us = imu_c.due_us
+            te = imu_us if imu_us < slow_us else slow_us
+            if te > t:
+                break
+            at = s if prev is None or te == t else state_at(prev, s, te)
+            if te == slow_us:
+                self._slow_samples(te, at)
+                slow_us = min(baro_c.due_us, mag_c.due_us, mocap_c.due_us)
+            if imu_us == te:
+                if te == t and dv is not _ZERO3:  # the step's impulse, at its end
+                    self._contacts.add(dv)
+                    dv = _ZERO3
+                if queue and queue[0].delivered_s <= (te + 0.5) * 1e-6:
+                    self._deliver(te, out)
+                out.append(self._hil_sensor(at))
+        if dv is not _ZERO3:  # (adding zeros changes no sum: it never holds a -0.0)
+            self._contacts.add(dv)
+        if queue and queue[0].delivered_s <= (t + 0.5) * 1e-6:
+            self._deliver(t, out)

@@ -42,8 +42,9 @@ def obeyed_command(speeds_rad_s: tuple[float, ...], tilts_rad: tuple[float, ...]
     """What the actuators do with a command: rotor speeds zero unless armed, a speed that
     is not finite zero, a tilt that is not finite the current tilt."""
     isfinite = math.isfinite
-    if armed:
-        speeds = tuple([w if isfinite(w) else 0.0 for w in speeds_rad_s])
+    if armed:  # a finite sum: all finite; else (NaN, inf, overflow) each one
+        speeds = tuple(speeds_rad_s) if isfinite(sum(speeds_rad_s)) else \
+            tuple([w if isfinite(w) else 0.0 for w in speeds_rad_s])
     else:
         speeds = (0.0,) * len(speeds_rad_s)
     tilts = tilts_rad

@@ -63,9 +63,11 @@ def q_enu_flu_as_wire(q_enu_flu: Quat) -> Quat:
     return q_ned_frd_to_enu_flu((w, x, y, z))
 
 
-def rotor_speeds_as_wire(speeds_rad_s: tuple[float, ...],
-                         w_max_rad_s: float) -> tuple[float, ...]:
-    """Rotor speeds as HIL_ACTUATOR_CONTROLS carries them and the plant reads them back:
-    float32(speed / w_max) x w_max each (docs/simulator-link.md)."""
-    return tuple([c * w_max_rad_s for c in f32s(tuple([w / w_max_rad_s
-                                                         for w in speeds_rad_s]))])
+def controls_as_wire(speeds_rad_s: tuple[float, ...], tilts_rad: tuple[float, ...],
+                     w_max_rad_s: float) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Rotor speeds and tilts as HIL_ACTUATOR_CONTROLS carries them and the plant reads
+    them back (docs/simulator-link.md): controls[0..n) float32(speed / w_max), read back
+    x w_max; controls[n..2n) float32(tilt). One rounding of the message's 2n fields."""
+    n = len(speeds_rad_s)
+    c = f32s((*[w / w_max_rad_s for w in speeds_rad_s], *tilts_rad))
+    return tuple([x * w_max_rad_s for x in c[:n]]), c[n:]

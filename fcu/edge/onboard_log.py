@@ -217,9 +217,12 @@ class OnboardLog(ULogWriter):
     def _imu(self, m: ImuInput) -> None:
         """sensor_combined of one IMU sample (`px4.sensor_combined_record`, packed here),
         after the poses received before it."""
-        t = max(m.t_us + self.clock_offset_us, 0)  # on_flight_clock
+        t = m.t_us + self.clock_offset_us  # on_flight_clock
+        if t < 0:
+            t = 0
         if self.imu_t_us >= 0:
-            self.imu_dt_us = min(max(t - self.imu_t_us, 0), 0xFFFFFFFF)
+            d = t - self.imu_t_us
+            self.imu_dt_us = d if 0 <= d <= 0xFFFFFFFF else min(max(d, 0), 0xFFFFFFFF)
         if self.poses_waiting:
             for pose in self.poses_waiting:
                 self._pose(t, pose)

@@ -196,7 +196,8 @@ class Estimator:
             return
         if self._last_t >= 0:  # the nominal period: the shortest interval (a gap is no period)
             dt = t - self._last_t
-            self._dt_us = dt if not self._dt_seen else min(self._dt_us, dt)
+            if dt < self._dt_us or not self._dt_seen:
+                self._dt_us = dt
             self._dt_seen = True
         self._last_t = t
         self._last_w = w

@@ -26,7 +26,7 @@ from common.process.startup import compile_time_s
 from common.wire.mavlink import encoder, pack, parser
 from common.wire.mission_items import PX4_SITL_HOME, MissionItem, item_from_message
 from common.wire.mission_messages import item_message
-from common.wire.rounding import f32_vec3, f32s, q_enu_flu_as_wire, rotor_speeds_as_wire
+from common.wire.rounding import controls_as_wire, f32_vec3, q_enu_flu_as_wire
 from common.wire.simlink import HilSensor, Odometry
 from fcu import compose
 from fcu.compose import accept_mission, arm_and_start, published_home
@@ -88,8 +88,9 @@ def command_for_plant(out: StepOutput, vehicle: VehicleConfig,
                       state: PlantState) -> ActuatorCommand:
     """A step's output as the plant obeys it through HIL_ACTUATOR_CONTROLS: the rotor
     speeds and tilts rounded as the wire rounds them, then `obeyed_command`."""
-    return obeyed_command(rotor_speeds_as_wire(out.speed_rad_s, vehicle.rotor_speed_max_rad_s),
-                          f32s(out.tilt_rad), out.armed, state)
+    speeds, tilts = controls_as_wire(out.speed_rad_s, out.tilt_rad,
+                                     vehicle.rotor_speed_max_rad_s)
+    return obeyed_command(speeds, tilts, out.armed, state)
 
 
 _IMU_WIRE = struct.Struct("<6f")  # HIL_SENSOR's accelerometer and gyro fields
@@ -118,22 +119,23 @@ def pose_for_fcu(o: Odometry) -> PoseInput | None:
 def feed_fcu(pipeline: Pipeline, messages: list[HilSensor | Odometry]) -> float:
     """A period's sensor messages as the FCU takes them from the simulator link (float32);
     returns the microseconds the estimator spent on them (part of the FCU's step time)."""
-    spent = 0.0
-    clock = time.perf_counter
+    inputs: list[ImuInput | PoseInput] = []  # as the link's decoder hands them over
     for m in messages:
         if type(m) is HilSensor:
-            imu = imu_for_fcu(m)
-            t0 = clock()
-            pipeline.on_imu(imu)
+            inputs.append(imu_for_fcu(m))
         else:
             assert isinstance(m, Odometry)
             pose = pose_for_fcu(m)
-            if pose is None:
-                continue
-            t0 = clock()
-            pipeline.on_pose(pose)
-        spent += (clock() - t0) * 1e6
-    return spent
+            if pose is not None:
+                inputs.append(pose)
+    on_imu, on_pose = pipeline.on_imu, pipeline.on_pose
+    t0 = time.perf_counter()
+    for x in inputs:
+        if isinstance(x, ImuInput):
+            on_imu(x)
+        else:
+            on_pose(x)
+    return (time.perf_counter() - t0) * 1e6
 
 
 def align(pipeline: Pipeline, world: World, dt_s: float,

@@ -1,7 +1,8 @@
-"""The in-process runner's shortcuts through the simulator link give the FCU what the link
+"""The in-process runner's shortcuts through the simulator link give each side what the link
 gives it, to the bit: `imu_for_fcu` and `pose_for_fcu` against the full round trip
-(`through_wire_*`, then `fcu.edge.sim_bridge`'s conversions), and the plant's accelerometer
-kernel against the rotor wrench and disturbance it sums."""
+(`through_wire_*`, then `fcu.edge.sim_bridge`'s conversions), `command_for_plant` against
+HIL_ACTUATOR_CONTROLS's (`actuator_controls`, the wire, `command_from_controls`), and the
+plant's accelerometer kernel against the rotor wrench and disturbance it sums."""
 
 from __future__ import annotations
 
@@ -18,13 +19,16 @@ from common.wire.simlink import (
     HilSensor,
     Odometry,
     pose_covariance,
+    through_wire_controls,
     through_wire_hil_sensor,
     through_wire_odometry,
 )
-from fcu.edge.sim_bridge import imu_from_hil_sensor, pose_from_odometry
-from gcs.run.inprocess import imu_for_fcu, pose_for_fcu
+from fcu.edge.sim_bridge import actuator_controls, imu_from_hil_sensor, pose_from_odometry
+from fcu.pipeline import StepOutput
+from gcs.run.inprocess import command_for_plant, imu_for_fcu, pose_for_fcu
 from sitl.plant import scenario_plant
 from sitl.plant_kernels import rotor_wrench_kernel, with_disturbance
+from sitl.world import command_from_controls
 
 NAN = math.nan
 ROOT = Path(__file__).resolve().parents[2]
@@ -89,6 +93,39 @@ def test_pose_for_fcu_is_the_wire_round_trip_to_the_bit():
         assert _bits((*got.p_enu_m, *got.q_enu_flu, got.pos_var_m2, got.att_var_rad2)) == \
             _bits((*want.p_enu_m, *want.q_enu_flu, want.pos_var_m2, want.att_var_rad2))
     assert refused == 4
+
+
+def test_command_for_plant_is_the_wire_round_trip_to_the_bit():
+    """Armed and disarmed, with speeds and tilts that are not finite (zero speed, the
+    current tilt), tiny, negative, beyond the rotor's limit: the plant obeys the same
+    command either way."""
+    scenario = load_scenario(ROOT / "config/scenarios/case1_figure8.toml")
+    vehicle, plant = scenario.vehicle, scenario_plant(scenario, 1000)
+    w_max = vehicle.rotor_speed_max_rad_s
+    rng = np.random.default_rng(13)
+    state = plant.initial_state((0.0, 0.0, 1.0), on_ground=False,
+                                tilt_rad=tuple(float(x) for x in rng.uniform(-1, 1, N_ROTORS)))
+    odd = (NAN, math.inf, -math.inf, 1e-45, -0.0, 1.3 * w_max)
+    cases = []
+    for k in range(300):
+        speeds = [float(x) for x in rng.uniform(0.0, w_max, N_ROTORS)]
+        tilts = [float(x) for x in rng.uniform(-4.0, 4.0, N_ROTORS)]
+        if k % 3 == 0:
+            speeds[k % N_ROTORS] = odd[k % len(odd)]
+            tilts[(k + 1) % N_ROTORS] = odd[(k + 2) % len(odd)]
+        cases.append(StepOutput(k, tuple(speeds), tuple(tilts), k % 7 != 0, None))
+    for out in cases:
+        wire = through_wire_controls(actuator_controls(out, w_max, True))
+        want = command_from_controls(wire.controls, wire.mode, vehicle, state)
+        got = command_for_plant(out, vehicle, state)
+        assert _bits(got.rotor_speed_rad_s) == _bits(want.rotor_speed_rad_s)
+        assert _bits(got.tilt_rad) == _bits(want.tilt_rad)
+    # what the plant makes of values that are not finite (`obeyed_command`)
+    got = command_for_plant(StepOutput(0, (NAN, math.inf) + (100.0,) * (N_ROTORS - 2),
+                                       (-math.inf,) + (0.5,) * (N_ROTORS - 1), True, None),
+                            vehicle, state)
+    assert got.rotor_speed_rad_s[:3] == (0.0, 0.0, pytest.approx(100.0, rel=1e-6))
+    assert got.tilt_rad[:2] == (state.tilt_rad[0], 0.5)
 
 
 def test_the_accelerometer_kernel_is_the_wrench_and_disturbance_per_mass():
