@@ -11,7 +11,10 @@ Topics (ULog, read with pyulog):
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
+
+import numpy as np
 
 from common.logs import px4_topics as px4
 from common.logs.columns import TRUTH_COLUMNS
@@ -20,6 +23,7 @@ from common.process.diagnostics import get_logger
 from sitl.plant import PlantState
 
 logger = get_logger(__name__)
+_STAMP = struct.Struct("<Q")
 
 DQ_TRUTH = Topic("dq_truth", (("uint64_t", "timestamp"),
                               *(("double", c) for c in TRUTH_COLUMNS[1:])))
@@ -36,16 +40,23 @@ class TruthLog(ULogWriter):
         super().__init__(sink, TRUTH_TOPICS, info={
             "sys_name": "dqflight sitl", "ver_hw": "SITL", "sim_scenario": scenario_name})
         self._dq_truth = self._ids[DQ_TRUTH.name]
+        msg_id, record = self._dq_truth
+        self._head = struct.pack("<HBH", record.size - 3, 68, msg_id)  # a record's header
         self.period_us = 1_000_000 // GROUNDTRUTH_HZ
         self.next_gt_us = 0
 
-    def record(self, s: PlantState) -> None:
+    def record(self, s: PlantState, row: np.ndarray | None = None) -> None:
+        """Queue the state s; `row`: its truth row (`sitl.plant.state_row`, float64) when
+        the caller has it, whose bytes after the stamp are the record's."""
         w = self
         t = s.time_us
         msg_id, record = self._dq_truth  # the values of `truth_row`, packed here
-        self._pending.append(record.pack(
-            record.size - 3, 68, msg_id, t, *s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu,
-            *s.omega_flu_rad_s, *s.rotor_speed_rad_s, *s.tilt_rad, float(s.landed)))
+        if row is not None:
+            self._pending += (self._head, _STAMP.pack(t), row[1:].tobytes())
+        else:
+            self._pending.append(record.pack(
+                record.size - 3, 68, msg_id, t, *s.p_enu_m, *s.v_enu_m_s, *s.q_enu_flu,
+                *s.omega_flu_rad_s, *s.rotor_speed_rad_s, *s.tilt_rad, float(s.landed)))
         if t >= self.next_gt_us:
             self.next_gt_us = (t // self.period_us + 1) * self.period_us
             w.add(px4.VEHICLE_LOCAL_POSITION_GROUNDTRUTH.name, px4.local_position_record(

@@ -166,9 +166,9 @@ class _RunLogs:
         self.onboard = OnboardLog(self.onboard_buf, pipeline, values) if on else None
         self.events_logged = 0
 
-    def record(self, state: PlantState) -> None:
+    def record(self, state: PlantState, row: np.ndarray | None = None) -> None:
         if self.truth is not None:
-            self.truth.record(state)
+            self.truth.record(state, row)
 
     def step(self, out: StepOutput, step_us: float, t_us: int, events: list[Event],
              row: tuple[float, ...] | None = None) -> None:
@@ -285,8 +285,9 @@ def _fly(scenario: Scenario, world: World, pipeline: Pipeline, run_logs: _RunLog
     while True:
         state = world.state
         t_us = state.time_us
-        rows.append(world.row)
-        run_logs.record(state)
+        row_now = world.row
+        rows.append(row_now)
+        run_logs.record(state, row_now)
         if feed is None:
             pipeline.on_state(t_us, state_for_fcu(state), t_us)
         if before_step is not None:
