@@ -193,7 +193,7 @@ class SensorFeed:
         readings (FLU) are one compiled call (`imu_sample_kernel`): `Plant.specific_force_
         flu` (the contact impulses since the last sample, over its interval), then
         `ImuModel.sample`."""
-        t, dt_us = self.imu_clock.take()  # dt_us >= 1: a clock's samples are 1 us apart
+        t, dt_us = self.imu_clock.take()  # dt_us >= 1: samples are at least 1 us apart
         dv = self._contacts.take()
         if self._spread.spread_us > 0:
             dv = self._spread.take(dv, dt_us)
