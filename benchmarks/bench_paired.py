@@ -50,7 +50,7 @@ def _wall(proc: subprocess.Popen[str], checkout: Path) -> float:
     if proc.returncode != 0:
         raise SystemExit(f"bench_paired: the flight in {checkout} failed "
                          f"(exit {proc.returncode}):\n{err.strip()}")
-    wall, status = out.split()
+    wall, status = out.strip().splitlines()[-1].split()  # the flight's last line
     if status != "completed":
         raise SystemExit(f"bench_paired: the flight in {checkout} ended {status}")
     return float(wall)

@@ -52,6 +52,9 @@ class TruthLog(ULogWriter):
         t = s.time_us
         msg_id, record = self._dq_truth  # the values of `truth_row`, packed here
         if row is not None:
+            if row.dtype != np.float64 or row.shape != (len(TRUTH_COLUMNS),) or row[0] != t:
+                raise ValueError(f"truth log: the row of {t} us is not that state's truth "
+                                 f"row (dtype {row.dtype}, shape {row.shape}, time {row[0]})")
             self._pending += (self._head, _STAMP.pack(t), row[1:].tobytes())
         else:
             self._pending.append(record.pack(

@@ -222,7 +222,7 @@ class OnboardLog(ULogWriter):
             t = 0
         if self.imu_t_us >= 0:
             d = t - self.imu_t_us
-            self.imu_dt_us = d if 0 <= d <= 0xFFFFFFFF else min(max(d, 0), 0xFFFFFFFF)
+            self.imu_dt_us = 0 if d < 0 else min(d, 0xFFFFFFFF)
         if self.poses_waiting:
             for pose in self.poses_waiting:
                 self._pose(t, pose)

@@ -8,6 +8,7 @@ import errno
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from common.config.scenario import load_scenario
 from common.logs.ulog import read_topic
@@ -45,6 +46,11 @@ def test_a_state_recorded_from_its_row_is_the_same_bytes():
     a.close()
     b.close()
     assert bytes(plain) == bytes(from_row)
+    s = states[5]
+    for bad in (state_row(s)[:-1], state_row(s).astype(np.float32),
+                state_row(s._replace(time_us=s.time_us + 1))):
+        with pytest.raises(ValueError, match="truth row"):
+            b.record(s, bad)
 
 
 def test_a_flush_writes_what_was_recorded(tmp_path):
