@@ -1,5 +1,8 @@
 # Two commands do everything on a fresh machine: `make demo` and `make test`.
-PYTHON ?= python3
+# .venv's interpreter: the fastest build of python3's version on the machine (a build with
+# profile-guided and link-time optimisation runs the flight stack about 10 % faster;
+# tools/fastest_python.py says why); `make PYTHON=/path/to/python3` chooses instead.
+PYTHON ?= $(shell python3 tools/fastest_python.py)
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
@@ -15,7 +18,7 @@ export PYTHONDONTWRITEBYTECODE :=
 venv: $(STAMP)
 
 $(STAMP): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
+	@py="$(PYTHON)"; echo "creating $(VENV) with $$py"; "$$py" -m venv $(VENV)
 	@echo "installing into $(VENV) (log: $(VENV)/install.log)"
 	@$(PY) -m pip install --upgrade pip > $(VENV)/install.log 2>&1 || (cat $(VENV)/install.log; exit 1)
 	@$(PY) -m pip install -e '.[dev]' >> $(VENV)/install.log 2>&1 || (cat $(VENV)/install.log; exit 1)
