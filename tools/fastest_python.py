@@ -1,6 +1,7 @@
 """The CPython `make` builds `.venv` with: of the builds on this machine of python3's own
-version (3.11 or newer, with `venv` and `ensurepip`), the one that runs a short pure-Python
-workload fastest. Prints its path; `python3` when none of them answers.
+version (where python3 is older than 3.11, of the oldest version that is not), those with
+`venv` and `ensurepip`, the one that runs a short pure-Python workload fastest. Prints its
+path; `python3` when none of them answers.
 
     python3 tools/fastest_python.py [-v]
 
@@ -104,6 +105,16 @@ def pick(probes: list[Probe | None], version: tuple[int, int]) -> Probe | None:
     return min(usable, key=lambda p: p.seconds, default=None)
 
 
+def wanted_version(default: Probe | None, probes: list[Probe | None]
+                   ) -> tuple[int, int] | None:
+    """python3's version (`default`) when it is 3.11 or newer; else the oldest version that
+    is, among the probes (a machine whose python3 is older, with a newer one installed)."""
+    if default is not None and default.version >= MIN_VERSION:
+        return default.version
+    return min((p.version for p in probes if p is not None and p.version >= MIN_VERSION),
+               default=None)
+
+
 def measured(paths: list[str], rounds: int = ROUNDS) -> dict[str, Probe | None]:
     """Each interpreter's probe (one per interpreter, under its first name), its time the
     best of `rounds` probes taken in turn (so that a machine's changing speed is shared)."""
@@ -126,10 +137,12 @@ def main(argv: list[str]) -> int:
     if "-v" in argv:
         for path, p in probes.items():
             print(f"{path}: {'no answer' if p is None else p}", file=sys.stderr)
-    default = probes.get(shutil.which("python3") or "")
-    best = pick(list(probes.values()), default.version) if default is not None else None
+    found = list(probes.values())
+    version = wanted_version(probes.get(shutil.which("python3") or ""), found)
+    best = pick(found, version) if version is not None else None
     print(best.exe if best is not None else "python3")
     return 0
+
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

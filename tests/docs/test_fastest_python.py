@@ -50,6 +50,16 @@ def test_the_fastest_build_of_the_default_version_that_can_make_a_venv_is_picked
     assert fp.pick([None], HERE) is None
 
 
+def test_the_version_is_python3s_unless_it_is_too_old() -> None:
+    old, mid, new = (_probe("/usr/bin/python3", 0.01, version=(3, 10)),
+                     _probe("/usr/bin/python3.12", 0.03, version=(3, 12)),
+                     _probe("/usr/bin/python3.13", 0.02, version=(3, 13)))
+    assert fp.wanted_version(mid, [old, mid, new]) == (3, 12)
+    assert fp.wanted_version(old, [old, new, mid]) == (3, 12)  # the oldest that will do
+    assert fp.wanted_version(None, [new, None]) == (3, 13)  # python3 did not answer
+    assert fp.wanted_version(old, [old]) is None
+
+
 def test_one_interpreter_under_two_names_is_measured_once(tmp_path: Path) -> None:
     alias = tmp_path / "python3"
     alias.symlink_to(os.path.realpath(sys.executable))
