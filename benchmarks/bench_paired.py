@@ -10,8 +10,11 @@ see the same moment of the host. Each prints its flight's wall time (after a 2 s
 the same process, which loads the kernels); the ratio B / A per round and their median say
 how much faster B is.
 
-Usage: bench_paired.py DIR_A DIR_B [--rounds N] [--duration S]  (needs two cores).
-Each DIR is a checkout whose package imports (a git worktree of another commit, say).
+Usage: bench_paired.py DIR_A DIR_B [--rounds N] [--duration S] [--python-a PY]
+[--python-b PY]  (needs two cores). Each DIR is a checkout whose package imports (a git
+worktree of another commit, say); each side runs on this interpreter unless `--python-a` /
+`--python-b` name another, a venv's python with the project's packages installed (two
+builds of CPython, say, with one checkout given twice).
 """
 
 from __future__ import annotations
@@ -37,10 +40,11 @@ print(m["wall_time_s"], m["status"])
 """
 
 
-def _start(checkout: Path, cpu: int, duration_s: float) -> subprocess.Popen[str]:
+def _start(checkout: Path, python: str, cpu: int, duration_s: float
+           ) -> subprocess.Popen[str]:
     env = {**os.environ, "PYTHONPATH": str(checkout)}
     return subprocess.Popen(
-        [sys.executable, "-c", _FLIGHT, str(duration_s)], cwd=checkout, env=env,
+        [python, "-c", _FLIGHT, str(duration_s)], cwd=checkout, env=env,
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         preexec_fn=lambda: os.sched_setaffinity(0, {cpu}))
 
@@ -56,7 +60,8 @@ def _wall(proc: subprocess.Popen[str], checkout: Path) -> float:
     return float(wall)
 
 
-def main(a: Path, b: Path, rounds: int, duration_s: float) -> list[tuple[float, float]]:
+def main(a: Path, b: Path, rounds: int, duration_s: float, python_a: str = sys.executable,
+         python_b: str = sys.executable) -> list[tuple[float, float]]:
     """(wall A, wall B) of each round."""
     cpus = sorted(os.sched_getaffinity(0))
     if len(cpus) < 2:
@@ -64,7 +69,7 @@ def main(a: Path, b: Path, rounds: int, duration_s: float) -> list[tuple[float, 
     walls = []
     for k in range(rounds):
         ca, cb = (cpus[0], cpus[1]) if k % 2 == 0 else (cpus[1], cpus[0])
-        pa, pb = _start(a, ca, duration_s), _start(b, cb, duration_s)
+        pa, pb = _start(a, python_a, ca, duration_s), _start(b, python_b, cb, duration_s)
         wa, wb = _wall(pa, a), _wall(pb, b)
         walls.append((wa, wb))
         print(f"round {k + 1}: A {wa:.3f} s, B {wb:.3f} s, B/A {wb / wa:.3f}", flush=True)
@@ -78,6 +83,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--rounds", type=int, default=10, help="rounds (default 10)")
     p.add_argument("--duration", type=float, default=40.0,
                    help="simulated seconds of each timed flight (default 40)")
+    p.add_argument("--python-a", default=sys.executable,
+                   help="A's interpreter (default: this one)")
+    p.add_argument("--python-b", default=sys.executable,
+                   help="B's interpreter (default: this one)")
     return p
 
 
@@ -88,7 +97,11 @@ if __name__ == "__main__":
             raise SystemExit(f"bench_paired: {d} is not a checkout of this project")
     if args.rounds < 1 or not args.duration > 0.0:
         raise SystemExit("bench_paired: --rounds must be >= 1 and --duration > 0")
-    w = main(args.a.resolve(), args.b.resolve(), args.rounds, args.duration)
+    for py in (args.python_a, args.python_b):
+        if not os.access(py, os.X_OK):
+            raise SystemExit(f"bench_paired: {py} is not an interpreter this user can run")
+    w = main(args.a.resolve(), args.b.resolve(), args.rounds, args.duration, args.python_a,
+             args.python_b)
     ratios = [wb / wa for wa, wb in w]
     print(f"{args.duration:g} s of in-process mocap flight, {len(w)} rounds: A median "
           f"{statistics.median(x for x, _ in w):.3f} s, B median "
