@@ -6,11 +6,11 @@ path; `python3` when none of them answers.
     python3 tools/fastest_python.py [-v]
 
 Why: the flight stack's step is mostly interpreted Python around compiled kernels, and how
-CPython was built changes its speed by a quarter. A build with profile-guided optimisation
-and link-time optimisation, and with libpython linked into the executable (a distribution's
-python3, python.org's installers), runs the in-process mocap flight about 10 % faster than
-one built without them and against a shared libpython (pyenv's default build), and the
-same interpreters give the same figures to the last bit (docs/benchmarks.md#the-interpreter).
+CPython was built changes its speed a lot. On the 2-core machine of docs/benchmarks.md,
+Debian's python3.11 (profile-guided and link-time optimisation, libpython linked into the
+executable) runs this tool's workload in two thirds of the time pyenv's default build of
+3.11 takes (no such optimisation, a shared libpython), and the in-process mocap flight about
+8 % faster, with the same figures to the last bit (docs/benchmarks.md#the-interpreter).
 `make PYTHON=/path/to/python3` chooses instead. Only builds of the version `python3` is
 are compared, so the packages installed, and the figures, are those python3 would give.
 
