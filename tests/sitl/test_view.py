@@ -225,7 +225,19 @@ class Flight(threading.Thread):
     def run(self) -> None:
         self.stream(0.5)
         self.results["arm"] = arm(self.session, True)
-        self.results["mode"] = set_mode(self.session, "OFFBOARD")
+        # OFFBOARD asked for again, the stream kept up between tries, as a station does: in a
+        # whole suite at load 8 this test's process, starved, sent one set-point pair in its
+        # 0.5 s, never heard the arming's COMMAND_ACK (the FCU had armed at once), and the
+        # FCU, holding no set-point, refused OFFBOARD ("no setpoint stream"). The viewer is
+        # judged here, not the entry into OFFBOARD.
+        deadline = time.monotonic() + 20.0
+        while True:
+            mode = set_mode(self.session, "OFFBOARD")
+            if mode == M.MAV_RESULT_ACCEPTED or time.monotonic() > deadline or \
+                    self.halt.is_set():
+                break
+            self.stream(0.5)
+        self.results["mode"] = mode
         self.stream(math.inf)
 
 
