@@ -666,8 +666,11 @@ def test_imu_rates_fly_takeoff_hold_land(tmp_path, imu_hz, period):
                                  waypoints=TAKEOFF_HOLD_LAND)
     s = server.stats()
     assert r.violations == [] and r.stale == {}
-    assert s["answer_period_samples"] == period
     gave_up = _gave_up_only_on_a_late_peer(s, r)
+    # after a give-up on the starved peer the plant learns the cadence again: it holds what
+    # the answers since the latest one teach (None when it came in the flight's last second,
+    # as at load 8); the answers' cadence itself is checked below
+    assert s["answer_period_samples"] == (_period_learned(r, s, imu_hz) if gave_up else period)
     assert (s["stale_answers"], s["extra_answers"]) == (0, 0)
     # late only where it stepped past a slow answer (a busy machine), a few times at most;
     # after giving up on a starved peer, also while that peer works off its backlog
