@@ -1,6 +1,6 @@
 # Two commands do everything on a fresh machine: `make demo` and `make test`.
 # .venv's interpreter: the fastest build of python3's version on the machine (Debian's runs
-# the flight stack about 8 % faster than pyenv's default build; tools/fastest_python.py
+# the flight stack 6-8 % faster than pyenv's default build; tools/fastest_python.py
 # says why); `make PYTHON=/path/to/python3` chooses instead.
 PYTHON ?= $(shell python3 tools/fastest_python.py 2>/dev/null || echo python3)
 VENV := .venv

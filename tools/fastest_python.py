@@ -9,8 +9,9 @@ Why: the flight stack's step is mostly interpreted Python around compiled kernel
 CPython was built changes its speed a lot. On the 2-core machine of docs/benchmarks.md,
 Debian's python3.11 (its distribution's build, libpython linked into the executable) runs
 this tool's workload in two thirds of the time pyenv's default build of 3.11 takes (no
-profile-guided or link-time optimisation, a shared libpython), and the in-process mocap flight about
-8 % faster, with the same figures to the last bit (docs/benchmarks.md#the-interpreter).
+profile-guided or link-time optimisation, a shared libpython), and the in-process mocap
+flight 6-8 % faster, with the same figures to the last bit
+(docs/benchmarks.md#the-interpreter).
 `make PYTHON=/path/to/python3` chooses instead. Only builds of the version `python3` is
 are compared, so the packages installed, and the figures, are those python3 would give.
 
