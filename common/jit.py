@@ -2,6 +2,8 @@
 mode, no fastmath: IEEE arithmetic in the order written, so compiled and interpreted maths
 agree to the bit) and caches it on disk, so that a later process loads it instead of
 compiling it again. Typed for mypy: the decorated function keeps its signature.
+`compiled_for` hands a hot caller a kernel's machine code for fixed argument types, without
+numba's type dispatch on each call.
 
 numba checks a cached kernel against its own source file only, while a kernel inlines the
 kernels it calls from other modules (the tracker's has the dual-quaternion algebra in it):
@@ -86,3 +88,20 @@ def njit_released(fn: F) -> F:
     """`njit_loops` that releases the GIL while it runs: a batch kernel whose calls other
     threads may make at the same time (`fcu.mission.batches`)."""
     return cast(F, numba.njit(cache=True, error_model="numpy", nogil=True)(_real_file(fn)))
+
+
+def compiled_for(kernel: F, *example_args: object) -> F:
+    """`kernel`'s machine code for exactly the numba types of `example_args` (compiled, or
+    loaded from the cache, now), called without numba's dispatch: the type fingerprint of
+    every argument and the lookup of the matching signature, a few hundred nanoseconds a
+    call (with tuple arguments most), some percent of a flight's control period over its
+    dozen kernel calls. The arithmetic is the kernel's, to the bit.
+
+    Only for a caller whose argument types are fixed by construction: float64 or int64
+    C-contiguous arrays it made itself (their rank as in `example_args`), plain floats, ints
+    and bools, tuples of floats. Nothing is checked per call: a tuple of another length or an
+    argument that is not a number is refused (ValueError, TypeError), but an array of another
+    dtype, rank or layout would be misread."""
+    dispatcher, typeof = cast(Any, kernel), cast(Any, numba).typeof
+    signature = tuple(typeof(a) for a in example_args)
+    return cast(F, dispatcher.compile(signature))

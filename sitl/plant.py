@@ -40,6 +40,7 @@ import numpy as np
 
 from common.config.scenario import Scenario, VehicleConfig
 from common.geometry import rotor_frames
+from common.jit import compiled_for
 from common.logs.columns import TRUTH_COLUMNS
 from common.vehicle_constants import N_ROTORS
 from common.warm_ups import warm_up
@@ -233,6 +234,10 @@ class Plant:
         self.params = pp
         self.disturbance = disturbance or Disturbance()
         self.last_rk4_steps = 0  # RK4 steps of the last `step` (one per smooth piece)
+        # the kernel's machine code for its arrays' types (`compiled_for`)
+        self._steps = compiled_for(steps_kernel, pp, self._disturbance.table,
+                                   np.empty(STATE_SIZE), np.empty(PC_SIZE),
+                                   np.empty((2, STATE_SIZE)))
         warm_up("sitl.plant", self._warm_up)
 
     def _warm_up(self) -> None:
@@ -303,8 +308,9 @@ class Plant:
 
     def step_rows(self, row: np.ndarray, cmd: np.ndarray, out: np.ndarray) -> None:
         """len(out) steps from the state row `row` under the command row `cmd` (speeds,
-        tilts: PLANT_COMMAND) held, into the rows of `out` (the state after each step)."""
-        steps_kernel(self.params, self._disturbance.table, row, cmd, out)
+        tilts: PLANT_COMMAND) held, into the rows of `out` (the state after each step): all
+        float64 and C-contiguous, `out` two-dimensional (`compiled_for`)."""
+        self._steps(self.params, self._disturbance.table, row, cmd, out)
 
     # ------------------------------------------------------------------ helpers
 

@@ -36,6 +36,7 @@ import numpy as np
 from common.config.scenario import SENSOR_FAULT_KINDS, ConfigError, SensorFault
 from common.config.sensors import IMU_RATE_MIN_HZ, SensorProfile, check_servable
 from common.frames import enu_to_ned, flu_to_frd, q_enu_flu_to_ned_frd
+from common.jit import compiled_for
 from common.quaternion import Vec3, q_conj, q_exp, q_log, q_mul, q_normalize
 from common.vehicle_constants import N_ROTORS
 from common.warm_ups import warm_up
@@ -118,6 +119,12 @@ class SensorFeed:
         # The faults as windows on the simulation clock [start_us, end_us) (end None: open).
         self._faults: list[tuple[str, int, int | None, Vec3]] = []
         warm_up("sitl.imu_kernels", self._warm_up)
+        # the IMU sample's machine code for its arguments' types (`compiled_for`)
+        imu, draws = self.suite.imu, np.zeros((1, 6))
+        self._imu_sample = compiled_for(
+            imu_sample_kernel, plant.params, plant.disturbance.table, _ZERO6, _ZERO6, 0.0,
+            1.0, 9.81, False, (1.0, 0.0, 0.0, 0.0), _ZERO3, _ZERO3, 1e-3, 1e-3, imu.gyro.row,
+            draws, 0, imu.accel.row, draws, 0)
 
     def _warm_up(self) -> None:
         """The IMU sample's kernel once, resting and in flight, on scratch triads (their
@@ -205,11 +212,11 @@ class SensorFeed:
         gyro_block, gk = imu.gyro.draws.take_row()
         accel_block, ak = imu.accel.draws.take_row()
         dt_s = dt_us * 1e-6
-        f, g, a = imu_sample_kernel(plant.params, plant.disturbance.table, speeds, tilts,
-                                    s.time_us * 1e-6, plant.mass, plant.g, s.landed,
-                                    s.q_enu_flu, s.omega_flu_rad_s, dv, dt_s, dt_s,
-                                    imu.gyro.row, gyro_block, gk, imu.accel.row, accel_block,
-                                    ak)
+        f, g, a = self._imu_sample(plant.params, plant.disturbance.table, speeds, tilts,
+                                   s.time_us * 1e-6, plant.mass, plant.g, s.landed,
+                                   s.q_enu_flu, s.omega_flu_rad_s, dv, dt_s, dt_s,
+                                   imu.gyro.row, gyro_block, gk, imu.accel.row, accel_block,
+                                   ak)
         self.true_f_flu_m_s2 = f
         if self._faults:
             imu_s = self._imu_faults(t, ImuSample(t * 1e-6, g, a))

@@ -21,7 +21,7 @@ import numpy as np
 
 from common.config.gains import Gains
 from common.config.vehicle import VehicleConfig
-from common.jit import njit
+from common.jit import compiled_for, njit
 from common.vehicle_constants import N_ROTORS
 from common.warm_ups import warm_up
 from fcu.control import allocation as al
@@ -159,6 +159,7 @@ class FlightCore:
         self.inp = np.zeros(IN_SIZE)
         self.out = np.zeros(OUT_SIZE)
         warm_up("fcu.control.core", self._warm_up)
+        self._kernel = compiled_for(core_kernel, self.inp, params, state, self.out)
 
     def _warm_up(self) -> None:
         """The fused step once, on copies of the buffers, at identity with lag compensation
@@ -181,7 +182,7 @@ class FlightCore:
         inp = self.inp
         inp[CI_DT] = dt_s
         inp[CI_LAG_ON] = 1.0 if self.lag_compensation else 0.0
-        core_kernel(inp, self.params, self.state, self.out)
+        self._kernel(inp, self.params, self.state, self.out)
         return self.out
 
     def step(self, state: VehicleState, ref: Reference,

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from common.jit import njit
+from common.jit import compiled_for, njit
 from common.quaternion import q_normalize
 from common.warm_ups import warm_up
 from fcu.estimator.buffers import filter_buffers
@@ -140,15 +140,22 @@ class ImuRateFilter:
         self.st = np.zeros(RF_SIZE)
         self.st[RF_CUTOFF] = cutoff_hz
         warm_up("fcu.control.rate_filter", _warm_up)
+        # the kernels' machine code for these types (`compiled_for`); the estimator's
+        # buffers are those `filter_buffers` makes
+        self._step = compiled_for(rate_filter_step, self.st, 0, 0.0, 0.0, 0.0)
+        self._flown = compiled_for(flown_values, *filter_buffers(EstimatorSettings())[:2],
+                                   self.st)
 
     def update(self, t_us: int, w: Vec3) -> None:
         st = self.st
-        if rate_filter_step(st, t_us, w[0], w[1], w[2]):
+        if type(t_us) is not int:
+            t_us = int(t_us)
+        if self._step(st, t_us, w[0], w[1], w[2]):
             # the low-pass's coefficients (its state lives in the array)
             lpf = GyroLowPass(1e6 / (t_us - int(st[RF_LAST_T])), self.cutoff_hz)
             st[RF_COEF:RF_COEF + 5] = (lpf.a1, lpf.a2, lpf.b0, lpf.b1, lpf.b2)
             st[RF_BUILT], st[RF_ACTIVE] = 1.0, float(lpf.active)
-            rate_filter_step(st, t_us, w[0], w[1], w[2])
+            self._step(st, t_us, w[0], w[1], w[2])
 
     def apply(self, state: VehicleState) -> VehicleState:
         """`state` with its rate filtered (`filtered_rate`)."""
@@ -162,7 +169,7 @@ class ImuRateFilter:
         arrays = est.output_arrays()
         if arrays is None:
             return None
-        t_us, p, q, v, w = flown_values(arrays[0], arrays[1], self.st)
+        t_us, p, q, v, w = self._flown(arrays[0], arrays[1], self.st)
         return t_us, VehicleState(p, q, v, w)
 
 

@@ -14,6 +14,7 @@ from collections import deque
 
 import numpy as np
 
+from common.jit import compiled_for
 from common.quaternion import Vec3
 from common.warm_ups import warm_up
 from fcu.estimator.align import AlignWindow
@@ -79,6 +80,15 @@ class Estimator:
         self._align_us = round(s.align_time_s * 1e6)
         warm()
         self.reset()
+        # the hot kernels' machine code for the buffers' types (`compiled_for`): `reset`
+        # makes new buffers of the same types
+        fb, ib, M, pend_t, pend_v, pose_c, pose_v = (self._fb, self._ib, self._M, self._pend_t,
+                                                     self._pend_v, self._pose_c, self._pose_v)
+        self._imu_step = compiled_for(imu_step, fb, ib, M, pend_t, pend_v, pose_c, pose_v, 0,
+                                      0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)
+        self._fuse = compiled_for(fuse, fb, ib, M, pend_t, pend_v)
+        self._pose_step = compiled_for(pose_step, fb, ib, pose_c, pose_v, 0, np.zeros(9), 0)
+        self._variance_code = compiled_for(variance_code, fb, M)
 
     # ------------------------------------------------------------------------------------
     # State
@@ -202,9 +212,9 @@ class Estimator:
         self._last_t = t
         self._last_w = w
         if self._aligned:
-            code = imu_step(self._fb, self._ib, self._M, self._pend_t, self._pend_v,
-                            self._pose_c, self._pose_v, t, w[0], w[1], w[2], f[0], f[1], f[2],
-                            self._dt_us, PUSH | OUTPUT)
+            code = self._imu_step(self._fb, self._ib, self._M, self._pend_t, self._pend_v,
+                                  self._pose_c, self._pose_v, t, w[0], w[1], w[2], f[0], f[1],
+                                  f[2], self._dt_us, PUSH | OUTPUT)
             if code != DONE:
                 self._advance(t, w, f, PUSH | OUTPUT, code)
             return
@@ -224,9 +234,9 @@ class Estimator:
             elif code == FUSE:
                 self._fuse_current()
                 mode &= ~PUSH
-            code = imu_step(self._fb, self._ib, self._M, self._pend_t, self._pend_v,
-                            self._pose_c, self._pose_v, t, w[0], w[1], w[2], f[0], f[1], f[2],
-                            self._dt_us, mode)
+            code = self._imu_step(self._fb, self._ib, self._M, self._pend_t, self._pend_v,
+                                  self._pose_c, self._pose_v, t, w[0], w[1], w[2], f[0], f[1],
+                                  f[2], self._dt_us, mode)
 
     def _grow(self, cap: int) -> None:
         """The ring of buffered samples at capacity cap, oldest first."""
@@ -261,8 +271,8 @@ class Estimator:
             self._ib[EI_POSE_IGNORED] += 1
             return
         v = np.array((*m.p_enu_m, *m.q_enu_flu, m.pos_var_m2, m.att_var_rad2))
-        if pose_step(self._fb, self._ib, self._pose_c, self._pose_v, c, v,
-                     self._dt_us) == FUSE:
+        if self._pose_step(self._fb, self._ib, self._pose_c, self._pose_v, c, v,
+                           self._dt_us) == FUSE:
             self._fuse_current()
 
     def _check_pose(self, m: PoseInput) -> PoseInput | None:
@@ -378,7 +388,7 @@ class Estimator:
 
     def _fuse_current(self) -> None:
         """The pose under way: gated, fused, counted, one compiled call (`filter.fuse`)."""
-        fuse(self._fb, self._ib, self._M, self._pend_t, self._pend_v)
+        self._fuse(self._fb, self._ib, self._M, self._pend_t, self._pend_v)
 
     # ------------------------------------------------------------------------------------
     # Outputs
@@ -400,7 +410,7 @@ class Estimator:
         Cholesky test (the covariance is kept positive definite by construction; status()
         checks it for telemetry and logs): finite state, the standard deviations."""
         ib = self._ib
-        code = variance_code(self._fb, self._M) if self._aligned else 0
+        code = self._variance_code(self._fb, self._M) if self._aligned else 0
         return EstimatorHealth(self._aligned, code == 3, code != 0, int(ib[EI_REJ_ROW]),
                                int(ib[EI_LAST_FUSION]))
 

@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from common.jit import njit
+from common.jit import compiled_for, njit
 from common.warm_ups import warm_up
 
 TILT_TOLERANCE_RAD = 1e-5  # above the float32 rounding of the tilts on the simulator link
@@ -192,6 +192,12 @@ class ActuatorMonitor:
         self.any_tilt_limited = False  # in the last period
         self.reset((0.0,) * n_rotors if tilt_rad is None else tilt_rad)
         warm_up("fcu.safety.actuator_monitor", self._warm_up)
+        # the kernel's machine code for speeds and for Omega pairs (`compiled_for`)
+        n = n_rotors
+        self._kernels = (compiled_for(monitor_kernel, self.st, 0.0, 0.0, (0.0,) * n,
+                                      (0.0,) * n, False),
+                         compiled_for(monitor_kernel, self.st, 0.0, 0.0, (0.0,) * n,
+                                      (0.0,) * (2 * n), True))
 
     def _warm_up(self) -> None:
         """The kernel once on a scratch state, with both kinds of speeds, on tuples of the
@@ -256,7 +262,8 @@ class ActuatorMonitor:
         if len(tilts) != n or len(speeds) != (2 * n if omega_sq else n):
             raise ValueError(f"expected {n} tilts and {2 * n if omega_sq else n} speeds, got "
                              f"{len(tilts)} and {len(speeds)}")
-        flags = monitor_kernel(self.st, float(dt_s), float(limit_s), tilts, speeds, omega_sq)
+        flags = self._kernels[omega_sq](self.st, float(dt_s), float(limit_s), tilts, speeds,
+                                        omega_sq)
         self.any_tilt_limited = bool(flags & ANY_TILT_LIMITED)
         if not flags & (ANY_NOTICE | CLEARED):
             return []
