@@ -27,7 +27,6 @@ overrides the value, so a run with a fault is the run without it up to the fault
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -183,8 +182,7 @@ class SensorFeed:
         if self._active("mocap_off", t_us):
             mocap.queue.pop()
         elif self._active("pose_nan", t_us):
-            mocap.queue[-1] = dataclasses.replace(mocap.queue[-1], p_enu_m=_NAN3,
-                                                  q_enu_flu=_NAN4)
+            mocap.queue[-1] = mocap.queue[-1]._replace(p_enu_m=_NAN3, q_enu_flu=_NAN4)
 
     def _deliver(self, t_us: int, out: list[HilSensor | Odometry]) -> None:
         """The poses whose latency has passed at t_us, as ODOMETRY at their capture time

@@ -233,8 +233,7 @@ def _accel(a: AccelConfig, imu: ImuConfig, rng: np.random.Generator) -> _Triad:
                   correlation_time_s=a.bias_correlation_time_s)
 
 
-@dataclass(frozen=True)
-class BaroSample:
+class BaroSample(NamedTuple):
     t_s: float
     alt_m: float  # pressure altitude above the home point (ENU up)
 
@@ -258,8 +257,7 @@ class BaroModel:
         return BaroSample(t_s, alt)
 
 
-@dataclass(frozen=True)
-class MagSample:
+class MagSample(NamedTuple):
     t_s: float
     b_flu_gauss: Vec3
 
@@ -285,8 +283,7 @@ class MagModel:
         return MagSample(t_s, b)
 
 
-@dataclass(frozen=True)
-class PoseDelivery:
+class PoseDelivery(NamedTuple):
     capture_s: float  # when the pose was measured
     delivered_s: float  # capture_s + latency_s: when the receiver gets it
     p_enu_m: Vec3
