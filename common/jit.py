@@ -99,9 +99,10 @@ def compiled_for(kernel: F, *example_args: object) -> F:
 
     Only for a caller whose argument types are fixed by construction: float64 or int64
     C-contiguous arrays it made itself (their rank as in `example_args`), plain floats, ints
-    and bools, tuples of floats. Nothing is checked per call: a tuple of another length or an
-    argument that is not a number is refused (ValueError, TypeError), but an array of another
-    dtype, rank or layout would be misread."""
+    and bools, tuples of floats. Nothing is checked per call: a tuple of another length, a
+    list for a tuple or an argument that is not a number is refused (ValueError, TypeError),
+    but a numeric string or bytes would be read as its number and an array of another dtype,
+    rank or layout would be misread."""
     dispatcher, typeof = cast(Any, kernel), cast(Any, numba).typeof
     signature = tuple(typeof(a) for a in example_args)
     return cast(F, dispatcher.compile(signature))
