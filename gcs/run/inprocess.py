@@ -174,7 +174,7 @@ class _PackedRows:
         self.data += row.tobytes()
 
     def array(self) -> np.ndarray:
-        return np.frombuffer(bytes(self.data), dtype=np.float64).reshape(-1, self.width)
+        return np.frombuffer(self.data, dtype=np.float64).reshape(-1, self.width).copy()
 
 
 # Queued log records are written into the run's buffers every this many control periods,
