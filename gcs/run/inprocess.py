@@ -156,7 +156,7 @@ def align(pipeline: Pipeline, world: World, dt_s: float,
 
 class _PackedRows:
     """Rows of float64 values kept packed in one buffer, not as an object per row and per
-    value: a 160 s flight's onboard rows take 26 MB so rather than 115 MB of tuples, and the
+    value: a 160 s flight's onboard rows take 42 MB rather than about 115 MB of tuples, and the
     flight touches that much less fresh memory (each new page a fault of some microseconds
     on a virtual machine). `array()` gives them back, the same floats to the bit (a Python
     int or bool converted as numpy converts it)."""
