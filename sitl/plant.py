@@ -234,17 +234,19 @@ class Plant:
         self.params = pp
         self.disturbance = disturbance or Disturbance()
         self.last_rk4_steps = 0  # RK4 steps of the last `step` (one per smooth piece)
-        # the kernel's machine code for its arrays' types (`compiled_for`)
+        warm_up("sitl.plant", self._warm_up)
+        # the kernel's machine code for its arrays' types (`compiled_for`; loaded by the
+        # warm-up, which the programs time and count in compile_time_s)
         self._steps = compiled_for(steps_kernel, pp, self._disturbance.table,
                                    np.empty(STATE_SIZE), np.empty(PC_SIZE),
                                    np.empty((2, STATE_SIZE)))
-        warm_up("sitl.plant", self._warm_up)
 
     def _warm_up(self) -> None:
         """Two steps at rest in the air (compiles or loads the step kernels before the
         first control period)."""
         row = state_row(self.initial_state((0.0, 0.0, 1.0), on_ground=False))
-        self.step_rows(row, np.zeros(PC_SIZE), np.empty((2, STATE_SIZE)))
+        steps_kernel(self.params, self._disturbance.table, row, np.zeros(PC_SIZE),
+                     np.empty((2, STATE_SIZE)))
         step_kernel(self.params, self._disturbance.table, row, np.zeros(PC_SIZE),
                     np.empty(STATE_SIZE))
         flight_force_kernel(self.params, self._disturbance.table, np.zeros(2 * N_ROTORS),
