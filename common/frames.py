@@ -40,7 +40,13 @@ def q_enu_flu_to_ned_frd(q: Quat) -> Quat:
     """q_ned_frd = q_ned_enu q_enu_flu q_flu_frd, sign chosen with w >= 0: `q_mul` twice
     with the fixed rotations' components written in (the same operations in the same
     order, so the same bits, without two compiled calls' overhead from Python); a
-    component not finite takes the compiled calls (whose NaN signs may differ)."""
+    component not finite takes the compiled calls (whose NaN signs may differ).
+
+    With q_ned_enu = (0, h, h, 0) and q_flu_frd = (0, 1, 0, 0) the product is
+    (-ax, aw, az, -ay) of a = q_ned_enu q. The terms the fixed rotations' zeros and ones
+    contribute are signed zeros and exact products, which change no sum that is not zero:
+    when every component of `a` is non-zero the short form below gives the full form's
+    bits; otherwise the full form decides the signs of the zeros."""
     h = _H
     w, x, y, z = q[0], q[1], q[2], q[3]
     if not math.isfinite(w + x + y + z):
@@ -48,7 +54,13 @@ def q_enu_flu_to_ned_frd(q: Quat) -> Quat:
 
         r = q_mul(q_mul(_Q_NED_ENU, q), _Q_FLU_FRD)
         return r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
-    # a = q_mul(_Q_NED_ENU, q), _Q_NED_ENU = (0, h, h, 0)
+    aw = -h * x - h * y
+    ax = h * w + h * z
+    ay = h * w - h * z
+    az = h * y - h * x
+    if aw and ax and ay and az:
+        return (-ax, aw, az, -ay) if ax <= 0.0 else (ax, -aw, -az, ay)
+    # a = q_mul(_Q_NED_ENU, q), _Q_NED_ENU = (0, h, h, 0), every term written out
     aw = 0.0 * w - h * x - h * y - 0.0 * z
     ax = 0.0 * x + h * w + h * z - 0.0 * y
     ay = 0.0 * y - h * z + h * w + 0.0 * x

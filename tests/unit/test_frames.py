@@ -99,6 +99,10 @@ def test_the_written_out_conversion_is_the_two_products_to_the_bit():
     cases = [tuple(float(c) for c in rng.normal(0.0, 1.0, 4)) for _ in range(2000)]
     cases += [tuple(float(c) for c in rng.choice(special, 4)) for _ in range(2000)]
     cases += [(1.0, 0.0, 0.0, 0.0), (-0.0, 0.0, -0.0, 1.0), (0.0, -0.0, 0.0, -0.0)]
+    # a component of q_ned_enu q cancelling to zero (w = -z, w = z, x = -y, x = y): the
+    # short form's fall-back decides its sign
+    for a, b in rng.normal(0.0, 1.0, (500, 2)).tolist():
+        cases += [(a, b, -b, -a), (a, b, b, a), (a, b, -b, a), (-a, b, b, -a)]
     for q in cases:
         r = q_mul(q_mul((0.0, h, h, 0.0), (q[0], q[1], q[2], q[3])), (0.0, 1.0, 0.0, 0.0))
         want = r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
