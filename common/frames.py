@@ -45,8 +45,9 @@ def q_enu_flu_to_ned_frd(q: Quat) -> Quat:
     With q_ned_enu = (0, h, h, 0) and q_flu_frd = (0, 1, 0, 0) the product is
     (-ax, aw, az, -ay) of a = q_ned_enu q. The terms the fixed rotations' zeros and ones
     contribute are signed zeros and exact products, which change no sum that is not zero:
-    when every component of `a` is non-zero the short form below gives the full form's
-    bits; otherwise the full form decides the signs of the zeros."""
+    when every component of `a` is non-zero and finite the short form below gives the full
+    form's bits; otherwise the full form decides the signs of the zeros (and gives NaN
+    where a product overflowed, as the compiled products do)."""
     h = _H
     w, x, y, z = q[0], q[1], q[2], q[3]
     if not math.isfinite(w + x + y + z):
@@ -58,7 +59,7 @@ def q_enu_flu_to_ned_frd(q: Quat) -> Quat:
     ax = h * w + h * z
     ay = h * w - h * z
     az = h * y - h * x
-    if aw and ax and ay and az:
+    if aw and ax and ay and az and math.isfinite(aw + ax + ay + az):
         return (-ax, aw, az, -ay) if ax <= 0.0 else (ax, -aw, -az, ay)
     # a = q_mul(_Q_NED_ENU, q), _Q_NED_ENU = (0, h, h, 0), every term written out
     aw = 0.0 * w - h * x - h * y - 0.0 * z

@@ -103,6 +103,9 @@ def test_the_written_out_conversion_is_the_two_products_to_the_bit():
     # short form's fall-back decides its sign
     for a, b in rng.normal(0.0, 1.0, (500, 2)).tolist():
         cases += [(a, b, -b, -a), (a, b, b, a), (a, b, -b, a), (-a, b, b, -a)]
+    # finite components whose products with the fixed rotations overflow (the sum of q's
+    # components finite, its products not)
+    cases += [(-1.7e308, 1.7e308, 1.6e308, -1.6e308), (1.7e308, -1.6e308, -1.7e308, 1.6e308)]
     for q in cases:
         r = q_mul(q_mul((0.0, h, h, 0.0), (q[0], q[1], q[2], q[3])), (0.0, 1.0, 0.0, 0.0))
         want = r if r[0] >= 0.0 else (-r[0], -r[1], -r[2], -r[3])
