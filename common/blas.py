@@ -3,8 +3,9 @@ there by importing `scipy.linalg.cython_blas`, which runs all of `scipy.linalg` 
 to 0.4 s of CPU in every program, the ground station's, the FCU's and the plant's, most
 of it scipy's array-API layer) for an extension module that loads alone in 5 ms.
 `load_cython_blas` loads that module alone, before numba is imported (`common.jit`).
-numba's compiled BLAS calls (the estimator's `np.dot`) take their function pointers from
-its `__pyx_capi__`: the same module either way, and the same products.
+numba checks for it whether or not a kernel calls BLAS (none of ours does since the
+estimator's products use their matrices' structure); a kernel's `np.dot` would take its
+function pointers from the module's `__pyx_capi__`: the same module either way.
 """
 
 from __future__ import annotations

@@ -95,6 +95,50 @@ def _flat_indices() -> np.ndarray:
 F_IDX = _flat_indices()
 
 
+def _row_columns() -> np.ndarray:
+    """For each row of F, the columns that can be non-zero (the diagonal and F_IDX's), in
+    increasing order, padded with -1: 72 of F's 225 entries."""
+    cols = [{i} for i in range(N)]
+    for f in F_IDX:
+        cols[f // N].add(int(f % N))
+    out = np.full((N, max(len(c) for c in cols)), -1, dtype=np.int64)
+    for i, c in enumerate(cols):
+        out[i, :len(c)] = sorted(c)
+    return out
+
+
+F_COLS = _row_columns()
+
+
+@njit
+def f_p_ft(F: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """F P F^T over F's possibly non-zero entries (`F_COLS`): about 2,200 multiplications
+    where the dense products take 6,750; the same sums but for their order and the terms
+    of F's zeros."""
+    n = P.shape[0]
+    w = F_COLS.shape[1]
+    FP = np.zeros((n, n))
+    for i in range(n):
+        for c in range(w):
+            k = F_COLS[i, c]
+            if k < 0:
+                break
+            f = F[i, k]
+            for j in range(n):
+                FP[i, j] += f * P[k, j]
+    out = np.empty((n, n))
+    for j in range(n):
+        for i in range(n):
+            t = 0.0
+            for c in range(w):
+                k = F_COLS[j, c]
+                if k < 0:
+                    break
+                t += FP[i, k] * F[j, k]
+            out[i, j] = t
+    return out
+
+
 @njit
 def transition_entries(x0: State, x1: State, T: float, g: float) -> tuple[float, ...]:
     """The 60 time-varying entries of F (at F_IDX) over an interval T from x0 to x1.

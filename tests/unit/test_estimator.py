@@ -660,14 +660,14 @@ class _RecordingEstimator(Estimator):
         fb, ib, M = self._fb, self._ib, self._M
         ok = fuse_begin(fb, ib, M)
         if ok:
-            H, y, r = _measurement(fb, (ok & OK_POS) != 0, (ok & OK_ATT) != 0)
+            idx, y, r = _measurement(fb, (ok & OK_POS) != 0, (ok & OK_ATT) != 0)
             if len(y) == 6:
-                S = H @ M[0] @ H.T + np.diag(r)
+                S = M[0][np.ix_(idx, idx)] + np.diag(r)
                 self.nis.append((self._h_t, float(y @ np.linalg.solve(S, y))))
-            pht, S = joseph_gain(M[0], H, r)
+            pht, S = joseph_gain(M[0], idx, r)
             spd, s_inv = spd_inverse(S)
             assert spd
-            apply_update(fb, M, H, pht, s_inv, y, r)
+            apply_update(fb, M, idx, pht, s_inv, y, r)
         fuse_end(fb, ib, M, self._pend_t, self._pend_v, ok)
 
 

@@ -1,7 +1,9 @@
 """The estimator's compiled kernels (fcu/estimator/filter.py, update.py, strapdown.py,
 output.py) against references written here: straightforward numpy for the maths (a dropped
 or wrong term shows as a difference far above rounding), and numpy in the interpreted
-filter's own order for the bits (the kernels must give the same floats)."""
+filter's own order for the bits (the kernels must give the same floats), but for the
+products written over the matrices' structure (F P F^T, the Joseph update), which must
+agree with numpy's dense products within 1e-13 relative."""
 
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ from fcu.estimator.layouts import (
 )
 from fcu.estimator.readout import positive_definite, sd_values, variance_code
 from fcu.estimator.settings import EstimatorSettings
-from fcu.estimator.strapdown import strapdown
+from fcu.estimator.strapdown import F_COLS, F_IDX, f_p_ft, strapdown
 from fcu.estimator.update import (
     bound_covariance,
     inject,
@@ -43,6 +45,12 @@ I15 = np.eye(15)
 H_POS = I15[[0, 1, 2]]  # the measurement selectors the filter builds (`filter._measurement`)
 H_ATT = I15[[6, 7, 8]]
 H_BOTH = I15[[0, 1, 2, 6, 7, 8]]
+STRUCTURED_REL = 1e-13  # the structured products against numpy's dense ones
+
+
+def _rows(H: np.ndarray) -> np.ndarray:
+    """The rows of I15 a selector H takes (the kernels' `idx`)."""
+    return np.flatnonzero(H.any(axis=0)).astype(np.int64)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -188,24 +196,55 @@ def _update_numpy_order(P: np.ndarray, H: np.ndarray, y: list[float], r: list[fl
 def test_update_against_references(H):
     """Given random covariances, innovations and variances, then the compiled update (its
     two halves around the compiled inverse) is the textbook Joseph update with the reset
-    within rounding, and, given numpy's inverse, the interpreted filter's numpy update to
-    the bit."""
+    within rounding; its first half (P H^T, S) is numpy's dense products to the bit, and,
+    given numpy's inverse, the whole is the interpreted filter's numpy update within
+    1e-13 relative (the structured sums in another order)."""
     rng = np.random.default_rng(RNG_SEED + 2)
     m = H.shape[0]
+    idx = _rows(H)
+    worst = 0.0
     for _ in range(200):
         P = _spd(rng)
         y = rng.normal(0, 0.01, m)
         r = rng.uniform(1e-6, 1e-4, m)
         Pk = P.copy()
-        pht, S = joseph_gain(Pk, H, r)
-        dx = joseph_apply(Pk, H, pht, np.linalg.inv(S), y, r)
+        pht, S = joseph_gain(Pk, idx, r)
+        pht_np = P.dot(H.T)
+        S_np = H.dot(pht_np)
+        S_np.flat[::m + 1] += r
+        assert np.array_equal(pht, pht_np) and np.array_equal(S, S_np)
+        dx = joseph_apply(Pk, idx, pht, np.linalg.inv(S), y, r)
         P_np, dx_np = _update_numpy_order(P.copy(), H, y.tolist(), r.tolist())
-        assert np.array_equal(Pk, P_np) and dx.tolist() == dx_np
+        worst = max(worst, float(np.abs(Pk - P_np).max() / np.abs(P_np).max()),
+                    float(np.abs(dx - dx_np).max() / np.abs(dx_np).max()))
+        assert np.array_equal(Pk, Pk.T)
         Pk = P.copy()
-        dx = joseph_apply(Pk, H, pht, spd_inverse(S)[1], y, r)
+        dx = joseph_apply(Pk, idx, pht, spd_inverse(S)[1], y, r)
         P_ref, dx_ref = _update_reference(P, H, y, r)
         assert np.abs(dx - dx_ref).max() < 1e-12
         assert np.abs(Pk - P_ref).max() < 1e-10 * np.abs(P_ref).max()
+    assert worst < STRUCTURED_REL, worst
+
+
+def test_f_p_ft_is_the_dense_product_within_rounding():
+    """Given transitions with random values at F's time-varying entries (F_IDX) and on its
+    diagonal, then `F_COLS` holds every entry that can be non-zero and the structured
+    F P F^T is numpy's dense product within 1e-13 relative."""
+    rng = np.random.default_rng(RNG_SEED + 8)
+    mask = np.eye(15, dtype=bool)
+    mask.flat[F_IDX] = True
+    listed = np.zeros((15, 15), dtype=bool)
+    for i, row in enumerate(F_COLS):
+        listed[i, row[row >= 0]] = True
+    assert np.array_equal(listed, mask)
+    worst = 0.0
+    for _ in range(300):
+        F = np.zeros((15, 15))
+        F[mask] = rng.normal(size=int(mask.sum()))
+        P = _spd(rng)
+        want = F @ P @ F.T
+        worst = max(worst, float(np.abs(f_p_ft(F, P) - want).max() / np.abs(want).max()))
+    assert worst < STRUCTURED_REL, worst
 
 
 @pytest.mark.parametrize("H", [H_BOTH, H_POS, H_ATT], ids=["both", "position", "attitude"])
@@ -219,7 +258,7 @@ def test_innovation_covariance_inverse_is_numpys_within_rounding(H):
     for _ in range(300):
         P = _spd(rng)
         r = 10.0 ** rng.uniform(-10, -2, m)
-        _, S = joseph_gain(P, H, r)
+        _, S = joseph_gain(P, _rows(H), r)
         ok, inv = spd_inverse(S)
         want = np.linalg.inv(S)
         assert ok and np.array_equal(inv, inv.T)
