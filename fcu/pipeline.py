@@ -86,7 +86,11 @@ class Pipeline:
                                          self.core.allocator.tilt)
         self.gcs_link = GcsLinkMonitor()
         self.state: VehicleState | None = None
-        self.state_time_us = -1  # the stamp of the latest state
+        self.state_time_us = -1  # the stamp of the latest state or IMU sample (answers echo it)
+        # The stamp of `state`, the state a step flies: its source's, or the estimate's (an
+        # IMU sample at a period's end). In lockstep a step comes at that sample and the two
+        # stamps agree; in real time newer samples may have come since.
+        self.state_stamp_us = -1
         self.state_rx_us: int | None = None  # the flight clock when it arrived
         self.failsafe: Failsafe = Failsafe.NONE  # in force: shown in HEARTBEAT, SYS_STATUS
         self.last_output: StepOutput | None = None
@@ -114,6 +118,7 @@ class Pipeline:
         """`on_state` of a state whose attitude is normalized."""
         self.state = state
         self.state_time_us = stamp_us
+        self.state_stamp_us = stamp_us
         self.state_rx_us = rx_us
         self.commander.on_state(state, rx_us)
 

@@ -333,11 +333,11 @@ def _fly(scenario: Scenario, world: World, pipeline: Pipeline, run_logs: _RunLog
         step_us = (clock() - t0) * 1e6 + input_us
         row = None
         if out.result is not None and pipeline.state is not None:
-            row = onboard_row(t_us, pipeline.state, out.result, out.speed_rad_s, out.tilt_rad,
-                              out.armed, step_us)
+            # keyed by the stamp of the state flown, as the onboard log keys it
+            row = onboard_row(pipeline.state_stamp_us, pipeline.state, out.result,
+                              out.speed_rad_s, out.tilt_rad, out.armed, step_us)
             onboard_rows.add(row)
-        # the onboard log's row is the same but for its stamp, out.t_us
-        run_logs.step(out, step_us, t_us, cmd.events, row if out.t_us == t_us else None)
+        run_logs.step(out, step_us, t_us, cmd.events, row)
         # The step's mission events consumed, as the FCU process's housekeeping consumes
         # them (MISSION_ITEM_REACHED): the log reads only the new ones at its next step.
         cmd.mission_events.clear()

@@ -34,3 +34,42 @@ def test_each_control_step_is_in_the_file_when_the_step_returns(tmp_path):
             assert rows[:, 0].tolist() == [2000.0 * i for i in range(k + 1)]
     finally:
         fc.close()
+
+
+def test_a_step_after_a_newer_sample_is_keyed_by_the_estimate_it_flew():
+    """Given an in-process mocap flight in which, before every 10th control step, an IMU
+    sample 1 ms newer than the period's end reaches the estimator first (as in real time,
+    where the FCU's tick may follow an odd sample of a 1 kHz IMU), then every dq_onboard row
+    is keyed by the stamp of the estimate the step flew (a period's end: `state_time_us`,
+    and the timestamp with it), and every step joins a truth row in the metrics; keyed by
+    the newest sample instead, a tenth of the rows joined none."""
+    import dataclasses
+    import io
+
+    from pyulog import ULog
+
+    from common.config.scenario import load_scenario
+    from common.config.sensors import resolve_sensor_profile
+    from fcu.estimator.inputs import ImuInput
+    from gcs.run.inprocess import run_scenario
+
+    injected = []
+
+    def newer_sample_first(t_us: int, pipeline: Pipeline) -> None:
+        inputs = pipeline.estimator_inputs or []
+        imu = [x for x in inputs if isinstance(x, ImuInput)]
+        if t_us % 20_000 == 0 and imu and imu[-1].t_us == t_us:
+            pipeline.on_imu(imu[-1]._replace(t_us=t_us + 1000))
+            injected.append(t_us)
+
+    scenario = dataclasses.replace(load_scenario(ROOT / "config/scenarios/case1_figure8.toml"),
+                                   sensors=resolve_sensor_profile("mocap-indoor"),
+                                   duration_s=3.0)
+    result = run_scenario(scenario, before_step=newer_sample_first)
+    assert len(injected) >= 100
+    assert result.onboard_ulog is not None
+    dq = ULog(io.BytesIO(result.onboard_ulog), ["dq_onboard"]).data_list[0].data
+    stamps = dq["state_time_us"].astype(int)
+    assert len(stamps) >= 1400 and set(stamps % 2000) == {0}
+    assert set(injected) <= set(stamps.tolist())
+    assert result.metrics["samples"] == len(result.onboard) == len(stamps)
