@@ -87,10 +87,11 @@ class Pipeline:
         self.gcs_link = GcsLinkMonitor()
         self.state: VehicleState | None = None
         self.state_time_us = -1  # the stamp of the latest state or IMU sample (answers echo it)
-        # The stamp of `state`, the state a step flies: its source's, or the estimate's (an
-        # IMU sample at a period's end). In lockstep a step comes at that sample and the two
-        # stamps agree; in real time newer samples may have come since.
-        self.state_stamp_us = -1
+        # The simulator's stamp of the control period the next step answers: the newest
+        # state's, or with the estimator the newest IMU sample at a period's end (where the
+        # estimate is taken). In lockstep the step comes at that instant; in real time a
+        # newer sample may have come since (with a 1 kHz IMU, the odd millisecond's).
+        self.period_stamp_us = -1
         self.state_rx_us: int | None = None  # the flight clock when it arrived
         self.failsafe: Failsafe = Failsafe.NONE  # in force: shown in HEARTBEAT, SYS_STATUS
         self.last_output: StepOutput | None = None
@@ -113,12 +114,12 @@ class Pipeline:
         """A valid state stamped `stamp_us`, received at `rx_us` on the flight clock."""
         p, q, v, w = state
         self._take_state(stamp_us, VehicleState(p, q_normalize(q), v, w), rx_us)
+        self.period_stamp_us = stamp_us
 
     def _take_state(self, stamp_us: int, state: VehicleState, rx_us: int) -> None:
         """`on_state` of a state whose attitude is normalized."""
         self.state = state
         self.state_time_us = stamp_us
-        self.state_stamp_us = stamp_us
         self.state_rx_us = rx_us
         self.commander.on_state(state, rx_us)
 
@@ -151,6 +152,7 @@ class Pipeline:
             self.state_time_us = sample.t_us  # answers echo the newest sample
         if sample.t_us % self.period_us == 0:
             self._take_estimate()  # the state of the period (telemetry, arming, the step)
+            self.period_stamp_us = sample.t_us
 
     def on_pose(self, pose: PoseInput) -> None:
         """One external pose (motion capture) for the estimator."""

@@ -4,11 +4,11 @@ Topics (ULog, read with pyulog); PX4's layouts are in `common.logs.px4_topics`:
 
 - `dq_onboard`, every control step in flight: ONBOARD_COLUMNS in float64, ENU/FLU (state,
   desired pose and twist, wrench, commands, raw and unwrapped tilts, dual-quaternion errors,
-  step time), and `state_time_us`, the stamp of the state the step acted on as its source
-  (the simulator) sent it, or with the estimator the stamp of the IMU sample (a period's
-  end) of the estimate flown (`Pipeline.state_stamp_us`; in real time newer samples may have
-  come before the step): the key that joins it to truth.ulg (`gcs.run.runio`); every metric
-  of the controller's side is computed from it.
+  step time), and `state_time_us`, the simulator's stamp of the control period the step
+  answered: the state's as its source sent it, or with the estimator the IMU sample at the
+  period's end, where the estimate is taken (`Pipeline.period_stamp_us`; in real time a
+  newer sample may have come before the step): the key that joins it to truth.ulg
+  (`gcs.run.runio`); every metric of the controller's side is computed from it.
 - At PX4_HZ (NED/FRD, float32): vehicle_local_position, vehicle_attitude,
   vehicle_angular_velocity (the state the controller used); in flight trajectory_setpoint,
   vehicle_local_position_setpoint, vehicle_attitude_setpoint, vehicle_rates_setpoint (the
@@ -147,12 +147,12 @@ class OnboardLog(ULogWriter):
     def step(self, out: StepOutput, step_us: float, t_us: int,
              row: tuple[float, ...] | None = None) -> None:
         """Queue the records of one control step at flight time t_us; `row`: its
-        `onboard_row` when the caller made it already (stamped with the state's stamp)."""
+        `onboard_row` when the caller made it already (its stamp is not read)."""
         pipe = self.pipeline
         state = pipe.state
         self._estimator_inputs()
         if out.result is not None and state is not None:
-            stamp_us = pipe.state_stamp_us  # the state flown (out.t_us: the newest sample)
+            stamp_us = pipe.period_stamp_us  # the period answered (out.t_us: newest sample)
             if row is None:
                 row = onboard_row(stamp_us, state, out.result, out.speed_rad_s, out.tilt_rad,
                                   out.armed, step_us)
@@ -169,8 +169,8 @@ class OnboardLog(ULogWriter):
         pipe = self.pipeline
         state = pipe.state
         w = self
-        # timestamp_sample: the stamp of the state the step flew
-        stamp = self.on_flight_clock(pipe.state_stamp_us if state is not None else out.t_us)
+        # timestamp_sample: the period the step answered
+        stamp = self.on_flight_clock(pipe.period_stamp_us if state is not None else out.t_us)
         if state is not None:
             valid = not state_lost(t_us, pipe.state_rx_us, pipe.settings)
             v_enu = q_rotate(state.q_enu_flu, state.v_flu_m_s)

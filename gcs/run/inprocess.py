@@ -333,8 +333,8 @@ def _fly(scenario: Scenario, world: World, pipeline: Pipeline, run_logs: _RunLog
         step_us = (clock() - t0) * 1e6 + input_us
         row = None
         if out.result is not None and pipeline.state is not None:
-            # keyed by the stamp of the state flown, as the onboard log keys it
-            row = onboard_row(pipeline.state_stamp_us, pipeline.state, out.result,
+            # keyed by the control period answered, as the onboard log keys it (t_us)
+            row = onboard_row(pipeline.period_stamp_us, pipeline.state, out.result,
                               out.speed_rad_s, out.tilt_rad, out.armed, step_us)
             onboard_rows.add(row)
         run_logs.step(out, step_us, t_us, cmd.events, row)

@@ -212,8 +212,8 @@ def test_one_clock_in_the_onboard_log_in_real_time(tmp_path, sensors):
     timestamp (not the processes' start-up apart), dq_onboard is moved by one offset, a
     whole number of control periods, from the states' own stamps (state_time_us), the
     metrics joined on those stamps are metrics.json's, and they join nearly every step.
-    With the estimator the stamp is the estimate's, at a period's end, where the truth log
-    has a row, not the newest IMU sample's, which a real-time step may follow: keyed by
+    With the estimator the stamp is the newest IMU sample at a period's end, where the
+    truth log has a row, not the newest sample, which a real-time step may follow: keyed by
     that, 1 to 4 of 3,000 steps joined when the FCU's ticks fell after the odd samples of
     the 1 kHz IMU (tests/unit/test_onboard_log.py makes that case in every run)."""
     out = tmp_path / "rt"

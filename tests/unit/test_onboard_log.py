@@ -36,13 +36,13 @@ def test_each_control_step_is_in_the_file_when_the_step_returns(tmp_path):
         fc.close()
 
 
-def test_a_step_after_a_newer_sample_is_keyed_by_the_estimate_it_flew():
+def test_a_step_after_a_newer_sample_is_keyed_by_the_period_it_answers():
     """Given an in-process mocap flight in which, before every 10th control step, an IMU
     sample 1 ms newer than the period's end reaches the estimator first (as in real time,
     where the FCU's tick may follow an odd sample of a 1 kHz IMU), then every dq_onboard row
-    is keyed by the stamp of the estimate the step flew (a period's end: `state_time_us`,
-    and the timestamp with it), and every step joins a truth row in the metrics; keyed by
-    the newest sample instead, a tenth of the rows joined none."""
+    is keyed by the period's end, where the estimate is taken (`state_time_us`, and the
+    timestamp with it), and every step joins a truth row in the metrics; keyed by the newest
+    sample instead, a tenth of the rows joined none."""
     import dataclasses
     import io
 
