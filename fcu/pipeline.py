@@ -152,7 +152,8 @@ class Pipeline:
             self.state_time_us = sample.t_us  # answers echo the newest sample
         if sample.t_us % self.period_us == 0:
             self._take_estimate()  # the state of the period (telemetry, arming, the step)
-            self.period_stamp_us = sample.t_us
+            if sample.t_us > self.period_stamp_us:  # a late, reordered sample answers none
+                self.period_stamp_us = sample.t_us
 
     def on_pose(self, pose: PoseInput) -> None:
         """One external pose (motion capture) for the estimator."""

@@ -73,3 +73,21 @@ def test_a_step_after_a_newer_sample_is_keyed_by_the_period_it_answers():
     assert len(stamps) >= 1400 and set(stamps % 2000) == {0}
     assert set(injected) <= set(stamps.tolist())
     assert result.metrics["samples"] == len(result.onboard) == len(stamps)
+
+
+def test_a_late_sample_at_a_period_end_does_not_move_the_period_answered_back():
+    """Given IMU samples at the period ends 2, 4 and 6 ms, then a reordered one stamped 4 ms
+    again and one stamped 2 ms (a real-time link may reorder), then the period the next step
+    answers stays 6 ms; a newer period end moves it on."""
+    from fcu.estimator.inputs import ImuInput
+    from fcu.estimator.settings import EstimatorSettings
+
+    pipeline = Pipeline(load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml"),
+                        load_gains(ROOT / "config/gains/pid_eq30.toml"), 500)
+    pipeline.use_estimator(EstimatorSettings())
+    rest = ((0.0, 0.0, 0.0), (0.0, 0.0, 9.81))
+    for t_us in (2000, 3000, 4000, 5000, 6000, 4000, 2000):
+        pipeline.on_imu(ImuInput(t_us, *rest))
+    assert pipeline.period_stamp_us == 6000
+    pipeline.on_imu(ImuInput(8000, *rest))
+    assert pipeline.period_stamp_us == 8000
