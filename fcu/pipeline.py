@@ -317,7 +317,7 @@ class Pipeline:
         level = pose_loss_level(t_us, st.last_fusion_us, self.settings)
         if level > self.pose_level:
             self.failsafe = Failsafe.POSE_LOST
-            if level is PoseLoss.HOLD and not cmd.landing:
+            if level is PoseLoss.HOLD and not cmd.landing_ahead:
                 cmd.failsafe_hold("failsafe: pose source lost: HOLD")
             elif level is PoseLoss.LAND:
                 cmd.failsafe_land("failsafe: pose source lost: LAND")
@@ -349,8 +349,8 @@ class Pipeline:
         cmd = self.commander
         if change is SaturationChange.START:
             self.failsafe = Failsafe.ROTOR_SATURATION
-            if self.settings.saturation_hold and cmd.mode == Mode.MISSION and \
-                    not cmd.landing:
+            if self.settings.saturation_hold and cmd.mode_ahead == Mode.MISSION and \
+                    not cmd.landing_ahead:
                 cmd.failsafe_hold("failsafe: rotors saturated: mission aborted, HOLD")
             else:
                 speeds = unclamped_speeds(omega_sq)
@@ -377,7 +377,7 @@ class Pipeline:
         change = self.gcs_link.update(now_s, gcs_seen_s, self.settings)
         if change is LinkChange.LOST:
             self.failsafe = Failsafe.GCS_LOST
-            if cmd.armed and not cmd.landing:
+            if cmd.armed and not cmd.landing_ahead:
                 cmd.failsafe_hold("failsafe: GCS link lost: HOLD")
             else:
                 cmd.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, "failsafe: GCS link lost")

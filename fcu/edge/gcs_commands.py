@@ -96,8 +96,11 @@ class CommandService:
         self.repeated_commands = 0
 
     def ack(self, index: int, msg: Message, command: int, result: int) -> None:
+        """COMMAND_ACK to the sender; `progress` UINT8_MAX with IN_PROGRESS (the spec's
+        "progress unknown"), else 0."""
+        progress = 255 if result == IN_PROGRESS else 0
         self.server.send(M.MAVLink_command_ack_message(
-            command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()), index)
+            command, result, progress, 0, msg.get_srcSystem(), msg.get_srcComponent()), index)
 
     def handle(self, index: int, msg: Command, now_s: float) -> None:
         """Execute a COMMAND_LONG/INT and ACK it; a COMMAND_LONG re-sent by its sender
@@ -121,15 +124,24 @@ class CommandService:
         plan = self.server.pipeline.commander.under_way
         if answer.result == IN_PROGRESS and plan is not None:  # answered again when planned
             self._answer(index, msg, sender, key, now_s, Answer(IN_PROGRESS, ""))
-            plan.on_end(lambda r, t: self._answer(index, msg, sender, key, now_s, Answer(r, t)))
+            plan.on_end(lambda r, t: self._answer(index, msg, sender, key, now_s, Answer(r, t),
+                                                  final=True))
             return
         self._answer(index, msg, sender, key, now_s, answer)
 
     def _answer(self, index: int, msg: Command, sender: tuple[int, int, int], key: bytes,
-                now_s: float, answer: Answer) -> None:
-        if len(self.executed) >= MAX_PEERS and sender not in self.executed:
-            del self.executed[next(iter(self.executed))]
-        self.executed[sender] = (key, now_s, answer)
+                now_s: float, answer: Answer, final: bool = False) -> None:
+        """ACK `answer` and keep it for the sender's retries; a `final` answer (of a command
+        that was IN_PROGRESS) only where that command is still the sender's last: a newer
+        one's record is kept for its own retries."""
+        if final:
+            last = self.executed.get(sender)
+            if last is not None and last[0] == key and last[1] == now_s:
+                self.executed[sender] = (key, now_s, answer)
+        else:
+            if len(self.executed) >= MAX_PEERS and sender not in self.executed:
+                del self.executed[next(iter(self.executed))]
+            self.executed[sender] = (key, now_s, answer)
         self.ack(index, msg, msg.command, answer.result)
         if answer.reason and answer.result != ACCEPTED:
             self.server.say(WARNING, answer.reason, index)

@@ -67,6 +67,7 @@ WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
 COMPONENT = MAV_COMPONENT.MAV_COMP_ID_AUTOPILOT1
 STATUSTEXT_LEN = 50
 MAX_PARSERS = MAX_PEERS  # one per (link, peer); peers cycling source ports cannot grow it
+MAX_PARTNERS = MAX_PEERS  # mission partners whose link is kept (`mission_partner_links`)
 STATUSTEXT_BURST = 20.0
 STATUSTEXT_RATE = 10.0  # per second and link
 # Every message type a ground station can send that the server acts on (the rest are
@@ -109,6 +110,9 @@ class GcsServer:
         self.builders = Builders(self.snapshot, home)
         self.gcs_seen_s = -math.inf
         self.mission_link = 0  # the link of the latest mission upload (re-requests go there)
+        # the link each GCS (system, component) last sent a mission message on: where the
+        # answers that come later (`MissionServer.outbox`) go
+        self.mission_partner_links: dict[tuple[int, int], int] = {}
         missions.current = lambda: pipeline.commander.mission_current
         self.rejected_bytes = 0
         self.ignored_messages = 0
@@ -259,6 +263,12 @@ class GcsServer:
     def _mission(self, index: int, msg: MAV.MAVLink_message, now_s: float) -> None:
         """A mission protocol message: the mission server's replies to the link it came on
         (an upload's re-requests too, once it began there)."""
+        partners = self.mission_partner_links
+        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        partners.pop(partner, None)  # kept newest last, the oldest forgotten past MAX_PARTNERS
+        partners[partner] = index
+        if len(partners) > MAX_PARTNERS:
+            del partners[next(iter(partners))]
         replies = self.missions.handle(msg, now_s)
         if msg.get_type() == "MISSION_COUNT" and any(r.get_type() == "MISSION_REQUEST_INT"
                                                      for r in replies):
@@ -412,8 +422,11 @@ class GcsServer:
         """Wall-clock work: mission re-requests, each link's due streams; a HEARTBEAT at once
         when the mode or the arming state changes (on the links that have the stream on)."""
         self.now_s = max(self.now_s, now_s)
-        # the upload's answer once its check is done (`fcu.work`), then re-requests
-        self._send_mission(self.missions.take_outbox(), self.mission_link)
+        # the upload's answer once its check is done (`fcu.work`), each to its GCS's link;
+        # then re-requests
+        for partner, reply in self.missions.take_outbox():
+            self._send_mission([reply], self.mission_partner_links.get(partner,
+                                                                       self.mission_link))
         self.param_service.tick()  # a parameter list, a burst at a time
         for reply in self.missions.tick(now_s):
             self.send(reply, self.mission_link)

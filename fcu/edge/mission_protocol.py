@@ -16,8 +16,10 @@ The check runs where the server's `work` runs it (`fcu.work`: at once, or beside
 loop): until it is done nothing is answered (MISSION_ACK goes out when it is, through
 `outbox`), a final item sent again meanwhile is no new upload and gets no answer of its
 own, a MISSION_COUNT from the same GCS starts a new upload (the pending check's result is
-dropped), one from another GCS is DENIED as during an upload, and downloads return the
-mission in force. A check that fails (its worker stopped) is MAV_MISSION_ERROR with why.
+dropped), one from another GCS is DENIED as during an upload, a MISSION_CLEAR_ALL is done
+(and answered) right after the check, and downloads return the mission in force. A check
+that fails (its worker stopped) is MAV_MISSION_ERROR with why. `outbox` names the GCS each
+of its answers goes to.
 Download: MISSION_REQUEST_LIST -> MISSION_COUNT, then MISSION_ITEM_INT for each
 MISSION_REQUEST_INT (or legacy MISSION_REQUEST). MISSION_CLEAR_ALL clears. Only
 MAV_MISSION_TYPE_MISSION is supported; the other plan types get MAV_MISSION_UNSUPPORTED.
@@ -91,6 +93,9 @@ class _Checking:
     partner: Partner
     count: int
     items: tuple[MissionItem, ...]
+    # MISSION_CLEAR_ALLs that came meanwhile (partner, mission type): done right after it,
+    # as they would have been had the check been done when the last item came
+    clears: list[tuple[Partner, int]] = field(default_factory=list)
 
 
 def _msg(cls: type[MAV.MAVLink_message], *args: object,
@@ -134,7 +139,8 @@ class MissionServer:
                  home: HomePosition | None = None, work: Work | None = None) -> None:
         self.system_id = system_id
         self.work = work if work is not None else InlineWork()
-        self.outbox: list[MAV.MAVLink_message] = []  # answers that came after the message
+        # answers that came after their message, each with the GCS it goes to
+        self.outbox: list[tuple[Partner, MAV.MAVLink_message]] = []
         self.component_id = component_id
         self.limits = limits
         self.home = home  # converts global-frame items; None: only local ones are accepted
@@ -235,9 +241,21 @@ class MissionServer:
         """MISSION_CLEAR_ALL of the mission (or of all types): the mission emptied."""
         if mission_type not in (MISSION, M.MAV_MISSION_TYPE_ALL):
             return [self._ack(partner, M.MAV_MISSION_UNSUPPORTED, mission_type)]
-        self._checking = None  # cleared after it: the check's answer would be stale
+        if self._checking is not None:  # done after the upload being checked (`_clears`)
+            self._checking.clears.append((partner, mission_type))
+            return []
         self._replace(())
         return [self._ack(partner, M.MAV_MISSION_ACCEPTED, mission_type, opaque=True)]
+
+    def _clears(self, checking: _Checking) -> None:
+        """The MISSION_CLEAR_ALLs that came while `checking` was checked, done now: the
+        mission emptied, each answered through `outbox`."""
+        if checking.clears:
+            self._replace(())
+        for partner, mission_type in checking.clears:
+            self.outbox.append((partner, self._ack(partner, M.MAV_MISSION_ACCEPTED,
+                                                   mission_type, opaque=True)))
+        checking.clears.clear()
 
     def _transfer(self, kind: str, msg: MAV.MAVLink_message, partner: Partner,
                   now_s: float) -> list[MAV.MAVLink_message]:
@@ -276,7 +294,9 @@ class MissionServer:
                 (checking is not None and checking.partner != partner):
             return [self._ack(partner, M.MAV_MISSION_DENIED)]  # busy with another GCS
         self._upload = None
-        self._checking = None  # a new upload: the old one's check answers nothing
+        if checking is not None:  # a new upload: the old one's check answers nothing,
+            self._checking = None  # the clears that waited for it are done now
+            self._clears(checking)
         self._finished = None
         if count > self.limits.max_items:
             return [*self._statustexts(too_many(count, self.limits)),
@@ -312,7 +332,7 @@ class MissionServer:
         checking = self._checking = _Checking(partner, up.count, tuple(up.items))
         self.work.submit(check_mission, (checking.items, self.limits, self.home),
                          lambda outcome: self._checked(checking, outcome))
-        return self.take_outbox()
+        return self._take_for(partner)  # done at once (inline): the answer now
 
     def _checked(self, checking: _Checking,
                  outcome: Outcome[tuple[int, int | None, str]]) -> None:
@@ -328,13 +348,21 @@ class MissionServer:
             self._replace(checking.items)
         notes = self._statustexts(reason) if reason else ()
         self._finished = _Finished(checking.partner, checking.count, result, notes)
-        self.outbox += [*notes, self._ack(checking.partner, result,
-                                          opaque=result == M.MAV_MISSION_ACCEPTED)]
+        self.outbox += [(checking.partner, m) for m in (
+            *notes, self._ack(checking.partner, result, opaque=result == M.MAV_MISSION_ACCEPTED))]
+        self._clears(checking)
 
-    def take_outbox(self) -> list[MAV.MAVLink_message]:
-        """The answers queued since the last call (to the GCS of the latest upload)."""
+    def take_outbox(self) -> list[tuple[Partner, MAV.MAVLink_message]]:
+        """The answers queued since the last call, each with the GCS (system, component)
+        it goes to: the uploader's, and those of clears that waited for its check."""
         out, self.outbox = self.outbox, []
         return out
+
+    def _take_for(self, partner: Partner) -> list[MAV.MAVLink_message]:
+        """The queued answers to `partner`, taken out of `outbox` (others stay)."""
+        mine = [m for p, m in self.outbox if p == partner]
+        self.outbox = [(p, m) for p, m in self.outbox if p != partner]
+        return mine
 
     # ------------------------------------------------------------------ time
 

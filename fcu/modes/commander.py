@@ -132,6 +132,19 @@ class Commander:
         return self.modes.mode
 
     @property
+    def mode_ahead(self) -> Mode:
+        """The mode in force once the change under way is made (`mode` when none is): a
+        failsafe reacts as it would had the change been made in the loop, at its command."""
+        under_way = self.under_way
+        return self.mode if under_way is None else under_way.mode
+
+    @property
+    def landing_ahead(self) -> bool:
+        """`landing`, judged by `mode_ahead`: a change under way (MISSION's start, POSCTL)
+        takes the vehicle out of a landing."""
+        return self.landing and self.under_way is None
+
+    @property
     def landing(self) -> bool:
         """Landing or returning (`ModeState.landing`): a GCS link loss does not interrupt it."""
         return self.modes.landing
@@ -234,8 +247,9 @@ class Commander:
             self._fit_posctl(Mode.POSCTL)  # fitted again there
         run = self.modes.mission_run
         if self.mode == Mode.MISSION and not run.running and not run.done \
-                and run.items:  # MISSION_START came first: fly it now
-            self._plan_mission(run.current, "", "mission started", self._warn)
+                and run.items and self.under_way is None:  # MISSION_START came first: fly
+            self._plan_mission(run.current, "", "mission started", (self._warn,))  # it now
+        # (POSCTL asked for meanwhile, its fit under way: POSCTL is entered when fitted)
         self._maybe_start_flight()
         return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, "armed")
 
@@ -251,7 +265,7 @@ class Commander:
                           "disarm refused: in the air (force with p2 = 21196)")
         self.armed = False  # simulated time keeps running once the flight has started
         self.modes.on_disarming()
-        self._drop_under_way()
+        self.drop_under_way()
         self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING if force else MAV_SEVERITY.MAV_SEVERITY_INFO,
                  reason)
         if not landed and record_in_air:
@@ -283,7 +297,7 @@ class Commander:
         under_way = self.under_way
         if under_way is not None and under_way.mode == mode:
             return Answer(IN_PROGRESS, "")  # the same mode asked again (another station): it waits
-        self._drop_under_way()  # a start under way gives way to the newer command
+        self.drop_under_way()  # a start under way gives way to the newer command
         run = self.modes.mission_run
         if mode == Mode.MISSION and (previous != Mode.MISSION or not run.running) \
                 and self.armed:
@@ -323,6 +337,7 @@ class Commander:
         refused = self.modes.plan_takeoff(climb)
         if refused:
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, refused)
+        self.drop_under_way()  # a change under way gives way to the take-off
         previous = self.mode
         self.modes.switch(Mode.TAKEOFF)
         self._maybe_start_flight()
@@ -336,7 +351,7 @@ class Commander:
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, "no mission")
         if not 0 <= first < len(run.items):
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {first}")
-        self._drop_under_way()
+        self.drop_under_way()
         if self.armed:
             return self._plan_mission(first, "mission started", "mission started")
         run.restart(first)
@@ -347,7 +362,7 @@ class Commander:
     def set_mission(self, items: tuple[MissionItem, ...]) -> None:
         """A new mission (already validated by the mission protocol)."""
         self.modes.mission_run.replace(items)
-        self._drop_under_way()  # planned for the old one
+        self._drop_mission_plan()  # planned for the old one (POSCTL's fit goes on)
         if self.modes.mission_run.has_landing:
             self.modes.say_touchdown_cap()  # the landing's clamp, said when the mission is taken
         if self.mode == Mode.MISSION:
@@ -358,8 +373,13 @@ class Commander:
         run = self.modes.mission_run
         if not 0 <= seq < len(run.items):
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {seq}")
+        pending = run.plan
+        if pending is not None:  # a start under way: it flies from `seq` instead, and its
+            run.plan = None      # commands wait for that plan's answer
+            return self._plan_mission(seq, pending.said, pending.text,
+                                      (*pending.replies,))
         if self.mode == Mode.MISSION and run.running and self.armed:
-            self._drop_under_way()
+            self.drop_under_way()
             return self._plan_mission(seq, "", f"mission item {seq}")
         run.select(seq)
         return Answer(MAV_RESULT.MAV_RESULT_ACCEPTED, f"mission item {seq}")
@@ -393,30 +413,38 @@ class Commander:
                      f"{lim.jerk_m_s3:.2g} m/s3 here")
         fit.end(*result)
 
-    def _drop_under_way(self) -> None:
-        """A mode change under way gives way to a newer command, a new mission, a disarm or
-        a failsafe: its command is answered MAV_RESULT_FAILED (valid, not carried out; the
-        spec's MAV_RESULT_CANCELLED answers COMMAND_CANCEL only), with why."""
+    def drop_under_way(self) -> None:
+        """A mode change under way gives way to a newer command, a disarm or a failsafe
+        (also one whose reaction the current mode makes needless: the change would have
+        been in force when it came, had it been made in the loop): its command is answered
+        MAV_RESULT_FAILED (valid, not carried out; the spec's MAV_RESULT_CANCELLED answers
+        COMMAND_CANCEL only), with why."""
         dropped = self.under_way
         self.modes.mission_run.plan = self.modes.posctl.fit = None
         if dropped is not None:
             dropped.end(MAV_RESULT.MAV_RESULT_FAILED, "superseded by a newer command")
+
+    def _drop_mission_plan(self) -> None:
+        """A new mission: a mission start under way (planned for the old one) is dropped
+        as `drop_under_way` drops it."""
+        if self.modes.mission_run.plan is not None:
+            self.drop_under_way()
 
     def _warn(self, result: int, text: str) -> None:
         if result != MAV_RESULT.MAV_RESULT_ACCEPTED:
             self.say(MAV_SEVERITY.MAV_SEVERITY_WARNING, text)
 
     def _plan_mission(self, seq: int, said: str, text: str,
-                      reply: Reply | None = None) -> Answer:
+                      replies: tuple[Reply, ...] = ()) -> Answer:
         """Plan the mission from item `seq`, starting now from the desired pose, and check
         it again from there with the upload's envelope (`fcu.mission.start.plan_from`, run
         by `work`): one that no longer fits is not flown (the vehicle holds; the command is
         refused with the reason), never flown into the limits. The answer, or IN_PROGRESS
-        while the plan is made beside the loop (then `reply` gets it)."""
+        while the plan is made beside the loop (then each of `replies` gets it)."""
         start = self.modes.here()
         plan = self.modes.mission_run.plan = MissionPlan(seq=seq, t_s=self.clock_us * 1e-6,
                                                    start=start, said=said, text=text)
-        if reply is not None:
+        for reply in replies:
             plan.on_end(reply)
         self.work.submit(plan_from, (self.modes.mission_run.items, self.limits, seq, plan.t_s,
                                      start.p_enu_m, start.q_enu_flu),
@@ -451,13 +479,13 @@ class Commander:
 
     def failsafe_hold(self, reason: str) -> None:
         """A failsafe reaction: stop where the vehicle should be and hold."""
-        self._drop_under_way()
+        self.drop_under_way()
         self.modes.switch(Mode.HOLD)
         self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, reason, FAILSAFE)
 
     def failsafe_land(self, reason: str) -> None:
         """A failsafe reaction: land where the vehicle is (unless landing already)."""
-        self._drop_under_way()
+        self.drop_under_way()
         if self.mode != Mode.LAND:
             self.modes.switch(Mode.LAND)
         self.say(MAV_SEVERITY.MAV_SEVERITY_CRITICAL, reason, FAILSAFE)

@@ -53,7 +53,7 @@ def _gcs(work: Work) -> tuple[Callable[[int, Pipeline], None], list[int]]:
             replies = s.handle(count, 0.0)
             for it in items:
                 replies = s.handle(item_message(it, 1, 1), 0.0)
-            answers.extend(r.type for r in [*replies, *s.take_outbox()]
+            answers.extend(r.type for r in [*replies, *(m for _, m in s.take_outbox())]
                            if r.get_type() == "MISSION_ACK")
         if t_us == START_US:
             answers.append(c.mission_start(0)[0])

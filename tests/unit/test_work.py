@@ -90,6 +90,15 @@ def _kinds(msgs: list[MAV.MAVLink_message]) -> list[str]:
     return [m.get_type() for m in msgs]
 
 
+def _out(server: MissionServer, partner: tuple[int, int] | None = None
+         ) -> list[MAV.MAVLink_message]:
+    """The server's queued answers (`take_outbox`), each checked to go to `partner`
+    (default: GCS, the uploader)."""
+    out = server.take_outbox()
+    assert all(p == (partner or GCS) for p, _ in out), out
+    return [m for _, m in out]
+
+
 # ---------------------------------------------------------------------- the workers
 
 
@@ -117,15 +126,15 @@ def test_the_answer_to_an_upload_waits_for_its_check():
     old = _items(2)
     _upload(server, old)
     work.release()
-    assert _acks(server.take_outbox()) == [M.MAV_MISSION_ACCEPTED]
+    assert _acks(_out(server)) == [M.MAV_MISSION_ACCEPTED]
     new = _items(5)
     assert _upload(server, new) == [] and server.checking
     assert server.handle(_item(new[-1]), 0.0) == []  # the last item again: no answer
     assert server.handle(_msg(M.MAVLink_mission_request_list_message(*VEHICLE, 0), GCS),
                          0.0)[0].count == 2  # a download meanwhile: the mission in force
-    assert server.take_outbox() == [] and len(changed) == 1
+    assert _out(server) == [] and len(changed) == 1
     assert work.release() == 1
-    acks = server.take_outbox()
+    acks = _out(server)
     assert _kinds(acks) == ["MISSION_ACK"] and acks[0].type == M.MAV_MISSION_ACCEPTED
     assert len(server.mission) == 5 and len(changed) == 2 and not server.checking
     again = server.handle(_item(new[-1]), 0.0)  # after the ACK: the same answer again
@@ -142,10 +151,10 @@ def test_a_new_upload_drops_the_pending_check_and_another_gcs_is_denied():
     assert _kinds(busy) == ["MISSION_ACK"] and busy[0].type == M.MAV_MISSION_DENIED
     assert _kinds(server.handle(_count(2), 0.0)) == ["MISSION_REQUEST_INT"]
     work.release()
-    assert server.take_outbox() == [] and server.mission == ()  # dropped
+    assert _out(server) == [] and server.mission == ()  # dropped
     _upload(server, _items(2))
     work.release()
-    assert _acks(server.take_outbox()) == [M.MAV_MISSION_ACCEPTED]
+    assert _acks(_out(server)) == [M.MAV_MISSION_ACCEPTED]
     assert len(server.mission) == 2
 
 
@@ -414,3 +423,235 @@ def test_a_new_current_item_in_flight_is_confirmed_by_mission_current_and_its_ac
     assert [(m.command, m.result) for m in sent if m.get_type() == "COMMAND_ACK"] == [
         (current, MAV_RESULT.MAV_RESULT_ACCEPTED)]
     assert [m.seq for m in sent if m.get_type() == "MISSION_CURRENT"] == [2]
+
+
+# ---------------------------------------------------------------------- what supersedes what
+
+
+def _posctl_or_mission_under_way(mode: Mode) -> tuple[Any, HeldWork, list[tuple[int, str]]]:
+    """Airborne in HOLD with a mission stored and MANUAL_CONTROL heard; `mode` asked, its
+    work held beside the loop; the replies its command gets."""
+    from fcu.modes import manual
+    c, work = _planned_commander()
+    c.manual_input(0.0, manual.CENTRED)
+    assert c.set_mode(mode, 0.0) == (IN_PROGRESS, "")
+    replies: list[tuple[int, str]] = []
+    c.under_way.on_end(lambda r, t: replies.append((r, t)))
+    return c, work, replies
+
+
+@pytest.mark.parametrize("mode", [Mode.MISSION, Mode.POSCTL])
+def test_a_takeoff_supersedes_a_change_under_way(mode):
+    """Given MISSION's plan or POSCTL's fit under way, when NAV_TAKEOFF is accepted, then
+    the change is dropped (its command FAILED, superseded) and TAKEOFF stays in force when
+    the work comes back. (The change used to be taken in over the accepted take-off: the
+    climb abandoned for a mission or POSCTL.)"""
+    c, work, replies = _posctl_or_mission_under_way(mode)
+    answer = c.takeoff()
+    assert answer[0] == MAV_RESULT.MAV_RESULT_ACCEPTED and c.mode == Mode.TAKEOFF
+    assert replies == [(MAV_RESULT.MAV_RESULT_FAILED, "superseded by a newer command")]
+    work.release()
+    assert c.mode == Mode.TAKEOFF and c.under_way is None and len(replies) == 1
+    assert not c.modes.mission_run.running
+
+
+def _landing_pipeline(work: Work) -> Any:
+    """Armed 2 m up, landing (LAND), a mission stored, the GCS link watched (COM_DL_LOSS_T
+    5 s, COM_DL_LAND_T 10 s) and rotor saturation aborting missions (COM_SAT_ACT 1)."""
+    from fcu.safety.failsafe import FailsafeSettings
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
+                    limits=MissionLimits(vehicle=vehicle),
+                    failsafes=FailsafeSettings(gcs_loss_s=5.0, gcs_loss_land_s=10.0,
+                                               saturation_hold=True))
+    pipe.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    assert pipe.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    pipe.commander.work = work
+    pipe.commander.set_mission(tuple(_items(3)))
+    pipe.check_links(0.0, 0.0)  # the GCS heard at 0 s
+    assert pipe.commander.set_mode(Mode.LAND, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    return pipe
+
+
+def _gcs_loss_in_landing(held: bool) -> tuple[Mode, Mode, list[int]]:
+    """MISSION asked while landing, the GCS link lost before its plan is taken in: (the
+    mode after the plan came back, the mode after COM_DL_LAND_T, the command's answers)."""
+    work = HeldWork() if held else InlineWork()
+    pipe = _landing_pipeline(work)
+    c = pipe.commander
+    answers: list[int] = []
+    answer = c.set_mode(Mode.MISSION, 4.9)
+    if c.under_way is not None:
+        c.under_way.on_end(lambda r, t: answers.append(r))
+    else:
+        answers.append(answer[0])
+    pipe.check_links(5.5, 0.0)  # lost
+    if isinstance(work, HeldWork):
+        work.release()
+    after_loss = c.mode
+    pipe.check_links(16.0, 0.0)  # COM_DL_LAND_T after the loss
+    return after_loss, c.mode, answers
+
+
+def test_a_failsafe_in_a_landing_judges_the_change_under_way_as_made():
+    """Given MISSION asked while landing, when the GCS link is lost before its plan is taken
+    in, then the vehicle does what it does when the plan is made in the loop: the loss's
+    HOLD (the change dropped, its command FAILED, where inline it was ACCEPTED first), then
+    LAND after COM_DL_LAND_T. (The landing used to make the loss's reaction needless, and
+    the mission was then entered and flown with the link lost and no reaction at all.)"""
+    assert _gcs_loss_in_landing(held=False) == (
+        Mode.HOLD, Mode.LAND, [MAV_RESULT.MAV_RESULT_ACCEPTED])
+    assert _gcs_loss_in_landing(held=True) == (
+        Mode.HOLD, Mode.LAND, [MAV_RESULT.MAV_RESULT_FAILED])
+
+
+def test_rotor_saturation_aborts_a_mission_whose_start_is_under_way():
+    """Given COM_SAT_ACT 1 and a mission's start under way from HOLD, when the rotors have
+    been saturated for COM_SAT_T, then the start is dropped and the vehicle holds, as the
+    mission flown would have been aborted; a POSCTL fit under way is not (POSCTL is not
+    aborted by saturation)."""
+    for mode, expected in ((Mode.MISSION, Mode.HOLD), (Mode.POSCTL, Mode.POSCTL)):
+        from fcu.modes import manual
+        work = HeldWork()
+        pipe = _landing_pipeline(work)
+        c = pipe.commander
+        c.set_mode(Mode.HOLD, 0.0)
+        c.manual_input(0.0, manual.CENTRED)
+        assert c.set_mode(mode, 0.0)[0] == IN_PROGRESS
+        omega_sq = (1e9,) * 6
+        pipe._check_saturation(0, True, omega_sq)
+        pipe._check_saturation(2_100_000, True, omega_sq)  # COM_SAT_T (2 s) later
+        work.release()
+        assert c.mode == expected, mode
+        aborted = any("mission aborted" in e.text for e in c.events)
+        assert aborted == (mode == Mode.MISSION), mode
+
+
+def test_a_new_current_item_re_aims_a_start_under_way():
+    """Given MISSION_START under way, when a new current item is set before its plan is
+    taken in, then the start flies from that item: one plan taken in, the MISSION_START's
+    command ACCEPTED once, the current item the new one. (It used to be ACCEPTED and then
+    silently undone: the start flew from item 0.)"""
+    c, work = _planned_commander()
+    c.set_mission(tuple(_items(4)))
+    assert c.mission_start(0) == (IN_PROGRESS, "")
+    replies: list[tuple[int, str]] = []
+    c.under_way.on_end(lambda r, t: replies.append((r, t)))
+    assert c.set_mission_current(3) == (IN_PROGRESS, "")
+    assert replies == []
+    work.release()
+    assert replies == [(MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")]
+    assert c.mode == Mode.MISSION and c.modes.mission_run.running and c.mission_current == 3
+
+
+def test_a_new_mission_leaves_posctl_under_way():
+    """Given POSCTL's fit under way, when a mission upload is accepted (or the mission
+    cleared), then POSCTL is still entered when fitted: the new mission drops only a
+    mission's plan."""
+    c, work, replies = _posctl_or_mission_under_way(Mode.POSCTL)
+    c.set_mission(())
+    assert replies == []
+    work.release()
+    assert replies == [(MAV_RESULT.MAV_RESULT_ACCEPTED, "mode POSCTL")]
+    assert c.mode == Mode.POSCTL
+
+
+def test_arming_in_mission_with_posctl_under_way_enters_posctl_alone():
+    """Given MISSION_START on the ground (MISSION, flown when armed) and then POSCTL asked,
+    its fit under way, when the vehicle arms, then no mission plan starts beside it: POSCTL
+    is entered when fitted and stays. (Both used to be taken in: POSCTL ACCEPTED, then the
+    mission's plan switched to MISSION.)"""
+    from fcu.modes import manual
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
+                    limits=MissionLimits(vehicle=vehicle))
+    pipe.on_state(0, VehicleState((0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    c = pipe.commander
+    work = HeldWork()
+    c.work = work
+    c.set_mission(tuple(_items(3)))
+    assert c.mission_start(0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED and c.mode == Mode.MISSION
+    c.manual_input(0.0, manual.CENTRED)
+    assert c.set_mode(Mode.POSCTL, 0.0) == (IN_PROGRESS, "")
+    assert pipe.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    assert len(work.held) == 1 and c.modes.mission_run.plan is None
+    work.release()
+    assert c.mode == Mode.POSCTL and not c.modes.mission_run.running
+
+
+def test_a_clear_during_a_check_is_done_after_it_and_both_stations_are_answered():
+    """Given GCS's upload being checked, when another station sends MISSION_CLEAR_ALL, then
+    it is done right after the check, as in the loop: GCS gets its MISSION_ACK (and again
+    for its last item re-sent), the other station ACCEPTED, and the mission is empty. (The
+    clear used to drop the check: GCS never got a MISSION_ACK.) A new upload from GCS
+    meanwhile drops the check and the clear is done then."""
+    work = HeldWork()
+    server = MissionServer(*VEHICLE, MissionLimits(), work=work)
+    items = _items(4)
+    assert _upload(server, items) == []
+    clear = _msg(M.MAVLink_mission_clear_all_message(*VEHICLE, 0), OTHER)
+    assert server.handle(clear, 0.0) == []
+    assert server.mission == ()
+    work.release()
+    out = server.take_outbox()
+    assert [(p, m.get_type(), m.type) for p, m in out] == [
+        (GCS, "MISSION_ACK", M.MAV_MISSION_ACCEPTED), (OTHER, "MISSION_ACK",
+                                                     M.MAV_MISSION_ACCEPTED)]
+    assert server.mission == () and server.version == 2
+    again = server.handle(_item(items[-1]), 1.0)
+    assert _acks(again) == [M.MAV_MISSION_ACCEPTED]
+
+    assert _upload(server, items) == []
+    assert server.handle(clear, 0.0) == []
+    assert _kinds(server.handle(_count(2), 0.0)) == ["MISSION_REQUEST_INT"]  # a new upload
+    assert _acks(_out(server, OTHER)) == [M.MAV_MISSION_ACCEPTED]
+    work.release()
+    assert server.take_outbox() == [] and server.mission == ()
+
+
+def test_an_answer_that_comes_later_goes_to_its_stations_link():
+    """Given GCS's upload on link 0 checked, when another station starts an upload on link
+    1 before the answer went out, then GCS's MISSION_ACK still goes out on link 0 (it went
+    to the link of the latest upload)."""
+    from tests.unit.test_gcs_dispatch import make_server, parsed
+    server, links = make_server(2)
+    work = HeldWork()
+    server.missions.work = work
+    items = _items(3)
+    server.handle(0, _count(len(items)), 1.0)
+    for it in items:
+        server.handle(0, _item(it), 1.0)
+    work.release()  # the check done, its answer queued
+    server.handle(1, _count(2, OTHER), 1.0)
+    server.tick(1.0)
+    acks0 = [m for m in parsed(links[0]) if m.get_type() == "MISSION_ACK"]
+    acks1 = [m for m in parsed(links[1]) if m.get_type() == "MISSION_ACK"]
+    assert [(m.target_system, m.type) for m in acks0] == [(GCS[0], M.MAV_MISSION_ACCEPTED)]
+    assert acks1 == []
+
+
+def test_in_progress_says_progress_unknown_and_a_final_answer_keeps_a_newer_record():
+    """Given MISSION_START under way, then its IN_PROGRESS carries progress 255 (the spec's
+    unknown) and its final answer 0; a command the same station sent meanwhile is still
+    answered from its record when retried (confirmation 1) after that final answer, not
+    run again (the final answer used to overwrite the station's record)."""
+    from tests.unit.test_gcs_dispatch import parsed
+    server, links = _airborne_server(1)
+    c = server.pipeline.commander
+    work = HeldWork()
+    c.work = work
+    c.set_mission(tuple(_items(3)))
+    start, interval = MAV_CMD.MAV_CMD_MISSION_START, MAV_CMD.MAV_CMD_SET_MESSAGE_INTERVAL
+    _command(server, start, 0)
+    _command(server, interval, 0, float(M.MAVLINK_MSG_ID_HEARTBEAT), 1e6)
+    work.release()
+    _command(server, interval, 1, float(M.MAVLINK_MSG_ID_HEARTBEAT), 1e6)
+    acks = [(m.command, m.result, m.progress) for m in parsed(links[0])
+            if m.get_type() == "COMMAND_ACK"]
+    ok = MAV_RESULT.MAV_RESULT_ACCEPTED
+    assert acks == [(start, IN_PROGRESS, 255), (interval, ok, 0), (start, ok, 0),
+                    (interval, ok, 0)]
+    assert server.commands.repeated_commands == 1
+    assert c.mode == Mode.MISSION
