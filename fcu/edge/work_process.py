@@ -146,9 +146,10 @@ class ProcessWork(Work):
             self._start().send((job_id, fn, args, warm_up))
         except Exception as exc:  # the pipe is gone (the worker died) or args unpicklable
             self._lost(f"job not sent: {exc}")
-            return
-        if self.wait:
-            self._wait_for(job_id)
+        else:
+            if self.wait:
+                self._wait_for(job_id)
+        if self.wait:  # called back before `submit` returns, a failure too (lockstep)
             self.take()
 
     def filenos(self) -> list[int]:

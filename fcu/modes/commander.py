@@ -374,6 +374,8 @@ class Commander:
         if not 0 <= seq < len(run.items):
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, f"no mission item {seq}")
         pending = run.plan
+        if pending is not None and pending.seq == seq:
+            return Answer(IN_PROGRESS, "")  # asked again (a re-send): it waits for that plan
         if pending is not None:  # a start under way: it flies from `seq` instead, and its
             run.plan = None      # commands wait for that plan's answer
             return self._plan_mission(seq, pending.said, pending.text,

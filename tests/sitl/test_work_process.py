@@ -109,3 +109,20 @@ def test_after_its_warm_up_the_worker_runs_the_checks_shares_on_two_threads_belo
         work.close()
     assert [o.value for o in got] == [(1, [loop]), (ways, [lowered] * ways),
                                       (ways, [lowered] * ways)]
+
+
+def test_a_job_that_cannot_be_sent_fails_before_submit_returns_when_the_loop_waits():
+    """Given a worker the loop waits for (lockstep), when a job cannot be sent to it (its
+    arguments do not pickle), then its failure is called back before `submit` returns, as
+    every result is (it was left for a step boundary that wall time chose), and the next job
+    runs on a new worker."""
+    work = ProcessWork(wait=True)
+    got: list[Outcome[Any]] = []
+    try:
+        work.submit(len, (lambda: 0,), got.append)
+        assert len(got) == 1 and got[0].value is None
+        assert got[0].error.startswith("job not sent"), got[0].error
+        work.submit(len, ((1, 2),), got.append)
+    finally:
+        work.close()
+    assert got[1] == Outcome(2) and work.restarts == 1

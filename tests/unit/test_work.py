@@ -539,7 +539,9 @@ def test_a_new_current_item_re_aims_a_start_under_way():
     replies: list[tuple[int, str]] = []
     c.under_way.on_end(lambda r, t: replies.append((r, t)))
     assert c.set_mission_current(3) == (IN_PROGRESS, "")
-    assert replies == []
+    assert replies == [] and len(work.held) == 2
+    assert c.set_mission_current(3) == (IN_PROGRESS, "")  # sent again: the same plan
+    assert len(work.held) == 2
     work.release()
     assert replies == [(MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")]
     assert c.mode == Mode.MISSION and c.modes.mission_run.running and c.mission_current == 3
