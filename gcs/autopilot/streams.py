@@ -35,6 +35,7 @@ class SessionLink(Protocol):
     def autopilot(self) -> Autopilot | None: ...
     def send(self, msg: Any) -> None: ...
     def recv(self, types: list[str] | None = None, timeout: float = 1.0) -> Any: ...
+    def addressed_to_me(self, msg: Any) -> bool: ...
 
 
 M = MAV
@@ -107,7 +108,7 @@ def _commands(session: SessionLink, command: int, params: list[tuple[float, ...]
             continue
         if msg.get_type() == "MESSAGE_INTERVAL":
             intervals[msg.message_id] = msg.interval_us
-        elif msg.command == command:
+        elif msg.command == command and s.addressed_to_me(msg):
             results.append(msg.result)
     return results, intervals
 

@@ -39,6 +39,7 @@ from common.wire.mavlink import MAV
 from common.wire.mission_items import HomePosition, MissionItem, item_from_message
 from common.wire.mission_messages import item_message
 from gcs.vehicle_link.patience import MISSION_ITEM, MISSION_STEP, SILENCE_S, Budget, Wait
+from gcs.vehicle_link.status_texts import StatusTexts
 
 M = MAV
 MISSION = M.MAV_MISSION_TYPE_MISSION
@@ -148,46 +149,6 @@ def _item_from(msg: Any) -> MissionItem:
     return item
 
 
-STATUSTEXT_LEN = 50
-
-
-class StatusTexts:
-    """STATUSTEXT messages as texts, chunked ones (MAVLink 2 `id` != 0) put back together: a
-    chunk shorter than 50 characters ends its text. Runs of spaces are collapsed (chunks are
-    padded at word boundaries) and a text equal to the previous one is kept once (a vehicle
-    repeats its answer when the MISSION_ACK after it was lost)."""
-
-    def __init__(self) -> None:
-        self._done: list[str] = []
-        self._open: dict[int, dict[int, str]] = {}
-
-    @staticmethod
-    def _joined(texts: list[str], text: str) -> list[str]:
-        text = " ".join(text.split())
-        return [*texts, text] if text and (not texts or texts[-1] != text) else texts
-
-    def add(self, msg: Any) -> None:
-        text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
-        text = text.split("\0", 1)[0]
-        text_id = getattr(msg, "id", 0)
-        if not text_id:
-            self._done = self._joined(self._done, text)
-            return
-        chunks = self._open.setdefault(text_id, {})
-        chunks[getattr(msg, "chunk_seq", 0)] = text
-        if len(text) < STATUSTEXT_LEN:
-            del self._open[text_id]
-            self._done = self._joined(self._done, "".join(chunks[k] for k in sorted(chunks)))
-
-    @property
-    def texts(self) -> tuple[str, ...]:
-        """The texts so far, unfinished chunked ones included as far as they came."""
-        out = self._done
-        for chunks in self._open.values():
-            out = self._joined(out, "".join(chunks[k] for k in sorted(chunks)))
-        return tuple(out)
-
-
 class UploadResult(NamedTuple):
     """The vehicle's answer to an upload: MAV_MISSION_RESULT and what it said meanwhile."""
 
@@ -261,11 +222,14 @@ def upload_detailed(conn: Connection, target_system: int, target_component: int,
     last = M.MAVLink_mission_count_message(target_system, target_component, count, MISSION)
     _send(last)
     wait, done = Wait(step), -1  # done: highest seq requested so far
+    sent_items: set[int] = set()
+    repeats = 0  # items sent again: each may draw ArduPilot's NACK (`_repeat_nack`)
     types = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "STATUSTEXT"]
     while True:
         if wait.due() and not wait.expired():
             _send(last)
             wait.sent()
+            repeats += done >= 0  # an item sent again (MISSION_COUNT is not an item)
         msg = _recv(conn, types, target_system, target_component, wait.left(), wait)
         if msg is not None and msg.get_type() == "STATUSTEXT":
             texts.add(msg)
@@ -279,17 +243,17 @@ def upload_detailed(conn: Connection, target_system: int, target_component: int,
                                          f"{why}{wait.tries_text()}", texts.texts)
             continue
         if msg.get_type() == "MISSION_ACK":
-            if _earlier_ack(msg.type, done, count):
+            meaning = _ack_meaning(msg.type, done, count, repeats)
+            repeats -= meaning == _REPEATED
+            if meaning in (_EARLIER, _REPEATED):
                 continue
+            if meaning:
+                raise _upload_unanswered(target_system, count, done, meaning, texts.texts)
             if msg.type == M.MAV_MISSION_ACCEPTED and progress is not None:
                 progress(count, count)
             return UploadResult(msg.type, texts.texts, done)
         seq = msg.seq
-        if not 0 <= seq < count:
-            _send(M.MAVLink_mission_ack_message(
-                target_system, target_component, M.MAV_MISSION_INVALID_SEQUENCE, MISSION))
-            raise MissionError(f"mission upload to system {target_system}: vehicle asked for "
-                               f"item {seq} of a mission of {count}")
+        _check_asked(_send, target_system, target_component, seq, count)
         if seq > done:  # progress: the vehicle holds items 0..seq-1; the next answer's wait
             done = seq
             wait = Wait(per_item)
@@ -299,6 +263,19 @@ def upload_detailed(conn: Connection, target_system: int, target_component: int,
             wait.sent()
         last = item_message(items[seq], target_system, target_component)
         _send(last)
+        repeats += seq in sent_items
+        sent_items.add(seq)
+
+
+def _check_asked(send: Send, target_system: int, target_component: int, seq: int,
+                 count: int) -> None:
+    """A request for item `seq` outside the mission: MAV_MISSION_INVALID_SEQUENCE to the
+    vehicle, MissionError raised."""
+    if not 0 <= seq < count:
+        send(M.MAVLink_mission_ack_message(target_system, target_component,
+                                           M.MAV_MISSION_INVALID_SEQUENCE, MISSION))
+        raise MissionError(f"mission upload to system {target_system}: vehicle asked for "
+                           f"item {seq} of a mission of {count}")
 
 
 def _upload_unanswered(target_system: int, count: int, done: int, why: str,
@@ -316,6 +293,30 @@ def _upload_unanswered(target_system: int, count: int, done: int, why: str,
     said = "".join(f"; the vehicle said: {t}" for t in texts)
     return MissionError(f"mission upload to system {target_system}: no {what}{why}{held}"
                         f"{said}")
+
+
+_EARLIER, _REPEATED = "earlier", "repeated"  # MISSION_ACKs that are not the answer
+
+
+def _ack_meaning(result: int, done: int, count: int, repeats: int) -> str:
+    """What a MISSION_ACK during an upload says: '' the answer; _EARLIER an earlier
+    transaction's (`_earlier_ack`); _REPEATED ArduPilot's NACK to an item sent again (of
+    which `repeats` are not answered so yet): during its upload it answers an item it did
+    not ask for with MAV_MISSION_INVALID_SEQUENCE and goes on (wait for its next request);
+    else why the outcome is unknown: after its upload it answers any item with
+    MAV_MISSION_ERROR, so after the last item sent again its MISSION_ACK to the first was
+    lost. PX4 ignores the first and answers the last item again with its MISSION_ACK."""
+    if _earlier_ack(result, done, count):
+        return _EARLIER
+    if repeats <= 0:
+        return ""
+    if result == M.MAV_MISSION_INVALID_SEQUENCE:
+        return _REPEATED
+    if result == M.MAV_MISSION_ERROR and done == count - 1:
+        return (": the vehicle answered the last item sent again with MAV_MISSION_ERROR, "
+                "as ArduPilot answers an item after its upload is over (its MISSION_ACK "
+                "was lost)")
+    return ""
 
 
 def _earlier_ack(result: int, done: int, count: int) -> bool:

@@ -316,7 +316,7 @@ class Session:
         p = [*params, *([0.0] * (7 - len(params)))]
         self.last_texts = []
         budget = COMMAND.but(resend_s=timeout, ceiling_s=ceiling_s, silence_s=silence_s)
-        wait, confirmation = Wait(budget), 0
+        wait, confirmation, in_progress = Wait(budget), 0, False
         self.send(M.MAVLink_command_long_message(self.target_system, self.target_component,
                                                  command, confirmation, *p))
         while not (why := wait.expired()):
@@ -326,9 +326,10 @@ class Session:
                 wait.heard()
                 if msg.get_type() == "STATUSTEXT":
                     self.last_texts.append(msg.text)
-                elif msg.command == command:
+                elif msg.command == command and self.addressed_to_me(msg):
                     if msg.result == M.MAV_RESULT_IN_PROGRESS:
                         wait.stop_resending()  # working on it: wait for the final answer
+                        in_progress = True
                         continue
                     if msg.result != M.MAV_RESULT_ACCEPTED:
                         self._texts_after(REFUSAL_TEXT_S)
@@ -342,7 +343,18 @@ class Session:
                     self.target_system, self.target_component, command,
                     min(confirmation, 255), *p))
                 wait.sent()
-        raise GcsError(f"no COMMAND_ACK for command {command}{why}{wait.tries_text()}")
+        final = "final " if in_progress else ""
+        last = " (the last: MAV_RESULT_IN_PROGRESS)" if in_progress else ""
+        raise GcsError(f"no {final}COMMAND_ACK for command {command}{why}{wait.tries_text()}"
+                       f"{last}")
+
+    def addressed_to_me(self, msg: Any) -> bool:
+        """Whether an answer (COMMAND_ACK) is this station's: ArduPilot and PX4 address it
+        to the command's sender (target_system, target_component; 0 from a sender that
+        leaves them unset, MAVLink 1): another station's answer on a shared link is not."""
+        mav = self.conn.mav
+        return getattr(msg, "target_system", 0) in (0, mav.srcSystem) and \
+            getattr(msg, "target_component", 0) in (0, mav.srcComponent)
 
     def _texts_after(self, quiet_s: float) -> None:
         """Collect the target's STATUSTEXTs until none has come for `quiet_s`."""

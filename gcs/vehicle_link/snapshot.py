@@ -95,5 +95,6 @@ def collect_requested(session: Session, snapshot: Snapshot, requests: dict[str, 
             continue
         snapshot.update(msg)
         if msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_REQUEST_MESSAGE and \
+                s.addressed_to_me(msg) and \
                 msg.result not in (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_IN_PROGRESS):
             wanted = {}  # an ACK does not say which request it answers: stop asking

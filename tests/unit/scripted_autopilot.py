@@ -8,7 +8,11 @@ refuses local-frame items (MAV_MISSION_UNSUPPORTED_FRAME, no text), casts parame
 download in the plain global frames (0, 3, 10); PX4 answers one in the _INT frames (5, 6:
 it keeps only whether an altitude is relative), numbers a
 mission from 0, carries integer parameters bytewise and refuses a PARAM_SET whose type is
-not the parameter's.
+not the parameter's. An item it did not ask for: ArduPilot answers MAV_MISSION_INVALID_SEQUENCE
+during its upload (and goes on) and MAV_MISSION_ERROR after it; PX4 ignores it during its
+upload and answers the last item again with its MISSION_ACK after it (`_unasked_item`).
+`reply_delay_s` delays everything it sends (a slow link); `lose_upload_acks` drops that many
+of its uploads' final MISSION_ACKs.
 """
 
 from __future__ import annotations
@@ -33,6 +37,12 @@ _RANGES = {1: (0, 255), 2: (-128, 127), 3: (0, 65535), 4: (-32768, 32767),
            5: (0, 2**32 - 1), 6: (-2**31, 2**31 - 1)}
 
 
+# Four global items as ArduPilot keeps them (home at seq 0), for uploads of either firmware
+PLAN_HOME_ITEMS = tuple(
+    MissionItem(i, 0, 16, 0, 1, 0.0, 0.0, 0.0, 0.0, round(HOME[0] * 1e7) + 100 * i,
+                round(HOME[1] * 1e7), 20.0) for i in range(4))
+
+
 class _RawParamValue(M.MAVLink_param_value_message):
     """PARAM_VALUE with param_value's four bytes as given (PX4's bytewise integers)."""
 
@@ -54,8 +64,14 @@ class ScriptedAutopilot:
 
     def __init__(self, kind: str, params: dict[str, tuple[float, int]] | None = None,
                  refuse: dict[int, tuple[int, str]] | None = None,
-                 home: tuple[float, float, float] | None = HOME, mute: str = "") -> None:
+                 home: tuple[float, float, float] | None = HOME, mute: str = "",
+                 reply_delay_s: float = 0.0, lose_upload_acks: int = 0) -> None:
         self.kind = kind
+        self.reply_delay_s = reply_delay_s
+        self.lose_upload_acks = lose_upload_acks
+        self._delayed: list[tuple[float, bytes]] = []  # (when, frame), in order
+        self._last_count = 0  # the count of the last upload taken whole
+        self.unasked_items = 0  # items it did not ask for (answered as its firmware does)
         self.mute = mute
         self.params = dict(params or {})
         self.names = list(self.params)
@@ -81,8 +97,18 @@ class ScriptedAutopilot:
     # ------------------------------------------------------------------ plumbing
 
     def _send(self, msg) -> None:
-        if self._peer is not None:
-            self.sock.sendto(pack(self.mav, msg), self._peer)
+        if self._peer is None:
+            return
+        frame = pack(self.mav, msg)
+        if self.reply_delay_s > 0.0:
+            self._delayed.append((time.monotonic() + self.reply_delay_s, frame))
+        else:
+            self.sock.sendto(frame, self._peer)
+
+    def _send_due(self) -> None:
+        now = time.monotonic()
+        while self._delayed and self._delayed[0][0] <= now and self._peer is not None:
+            self.sock.sendto(self._delayed.pop(0)[1], self._peer)
 
     def _run(self) -> None:
         beat = 0.0
@@ -90,11 +116,12 @@ class ScriptedAutopilot:
             M.MAV_AUTOPILOT_PX4
         try:
             while not self._stop.is_set():
-                if select.select([self.sock], [], [], 0.01)[0]:
+                if select.select([self.sock], [], [], 0.002 if self._delayed else 0.01)[0]:
                     data, self._peer = self.sock.recvfrom(65535)
                     for msg in self.parser.parse_buffer(data) or []:
                         if msg.get_type() != "BAD_DATA":
                             self._handle(msg)
+                self._send_due()
                 if time.monotonic() - beat > 0.1 and self._peer is not None:
                     beat = time.monotonic()
                     self._send(M.MAVLink_heartbeat_message(
@@ -191,8 +218,26 @@ class ScriptedAutopilot:
     def _request(self, seq: int) -> None:
         self._send(M.MAVLink_mission_request_int_message(255, 0, seq, 0))
 
+    def _unasked_item(self, item: MissionItem) -> None:
+        """An item it did not ask for. ArduPilot: MAV_MISSION_INVALID_SEQUENCE while it
+        receives (the upload goes on), MAV_MISSION_ERROR when it does not (GCS_Common.cpp
+        handle_mission_item, MissionItemProtocol::handle_mission_item). PX4: ignored while
+        it receives; after, the last item again is ACCEPTED again (its ACK was lost), any
+        other MAV_MISSION_ERROR (mavlink_mission.cpp handle_mission_item_both)."""
+        self.unasked_items += 1
+        receiving = self._upload is not None
+        if self.kind == "ardupilot":
+            result = M.MAV_MISSION_INVALID_SEQUENCE if receiving else M.MAV_MISSION_ERROR
+        elif receiving:
+            return
+        else:
+            result = M.MAV_MISSION_ACCEPTED if item.seq == self._last_count - 1 else \
+                M.MAV_MISSION_ERROR
+        self._send(M.MAVLink_mission_ack_message(255, 0, result, 0))
+
     def _item(self, item: MissionItem) -> None:
         if self._upload is None or item.seq != len(self._upload):
+            self._unasked_item(item)
             return
         refused = self.refuse.get(item.command)
         if refused is None and self.kind == "ardupilot" and item.frame == 1:
@@ -210,6 +255,10 @@ class ScriptedAutopilot:
             self._request(len(self._upload))
             return
         self.mission, self._upload = self._upload, None
+        self._last_count = self._count
+        if self.lose_upload_acks > 0:
+            self.lose_upload_acks -= 1
+            return
         self._send(M.MAVLink_mission_ack_message(255, 0, M.MAV_MISSION_ACCEPTED, 0))
 
     # ------------------------------------------------------------------ parameters

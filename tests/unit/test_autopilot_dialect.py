@@ -201,6 +201,10 @@ class Vehicle:
     def describe(self, result: int) -> str:
         return ": ".join([M.enums["MAV_RESULT"][result].name, *self.last_texts])
 
+    def addressed_to_me(self, msg) -> bool:  # as Session's, this station being 255/190
+        return getattr(msg, "target_system", 0) in (0, 255) and \
+            getattr(msg, "target_component", 0) in (0, 190)
+
     def commands(self, command: int) -> list:
         return [m for m in self.sent if m.get_type() == "COMMAND_LONG" and m.command == command]
 

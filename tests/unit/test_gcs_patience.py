@@ -79,6 +79,8 @@ class BusyVehicle(ScriptedAutopilot):
 
             self._later("mission", accept)
             return
+        if "mission" in self._answered and not self.acks_sent:
+            return  # busy with the last item: a repeat waits (a firmware's one loop)
         super()._item(item)
 
     def _param_set(self, msg) -> None:
@@ -239,3 +241,25 @@ def test_in_progress_stops_the_resends_and_waits_for_the_final_answer(connected)
     v._command = in_progress  # type: ignore[method-assign]
     assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0) == M.MAV_RESULT_ACCEPTED
     assert v.commands_heard == [0]  # never sent again once the vehicle said it works on it
+
+
+def test_a_command_ack_to_another_station_is_not_the_answer(connected):
+    """Given a vehicle that answers another station (254/190) on the same link, its
+    COMMAND_ACK addressed there (DENIED, or IN_PROGRESS) before ours, then the command's
+    answer is the one addressed to this station (ACCEPTED); the other's IN_PROGRESS does
+    not stop our re-sends. (Any ACK of the command used to be taken.)"""
+    v, s = connected()
+    arm = M.MAV_CMD_COMPONENT_ARM_DISARM
+
+    def shared_link(msg) -> None:
+        v.commands_heard.append(msg.confirmation)
+        v._send(M.MAVLink_command_ack_message(arm, M.MAV_RESULT_DENIED, 0, 0, 254, 190))
+        v._send(M.MAVLink_command_ack_message(arm, M.MAV_RESULT_IN_PROGRESS, 0, 0, 254, 190))
+        if len(v.commands_heard) == 2:  # our re-send is answered
+            threading.Timer(0.2, lambda: v._send(M.MAVLink_command_ack_message(
+                arm, M.MAV_RESULT_ACCEPTED, 0, 0, s.conn.mav.srcSystem,
+                s.conn.mav.srcComponent))).start()
+
+    v._command = shared_link  # type: ignore[method-assign]
+    assert s.command(arm, 1.0) == M.MAV_RESULT_ACCEPTED
+    assert v.commands_heard == [0, 1]

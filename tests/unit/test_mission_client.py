@@ -23,13 +23,13 @@ from fcu.mission.validation import check_mission
 from gcs.run.scenario_mission import scenario_mission
 from gcs.vehicle_link.mission_client import (
     MissionError,
-    StatusTexts,
     UploadResult,
     clear,
     download,
     upload,
     upload_detailed,
 )
+from gcs.vehicle_link.status_texts import StatusTexts
 
 M = MAV
 ROOT = Path(__file__).resolve().parents[2]

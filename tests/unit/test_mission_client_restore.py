@@ -251,6 +251,7 @@ class SlowChecker(ScriptedAutopilot):
 
     def __init__(self, check_s: float) -> None:
         self.check_s = check_s
+        self._checked: list | None = None  # the mission its check accepted
         super().__init__("px4")
 
     def _item(self, item) -> None:
@@ -262,8 +263,14 @@ class SlowChecker(ScriptedAutopilot):
             return
         super()._item(item)
 
+    def _unasked_item(self, item) -> None:
+        if self._upload is None and self.mission != self._checked:
+            return  # the last item again while it checks: it checks on
+        super()._unasked_item(item)
+
     def _accept(self, mission) -> None:
-        self.mission = mission
+        self.mission = self._checked = mission
+        self._last_count = len(mission)
         self._send(M.MAVLink_mission_ack_message(255, 0, M.MAV_MISSION_ACCEPTED, 0))
 
 

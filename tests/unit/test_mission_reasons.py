@@ -20,7 +20,7 @@ from fcu.mission.codes import MAV_CMD_POSE_KEYFRAME, result_name
 from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission, compared, refusal
 from fcu.params import ParamError, ParamStore, mission_limits
-from gcs.vehicle_link.mission_client import StatusTexts
+from gcs.vehicle_link.status_texts import StatusTexts
 from tests.unit.test_gcs_dispatch import make_server, parsed
 
 M = MAV
