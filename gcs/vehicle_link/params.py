@@ -214,7 +214,10 @@ def param_set(session: Session, name: str, value: float, timeout: float = PARAM.
     parameter protocol's recovery); GcsError when the vehicle falls silent or at the
     ceiling `timeout`. The value in force is the echo that equals what was sent if one
     came within ECHO_QUIET_S of the first (a stale answer to the read may come first),
-    else the last echo: a vehicle that clamps the value echoes the clamped one. Without
+    else the last echo: a vehicle that clamps the value echoes the clamped one. An echo of
+    another value is believed when it comes again: the first is answered with PARAM_SET
+    sent again (the parameter protocol's recovery), as it may be a late answer to the read
+    (a link slower than the read's re-send brings two). Without
     `linger` (a file loaded item by item) an echo of the value sent ends the wait at once,
     with no time left for a note sent after it. ParamValueError for a value the type cannot
     carry."""
@@ -245,6 +248,11 @@ def param_set(session: Session, name: str, value: float, timeout: float = PARAM.
             elif msg.param_id == name:
                 echoes.append(param_wire.decode(param_wire.raw_value(msg), param_type,
                                                 encoding))
+                if echoes[-1] != want and echoes.count(echoes[-1]) == 1 and \
+                        want not in echoes:
+                    s.send(request)  # maybe a late answer to the read: the set asked again,
+                    wait.sent()      # a value other than sent is taken when it comes again
+                    continue
                 if not linger and echoes[-1] == want:
                     break  # taken as sent
                 quiet_until = time.monotonic() + ECHO_QUIET_S  # a refusal may come after

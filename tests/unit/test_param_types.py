@@ -112,6 +112,21 @@ def test_ardupilot_clamped_set_is_not_taken(vehicles, capsys):
     assert v.params["DISARM_DELAY"] == (5.0, INT8)
 
 
+def test_a_set_over_a_slow_link_is_not_judged_by_a_late_answer_to_its_read(capsys):
+    """Given a vehicle whose answers take 1 s (the read before the set is asked again at
+    0.7 s, so a second answer with the old value comes while the set waits), when
+    ATC_RAT_RLL_P (REAL32: set as soon as read) is set to 0.25, then it is taken (exit 0):
+    that answer is not the set's echo. (It used to be: "not taken: the vehicle keeps
+    0.135", exit 1, the vehicle holding 0.25.)"""
+    v = ScriptedAutopilot("ardupilot", ARDU_PARAMS, reply_delay_s=1.0)
+    try:
+        code, out, err = gcs(capsys, v, "param", "set", "ATC_RAT_RLL_P", "0.25")
+    finally:
+        v.close()
+    assert code == 0 and out.strip() == "ATC_RAT_RLL_P = 0.25", out + err
+    assert v.params["ATC_RAT_RLL_P"] == (0.25, REAL32)
+
+
 @pytest.mark.parametrize("kind,params", [("ardupilot", ARDU_PARAMS), ("px4", PX4_PARAMS)])
 def test_save_load_round_trip_keeps_types_and_values(vehicles, capsys, tmp_path, kind,
                                                      params):
