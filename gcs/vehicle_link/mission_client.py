@@ -111,7 +111,8 @@ def _drain(conn: Connection, target_system: int, quiet_s: float, limit_s: float 
 def _recv(conn: Connection, types: list[str], target_system: int, target_component: int,
           timeout_s: float, wait: Wait | None = None) -> Any:
     """The next message of `types` from the target about missions, or None on timeout;
-    every message of the target's system heard meanwhile is noted in `wait`."""
+    every message of the target (its component, when given) heard meanwhile is noted in
+    `wait`."""
     deadline = time.monotonic() + timeout_s
     me = conn.mav.srcSystem
     while True:
@@ -123,11 +124,11 @@ def _recv(conn: Connection, types: list[str], target_system: int, target_compone
             continue  # loop to the deadline check
         if msg.get_srcSystem() != target_system:
             continue
+        if target_component and msg.get_srcComponent() != target_component:
+            continue  # another component of its system: not the autopilot heard
         if wait is not None:
             wait.heard()
         if msg.get_type() not in types:
-            continue
-        if target_component and msg.get_srcComponent() != target_component:
             continue
         if getattr(msg, "target_system", 0) not in (0, me):
             continue

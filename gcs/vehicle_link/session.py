@@ -14,7 +14,8 @@ for the telemetry a command needs, and `close` gives back what was changed.
 
 Wall-clock timeouts are fine here: the GCS faces people and links, not the lockstep path.
 How long an answer is waited for is `gcs.vehicle_link.patience`'s policy: `last_heard` is when any
-message of the vehicle's system last came, whoever read it.
+message of the vehicle's autopilot (the component whose HEARTBEAT was taken) last came,
+whoever read it.
 """
 
 from __future__ import annotations
@@ -238,8 +239,12 @@ class Session:
             if msg.get_type() == "STATUSTEXT":  # kept whoever reads the link meanwhile
                 self.texts.append((time.monotonic(), msg.get_srcSystem(), str(msg.text)))
             if self.target_system and msg.get_type() != "BAD_DATA" and \
-                    msg.get_srcSystem() == self.target_system:
-                # the vehicle is alive (gcs.vehicle_link.patience)
+                    msg.get_srcSystem() == self.target_system and \
+                    (not self.target_component or
+                     msg.get_srcComponent() == self.target_component):
+                # the vehicle's autopilot is alive (gcs.vehicle_link.patience): not another
+                # component of its system (a companion computer's heartbeat goes on when
+                # the autopilot has stopped)
                 self.last_heard = time.monotonic()
             _received(msg)
 
@@ -250,7 +255,7 @@ class Session:
         self.last_texts: list[str] = []  # STATUSTEXTs that came with the last command's ACK
         self.heartbeat_msg: Any = None  # the vehicle heartbeat that wait_vehicle took
         self.heartbeat_at = 0.0  # and when (monotonic seconds)
-        self.last_heard = 0.0  # the latest message of the target system (monotonic s)
+        self.last_heard = 0.0  # the latest message of the target (monotonic s)
         self.commanded_at = 0.0  # the latest command sent (wall clock, as pymavlink stamps)
         self.autopilot: Autopilot | None = None  # which autopilot that heartbeat came from
         self._streams = _streams.Streams()  # what request_streams changed on the link

@@ -171,6 +171,34 @@ def test_a_vehicle_that_falls_silent_fails_the_upload_after_the_silence_limit(co
     assert SILENCE_S <= took < SILENCE_S + 1.5 < MISSION_ITEM.ceiling_s
 
 
+def test_a_companion_heartbeat_does_not_keep_a_silent_autopilot_heard(connected):
+    """Given an autopilot that stops sending anything when the last item comes while a
+    companion computer of its system (component 191) goes on sending HEARTBEAT, then the
+    upload still fails on silence after 3.0 s: only the autopilot counts. (The companion
+    used to keep the wait going to its 30 s ceiling.)"""
+    from common.wire.mavlink import encoder, pack
+    v, s = connected(silent_on="item")
+    companion, stop = encoder(1, 191), threading.Event()
+
+    def beat() -> None:
+        hb = M.MAVLink_heartbeat_message(M.MAV_TYPE_ONBOARD_CONTROLLER,
+                                         M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE, 3)
+        while not stop.wait(0.1):
+            if v._peer is not None:
+                v.sock.sendto(pack(companion, hb), v._peer)
+
+    thread = threading.Thread(target=beat, daemon=True)
+    thread.start()
+    t0 = time.monotonic()
+    try:
+        with pytest.raises(MissionError, match=r"vehicle silent for 3\.0 s"):
+            _upload(s)
+    finally:
+        stop.set()
+        thread.join(timeout=5.0)
+    assert SILENCE_S <= time.monotonic() - t0 < SILENCE_S + 1.5
+
+
 def test_a_heard_vehicle_that_never_answers_fails_at_the_ceiling(connected):
     """Given a vehicle heard throughout that never answers the last item, then the upload
     fails at the ceiling, saying so (the silence limit set far beyond it: a thread of the
