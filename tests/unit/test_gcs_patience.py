@@ -291,3 +291,14 @@ def test_a_command_ack_to_another_station_is_not_the_answer(connected):
     v._command = shared_link  # type: ignore[method-assign]
     assert s.command(arm, 1.0) == M.MAV_RESULT_ACCEPTED
     assert v.commands_heard == [0, 1]
+
+
+def test_a_command_left_in_progress_says_so_at_the_ceiling(connected):
+    """Given a vehicle that answers IN_PROGRESS and never the final result, then the command
+    fails at its ceiling saying no final COMMAND_ACK came, the last being IN_PROGRESS."""
+    v, s = connected()
+    v._command = lambda msg: v._send(M.MAVLink_command_ack_message(  # type: ignore[method-assign]
+        msg.command, M.MAV_RESULT_IN_PROGRESS))
+    with pytest.raises(GcsError, match=r"no final COMMAND_ACK for command 400 within the "
+                       r"1\.5 s ceiling.*\(the last: MAV_RESULT_IN_PROGRESS\)"):
+        s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, ceiling_s=1.5)
