@@ -224,7 +224,7 @@ def upload_detailed(conn: Connection, target_system: int, target_component: int,
     _send(last)
     wait, done = Wait(step), -1  # done: highest seq requested so far
     sent_items: set[int] = set()
-    repeats = 0  # items sent again: each may draw ArduPilot's NACK (`_repeat_nack`)
+    repeats = 0  # items sent again: each may draw ArduPilot's NACK (`_ack_meaning`)
     types = ["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "STATUSTEXT"]
     while True:
         if wait.due() and not wait.expired():
