@@ -522,10 +522,13 @@ def test_refusal_prints_the_vehicles_reason(tmp_path):
                                   f"udpout:127.0.0.1:{free_port()}", "--gcs",
                                   f"udpout:127.0.0.1:{gcs}"], tmp_path)}
     try:
-        out, _ = _cmd("gcs", "arm", "--connect", f"udpin:127.0.0.1:{gcs}")
+        # the FCU's start-up on a loaded machine can outlast the default 10 s heartbeat wait
+        out, _ = _cmd("gcs", "arm", "--connect", f"udpin:127.0.0.1:{gcs}", "--wait", "120",
+                      timeout=180.0)
         assert out.returncode == 1, out.stderr
         assert out.stdout.strip() == \
-            "arm refused: MAV_RESULT_DENIED: arming refused: no state input", out.stdout
+            "arm refused: MAV_RESULT_DENIED: arming refused: no state input", \
+            out.stdout + out.stderr
     finally:
         stop(procs)
 
