@@ -68,10 +68,11 @@ def confirm_mode(session: Session, target: ModeTarget, timeout_s: float,
     wait = Wait(MODE.but(ceiling_s=timeout_s))
     while not (why := wait.expired()):
         hb = session.recv(kinds, timeout=wait.left())
-        wait.note_session(session)  # any message of the vehicle
+        wait.note_session(session)  # any message of the vehicle's autopilot
         if hb is None or hb.get_srcSystem() != session.target_system:
             continue
-        wait.heard()
+        if hb.get_srcComponent() == session.target_component:
+            wait.heard()  # (a session-like object may not keep `last_heard`)
         if hb.get_type() != "HEARTBEAT":
             if observe is not None:
                 observe(hb)

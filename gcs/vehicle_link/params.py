@@ -110,7 +110,8 @@ def param_values(session: Session, timeout: float = PARAM_LIST.ceiling_s
             continue
         if msg.get_srcSystem() != s.target_system:
             continue
-        wait.heard()
+        if msg.get_srcComponent() == s.target_component:
+            wait.heard()  # the autopilot, not another component of its system
         if count != msg.param_count:  # the first, or the vehicle's count changed
             count = msg.param_count
             values = {i: v for i, v in values.items() if i < count}

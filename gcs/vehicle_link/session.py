@@ -326,9 +326,8 @@ class Session:
                                                  command, confirmation, *p))
         while not (why := wait.expired()):
             msg = self.recv(["COMMAND_ACK", "STATUSTEXT"], timeout=wait.left())
-            wait.note_session(self)
+            wait.note_session(self)  # the autopilot heard (`last_heard`), whatever it sent
             if msg is not None and msg.get_srcSystem() == self.target_system:
-                wait.heard()
                 if msg.get_type() == "STATUSTEXT":
                     self.last_texts.append(msg.text)
                 elif msg.command == command and self.addressed_to_me(msg):
