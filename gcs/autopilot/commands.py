@@ -69,15 +69,12 @@ def confirm_mode(session: Session, target: ModeTarget, timeout_s: float,
     while not (why := wait.expired()):
         hb = session.recv(kinds, timeout=wait.left())
         wait.note_session(session)  # any message of the vehicle's autopilot
-        if hb is None or hb.get_srcSystem() != session.target_system:
+        if not session.from_autopilot(hb):
             continue
-        if hb.get_srcComponent() == session.target_component:
-            wait.heard()  # (a session-like object may not keep `last_heard`)
+        wait.heard()  # (a session-like object may not keep `last_heard`)
         if hb.get_type() != "HEARTBEAT":
             if observe is not None:
                 observe(hb)
-            continue
-        if hb.get_srcComponent() != session.target_component:
             continue
         seen = hb
         if ap.same_mode(target.custom_mode, hb.custom_mode):
@@ -97,7 +94,7 @@ def _settle(session: Session, observe: Observer | None) -> None:
     while observe is not None and observe.pending() and \
             (left := end - time.monotonic()) > 0:
         msg = session.recv(list(HEIGHTS), timeout=left)
-        if msg is not None and msg.get_srcSystem() == session.target_system:
+        if session.from_autopilot(msg):
             observe(msg)
 
 
@@ -121,9 +118,8 @@ def flight_state(session: Session) -> tuple[bool, int | None, float | None]:
     # came after the latest command sent (an arm's COMMAND_ACK comes before its HEARTBEAT)
     last = s.conn.messages.get("HEARTBEAT")
     heard = getattr(last, "_timestamp", 0.0)
-    if last is not None and last.get_srcSystem() == s.target_system and \
-            last.get_srcComponent() == s.target_component and \
-            time.time() - heard < FRESH_HEARTBEAT_S and heard > s.commanded_at:
+    if s.from_autopilot(last) and time.time() - heard < FRESH_HEARTBEAT_S and \
+            heard > s.commanded_at:
         armed = bool(last.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
     asked = {M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: "EXTENDED_SYS_STATE",
              M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: "GLOBAL_POSITION_INT"}
@@ -136,10 +132,10 @@ def flight_state(session: Session) -> tuple[bool, int | None, float | None]:
                                                      or height is None):
         msg = s.recv(["HEARTBEAT", "EXTENDED_SYS_STATE", "GLOBAL_POSITION_INT"],
                      timeout=left)
-        if msg is None or msg.get_srcSystem() != s.target_system:
+        if not s.from_autopilot(msg):
             continue
         kind = msg.get_type()
-        if kind == "HEARTBEAT" and msg.get_srcComponent() == s.target_component:
+        if kind == "HEARTBEAT":
             armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
         elif kind == "EXTENDED_SYS_STATE":
             landed = msg.landed_state
@@ -215,12 +211,11 @@ def wait_height(session: Session, at_least_m: float, timeout_s: float,
     end = time.monotonic() + timeout_s
     while (left := end - time.monotonic()) > 0:
         msg = s.recv(["GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "HEARTBEAT"], timeout=left)
-        if msg is None or msg.get_srcSystem() != s.target_system:
+        if not s.from_autopilot(msg):
             continue
         kind = msg.get_type()
         if kind == "HEARTBEAT":
-            if msg.get_srcComponent() == s.target_component and \
-                    not msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
+            if not msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
                 return None
             continue
         if observe is not None:

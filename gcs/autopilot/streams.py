@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeGuard
 
 from common.wire.mavlink import MAV
 from gcs.autopilot.dialect import ARDUPILOT, STATION_DIALECT, Autopilot
@@ -36,6 +36,7 @@ class SessionLink(Protocol):
     def send(self, msg: Any) -> None: ...
     def recv(self, types: list[str] | None = None, timeout: float = 1.0) -> Any: ...
     def addressed_to_me(self, msg: Any) -> bool: ...
+    def from_autopilot(self, msg: Any | None) -> TypeGuard[Any]: ...
 
 
 M = MAV
@@ -104,7 +105,7 @@ def _commands(session: SessionLink, command: int, params: list[tuple[float, ...]
             len(results) < len(params) or
             (command == M.MAV_CMD_GET_MESSAGE_INTERVAL and len(intervals) < len(params))):
         msg = s.recv(["COMMAND_ACK", "MESSAGE_INTERVAL"], timeout=left)
-        if msg is None or msg.get_srcSystem() != s.target_system:
+        if not s.from_autopilot(msg):
             continue
         if msg.get_type() == "MESSAGE_INTERVAL":
             intervals[msg.message_id] = msg.interval_us

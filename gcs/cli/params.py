@@ -54,7 +54,7 @@ def _param_save(args: argparse.Namespace, session: Session) -> int:
 
     values = vl.param_values(session)
     t, c = session.target_system, session.target_component
-    beat = session.conn.messages.get("HEARTBEAT")
+    beat = session.heartbeat_msg  # the autopilot's (the link's latest may be a companion's)
     stack = vehicle = version = git = ""
     if beat is not None and beat.get_srcSystem() == t:
         stack = {MAV.MAV_AUTOPILOT_PX4: "PX4 Pro", MAV.MAV_AUTOPILOT_ARDUPILOTMEGA: "ArduPilot"

@@ -77,7 +77,7 @@ def wait_state(session: Session, children: Checked, ceiling_s: float = STATE_S,
         if now - max(session.last_heard, start) > silence_s:
             return None
         att = session.recv(["ATTITUDE_QUATERNION"], timeout=CHECK_S)
-        if att is not None and att.get_srcSystem() == session.target_system:
+        if session.from_autopilot(att):
             return att
     return None
 
@@ -121,7 +121,7 @@ def watch(session: Session, children: Checked, progress: Progress, end_s: float,
             last_check = now
             if report is not None:
                 report(progress)
-        if msg is None:
+        if not session.from_autopilot(msg):
             continue
         if msg.get_type() != "ATTITUDE_QUATERNION":
             _mission_news(msg, progress, total)

@@ -64,7 +64,7 @@ class _Listener:
         end = time.monotonic() + seconds
         while (left := end - time.monotonic()) > 0.0:
             msg = s.recv(None, timeout=min(0.05, left))
-            if msg is not None and msg.get_srcSystem() == s.target_system:
+            if s.from_autopilot(msg):
                 snap.update(msg)
                 self.watch.update(msg, time.monotonic())
             # said of our targets, whichever read took it (the mode's confirmation too)

@@ -38,7 +38,14 @@ import common.wire.mavlink  # noqa: F401  (pins MAVLink 2 before anything import
 from common.wire.mavlink import MAV
 from common.wire.mission_items import HomePosition, MissionItem, item_from_message
 from common.wire.mission_messages import item_message
-from gcs.vehicle_link.patience import MISSION_ITEM, MISSION_STEP, SILENCE_S, Budget, Wait
+from gcs.vehicle_link.patience import (
+    MISSION_ITEM,
+    MISSION_STEP,
+    SILENCE_S,
+    Budget,
+    Wait,
+    from_target,
+)
 from gcs.vehicle_link.status_texts import StatusTexts
 
 M = MAV
@@ -122,9 +129,7 @@ def _recv(conn: Connection, types: list[str], target_system: int, target_compone
         msg = conn.recv_match(blocking=True, timeout=remaining)
         if msg is None or msg.get_type() == "BAD_DATA":
             continue  # loop to the deadline check
-        if msg.get_srcSystem() != target_system:
-            continue
-        if target_component and msg.get_srcComponent() != target_component:
+        if not from_target(msg, target_system, target_component):
             continue  # another component of its system: not the autopilot heard
         if wait is not None:
             wait.heard()
@@ -452,7 +457,7 @@ def home_position(conn: Connection, target_system: int, target_component: int, *
     through): the last one heard, else asked for with MAV_CMD_REQUEST_MESSAGE (and waited
     for `timeout_s` per try, the vehicle's periodic one counting too); None if none came."""
     last = getattr(conn, "messages", {}).get("HOME_POSITION")
-    if last is not None and last.get_srcSystem() == target_system:
+    if from_target(last, target_system, target_component):
         return HomePosition.from_message(last)
     _send = _sender(conn, send)
     for confirmation in range(retries + 1):
@@ -462,6 +467,6 @@ def home_position(conn: Connection, target_system: int, target_component: int, *
         deadline = time.monotonic() + timeout_s
         while (remaining := deadline - time.monotonic()) > 0.0:
             msg = conn.recv_match(type="HOME_POSITION", blocking=True, timeout=remaining)
-            if msg is not None and msg.get_srcSystem() == target_system:
+            if from_target(msg, target_system, target_component):
                 return HomePosition.from_message(msg)
     return None

@@ -41,6 +41,12 @@ class ParamValue:
 
 _ENCODINGS: weakref.WeakKeyDictionary[Session, str] = weakref.WeakKeyDictionary()
 ECHO_QUIET_S = 0.2  # after a set's echo, how long to listen for a later echo or a reason
+# Missing list indices are re-read by index this many at a time, the next batch once these
+# are in (QGroundControl's batch): ArduPilot queues at most 20 PARAM_REQUEST_READs for all
+# its links together and drops the rest (GCS_Param's param_requests), so asking for every
+# missing index at once lost most of them and crowded out other stations' reads.
+REREAD_BATCH = 10
+PAUSE_S = 0.3  # the list's stream paused this long after a parameter: re-read what is missing
 
 
 def autopilot_version(session: Session, timeout: float = 0.5) -> Any:
@@ -48,15 +54,16 @@ def autopilot_version(session: Session, timeout: float = 0.5) -> Any:
     (REQUEST_MESSAGE); None when it sends none."""
     s = session
     ver = s.conn.messages.get("AUTOPILOT_VERSION")
-    if ver is None:
+    if not s.from_autopilot(ver):  # none yet, or a companion computer's
         try:
             s.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
                       timeout=timeout, retries=1)
-            ver = s.conn.messages.get("AUTOPILOT_VERSION") or \
-                s.recv(["AUTOPILOT_VERSION"], timeout=timeout)
+            ver = s.conn.messages.get("AUTOPILOT_VERSION")
+            if not s.from_autopilot(ver):
+                ver = s.recv(["AUTOPILOT_VERSION"], timeout=timeout)
         except GcsError:
             ver = None
-    return ver if ver is not None and ver.get_srcSystem() == s.target_system else None
+    return ver if s.from_autopilot(ver) else None
 
 
 def param_encoding(session: Session) -> str:
@@ -92,67 +99,87 @@ def param_values(session: Session, timeout: float = PARAM_LIST.ceiling_s
     read by name (its GCS_Param), and counting such an echo as an index ended the list
     one parameter short. The vehicle's latest param_count holds."""
     s = session
-    request = M.MAVLink_param_request_list_message(s.target_system, s.target_component)
-    s.send(request)
-    values: dict[int, tuple[str, bytes, int]] = {}
-    count = None
-    wait = Wait(PARAM_LIST.but(ceiling_s=timeout))  # its ceiling restarts at each new one
-    quiet_until = time.monotonic() + PARAM_LIST.resend_s
+    read = _ListRead(s, Wait(PARAM_LIST.but(ceiling_s=timeout)))
     why = ""
-    while not (why := wait.expired()):
-        msg = s.recv(["PARAM_VALUE"], timeout=min(0.2, wait.left()))
-        wait.note_session(s)
-        if msg is None:
-            if time.monotonic() > quiet_until:
-                if _ask_again(s, request, wait, count, values):
-                    break
-                quiet_until = time.monotonic() + PARAM_LIST.resend_s
-            continue
-        if msg.get_srcSystem() != s.target_system:
-            continue
-        if msg.get_srcComponent() == s.target_component:
-            wait.heard()  # the autopilot, not another component of its system
-        if count != msg.param_count:  # the first, or the vehicle's count changed
-            count = msg.param_count
-            values = {i: v for i, v in values.items() if i < count}
-        if not _take(msg, values, msg.param_count, wait):  # count: the message's
-            continue
-        quiet_until = time.monotonic() + 0.3
-        if len(values) == count:
+    while not (why := read.wait.expired()):
+        msg = s.recv(["PARAM_VALUE"], timeout=min(0.2, read.wait.left()))
+        read.wait.note_session(s)
+        if s.from_autopilot(msg) and read.take(msg):  # not a camera's or gimbal's
             break
-    if count is None:
+        if read.paused():  # checked whatever came: others' values must not put it off
+            break
+    if read.count is None:
         raise GcsError(f"no PARAM_VALUE answered PARAM_REQUEST_LIST{why}")
-    if len(values) != count:
-        raise GcsError(f"received {len(values)} of {count} parameters{why}")
-    return {name: _decoded(s, raw, ptype) for _, (name, raw, ptype) in sorted(values.items())}
+    if len(read.values) != read.count:
+        raise GcsError(f"received {len(read.values)} of {read.count} parameters{why}")
+    return {name: _decoded(s, raw, ptype)
+            for _, (name, raw, ptype) in sorted(read.values.items())}
 
 
-def _ask_again(s: Session, request: MAV.MAVLink_message, wait: Wait, count: int | None,
-               values: dict[int, tuple[str, bytes, int]]) -> bool:
-    """The stream paused: the list asked for again (nothing heard yet) or the indices that
-    did not arrive, each by index (the spec's recovery); True when none is missing."""
-    if count is None:  # nothing yet: ask again
-        s.send(request)
-        wait.sent()
+class _ListRead:
+    """A parameter list being read: the values by index, the vehicle's count, and the
+    indices re-read by index and not yet answered. Sends PARAM_REQUEST_LIST on creation."""
+
+    def __init__(self, session: Session, wait: Wait) -> None:
+        s = self.s = session
+        self.wait = wait  # its ceiling restarts at each new index
+        self.request = M.MAVLink_param_request_list_message(s.target_system,
+                                                            s.target_component)
+        self.values: dict[int, tuple[str, bytes, int]] = {}
+        self.count: int | None = None
+        self.asked: set[int] = set()
+        self.streaming = False  # an index not asked for came since the last re-read
+        self.quiet_until = time.monotonic() + PARAM_LIST.resend_s
+        s.send(self.request)
+
+    def take(self, msg: Any) -> bool:
+        """A PARAM_VALUE of the autopilot; True when the list is whole. An index of the
+        list restarts the ceiling when new; the last of a re-read batch asks the next."""
+        self.wait.heard()
+        index = msg.param_index
+        if self.count != msg.param_count:  # the first, or the vehicle's count changed
+            self.count = msg.param_count
+            self.values = {i: v for i, v in self.values.items() if i < msg.param_count}
+        if not 0 <= index < msg.param_count:  # 65535: an echo of a set or a read by name
+            return False
+        if index not in self.values:
+            self.wait.start = time.monotonic()  # progress: the ceiling counts from here
+        self.values[index] = (msg.param_id, param_wire.raw_value(msg), msg.param_type)
+        self.quiet_until = time.monotonic() + PAUSE_S
+        if len(self.values) == self.count:
+            return True
+        if index not in self.asked:
+            self.streaming = True  # the list's own stream goes on
+            return False
+        self.asked.discard(index)
+        if not self.asked and not self.streaming:
+            self._ask_again()  # the batch is in and the stream has stopped: the next, now
         return False
-    missing = [i for i in range(count) if i not in values]
-    for i in missing:  # the spec's recovery: request what did not arrive
-        s.send(M.MAVLink_param_request_read_message(s.target_system, s.target_component,
-                                                    b"", i))
-    return not missing
 
+    def paused(self) -> bool:
+        """Nothing came for a while: once the pause is long enough, ask again (`_ask_again`);
+        True when nothing is missing."""
+        if time.monotonic() <= self.quiet_until:
+            return False
+        return self._ask_again()
 
-def _take(msg: MAV.MAVLink_message, values: dict[int, tuple[str, bytes, int]], count: int,
-          wait: Wait) -> bool:
-    """A PARAM_VALUE at an index of the list into `values` (a new index restarts the
-    wait's ceiling); False for an echo outside the list (65535: a set's or a read by name)."""
-    index = msg.param_index
-    if not 0 <= index < count:  # 65535: an echo of a set or of a read by name
-        return False
-    if index not in values:
-        wait.start = time.monotonic()  # progress: the ceiling counts from here
-    values[index] = (msg.param_id, param_wire.raw_value(msg), msg.param_type)
-    return True
+    def _ask_again(self) -> bool:
+        """The list asked for again (nothing heard yet), or the first REREAD_BATCH indices
+        that did not arrive, each by index (the spec's recovery), kept in `asked`; True
+        when none is missing."""
+        s = self.s
+        self.quiet_until = time.monotonic() + PARAM_LIST.resend_s
+        self.streaming = False
+        if self.count is None:  # nothing yet: ask again
+            s.send(self.request)
+            self.wait.sent()
+            return False
+        missing = [i for i in range(self.count) if i not in self.values]
+        self.asked = set(missing[:REREAD_BATCH])
+        for i in missing[:REREAD_BATCH]:
+            s.send(M.MAVLink_param_request_read_message(s.target_system, s.target_component,
+                                                        b"", i))
+        return not missing
 
 
 def param_list(session: Session, timeout: float = PARAM_LIST.ceiling_s) -> dict[str, float]:
@@ -191,8 +218,7 @@ def param_read(session: Session, name: str, timeout: float = PARAM.ceiling_s) ->
     while not (why := wait.expired()):
         msg = s.recv(["PARAM_VALUE", "PARAM_ERROR"], timeout=min(0.1, wait.left()))
         wait.note_session(s)
-        if msg is not None and msg.param_id == name and \
-                msg.get_srcSystem() == s.target_system:
+        if s.from_autopilot(msg) and msg.param_id == name:
             if msg.get_type() == "PARAM_ERROR":
                 raise ParamRefused(name, param_error_text(msg.error))
             return _decoded(s, param_wire.raw_value(msg), msg.param_type)
@@ -243,7 +269,7 @@ def param_set(session: Session, name: str, value: float, timeout: float = PARAM.
         left = wait.left() if quiet_until is None else min(wait.left(), quiet_until - now)
         msg = s.recv(["PARAM_VALUE", "STATUSTEXT"], timeout=min(0.1, max(left, 0.001)))
         wait.note_session(s)
-        if msg is not None and msg.get_srcSystem() == s.target_system:
+        if s.from_autopilot(msg):
             if msg.get_type() == "STATUSTEXT":
                 texts.append(msg.text)
             elif msg.param_id == name:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, TypeGuard
 
 SILENCE_S = 3.0  # nothing at all heard from the vehicle for this long: it is gone
 
@@ -55,10 +55,14 @@ COMMAND = Budget(resend_s=1.0, ceiling_s=10.0)  # COMMAND_LONG: its final COMMAN
 MODE = Budget(resend_s=math.inf, ceiling_s=10.0)  # a HEARTBEAT showing the mode asked for
 
 
-def heard_from(msg: Any, system: int) -> bool:
-    """Whether `msg` is a message of vehicle `system` (any of its components)."""
+def from_target(msg: Any | None, system: int, component: int) -> TypeGuard[Any]:
+    """Whether `msg` is a message of the target: vehicle `system`'s `component` (its
+    autopilot; 0: any component). Another component of the system (a companion computer,
+    a gimbal, a camera) sends its own HEARTBEAT, ATTITUDE or PARAM_VALUE, which say nothing
+    of the autopilot's mode, state, parameters or answers."""
     return msg is not None and msg.get_type() != "BAD_DATA" and \
-        msg.get_srcSystem() == system
+        msg.get_srcSystem() == system and \
+        (not component or msg.get_srcComponent() == component)
 
 
 class Wait:
@@ -76,11 +80,6 @@ class Wait:
 
     def heard(self, now: float | None = None) -> None:
         self.last_heard = time.monotonic() if now is None else now
-
-    def note(self, msg: Any, system: int) -> None:
-        """`heard()` if `msg` came from vehicle `system`."""
-        if heard_from(msg, system):
-            self.heard()
 
     def note_session(self, session: Any) -> None:
         """Take the session's `last_heard` (any message of the vehicle, whoever read it)."""

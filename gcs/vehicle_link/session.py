@@ -27,7 +27,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeGuard
 
 from pymavlink import mavutil
 
@@ -37,9 +37,17 @@ from common.wire.mavlink import GCS_SYSID, MAV, MAV_COMP_ID_MISSIONPLANNER
 from gcs.autopilot import Autopilot, autopilot_of
 from gcs.autopilot import streams as _streams
 from gcs.autopilot.dialect import STATION_DIALECT as DIALECT
-from gcs.vehicle_link.patience import COMMAND, Wait
+from gcs.vehicle_link.patience import COMMAND, Wait, from_target
 
 M = MAV
+# HEARTBEAT types that are components or stations, never a vehicle's autopilot (as
+# QGroundControl ignores them when it looks for vehicles)
+NOT_A_VEHICLE = frozenset({
+    M.MAV_TYPE_GCS, M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_TYPE_GIMBAL, M.MAV_TYPE_ADSB,
+    M.MAV_TYPE_CAMERA, M.MAV_TYPE_CHARGING_STATION, M.MAV_TYPE_FLARM, M.MAV_TYPE_SERVO,
+    M.MAV_TYPE_ODID, M.MAV_TYPE_BATTERY, M.MAV_TYPE_PARACHUTE, M.MAV_TYPE_LOG,
+    M.MAV_TYPE_OSD, M.MAV_TYPE_IMU, M.MAV_TYPE_GPS, M.MAV_TYPE_WINCH,
+    M.MAV_TYPE_ILLUMINATOR, M.MAV_TYPE_GRIPPER})
 TCP_CONNECT_S = 3.0  # a tcp: link that has not connected by then is reported, exit 1
 TEXTS_KEPT = 256  # the latest STATUSTEXTs heard, with when (Session.texts)
 REFUSAL_TEXT_S = 0.3  # after a refusal, how long to listen for the STATUSTEXT saying why
@@ -227,8 +235,8 @@ class Session:
         except OSError:
             self.conn.close()
             raise
-        # (monotonic s, system id, text) of the latest STATUSTEXTs heard
-        self.texts: collections.deque[tuple[float, int, str]] = \
+        # (monotonic s, system id, component id, text) of the latest STATUSTEXTs heard
+        self.texts: collections.deque[tuple[float, int, int, str]] = \
             collections.deque(maxlen=TEXTS_KEPT)
         received = self.conn.post_message
 
@@ -237,11 +245,9 @@ class Session:
             if _log is not None:
                 _log.write(msg)  # every message heard, whatever the caller waits for
             if msg.get_type() == "STATUSTEXT":  # kept whoever reads the link meanwhile
-                self.texts.append((time.monotonic(), msg.get_srcSystem(), str(msg.text)))
-            if self.target_system and msg.get_type() != "BAD_DATA" and \
-                    msg.get_srcSystem() == self.target_system and \
-                    (not self.target_component or
-                     msg.get_srcComponent() == self.target_component):
+                self.texts.append((time.monotonic(), msg.get_srcSystem(),
+                                   msg.get_srcComponent(), str(msg.text)))
+            if self.target_system and self.from_autopilot(msg):
                 # the vehicle's autopilot is alive (gcs.vehicle_link.patience): not another
                 # component of its system (a companion computer's heartbeat goes on when
                 # the autopilot has stopped)
@@ -289,11 +295,15 @@ class Session:
         return self.conn.recv_match(type=types, blocking=True, timeout=timeout)
 
     def wait_vehicle(self, timeout: float = 10.0, system_id: int | None = None) -> None:
-        """Wait for an autopilot's heartbeat; pick its system id (or the one asked for)."""
+        """Wait for an autopilot's heartbeat; pick its system id (or the one asked for) and
+        its component, the one `from_autopilot` takes from then on. A HEARTBEAT of
+        MAV_AUTOPILOT_INVALID or of a component type (NOT_A_VEHICLE) is not an autopilot's:
+        some cameras and gimbals have announced an autopilot in theirs."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             msg = self.recv(["HEARTBEAT"], timeout=max(0.05, deadline - time.monotonic()))
-            if msg is None or msg.autopilot == M.MAV_AUTOPILOT_INVALID:
+            if msg is None or msg.autopilot == M.MAV_AUTOPILOT_INVALID or \
+                    msg.type in NOT_A_VEHICLE:
                 continue
             if system_id is not None and msg.get_srcSystem() != system_id:
                 continue
@@ -312,8 +322,10 @@ class Session:
         """COMMAND_LONG, re-sent each `timeout` without an answer (confirmation
         incremented, at most `retries` times when given); returns the final MAV_RESULT.
         MAV_RESULT_IN_PROGRESS is not final: it stops the re-sends and the wait goes on for
-        the final answer (command protocol). GcsError when the vehicle falls silent for
-        `silence_s` or no final answer comes within `ceiling_s` (`gcs.vehicle_link.patience`).
+        the final answer (command protocol); each one is progress and restarts the ceiling
+        (as MAVSDK does). GcsError when the vehicle falls silent for `silence_s` or no final
+        answer comes within `ceiling_s` of asking or of the last IN_PROGRESS
+        (`gcs.vehicle_link.patience`).
 
         The STATUSTEXTs the target sends meanwhile, and after a refusal until
         REFUSAL_TEXT_S passes without one, are kept in `last_texts`: a refusal's reason
@@ -327,12 +339,13 @@ class Session:
         while not (why := wait.expired()):
             msg = self.recv(["COMMAND_ACK", "STATUSTEXT"], timeout=wait.left())
             wait.note_session(self)  # the autopilot heard (`last_heard`), whatever it sent
-            if msg is not None and msg.get_srcSystem() == self.target_system:
+            if self.from_autopilot(msg):
                 if msg.get_type() == "STATUSTEXT":
                     self.last_texts.append(msg.text)
                 elif msg.command == command and self.addressed_to_me(msg):
                     if msg.result == M.MAV_RESULT_IN_PROGRESS:
                         wait.stop_resending()  # working on it: wait for the final answer
+                        wait.start = time.monotonic()  # progress: the ceiling from here
                         in_progress = True
                         continue
                     if msg.result != M.MAV_RESULT_ACCEPTED:
@@ -352,6 +365,13 @@ class Session:
         raise GcsError(f"no {final}COMMAND_ACK for command {command}{why}{wait.tries_text()}"
                        f"{last}")
 
+    def from_autopilot(self, msg: Any | None) -> TypeGuard[Any]:
+        """Whether `msg` came from the target vehicle's autopilot (the component whose
+        heartbeat `wait_vehicle` took), not from another component of its system: a
+        companion computer's HEARTBEAT says nothing of the autopilot's mode, a gimbal's
+        ATTITUDE nothing of the vehicle's (`gcs.vehicle_link.patience.from_target`)."""
+        return from_target(msg, self.target_system, self.target_component)
+
     def addressed_to_me(self, msg: Any) -> bool:
         """Whether an answer (COMMAND_ACK) is this station's: ArduPilot and PX4 address it
         to the command's sender (target_system, target_component; 0 from a sender that
@@ -365,15 +385,17 @@ class Session:
         end = time.monotonic() + quiet_s
         while (left := end - time.monotonic()) > 0:
             msg = self.recv(["STATUSTEXT"], timeout=left)
-            if msg is not None and msg.get_srcSystem() == self.target_system:
+            if self.from_autopilot(msg):
                 self.last_texts.append(msg.text)
                 end = time.monotonic() + quiet_s
 
     def text_since(self, t_monotonic: float, prefix: str) -> str | None:
         """The first STATUSTEXT of the target starting with `prefix` heard at or after
         `t_monotonic`, whichever call read it from the link; None if none."""
-        for at, system, text in list(self.texts):
-            if at >= t_monotonic and system == self.target_system and text.startswith(prefix):
+        for at, system, component, text in list(self.texts):
+            if at >= t_monotonic and system == self.target_system and \
+                    (not self.target_component or component == self.target_component) and \
+                    text.startswith(prefix):
                 return text
         return None
 

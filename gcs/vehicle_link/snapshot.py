@@ -62,7 +62,7 @@ def collect(session: Session, snapshot: Snapshot, seconds: float) -> Snapshot:
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
         msg = session.recv(None, timeout=max(0.01, deadline - time.monotonic()))
-        if msg is not None and msg.get_srcSystem() == session.target_system:
+        if session.from_autopilot(msg):
             snapshot.update(msg)
     return snapshot
 
@@ -91,7 +91,7 @@ def collect_requested(session: Session, snapshot: Snapshot, requests: dict[str, 
                                                       0, 0, 0, 0, 0, 0))
             asked_at = now
         msg = s.recv(None, timeout=0.05)
-        if msg is None or msg.get_srcSystem() != s.target_system:
+        if not s.from_autopilot(msg):
             continue
         snapshot.update(msg)
         if msg.get_type() == "COMMAND_ACK" and msg.command == M.MAV_CMD_REQUEST_MESSAGE and \

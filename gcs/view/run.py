@@ -80,8 +80,7 @@ def run_live(session: Session, publisher: Publisher, stop: threading.Event,
         msg = session.recv(None, timeout=min(0.05, next_tick - now))
         if msg is None or msg.get_type() == "BAD_DATA":
             continue
-        if (msg.get_srcSystem() != session.target_system
-                or msg.get_srcComponent() != session.target_component):
+        if not session.from_autopilot(msg):
             continue
         t_before = view.sample.time_us
         if apply_message(view.sample, msg):

@@ -305,3 +305,35 @@ def gcs(capsys, vehicle: ScriptedAutopilot, *args: str) -> tuple[int, str, str]:
     code = cli.main([*args, "--connect", vehicle.url, "--wait", "5"])
     out = capsys.readouterr()
     return code, out.out, out.err
+
+
+class Companion:
+    """Another component of the vehicle's system on its link (a companion computer, id 191,
+    behind a router that merges it into the vehicle's link): while entered, sends its
+    HEARTBEAT and `messages` every `period_s` from the vehicle's socket."""
+
+    def __init__(self, vehicle: ScriptedAutopilot, messages: tuple = (),
+                 period_s: float = 0.1, component: int = 191) -> None:
+        self.vehicle = vehicle
+        self.messages = (M.MAVLink_heartbeat_message(
+            M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0,
+            M.MAV_STATE_ACTIVE, 3), *messages)
+        self.period_s = period_s
+        self.mav = encoder(vehicle.mav.srcSystem, component)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="companion", daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period_s):
+            peer = self.vehicle._peer
+            if peer is not None:
+                for msg in self.messages:
+                    self.vehicle.sock.sendto(pack(self.mav, msg), peer)
+
+    def __enter__(self) -> Companion:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5.0)

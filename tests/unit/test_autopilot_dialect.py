@@ -18,6 +18,7 @@ from fcu.edge.telemetry import autopilot_version
 from gcs.autopilot import PORTABLE_NAMES, UnknownMode, autopilot_of, commands, health, streams
 from gcs.autopilot.dialect import STATION_DIALECT as A
 from gcs.vehicle_link.actions import set_mode
+from gcs.vehicle_link.patience import from_target
 from gcs.vehicle_link.pose import PoseTarget, pose_errors
 from gcs.vehicle_link.session import GcsError
 from gcs.vehicle_link.snapshot import Snapshot
@@ -204,6 +205,9 @@ class Vehicle:
     def addressed_to_me(self, msg) -> bool:  # as Session's, this station being 255/190
         return getattr(msg, "target_system", 0) in (0, 255) and \
             getattr(msg, "target_component", 0) in (0, 190)
+
+    def from_autopilot(self, msg) -> bool:  # as Session's
+        return from_target(msg, self.target_system, self.target_component)
 
     def commands(self, command: int) -> list:
         return [m for m in self.sent if m.get_type() == "COMMAND_LONG" and m.command == command]

@@ -11,6 +11,7 @@ from typing import Any
 
 from common.wire.mavlink import MAV
 from gcs.autopilot.commands import flight_state
+from gcs.vehicle_link.patience import from_target
 
 M = MAV
 ARMED = M.MAV_MODE_FLAG_SAFETY_ARMED | M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
@@ -37,6 +38,9 @@ class _Session(SimpleNamespace):
 
     def recv(self, types: list[str], timeout: float) -> Any:
         return self.coming.pop(0) if self.coming else None
+
+    def from_autopilot(self, msg: Any) -> bool:  # as Session's
+        return from_target(msg, self.target_system, self.target_component)
 
 
 def _session(cached_at: float, commanded_at: float) -> _Session:

@@ -16,7 +16,7 @@ from gcs.vehicle_link.mission_client import MissionError, upload_detailed
 from gcs.vehicle_link.params import param_set
 from gcs.vehicle_link.patience import MISSION_ITEM, SILENCE_S, Budget, Wait
 from gcs.vehicle_link.session import GcsError, Session
-from tests.unit.scripted_autopilot import ScriptedAutopilot
+from tests.unit.scripted_autopilot import Companion, ScriptedAutopilot
 
 M = MAV
 REAL32 = M.MAV_PARAM_TYPE_REAL32
@@ -176,26 +176,10 @@ def test_a_companion_heartbeat_does_not_keep_a_silent_autopilot_heard(connected)
     companion computer of its system (component 191) goes on sending HEARTBEAT, then the
     upload still fails on silence after 3.0 s: only the autopilot counts. (The companion
     used to keep the wait going to its 30 s ceiling.)"""
-    from common.wire.mavlink import encoder, pack
     v, s = connected(silent_on="item")
-    companion, stop = encoder(1, 191), threading.Event()
-
-    def beat() -> None:
-        hb = M.MAVLink_heartbeat_message(M.MAV_TYPE_ONBOARD_CONTROLLER,
-                                         M.MAV_AUTOPILOT_INVALID, 0, 0, M.MAV_STATE_ACTIVE, 3)
-        while not stop.wait(0.1):
-            if v._peer is not None:
-                v.sock.sendto(pack(companion, hb), v._peer)
-
-    thread = threading.Thread(target=beat, daemon=True)
-    thread.start()
     t0 = time.monotonic()
-    try:
-        with pytest.raises(MissionError, match=r"vehicle silent for 3\.0 s"):
-            _upload(s)
-    finally:
-        stop.set()
-        thread.join(timeout=5.0)
+    with Companion(v), pytest.raises(MissionError, match=r"vehicle silent for 3\.0 s"):
+        _upload(s)
     assert SILENCE_S <= time.monotonic() - t0 < SILENCE_S + 1.5
 
 
@@ -302,3 +286,77 @@ def test_a_command_left_in_progress_says_so_at_the_ceiling(connected):
     with pytest.raises(GcsError, match=r"no final COMMAND_ACK for command 400 within the "
                        r"1\.5 s ceiling.*\(the last: MAV_RESULT_IN_PROGRESS\)"):
         s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, ceiling_s=1.5)
+
+
+# ------------------------------------------------------------------ only the autopilot is heard
+
+def test_a_command_to_a_silent_autopilot_fails_on_silence_beside_a_companion(connected):
+    """Given an autopilot that stops sending anything when a command comes, while a
+    companion computer of its system goes on with its HEARTBEAT, then the command fails
+    on silence after 3.0 s, not at its 10 s ceiling."""
+    v, s = connected(silent_on="command")
+    t0 = time.monotonic()
+    with Companion(v), pytest.raises(GcsError, match=r"no COMMAND_ACK for command 400: "
+                                     r"vehicle silent for 3\.0 s"):
+        s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+    assert SILENCE_S <= time.monotonic() - t0 < SILENCE_S + 1.5
+
+
+def test_a_mode_of_an_autopilot_silent_after_its_ack_fails_on_silence_beside_a_companion(
+        connected):
+    """Given an autopilot that accepts a mode change and then falls silent, while a
+    companion's HEARTBEAT goes on, then the mode is not confirmed, for silence after
+    3.0 s, not at the confirmation's 10 s ceiling."""
+    from gcs.autopilot.commands import NotConfirmed, set_mode
+    from gcs.autopilot.dialect import ModeTarget
+    v, s = connected()
+
+    def accept_then_fall_silent(msg) -> None:
+        v._send(M.MAVLink_command_ack_message(msg.command, M.MAV_RESULT_ACCEPTED))
+        v.silent = True
+
+    v._command = accept_then_fall_silent  # type: ignore[method-assign]
+    t0 = time.monotonic()
+    with Companion(v), pytest.raises(NotConfirmed, match=r"vehicle silent for 3\.0 s"):
+        set_mode(s, ModeTarget("POSCTL", 3 << 16), confirm_s=10.0)
+    assert SILENCE_S <= time.monotonic() - t0 < SILENCE_S + 1.5
+
+
+def test_a_parameter_list_of_a_silent_autopilot_fails_on_silence_beside_a_companion(
+        connected):
+    """Given an autopilot that falls silent when asked for its parameter list, while a
+    companion's HEARTBEAT goes on, then the list fails on silence after 3.0 s, not at its
+    10 s ceiling."""
+    from gcs.vehicle_link.params import param_values
+    v, s = connected()
+
+    def fall_silent(kind, msg) -> None:
+        v.silent = True
+
+    v._param_message = fall_silent  # type: ignore[method-assign]
+    t0 = time.monotonic()
+    with Companion(v), pytest.raises(GcsError, match=r"no PARAM_VALUE answered "
+                                     r"PARAM_REQUEST_LIST: vehicle silent for 3\.0 s"):
+        param_values(s)
+    assert SILENCE_S <= time.monotonic() - t0 < SILENCE_S + 1.5
+
+
+def test_each_in_progress_restarts_the_commands_ceiling(connected):
+    """Given a vehicle that answers IN_PROGRESS every 0.5 s for 3 s, then ACCEPTED, then a
+    command with a 1.5 s ceiling is ACCEPTED: progress restarts the ceiling (as MAVSDK
+    counts it); it was given up at 1.5 s."""
+    v, s = connected()
+
+    def progress(msg) -> None:
+        v.commands_heard.append(msg.confirmation)
+        for k in range(7):
+            threading.Timer(0.5 * k, lambda k=k: v._send(M.MAVLink_command_ack_message(
+                msg.command, M.MAV_RESULT_IN_PROGRESS, 16 * k))).start()
+        threading.Timer(3.2, lambda: v._send(M.MAVLink_command_ack_message(
+            msg.command, M.MAV_RESULT_ACCEPTED))).start()
+
+    v._command = progress  # type: ignore[method-assign]
+    t0 = time.monotonic()
+    assert s.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0, ceiling_s=1.5) == \
+        M.MAV_RESULT_ACCEPTED
+    assert time.monotonic() - t0 >= 3.0 and v.commands_heard == [0]

@@ -6,6 +6,8 @@ first by a stray echo."""
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from common.wire.mavlink import MAV
@@ -83,3 +85,54 @@ def test_param_save_writes_all_n(capsys, vehicle, tmp_path):
     assert code == 0, err
     assert out.strip() == f"saved {N} parameters to {path}"
     assert sorted(e.name for e in parse_params(path.read_text())) == sorted(PARAMS)
+
+
+class ArduPilotReadQueue(ScriptedAutopilot):
+    """ArduPilot's PARAM_REQUEST_READ handling: reads wait in one queue of 20 (GCS_Param's
+    param_requests, shared by all links) served one each 5 ms; a read that finds it full is
+    dropped. Its PARAM_REQUEST_LIST answer loses three indices in four."""
+
+    QUEUE = 20
+
+    def __init__(self, n: int) -> None:
+        self.queue: list[int] = []
+        self.dropped = 0
+        self.peak = 0
+        self._served_at = 0.0
+        super().__init__("ardupilot", {f"Q{i:03d}_X": (float(i), M.MAV_PARAM_TYPE_REAL32)
+                                       for i in range(n)})
+
+    def _param_message(self, kind: str, msg) -> None:
+        if kind == "PARAM_REQUEST_LIST":
+            for i in range(0, len(self.names), 4):
+                self._param_value(i)
+        elif kind == "PARAM_REQUEST_READ" and msg.param_index >= 0:
+            if len(self.queue) >= self.QUEUE:
+                self.dropped += 1
+                return
+            self.queue.append(msg.param_index)
+            self.peak = max(self.peak, len(self.queue))
+        else:
+            super()._param_message(kind, msg)
+
+    def _send_due(self) -> None:
+        super()._send_due()
+        now = time.monotonic()
+        if self.queue and now - self._served_at >= 0.005:
+            self._served_at = now
+            self._param_value(self.queue.pop(0))
+
+
+def test_param_list_rereads_in_batches_that_ardupilots_queue_holds(capsys):
+    """Given an ArduPilot-like vehicle of 80 parameters whose list loses 60 of them, and
+    whose read queue holds 20 and drops the rest, then `param list` prints all 80 and no
+    read was dropped: the missing are asked for ten at a time, the next ten once these
+    are in. (All 60 at once, as before, overflowed its queue.)"""
+    v = ArduPilotReadQueue(80)
+    try:
+        code, out, err = gcs(capsys, v, "param", "list")
+    finally:
+        v.close()
+    assert code == 0, err
+    assert [line.split()[0] for line in out.splitlines()] == v.names
+    assert v.dropped == 0 and v.peak <= 10
