@@ -46,6 +46,7 @@ ECHO_QUIET_S = 0.2  # after a set's echo, how long to listen for a later echo or
 # its links together and drops the rest (GCS_Param's param_requests), so asking for every
 # missing index at once lost most of them and crowded out other stations' reads.
 REREAD_BATCH = 10
+MAX_RESTARTS = 3  # a list whose param_count changes more often than this is given up
 PAUSE_S = 0.3  # the list's stream paused this long after a parameter: re-read what is missing
 
 
@@ -97,7 +98,8 @@ def param_values(session: Session, timeout: float = PARAM_LIST.ceiling_s
     Only a PARAM_VALUE whose param_index is within param_count fills the list: ArduPilot
     also sends PARAM_VALUE with param_index 65535 (-1) for a parameter that changes or is
     read by name (its GCS_Param), and counting such an echo as an index ended the list
-    one parameter short. The vehicle's latest param_count holds."""
+    one parameter short. When the vehicle's param_count changes, its indices have moved:
+    the list starts again (`_ListRead._restart`)."""
     s = session
     read = _ListRead(s, Wait(PARAM_LIST.but(ceiling_s=timeout)))
     why = ""
@@ -127,6 +129,7 @@ class _ListRead:
                                                             s.target_component)
         self.values: dict[int, tuple[str, bytes, int]] = {}
         self.count: int | None = None
+        self.counts: list[int] = []  # each param_count the vehicle announced, in turn
         self.asked: set[int] = set()
         self.streaming = False  # an index not asked for came since the last re-read
         self.quiet_until = time.monotonic() + PARAM_LIST.resend_s
@@ -137,9 +140,13 @@ class _ListRead:
         list restarts the ceiling when new; the last of a re-read batch asks the next."""
         self.wait.heard()
         index = msg.param_index
-        if self.count != msg.param_count:  # the first, or the vehicle's count changed
+        if self.count is None:
             self.count = msg.param_count
-            self.values = {i: v for i, v in self.values.items() if i < msg.param_count}
+            self.counts.append(msg.param_count)
+        elif self.count != msg.param_count:
+            if msg.param_count in self.counts:
+                return False  # sent before the change, come late
+            self._restart(msg.param_count)
         if not 0 <= index < msg.param_count:  # 65535: an echo of a set or a read by name
             return False
         if index not in self.values:
@@ -155,6 +162,20 @@ class _ListRead:
         if not self.asked and not self.streaming:
             self._ask_again()  # the batch is in and the stream has stopped: the next, now
         return False
+
+    def _restart(self, count: int) -> None:
+        """The vehicle's param_count changed: its list changed under the read, and the
+        indices with it (PX4 numbers the parameters in use, ArduPilot those of the enabled
+        subsystems: one more moves every index after it). Every value is read again, from
+        a new PARAM_REQUEST_LIST; GcsError after MAX_RESTARTS."""
+        self.counts.append(count)
+        if len(self.counts) > MAX_RESTARTS + 1:
+            raise GcsError("the vehicle's parameter count kept changing during the list: "
+                           + ", ".join(map(str, self.counts)))
+        self.count, self.values, self.asked = count, {}, set()
+        self.s.send(self.request)
+        self.quiet_until = time.monotonic() + PARAM_LIST.resend_s
+        self.streaming = False
 
     def paused(self) -> bool:
         """Nothing came for a while: once the pause is long enough, ask again (`_ask_again`);

@@ -136,3 +136,71 @@ def test_param_list_rereads_in_batches_that_ardupilots_queue_holds(capsys):
     assert code == 0, err
     assert [line.split()[0] for line in out.splitlines()] == v.names
     assert v.dropped == 0 and v.peak <= 10
+
+
+class CountGrows(ScriptedAutopilot):
+    """PX4-like: it numbers the parameters in use, and one comes into use while its first
+    list is sent: after index 19 of 30, NEW_PARAM takes index 5, every index after it moves
+    one up and param_count becomes 31 (the rest of that list is sent in the new order)."""
+
+    def __init__(self) -> None:
+        self.lists = 0
+        super().__init__("px4", {f"P{i:03d}_X": (float(i), M.MAV_PARAM_TYPE_REAL32)
+                                 for i in range(30)})
+
+    def _param_message(self, kind: str, msg) -> None:
+        if kind == "PARAM_REQUEST_LIST" and self.lists == 0:
+            self.lists += 1
+            for i in range(20):
+                self._param_value(i)
+            self.params["NEW_PARAM"] = (99.0, M.MAV_PARAM_TYPE_REAL32)
+            self.names.insert(5, "NEW_PARAM")
+            for i in range(20, 31):
+                self._param_value(i)
+            return
+        self.lists += kind == "PARAM_REQUEST_LIST"
+        super()._param_message(kind, msg)
+
+
+def test_param_list_starts_again_when_the_vehicles_count_changes(capsys):
+    """Given a vehicle whose parameter count grows from 30 to 31 during its list (a
+    parameter in use from then on moves the indices after it), then `param list` prints
+    the 31 of the new list, NEW_PARAM among them, having asked for the list again. (The
+    values of both numberings were mixed: one name twice, NEW_PARAM missing.)"""
+    v = CountGrows()
+    try:
+        code, out, err = gcs(capsys, v, "param", "list")
+    finally:
+        v.close()
+    assert code == 0, err
+    assert [line.split()[0] for line in out.splitlines()] == v.names
+    assert "NEW_PARAM" in v.names and v.lists == 2
+
+
+class CountChurns(ScriptedAutopilot):
+    """A vehicle whose param_count is another one in each PARAM_VALUE it sends."""
+
+    def __init__(self) -> None:
+        self.sent_values = 0
+        super().__init__("px4", {f"P{i:03d}_X": (float(i), M.MAV_PARAM_TYPE_REAL32)
+                                 for i in range(10)})
+
+    def _param_value(self, i: int) -> None:
+        self.sent_values += 1
+        name = self.names[i]
+        value, param_type = self.params[name]
+        self._send(_RawParamValue(name, self._raw(value, param_type), param_type,
+                                  len(self.names) + self.sent_values, i))
+
+
+def test_param_list_gives_up_on_a_count_that_keeps_changing(capsys):
+    """Given a vehicle whose param_count changes with every value, then `param list` exits 1
+    saying so, with the counts it saw, after three new starts."""
+    v = CountChurns()
+    try:
+        code, out, err = gcs(capsys, v, "param", "list")
+    finally:
+        v.close()
+    assert code == 1 and out == ""
+    assert "the vehicle's parameter count kept changing during the list: 11, 12, 13, 14, 15" \
+        in err
