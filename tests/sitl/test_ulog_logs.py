@@ -211,18 +211,24 @@ def test_one_clock_in_the_onboard_log_in_real_time(tmp_path, sensors):
     is on the FCU's flight clock: a PX4 topic's timestamp_sample is within transit of its
     timestamp (not the processes' start-up apart), dq_onboard is moved by one offset, a
     whole number of control periods, from the states' own stamps (state_time_us), the
-    metrics joined on those stamps are metrics.json's, and they join nearly every step.
-    With the estimator the stamp is the newest IMU sample at a period's end, where the
-    truth log has a row, not the newest sample, which a real-time step may follow: keyed by
-    that, 1 to 4 of 3,000 steps joined when the FCU's ticks fell after the odd samples of
-    the 1 kHz IMU (tests/unit/test_onboard_log.py makes that case in every run)."""
+    metrics joined on those stamps are metrics.json's, and every state a step took joins
+    once. A step that found no newer state than the step before (the simulator late: on a
+    loaded machine, 527 of 3,182 steps once) takes the same stamp again and adds no row:
+    how often is the machine's, not the FCU's, so it is not judged; that the stamps never
+    go back is. With the estimator the stamp is the newest IMU sample at a period's end,
+    where the truth log has a row, not the newest sample, which a real-time step may
+    follow: keyed by that, 1 to 4 of 3,000 steps joined when the FCU's ticks fell after the
+    odd samples of the 1 kHz IMU (tests/unit/test_onboard_log.py makes that case in every
+    run)."""
     out = tmp_path / "rt"
     metrics = _gcs_run(out, "--realtime", "--sensors", sensors)
     u = open_ulog(out / "onboard.ulg")
     dq = u.get_dataset("dq_onboard").data
     shift = dq["timestamp"].astype(np.int64) - dq["state_time_us"].astype(np.int64)
     assert len(shift) > 500 and np.all(shift == shift[0]) and shift[0] % 2000 == 0
-    assert metrics["samples"] >= 0.95 * len(shift), (metrics["samples"], len(shift))
+    keys = dq["state_time_us"].astype(np.int64)
+    assert np.all(np.diff(keys) >= 0)  # a step never takes an older state
+    assert metrics["samples"] == len(np.unique(keys)), (metrics["samples"], len(keys))
     lp = u.get_dataset("vehicle_local_position").data
     lag_s = (lp["timestamp"].astype(np.int64) - lp["timestamp_sample"].astype(np.int64)) * 1e-6
     # transit and scheduling only: the processes start tens of ms to seconds apart
