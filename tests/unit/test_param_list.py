@@ -7,6 +7,7 @@ first by a stray echo."""
 from __future__ import annotations
 
 import time
+from typing import TypeVar
 
 import pytest
 
@@ -18,6 +19,7 @@ from tests.unit.scripted_autopilot import ScriptedAutopilot, _RawParamValue
 M = MAV
 pytestmark = pytest.mark.timeout(60)
 N = 37
+ScriptedAutopilotT = TypeVar("ScriptedAutopilotT", bound=ScriptedAutopilot)
 PARAMS = {f"P{i:03d}_X": (float(i), M.MAV_PARAM_TYPE_REAL32) for i in range(N)}
 
 
@@ -87,6 +89,18 @@ def test_param_save_writes_all_n(capsys, vehicle, tmp_path):
     assert sorted(e.name for e in parse_params(path.read_text())) == sorted(PARAMS)
 
 
+def _listed(capsys, v: ScriptedAutopilotT) -> ScriptedAutopilotT:
+    """`gcs param list` against `v` (closed after): it exits 0 printing v's parameters in
+    index order."""
+    try:
+        code, out, err = gcs(capsys, v, "param", "list")
+    finally:
+        v.close()
+    assert code == 0, err
+    assert [line.split()[0] for line in out.splitlines()] == v.names
+    return v
+
+
 class ArduPilotReadQueue(ScriptedAutopilot):
     """ArduPilot's PARAM_REQUEST_READ handling: reads wait in one queue of 20 (GCS_Param's
     param_requests, shared by all links) served one each 5 ms; a read that finds it full is
@@ -128,13 +142,7 @@ def test_param_list_rereads_in_batches_that_ardupilots_queue_holds(capsys):
     whose read queue holds 20 and drops the rest, then `param list` prints all 80 and no
     read was dropped: the missing are asked for ten at a time, the next ten once these
     are in. (All 60 at once, as before, overflowed its queue.)"""
-    v = ArduPilotReadQueue(80)
-    try:
-        code, out, err = gcs(capsys, v, "param", "list")
-    finally:
-        v.close()
-    assert code == 0, err
-    assert [line.split()[0] for line in out.splitlines()] == v.names
+    v = _listed(capsys, ArduPilotReadQueue(80))
     assert v.dropped == 0 and v.peak <= 10
 
 
@@ -167,13 +175,7 @@ def test_param_list_starts_again_when_the_vehicles_count_changes(capsys):
     parameter in use from then on moves the indices after it), then `param list` prints
     the 31 of the new list, NEW_PARAM among them, having asked for the list again. (The
     values of both numberings were mixed: one name twice, NEW_PARAM missing.)"""
-    v = CountGrows()
-    try:
-        code, out, err = gcs(capsys, v, "param", "list")
-    finally:
-        v.close()
-    assert code == 0, err
-    assert [line.split()[0] for line in out.splitlines()] == v.names
+    v = _listed(capsys, CountGrows())
     assert "NEW_PARAM" in v.names and v.lists == 2
 
 
