@@ -56,7 +56,7 @@ def _param_save(args: argparse.Namespace, session: Session) -> int:
     t, c = session.target_system, session.target_component
     beat = session.heartbeat_msg  # the autopilot's (the link's latest may be a companion's)
     stack = vehicle = version = git = ""
-    if beat is not None and beat.get_srcSystem() == t:
+    if beat is not None:
         stack = {MAV.MAV_AUTOPILOT_PX4: "PX4 Pro", MAV.MAV_AUTOPILOT_ARDUPILOTMEGA: "ArduPilot"
                  }.get(beat.autopilot, "MAVLink Generic")
         vehicle = "Multi-Rotor" if beat.type in (

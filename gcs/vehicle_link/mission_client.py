@@ -127,10 +127,8 @@ def _recv(conn: Connection, types: list[str], target_system: int, target_compone
         if remaining <= 0.0:
             return None
         msg = conn.recv_match(blocking=True, timeout=remaining)
-        if msg is None or msg.get_type() == "BAD_DATA":
-            continue  # loop to the deadline check
         if not from_target(msg, target_system, target_component):
-            continue  # another component of its system: not the autopilot heard
+            continue  # none, bad data, or another component of its system: not heard
         if wait is not None:
             wait.heard()
         if msg.get_type() not in types:

@@ -42,9 +42,10 @@ class ParamValue:
 _ENCODINGS: weakref.WeakKeyDictionary[Session, str] = weakref.WeakKeyDictionary()
 ECHO_QUIET_S = 0.2  # after a set's echo, how long to listen for a later echo or a reason
 # Missing list indices are re-read by index this many at a time, the next batch once these
-# are in (QGroundControl's batch): ArduPilot queues at most 20 PARAM_REQUEST_READs for all
-# its links together and drops the rest (GCS_Param's param_requests), so asking for every
-# missing index at once lost most of them and crowded out other stations' reads.
+# are in (QGroundControl too asks in batches of about ten): ArduPilot queues at most 20
+# PARAM_REQUEST_READs for all its links together and drops the rest (GCS_Param's
+# param_requests), so asking for every missing index at once lost most of them and crowded
+# out other stations' reads.
 REREAD_BATCH = 10
 MAX_RESTARTS = 3  # a list whose param_count changes more often than this is given up
 PAUSE_S = 0.3  # the list's stream paused this long after a parameter: re-read what is missing
@@ -150,7 +151,7 @@ class _ListRead:
         if not 0 <= index < msg.param_count:  # 65535: an echo of a set or a read by name
             return False
         if index not in self.values:
-            self.wait.start = time.monotonic()  # progress: the ceiling counts from here
+            self.wait.progressed()
         self.values[index] = (msg.param_id, param_wire.raw_value(msg), msg.param_type)
         self.quiet_until = time.monotonic() + PAUSE_S
         if len(self.values) == self.count:

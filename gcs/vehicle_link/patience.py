@@ -81,6 +81,11 @@ class Wait:
     def heard(self, now: float | None = None) -> None:
         self.last_heard = time.monotonic() if now is None else now
 
+    def progressed(self, now: float | None = None) -> None:
+        """The answer is coming (a new parameter of a list, a command's IN_PROGRESS): the
+        ceiling counts from now."""
+        self.start = time.monotonic() if now is None else now
+
     def note_session(self, session: Any) -> None:
         """Take the session's `last_heard` (any message of the vehicle, whoever read it)."""
         heard = getattr(session, "last_heard", 0.0)

@@ -345,7 +345,7 @@ class Session:
                 elif msg.command == command and self.addressed_to_me(msg):
                     if msg.result == M.MAV_RESULT_IN_PROGRESS:
                         wait.stop_resending()  # working on it: wait for the final answer
-                        wait.start = time.monotonic()  # progress: the ceiling from here
+                        wait.progressed()  # progress: the ceiling counts from here
                         in_progress = True
                         continue
                     if msg.result != M.MAV_RESULT_ACCEPTED:

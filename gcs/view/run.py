@@ -78,9 +78,7 @@ def run_live(session: Session, publisher: Publisher, stop: threading.Event,
             next_tick = max(next_tick + period, now)
             continue
         msg = session.recv(None, timeout=min(0.05, next_tick - now))
-        if msg is None or msg.get_type() == "BAD_DATA":
-            continue
-        if not session.from_autopilot(msg):
+        if not session.from_autopilot(msg):  # none, bad data, or another component's
             continue
         t_before = view.sample.time_us
         if apply_message(view.sample, msg):
