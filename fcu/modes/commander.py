@@ -33,8 +33,9 @@ A mission's start (MISSION_START, mode MISSION, a new current item in flight, ar
 MISSION) plans the mission from the desired pose and checks it again: a job for `work`
 (`fcu.work`). Where it runs beside the loop the command's answer is IN_PROGRESS
 (`MAV_RESULT_IN_PROGRESS`; every command waiting on it is told the final one,
-`UnderWay.end`): the mode in force flies on, the HEARTBEAT shows it, until the plan is taken
-in at a step boundary (`_planned`); its timeline then starts at that step
+`UnderWay.end`): the reference rests where the plan starts (`ModeState.reference`), the
+HEARTBEAT shows the mode in force, until the plan is taken in at a step boundary
+(`_planned`); its timeline then starts at that step
 (`MissionRun.offset_s`). The same mode asked for again meanwhile waits for the same end; any
 other mode change, a disarm, a failsafe or a new mission drops a plan under way.
 """

@@ -80,6 +80,7 @@ class ModeState:
         self.ahead = PlansAhead(known.voice)
         self.shaper = OffboardShaper(self.ahead, lambda: self.mode == Mode.OFFBOARD)
         self.brake = HoldBrake(self.ahead)
+        self._held_for_start = False  # a mission's start under way has held the reference
 
     # ------------------------------------------------------------------ entering a mode
 
@@ -119,6 +120,26 @@ class ModeState:
         self.descent.end()
         self.posctl.restart()
         self.shaper.restart()
+        self._held_for_start = False
+
+    def _resume_from(self, held: Reference, t_us: int) -> None:
+        """A mission's start that held the reference (`reference`) ended without the mission
+        flying from it (dropped, or refused: HOLD): the mode in force flies on from the held
+        pose at rest, as if entered there now, not from the state it had when the start was
+        asked (that would jump ahead by as far as it would have flown meanwhile)."""
+        if self.mode == Mode.MISSION and self.mission_run.running:
+            return  # the mission's plan was taken in: it starts at the held pose
+        self.shaper.restart()
+        self.posctl.restart()
+        if self.mode == Mode.HOLD:
+            self.brake.hold_at(held)
+        if self.descent.touchdown is not None:
+            self.descent.begin_touchdown(t_us, held)
+        elif self.descent.plan is not None:
+            self.descent.start(t_us * 1e-6, held, self.known.limits)
+        if self.auto is not None:  # TAKEOFF's or RTL's items are absolute: the rest of them
+            self.auto.set_current(self.auto.current_seq, t_us * 1e-6, held.p_enu_m,
+                                  held.q_enu_flu)
 
     def on_disarming(self) -> None:
         """Disarmed: what flew ends (the mission's run, the landing, TAKEOFF's or RTL's
@@ -192,9 +213,21 @@ class ModeState:
         return envelope(vehicle) if vehicle is not None else None
 
     def reference(self, t_us: int) -> Reference:
-        """The desired pose, twist and acceleration at t_us (flight clock)."""
+        """The desired pose, twist and acceleration at t_us (flight clock). While a
+        mission's start is under way beside the loop, at rest where its plan starts (where
+        the reference was when it was asked), as the loop flies it when the plan is made in
+        the step: a mode flown on meanwhile would leave the plan's start behind, and the
+        reference would step back to it when the plan is taken in. In lockstep no step sees
+        this: the plan is taken in before the next step."""
         self.known.voice.clock_us = t_us
         mode, known = self.mode, self.known
+        start = self.mission_run.plan
+        if start is not None and known.armed:
+            self._held_for_start = True
+            return start.start
+        if self._held_for_start:
+            self._held_for_start = False
+            self._resume_from(self.here(), t_us)
         if self.descent.touchdown is not None:
             return self.descent.touchdown_ref(t_us, known.limits.land_speed_m_s, known.state)
         if mode == Mode.MISSION and self.mission_run.running and \

@@ -4,6 +4,8 @@ work is done, and the vehicle flying the mode in force meanwhile."""
 
 from __future__ import annotations
 
+import itertools
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -233,6 +235,84 @@ def test_inline_work_answers_a_mission_start_at_once():
     c.set_mission(tuple(_items(3)))
     assert c.mission_start(0) == (MAV_RESULT.MAV_RESULT_ACCEPTED, "mission started")
     assert c.mode == Mode.MISSION and c.modes.mission_run.offset_s == 0.0
+
+
+def _flown_until_moving(c: Any, t_us: int) -> int:
+    """Steps of 2 ms from `t_us` until the reference moves at 0.2 m/s or more; the next
+    step's time."""
+    while math.dist(c.fly(t_us).v_enu_m_s, (0.0, 0.0, 0.0)) < 0.2:
+        t_us += 2000
+        assert t_us < 20_000_000, "the reference never moved"
+    return t_us + 2000
+
+
+def _path_after(c: Any, t_us: int, steps: int) -> list[tuple[float, float, float]]:
+    return [c.fly(t_us + 2000 * k).p_enu_m for k in range(steps)]
+
+
+def test_a_start_under_way_rests_where_it_was_asked_and_its_plan_flies_on_from_there():
+    """Given a mission in flight, moving, and a new current item planned beside the loop,
+    then while the plan is made the reference rests where the vehicle should have been
+    when it was asked (zero velocity: as the loop flies it when the plan is made in the
+    step), and when it is taken in, the new plan starts there: no step. (The old plan flew
+    on meanwhile, and the reference stepped back by as far as it had gone, at 1.2 m/s
+    1.2 cm for a 10 ms plan, half a metre at 5 m/s for a plan of 100 ms.)"""
+    c = airborne_commander()
+    c.set_mission(tuple(_items(3)))
+    c.fly(2_000_000)
+    assert c.mission_start(0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED  # inline work
+    t = _flown_until_moving(c, 2_002_000)
+    asked = c.last_ref
+    work = HeldWork()
+    c.work = work
+    assert c.set_mission_current(2) == (IN_PROGRESS, "")
+    held = [c.fly(t + 2000 * k) for k in range(10)]
+    assert all(r.p_enu_m == asked.p_enu_m and r.q_enu_flu == asked.q_enu_flu for r in held)
+    assert all(r.v_enu_m_s == (0.0, 0.0, 0.0) and r.a_enu_m_s2 == (0.0, 0.0, 0.0)
+               for r in held)
+    assert work.release() == 1 and c.mode == Mode.MISSION and c.mission_current == 2
+    path = [asked.p_enu_m, *_path_after(c, t + 20_000, 2000)]
+    assert math.dist(path[0], path[1]) < 1e-6  # from rest where it rested: no step
+    assert max(math.dist(a, b) for a, b in itertools.pairwise(path)) < 0.01  # 5 m/s
+    assert math.dist(path[-1], path[-2]) > 0.0 or c.mission_done
+
+
+@pytest.mark.parametrize("mode", [Mode.TAKEOFF, Mode.LAND, Mode.POSCTL])
+def test_a_dropped_start_lets_the_mode_in_force_fly_on_from_where_it_rested(mode):
+    """Given TAKEOFF climbing, LAND descending or POSCTL moving up on its stick, and
+    MISSION asked with its plan made beside the loop (the reference rests meanwhile), when
+    a new mission upload drops that start (the mode in force stays), then the mode flies
+    on from where the reference rested, with no jump to where its plan or set-point would
+    have been by then, and reaches what it was going to: TAKEOFF its altitude, LAND the
+    touchdown."""
+    from fcu.modes import manual
+    c = airborne_commander()
+    c.set_mission(tuple(_items(3)))
+    c.manual_input(0.0, manual.Sticks(up=0.5))
+    c.fly(2_000_000)
+    answer = c.takeoff() if mode == Mode.TAKEOFF else c.set_mode(mode, 0.0)
+    assert answer[0] == MAV_RESULT.MAV_RESULT_ACCEPTED and c.mode == mode
+    t = _flown_until_moving(c, 2_002_000)
+    work = HeldWork()
+    c.work = work
+    assert c.set_mode(Mode.MISSION, 0.0) == (IN_PROGRESS, "")
+    rested = [c.fly(t + 2000 * k).p_enu_m for k in range(50)]  # 100 ms
+    assert all(p == rested[0] for p in rested)
+    c.set_mission(tuple(_items(2)))
+    assert c.under_way is None and c.mode == mode
+    work.release()
+    path = [rested[-1]]
+    for k in range(5000 if mode != Mode.POSCTL else 500):  # to the touchdown, whose
+        path.append(c.fly(t + 100_000 + 2000 * k).p_enu_m)   # set-point follows the state
+        if c.modes.descent.touchdown is not None:              # (held here)
+            break
+    assert max(math.dist(a, b) for a, b in itertools.pairwise(path)) < 0.004  # 2 m/s
+    if mode == Mode.TAKEOFF:
+        assert path[-1][2] == pytest.approx(2.0 + c.flight.takeoff_alt_m, abs=1e-6)
+    elif mode == Mode.LAND:
+        assert c.modes.descent.touchdown is not None and path[-1][2] < 0.5
+    else:
+        assert path[-1][2] > rested[-1][2] + 0.5  # climbing on its stick for 1 s
 
 
 def test_posctl_is_entered_when_its_limits_are_fitted():
