@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from benchmarks.bench_mission_length import mission
@@ -123,3 +124,49 @@ def test_realtime_offboard_samples_are_anchored_beside_the_loop(tmp_path):
     # documented reaction (pinned in tests/unit/test_plans_beside.py), and judged there
     assert brakes and min(brakes) >= 1, work
     assert len(brakes) <= 1 + work["late_anchors"] + work["inline_plans"], work
+
+
+@pytest.mark.timeout(180)
+def test_realtime_mission_asked_at_speed_rests_where_asked_and_starts_there(tmp_path):
+    """Given real time (`beside`), OFFBOARD at speed and mode MISSION asked, then the plan
+    ran while the loop stepped, and the reference (the onboard log's, one row a step) came
+    to rest where it was when MISSION was asked: the first row at rest repeats the row
+    before it exactly, and the mission leaves from there. (The OFFBOARD approach used to fly
+    on while the plan was made, and the reference stepped back to where it was asked.)"""
+    from common.logs.ulog import read_topic
+    from common.wire.mission_items import MissionItem, local_xy
+    nan = float("nan")
+    items = [MissionItem(seq, M.MAV_FRAME_LOCAL_NED, M.MAV_CMD_NAV_WAYPOINT, int(seq == 0), 1,
+                         0.0, 0.0, 0.0, nan, local_xy(3.0), local_xy(east), -1.5)
+             for seq, east in enumerate((1.0, 2.0))]
+    stats_path = tmp_path / "fcu.json"
+    s = launch(tmp_path, "case1_figure8", realtime=True, fcu_args=("--stats", str(stats_path)))
+    try:
+        sess = s.session
+        assert upload(sess.conn, sess.target_system, sess.target_component, items,
+                      send=sess.send) == M.MAV_MISSION_ACCEPTED
+        assert sess.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1.0) == M.MAV_RESULT_ACCEPTED
+        assert _stream_until(s, (0.0, 1.0, -1.5), False, lambda m: m.z < -1.4 and m.y > 0.95)
+        assert _stream_until(s, (6.0, 1.0, -1.5), True, lambda m: m.x > 1.0 and m.vx > 0.8)
+        assert sess.command(M.MAV_CMD_DO_SET_MODE, 1.0, *Mode.MISSION.value) == \
+            M.MAV_RESULT_ACCEPTED
+        until(lambda: s.wait_for(["LOCAL_POSITION_NED"], lambda m: m.y > 1.9, 1.0),
+              "the mission's second waypoint", 30.0)
+    finally:
+        s.session.close()
+        stop(s.procs)
+    work = json.loads(stats_path.read_text())["work"]
+    plans = [j["steps"] for j in work["history"] if j["job"] == "plan_from"]
+    assert plans and min(plans) >= 1 and work["failed"] == 0, work
+    cols, rows = read_topic(tmp_path / "onboard.ulg", "dq_onboard")
+    p = rows[:, [cols.index(c) for c in ("pdx", "pdy", "pdz")]]
+    speed = np.linalg.norm(rows[:, [cols.index(c) for c in ("vdx", "vdy", "vdz")]], axis=1)
+    fast = int(np.flatnonzero(speed > 0.8)[0])
+    at_rest = np.flatnonzero(speed[fast:] < 1e-9)
+    assert at_rest.size, "the reference never rested: the mode in force flew on meanwhile"
+    rest = fast + int(at_rest[0])  # the first row at rest after the speed
+    assert speed[rest - 1] > 0.5  # it stopped from speed: MISSION asked
+    assert np.array_equal(p[rest], p[rest - 1]), (p[rest - 3:rest + 3], speed[rest - 3:rest + 3])
+    moving = rest + int(np.flatnonzero(speed[rest:] >= 1e-9)[0])
+    assert np.all(p[rest:moving] == p[rest])  # at rest there until the mission leaves
+    assert np.linalg.norm(p[moving] - p[rest]) < 1e-3
