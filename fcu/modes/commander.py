@@ -473,6 +473,7 @@ class Commander:
             return
         self.modes.switch(Mode.MISSION)
         run.begin(executor, self.clock_us * 1e-6 - plan.t_s)  # offset 0 when planned inline
+        self.modes.start_taken_in()
         self._maybe_start_flight()
         if plan.said:
             self.say(MAV_SEVERITY.MAV_SEVERITY_INFO, plan.said)

@@ -80,7 +80,7 @@ class ModeState:
         self.ahead = PlansAhead(known.voice)
         self.shaper = OffboardShaper(self.ahead, lambda: self.mode == Mode.OFFBOARD)
         self.brake = HoldBrake(self.ahead)
-        self._held_for_start = False  # a mission's start under way has held the reference
+        self._rest_since_us: int | None = None  # the reference at rest for a mission's start
 
     # ------------------------------------------------------------------ entering a mode
 
@@ -120,19 +120,26 @@ class ModeState:
         self.descent.end()
         self.posctl.restart()
         self.shaper.restart()
-        self._held_for_start = False
+        self._rest_since_us = None
 
-    def _resume_from(self, held: Reference, t_us: int) -> None:
-        """A mission's start that held the reference (`reference`) ended without the mission
-        flying from it (dropped, or refused: HOLD): the mode in force flies on from the held
-        pose at rest, as if entered there now, not from the state it had when the start was
-        asked (that would jump ahead by as far as it would have flown meanwhile)."""
-        if self.mode == Mode.MISSION and self.mission_run.running:
-            return  # the mission's plan was taken in: it starts at the held pose
+    def start_taken_in(self) -> None:
+        """The mission's plan the reference rested for is flown from now (from where it
+        rested): nothing to resume."""
+        self._rest_since_us = None
+
+    def _resume_from(self, held: Reference, t_us: int, rest_since_us: int) -> None:
+        """A mission's start that rested the reference (`reference`) from `rest_since_us`
+        ended without its plan flown (dropped, or refused: HOLD): the mode in force flies on
+        from the rest, not from the state it had when the start was asked (that would jump
+        ahead by as far as it would have flown meanwhile). HOLD holds there; OFFBOARD,
+        POSCTL, LAND, a touchdown, TAKEOFF and RTL start again from there; a mission still
+        running (its new start dropped) goes on from where it paused, its timeline moved
+        by the rest's length."""
         self.shaper.restart()
         self.posctl.restart()
-        if self.mode == Mode.HOLD:
-            self.brake.hold_at(held)
+        self.brake.hold_at(held)  # (HOLD entered later holds afresh: `switch`)
+        if self.mode == Mode.MISSION and self.mission_run.running:
+            self.mission_run.offset_s += (t_us - rest_since_us) * 1e-6
         if self.descent.touchdown is not None:
             self.descent.begin_touchdown(t_us, held)
         elif self.descent.plan is not None:
@@ -223,11 +230,12 @@ class ModeState:
         mode, known = self.mode, self.known
         start = self.mission_run.plan
         if start is not None and known.armed:
-            self._held_for_start = True
+            if self._rest_since_us is None:
+                self._rest_since_us = t_us
             return start.start
-        if self._held_for_start:
-            self._held_for_start = False
-            self._resume_from(self.here(), t_us)
+        if self._rest_since_us is not None:
+            self._resume_from(self.here(), t_us, self._rest_since_us)
+            self._rest_since_us = None
         if self.descent.touchdown is not None:
             return self.descent.touchdown_ref(t_us, known.limits.land_speed_m_s, known.state)
         if mode == Mode.MISSION and self.mission_run.running and \

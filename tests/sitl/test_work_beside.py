@@ -92,6 +92,12 @@ def _stream_until(s: Stack, target_ned: tuple[float, float, float], mode_set: bo
     return False
 
 
+def _job_steps(stats_path: Path, job: str) -> tuple[dict, list[int]]:
+    """The FCU's `--stats` work section, and the control steps each `job` took."""
+    work = json.loads(stats_path.read_text())["work"]
+    return work, [j["steps"] for j in work["history"] if j["job"] == job]
+
+
 @pytest.mark.timeout(180)
 def test_realtime_offboard_samples_are_anchored_beside_the_loop(tmp_path):
     """Given real time (`beside`), OFFBOARD from a hover and set-points 1 m north then 1 m
@@ -115,10 +121,9 @@ def test_realtime_offboard_samples_are_anchored_beside_the_loop(tmp_path):
     finally:
         s.session.close()
         stop(s.procs)
-    work = json.loads(stats_path.read_text())["work"]
-    anchors = [j["steps"] for j in work["history"] if j["job"] == "advance"]
+    work, anchors = _job_steps(stats_path, "advance")
     assert len(anchors) >= 3 and min(anchors) >= 1 and work["failed"] == 0, work
-    brakes = [j["steps"] for j in work["history"] if j["job"] == "brake_ahead"]
+    brakes = _job_steps(stats_path, "brake_ahead")[1]
     # one brake, or more where one came after its time on a busy machine (planned again);
     # a plan the starved worker had not sent within COAST_MAX_US is made in the loop, the
     # documented reaction (pinned in tests/unit/test_plans_beside.py), and judged there
@@ -155,8 +160,7 @@ def test_realtime_mission_asked_at_speed_rests_where_asked_and_starts_there(tmp_
     finally:
         s.session.close()
         stop(s.procs)
-    work = json.loads(stats_path.read_text())["work"]
-    plans = [j["steps"] for j in work["history"] if j["job"] == "plan_from"]
+    work, plans = _job_steps(stats_path, "plan_from")
     assert plans and min(plans) >= 1 and work["failed"] == 0, work
     cols, rows = read_topic(tmp_path / "onboard.ulg", "dq_onboard")
     p = rows[:, [cols.index(c) for c in ("pdx", "pdy", "pdz")]]

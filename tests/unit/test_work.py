@@ -272,9 +272,41 @@ def test_a_start_under_way_rests_where_it_was_asked_and_its_plan_flies_on_from_t
                for r in held)
     assert work.release() == 1 and c.mode == Mode.MISSION and c.mission_current == 2
     path = [asked.p_enu_m, *_path_after(c, t + 20_000, 2000)]
-    assert math.dist(path[0], path[1]) < 1e-6  # from rest where it rested: no step
+    assert 0.0 < math.dist(path[0], path[1]) < 1e-6  # from rest where it rested, at once
     assert max(math.dist(a, b) for a, b in itertools.pairwise(path)) < 0.01  # 5 m/s
     assert math.dist(path[-1], path[-2]) > 0.0 or c.mission_done
+
+
+def test_a_running_missions_dropped_new_start_goes_on_from_where_it_paused():
+    """Given a mission in flight, moving, a new current item planned beside the loop (the
+    reference rests), when POSCTL is asked (the new start dropped, POSCTL's fit beside the
+    loop: MISSION still in force), then the mission goes on from where it paused, no jump
+    ahead to where its timeline had got meanwhile, and it passes no item at once; POSCTL is
+    entered from there when fitted."""
+    from fcu.modes import manual
+    c = airborne_commander()
+    c.set_mission(tuple(_items(3)))
+    c.manual_input(0.0, manual.CENTRED)
+    c.fly(2_000_000)
+    assert c.mission_start(0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED  # inline work
+    t = _flown_until_moving(c, 2_002_000)
+    before = [c.fly(t + 2000 * k).p_enu_m for k in range(2)]
+    t += 4000
+    work = HeldWork()
+    c.work = work
+    assert c.set_mission_current(2) == (IN_PROGRESS, "")
+    rested = [c.fly(t + 2000 * k).p_enu_m for k in range(50)]  # 100 ms
+    assert all(p == before[-1] for p in rested)
+    assert c.set_mode(Mode.POSCTL, 0.0) == (IN_PROGRESS, "")  # the re-aim dropped
+    assert c.mode == Mode.MISSION and c.modes.mission_run.running
+    c.mission_events.clear()
+    path = [*before, *rested, *_path_after(c, t + 100_000, 20)]
+    steps = [math.dist(a, b) for a, b in itertools.pairwise(path)]
+    assert steps[-20] < 2 * steps[0]  # from where it paused: one step at about its speed
+    assert max(steps) < 0.01 and len(c.mission_events) <= 1
+    work.release()
+    assert c.mode == Mode.POSCTL
+    assert math.dist(c.fly(t + 140_000).p_enu_m, path[-1]) < 0.01
 
 
 @pytest.mark.parametrize("mode", [Mode.TAKEOFF, Mode.LAND, Mode.POSCTL])
