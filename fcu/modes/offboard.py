@@ -56,7 +56,8 @@ from fcu.envelope.excess import TILT
 from fcu.envelope.feasibility import Envelope
 from fcu.modes.manual import StickSettings
 from fcu.reference import approach
-from fcu.reference.approach import Approach, Offset, Setpoint, offset_rate
+from fcu.reference.approach import Approach, Offset, Setpoint
+from fcu.reference.approach_kernels import offset_rate, reference_kernel
 from fcu.stages import Reference
 
 ROTATION_RATE_DEG_S = 90.0  # a rotation's approach rate, about any axis
@@ -136,7 +137,7 @@ def _reference(s: Shaped, t_us: int) -> Reference:
     if plan is None:
         x = _extrapolated(sp, tau_sp)
         return Reference(x.p, x.q, x.v, sp.a, sp.w, _ZERO)
-    p, q, v, a, w, wd = approach.reference_kernel(*approach.floats(sp), plan.coeffs,
+    p, q, v, a, w, wd = reference_kernel(*approach.floats(sp), plan.coeffs,
                                                   plan.duration_s, tau_sp,
                                                   (t_us - s.plan_us) * 1e-6)
     return Reference(p, q, v, a, w, wd)

@@ -10,7 +10,10 @@ where the set-point jumps:
 e in ENU, eps a rotation vector in the set-point's body frame (FLU). Each of their six
 components x goes from its value, rate and acceleration when the plan starts to rest at zero
 in D seconds as x0 (1 - B(t / D)) plus the quintic that takes its starting rate and
-acceleration to rest from zero (`quintic_to_rest`, `_component`). B is `blend`: the
+acceleration to rest from zero (`fcu.reference.approach_kernels`); with a fixed end that
+quintic lasts at most twice the shortest time in which it alone fits the limits
+(`rates_duration`), not the whole of a long approach, whose excursion would grow as v0 D
+and a0 D^2 (so that no duration fitted). B is `blend`: the
 minimum-jerk 10 s^3 - 15 s^4 + 6 s^5, or, on a long step, a cruise between minimum-jerk
 ramps of share r (`cruise_share`: the ramps reach the speed limit at the acceleration
 limit); both are tried and the shorter kept. Position, velocity and acceleration are then
@@ -54,13 +57,19 @@ from typing import NamedTuple
 
 import numpy as np
 
-from common.jit import njit
 from common.warm_ups import warm_up
-from fcu.control.dualquat import Quat, Vec3, cross, q_exp, q_mul, q_rotate_inv, right_jacobian_inv
+from fcu.control.dualquat import Quat, Vec3
 from fcu.envelope.excess import KINDS, Excess, excess_kernel
 from fcu.envelope.feasibility import TILT_STEP_S, Envelope, _nominal_wrench_rows
 from fcu.modes.manual import StickSettings
-from fcu.reference.trajectory import quintic_poly
+from fcu.reference.approach_kernels import (
+    kinematic_ratio,
+    offset_kernel,
+    offset_rate,
+    quintic_to_rest,
+    reference_kernel,
+    reference_rows,
+)
 
 D_MIN_S = 0.02  # the shortest approach
 D_MAX_S = 120.0  # the longest tried
@@ -75,6 +84,8 @@ RAMP_SAMPLES = 32
 DIFF_S = 1e-5  # the central differences' time step (s)
 TINY = 1e-9  # an offset and its rates below this are zero: no plan
 CRUISE_MAX = 0.4  # a longer ramp share flies as the plain minimum-jerk blend
+RATES_HEADROOM = 2.0  # the starting rates' quintic lasts this many times its shortest
+GROW_RATES = 1.25  # ... found growing by this factor
 FLIP_RAD = 1.0  # a nominal tilt that turns this much between two samples flips (`flip`)
 FLIP = "tilt flip"
 
@@ -113,171 +124,9 @@ class Approach(NamedTuple):
 ZERO: Vec3 = (0.0, 0.0, 0.0)
 
 
-@njit
-def _right_jacobians(phi: Vec3, x: Vec3, y: Vec3) -> tuple[Vec3, Vec3]:
-    """J_r(phi) x and J_r(phi) y (`right_jacobian`), the coefficients taken once."""
-    th2 = phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]
-    if th2 < 1e-12:
-        a, b = 0.5, 1.0 / 6.0
-    else:
-        th = math.sqrt(th2)
-        a, b = (1.0 - math.cos(th)) / th2, (th - math.sin(th)) / (th2 * th)
-    px, py = cross(phi, x), cross(phi, y)
-    ppx, ppy = cross(phi, px), cross(phi, py)
-    return ((x[0] - a * px[0] + b * ppx[0], x[1] - a * px[1] + b * ppx[1],
-             x[2] - a * px[2] + b * ppx[2]),
-            (y[0] - a * py[0] + b * ppy[0], y[1] - a * py[1] + b * ppy[1],
-             y[2] - a * py[2] + b * ppy[2]))
-
-
-@njit
-def right_jacobian(phi: Vec3, x: Vec3) -> Vec3:
-    """J_r(phi) x: the body rate of exp(phi) when phi changes at x."""
-    return _right_jacobians(phi, x, x)[0]
-
-
-@njit
-def offset_rate(phi: Vec3, w: Vec3) -> Vec3:
-    """How the attitude offset phi changes for a body rate w of exp(phi)
-    (`fcu.control.dualquat.right_jacobian_inv`); beyond 3 rad, where the inverse grows without bound
-    towards 2 pi, w itself."""
-    if math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2]) > 3.0:
-        return w
-    return right_jacobian_inv(phi, w)
-
-
-def quintic_to_rest(x0: float, v0: float, a0: float, d: float) -> tuple[float, ...]:
-    """Coefficients k0..k5 of x(s) = sum k_j s^j, s = tau / d in [0, 1], with x, dx/dtau,
-    d^2x/dtau^2 = (x0, v0, a0) at s = 0 and (0, 0, 0) at s = 1."""
-    v, a = v0 * d, a0 * d * d
-    return (x0, v, 0.5 * a, -(20.0 * x0 + 12.0 * v + 3.0 * a) / 2.0,
-            (30.0 * x0 + 16.0 * v + 3.0 * a) / 2.0, -(12.0 * x0 + 6.0 * v + a) / 2.0)
-
-
-_quintic = njit(quintic_poly)  # the one minimum-jerk polynomial, compiled for `blend`
-
-
-@njit
-def blend(s: float, r: float) -> tuple[float, float, float]:
-    """B(s) from 0 to 1 on [0, 1] and its first two s-derivatives, zero at both ends: the
-    minimum-jerk 10 s^3 - 15 s^4 + 6 s^5 for r = 0; for 0 < r <= 1/2 a cruise at
-    1 / (1 - r) between ramps of share r whose rate is the minimum-jerk blend of the ramp
-    (so B'' is continuous: no step in an acceleration)."""
-    if s <= 0.0:
-        return 0.0, 0.0, 0.0
-    if s >= 1.0:
-        return 1.0, 0.0, 0.0
-    if r <= 0.0:
-        return _quintic(s)
-    k = 1.0 / (1.0 - r)
-    if r < s < 1.0 - r:
-        return k * (s - 0.5 * r), k, 0.0
-    u = s / r if s <= r else (1.0 - s) / r
-    u2 = u * u
-    big_q = u2 * u2 * (2.5 - 3.0 * u + u2)  # the integral of the ramp's rate
-    q = _quintic(u)[0]
-    dq = 30.0 * u2 * (1.0 - u) * (1.0 - u)  # q's rate, factored as the pinned figures have it
-    if s <= r:
-        return k * r * big_q, k * q, k * dq / r
-    return 1.0 - k * r * big_q, k * q, -k * dq / r
-
-
-@njit
-def _component(k: np.ndarray, j: int, d: float, tau: float) -> tuple[float, float, float]:
-    """Component j's value, rate and acceleration at tau (zero from tau >= d on): its
-    start k[j, 0] times 1 - B(s) (`blend`, cruise share k[j, 6]) plus the quintic of its
-    start's rates, k[j, 1..5]."""
-    if tau >= d:
-        return 0.0, 0.0, 0.0
-    s = max(tau, 0.0) / d
-    x0, c1, c2, c3, c4, c5 = k[j, 0], k[j, 1], k[j, 2], k[j, 3], k[j, 4], k[j, 5]
-    b, db, ddb = blend(s, k[j, 6])
-    x = x0 * (1.0 - b) + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
-    dx = (-x0 * db + c1 + s * (2.0 * c2 + s * (3.0 * c3 + s * (4.0 * c4 + s * 5.0 * c5)))) / d
-    ddx = (-x0 * ddb + 2.0 * c2 + s * (6.0 * c3 + s * (12.0 * c4 + s * 20.0 * c5))) / (d * d)
-    return x, dx, ddx
-
-
-@njit
-def offset_kernel(k: np.ndarray, d: float, tau: float) -> tuple[Vec3, Vec3, Vec3, Vec3, Vec3,
-                                                                 Vec3]:
-    """(e, de, dde, eps, deps, ddeps) at tau seconds into the approach."""
-    e0, de0, dde0 = _component(k, 0, d, tau)
-    e1, de1, dde1 = _component(k, 1, d, tau)
-    e2, de2, dde2 = _component(k, 2, d, tau)
-    r0, dr0, ddr0 = _component(k, 3, d, tau)
-    r1, dr1, ddr1 = _component(k, 4, d, tau)
-    r2, dr2, ddr2 = _component(k, 5, d, tau)
-    return ((e0, e1, e2), (de0, de1, de2), (dde0, dde1, dde2), (r0, r1, r2), (dr0, dr1, dr2),
-            (ddr0, ddr1, ddr2))
-
-
-@njit
-def reference_kernel(p: Vec3, v: Vec3, a: Vec3, q: Quat, w: Vec3, k: np.ndarray, d: float,
-                     tau_sp: float, tau: float) -> tuple[Vec3, Quat, Vec3, Vec3, Vec3, Vec3]:
-    """The reference (p, q, v, a, omega, omega_dot) of the set-point extrapolated tau_sp
-    seconds from its anchor plus the offset tau seconds into the approach."""
-    e, de, dde, eps, deps, ddeps = offset_kernel(k, d, tau)
-    h = 0.5 * tau_sp * tau_sp
-    q_sp = q_mul(q, q_exp((w[0] * tau_sp, w[1] * tau_sp, w[2] * tau_sp)))
-    q_e = q_exp(eps)
-    w_seen = q_rotate_inv(q_e, w)
-    w_e = right_jacobian(eps, deps)
-    return ((p[0] + v[0] * tau_sp + a[0] * h + e[0], p[1] + v[1] * tau_sp + a[1] * h + e[1],
-             p[2] + v[2] * tau_sp + a[2] * h + e[2]),
-            q_mul(q_sp, q_e),
-            (v[0] + a[0] * tau_sp + de[0], v[1] + a[1] * tau_sp + de[1],
-             v[2] + a[2] * tau_sp + de[2]),
-            (a[0] + dde[0], a[1] + dde[1], a[2] + dde[2]),
-            (w_seen[0] + w_e[0], w_seen[1] + w_e[1], w_seen[2] + w_e[2]),
-            right_jacobian(eps, ddeps))
-
-
-@njit
-def _rows(p: Vec3, v: Vec3, a: Vec3, q: Quat, w: Vec3, k: np.ndarray, d: float,
-          taus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """`reference_kernel`'s q (4 x n), a, omega, omega_dot (3 x n) at each tau (set-point
-    and approach start together); where w = 0, exp(w tau) is taken once per sign of tau."""
-    n = taus.shape[0]
-    qs, acc, rate, rate_dot = np.empty((4, n)), np.empty((3, n)), np.empty((3, n)), \
-        np.empty((3, n))
-    still = w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0
-    q_signs = (q_mul(q, q_exp((w[0] * 1.0, w[1] * 1.0, w[2] * 1.0))),
-               q_mul(q, q_exp((w[0] * -1.0, w[1] * -1.0, w[2] * -1.0))))
-    for i in range(n):
-        tau = taus[i]
-        _, _, dde, eps, deps, ddeps = offset_kernel(k, d, tau)
-        q_sp = q_signs[int(math.copysign(1.0, tau) < 0.0)] if still else \
-            q_mul(q, q_exp((w[0] * tau, w[1] * tau, w[2] * tau)))
-        q_e = q_exp(eps)
-        w_seen = q_rotate_inv(q_e, w)
-        w_e, wd = _right_jacobians(eps, deps, ddeps)
-        qs[0, i], qs[1, i], qs[2, i], qs[3, i] = q_mul(q_sp, q_e)
-        acc[0, i], acc[1, i], acc[2, i] = a[0] + dde[0], a[1] + dde[1], a[2] + dde[2]
-        for j in range(3):
-            rate[j, i], rate_dot[j, i] = w_seen[j] + w_e[j], wd[j]
-    return qs, acc, rate, rate_dot
-
-
-@njit
-def _kinematic_ratio(k: np.ndarray, d: float, taus: np.ndarray, lim: np.ndarray) -> float:
-    """The largest share of the approach limits the offset uses: lim = (speed_xy, speed_up,
-    speed_down, acc_xy, acc_up, acc_down, rotation rate, rotation acceleration)."""
-    worst = 0.0
-    for i in range(taus.shape[0]):
-        _, de, dde, _, deps, ddeps = offset_kernel(k, d, taus[i])
-        r = max(math.hypot(de[0], de[1]) / lim[0],
-                de[2] / lim[1] if de[2] > 0.0 else -de[2] / lim[2],
-                math.hypot(dde[0], dde[1]) / lim[3],
-                dde[2] / lim[4] if dde[2] > 0.0 else -dde[2] / lim[5],
-                math.sqrt(deps[0] ** 2 + deps[1] ** 2 + deps[2] ** 2) / lim[6],
-                math.sqrt(ddeps[0] ** 2 + ddeps[1] ** 2 + ddeps[2] ** 2) / lim[7])
-        worst = max(worst, r)
-    return worst
-
 
 def _limits(lim: StickSettings, x: Offset) -> np.ndarray:
-    """The limits of `_kinematic_ratio`, each at least what the offset starts with (a
+    """The limits of `kinematic_ratio`, each at least what the offset starts with (a
     reference that enters faster than a limit, say HOLD at 10 m/s, slows from there)."""
     return np.array([max(lim.speed_xy_m_s, math.hypot(x.de[0], x.de[1])),
                      max(lim.speed_up_m_s, x.de[2]), max(lim.speed_down_m_s, -x.de[2]),
@@ -314,11 +163,16 @@ def free_end(x: Offset, d: float, free: tuple[bool, bool] = (True, True)) -> Off
                       eps=start(x.deps, x.ddeps) if free[1] else x.eps)
 
 
-def coefficients(x: Offset, d: float, r: float = 0.0) -> np.ndarray:
-    """Per component (e, then eps): its start, the quintic of its start's rates (from 0),
-    and the cruise share r (`_component`)."""
-    rows = [(x.e[j], *quintic_to_rest(0.0, x.de[j], x.dde[j], d)[1:], r) for j in range(3)] + \
-        [(x.eps[j], *quintic_to_rest(0.0, x.deps[j], x.ddeps[j], d)[1:], r) for j in range(3)]
+def coefficients(x: Offset, d: float, r: float = 0.0,
+                 rho: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+    """Per component (e, then eps): its start, the quintic of its start's rates (from 0)
+    over rho * d (rho[0] for e, rho[1] for eps), the cruise share r and rho
+    (`_component`)."""
+    dp, dq = rho[0] * d, rho[1] * d
+    rows = [(x.e[j], *quintic_to_rest(0.0, x.de[j], x.dde[j], dp)[1:], r, rho[0])
+            for j in range(3)] + \
+        [(x.eps[j], *quintic_to_rest(0.0, x.deps[j], x.ddeps[j], dq)[1:], r, rho[1])
+         for j in range(3)]
     return np.array(rows)
 
 
@@ -377,7 +231,7 @@ def _allocated(env: Envelope, sp: Setpoint, k: np.ndarray, d: float, taus: np.nd
                ) -> np.ndarray:
     """Omega = A^+ [f_b; tau_b] of the nominal wrench along the reference at each tau
     (samples x 2n, contiguous)."""
-    qs, acc, rate, rate_dot = _rows(*floats(sp), k, d, taus)
+    qs, acc, rate, rate_dot = reference_rows(*floats(sp), k, d, taus)
     v = env.vehicle
     wrench = _nominal_wrench_rows(v.mass_kg, v.gravity_m_s2, v.inertia_diag_kg_m2, qs, acc,
                                   rate, rate_dot)
@@ -385,12 +239,14 @@ def _allocated(env: Envelope, sp: Setpoint, k: np.ndarray, d: float, taus: np.nd
 
 
 def check(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset, d: float,
-          r: float = 0.0) -> tuple[float, Excess | None]:
-    """(ratio, excess) of the approach of offset x to set-point sp in d seconds: the largest
-    share of a limit or an actuator's envelope it uses (> 1: it does not fit)."""
-    k = coefficients(x, d, r)
+          r: float = 0.0, rho: tuple[float, float] = (1.0, 1.0)
+          ) -> tuple[float, Excess | None]:
+    """(ratio, excess) of the approach of offset x to set-point sp in d seconds (its rates'
+    quintic over rho * d): the largest share of a limit or an actuator's envelope it uses
+    (> 1: it does not fit)."""
+    k = coefficients(x, d, r, rho)
     taus = _instants(sp, x, d, r)
-    ratio = float(_kinematic_ratio(k, d, taus, _limits(lim, x)))
+    ratio = float(kinematic_ratio(k, d, taus, _limits(lim, x)))
     if env is None:
         return ratio, None
     n = len(taus)
@@ -448,11 +304,35 @@ def plan(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
     return best
 
 
+def rates_duration(lim: StickSettings, sp: Setpoint, x: Offset) -> float:
+    """How long the quintic of the offset's starting rates lasts at most (fixed ends): the
+    shortest duration in which it alone (the offset's value zero) stays within the limits,
+    times RATES_HEADROOM (0: no rates). Stretched over a long approach instead, its
+    excursion grows as v0 D and a0 D^2: an OFFBOARD set-point 39 m away taken while the
+    reference still decelerated found no duration that fitted, and the longest tried ran
+    the reference into the ground."""
+    rates = x._replace(e=ZERO, eps=ZERO)
+    if at_rest(rates):
+        return 0.0
+    d = _bound(rates, lim)
+    for _ in range(MAX_TRIES):
+        if check(None, lim, sp, rates, d)[0] <= 1.0 or d >= D_MAX_S:
+            break
+        d = min(D_MAX_S, d * GROW_RATES)
+    return RATES_HEADROOM * d
+
+
 def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
             free: tuple[bool, bool], r: float, d: float) -> Approach:
     """The shortest duration from d up that fits with cruise share r (module docstring)."""
+    d_rates = rates_duration(lim, sp, x) if not all(free) else 0.0
+
+    def rho(dur: float) -> tuple[float, float]:
+        share = min(1.0, d_rates / dur) if d_rates > 0.0 else 1.0
+        return (1.0 if free[0] else share, 1.0 if free[1] else share)
+
     def trial(dur: float) -> tuple[float, Excess | None]:
-        return check(env, lim, sp, free_end(x, dur, free), dur, r)
+        return check(env, lim, sp, free_end(x, dur, free), dur, r, rho(dur))
 
     lo, best = math.nan, None
     for _ in range(MAX_TRIES):
@@ -465,7 +345,8 @@ def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
             break
         d = min(D_MAX_S, d * max(GROW_MIN, min(math.sqrt(ratio), GROW_MAX)))
     if best is None:  # nothing fits: the longest tried
-        return Approach(coefficients(free_end(x, d, free), d, r), d, False, trial(d)[1])
+        return Approach(coefficients(free_end(x, d, free), d, r, rho(d)), d, False,
+                        trial(d)[1])
     hi, hi_excess = best
     while not math.isnan(lo) and hi - lo > REFINE_TOL * hi:
         mid = 0.5 * (lo + hi)
@@ -474,7 +355,7 @@ def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
             hi, hi_excess = mid, excess
         else:
             lo = mid
-    return Approach(coefficients(free_end(x, hi, free), hi, r), hi, True, hi_excess)
+    return Approach(coefficients(free_end(x, hi, free), hi, r, rho(hi)), hi, True, hi_excess)
 
 
 def start_offset(a: Approach) -> tuple[Vec3, Vec3]:
@@ -485,10 +366,14 @@ def start_offset(a: Approach) -> tuple[Vec3, Vec3]:
 
 
 def _warm() -> None:
-    k = np.zeros((6, 7))
+    k = np.zeros((6, 8))
+    k[:, 7] = 1.0
+    k2 = k.copy()
+    k2[:, 7] = 0.5
+    offset_kernel(k2, 1.0, 0.25)
     reference_kernel(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, 0.0, 0.0)
-    _rows(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, np.zeros(2))
-    _kinematic_ratio(k, 1.0, np.zeros(2), np.ones(8))
+    reference_rows(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, np.zeros(2))
+    kinematic_ratio(k, 1.0, np.zeros(2), np.ones(8))
     offset_rate(ZERO, ZERO)
 
 

@@ -19,7 +19,8 @@ from fcu.modes import offboard
 from fcu.modes.manual import StickSettings
 from fcu.modes.offboard import Target
 from fcu.reference import approach
-from fcu.reference.approach import Setpoint, blend
+from fcu.reference.approach import Setpoint
+from fcu.reference.approach_kernels import blend, offset_kernel
 from fcu.stages import Reference, pose_ref
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,7 +59,7 @@ def test_a_long_step_cruises_at_the_speed_limit():
     assert plan is not None and plan.fits
     assert plan.duration_s == pytest.approx(100 / 5 + 1.875 * 5 / 3, rel=0.03)
     taus = np.linspace(0.0, plan.duration_s, 5001)
-    rates = [approach.offset_kernel(plan.coeffs, plan.duration_s, t) for t in taus]
+    rates = [offset_kernel(plan.coeffs, plan.duration_s, t) for t in taus]
     speed = max(math.hypot(*o[1][:2]) for o in rates)
     acc = max(math.hypot(*o[2][:2]) for o in rates)
     assert 4.9 < speed <= 5.0 + 1e-9 and 2.8 < acc <= 3.0 + 1e-9

@@ -16,7 +16,7 @@ from fcu.control.dualquat import right_jacobian_inv
 from fcu.modes import offboard
 from fcu.modes.manual import StickSettings
 from fcu.modes.offboard import Target
-from fcu.reference.approach import offset_rate, right_jacobian
+from fcu.reference.approach_kernels import offset_rate, right_jacobian
 from fcu.stages import Reference, pose_ref
 
 LIM = StickSettings(speed_xy_m_s=5.0, speed_up_m_s=3.0, speed_down_m_s=1.5, acc_xy_m_s2=3.0,
@@ -70,6 +70,27 @@ def test_a_far_step_is_flown_continuously_within_the_limits_and_reached():
         assert d == pytest.approx(mid, abs=2e-5)
     assert math.dist(refs[-1].p_enu_m, target.p_enu_m) < 1e-6
     assert max(map(abs, refs[-1].v_enu_m_s)) < 1e-6
+
+
+@pytest.mark.parametrize("switch_s", [0.8, 1.2, 1.5])
+def test_a_far_sample_taken_while_still_decelerating_is_flown_within_the_limits(switch_s):
+    """Given an approach to a set-point 1 m east and 1.5 m up, still braking towards it,
+    when a sample 39 m north comes, then the reference flies there within the limits (5 m/s
+    horizontal, 3 m/s up, 1.5 m/s down), never below where it was, and ends on it, still.
+    (The quintic of the offset's starting rates was stretched over the whole approach: its
+    excursion grows as v0 D and a0 D^2, no duration fitted, and the longest tried, 120 s,
+    flew the reference back and down, through the ground at up to 20 m/s.)"""
+    near, far = Target(1, (1.0, 0.0, 1.5), Z, Z, None, Z), Target(2, (1.0, 39.0, 1.5), Z, Z,
+                                                                  None, Z)
+    refs = fly(pose_ref(Z, Q0), lambda k: near if k < switch_s * 500 else far, 30.0)
+    switch = round(switch_s * 500)
+    assert math.hypot(*refs[switch].v_enu_m_s) > 0.05  # still moving when it came
+    v = [r.v_enu_m_s for r in refs]
+    assert max(math.hypot(x[0], x[1]) for x in v) <= 5.0 + 1e-6
+    assert max(x[2] for x in v) <= 3.0 + 1e-6 and min(x[2] for x in v) >= -1.5 - 1e-6
+    assert min(r.p_enu_m[2] for r in refs[switch:]) >= refs[switch].p_enu_m[2] - 0.5
+    assert math.dist(refs[-1].p_enu_m, far.p_enu_m) < 1e-6
+    assert math.hypot(*refs[-1].v_enu_m_s) < 1e-9
 
 
 def test_descents_are_slower_than_climbs():
