@@ -10,10 +10,11 @@ where the set-point jumps:
 e in ENU, eps a rotation vector in the set-point's body frame (FLU). Each of their six
 components x goes from its value, rate and acceleration when the plan starts to rest at zero
 in D seconds as x0 (1 - B(t / D)) plus the quintic that takes its starting rate and
-acceleration to rest from zero (`fcu.reference.approach_kernels`); with a fixed end that
-quintic lasts at most twice the shortest time in which it alone fits the limits
-(`rates_duration`), not the whole of a long approach, whose excursion would grow as v0 D
-and a0 D^2 (so that no duration fitted). B is `blend`: the
+acceleration to rest from zero (`fcu.reference.approach_kernels`). On a long approach
+with a fixed end the starting rates are braked on their own instead, with a free end, in
+at most twice the shortest time that fits the limits (`rates_duration`), and the blend
+takes the rest of the offset: taken to rest over the whole approach, the quintic's
+excursion grows as v0 D and a0 D^2, and no duration fitted. B is `blend`: the
 minimum-jerk 10 s^3 - 15 s^4 + 6 s^5, or, on a long step, a cruise between minimum-jerk
 ramps of share r (`cruise_share`: the ramps reach the speed limit at the acceleration
 limit); both are tried and the shorter kept. Position, velocity and acceleration are then
@@ -86,6 +87,7 @@ TINY = 1e-9  # an offset and its rates below this are zero: no plan
 CRUISE_MAX = 0.4  # a longer ramp share flies as the plain minimum-jerk blend
 RATES_HEADROOM = 2.0  # the starting rates' quintic lasts this many times its shortest
 GROW_RATES = 1.25  # ... found growing by this factor
+RATES_SLACK = 1.1  # where they fit no duration: this times their least overshoot is allowed
 FLIP_RAD = 1.0  # a nominal tilt that turns this much between two samples flips (`flip`)
 FLIP = "tilt flip"
 
@@ -166,13 +168,15 @@ def free_end(x: Offset, d: float, free: tuple[bool, bool] = (True, True)) -> Off
 def coefficients(x: Offset, d: float, r: float = 0.0,
                  rho: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
     """Per component (e, then eps): its start, the quintic of its start's rates (from 0)
-    over rho * d (rho[0] for e, rho[1] for eps), the cruise share r and rho
-    (`_component`)."""
+    over rho * d (rho[0] for e, rho[1] for eps), the cruise share r, rho, and where the
+    rates' brake starts when rho < 1 (`approach_kernels._component`)."""
     dp, dq = rho[0] * d, rho[1] * d
-    rows = [(x.e[j], *quintic_to_rest(0.0, x.de[j], x.dde[j], dp)[1:], r, rho[0])
+    stop_e = free_end(x, dp, (True, False)).e if rho[0] < 1.0 else ZERO
+    stop_eps = free_end(x, dq, (False, True)).eps if rho[1] < 1.0 else ZERO
+    rows = [(x.e[j], *quintic_to_rest(0.0, x.de[j], x.dde[j], dp)[1:], r, rho[0], stop_e[j])
             for j in range(3)] + \
-        [(x.eps[j], *quintic_to_rest(0.0, x.deps[j], x.ddeps[j], dq)[1:], r, rho[1])
-         for j in range(3)]
+        [(x.eps[j], *quintic_to_rest(0.0, x.deps[j], x.ddeps[j], dq)[1:], r, rho[1],
+          stop_eps[j]) for j in range(3)]
     return np.array(rows)
 
 
@@ -239,14 +243,14 @@ def _allocated(env: Envelope, sp: Setpoint, k: np.ndarray, d: float, taus: np.nd
 
 
 def check(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset, d: float,
-          r: float = 0.0, rho: tuple[float, float] = (1.0, 1.0)
+          r: float = 0.0, rho: tuple[float, float] = (1.0, 1.0), allowed: float = 1.0
           ) -> tuple[float, Excess | None]:
     """(ratio, excess) of the approach of offset x to set-point sp in d seconds (its rates'
-    quintic over rho * d): the largest share of a limit or an actuator's envelope it uses
-    (> 1: it does not fit)."""
+    quintic over rho * d): the largest share of a limit (`allowed` times it) or an
+    actuator's envelope it uses (> 1: it does not fit)."""
     k = coefficients(x, d, r, rho)
     taus = _instants(sp, x, d, r)
-    ratio = float(kinematic_ratio(k, d, taus, _limits(lim, x)))
+    ratio = float(kinematic_ratio(k, d, taus, _limits(lim, x))) / allowed
     if env is None:
         return ratio, None
     n = len(taus)
@@ -304,35 +308,44 @@ def plan(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
     return best
 
 
-def rates_duration(lim: StickSettings, sp: Setpoint, x: Offset) -> float:
-    """How long the quintic of the offset's starting rates lasts at most (fixed ends): the
-    shortest duration in which it alone (the offset's value zero) stays within the limits,
-    times RATES_HEADROOM (0: no rates). Stretched over a long approach instead, its
-    excursion grows as v0 D and a0 D^2: an OFFBOARD set-point 39 m away taken while the
-    reference still decelerated found no duration that fitted, and the longest tried ran
-    the reference into the ground."""
+def rates_duration(lim: StickSettings, sp: Setpoint, x: Offset) -> tuple[float, float]:
+    """How long a fixed end's approach brakes the offset's starting rates at most (a brake
+    with a free end, the blend taking the rest of the offset), and the share of the limits
+    it may use: RATES_HEADROOM times the shortest duration in which that brake alone stays
+    within the limits, and 1; where none does (a start accelerating towards a speed limit
+    overshoots it at any), the duration where it overshoots least, and RATES_SLACK times
+    that least ratio. (0, 1): no rates. Taken to rest over the whole of a long approach
+    instead, the rates' quintic went out and came back by as much as v0 D and a0 D^2: an
+    OFFBOARD set-point 39 m away taken while the reference still decelerated found no
+    duration that fitted, and the longest tried ran the reference into the ground."""
     rates = x._replace(e=ZERO, eps=ZERO)
     if at_rest(rates):
-        return 0.0
+        return 0.0, 1.0
     d = _bound(rates, lim)
+    best = (math.inf, d)
     for _ in range(MAX_TRIES):
-        if check(None, lim, sp, rates, d)[0] <= 1.0 or d >= D_MAX_S:
+        ratio = check(None, lim, sp, free_end(rates, d), d)[0]
+        if ratio <= 1.0:
+            return RATES_HEADROOM * d, 1.0
+        if ratio < best[0]:
+            best = (ratio, d)
+        elif d > 2.0 * best[1] or d >= D_MAX_S:  # past its least: it only grows from here
             break
         d = min(D_MAX_S, d * GROW_RATES)
-    return RATES_HEADROOM * d
+    return best[1], RATES_SLACK * best[0]
 
 
 def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
             free: tuple[bool, bool], r: float, d: float) -> Approach:
     """The shortest duration from d up that fits with cruise share r (module docstring)."""
-    d_rates = rates_duration(lim, sp, x) if not all(free) else 0.0
+    d_rates, allowed = rates_duration(lim, sp, x) if not all(free) else (0.0, 1.0)
 
     def rho(dur: float) -> tuple[float, float]:
         share = min(1.0, d_rates / dur) if d_rates > 0.0 else 1.0
         return (1.0 if free[0] else share, 1.0 if free[1] else share)
 
     def trial(dur: float) -> tuple[float, Excess | None]:
-        return check(env, lim, sp, free_end(x, dur, free), dur, r, rho(dur))
+        return check(env, lim, sp, free_end(x, dur, free), dur, r, rho(dur), allowed)
 
     lo, best = math.nan, None
     for _ in range(MAX_TRIES):
@@ -366,7 +379,7 @@ def start_offset(a: Approach) -> tuple[Vec3, Vec3]:
 
 
 def _warm() -> None:
-    k = np.zeros((6, 8))
+    k = np.zeros((6, 9))
     k[:, 7] = 1.0
     k2 = k.copy()
     k2[:, 7] = 0.5

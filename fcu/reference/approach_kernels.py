@@ -87,7 +87,9 @@ def blend(s: float, r: float) -> tuple[float, float, float]:
 def _component(k: np.ndarray, j: int, d: float, tau: float) -> tuple[float, float, float]:
     """Component j's value, rate and acceleration at tau (zero from tau >= d on): its
     start k[j, 0] times 1 - B(s) (`blend`, cruise share k[j, 6]) plus the quintic of its
-    start's rates, k[j, 1..5], over the share k[j, 7] of d (zero after it)."""
+    start's rates, k[j, 1..5], over the share k[j, 7] of d. With a share below 1 the rates
+    are braked over it with a free end (from k[j, 8], where that brake starts, to rest at
+    0: `fcu.reference.approach.free_end`) and the blend takes the start less k[j, 8]."""
     if tau >= d:
         return 0.0, 0.0, 0.0
     s = max(tau, 0.0) / d
@@ -101,13 +103,18 @@ def _component(k: np.ndarray, j: int, d: float, tau: float) -> tuple[float, floa
         ddx = (-x0 * ddb + 2.0 * c2 + s * (6.0 * c3 + s * (12.0 * c4 + s * 20.0 * c5))) / \
             (d * d)
         return x, dx, ddx
+    stop = k[j, 8]  # where the rates' brake starts (its end free), from its rest
+    x0 -= stop
     x, dx, ddx = x0 * (1.0 - b), -x0 * db / d, -x0 * ddb / (d * d)
     dr = rho * d
     if tau < dr:
         u = max(tau, 0.0) / dr
-        x += u * (c1 + u * (c2 + u * (c3 + u * (c4 + u * c5))))
-        dx += (c1 + u * (2.0 * c2 + u * (3.0 * c3 + u * (4.0 * c4 + u * 5.0 * c5)))) / dr
-        ddx += (2.0 * c2 + u * (6.0 * c3 + u * (12.0 * c4 + u * 20.0 * c5))) / (dr * dr)
+        b0, db0, ddb0 = blend(u, 0.0)
+        x += stop * (1.0 - b0) + u * (c1 + u * (c2 + u * (c3 + u * (c4 + u * c5))))
+        dx += (-stop * db0 + c1 + u * (2.0 * c2 + u * (3.0 * c3 + u * (4.0 * c4 +
+                                                                     u * 5.0 * c5)))) / dr
+        ddx += (-stop * ddb0 + 2.0 * c2 + u * (6.0 * c3 + u * (12.0 * c4 + u * 20.0 * c5))
+                ) / (dr * dr)
     return x, dx, ddx
 
 
