@@ -12,9 +12,10 @@ components x goes from its value, rate and acceleration when the plan starts to 
 in D seconds as x0 (1 - B(t / D)) plus the quintic that takes its starting rate and
 acceleration to rest from zero (`fcu.reference.approach_kernels`). On a long approach
 with a fixed end the starting rates are braked on their own instead, with a free end, in
-at most twice the shortest time that fits the limits (`rates_duration`), and the blend
-takes the rest of the offset: taken to rest over the whole approach, the quintic's
-excursion grows as v0 D and a0 D^2, and no duration fitted. B is `blend`: the
+twice the shortest time that fits the limits, or in that time where the longer brake
+leaves them (`rates_brakes`), and the blend takes the rest of the offset: taken to rest
+over the whole approach, the quintic's excursion grows as v0 D and a0 D^2, and no
+duration fitted. B is `blend`: the
 minimum-jerk 10 s^3 - 15 s^4 + 6 s^5, or, on a long step, a cruise between minimum-jerk
 ramps of share r (`cruise_share`: the ramps reach the speed limit at the acceleration
 limit); both are tried and the shorter kept. Position, velocity and acceleration are then
@@ -64,7 +65,7 @@ from fcu.envelope.excess import KINDS, Excess, excess_kernel
 from fcu.envelope.feasibility import TILT_STEP_S, Envelope, _nominal_wrench_rows
 from fcu.modes.manual import StickSettings
 from fcu.reference.approach_kernels import (
-    kinematic_ratio,
+    kinematic_ratios,
     offset_kernel,
     offset_rate,
     quintic_to_rest,
@@ -87,7 +88,7 @@ TINY = 1e-9  # an offset and its rates below this are zero: no plan
 CRUISE_MAX = 0.4  # a longer ramp share flies as the plain minimum-jerk blend
 RATES_HEADROOM = 2.0  # the starting rates' quintic lasts this many times its shortest
 GROW_RATES = 1.25  # ... found growing by this factor
-RATES_SLACK = 1.1  # where they fit no duration: this times their least overshoot is allowed
+RATES_SLACK = 1.1  # a limit the rates' brake overshoots at any duration: this times its least
 FLIP_RAD = 1.0  # a nominal tilt that turns this much between two samples flips (`flip`)
 FLIP = "tilt flip"
 
@@ -242,15 +243,24 @@ def _allocated(env: Envelope, sp: Setpoint, k: np.ndarray, d: float, taus: np.nd
     return np.ascontiguousarray(wrench.T @ env.pinv_t)
 
 
+def kinematic_shares(lim: StickSettings, sp: Setpoint, x: Offset, d: float, r: float = 0.0,
+                     rho: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+    """The largest share of each approach limit (`_limits`, in `kinematic_ratios`' order)
+    the approach of offset x to set-point sp in d seconds uses."""
+    k = coefficients(x, d, r, rho)
+    return kinematic_ratios(k, d, _instants(sp, x, d, r), _limits(lim, x))
+
+
 def check(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset, d: float,
-          r: float = 0.0, rho: tuple[float, float] = (1.0, 1.0), allowed: float = 1.0
-          ) -> tuple[float, Excess | None]:
+          r: float = 0.0, rho: tuple[float, float] = (1.0, 1.0),
+          allowed: tuple[float, ...] | None = None) -> tuple[float, Excess | None]:
     """(ratio, excess) of the approach of offset x to set-point sp in d seconds (its rates'
-    quintic over rho * d): the largest share of a limit (`allowed` times it) or an
-    actuator's envelope it uses (> 1: it does not fit)."""
+    quintic over rho * d): the largest share of a limit (`allowed[i]` times limit i, in
+    `kinematic_ratios`' order) or an actuator's envelope it uses (> 1: it does not fit)."""
     k = coefficients(x, d, r, rho)
     taus = _instants(sp, x, d, r)
-    ratio = float(kinematic_ratio(k, d, taus, _limits(lim, x))) / allowed
+    shares = kinematic_ratios(k, d, taus, _limits(lim, x))
+    ratio = float((shares if allowed is None else shares / np.array(allowed)).max())
     if env is None:
         return ratio, None
     n = len(taus)
@@ -308,44 +318,84 @@ def plan(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
     return best
 
 
-def rates_duration(lim: StickSettings, sp: Setpoint, x: Offset) -> tuple[float, float]:
-    """How long a fixed end's approach brakes the offset's starting rates at most (a brake
-    with a free end, the blend taking the rest of the offset), and the share of the limits
-    it may use: RATES_HEADROOM times the shortest duration in which that brake alone stays
-    within the limits, and 1; where none does (a start accelerating towards a speed limit
-    overshoots it at any), the duration where it overshoots least, and RATES_SLACK times
-    that least ratio. (0, 1): no rates. Taken to rest over the whole of a long approach
-    instead, the rates' quintic went out and came back by as much as v0 D and a0 D^2: an
-    OFFBOARD set-point 39 m away taken while the reference still decelerated found no
-    duration that fitted, and the longest tried ran the reference into the ground."""
+class RatesBrake(NamedTuple):
+    """How a fixed end's approach longer than `longer_than_s` brakes the offset's starting
+    rates on their own (a brake with a free end, the blend taking the rest of the offset):
+    over `duration_s`, the approach using up to `allowed[i]` times limit i (in
+    `kinematic_ratios`' order; None: 1 each)."""
+
+    longer_than_s: float
+    duration_s: float
+    allowed: tuple[float, ...] | None
+
+
+def _slack(shares: np.ndarray) -> tuple[float, ...]:
+    """RATES_SLACK times each share of a limit the rates' brake uses where it overshoots
+    that limit (the blend beside it needs room), 1 elsewhere: the others stay whole."""
+    return tuple(float(RATES_SLACK * v) if v > 1.0 else 1.0 for v in shares)
+
+
+def rates_brakes(lim: StickSettings, sp: Setpoint, x: Offset) -> tuple[RatesBrake, ...]:
+    """The brakes of the offset's starting rates by the approach's duration: the last whose
+    `longer_than_s` the duration passes applies; none: the rates' quintic over the whole
+    approach. With d1 the shortest duration in which the brake alone stays within the
+    limits: RATES_HEADROOM d1 (from any duration on); where that longer brake alone leaves
+    them (a start accelerating towards a speed limit overshoots it more the longer it
+    brakes: the blend beside it may offset that on a short approach, never on a long
+    one), then, from RATES_HEADROOM^2 d1 on, d1 itself. Where no duration fits, the one
+    where it overshoots least, the limits it overshoots slackened (`_slack`).
+
+    Taken to rest over the whole of a long approach instead, the rates' quintic went out
+    and came back by as much as v0 D and a0 D^2: an OFFBOARD set-point 39 m away taken
+    while the reference still decelerated found no duration that fitted, and the longest
+    tried ran the reference into the ground. With RATES_HEADROOM d1 alone, the same
+    set-point taken while the body still turned faster towards the rotation limit found
+    none either: the longest tried, 120 s, was flown."""
     rates = x._replace(e=ZERO, eps=ZERO)
     if at_rest(rates):
-        return 0.0, 1.0
+        return ()
+
+    def shares(dur: float) -> np.ndarray:
+        return kinematic_shares(lim, sp, free_end(rates, dur), dur)
+
     d = _bound(rates, lim)
-    best = (math.inf, d)
+    least = (math.inf, d, np.zeros(8))
     for _ in range(MAX_TRIES):
-        ratio = check(None, lim, sp, free_end(rates, d), d)[0]
+        now = shares(d)
+        ratio = float(now.max())
         if ratio <= 1.0:
-            return RATES_HEADROOM * d, 1.0
-        if ratio < best[0]:
-            best = (ratio, d)
-        elif d > 2.0 * best[1] or d >= D_MAX_S:  # past its least: it only grows from here
+            longer = RATES_HEADROOM * d
+            brakes = (RatesBrake(0.0, longer, None),)
+            if float(shares(longer).max()) <= 1.0:
+                return brakes
+            return (*brakes, RatesBrake(RATES_HEADROOM * longer, d, None))
+        if ratio < least[0]:
+            least = (ratio, d, now)
+        elif d > 2.0 * least[1] or d >= D_MAX_S:  # past its least: it only grows from here
             break
         d = min(D_MAX_S, d * GROW_RATES)
-    return best[1], RATES_SLACK * best[0]
+    return (RatesBrake(0.0, least[1], _slack(least[2])),)
 
 
 def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
             free: tuple[bool, bool], r: float, d: float) -> Approach:
     """The shortest duration from d up that fits with cruise share r (module docstring)."""
-    d_rates, allowed = rates_duration(lim, sp, x) if not all(free) else (0.0, 1.0)
+    brakes = rates_brakes(lim, sp, x) if not all(free) else ()
+
+    def brake(dur: float) -> tuple[tuple[float, float], tuple[float, ...] | None]:
+        """(rho, allowed) of an approach of duration dur."""
+        share, allowed = 1.0, None
+        for b in brakes:
+            if dur > b.longer_than_s:
+                share, allowed = min(1.0, b.duration_s / dur), b.allowed
+        return (1.0 if free[0] else share, 1.0 if free[1] else share), allowed
 
     def rho(dur: float) -> tuple[float, float]:
-        share = min(1.0, d_rates / dur) if d_rates > 0.0 else 1.0
-        return (1.0 if free[0] else share, 1.0 if free[1] else share)
+        return brake(dur)[0]
 
     def trial(dur: float) -> tuple[float, Excess | None]:
-        return check(env, lim, sp, free_end(x, dur, free), dur, r, rho(dur), allowed)
+        rho_d, allowed = brake(dur)
+        return check(env, lim, sp, free_end(x, dur, free), dur, r, rho_d, allowed)
 
     lo, best = math.nan, None
     for _ in range(MAX_TRIES):
@@ -386,7 +436,7 @@ def _warm() -> None:
     offset_kernel(k2, 1.0, 0.25)
     reference_kernel(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, 0.0, 0.0)
     reference_rows(ZERO, ZERO, ZERO, (1.0, 0.0, 0.0, 0.0), ZERO, k, 1.0, np.zeros(2))
-    kinematic_ratio(k, 1.0, np.zeros(2), np.ones(8))
+    kinematic_ratios(k, 1.0, np.zeros(2), np.ones(8))
     offset_rate(ZERO, ZERO)
 
 

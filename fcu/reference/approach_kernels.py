@@ -180,17 +180,24 @@ def reference_rows(p: Vec3, v: Vec3, a: Vec3, q: Quat, w: Vec3, k: np.ndarray, d
 
 
 @njit
-def kinematic_ratio(k: np.ndarray, d: float, taus: np.ndarray, lim: np.ndarray) -> float:
-    """The largest share of the approach limits the offset uses: lim = (speed_xy, speed_up,
+def kinematic_ratios(k: np.ndarray, d: float, taus: np.ndarray, lim: np.ndarray
+                     ) -> np.ndarray:
+    """The largest share of each approach limit the offset uses: lim = (speed_xy, speed_up,
     speed_down, acc_xy, acc_up, acc_down, rotation rate, rotation acceleration)."""
-    worst = 0.0
+    worst = np.zeros(8)
     for i in range(taus.shape[0]):
         _, de, dde, _, deps, ddeps = offset_kernel(k, d, taus[i])
-        r = max(math.hypot(de[0], de[1]) / lim[0],
-                de[2] / lim[1] if de[2] > 0.0 else -de[2] / lim[2],
-                math.hypot(dde[0], dde[1]) / lim[3],
-                dde[2] / lim[4] if dde[2] > 0.0 else -dde[2] / lim[5],
-                math.sqrt(deps[0] ** 2 + deps[1] ** 2 + deps[2] ** 2) / lim[6],
-                math.sqrt(ddeps[0] ** 2 + ddeps[1] ** 2 + ddeps[2] ** 2) / lim[7])
-        worst = max(worst, r)
+        worst[0] = max(worst[0], math.hypot(de[0], de[1]) / lim[0])
+        if de[2] > 0.0:
+            worst[1] = max(worst[1], de[2] / lim[1])
+        else:
+            worst[2] = max(worst[2], -de[2] / lim[2])
+        worst[3] = max(worst[3], math.hypot(dde[0], dde[1]) / lim[3])
+        if dde[2] > 0.0:
+            worst[4] = max(worst[4], dde[2] / lim[4])
+        else:
+            worst[5] = max(worst[5], -dde[2] / lim[5])
+        worst[6] = max(worst[6], math.sqrt(deps[0] ** 2 + deps[1] ** 2 + deps[2] ** 2) / lim[6])
+        worst[7] = max(worst[7], math.sqrt(ddeps[0] ** 2 + ddeps[1] ** 2 + ddeps[2] ** 2) /
+                       lim[7])
     return worst
