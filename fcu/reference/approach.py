@@ -343,7 +343,10 @@ def rates_brakes(lim: StickSettings, sp: Setpoint, x: Offset) -> tuple[RatesBrak
     them (a start accelerating towards a speed limit overshoots it more the longer it
     brakes: the blend beside it may offset that on a short approach, never on a long
     one), then, from RATES_HEADROOM^2 d1 on, d1 itself. Where no duration fits, the one
-    where it overshoots least, the limits it overshoots slackened (`_slack`).
+    where it overshoots least, the limits it overshoots slackened (`_slack`). A free end's
+    part is its own brake (its rho stays 1): there only that slack counts, and HOLD's brake
+    from a reference at or past a limit and still speeding up (a mission flies at its own
+    speeds) takes a few seconds; it took 120 s and ran away at up to 32 m/s.
 
     Taken to rest over the whole of a long approach instead, the rates' quintic went out
     and came back by as much as v0 D and a0 D^2: an OFFBOARD set-point 39 m away taken
@@ -380,7 +383,7 @@ def rates_brakes(lim: StickSettings, sp: Setpoint, x: Offset) -> tuple[RatesBrak
 def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
             free: tuple[bool, bool], r: float, d: float) -> Approach:
     """The shortest duration from d up that fits with cruise share r (module docstring)."""
-    brakes = rates_brakes(lim, sp, x) if not all(free) else ()
+    brakes = rates_brakes(lim, sp, x)
 
     def brake(dur: float) -> tuple[tuple[float, float], tuple[float, ...] | None]:
         """(rho, allowed) of an approach of duration dur."""

@@ -13,7 +13,8 @@ import pytest
 
 from common.config.scenario import load_gains, load_vehicle
 from common.outcome import CRASH, FAILSAFE
-from common.wire.mav_enums import MAV_RESULT
+from common.wire.mav_enums import MAV_CMD, MAV_FRAME, MAV_RESULT
+from common.wire.mission_items import MissionItem
 from common.wire.modes import Mode
 from fcu.control.dualquat import norm3 as norm
 from fcu.edge.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
@@ -367,6 +368,36 @@ def test_rearmed_in_offboard_the_approach_starts_where_the_vehicle_is():
     assert c.last_ref is not None
     assert math.dist(c.last_ref.p_enu_m, ground) < 1e-3, c.last_ref.p_enu_m
     assert norm(c.last_ref.v_enu_m_s) < 1e-2, c.last_ref.v_enu_m_s
+
+
+def test_hold_during_a_missions_descent_still_speeding_up_stops_near_where_it_was():
+    """Given a mission at the default 2 m/s descending 18 m over 3 m (faster down than the
+    approach limits' 1.5 m/s), when HOLD comes while the leg still speeds up, then the
+    reference stops within 3 s and 2 m of where HOLD came, not below 17 m. (It dived
+    through the ground at 16 m/s: every brake overshot the entry's descent speed, none
+    fitted, and the longest tried, 120 s, was flown.)"""
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
+                    limits=MissionLimits(vehicle=vehicle))
+    pipe.on_state(0, _state(20.0), 0)
+    assert pipe.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    c = pipe.commander
+    c.set_mission((MissionItem(0, MAV_FRAME.MAV_FRAME_LOCAL_NED,
+                               MAV_CMD.MAV_CMD_NAV_WAYPOINT, 1, 1, 0.0, 0.0, 0.0, math.nan,
+                               30_000, 0, -2.0),))  # 3 m north, 2 m up (x in 1e-4 m)
+    assert c.set_mode(Mode.MISSION, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    t = 0
+    while math.dist(c.fly(t).v_enu_m_s, (0.0, 0.0, 0.0)) < 1.8:
+        t += 2000
+        assert t < 20_000_000
+    entry = c.fly(t)
+    assert entry.v_enu_m_s[2] < -1.5 and entry.a_enu_m_s2[2] < -0.5  # still speeding up
+    assert c.set_mode(Mode.HOLD, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    path = [c.fly(t + 2000 * k) for k in range(1, 10 * 500)]
+    assert min(r.p_enu_m[2] for r in path) > 17.0
+    still = [math.dist(r.v_enu_m_s, (0.0, 0.0, 0.0)) < 1e-9 for r in path]
+    assert all(still[3 * 500:])
+    assert math.dist(path[-1].p_enu_m, entry.p_enu_m) < 2.0
 
 
 def test_land_rearmed_after_landing_holds_where_it_is():

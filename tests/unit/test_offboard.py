@@ -348,6 +348,29 @@ def test_a_moving_reference_brakes_to_its_hold_pose_without_overshoot(v):
     assert q_angle(q_mul(q_conj(Q0), q_stop)) == pytest.approx(1.0 * d / 2, abs=1e-9)
 
 
+@pytest.mark.parametrize(("v", "a", "w", "dw", "top"), [
+    ((0.0, 6.4, 0.0), (0.0, 1.85, 0.0), Z, Z, 6.4),  # a mission at 8 m/s, still speeding up
+    ((0.0, 0.3, -1.78), (0.0, 0.21, -1.25), Z, Z, 1.78),  # a 2 m/s mission's descent
+    ((0.0, 0.0, 2.7), (0.0, 0.0, 2.59), Z, Z, 3.0),  # near the 3 m/s climb limit
+    (Z, Z, (0.0, 0.6, 1.5), (0.0, 0.4, 1.0), 1.62)])  # past 90 deg/s
+def test_a_reference_at_a_limit_and_still_speeding_up_brakes_within_seconds(v, a, w, dw, top):
+    """Given a reference at or past an approach limit and still speeding up (a mission flies
+    at its own speeds), when HOLD brakes it, then it stops within 5 s, its speed (or body
+    rate) at most 15 % over `top` (the larger of the entry's and the limit) on the way,
+    and holds within 20 m. (Every brake overshoots there: none fitted, and the longest
+    tried, 120 s, was flown: the reference reached 16-32 m/s, 120 m below the ground for
+    the descent.)"""
+    start = Reference((1.0, 2.0, 20.0), Q0, v, a, w, dw)
+    s, hold = offboard.brake(0, start, LIM)
+    assert s.plan is not None and s.plan.fits and s.plan.duration_s < 5.0
+    refs = [offboard.advance(s, k * DT_US, None, LIM)[1] for k in range(0, 5 * 500 + 1)]
+    assert max(math.dist(r.v_enu_m_s, Z) for r in refs) <= 1.15 * (top if v != Z else 0.0)
+    assert _turned(refs)[0] <= 1.15 * (top if w != Z else 0.0)
+    assert math.dist(hold.p_enu_m, start.p_enu_m) < 20.0
+    assert math.dist(refs[-1].p_enu_m, hold.p_enu_m) < 1e-6
+    assert max(map(abs, (*refs[-1].v_enu_m_s, *refs[-1].omega_flu_rad_s))) < 1e-6
+
+
 def test_a_resent_target_rounded_to_float32_keeps_the_approach_under_way():
     """Given a 10 m step under way, when the same target keeps arriving as MAVLink's float32
     fields carry it (rounded differently each time: 60 m away, 100 m up), then the approach
