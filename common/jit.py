@@ -34,7 +34,7 @@ KERNEL_MODULES = ("common/jit.py", "common/vehicle_constants.py", "common/layout
                   "fcu/control/core.py", "fcu/control/wrench.py",
                   "fcu/envelope/feasibility.py", "fcu/envelope/excess.py",
                   "fcu/envelope/verdict.py", "fcu/envelope/speed_bound.py",
-                  "fcu/reference/approach.py", "fcu/reference/trajectory.py",
+                  "fcu/reference/approach_kernels.py", "fcu/reference/trajectory.py",
                   "fcu/mission/segments.py", "fcu/mission/verdicts.py", "fcu/mission/stretch.py",
                   "fcu/modes/manual.py", "fcu/safety/actuator_monitor.py",
                   "fcu/control/rate_filter.py",

@@ -46,3 +46,18 @@ def test_a_kernel_of_a_real_file_keeps_its_name() -> None:
 
     name = half.__code__.co_filename
     assert njit(half).py_func.__code__.co_filename == str(Path(name).resolve())
+
+
+def test_every_module_that_compiles_kernels_keys_the_cache() -> None:
+    """Every product module that compiles a kernel is in KERNEL_MODULES, whose hash names
+    the cache folder and whose stamps `tests.kernels` checks before the suite: one left
+    out (the approach's kernels, moved to a module of their own, while the module they
+    left stayed listed) could leave a kernel that inlines it stale in the cache."""
+    from common.jit import KERNEL_MODULES, ROOT
+
+    compiling = sorted(
+        str(path.relative_to(ROOT)) for folder in ("common", "fcu", "sitl", "gcs")
+        for path in (ROOT / folder).rglob("*.py")
+        if any(mark in path.read_text() for mark in ("@njit", "@jit.njit", "= njit(",
+                                                     "@njit_loops")))
+    assert [m for m in compiling if m not in KERNEL_MODULES] == []
