@@ -26,10 +26,17 @@ and what belongs to the other modes ends: the landing (LAND's plan, a touchdown)
 or RTL's plan, the mission's run. A mission replaced during its own touchdown lets that
 touchdown go on (`touchdown_goes_on`). Arming and disarming keep the mode and reset here too
 (`on_arming`: HOLD, POSCTL and OFFBOARD start from where the vehicle is; `on_disarming`).
+
+LAND's, TAKEOFF's and RTL's plans start at rest. Entered while the reference flown still
+moves, they start where HOLD's brake brings it to rest, when it does (`_after_brake`), as
+PX4's land and return slow down first: started at once, the reference's velocity stepped
+to zero, and LAND entered at 7 m/s left the rotors saturated for 3 s and the vehicle 7.5 m
+off its reference.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Protocol
 
@@ -81,6 +88,9 @@ class ModeState:
         self.shaper = OffboardShaper(self.ahead, lambda: self.mode == Mode.OFFBOARD)
         self.brake = HoldBrake(self.ahead)
         self._rest_since_us: int | None = None  # the reference at rest for a mission's start
+        # LAND's, TAKEOFF's or RTL's plan, started (at t_us, from a pose) when HOLD's brake
+        # has brought the moving reference to rest: `_after_brake`
+        self.lead_in: Callable[[int, Reference], None] | None = None
 
     # ------------------------------------------------------------------ entering a mode
 
@@ -92,6 +102,8 @@ class ModeState:
         previous = self.mode if previous is None else previous
         again = mode == previous
         self.mode = mode
+        if mode not in (Mode.TAKEOFF, Mode.RTL, Mode.LAND):
+            self.lead_in = None  # (TAKEOFF's and RTL's are planned before: `plan_auto`)
         if not (touchdown_goes_on or mode == Mode.LAND or (again and mode == Mode.RTL)):
             self.descent.end()
         if mode not in (Mode.TAKEOFF, Mode.RTL):
@@ -107,8 +119,20 @@ class ModeState:
         elif mode == Mode.POSCTL:
             self.posctl.restart()
         elif mode == Mode.LAND:
-            self.descent.start(self.known.voice.clock_us * 1e-6, self.here(),
-                               self.known.limits)
+            self._after_brake(lambda t_us, at: self.descent.start(t_us * 1e-6, at,
+                                                                  self.known.limits))
+
+    def _after_brake(self, start: Callable[[int, Reference], None]) -> None:
+        """`start(t_us, pose)`: a plan that starts at rest, from where the vehicle should be
+        now; from a reference flown that still moves, where HOLD's brake brings it to rest,
+        when it does (`reference`)."""
+        flown = self._flown()
+        if flown is None or not offboard.moving(flown):
+            self.lead_in = None
+            start(self.known.voice.clock_us, self.here())
+            return
+        self.brake.hold_at(self.here())
+        self.lead_in = start
 
     def on_arming(self) -> None:
         """Armed: the mode in force starts from where the vehicle is (HOLD holds there,
@@ -121,6 +145,7 @@ class ModeState:
         self.posctl.restart()
         self.shaper.restart()
         self._rest_since_us = None
+        self.lead_in = None
 
     def start_taken_in(self) -> None:
         """The mission's plan the reference rested for is flown from now (from where it
@@ -144,7 +169,8 @@ class ModeState:
             self.descent.begin_touchdown(t_us, held)
         elif self.descent.plan is not None:
             self.descent.start(t_us * 1e-6, held, self.known.limits)
-        if self.auto is not None:  # TAKEOFF's or RTL's items are absolute: the rest of them
+        if self.auto is not None and self.lead_in is None:  # TAKEOFF's or RTL's items are
+            # absolute: the rest of them (a plan still braking into starts from the rest)
             self.auto.set_current(self.auto.current_seq, t_us * 1e-6, held.p_enu_m,
                                   held.q_enu_flu)
 
@@ -154,6 +180,7 @@ class ModeState:
         self.mission_run.stop()
         self.descent.end()
         self.auto = None
+        self.lead_in = None
 
     def plan_auto(self, mode: Mode, previous: Mode) -> str:
         """TAKEOFF's or RTL's plan when entered anew, or again with nothing left to fly
@@ -172,7 +199,7 @@ class ModeState:
         items = auto_plans.takeoff(start.p_enu_m, climb_m, limits.max_distance_m)
         if isinstance(items, str):
             return items
-        self._fly_auto(items, limits, start)
+        self._fly_auto(items, limits)
         return ""
 
     def _plan_rtl(self) -> str:
@@ -182,15 +209,14 @@ class ModeState:
         items = auto_plans.rtl(start.p_enu_m, flight.rtl_return_alt_m, limits.max_distance_m)
         if isinstance(items, str):
             return items
-        self._fly_auto(items, replace(limits, cruise_speed_m_s=flight.rtl_cruise_m_s), start)
+        self._fly_auto(items, replace(limits, cruise_speed_m_s=flight.rtl_cruise_m_s))
         self.known.voice.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
                              f"RTL: return at {-items[0].z:.1f} m, then land")
         return ""
 
-    def _fly_auto(self, items: tuple[MissionItem, ...], limits: MissionLimits,
-                  start: Reference) -> None:
-        self.auto = MissionExecutor(items, limits)
-        self.auto.start(self.known.voice.clock_us * 1e-6, start.p_enu_m, start.q_enu_flu)
+    def _fly_auto(self, items: tuple[MissionItem, ...], limits: MissionLimits) -> None:
+        auto = self.auto = MissionExecutor(items, limits)
+        self._after_brake(lambda t_us, at: auto.start(t_us * 1e-6, at.p_enu_m, at.q_enu_flu))
 
     # ------------------------------------------------------------------ what flies
 
@@ -236,6 +262,8 @@ class ModeState:
         if self._rest_since_us is not None:
             self._resume_from(self.here(), t_us, self._rest_since_us)
             self._rest_since_us = None
+        if self.lead_in is not None and (braking := self._lead_in(t_us)) is not None:
+            return braking
         if self.descent.touchdown is not None:
             return self.descent.touchdown_ref(t_us, known.limits.land_speed_m_s, known.state)
         if mode == Mode.MISSION and self.mission_run.running and \
@@ -255,6 +283,18 @@ class ModeState:
             return self.posctl.step(t_us, here,
                                     known.state.p_enu_m if known.state is not None else None)
         return self._hold_ref(t_us)
+
+    def _lead_in(self, t_us: int) -> Reference | None:
+        """HOLD's brake into LAND's, TAKEOFF's or RTL's plan (`_after_brake`) at t_us; None
+        once it has come to rest: the plan is started there, now."""
+        ref = self._hold_ref(t_us)
+        start = self.lead_in
+        assert start is not None
+        if self.brake.sp is None or not offboard.settled(self.brake.sp):
+            return ref
+        self.lead_in = None
+        start(t_us, ref)  # at rest where the brake ended: the plan flies on from here
+        return None
 
     def _offboard_ref(self, t_us: int) -> Reference:
         """The streamed target approached from the reference flown when OFFBOARD began."""
