@@ -13,7 +13,7 @@ in D seconds as x0 (1 - B(t / D)) plus the quintic that takes its starting rate 
 acceleration to rest from zero (`fcu.reference.approach_kernels`). On a long approach
 with a fixed end the starting rates are braked on their own instead, with a free end, in
 twice the shortest time that fits the limits, or in that time where the longer brake
-leaves them (`rates_brakes`), and the blend takes the rest of the offset: taken to rest
+leaves them (`RatesBrakes`), and the blend takes the rest of the offset: taken to rest
 over the whole approach, the quintic's excursion grows as v0 D and a0 D^2, and no
 duration fitted. B is `blend`: the
 minimum-jerk 10 s^3 - 15 s^4 + 6 s^5, or, on a long step, a cruise between minimum-jerk
@@ -309,24 +309,14 @@ def plan(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
         flipped = flip(env, sp, free_end(x, d, free), d)
         if flipped is not None:  # slower would leave that rotor's thrust wrong for longer
             return Approach(coefficients(free_end(x, d, free), d), d, False, flipped)
-    best = _search(env, lim, sp, x, free, 0.0, d)
+    brakes = None if all(free) else RatesBrakes(lim, sp, x)
+    best = _search(env, lim, sp, x, free, 0.0, d, brakes)
     r = 0.0 if any(free) else cruise_share(x, lim)
     if r > 0.0:
-        cruise = _search(env, lim, sp, x, free, r, _bound(x, lim, r))
+        cruise = _search(env, lim, sp, x, free, r, _bound(x, lim, r), brakes)
         if cruise.fits and (not best.fits or cruise.duration_s < best.duration_s):
             best = cruise
     return best
-
-
-class RatesBrake(NamedTuple):
-    """How a fixed end's approach longer than `longer_than_s` brakes the offset's starting
-    rates on their own (a brake with a free end, the blend taking the rest of the offset):
-    over `duration_s`, the approach using up to `allowed[i]` times limit i (in
-    `kinematic_ratios`' order; None: 1 each)."""
-
-    longer_than_s: float
-    duration_s: float
-    allowed: tuple[float, ...] | None
 
 
 def _slack(shares: np.ndarray) -> tuple[float, ...]:
@@ -335,18 +325,20 @@ def _slack(shares: np.ndarray) -> tuple[float, ...]:
     return tuple(float(RATES_SLACK * v) if v > 1.0 else 1.0 for v in shares)
 
 
-def rates_brakes(lim: StickSettings, sp: Setpoint, x: Offset) -> tuple[RatesBrake, ...]:
-    """The brakes of the offset's starting rates by the approach's duration: the last whose
-    `longer_than_s` the duration passes applies; none: the rates' quintic over the whole
-    approach. With d1 the shortest duration in which the brake alone stays within the
-    limits: RATES_HEADROOM d1 (from any duration on); where that longer brake alone leaves
-    them (a start accelerating towards a speed limit overshoots it more the longer it
-    brakes: the blend beside it may offset that on a short approach, never on a long
-    one), then, from RATES_HEADROOM^2 d1 on, d1 itself. Where no duration fits, the one
-    where it overshoots least, the limits it overshoots slackened (`_slack`). A free end's
-    part is its own brake (its rho stays 1): there only that slack counts, and HOLD's brake
-    from a reference at or past a limit and still speeding up (a mission flies at its own
-    speeds) takes a few seconds; it took 120 s and ran away at up to 32 m/s.
+class RatesBrakes:
+    """How a fixed end's approach brakes the offset's starting rates on their own (a brake
+    with a free end, the blend taking the rest of the offset), by the approach's duration
+    (`at`). With d1 the shortest duration in which the brake alone stays within the limits
+    (`shortest_s`): none up to RATES_HEADROOM d1 (the rates' quintic over the whole
+    approach), RATES_HEADROOM d1 beyond; where that longer brake alone leaves the limits (a
+    start accelerating towards a speed limit overshoots it more the longer it brakes: the
+    blend beside it may offset that on a short approach, never on a long one), d1 itself
+    from RATES_HEADROOM^2 d1 on (checked only when an approach that long is tried). Where
+    no duration fits, the one where it overshoots least (`least`), the limits it overshoots
+    slackened (`_slack`). A free end's part is its own brake (its rho stays 1): there only
+    that slack counts, and HOLD's brake from a reference at or past a limit and still
+    speeding up (a mission flies at its own speeds) takes a few seconds; it took 120 s and
+    ran away at up to 32 m/s.
 
     Taken to rest over the whole of a long approach instead, the rates' quintic went out
     and came back by as much as v0 D and a0 D^2: an OFFBOARD set-point 39 m away taken
@@ -354,43 +346,61 @@ def rates_brakes(lim: StickSettings, sp: Setpoint, x: Offset) -> tuple[RatesBrak
     tried ran the reference into the ground. With RATES_HEADROOM d1 alone, the same
     set-point taken while the body still turned faster towards the rotation limit found
     none either: the longest tried, 120 s, was flown."""
-    rates = x._replace(e=ZERO, eps=ZERO)
-    if at_rest(rates):
-        return ()
 
-    def shares(dur: float) -> np.ndarray:
-        return kinematic_shares(lim, sp, free_end(rates, dur), dur)
+    def __init__(self, lim: StickSettings, sp: Setpoint, x: Offset) -> None:
+        self._lim, self._sp = lim, sp
+        self._rates = rates = x._replace(e=ZERO, eps=ZERO)
+        self.shortest_s = 0.0  # d1; 0: no rates, or no duration fits (`least`)
+        self.least: tuple[float, tuple[float, ...]] | None = None  # (duration, allowed)
+        self._longer_fits: bool | None = None  # RATES_HEADROOM d1 within the limits
+        if at_rest(rates):
+            return
+        d = _bound(rates, lim)
+        least = (math.inf, d, np.zeros(8))
+        for _ in range(MAX_TRIES):
+            now = self._shares(d)
+            ratio = float(now.max())
+            if ratio <= 1.0:
+                self.shortest_s = d
+                return
+            if ratio < least[0]:
+                least = (ratio, d, now)
+            elif d > 2.0 * least[1] or d >= D_MAX_S:  # past its least: it only grows now
+                break
+            d = min(D_MAX_S, d * GROW_RATES)
+        self.least = (least[1], _slack(least[2]))
 
-    d = _bound(rates, lim)
-    least = (math.inf, d, np.zeros(8))
-    for _ in range(MAX_TRIES):
-        now = shares(d)
-        ratio = float(now.max())
-        if ratio <= 1.0:
-            longer = RATES_HEADROOM * d
-            brakes = (RatesBrake(0.0, longer, None),)
-            if float(shares(longer).max()) <= 1.0:
-                return brakes
-            return (*brakes, RatesBrake(RATES_HEADROOM * longer, d, None))
-        if ratio < least[0]:
-            least = (ratio, d, now)
-        elif d > 2.0 * least[1] or d >= D_MAX_S:  # past its least: it only grows from here
-            break
-        d = min(D_MAX_S, d * GROW_RATES)
-    return (RatesBrake(0.0, least[1], _slack(least[2])),)
+    def _shares(self, dur: float) -> np.ndarray:
+        return kinematic_shares(self._lim, self._sp, free_end(self._rates, dur), dur)
+
+    def at(self, dur: float) -> tuple[float, tuple[float, ...] | None]:
+        """For an approach of dur seconds: (the share of it the brake lasts, 1: no brake;
+        the limits' allowances, None: 1 each)."""
+        if self.least is not None:
+            return min(1.0, self.least[0] / dur), self.least[1]
+        d1 = self.shortest_s
+        longer = RATES_HEADROOM * d1
+        if d1 == 0.0 or dur <= longer:
+            return 1.0, None
+        if dur > RATES_HEADROOM * longer:
+            if self._longer_fits is None:
+                self._longer_fits = float(self._shares(longer).max()) <= 1.0
+            if not self._longer_fits:
+                return d1 / dur, None
+        return longer / dur, None
 
 
 def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
-            free: tuple[bool, bool], r: float, d: float) -> Approach:
-    """The shortest duration from d up that fits with cruise share r (module docstring)."""
-    brakes = rates_brakes(lim, sp, x)
+            free: tuple[bool, bool], r: float, d: float,
+            brakes: RatesBrakes | None) -> Approach:
+    """The shortest duration from d up that fits with cruise share r (module docstring);
+    `brakes` None: made when a duration first fails (both ends free: only their slack
+    counts, and it changes nothing where the brake fits)."""
+    made = [brakes]
 
     def brake(dur: float) -> tuple[tuple[float, float], tuple[float, ...] | None]:
         """(rho, allowed) of an approach of duration dur."""
-        share, allowed = 1.0, None
-        for b in brakes:
-            if dur > b.longer_than_s:
-                share, allowed = min(1.0, b.duration_s / dur), b.allowed
+        share, allowed = (1.0, None) if made[0] is None else made[0].at(dur)
         return (1.0 if free[0] else share, 1.0 if free[1] else share), allowed
 
     def rho(dur: float) -> tuple[float, float]:
@@ -398,7 +408,14 @@ def _search(env: Envelope | None, lim: StickSettings, sp: Setpoint, x: Offset,
 
     def trial(dur: float) -> tuple[float, Excess | None]:
         rho_d, allowed = brake(dur)
-        return check(env, lim, sp, free_end(x, dur, free), dur, r, rho_d, allowed)
+        ratio, excess = check(env, lim, sp, free_end(x, dur, free), dur, r, rho_d, allowed)
+        if ratio > 1.0 and made[0] is None:
+            made[0] = RatesBrakes(lim, sp, x)
+            rho_d, allowed = brake(dur)
+            if allowed is not None:
+                ratio, excess = check(env, lim, sp, free_end(x, dur, free), dur, r, rho_d,
+                                      allowed)
+        return ratio, excess
 
     lo, best = math.nan, None
     for _ in range(MAX_TRIES):
