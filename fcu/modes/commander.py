@@ -439,20 +439,30 @@ class Commander:
 
     def _plan_mission(self, seq: int, said: str, text: str,
                       replies: tuple[Reply, ...] = ()) -> Answer:
-        """Plan the mission from item `seq`, starting now from the desired pose, and check
-        it again from there with the upload's envelope (`fcu.mission.start.plan_from`, run
-        by `work`): one that no longer fits is not flown (the vehicle holds; the command is
-        refused with the reason), never flown into the limits. The answer, or IN_PROGRESS
-        while the plan is made beside the loop (then each of `replies` gets it)."""
-        start = self.modes.here()
+        """Plan the mission from item `seq`, starting now from the desired pose (with the
+        reference still moving: where HOLD's brake brings it to rest, when it does,
+        `ModeState.brake_then`), and check it again from there with the upload's envelope
+        (`fcu.mission.start.plan_from`, run by `work`): one that no longer fits is not flown
+        (the vehicle holds; the command is refused with the reason), never flown into the
+        limits. The answer, or IN_PROGRESS while the brake flies or the plan is made beside
+        the loop (then each of `replies` gets it)."""
         plan = self.modes.mission_run.plan = MissionPlan(seq=seq, t_s=self.clock_us * 1e-6,
-                                                   start=start, said=said, text=text)
+                                                   start=self.modes.here(), said=said,
+                                                   text=text)
         for reply in replies:
             plan.on_end(reply)
-        self.work.submit(plan_from, (self.modes.mission_run.items, self.limits, seq, plan.t_s,
-                                     start.p_enu_m, start.q_enu_flu),
-                         lambda outcome: self._planned(plan, outcome))
+        if self.modes.moving():  # planned where HOLD's brake brings the reference to rest
+            self.modes.brake_then(lambda t_us, at: self._plan_from(plan, t_us, at))
+        else:
+            self._plan_from(plan, self.clock_us, plan.start)
         return plan.result if plan.result is not None else Answer(IN_PROGRESS, "")
+
+    def _plan_from(self, plan: MissionPlan, t_us: int, start: Reference) -> None:
+        """`plan` made from `start` (at rest) at `t_us`, by `work`."""
+        plan.t_s, plan.start = t_us * 1e-6, start
+        self.work.submit(plan_from, (self.modes.mission_run.items, self.limits, plan.seq,
+                                     plan.t_s, start.p_enu_m, start.q_enu_flu),
+                         lambda outcome: self._planned(plan, outcome))
 
     def _planned(self, plan: MissionPlan,
                  outcome: Outcome[tuple[MissionExecutor | None, str]]) -> None:

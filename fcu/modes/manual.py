@@ -156,6 +156,18 @@ def start(t_us: int, p_enu_m: Vec3, q_enu_flu: Quat) -> ManualSetpoint:
     return ManualSetpoint(t_us, p_enu_m, (0.0, 0.0, 0.0), q_enu_flu)
 
 
+def continuing(t_us: int, ref: Reference) -> ManualSetpoint:
+    """Entering POSCTL at the reference flown: its pose, and its velocity, acceleration and
+    the yaw part of its body rate and of that rate's derivative (the world's vertical
+    component, NED: clockwise), which the shaper takes from there to what the sticks ask
+    (`advance`); from a still reference, `start`'s. Started still from a moving reference
+    instead, its velocity stepped to zero."""
+    w = q_rotate(ref.q_enu_flu, ref.omega_flu_rad_s)
+    w_dot = q_rotate(ref.q_enu_flu, ref.omega_dot_flu_rad_s2)  # d/dt (R w) = R dw/dt
+    return ManualSetpoint(t_us, ref.p_enu_m, ref.v_enu_m_s, ref.q_enu_flu, 0.0, 0.0 - w[2],
+                          ref.a_enu_m_s2, 0.0 - w_dot[2])
+
+
 def sqrt_controller(error: float, gain: float, limit: float, dt: float) -> float:
     """ArduPilot's sqrt_controller for error >= 0: the rate that brings `error` to zero,
     gain * error near zero, sqrt(2 limit (error - limit / 2 gain^2)) beyond limit / gain^2,

@@ -27,11 +27,12 @@ or RTL's plan, the mission's run. A mission replaced during its own touchdown le
 touchdown go on (`touchdown_goes_on`). Arming and disarming keep the mode and reset here too
 (`on_arming`: HOLD, POSCTL and OFFBOARD start from where the vehicle is; `on_disarming`).
 
-LAND's, TAKEOFF's and RTL's plans start at rest. Entered while the reference flown still
-moves, they start where HOLD's brake brings it to rest, when it does (`_after_brake`), as
-PX4's land and return slow down first: started at once, the reference's velocity stepped
-to zero, and LAND entered at 7 m/s left the rotors saturated for 3 s and the vehicle 7.5 m
-off its reference.
+LAND's, TAKEOFF's and RTL's plans start at rest, and so does a mission's. Asked while the
+reference flown still moves, they start where HOLD's brake brings it to rest, when it does
+(`_after_brake`; a mission's plan is made from there: `brake_then`), as PX4's land and
+return slow down first: started at once, the reference's velocity stepped to zero, and
+LAND entered at 7 m/s left the rotors saturated for 3 s and the vehicle 7.5 m off its
+reference.
 """
 
 from __future__ import annotations
@@ -91,6 +92,9 @@ class ModeState:
         # LAND's, TAKEOFF's or RTL's plan, started (at t_us, from a pose) when HOLD's brake
         # has brought the moving reference to rest: `_after_brake`
         self.lead_in: Callable[[int, Reference], None] | None = None
+        # a mission's start, made (at t_us, from a pose) when HOLD's brake has brought the
+        # moving reference to rest: `brake_then`
+        self.plan_lead_in: Callable[[int, Reference], None] | None = None
 
     # ------------------------------------------------------------------ entering a mode
 
@@ -104,6 +108,7 @@ class ModeState:
         self.mode = mode
         if mode not in (Mode.TAKEOFF, Mode.RTL, Mode.LAND):
             self.lead_in = None  # (TAKEOFF's and RTL's are planned before: `plan_auto`)
+        self.plan_lead_in = None  # the mode entered flies from the brake's reference
         if not (touchdown_goes_on or mode == Mode.LAND or (again and mode == Mode.RTL)):
             self.descent.end()
         if mode not in (Mode.TAKEOFF, Mode.RTL):
@@ -121,6 +126,20 @@ class ModeState:
         elif mode == Mode.LAND:
             self._after_brake(lambda t_us, at: self.descent.start(t_us * 1e-6, at,
                                                                   self.known.limits))
+
+    def moving(self) -> bool:
+        """The reference flown (in flight) still moves: a plan that starts at rest waits for
+        HOLD's brake (`_after_brake`, `brake_then`)."""
+        flown = self._flown()
+        return flown is not None and offboard.moving(flown)
+
+    def brake_then(self, start: Callable[[int, Reference], None]) -> None:
+        """A mission's start asked while the reference moves: HOLD's brake flies until it is
+        at rest, then `start(t_us, pose)` plans the mission from there (the mode in force
+        stays, as while any mission's plan is made); dropped meanwhile, the mode in force
+        flies on from the brake (`_resume_from_brake`)."""
+        self.brake.hold_at(self.here())
+        self.plan_lead_in = start
 
     def _after_brake(self, start: Callable[[int, Reference], None]) -> None:
         """`start(t_us, pose)`: a plan that starts at rest, from where the vehicle should be
@@ -145,7 +164,7 @@ class ModeState:
         self.posctl.restart()
         self.shaper.restart()
         self._rest_since_us = None
-        self.lead_in = None
+        self.lead_in = self.plan_lead_in = None
 
     def start_taken_in(self) -> None:
         """The mission's plan the reference rested for is flown from now (from where it
@@ -180,7 +199,7 @@ class ModeState:
         self.mission_run.stop()
         self.descent.end()
         self.auto = None
-        self.lead_in = None
+        self.lead_in = self.plan_lead_in = None
 
     def plan_auto(self, mode: Mode, previous: Mode) -> str:
         """TAKEOFF's or RTL's plan when entered anew, or again with nothing left to fly
@@ -254,11 +273,8 @@ class ModeState:
         this: the plan is taken in before the next step."""
         self.known.voice.clock_us = t_us
         mode, known = self.mode, self.known
-        start = self.mission_run.plan
-        if start is not None and known.armed:
-            if self._rest_since_us is None:
-                self._rest_since_us = t_us
-            return start.start
+        if (starting := self._mission_start_ref(t_us)) is not None:
+            return starting
         if self._rest_since_us is not None:
             self._resume_from(self.here(), t_us, self._rest_since_us)
             self._rest_since_us = None
@@ -278,11 +294,58 @@ class ModeState:
             return ref
         if mode in (Mode.TAKEOFF, Mode.RTL) and self.auto is not None:
             return self._auto_ref(t_us)
-        if mode == Mode.POSCTL:
-            here = self.here() if self.posctl.sp is None else None
+        if mode == Mode.POSCTL:  # from the reference flown, its velocity kept while it moves
+            here = (self._flown() if self.moving() else self.here()) \
+                if self.posctl.sp is None else None
             return self.posctl.step(t_us, here,
                                     known.state.p_enu_m if known.state is not None else None)
         return self._hold_ref(t_us)
+
+    def _mission_start_ref(self, t_us: int) -> Reference | None:
+        """While a mission's start is under way: HOLD's brake until the reference is at rest
+        (`brake_then`), then at rest where its plan starts until it is taken in (at once
+        when planned in the loop: then None, the mission flies). None: no start under way
+        (one dropped while braking: the mode in force flies on from the brake)."""
+        start = self.mission_run.plan
+        if start is None or not self.known.armed:
+            if self.plan_lead_in is not None:
+                self.plan_lead_in = None
+                self._resume_from_brake(t_us)
+            return None
+        if self.plan_lead_in is not None:
+            ref = self._hold_ref(t_us)
+            if self.brake.sp is None or not offboard.settled(self.brake.sp):
+                return ref
+            plan_from_here, self.plan_lead_in = self.plan_lead_in, None
+            plan_from_here(t_us, ref)
+            start = self.mission_run.plan
+            if start is None:
+                return None  # planned in the loop: taken in (or refused) already
+        if self._rest_since_us is None:
+            self._rest_since_us = t_us
+        return start.start
+
+    def _resume_from_brake(self, t_us: int) -> None:
+        """A mission's start dropped while HOLD's brake flew for it (`brake_then`), the mode
+        unchanged: OFFBOARD's approach and HOLD's brake start again from the reference
+        flown, POSCTL from here; LAND's descent, TAKEOFF's and RTL's plans from where the
+        brake brings the reference to rest (`_after_brake`); a touchdown sinks from here; a
+        mission still running (its new start dropped) holds, its timeline left behind."""
+        self.shaper.restart()
+        self.posctl.restart()
+        self.brake.hold_at(self.here())
+        if self.mode == Mode.MISSION and self.mission_run.running:
+            self.switch(Mode.HOLD)
+            self.known.voice.say(MAV_SEVERITY.MAV_SEVERITY_INFO, "mission paused: holding")
+        if self.descent.touchdown is not None:
+            self.descent.begin_touchdown(t_us, self.here())
+        elif self.descent.plan is not None and self.lead_in is None:
+            descent, limits = self.descent, self.known.limits
+            self._after_brake(lambda t, at: descent.start(t * 1e-6, at, limits))
+        auto = self.auto
+        if auto is not None and self.lead_in is None:
+            self._after_brake(lambda t, at: auto.set_current(auto.current_seq, t * 1e-6,
+                                                             at.p_enu_m, at.q_enu_flu))
 
     def _lead_in(self, t_us: int) -> Reference | None:
         """HOLD's brake into LAND's, TAKEOFF's or RTL's plan (`_after_brake`) at t_us; None

@@ -10,7 +10,7 @@ from fcu.control.dualquat import Vec3
 from fcu.mission.start import PosctlFit
 from fcu.modes import manual
 from fcu.modes.manual import ManualSetpoint, Sticks, StickSettings
-from fcu.stages import Reference
+from fcu.stages import Reference, pose_ref
 
 
 class Posctl:
@@ -39,14 +39,14 @@ class Posctl:
         self.sp = None
 
     def step(self, t_us: int, here: Reference | None, p_vehicle: Vec3 | None) -> Reference:
-        """The set-point moved as the sticks say at `t_us`, from `here` (where the vehicle
-        should be; given when `sp` is None); held still at `here` while its limits are
-        being fitted."""
+        """The set-point moved as the sticks say at `t_us`, from `here` (the reference flown,
+        or where the vehicle should be; given when `sp` is None: `manual.start`); held still
+        at its pose while its limits are being fitted."""
         sp = self.sp
         if sp is None:
             assert here is not None
             if self.fit is not None:  # its limits being fitted: hold still till then
-                return here
-            sp = manual.start(t_us, here.p_enu_m, here.q_enu_flu)
+                return pose_ref(here.p_enu_m, here.q_enu_flu)
+            sp = manual.continuing(t_us, here)
         self.sp, ref = manual.advance(sp, t_us, self.sticks, self.limits, p_vehicle)
         return ref

@@ -19,6 +19,7 @@ from common.wire.modes import Mode
 from fcu.control.dualquat import norm3 as norm
 from fcu.edge.setpoint_wire import attitude_target, position_target, sticks_from_manual_control
 from fcu.mission.limits import MissionLimits
+from fcu.modes import manual
 from fcu.modes.landing import (
     LANDED_STILL_S,
     TOUCHDOWN_BELOW_M,
@@ -370,16 +371,17 @@ def test_rearmed_in_offboard_the_approach_starts_where_the_vehicle_is():
     assert norm(c.last_ref.v_enu_m_s) < 1e-2, c.last_ref.v_enu_m_s
 
 
-@pytest.mark.parametrize("mode", [Mode.HOLD, Mode.LAND, Mode.RTL, Mode.TAKEOFF])
+@pytest.mark.parametrize("mode", [Mode.HOLD, Mode.LAND, Mode.RTL, Mode.TAKEOFF, Mode.POSCTL,
+                                  Mode.MISSION])
 def test_a_mode_entered_during_a_missions_descent_speeding_up_brakes_first(mode):
     """Given a mission at the default 2 m/s descending 18 m over 3 m (faster down than the
-    approach limits' 1.5 m/s), when HOLD, LAND, RTL or TAKEOFF comes while the leg still
-    speeds up, then the reference's velocity goes on from the mission's (no step), and it
-    comes to rest within 3 s and 2 m of where the mode came, never below 17 m, before
-    flying the mode's plan from there. (HOLD's brake dived through the ground at 16 m/s:
-    every brake overshot the entry's descent speed, none fitted, and the longest tried,
-    120 s, was flown. LAND's, RTL's and TAKEOFF's plans started at rest at once: the
-    reference's velocity stepped from 1.9 m/s to zero.)"""
+    approach limits' 1.5 m/s), when HOLD, LAND, RTL, TAKEOFF, POSCTL (sticks centred) or a
+    new current item comes while the leg still speeds up, then the reference's velocity
+    goes on from the mission's (no step), and it comes to rest within 3 s and 2 m of where
+    the mode came, never below 17 m, before flying the mode's plan from there. (HOLD's
+    brake dived through the ground at 16 m/s: every brake overshot the entry's descent
+    speed, none fitted, and the longest tried, 120 s, was flown. The others started at
+    rest at once: the reference's velocity stepped from 1.9 m/s to zero.)"""
     vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
     pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
                     limits=MissionLimits(vehicle=vehicle))
@@ -396,16 +398,19 @@ def test_a_mode_entered_during_a_missions_descent_speeding_up_brakes_first(mode)
         assert t < 20_000_000
     entry = c.fly(t)
     assert entry.v_enu_m_s[2] < -1.5 and entry.a_enu_m_s2[2] < -0.5  # still speeding up
-    answer = c.takeoff() if mode == Mode.TAKEOFF else c.set_mode(mode, 0.0)
-    assert answer[0] == MAV_RESULT.MAV_RESULT_ACCEPTED and c.mode == mode
+    c.manual_input(0.0, manual.CENTRED)
+    answer = c.takeoff() if mode == Mode.TAKEOFF else c.set_mission_current(0) \
+        if mode == Mode.MISSION else c.set_mode(mode, 0.0)
+    assert answer[0] == (MAV_RESULT.MAV_RESULT_IN_PROGRESS if mode == Mode.MISSION else
+                         MAV_RESULT.MAV_RESULT_ACCEPTED) and c.mode == mode
     path = [c.fly(t + 2000 * k) for k in range(1, 10 * 500)]
     assert math.dist(path[0].v_enu_m_s, entry.v_enu_m_s) < 0.01
     rest = next(k for k, r in enumerate(path) if math.dist(r.v_enu_m_s, (0.0, 0.0, 0.0)) == 0)
     assert rest < 3 * 500
     assert min(r.p_enu_m[2] for r in path[:rest + 1]) > 17.0
     assert math.dist(path[rest].p_enu_m, entry.p_enu_m) < 2.0
-    if mode == Mode.HOLD:
-        assert all(r == path[rest] for r in path[rest:])
+    if mode in (Mode.HOLD, Mode.POSCTL):
+        assert all(r.p_enu_m == path[rest].p_enu_m for r in path[rest:])
     else:  # its plan flies on from the rest
         assert math.dist(path[-1].p_enu_m, path[rest].p_enu_m) > 0.5
 

@@ -250,13 +250,34 @@ def _path_after(c: Any, t_us: int, steps: int) -> list[tuple[float, float, float
     return [c.fly(t_us + 2000 * k).p_enu_m for k in range(steps)]
 
 
-def test_a_start_under_way_rests_where_it_was_asked_and_its_plan_flies_on_from_there():
-    """Given a mission in flight, moving, and a new current item planned beside the loop,
-    then while the plan is made the reference rests where the vehicle should have been
-    when it was asked (zero velocity: as the loop flies it when the plan is made in the
-    step), and when it is taken in, the new plan starts there: no step. (The old plan flew
-    on meanwhile, and the reference stepped back by as far as it had gone, at 1.2 m/s
-    1.2 cm for a 10 ms plan, half a metre at 5 m/s for a plan of 100 ms.)"""
+def _braked_to_rest(c: Any, work: HeldWork, t_us: int) -> list[Any]:
+    """The references from `t_us` on, 2 ms apart, while HOLD's brake flies for a start
+    under way (its plan released beside the loop as soon as it is asked), until it is at
+    rest and the start's own plan has been asked for (held)."""
+    refs = []
+    for k in range(5000):
+        refs.append(c.fly(t_us + 2000 * k))
+        if c.modes.plan_lead_in is None:
+            assert work.pending == 1  # the mission's plan, asked from where it rests
+            return refs
+        work.release()  # the brake's plan
+    raise AssertionError("the brake never came to rest")
+
+
+def _continuous(refs: list[Any]) -> None:
+    """No step in position (5 m/s at most) or velocity (30 m/s^2 at most) between steps."""
+    for r0, r1 in itertools.pairwise(refs):
+        assert math.dist(r0.p_enu_m, r1.p_enu_m) < 0.01
+        assert math.dist(r0.v_enu_m_s, r1.v_enu_m_s) < 0.06
+
+
+def test_a_start_under_way_brakes_to_rest_and_its_plan_flies_on_from_there():
+    """Given a mission in flight, moving, and a new current item, planned beside the loop,
+    then HOLD's brake takes the reference to rest from its speed (no step in velocity),
+    the plan is made from where it rests (the reference resting there meanwhile), and when
+    it is taken in it flies from there: no step. (The reference used to stop dead where it
+    was asked, its velocity stepping to zero, or, earlier, to step back to that pose once
+    the plan came in.)"""
     c = airborne_commander()
     c.set_mission(tuple(_items(3)))
     c.fly(2_000_000)
@@ -266,23 +287,26 @@ def test_a_start_under_way_rests_where_it_was_asked_and_its_plan_flies_on_from_t
     work = HeldWork()
     c.work = work
     assert c.set_mission_current(2) == (IN_PROGRESS, "")
+    braking = _braked_to_rest(c, work, t)
+    rest = braking[-1]
+    assert rest.v_enu_m_s == (0.0, 0.0, 0.0) and len(braking) > 10
+    assert c.mode == Mode.MISSION and c.mission_current != 2  # not shown before it flies
+    t += 2000 * len(braking)
     held = [c.fly(t + 2000 * k) for k in range(10)]
-    assert all(r.p_enu_m == asked.p_enu_m and r.q_enu_flu == asked.q_enu_flu for r in held)
-    assert all(r.v_enu_m_s == (0.0, 0.0, 0.0) and r.a_enu_m_s2 == (0.0, 0.0, 0.0)
-               for r in held)
+    assert all(r.p_enu_m == rest.p_enu_m and r.v_enu_m_s == (0.0, 0.0, 0.0) for r in held)
     assert work.release() == 1 and c.mode == Mode.MISSION and c.mission_current == 2
-    path = [asked.p_enu_m, *_path_after(c, t + 20_000, 2000)]
-    assert 0.0 < math.dist(path[0], path[1]) < 1e-6  # from rest where it rested, at once
-    assert max(math.dist(a, b) for a, b in itertools.pairwise(path)) < 0.01  # 5 m/s
-    assert math.dist(path[-1], path[-2]) > 0.0 or c.mission_done
+    after = [c.fly(t + 20_000 + 2000 * k) for k in range(2000)]
+    _continuous([asked, *braking, *held, *after])
+    assert 0.0 < math.dist(rest.p_enu_m, after[0].p_enu_m) < 1e-6  # from where it rested
+    assert math.dist(after[-1].p_enu_m, after[-2].p_enu_m) > 0.0 or c.mission_done
 
 
-def test_a_running_missions_dropped_new_start_goes_on_from_where_it_paused():
-    """Given a mission in flight, moving, a new current item planned beside the loop (the
-    reference rests), when POSCTL is asked (the new start dropped, POSCTL's fit beside the
-    loop: MISSION still in force), then the mission goes on from where it paused, no jump
-    ahead to where its timeline had got meanwhile, and it passes no item at once; POSCTL is
-    entered from there when fitted."""
+def test_a_running_missions_dropped_new_start_holds_where_its_brake_stops():
+    """Given a mission in flight, moving, a new current item asked (HOLD's brake flying for
+    it), when POSCTL is asked (the new start dropped, POSCTL's fit beside the loop: MISSION
+    still in force), then the mission does not jump back to where it paused: it holds,
+    braking on from where the reference is, with no step, and POSCTL is entered from
+    there when fitted."""
     from fcu.modes import manual
     c = airborne_commander()
     c.set_mission(tuple(_items(3)))
@@ -290,33 +314,33 @@ def test_a_running_missions_dropped_new_start_goes_on_from_where_it_paused():
     c.fly(2_000_000)
     assert c.mission_start(0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED  # inline work
     t = _flown_until_moving(c, 2_002_000)
-    before = [c.fly(t + 2000 * k).p_enu_m for k in range(2)]
-    t += 4000
     work = HeldWork()
     c.work = work
     assert c.set_mission_current(2) == (IN_PROGRESS, "")
-    rested = [c.fly(t + 2000 * k).p_enu_m for k in range(50)]  # 100 ms
-    assert all(p == before[-1] for p in rested)
+    braking = [c.fly(t + 2000 * k) for k in range(20)]
+    work.release()  # the brake's plan
+    braking += [c.fly(t + 40_000 + 2000 * k) for k in range(5)]
+    assert math.dist(braking[-1].v_enu_m_s, (0.0, 0.0, 0.0)) > 0.05  # still braking
     assert c.set_mode(Mode.POSCTL, 0.0) == (IN_PROGRESS, "")  # the re-aim dropped
-    assert c.mode == Mode.MISSION and c.modes.mission_run.running
-    c.mission_events.clear()
-    path = [*before, *rested, *_path_after(c, t + 100_000, 20)]
-    steps = [math.dist(a, b) for a, b in itertools.pairwise(path)]
-    assert steps[-20] < 2 * steps[0]  # from where it paused: one step at about its speed
-    assert max(steps) < 0.01 and len(c.mission_events) <= 1
-    work.release()
+    held = [c.fly(t + 50_000 + 2000 * k) for k in range(1000)]
+    assert c.mode == Mode.HOLD and not c.modes.mission_run.running
+    _continuous([*braking, *held])
+    assert held[-1].v_enu_m_s == (0.0, 0.0, 0.0)
+    c.on_state(VehicleState(held[-1].p_enu_m, held[-1].q_enu_flu, (0.0, 0.0, 0.0),
+                            (0.0, 0.0, 0.0)), t + 2_050_000)  # the vehicle followed
+    work.release()  # the fit
     assert c.mode == Mode.POSCTL
-    assert math.dist(c.fly(t + 140_000).p_enu_m, path[-1]) < 0.01
+    assert math.dist(c.fly(t + 2_052_000).p_enu_m, held[-1].p_enu_m) < 0.01
 
 
 @pytest.mark.parametrize("mode", [Mode.TAKEOFF, Mode.LAND, Mode.POSCTL])
-def test_a_dropped_start_lets_the_mode_in_force_fly_on_from_where_it_rested(mode):
+def test_a_dropped_start_lets_the_mode_in_force_fly_on_from_the_brake(mode):
     """Given TAKEOFF climbing, LAND descending or POSCTL moving up on its stick, and
-    MISSION asked with its plan made beside the loop (the reference rests meanwhile), when
-    a new mission upload drops that start (the mode in force stays), then the mode flies
-    on from where the reference rested, with no jump to where its plan or set-point would
-    have been by then, and reaches what it was going to: TAKEOFF its altitude, LAND the
-    touchdown."""
+    MISSION asked (HOLD's brake flying for it, then its plan made beside the loop), when a
+    new mission upload drops that start (the mode in force stays), then the mode flies on
+    from where the reference is, with no step and no jump to where its plan or set-point
+    would have been by then, and reaches what it was going to: TAKEOFF its altitude, LAND
+    the touchdown."""
     from fcu.modes import manual
     c = airborne_commander()
     c.set_mission(tuple(_items(3)))
@@ -328,23 +352,25 @@ def test_a_dropped_start_lets_the_mode_in_force_fly_on_from_where_it_rested(mode
     work = HeldWork()
     c.work = work
     assert c.set_mode(Mode.MISSION, 0.0) == (IN_PROGRESS, "")
-    rested = [c.fly(t + 2000 * k).p_enu_m for k in range(50)]  # 100 ms
-    assert all(p == rested[0] for p in rested)
+    braking = [c.fly(t + 2000 * k) for k in range(10)]
+    work.release()  # the brake's plan
+    braking += [c.fly(t + 20_000 + 2000 * k) for k in range(40)]
     c.set_mission(tuple(_items(2)))
     assert c.under_way is None and c.mode == mode
-    work.release()
-    path = [rested[-1]]
+    path = braking[-1:]
     for k in range(5000 if mode != Mode.POSCTL else 500):  # to the touchdown, whose
-        path.append(c.fly(t + 100_000 + 2000 * k).p_enu_m)   # set-point follows the state
-        if c.modes.descent.touchdown is not None:              # (held here)
+        path.append(c.fly(t + 100_000 + 2000 * k))           # set-point follows the state
+        work.release()                                        # (held here)
+        if c.modes.descent.touchdown is not None:
             break
-    assert max(math.dist(a, b) for a, b in itertools.pairwise(path)) < 0.004  # 2 m/s
+    _continuous([*braking, *path])
+    z = path[-1].p_enu_m[2]
     if mode == Mode.TAKEOFF:
-        assert path[-1][2] == pytest.approx(2.0 + c.flight.takeoff_alt_m, abs=1e-6)
+        assert z == pytest.approx(2.0 + c.flight.takeoff_alt_m, abs=1e-6)
     elif mode == Mode.LAND:
-        assert c.modes.descent.touchdown is not None and path[-1][2] < 0.5
+        assert c.modes.descent.touchdown is not None and z < 0.5
     else:
-        assert path[-1][2] > rested[-1][2] + 0.5  # climbing on its stick for 1 s
+        assert z > braking[-1].p_enu_m[2] + 0.5  # climbing on its stick for 1 s
 
 
 def test_posctl_is_entered_when_its_limits_are_fitted():
