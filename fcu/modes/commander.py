@@ -165,8 +165,7 @@ class Commander:
         self.modes.descent.update_landed(self.armed, state)
 
     def drop_state(self) -> None:
-        """No state until the next one (the state source changed)."""
-        self.state = None
+        self.state = None  # no state until the next one (the state source changed)
 
     def step_at(self, t_us: int) -> None:
         """A control period begins at `t_us` (flight clock): what is said is stamped so."""
@@ -439,27 +438,23 @@ class Commander:
 
     def _plan_mission(self, seq: int, said: str, text: str,
                       replies: tuple[Reply, ...] = ()) -> Answer:
-        """Plan the mission from item `seq`, starting now from the desired pose (with the
-        reference still moving: where HOLD's brake brings it to rest, when it does,
-        `ModeState.brake_then`), and check it again from there with the upload's envelope
-        (`fcu.mission.start.plan_from`, run by `work`): one that no longer fits is not flown
-        (the vehicle holds; the command is refused with the reason), never flown into the
-        limits. The answer, or IN_PROGRESS while the brake flies or the plan is made beside
-        the loop (then each of `replies` gets it)."""
-        plan = self.modes.mission_run.plan = MissionPlan(seq=seq, t_s=self.clock_us * 1e-6,
-                                                   start=self.modes.here(), said=said,
-                                                   text=text)
+        """Plan the mission from item `seq` from the desired pose at rest (now, or where
+        HOLD's brake stops a moving reference: `ModeState.brake_then`) and check it again
+        from there with the upload's envelope (`fcu.mission.start.plan_from`, by `work`):
+        one that no longer fits is not flown (the vehicle holds; the command is refused with
+        the reason). The answer, or IN_PROGRESS meanwhile (then each of `replies` gets it)."""
+        plan = self.modes.mission_run.plan = MissionPlan(
+            seq=seq, t_s=self.clock_us * 1e-6, start=self.modes.here(), said=said, text=text)
         for reply in replies:
             plan.on_end(reply)
-        if self.modes.moving():  # planned where HOLD's brake brings the reference to rest
+        if self.modes.moving():
             self.modes.brake_then(lambda t_us, at: self._plan_from(plan, t_us, at))
         else:
             self._plan_from(plan, self.clock_us, plan.start)
         return plan.result if plan.result is not None else Answer(IN_PROGRESS, "")
 
     def _plan_from(self, plan: MissionPlan, t_us: int, start: Reference) -> None:
-        """`plan` made from `start` (at rest) at `t_us`, by `work`."""
-        plan.t_s, plan.start = t_us * 1e-6, start
+        plan.t_s, plan.start = t_us * 1e-6, start  # at rest there then
         self.work.submit(plan_from, (self.modes.mission_run.items, self.limits, plan.seq,
                                      plan.t_s, start.p_enu_m, start.q_enu_flu),
                          lambda outcome: self._planned(plan, outcome))

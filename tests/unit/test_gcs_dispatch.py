@@ -513,6 +513,16 @@ def test_a_mode_change_is_announced_at_once():
     assert [m for m in parsed(links[0]) if m.get_type() == "HEARTBEAT"]
 
 
+def _taken_in(server, t_us: int) -> int:
+    """Control steps of 2 ms after `t_us` until no mission start is under way (a start asked
+    while the reference moves waits for HOLD's brake); the last step's time."""
+    while server.pipeline.commander.modes.mission_run.plan is not None:
+        t_us += 2000
+        server.pipeline.step(t_us)
+        assert t_us < 10_000_000, "the start was never taken in"
+    return t_us
+
+
 def test_a_retried_command_is_answered_not_executed_again():
     """Given MISSION_START executed and the flight under way, when the sender re-sends it
     with confirmation 1 (its ACK was lost or late, as on a loaded machine), then the vehicle
@@ -545,15 +555,18 @@ def test_a_retried_command_is_answered_not_executed_again():
     assert started_at() == t0 and server.repeated_commands == 2
     server.pipeline.step(22_000)
     start(1, now_s=1.0 + 6.0)  # beyond the retry window: a new command
+    t_us = _taken_in(server, 22_000)  # (the reference moves: braked first)
     assert started_at() > t0
-    t1 = started_at()
-    server.pipeline.step(24_000)
+    first = c.modes.mission_run.executor
+    server.pipeline.step(t_us + 2000)
     start(0, now_s=7.1)  # confirmation 0: a new command, whatever came before
-    assert started_at() > t1
-    t2 = started_at()
-    server.pipeline.step(26_000)
+    t_us = _taken_in(server, t_us + 2000)
+    second = c.modes.mission_run.executor
+    assert second is not first  # planned again: executed
+    server.pipeline.step(t_us + 2000)
     start(1, first=1.0, now_s=7.2)  # another item: not a retry of the last one
-    assert started_at() > t2 and c.mission_current == 1
+    _taken_in(server, t_us + 2000)
+    assert c.modes.mission_run.executor is not second and c.mission_current == 1
     # a retry of a refused command repeats the refusal and its reason
     start(0, first=999.0, now_s=8.0)
     start(1, first=999.0, now_s=8.1)
