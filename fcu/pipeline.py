@@ -367,11 +367,12 @@ class Pipeline:
     def check_links(self, now_s: float, gcs_seen_s: float = math.inf) -> None:
         """Offboard and MANUAL_CONTROL streams and GCS heartbeat, on the wall clock
         (docs/clocks.md)."""
-        cmd = self.commander
-        if cmd.armed and cmd.mode == Mode.OFFBOARD and offboard_lost(
+        cmd = self.commander  # judged by the mode ahead: a change under way (a mission's
+        # start braking first) has left the stream's mode as it would have in the loop
+        if cmd.armed and cmd.mode_ahead == Mode.OFFBOARD and offboard_lost(
                 now_s, cmd.offboard.received_s, cmd.offboard_timeout_s):
             cmd.failsafe_hold("failsafe: offboard setpoints lost: HOLD")
-        if cmd.armed and cmd.mode == Mode.POSCTL and manual_control_lost(
+        if cmd.armed and cmd.mode_ahead == Mode.POSCTL and manual_control_lost(
                 now_s, cmd.sticks_received_s, cmd.flight.manual_timeout_s):
             cmd.failsafe_hold("failsafe: manual control lost: HOLD")
         change = self.gcs_link.update(now_s, gcs_seen_s, self.settings)

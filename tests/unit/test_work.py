@@ -405,6 +405,41 @@ def _offboard_commander(work: Work) -> Any:
     return c
 
 
+def test_a_mission_asked_from_offboard_at_speed_outlives_the_stream_it_left():
+    """Given OFFBOARD flying to a set-point 20 m north and MISSION asked at speed (HOLD's
+    brake flies first, seconds), when the set-points stop with the request, as a station's
+    do, then the OFFBOARD stream's loss is no failsafe (the change under way has left
+    OFFBOARD, as it would have in the loop): the start goes on and MISSION is entered
+    where the brake stopped. (The loss's HOLD dropped the start: MISSION answered FAILED.)"""
+    from fcu.edge.setpoint_wire import position_target
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
+                    limits=MissionLimits(vehicle=vehicle))
+    pipe.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    assert pipe.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    c = pipe.commander
+    c.set_mission(tuple(_items(3)))
+    pipe.check_links(0.0, 0.0)
+    assert c.offboard_position(0.0, position_target(1, 0b0000_1101_1111_1000, (20.0, 0.0, -2.0),
+                                                    (0.0,) * 3, (0.0,) * 3, 0.0))[0]
+    assert c.set_mode(Mode.OFFBOARD, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    t = 0
+    while math.dist(c.fly(t).v_enu_m_s, (0.0, 0.0, 0.0)) < 2.0:
+        t += 2000
+    answers: list[int] = []
+    assert c.set_mode(Mode.MISSION, 0.5)[0] == IN_PROGRESS
+    assert c.under_way is not None
+    c.under_way.on_end(lambda r, _: answers.append(r))
+    for k in range(1, 5000):
+        c.fly(t + 2000 * k)
+        pipe.check_links(0.5 + 0.002 * k, 0.5 + 0.002 * k)  # no set-point since 0 s
+        if answers:
+            break
+    assert answers == [MAV_RESULT.MAV_RESULT_ACCEPTED] and c.mode == Mode.MISSION
+    assert k * 0.002 > 1.0  # the brake outlasted COM_OF_LOSS_T
+
+
 def test_a_new_offboard_sample_is_anchored_beside_the_loop_ahead_and_flown_continuously():
     """Given OFFBOARD with the planner beside the loop, when a sample 2 m north comes, then
     the step only submits its anchor (the plan in force flies on, still), the anchor is
