@@ -176,7 +176,7 @@ def test_a_check_that_failed_is_a_mission_error_with_why():
 # ---------------------------------------------------------------------- a mission's start
 
 
-def airborne_commander() -> Any:
+def airborne_pipeline() -> Pipeline:
     """Hovering armed 2 m up in HOLD (the tilted vehicle's envelope in the limits)."""
     vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
     pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
@@ -184,7 +184,12 @@ def airborne_commander() -> Any:
     pipe.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
                                   (0.0, 0.0, 0.0)), 0)
     assert pipe.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
-    return pipe.commander
+    return pipe
+
+
+def airborne_commander() -> Any:
+    """`airborne_pipeline`'s commander."""
+    return airborne_pipeline().commander
 
 
 def _planned_commander() -> tuple[Any, HeldWork]:
@@ -412,12 +417,7 @@ def test_a_mission_asked_from_offboard_at_speed_outlives_the_stream_it_left():
     OFFBOARD, as it would have in the loop): the start goes on and MISSION is entered
     where the brake stopped. (The loss's HOLD dropped the start: MISSION answered FAILED.)"""
     from fcu.edge.setpoint_wire import position_target
-    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
-    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
-                    limits=MissionLimits(vehicle=vehicle))
-    pipe.on_state(0, VehicleState((0.0, 0.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
-                                  (0.0, 0.0, 0.0)), 0)
-    assert pipe.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    pipe = airborne_pipeline()
     c = pipe.commander
     c.set_mission(tuple(_items(3)))
     pipe.check_links(0.0, 0.0)
