@@ -5,7 +5,8 @@ approach planner and POSCTL's envelope fit.
     .venv/bin/python benchmarks/bench_planning.py [--rounds N]
 
 1. `check_mission` of `mission_envelope.mixed(500)` (a take-off, 498 items cycling 20 m legs
-   to stretch, 20 s keyframes and 60 s figures, a landing) on the tilted vehicle: what
+   to stretch, 20 s keyframes and 60 s figures, a landing) on the tilted vehicle with
+   `mission_envelope.fast_limits`: what
    `fcu.edge.mission_protocol` calls when the last MISSION_ITEM_INT arrives. Each round starts
    with the planning caches emptied (`fcu.envelope.feasibility.clear_caches`), so nothing of an
    earlier round is reused. Then MISSION_START as `fcu.modes.commander` does it:
@@ -40,7 +41,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.mission_envelope import mixed
+from benchmarks.mission_envelope import fast_limits, mixed
 from common.config.scenario import VehicleConfig, load_vehicle
 from common.wire.mission_items import MissionItem
 from fcu.control.dualquat import Quat, Vec3, q_exp
@@ -97,7 +98,7 @@ def _mission_start(items: Sequence[MissionItem], limits: MissionLimits) -> str:
 
 def bench_mission(rounds: int, vehicle: VehicleConfig) -> dict[str, list[float]]:
     items = mixed(MISSION_ITEMS)
-    limits = MissionLimits(vehicle=vehicle)
+    limits = fast_limits(vehicle)
     check = check_mission(items, limits)  # warm-up: kernels compiled or loaded
     assert not refusal(check), refusal(check)
     assert _mission_start(items, limits) == ""

@@ -1,8 +1,8 @@
 """Figures of the mission envelope check (docs/missions.md#the-envelope-check): how long a 2 m
-leg at MIS_CRUISE_SPD 2 m/s becomes on each vehicle and which actuator bounds it, the peak
-rotor speed and tilt rate of Case I, the rotor speed of hovering at the worst attitude, and
-how long the upload check of 500 items takes (waypoints alone, and a mix of fast legs,
-keyframes and figures)."""
+leg planned in 1 s (MIS_CRUISE_SPD 3.75 m/s) becomes on each vehicle and which actuator
+bounds it, the peak rotor speed and tilt rate of Case I, the rotor speed of hovering at the
+worst attitude, and how long the upload check of 500 items takes (waypoints alone, and a mix
+of fast legs, keyframes and figures)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common.config.scenario import load_scenario, load_vehicle
+from common.config.scenario import VehicleConfig, load_scenario, load_vehicle
 from common.wire.mav_enums import MAV_CMD, MAV_FRAME
 from common.wire.mission_items import MissionItem, local_xy
 from fcu.envelope.feasibility import MARGIN, envelope
@@ -33,6 +33,15 @@ LAND: int = MAV_CMD.MAV_CMD_NAV_LAND
 KEYFRAME: int = MAV_CMD.MAV_CMD_WAYPOINT_USER_1
 FIGURE: int = MAV_CMD.MAV_CMD_WAYPOINT_USER_2
 LOCAL_NED: int = MAV_FRAME.MAV_FRAME_LOCAL_NED
+
+
+def fast_limits(vehicle: VehicleConfig | None = None) -> MissionLimits:
+    """The limits these missions are checked with: top speeds of 3.75 m/s cruise, 1.875 m/s
+    climb and 0.9375 m/s descent, so that a leg lasts distance / 2, 1 or 0.5 m/s, fast enough
+    for the envelope to stretch the short legs (the timing of the planning figures pinned in
+    tests/unit/test_planning_figures.py)."""
+    return MissionLimits(cruise_speed_m_s=3.75, takeoff_speed_m_s=1.875,
+                         land_speed_m_s=0.9375, vehicle=vehicle)
 
 
 def waypoints(n: int) -> tuple[MissionItem, ...]:
@@ -60,18 +69,18 @@ def main() -> None:
     for name in ("hexa_tilted", "hexa_planar"):
         vehicle = load_vehicle(ROOT / f"config/vehicles/{name}.toml")
         env = envelope(vehicle)
-        ex = MissionExecutor(waypoints(3), MissionLimits(vehicle=vehicle))
+        ex = MissionExecutor(waypoints(3), fast_limits(vehicle))
         ex.start(0.0, (0.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0))
         legs = [t1 - t0 for _, t0, t1 in ex.schedule]
         leg = _Move(1, 0.0, (0.0, 0.0, 3.0), (0.0, 2.0, 0.0), (1.0, 0.0, 0.0, 0.0), None,
                     1.0, 0.0)
         scaling = env.scaling(leg)
-        print(f"{name}: 2 m legs at 2 m/s planned {legs[1]:.3f} s and {legs[2]:.3f} s "
+        print(f"{name}: 2 m legs at 3.75 m/s planned {legs[1]:.3f} s and {legs[2]:.3f} s "
               f"(1 s unstretched, where {env.explain(scaling.excess(1.0))}; rotor speed "
               f"alone would allow {scaling._speed_bound():.3f} s)")
 
     vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
-    limits = MissionLimits(vehicle=vehicle)
+    limits = fast_limits(vehicle)
     env = envelope(vehicle)
     traj = make_trajectory(load_scenario(ROOT / "config/scenarios/case1_figure8.toml")
                            .trajectory)

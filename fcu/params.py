@@ -100,11 +100,11 @@ GROUPS: tuple[tuple[str, tuple[ParamSpec, ...]], ...] = (("Controller", (
               "the tilt rate limit, from the reference; 0 = plain eqs. (28-29)"),
 )), ("Missions", (
     _bound("MIS_TKO_SPD", "MissionLimits.takeoff_speed_m_s", 0.05, 10.0, "m/s",
-           "takeoff climb speed when p2 is 0"),
+           "takeoff climb top speed when p2 is 0"),
     _bound("MIS_CRUISE_SPD", "MissionLimits.cruise_speed_m_s", 0.05, 20.0, "m/s",
-           "waypoint travel speed"),
+           "waypoint travel top speed (a leg lasts 1.875 distance / speed)"),
     _bound("MIS_LAND_SPD", "MissionLimits.land_speed_m_s", 0.05, 5.0, "m/s",
-           "landing descent speed"),
+           "landing descent top speed"),
     _bound("MIS_ITEM_MAX_S", "MissionLimits.item_max_s", 1.0, 86400.0, "s",
            "longest item duration a refusal proposes: an item the envelope check would need "
            "to lengthen beyond it is refused as not flyable"),
@@ -136,7 +136,7 @@ GROUPS: tuple[tuple[str, tuple[ParamSpec, ...]], ...] = (("Controller", (
     _bound("RTL_RETURN_ALT", "FlightSettings.rtl_return_alt_m", 0.0, 150.0, "m",
            "RTL climbs to this height above home if lower, flies home, lands"),
     _bound("MPC_XY_CRUISE", "FlightSettings.rtl_cruise_m_s", 0.1, 20.0, "m/s",
-           "RTL travel speed (distance / time)"),
+           "RTL travel top speed"),
 )), ("POSCTL and OFFBOARD", (
     _bound("COM_RC_LOSS_T", "FlightSettings.manual_timeout_s", 0.1, 35.0, "s",
            "POSCTL: MANUAL_CONTROL loss timeout (to HOLD)"),

@@ -14,18 +14,20 @@ imports no MAVLink library (tests/unit/test_mav_enums.py checks the enums agains
 
 Item semantics (positions local NED, metres; yaw in degrees, NED; NaN yaw = keep attitude):
 
-* NAV_TAKEOFF (22): climb vertically from the start pose to NED z; p2 = duration (0: |dz| /
-  takeoff speed), p4 = yaw (finite: level attitude at that yaw, same profile).
-* NAV_WAYPOINT (16): travel to x, y, z in distance / cruise speed, then hold p1 seconds;
+* NAV_TAKEOFF (22): climb vertically from the start pose to NED z; p2 = duration (0: at up
+  to the takeoff speed), p4 = yaw (finite: level attitude at that yaw, same profile).
+* NAV_WAYPOINT (16): travel to x, y, z at up to the cruise speed, then hold p1 seconds;
   p4 = yaw.
 * NAV_LOITER_TIME (19): travel to x, y, z as a waypoint, then hold p1 seconds.
-* NAV_LAND (21): descend vertically to NED z = 0 in |z| / land speed; p4 = yaw.
+* NAV_LAND (21): descend vertically to NED z = 0 at up to the land speed; p4 = yaw.
 * POSE_KEYFRAME (31000): reach x, y, z and the attitude q_ned_frd = exp(p2, p3, p4) in p1 s.
 * FIGURE_EIGHT (31001): the figure-infinity of the paper's eq. (31)-(32) with amplitude p1,
   duration p2, attitude turning about the world axis (p3, p4, z) (NED, not normalised).
 
 Travel, climbs and descents follow the minimum-jerk quintic (zero velocity and acceleration
-at both ends); attitudes move along the shortest rotation with the same profile. The quintic
+at both ends); attitudes move along the shortest rotation with the same profile. A speed (or
+the turn rate) is the quintic's top rate: a move timed by it lasts 1.875 distance / speed
+(`fcu.mission.planning`), as PX4 and ArduPilot treat their cruise speeds as most speeds. The quintic
 and the figure-infinity are those of `fcu.reference.trajectory` (one copy of the maths). An item is
 active on [start, end): at a boundary the reference is the next item's at tau = 0, the
 right-hand limit that holds over the coming control period (at a figure's start, T'' = pi k^2
@@ -34,7 +36,7 @@ is below
 `POSITION_TOLERANCE_M` (or whose turn is below `ANGLE_TOLERANCE_RAD`) is not made: the item
 keeps the start position (attitude), so a target equal to the previous item's end up to the
 wire's resolution costs no travel. A requested yaw change makes the move last at least
-angle / turn rate.
+1.875 angle / turn rate.
 
 Flyable missions (`fcu.envelope.feasibility`, when `MissionLimits.vehicle` is given): every planned
 segment's nominal wrench must allocate to commands every actuator can follow at every sample:

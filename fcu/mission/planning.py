@@ -31,6 +31,7 @@ from fcu.mission.segments import (
     keyframe_turn,
     level_attitude,
 )
+from fcu.reference.trajectory import QUINTIC_PEAK_RATE
 
 POSITION_TOLERANCE_M = 1e-3  # well above the wire's resolution (1e-4 m for x, y; float32 z)
 ANGLE_TOLERANCE_RAD = 1e-4
@@ -134,16 +135,19 @@ def with_speed(item: MissionItem, limits: MissionLimits,
 def _speed_timed(dp: Vec3, speed: float, phi: Vec3 | None,
                  turn_rate: float) -> tuple[Vec3, Vec3 | None, float]:
     """A move's translation and turn with those below the tolerances dropped, and its
-    duration: max(distance / speed, turn angle / turn rate)."""
+    duration: the shortest whose quintic keeps both the speed and the turn rate as top rates,
+    1.875 max(distance / speed, turn angle / turn rate) (`QUINTIC_PEAK_RATE`). A speed is a
+    most, as PX4's MPC_XY_CRUISE and ArduPilot's WPNAV_SPEED are, never a mean exceeded
+    half-way."""
     dist = norm3(dp)
     if dist < POSITION_TOLERANCE_M:
         dp, dist = ZERO, 0.0
     angle = 0.0 if phi is None else norm3(phi)
     if angle < ANGLE_TOLERANCE_RAD:
         phi, angle = None, 0.0
-    travel = dist / speed if dist > 0.0 else 0.0
+    travel = QUINTIC_PEAK_RATE * dist / speed if dist > 0.0 else 0.0
     if angle > 0.0:
-        travel = max(travel, angle / turn_rate)
+        travel = max(travel, QUINTIC_PEAK_RATE * angle / turn_rate)
     return dp, phi, travel
 
 

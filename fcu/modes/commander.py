@@ -19,7 +19,7 @@ plane follows its planned profile; then the set-point sinks and the land detecto
 
 TAKEOFF climbs `FlightSettings.takeoff_alt_m` (MIS_TAKEOFF_ALT) straight up from where the
 vehicle should be, then holds (HOLD). RTL climbs to `rtl_return_alt_m` (RTL_RETURN_ALT)
-above home if it is lower, flies to home's north and east at `rtl_cruise_m_s` (MPC_XY_CRUISE)
+above home if it is lower, flies to home's north and east at up to `rtl_cruise_m_s` (MPC_XY_CRUISE)
 and lands there as LAND does. Both are planned as missions (NAV_TAKEOFF, NAV_WAYPOINT,
 NAV_LAND items: `fcu.modes.auto_plans`) by the mission executor, so their legs are quintic
 profiles stretched until the vehicle can fly them (`fcu.mission`, `fcu.envelope.feasibility`). Home

@@ -72,6 +72,7 @@ from fcu.reference.approach_kernels import (
     reference_kernel,
     reference_rows,
 )
+from fcu.reference.trajectory import QUINTIC_PEAK_RATE
 
 D_MIN_S = 0.02  # the shortest approach
 D_MAX_S = 120.0  # the longest tried
@@ -202,7 +203,7 @@ def _bound(x: Offset, lim: StickSettings, r: float = 0.0) -> float:
     d = D_MIN_S
     for dist, speed, acc in _components(x, lim):
         if r <= 0.0:
-            d = max(d, 1.875 * dist / speed, math.sqrt(5.774 * dist / acc))
+            d = max(d, QUINTIC_PEAK_RATE * dist / speed, math.sqrt(5.774 * dist / acc))
         else:
             d = max(d, dist / (speed * (1.0 - r)), math.sqrt(1.875 * dist / (acc * r * (1 - r))))
     return max(d, math.hypot(x.de[0], x.de[1]) / lim.acc_xy_m_s2,
@@ -216,7 +217,7 @@ def cruise_share(x: Offset, lim: StickSettings) -> float:
     (A D); 0 (no cruise) where the ramps would take most of it (r > CRUISE_MAX)."""
     best_d, r = 0.0, 0.0
     for dist, speed, acc in _components(x, lim):
-        ramp = 1.875 * speed / acc
+        ramp = QUINTIC_PEAK_RATE * speed / acc
         d = dist / speed + ramp
         if dist > 0.0 and d > best_d:
             best_d, r = d, ramp / d

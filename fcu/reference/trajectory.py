@@ -53,6 +53,9 @@ class Hover:
 # ----------------------------------------------------------------------------------------
 
 
+QUINTIC_PEAK_RATE = 1.875  # the quintic's top rate over its mean, 30 s^2 (1 - s)^2 at s = 1/2
+
+
 def quintic_poly(s: Any) -> tuple[Any, Any, Any]:
     """10 s^3 - 15 s^4 + 6 s^5 and its first two derivatives, unclamped (floats or arrays)."""
     s2 = s * s

@@ -17,8 +17,10 @@ from .conftest import scenario
 
 LIMIT_S = 0.1  # COM_ACT_RATE_T's default
 
-# A takeoff to 3 m, then one 2 m leg at the cruise speed (2 m/s) flown as timed: its start
-# needs more tilt rate than the servos have (with the envelope check off).
+# A takeoff to 3 m in 3 s, then one 2 m leg in 1 s (MIS_TKO_SPD 1.875 and MIS_CRUISE_SPD 3.75
+# m/s, top speeds) flown as timed: its start needs more tilt rate than the servos have (with
+# the envelope check off).
+FAST = {"MIS_TKO_SPD": 1.875, "MIS_CRUISE_SPD": 3.75}
 LEG = """format = "dqflight-mission-1"
 
 [[item]]
@@ -41,7 +43,7 @@ def _fly_leg(tmp_path: Path, **params: float) -> RunResult:
     sc = scenario("mission_tour", duration_s=8.0)
     sc = dataclasses.replace(sc, trajectory=dataclasses.replace(sc.trajectory,
                                                                 mission_file=str(path)),
-                             params={"MIS_ENV_CHK": 0.0, **params})
+                             params={"MIS_ENV_CHK": 0.0, **FAST, **params})
     return run_scenario(sc, logs=False)
 
 
@@ -66,7 +68,7 @@ def _lagging_servos(r: RunResult, rate_max_rad_s: float, limit_s: float) -> dict
 
 
 def test_a_leg_beyond_the_tilt_rate_is_reported_naming_the_servos(tmp_path):
-    """Given a 2 m leg at 2 m/s with the envelope check off, when flown in-process, then
+    """Given a 2 m leg in 1 s with the envelope check off, when flown in-process, then
     metrics' events carry a WARNING "tilt servo N rate-limited" for exactly the servos whose
     plant tilt lagged its command for longer than COM_ACT_RATE_T, each within a period of
     when the truth shows it, at a rate above the limit; "actuator limits cleared" (INFO)

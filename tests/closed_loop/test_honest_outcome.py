@@ -21,7 +21,7 @@ from .. import reference_runs
 from .conftest import SCENARIOS
 from .test_actuator_limits import LEG
 
-# LEG: a takeoff to 3 m, then a 2 m leg at 2 m/s flown as timed (the envelope check off)
+# LEG: a takeoff to 3 m, then a 2 m leg in 1 s flown as timed (the envelope check off)
 
 
 def _leg_scenario(tmp_path: Path) -> Path:
@@ -33,7 +33,8 @@ def _leg_scenario(tmp_path: Path) -> Path:
         .replace('"../gains/', f'"{SCENARIOS.parent}/gains/') \
         .replace('mission = "../missions/tour.toml"', 'mission = "leg.toml"')
     path = tmp_path / "leg_scenario.toml"
-    path.write_text(text + "\n[params]\nMIS_ENV_CHK = 0\n")
+    path.write_text(text + "\n[params]\nMIS_ENV_CHK = 0\nMIS_TKO_SPD = 1.875\n"
+                    "MIS_CRUISE_SPD = 3.75\n")  # the leg in 1 s, the climb in 3 s
     return path
 
 

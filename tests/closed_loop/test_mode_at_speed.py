@@ -48,8 +48,8 @@ yaw_deg = nan
 
 
 @pytest.mark.parametrize(("mode", "speed_m_s", "at_s", "duration_s"),
-                         [(Mode.LAND, 5.0, 15.0, 40.0), (Mode.RTL, 8.0, 13.0, 40.0),
-                          (Mode.MISSION, 8.0, 13.0, 30.0)])
+                         [(Mode.LAND, 9.375, 15.0, 40.0), (Mode.RTL, 15.0, 13.0, 40.0),
+                          (Mode.MISSION, 15.0, 13.0, 30.0)])
 def test_land_and_rtl_at_speed_brake_first_and_fly_within_centimetres(
         tmp_path, mode, speed_m_s, at_s, duration_s):
     """Given a mission flying north at 7-11 m/s, still speeding up, when LAND, RTL or a new

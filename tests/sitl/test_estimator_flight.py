@@ -56,10 +56,13 @@ FIGURES = ("position_error_m", "attitude_error_rad", "estimation_error", "sample
            "sim_time_s", "status", "failsafe", "events", "seed", "sensors", "alignment_s")
 
 
-def _fly(duration_s: float, *faults: SensorFault, seed: int = 1) -> RunResult:
+def _fly(duration_s: float, *faults: SensorFault, seed: int = 1,
+         params: dict[str, float] | None = None) -> RunResult:
     sc = apply_overrides(load_scenario(CASE1), sensors=PROFILE, seed=seed,
                          duration_s=duration_s)
-    return run_scenario(dataclasses.replace(sc, sensor_faults=faults), logs=False)
+    return run_scenario(dataclasses.replace(sc, sensor_faults=faults,
+                                            params={**sc.params, **(params or {})}),
+                        logs=False)
 
 
 @dataclasses.dataclass
@@ -122,8 +125,8 @@ def test_short_pose_gap_is_bridged_without_failsafe():
 def test_long_pose_gap_holds_then_lands():
     """mocap off 5 s at 12 s: dead-reckoning COM_POS_LOSS_T = 1 s, then HOLD, then LAND
     COM_POS_LAND_T = 2 s later ("pose source lost"); the run is a failsafe by that name and
-    the vehicle comes down."""
-    r = _fly(20.0, SensorFault("mocap_off", 12.0, 17.0))
+    the vehicle comes down (at up to MIS_LAND_SPD 1 m/s: 4.9 m takes 9.2 s, 5 s are left)."""
+    r = _fly(20.0, SensorFault("mocap_off", 12.0, 17.0), params={"MIS_LAND_SPD": 1.0})
     m = r.metrics
     assert m["status"] == "failsafe" and "pose source lost" in m["failsafe"]
     fs = [e for e in m["events"] if e["kind"] == "failsafe"]

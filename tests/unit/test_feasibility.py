@@ -184,16 +184,17 @@ LEGS = [item(0, M.MAV_CMD_NAV_TAKEOFF, p4=NAN, z=-3.0),
 
 @pytest.mark.parametrize("vehicle", [TILTED, PLANAR], ids=["tilted", "planar"])
 def test_short_fast_legs_are_stretched(vehicle):
-    """Given 2 m waypoint legs at 2 m/s (1 s each: 11.5 m/s^2 peak), then without the
-    vehicle each leg is planned in 1 s and needs more than the margin; with it the mission is
+    """Given 2 m waypoint legs at 3.75 m/s (1 s each, a quintic's top speed 1.875 times its
+    mean: 11.5 m/s^2 peak), then without the vehicle each leg is planned in 1 s and needs
+    more than the margin; with it the mission is
     accepted, every leg is planned longer than 1 s and the reference flown (sampled every
     1 ms) stays within the margin."""
     env = envelope(vehicle)
-    plain = started(LEGS, MissionLimits())
+    plain = started(LEGS, MissionLimits(cruise_speed_m_s=3.75))
     assert [round(t1 - t0, 12) for _s, t0, t1 in plain.schedule[1:5]] == [1.0] * 4
     assert dense_peak(env, plain, *plain.schedule[2][1:]) > env.limit
 
-    limits = MissionLimits(vehicle=vehicle)
+    limits = MissionLimits(cruise_speed_m_s=3.75, vehicle=vehicle)
     assert check_mission(LEGS, limits) == MissionCheck(M.MAV_MISSION_ACCEPTED, None, "")
     ex = started(LEGS, limits)
     legs = [t1 - t0 for _s, t0, t1 in ex.schedule[1:5]]

@@ -287,7 +287,8 @@ def test_takeoff_with_yaw_ends_level_at_that_heading():
 
 
 def test_durations_from_speeds():
-    """Given speed-timed items, then travel = distance / speed (takeoff, cruise, land), the
+    """Given speed-timed items, then each travel lasts 1.875 distance / speed, so that the
+    quintic's top speed is the speed asked (takeoff, cruise, land) and never more; the
     waypoint and loiter holds follow, and the items chain end to start."""
     limits = MissionLimits(cruise_speed_m_s=2.0, takeoff_speed_m_s=1.0, land_speed_m_s=0.5)
     items = [item(0, M.MAV_CMD_NAV_TAKEOFF, p4=NAN, z=-4.0),
@@ -295,21 +296,30 @@ def test_durations_from_speeds():
              item(2, M.MAV_CMD_NAV_LOITER_TIME, p1=2.0, north=6.0, east=8.0, z=-4.0),
              item(3, M.MAV_CMD_NAV_LAND, p4=NAN)]
     ex = started(items, t0=100.0, limits=limits)
-    assert ex.schedule == ((0, 100.0, 104.0), (1, 104.0, 110.5), (2, 110.5, 112.5),
-                           (3, 112.5, 120.5))
-    assert ex.end_time_s == 120.5
-    assert max_abs_diff(ex.sample(120.5).p_enu_m, (8.0, 6.0, 0.0)) < 1e-12
+    assert ex.schedule == ((0, 100.0, 107.5), (1, 107.5, 118.375), (2, 118.375, 120.375),
+                           (3, 120.375, 135.375))
+    assert ex.end_time_s == 135.375
+    assert max_abs_diff(ex.sample(135.375).p_enu_m, (8.0, 6.0, 0.0)) < 1e-12
+    for (t0, t1), speed in (((100.0, 107.5), 1.0), ((107.5, 116.875), 2.0),
+                            ((120.375, 135.375), 0.5)):
+        top = max(math.dist(ex.sample(t).v_enu_m_s, (0.0, 0.0, 0.0))
+                  for t in np.linspace(t0, t1, 2001))
+        assert top == pytest.approx(speed, rel=1e-9)
 
 
 def test_tiny_moves_are_not_made_and_yaw_takes_turn_time():
     """Given a loiter 0.5 mm from the start, then it holds the start exactly; given a yaw
-    change with no distance, then it lasts angle / turn rate (no attitude step)."""
+    change with no distance, then it lasts 1.875 angle / turn rate, the turn rate its top
+    rate (no attitude step)."""
     ex = started([item(0, M.MAV_CMD_NAV_LOITER_TIME, p1=4.0, north=0.0005, z=0.0)])
     assert ex.schedule == ((0, 0.0, 4.0),)
     assert ex.sample(1.0).p_enu_m == (0.0, 0.0, 0.0)
     limits = MissionLimits(turn_rate_deg_s=45.0)
     ex = started([item(0, M.MAV_CMD_NAV_WAYPOINT, p4=0.0)], limits=limits)  # yaw 90 -> 0
-    assert ex.schedule[0][2] == pytest.approx(2.0, abs=1e-12)
+    assert ex.schedule[0][2] == pytest.approx(3.75, abs=1e-12)
+    top = max(math.dist(ex.sample(t).omega_flu_rad_s, (0.0, 0.0, 0.0))
+              for t in np.linspace(0.0, 3.75, 2001))
+    assert top == pytest.approx(math.radians(45.0), rel=1e-9)
     check_derivatives(ex, 0.7)
 
 
@@ -348,11 +358,11 @@ def test_set_current_replans_from_the_given_pose():
     ex.update(0.5)
     ex.set_current(2, 5.0, (0.0, 1.0, 0.0), level_attitude(0.0))
     assert not ex.completed and ex.current_seq == 2
-    assert ex.schedule == ((2, 5.0, 5.5),)  # 1 m at 2 m/s
+    assert ex.schedule == ((2, 5.0, 5.9375),)  # 1 m at up to 2 m/s
     assert ex.update(5.0) == [MissionEvent("current", 2)]
     r = ex.sample(5.0)
     assert r.p_enu_m == (0.0, 1.0, 0.0) and r.q_enu_flu == level_attitude(0.0)
-    assert ex.sample(5.5).p_enu_m == pytest.approx((0.0, 2.0, 0.0))
+    assert ex.sample(5.9375).p_enu_m == pytest.approx((0.0, 2.0, 0.0))
     assert ex.update(6.0) == [MissionEvent("reached", 2), MissionEvent("completed", 2)]
     with pytest.raises(ValueError, match="no mission item 3"):
         ex.set_current(3, 0.0, (0, 0, 0), (1, 0, 0, 0))

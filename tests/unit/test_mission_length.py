@@ -27,7 +27,7 @@ def test_onboard_log_reads_only_the_new_mission_events(tmp_path, monkeypatch):
     write_mission(path, mission(n))
     base = load_scenario(ROOT / "config/scenarios/mission_tour.toml")
     scenario = dataclasses.replace(
-        base, duration_s=15.0,
+        base, duration_s=20.0,
         trajectory=dataclasses.replace(base.trajectory, mission_file=str(path)))
     seen: list[int] = []
 

@@ -297,7 +297,8 @@ def test_speed_changes_time_the_legs_after_them():
     """Given a take-off to 3 m, DO_CHANGE_SPEED ground 0.5 m/s, a 2 m leg, DO_CHANGE_SPEED -2
     (the default, MIS_CRUISE_SPD 1 m/s here), a 2 m leg back, climb speed 0.25 m/s and a
     climb of 1 m, descent speed 0.2 m/s and a landing, then without the envelope each leg
-    takes distance / the speed in force (4 s, 2 s, 4 s, 20 s) and the speed items take no
+    takes 1.875 distance / the speed in force, its top speed (7.5 s, 3.75 s, 7.5 s, 37.5 s),
+    and the speed items take no
     time; the same mission is accepted in any frame QGC or MAVProxy writes them in (2, 0, 3)."""
     from fcu.mission.executor import MissionExecutor
     for frame in (2, 0, 3):
@@ -313,6 +314,6 @@ def test_speed_changes_time_the_legs_after_them():
         ex.start(0.0, (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
         spans = {seq: t1 - t0 for seq, t0, t1 in ex.schedule}
         assert [spans[k] for k in (1, 3, 5, 7)] == [0.0] * 4
-        assert [spans[k] for k in (2, 4, 6, 8)] == pytest.approx([4.0, 2.0, 4.0, 20.0])
+        assert [spans[k] for k in (2, 4, 6, 8)] == pytest.approx([7.5, 3.75, 7.5, 37.5])
     ex.set_current(4, 0.0, (0.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0))  # resumed after item 3
-    assert {seq: t1 - t0 for seq, t0, t1 in ex.schedule}[4] == pytest.approx(2.0)
+    assert {seq: t1 - t0 for seq, t0, t1 in ex.schedule}[4] == pytest.approx(3.75)

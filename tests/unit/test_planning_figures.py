@@ -8,13 +8,12 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from benchmarks.mission_envelope import mixed, waypoints
+from benchmarks.mission_envelope import fast_limits, mixed, waypoints
 from common.config.scenario import load_vehicle
 from fcu.control.dualquat import q_exp
 from fcu.envelope import feasibility
 from fcu.mission.codes import MAV_MISSION_ACCEPTED
 from fcu.mission.executor import MissionExecutor
-from fcu.mission.limits import MissionLimits
 from fcu.mission.validation import check_mission
 from fcu.modes import manual, offboard
 from fcu.reference import approach
@@ -30,9 +29,10 @@ LEVEL = (1.0, 0.0, 0.0, 0.0)
 def test_500_item_mission_is_planned_to_the_bit():
     """Given the 500 mixed items of benchmarks/mission_envelope.py on the tilted vehicle,
     then they are accepted and planned from the origin to end at the same instant to the
-    bit, with the caches emptied first or not (equal paths share one scaling)."""
+    bit, with the caches emptied first or not (equal paths share one scaling), at
+    `fast_limits`' speeds."""
     items = mixed(500)
-    limits = MissionLimits(vehicle=TILTED)
+    limits = fast_limits(TILTED)
     for _ in range(2):
         assert check_mission(items, limits).result == MAV_MISSION_ACCEPTED
         ex = MissionExecutor(items, limits)
@@ -43,10 +43,10 @@ def test_500_item_mission_is_planned_to_the_bit():
 
 
 def test_2m_legs_are_stretched_to_the_bit():
-    """Given 2 m legs at 2 m/s, then they are stretched to 1.629 s (tilted) and 1.919 s
-    (planar), the same to the bit."""
+    """Given 2 m legs at 3.75 m/s (planned in 1 s), then they are stretched to 1.629 s
+    (tilted) and 1.919 s (planar), the same to the bit."""
     for vehicle, leg in ((TILTED, "0x1.a11adf5563d03p+0"), (PLANAR, "0x1.eb2934655472dp+0")):
-        ex = MissionExecutor(waypoints(3), MissionLimits(vehicle=vehicle))
+        ex = MissionExecutor(waypoints(3), fast_limits(vehicle))
         ex.start(0.0, (0.0, 2.0, 3.0), LEVEL)
         assert [t1 - t0 for _, t0, t1 in ex.schedule][1:] == [float.fromhex(leg)] * 2
 
