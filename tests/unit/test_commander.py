@@ -221,7 +221,7 @@ def _on_ground(flight=None) -> Pipeline:
 def test_takeoff_climbs_mis_takeoff_alt_then_holds():
     """Given a vehicle armed on the ground, when NAV_TAKEOFF comes without an altitude, then
     the mode is TAKEOFF, the set-point climbs MIS_TAKEOFF_ALT (2.5 m) straight up (at most
-    MIS_TKO_SPD on average), and the mode becomes HOLD there; disarmed, it is refused."""
+    MIS_TKO_SPD), and the mode becomes HOLD there; disarmed, it is refused."""
     pipe = _on_ground()
     c = pipe.commander
     assert c.takeoff()[0] == MAV_RESULT.MAV_RESULT_DENIED  # not armed
@@ -229,7 +229,7 @@ def test_takeoff_climbs_mis_takeoff_alt_then_holds():
     assert c.takeoff()[0] == 0 and c.mode == Mode.TAKEOFF and c.flight_started
     trace = _kinematic(pipe, 0, 5.0)
     t_hold = next(t for t, _, mode in trace if mode == "HOLD")
-    assert t_hold * 1e-6 >= 2.5 / 1.0  # 2.5 m at MIS_TKO_SPD 1 m/s (stretched if needed)
+    assert t_hold * 1e-6 >= 1.875 * 2.5 / 1.0  # 2.5 m at up to MIS_TKO_SPD 1 m/s
     for _, p, _ in trace:
         assert p[0] == 0.0 and p[1] == 0.0 and 0.0 <= p[2] <= 2.5 + 1e-9
     assert trace[-1][1][2] == pytest.approx(2.5) and trace[-1][2] == "HOLD"
@@ -275,6 +275,35 @@ def test_rtl_climbs_flies_home_and_touches_down():
     assert not pipe.armed and trace[-1][1] == pytest.approx((0.0, 0.0, 0.0), abs=1e-6)
     assert "landed: disarmed" in [e.text for e in pipe.events]
     assert not any(e.kind == CRASH for e in pipe.events)
+
+
+def test_rtl_flies_at_up_to_its_speeds_and_no_faster():
+    """Given the vehicle 40 m from home at 3 m, when RTL starts (MPC_XY_CRUISE 5 m/s,
+    MIS_TKO_SPD 1, MIS_LAND_SPD 0.5), then its reference climbs at up to 1 m/s, travels home
+    at up to 5 m/s and descends at up to 0.5 m/s, each reached (within 1 %) and never
+    exceeded: the speeds are top speeds, as PX4's are. (Timed as means, the return peaked at
+    9.4 m/s.)"""
+    pipe = _on_ground(FlightSettings(rtl_return_alt_m=6.0, rtl_cruise_m_s=5.0))
+    c = pipe.commander
+    pipe.on_state(0, VehicleState((24.0, 32.0, 3.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
+                                  (0.0, 0.0, 0.0)), 0)
+    pipe.arm()
+    assert c.set_mode(Mode.RTL, 0.0)[0] == 0
+    up = level = down = 0.0
+    t = 0
+    while c.last_ref is None or math.hypot(*c.last_ref.p_enu_m[:2]) > 0.0 or \
+            c.last_ref.p_enu_m[2] > 0.5:
+        t += 2000
+        assert t < 120_000_000
+        pipe.step(t)
+        ref = c.last_ref
+        assert ref is not None
+        v = ref.v_enu_m_s
+        up, level, down = max(up, v[2]), max(level, math.hypot(v[0], v[1])), max(down, -v[2])
+        pipe.on_state(t, VehicleState(ref.p_enu_m, ref.q_enu_flu, (0.0,) * 3, (0.0,) * 3), t)
+    assert 0.99 <= up <= 1.0 + 1e-9
+    assert 4.95 <= level <= 5.0 + 1e-9
+    assert 0.495 <= down <= 0.5 + 1e-9
 
 
 def test_rtl_above_the_return_altitude_does_not_climb():
