@@ -1,11 +1,13 @@
 """The FCU's commands from ground stations: COMMAND_LONG and COMMAND_INT executed and
-acknowledged (COMMAND_ACK), each refusal explained by STATUSTEXT, and a retry answered
-without executing the command again (`fcu.edge.gcs_server` dispatches them here). A command
-whose work runs beside the control loop (a mission's start, POSCTL: `fcu.modes.commander`) is
-acknowledged MAV_RESULT_IN_PROGRESS at once and with its final result when the work is
-done, as the command protocol says; a retry meanwhile is answered IN_PROGRESS again, never
-executed again; the same mode asked for meanwhile (another station) waits for the same
-end; a newer command that supersedes it ends it MAV_RESULT_FAILED, with why.
+acknowledged (COMMAND_ACK), each refusal explained by STATUSTEXT, and a retry answered without
+executing the command again (`fcu.edge.gcs_server` dispatches them here). A command whose work
+runs beside the control loop (a mission's start, POSCTL: `fcu.modes.commander`) is acknowledged
+MAV_RESULT_IN_PROGRESS at once, again every IN_PROGRESS_REPEAT_S while the work lasts (MAVSDK
+re-sends a command, then gives it up, when nothing follows its IN_PROGRESS within its retries'
+time, 1.5 s at its defaults), and with its final result when the work is done, as the command
+protocol says; a retry meanwhile is answered IN_PROGRESS again, never executed again; the same
+mode asked for meanwhile (another station) waits for the same end; a newer command that
+supersedes it ends it MAV_RESULT_FAILED, with why.
 
 Parameters are range-checked against what they can mean (a mode's numbers, a mission item,
 a message id); MAV_CMD_NAV_TAKEOFF's altitude is AMSL in COMMAND_LONG's p7 (as PX4 reads it)
@@ -36,6 +38,7 @@ WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
 FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM p2 that forces a disarm
 MAX_PEERS = 64  # senders remembered for their retries (as parsers: one per link and peer)
 RETRY_WINDOW_S = 5.0  # a COMMAND_LONG with confirmation > 0 this soon after is a retry
+IN_PROGRESS_REPEAT_S = 0.5  # a command under way is acknowledged IN_PROGRESS this often
 ALWAYS_REQUESTABLE = (M.MAVLINK_MSG_ID_MISSION_CURRENT, M.MAVLINK_MSG_ID_HEARTBEAT,
                       M.MAVLINK_MSG_ID_SYS_STATUS)
 # NAV_TAKEOFF's altitude: COMMAND_LONG p7 is AMSL (as PX4 reads it); COMMAND_INT's z by frame
@@ -94,6 +97,8 @@ class CommandService:
         # a re-send carries confirmation > 0 and is answered, never executed again).
         self.executed: dict[tuple[int, int, int], tuple[bytes, float, Answer]] = {}
         self.repeated_commands = 0
+        # commands answered IN_PROGRESS and not yet ended: (link, command, when last told)
+        self.under_way: dict[tuple[tuple[int, int, int], bytes], tuple[int, Command, float]] = {}
 
     def ack(self, index: int, msg: Message, command: int, result: int) -> None:
         """COMMAND_ACK to the sender; `progress` UINT8_MAX with IN_PROGRESS (the spec's
@@ -124,10 +129,22 @@ class CommandService:
         plan = self.server.pipeline.commander.under_way
         if answer.result == IN_PROGRESS and plan is not None:  # answered again when planned
             self._answer(index, msg, sender, key, now_s, Answer(IN_PROGRESS, ""))
-            plan.on_end(lambda r, t: self._answer(index, msg, sender, key, now_s, Answer(r, t),
-                                                  final=True))
+            self.under_way[(sender, key)] = (index, msg, now_s)
+
+            def ended(result: MAV_RESULT, text: str) -> None:
+                self.under_way.pop((sender, key), None)
+                self._answer(index, msg, sender, key, now_s, Answer(result, text), final=True)
+
+            plan.on_end(ended)
             return
         self._answer(index, msg, sender, key, now_s, answer)
+
+    def tick(self, now_s: float) -> None:
+        """IN_PROGRESS again to each command under way not told so for IN_PROGRESS_REPEAT_S."""
+        for entry, (index, msg, told_s) in list(self.under_way.items()):
+            if now_s - told_s >= IN_PROGRESS_REPEAT_S:
+                self.under_way[entry] = (index, msg, now_s)
+                self.ack(index, msg, msg.command, IN_PROGRESS)
 
     def _answer(self, index: int, msg: Command, sender: tuple[int, int, int], key: bytes,
                 now_s: float, answer: Answer, final: bool = False) -> None:

@@ -427,6 +427,7 @@ class GcsServer:
         for partner, reply in self.missions.take_outbox():
             self._send_mission([reply], self.mission_partner_links.get(partner,
                                                                        self.mission_link))
+        self.commands.tick(now_s)  # IN_PROGRESS again for the commands under way
         self.param_service.tick()  # a parameter list, a burst at a time
         for reply in self.missions.tick(now_s):
             self.send(reply, self.mission_link)

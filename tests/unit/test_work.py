@@ -541,6 +541,31 @@ def test_a_command_under_way_is_in_progress_then_final_and_a_retry_is_not_run_ag
     assert c.mode == Mode.LAND
 
 
+def test_a_command_under_way_is_told_in_progress_again_until_its_end():
+    """Given MISSION_START whose plan is made beside the loop (through the FCU's
+    ground-station server), then the sender is told IN_PROGRESS again every
+    IN_PROGRESS_REPEAT_S (0.5 s) while it lasts, as the command protocol allows (MAVSDK
+    gives a command up when nothing follows IN_PROGRESS within 1.5 s at its defaults: a
+    start from 14 m/s brakes for about 7 s), and nothing more once its final answer is
+    given."""
+    server, links = _airborne_server(1)
+    c = server.pipeline.commander
+    work = HeldWork()
+    c.work = work
+    c.set_mission(tuple(_items(3)))
+    start = MAV_CMD.MAV_CMD_MISSION_START
+    _command(server, start, 0)  # at 1.0 s
+    told = [(start, MAV_RESULT.MAV_RESULT_IN_PROGRESS)]
+    assert _command_acks(links[0]) == told
+    for now_s, again in ((1.2, False), (1.5, True), (1.9, False), (2.0, True), (2.6, True)):
+        server.tick(now_s)
+        assert _command_acks(links[0]) == (told if again else []), now_s
+    work.release()
+    assert _command_acks(links[0]) == [(start, MAV_RESULT.MAV_RESULT_ACCEPTED)]
+    server.tick(5.0)
+    assert _command_acks(links[0]) == [] and server.commands.under_way == {}
+
+
 def test_the_same_mode_asked_by_two_stations_under_way_is_one_change_both_answered():
     """Given POSCTL asked by two stations (on two links) while its fit runs beside the loop,
     then both are answered IN_PROGRESS, one fit runs (the second joins, it does not drop the
