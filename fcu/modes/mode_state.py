@@ -223,19 +223,45 @@ class ModeState:
 
     def _plan_rtl(self) -> str:
         """Plan RTL (`fcu.modes.commander`): climb to RTL_RETURN_ALT if lower, travel home at
-        MPC_XY_CRUISE, land; a reason if refused, else ""."""
+        up to MPC_XY_CRUISE, land; a reason if refused, else "". Entered while the reference
+        moves, the return altitude is taken again where HOLD's brake stops (a climb at speed
+        stops above where RTL came: it returns from there, not down to it first)."""
         start, flight, limits = self.here(), self.known.flight, self.known.limits
-        items = auto_plans.rtl(start.p_enu_m, flight.rtl_return_alt_m, limits.max_distance_m)
+
+        def plan(p_enu_m: Vec3) -> tuple[MissionItem, ...] | str:
+            return auto_plans.rtl(p_enu_m, flight.rtl_return_alt_m, limits.max_distance_m)
+
+        items = plan(start.p_enu_m)
         if isinstance(items, str):
             return items
-        self._fly_auto(items, replace(limits, cruise_speed_m_s=flight.rtl_cruise_m_s))
-        self.known.voice.say(MAV_SEVERITY.MAV_SEVERITY_INFO,
-                             f"RTL: return at {-items[0].z:.1f} m, then land")
+        voice = self.known.voice
+        voice.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"RTL: return at {-items[0].z:.1f} m, then land")
+
+        def at_rest(p_enu_m: Vec3) -> tuple[MissionItem, ...]:
+            again = plan(p_enu_m)
+            if isinstance(again, str) or again[0].z == items[0].z:
+                return items  # the same, or beyond the fence from there: as answered
+            voice.say(MAV_SEVERITY.MAV_SEVERITY_INFO, f"RTL: return at {-again[0].z:.1f} m")
+            return again
+
+        self._fly_auto(items, replace(limits, cruise_speed_m_s=flight.rtl_cruise_m_s), at_rest)
         return ""
 
-    def _fly_auto(self, items: tuple[MissionItem, ...], limits: MissionLimits) -> None:
-        auto = self.auto = MissionExecutor(items, limits)
-        self._after_brake(lambda t_us, at: auto.start(t_us * 1e-6, at.p_enu_m, at.q_enu_flu))
+    def _fly_auto(self, items: tuple[MissionItem, ...], limits: MissionLimits,
+                  at_rest: Callable[[Vec3], tuple[MissionItem, ...]] | None = None) -> None:
+        """Fly `items` from where the vehicle should be, after HOLD's brake if the reference
+        moves (`_after_brake`); `at_rest(p)`: the items made again where the brake stops."""
+        self.auto = MissionExecutor(items, limits)
+
+        def start(t_us: int, at: Reference) -> None:
+            if at_rest is not None:
+                again = at_rest(at.p_enu_m)
+                if again is not items:
+                    self.auto = MissionExecutor(again, limits)
+            assert self.auto is not None
+            self.auto.start(t_us * 1e-6, at.p_enu_m, at.q_enu_flu)
+
+        self._after_brake(start)
 
     # ------------------------------------------------------------------ what flies
 

@@ -306,6 +306,44 @@ def test_rtl_flies_at_up_to_its_speeds_and_no_faster():
     assert 0.495 <= down <= 0.5 + 1e-9
 
 
+def test_rtl_asked_in_a_fast_climb_returns_from_where_its_brake_stops():
+    """Given a mission climbing at 6 m/s and still speeding up, when RTL comes (return
+    altitude 5 m, below), then the reference brakes to rest above where RTL came and
+    returns home from that height, never coming down before it is above home (RTL's
+    plan made where RTL came had it sink back to that height first), and it says the new
+    return altitude."""
+    vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
+    pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
+                    limits=MissionLimits(vehicle=vehicle, cruise_speed_m_s=12.0))
+    c = pipe.commander
+    c.flight = FlightSettings(rtl_return_alt_m=5.0)
+    pipe.on_state(0, VehicleState((4.0, 3.0, 2.0), (1.0, 0.0, 0.0, 0.0), (0.0,) * 3,
+                                  (0.0,) * 3), 0)
+    assert pipe.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    c.set_mission((MissionItem(0, MAV_FRAME.MAV_FRAME_LOCAL_NED,
+                               MAV_CMD.MAV_CMD_NAV_WAYPOINT, 1, 1, 0.0, 0.0, 0.0, math.nan,
+                               30_000, 40_000, -60.0),))  # straight up to 60 m
+    assert c.set_mode(Mode.MISSION, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    t = 0
+    while c.fly(t).v_enu_m_s[2] < 6.0:
+        t += 2000
+        assert t < 20_000_000
+    entry = c.fly(t)
+    assert entry.a_enu_m_s2[2] > 0.5  # still speeding up
+    assert c.set_mode(Mode.RTL, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    path = [c.fly(t + 2000 * k) for k in range(1, 40 * 500)]
+    rest = next(k for k, r in enumerate(path) if r.v_enu_m_s == (0.0, 0.0, 0.0))
+    top = path[rest].p_enu_m[2]
+    assert top > entry.p_enu_m[2] + 1.0
+    home = next(k for k, r in enumerate(path) if math.hypot(*r.p_enu_m[:2]) < 1e-9)
+    heights = [r.p_enu_m[2] for r in path[rest:home + 1]]
+    assert all(b >= a - 1e-9 for a, b in itertools.pairwise(heights))
+    assert path[home].p_enu_m[2] == pytest.approx(top)
+    said = [e.text for e in pipe.events if e.text.startswith("RTL: return at")]
+    assert said == [f"RTL: return at {entry.p_enu_m[2]:.1f} m, then land",
+                    f"RTL: return at {top:.1f} m"]
+
+
 def test_rtl_above_the_return_altitude_does_not_climb():
     pipe = _on_ground(FlightSettings(rtl_return_alt_m=1.0))
     pipe.on_state(0, VehicleState((0.0, 2.0, 3.0), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
