@@ -511,17 +511,23 @@ def _airborne_server(n_links: int) -> tuple[Any, list[Any]]:
     return server, links
 
 
+def _server_with_a_mission() -> tuple[Any, list[Any], Any, HeldWork]:
+    """The airborne server (one link), its commander, a 3-item mission and work held."""
+    server, links = _airborne_server(1)
+    c = server.pipeline.commander
+    work = HeldWork()
+    c.work = work
+    c.set_mission(tuple(_items(3)))
+    return server, links, c, work
+
+
 def test_a_command_under_way_is_in_progress_then_final_and_a_retry_is_not_run_again():
     """Given MISSION_START in flight with the plan made beside the loop (through the FCU's
     ground-station server), then COMMAND_ACK IN_PROGRESS comes at once; a retry
     (confirmation 1) meanwhile is answered IN_PROGRESS again and plans nothing more; when
     the plan is taken in, the final ACCEPTED; a second MISSION_START under way that a LAND
     supersedes ends FAILED, and LAND is ACCEPTED."""
-    server, links = _airborne_server(1)
-    c = server.pipeline.commander
-    work = HeldWork()
-    c.work = work
-    c.set_mission(tuple(_items(3)))
+    server, links, c, work = _server_with_a_mission()
     start = MAV_CMD.MAV_CMD_MISSION_START
     _command(server, start, 0)
     _command(server, start, 1)
@@ -548,11 +554,7 @@ def test_a_command_under_way_is_told_in_progress_again_until_its_end():
     gives a command up when nothing follows IN_PROGRESS within 1.5 s at its defaults: a
     start from 14 m/s brakes for about 7 s), and nothing more once its final answer is
     given."""
-    server, links = _airborne_server(1)
-    c = server.pipeline.commander
-    work = HeldWork()
-    c.work = work
-    c.set_mission(tuple(_items(3)))
+    server, links, _c, work = _server_with_a_mission()
     start = MAV_CMD.MAV_CMD_MISSION_START
     _command(server, start, 0)  # at 1.0 s
     told = [(start, MAV_RESULT.MAV_RESULT_IN_PROGRESS)]
