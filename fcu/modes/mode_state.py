@@ -212,13 +212,19 @@ class ModeState:
         return ""
 
     def plan_takeoff(self, climb_m: float) -> str:
-        """Plan TAKEOFF's climb (one NAV_TAKEOFF item); a reason if refused, else ""."""
+        """Plan TAKEOFF's climb (one NAV_TAKEOFF item); a reason if refused, else "".
+        Entered while the reference moves, a brake that stops above the climb's target
+        climbs no more: it never comes down to it."""
         start = self.here()
         limits = self.known.limits
         items = auto_plans.takeoff(start.p_enu_m, climb_m, limits.max_distance_m)
         if isinstance(items, str):
             return items
-        self._fly_auto(items, limits)
+
+        def at_rest(p_enu_m: Vec3) -> tuple[MissionItem, ...]:
+            return items if -p_enu_m[2] >= items[0].z else (items[0]._replace(z=-p_enu_m[2]),)
+
+        self._fly_auto(items, limits, at_rest)
         return ""
 
     def _plan_rtl(self) -> str:

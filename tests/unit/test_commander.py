@@ -31,7 +31,7 @@ from fcu.modes.manual import StickSettings
 from fcu.modes.settings import FlightSettings
 from fcu.pipeline import Pipeline
 from fcu.safety.failsafe import FailsafeSettings
-from fcu.stages import VehicleState, pose_ref
+from fcu.stages import Reference, VehicleState, pose_ref
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -306,12 +306,10 @@ def test_rtl_flies_at_up_to_its_speeds_and_no_faster():
     assert 0.495 <= down <= 0.5 + 1e-9
 
 
-def test_rtl_asked_in_a_fast_climb_returns_from_where_its_brake_stops():
-    """Given a mission climbing at 6 m/s and still speeding up, when RTL comes (return
-    altitude 5 m, below), then the reference brakes to rest above where RTL came and
-    returns home from that height, never coming down before it is above home (RTL's
-    plan made where RTL came had it sink back to that height first), and it says the new
-    return altitude."""
+def _climbing_at_six_metres_per_second() -> tuple[Pipeline, int, Reference]:
+    """A mission flying straight up from 2 m at up to 12 m/s (RTL_RETURN_ALT 5 m), sampled
+    until its reference climbs at 6 m/s, still speeding up: the pipeline, the time, the
+    reference then."""
     vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
     pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
                     limits=MissionLimits(vehicle=vehicle, cruise_speed_m_s=12.0))
@@ -330,6 +328,31 @@ def test_rtl_asked_in_a_fast_climb_returns_from_where_its_brake_stops():
         assert t < 20_000_000
     entry = c.fly(t)
     assert entry.a_enu_m_s2[2] > 0.5  # still speeding up
+    return pipe, t, entry
+
+
+def test_takeoff_asked_in_a_fast_climb_climbs_no_more_where_its_brake_stops_above():
+    """Given the fast climb, when TAKEOFF comes (2.5 m up from there), then the brake stops
+    far above that target and TAKEOFF ends there, holding: the reference never comes down
+    (the climb planned where TAKEOFF came flew it 13 m back down to its target)."""
+    pipe, t, entry = _climbing_at_six_metres_per_second()
+    c = pipe.commander
+    assert c.takeoff()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    path = [c.fly(t + 2000 * k) for k in range(1, 10 * 500)]
+    rest = next(k for k, r in enumerate(path) if r.v_enu_m_s == (0.0, 0.0, 0.0))
+    assert path[rest].p_enu_m[2] > entry.p_enu_m[2] + 2.5 + 5.0
+    assert all(r.p_enu_m == path[rest].p_enu_m for r in path[rest:])
+    assert c.mode == Mode.HOLD and "takeoff complete: mode HOLD" in [e.text for e in pipe.events]
+
+
+def test_rtl_asked_in_a_fast_climb_returns_from_where_its_brake_stops():
+    """Given a mission climbing at 6 m/s and still speeding up, when RTL comes (return
+    altitude 5 m, below), then the reference brakes to rest above where RTL came and
+    returns home from that height, never coming down before it is above home (RTL's
+    plan made where RTL came had it sink back to that height first), and it says the new
+    return altitude."""
+    pipe, t, entry = _climbing_at_six_metres_per_second()
+    c = pipe.commander
     assert c.set_mode(Mode.RTL, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
     path = [c.fly(t + 2000 * k) for k in range(1, 40 * 500)]
     rest = next(k for k, r in enumerate(path) if r.v_enu_m_s == (0.0, 0.0, 0.0))
