@@ -24,19 +24,18 @@ Item semantics (positions local NED, metres; yaw in degrees, NED; NaN yaw = keep
 * FIGURE_EIGHT (31001): the figure-infinity of the paper's eq. (31)-(32) with amplitude p1,
   duration p2, attitude turning about the world axis (p3, p4, z) (NED, not normalised).
 
-Travel, climbs and descents follow the minimum-jerk quintic (zero velocity and acceleration
-at both ends); attitudes move along the shortest rotation with the same profile. A speed (or
-the turn rate) is the quintic's top rate: a move timed by it lasts 1.875 distance / speed
-(`fcu.mission.planning`), as PX4 and ArduPilot treat their cruise speeds as most speeds. The quintic
-and the figure-infinity are those of `fcu.reference.trajectory` (one copy of the maths). An item is
-active on [start, end): at a boundary the reference is the next item's at tau = 0, the
-right-hand limit that holds over the coming control period (at a figure's start, T'' = pi k^2
-at once). A move whose duration comes from a speed (not from a parameter) and whose distance
-is below
-`POSITION_TOLERANCE_M` (or whose turn is below `ANGLE_TOLERANCE_RAD`) is not made: the item
-keeps the start position (attitude), so a target equal to the previous item's end up to the
-wire's resolution costs no travel. A requested yaw change makes the move last at least
-1.875 angle / turn rate.
+Travel, climbs and descents follow the minimum-jerk quintic (zero velocity and acceleration at
+both ends); attitudes move along the shortest rotation with the same profile. A speed (or the
+turn rate) is the quintic's top rate: a move timed by it lasts 1.875 distance / speed
+(`fcu.mission.planning`), as PX4 and ArduPilot take their cruise speeds as top speeds. The
+quintic and the figure-infinity are those of `fcu.reference.trajectory` (one copy of the maths).
+An item is active on [start, end): at a boundary the reference is the next item's at tau = 0,
+the right-hand limit that holds over the coming control period (at a figure's start, T'' = pi
+k^2 at once). A move whose duration comes from a speed (not from a parameter) and whose distance
+is below `POSITION_TOLERANCE_M` (or whose turn is below `ANGLE_TOLERANCE_RAD`) is not made: the
+item keeps the start position (attitude), so a target equal to the previous item's end up to the
+wire's resolution costs no travel. A requested yaw change makes the move last at least 1.875
+angle / turn rate.
 
 Flyable missions (`fcu.envelope.feasibility`, when `MissionLimits.vehicle` is given): every planned
 segment's nominal wrench must allocate to commands every actuator can follow at every sample:

@@ -18,16 +18,15 @@ plane follows its planned profile; then the set-point sinks and the land detecto
 (`fcu.modes.landing`): a landing ends on the ground, disarmed, never hovering armed.
 
 TAKEOFF climbs `FlightSettings.takeoff_alt_m` (MIS_TAKEOFF_ALT) straight up from where the
-vehicle should be, then holds (HOLD). RTL climbs to `rtl_return_alt_m` (RTL_RETURN_ALT)
-above home if it is lower, flies to home's north and east at up to `rtl_cruise_m_s` (MPC_XY_CRUISE)
-and lands there as LAND does. Both are planned as missions (NAV_TAKEOFF, NAV_WAYPOINT,
-NAV_LAND items: `fcu.modes.auto_plans`) by the mission executor, so their legs are quintic
-profiles stretched until the vehicle can fly them (`fcu.mission`, `fcu.envelope.feasibility`). Home
-is the origin of the local frame (HOME_POSITION). POSCTL moves the set-point as
-MANUAL_CONTROL's sticks say (`fcu.modes.manual`); the stream's freshness is checked on the wall
-clock like the offboard one.
-The FCU's MAVLink edge (`fcu.edge.setpoint_wire`) decodes the offboard and manual set-points; the
-commander takes them typed, in ENU/FLU and SI units.
+vehicle should be, then holds (HOLD). RTL climbs to `rtl_return_alt_m` (RTL_RETURN_ALT) above
+home if it is lower, flies to home's north and east at up to `rtl_cruise_m_s` (MPC_XY_CRUISE)
+and lands there as LAND does. Both are planned as missions (NAV_TAKEOFF, NAV_WAYPOINT, NAV_LAND
+items: `fcu.modes.auto_plans`) by the mission executor, so their legs are quintic profiles
+stretched until the vehicle can fly them (`fcu.mission`, `fcu.envelope.feasibility`). Home is
+the origin of the local frame (HOME_POSITION). POSCTL moves the set-point as MANUAL_CONTROL's
+sticks say (`fcu.modes.manual`); the stream's freshness is checked on the wall clock like the
+offboard one. The FCU's MAVLink edge (`fcu.edge.setpoint_wire`) decodes the offboard and manual
+set-points; the commander takes them typed, in ENU/FLU and SI units.
 
 A mission's start (MISSION_START, mode MISSION, a new current item in flight, arming in
 MISSION) plans the mission from the desired pose and checks it again: a job for `work`
