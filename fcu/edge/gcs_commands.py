@@ -1,13 +1,17 @@
 """The FCU's commands from ground stations: COMMAND_LONG and COMMAND_INT executed and
 acknowledged (COMMAND_ACK), each refusal explained by STATUSTEXT, and a retry answered without
-executing the command again (`fcu.edge.gcs_server` dispatches them here). A command whose work
-runs beside the control loop (a mission's start, POSCTL: `fcu.modes.commander`) is acknowledged
-MAV_RESULT_IN_PROGRESS at once, again every IN_PROGRESS_REPEAT_S while the work lasts (MAVSDK
+executing the command again (`fcu.edge.gcs_server` dispatches them here).
+
+A command whose work runs beside the control loop (a mission's start, POSCTL:
+`fcu.modes.commander`) is answered with its final result when the work is done, as the command
+protocol says. Work done within IN_PROGRESS_FIRST_S gets that answer alone, as PX4 and
+ArduPilot answer a mode change: MAVSDK's mission plugins report an IN_PROGRESS as their final
+result (Busy), though the mode is then entered. Longer work is acknowledged
+MAV_RESULT_IN_PROGRESS after IN_PROGRESS_FIRST_S, then again every IN_PROGRESS_REPEAT_S (MAVSDK
 re-sends a command, then gives it up, when nothing follows its IN_PROGRESS within its retries'
-time, 1.5 s at its defaults), and with its final result when the work is done, as the command
-protocol says; a retry meanwhile is answered IN_PROGRESS again, never executed again; the same
-mode asked for meanwhile (another station) waits for the same end; a newer command that
-supersedes it ends it MAV_RESULT_FAILED, with why.
+time, 1.5 s at its defaults). A retry meanwhile is answered IN_PROGRESS, never executed again;
+the same mode asked for meanwhile (another station) waits for the same end; a newer command
+that supersedes it ends it MAV_RESULT_FAILED, with why.
 
 Parameters are range-checked against what they can mean (a mode's numbers, a mission item,
 a message id); MAV_CMD_NAV_TAKEOFF's altitude is AMSL in COMMAND_LONG's p7 (as PX4 reads it)
@@ -38,7 +42,8 @@ WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
 FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM p2 that forces a disarm
 MAX_PEERS = 64  # senders remembered for their retries (as parsers: one per link and peer)
 RETRY_WINDOW_S = 5.0  # a COMMAND_LONG with confirmation > 0 this soon after is a retry
-IN_PROGRESS_REPEAT_S = 0.5  # a command under way is acknowledged IN_PROGRESS this often
+IN_PROGRESS_FIRST_S = 0.25  # work done sooner is answered once, with its final result
+IN_PROGRESS_REPEAT_S = 0.5  # then a command under way is acknowledged IN_PROGRESS this often
 ALWAYS_REQUESTABLE = (M.MAVLINK_MSG_ID_MISSION_CURRENT, M.MAVLINK_MSG_ID_HEARTBEAT,
                       M.MAVLINK_MSG_ID_SYS_STATUS)
 # NAV_TAKEOFF's altitude: COMMAND_LONG p7 is AMSL (as PX4 reads it); COMMAND_INT's z by frame
@@ -127,9 +132,11 @@ class CommandService:
         if answer is None:
             return  # answered with its message (requests): a retry asks again
         plan = self.server.pipeline.commander.under_way
-        if answer.result == IN_PROGRESS and plan is not None:  # answered again when planned
-            self._answer(index, msg, sender, key, now_s, Answer(IN_PROGRESS, ""))
-            self.under_way[(sender, key)] = (index, msg, now_s)
+        if answer.result == IN_PROGRESS and plan is not None:  # answered when planned
+            self._answer(index, msg, sender, key, now_s, Answer(IN_PROGRESS, ""), told=False)
+            # told IN_PROGRESS IN_PROGRESS_FIRST_S from now if the work lasts (`tick`)
+            self.under_way[(sender, key)] = (index, msg,
+                                             now_s + IN_PROGRESS_FIRST_S - IN_PROGRESS_REPEAT_S)
 
             def ended(result: MAV_RESULT, text: str) -> None:
                 self.under_way.pop((sender, key), None)
@@ -140,17 +147,18 @@ class CommandService:
         self._answer(index, msg, sender, key, now_s, answer)
 
     def tick(self, now_s: float) -> None:
-        """IN_PROGRESS again to each command under way not told so for IN_PROGRESS_REPEAT_S."""
+        """IN_PROGRESS to each command under way for IN_PROGRESS_FIRST_S, then again every
+        IN_PROGRESS_REPEAT_S."""
         for entry, (index, msg, told_s) in list(self.under_way.items()):
             if now_s - told_s >= IN_PROGRESS_REPEAT_S:
                 self.under_way[entry] = (index, msg, now_s)
                 self.ack(index, msg, msg.command, IN_PROGRESS)
 
     def _answer(self, index: int, msg: Command, sender: tuple[int, int, int], key: bytes,
-                now_s: float, answer: Answer, final: bool = False) -> None:
-        """ACK `answer` and keep it for the sender's retries; a `final` answer (of a command
-        that was IN_PROGRESS) only where that command is still the sender's last: a newer
-        one's record is kept for its own retries."""
+                now_s: float, answer: Answer, final: bool = False, told: bool = True) -> None:
+        """ACK `answer` (where `told`) and keep it for the sender's retries; a `final` answer
+        (of a command under way) only where that command is still the sender's last: a
+        newer one's record is kept for its own retries."""
         if final:
             last = self.executed.get(sender)
             if last is not None and last[0] == key and last[1] == now_s:
@@ -159,6 +167,8 @@ class CommandService:
             if len(self.executed) >= MAX_PEERS and sender not in self.executed:
                 del self.executed[next(iter(self.executed))]
             self.executed[sender] = (key, now_s, answer)
+        if not told:
+            return
         self.ack(index, msg, msg.command, answer.result)
         if answer.reason and answer.result != ACCEPTED:
             self.server.say(WARNING, answer.reason, index)

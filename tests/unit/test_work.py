@@ -523,15 +523,16 @@ def _server_with_a_mission() -> tuple[Any, list[Any], Any, HeldWork]:
 
 def test_a_command_under_way_is_in_progress_then_final_and_a_retry_is_not_run_again():
     """Given MISSION_START in flight with the plan made beside the loop (through the FCU's
-    ground-station server), then COMMAND_ACK IN_PROGRESS comes at once; a retry
-    (confirmation 1) meanwhile is answered IN_PROGRESS again and plans nothing more; when
-    the plan is taken in, the final ACCEPTED; a second MISSION_START under way that a LAND
+    ground-station server), then nothing is said before IN_PROGRESS_FIRST_S; a retry
+    (confirmation 1) meanwhile is answered IN_PROGRESS and plans nothing more; when the plan
+    is taken in, the final ACCEPTED; a second MISSION_START under way that a LAND
     supersedes ends FAILED, and LAND is ACCEPTED."""
     server, links, c, work = _server_with_a_mission()
     start = MAV_CMD.MAV_CMD_MISSION_START
     _command(server, start, 0)
+    assert _command_acks(links[0]) == []
     _command(server, start, 1)
-    assert _command_acks(links[0]) == [(start, MAV_RESULT.MAV_RESULT_IN_PROGRESS)] * 2
+    assert _command_acks(links[0]) == [(start, MAV_RESULT.MAV_RESULT_IN_PROGRESS)]
     assert len(work.held) == 1 and c.mode == Mode.HOLD
     work.release()
     assert _command_acks(links[0]) == [(start, MAV_RESULT.MAV_RESULT_ACCEPTED)]
@@ -542,30 +543,47 @@ def test_a_command_under_way_is_in_progress_then_final_and_a_retry_is_not_run_ag
     work.release()
     assert _command_acks(links[0]) == [
         (MAV_CMD.MAV_CMD_DO_SET_MODE, MAV_RESULT.MAV_RESULT_ACCEPTED),
-        (start, MAV_RESULT.MAV_RESULT_IN_PROGRESS), (start, MAV_RESULT.MAV_RESULT_FAILED),
+        (start, MAV_RESULT.MAV_RESULT_FAILED),
         (MAV_CMD.MAV_CMD_NAV_LAND, MAV_RESULT.MAV_RESULT_ACCEPTED)]
     assert c.mode == Mode.LAND
 
 
 def test_a_command_under_way_is_told_in_progress_again_until_its_end():
     """Given MISSION_START whose plan is made beside the loop (through the FCU's
-    ground-station server), then the sender is told IN_PROGRESS again every
-    IN_PROGRESS_REPEAT_S (0.5 s) while it lasts, as the command protocol allows (MAVSDK
-    gives a command up when nothing follows IN_PROGRESS within 1.5 s at its defaults: a
-    start from 14 m/s brakes for about 7 s), and nothing more once its final answer is
-    given."""
+    ground-station server) and lasts, then the sender is told IN_PROGRESS after
+    IN_PROGRESS_FIRST_S (0.25 s), then again every IN_PROGRESS_REPEAT_S (0.5 s) while it
+    lasts, as the command protocol allows (MAVSDK gives a command up when nothing follows
+    IN_PROGRESS within 1.5 s at its defaults: a start from 14 m/s brakes for about 7 s),
+    and nothing more once its final answer is given."""
     server, links, _c, work = _server_with_a_mission()
     start = MAV_CMD.MAV_CMD_MISSION_START
     _command(server, start, 0)  # at 1.0 s
     told = [(start, MAV_RESULT.MAV_RESULT_IN_PROGRESS)]
-    assert _command_acks(links[0]) == told
-    for now_s, again in ((1.2, False), (1.5, True), (1.9, False), (2.0, True), (2.6, True)):
+    assert _command_acks(links[0]) == []
+    for now_s, again in ((1.2, False), (1.25, True), (1.7, False), (1.75, True), (2.3, True),
+                         (2.5, False)):
         server.tick(now_s)
         assert _command_acks(links[0]) == (told if again else []), now_s
     work.release()
     assert _command_acks(links[0]) == [(start, MAV_RESULT.MAV_RESULT_ACCEPTED)]
     server.tick(5.0)
     assert _command_acks(links[0]) == [] and server.commands.under_way == {}
+
+
+def test_work_done_within_a_quarter_second_is_answered_once_with_its_result():
+    """Given MISSION_START whose plan beside the loop is taken in within
+    IN_PROGRESS_FIRST_S, then its one COMMAND_ACK is the final ACCEPTED, as PX4 and
+    ArduPilot answer a mode change (MAVSDK's mission plugins report a first IN_PROGRESS as
+    their result, Busy), and nothing follows."""
+    server, links, c, work = _server_with_a_mission()
+    start = MAV_CMD.MAV_CMD_MISSION_START
+    _command(server, start, 0)  # at 1.0 s
+    server.tick(1.2)
+    assert _command_acks(links[0]) == []
+    work.release()
+    assert _command_acks(links[0]) == [(start, MAV_RESULT.MAV_RESULT_ACCEPTED)]
+    server.tick(3.0)
+    assert _command_acks(links[0]) == [] and c.mode == Mode.MISSION
 
 
 def test_the_same_mode_asked_by_two_stations_under_way_is_one_change_both_answered():
@@ -584,6 +602,7 @@ def test_the_same_mode_asked_by_two_stations_under_way_is_one_change_both_answer
     for index, src in ((0, GCS), (1, OTHER)):
         server.handle(index, _msg(M.MAVLink_command_long_message(
             1, 1, set_mode, 0, 1.0, 3.0, 0.0, 0, 0, 0, 0), src), 1.0)  # POSCTL
+    server.tick(1.3)  # the fit lasts: each is told IN_PROGRESS
     in_progress = [(set_mode, MAV_RESULT.MAV_RESULT_IN_PROGRESS)]
     assert _command_acks(links[0]) == in_progress and _command_acks(links[1]) == in_progress
     assert len(work.held) == 1 and c.mode == Mode.HOLD
@@ -597,14 +616,13 @@ def test_the_same_mode_asked_by_two_stations_under_way_is_one_change_both_answer
             1, 1, set_mode, 0, 1.0, 4.0, 4.0, 0, 0, 0, 0), src), 1.0)  # AUTO.MISSION
     assert len(work.held) == 1
     work.release()
-    both = in_progress + accepted
-    assert _command_acks(links[0]) == both and _command_acks(links[1]) == both
+    assert _command_acks(links[0]) == accepted and _command_acks(links[1]) == accepted
     assert c.mode == Mode.MISSION and c.modes.mission_run.running
 
 
 def test_a_new_current_item_in_flight_is_confirmed_by_mission_current_and_its_ack():
     """Given DO_SET_MISSION_CURRENT in a flying mission, planned again beside the loop, then
-    it is answered IN_PROGRESS, and when the plan is taken in both the spec's confirmation
+    it is told IN_PROGRESS when the plan lasts, and when it is taken in both the spec's confirmation
     (MISSION_CURRENT with the new item) and the final COMMAND_ACK ACCEPTED go out (the
     ACK's reply used to replace the confirmation's)."""
     from tests.unit.test_gcs_dispatch import parsed
@@ -617,6 +635,7 @@ def test_a_new_current_item_in_flight_is_confirmed_by_mission_current_and_its_ac
     parsed(links[0])
     current = MAV_CMD.MAV_CMD_DO_SET_MISSION_CURRENT
     _command(server, current, 0, 2.0)
+    server.tick(1.3)
     assert _command_acks(links[0]) == [(current, MAV_RESULT.MAV_RESULT_IN_PROGRESS)]
     work.release()
     sent = parsed(links[0])
@@ -848,12 +867,13 @@ def test_in_progress_says_progress_unknown_and_a_final_answer_keeps_a_newer_reco
     start, interval = MAV_CMD.MAV_CMD_MISSION_START, MAV_CMD.MAV_CMD_SET_MESSAGE_INTERVAL
     _command(server, start, 0)
     _command(server, interval, 0, float(M.MAVLINK_MSG_ID_HEARTBEAT), 1e6)
+    server.tick(1.3)  # the plan lasts: told IN_PROGRESS
     work.release()
     _command(server, interval, 1, float(M.MAVLINK_MSG_ID_HEARTBEAT), 1e6)
     acks = [(m.command, m.result, m.progress) for m in parsed(links[0])
             if m.get_type() == "COMMAND_ACK"]
     ok = MAV_RESULT.MAV_RESULT_ACCEPTED
-    assert acks == [(start, IN_PROGRESS, 255), (interval, ok, 0), (start, ok, 0),
+    assert acks == [(interval, ok, 0), (start, IN_PROGRESS, 255), (start, ok, 0),
                     (interval, ok, 0)]
     assert server.commands.repeated_commands == 1
     assert c.mode == Mode.MISSION
