@@ -27,9 +27,14 @@ def takeoff(p_enu_m: Vec3, climb_m: float, max_distance_m: float
             ) -> tuple[MissionItem, ...] | str:
     """TAKEOFF's climb by `climb_m` from `p_enu_m` (one NAV_TAKEOFF item), or why it is
     refused."""
-    z_ned = -(p_enu_m[2] + climb_m)
-    x, y = p_enu_m[1], p_enu_m[0]
-    if norm3((x, y, z_ned)) > max_distance_m:
+    return takeoff_to(p_enu_m, -(p_enu_m[2] + climb_m), max_distance_m)
+
+
+def takeoff_to(p_enu_m: Vec3, z_ned: float, max_distance_m: float
+               ) -> tuple[MissionItem, ...] | str:
+    """TAKEOFF's climb from `p_enu_m` straight up to `z_ned` (one NAV_TAKEOFF item), or why
+    it is refused: its target beyond GF_MAX_DIST."""
+    if norm3((p_enu_m[1], p_enu_m[0], z_ned)) > max_distance_m:
         return "takeoff: beyond GF_MAX_DIST"
     return (_item(0, MAV_CMD.MAV_CMD_NAV_TAKEOFF, z_ned),)
 

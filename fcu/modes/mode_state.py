@@ -213,16 +213,26 @@ class ModeState:
 
     def plan_takeoff(self, climb_m: float) -> str:
         """Plan TAKEOFF's climb (one NAV_TAKEOFF item); a reason if refused, else "".
-        Entered while the reference moves, a brake that stops above the climb's target
-        climbs no more: it never comes down to it."""
+        Entered while the reference moves, the climb is checked again where HOLD's brake
+        stops: a brake that stops above the target climbs no more (it never comes down to
+        it), and one that stops where the target straight above is beyond GF_MAX_DIST
+        climbs no more either, and says so (the mode was already accepted: it holds)."""
         start = self.here()
         limits = self.known.limits
         items = auto_plans.takeoff(start.p_enu_m, climb_m, limits.max_distance_m)
         if isinstance(items, str):
             return items
+        voice = self.known.voice
 
         def at_rest(p_enu_m: Vec3) -> tuple[MissionItem, ...]:
-            return items if -p_enu_m[2] >= items[0].z else (items[0]._replace(z=-p_enu_m[2]),)
+            here_z = -p_enu_m[2]
+            z = items[0].z if here_z >= items[0].z else here_z
+            again = auto_plans.takeoff_to(p_enu_m, z, limits.max_distance_m)
+            if isinstance(again, str):
+                voice.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
+                          "takeoff: climb beyond GF_MAX_DIST: holding")
+                return (items[0]._replace(z=here_z),)
+            return items if z == items[0].z else again
 
         self._fly_auto(items, limits, at_rest)
         return ""

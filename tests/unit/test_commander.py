@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -306,10 +307,11 @@ def test_rtl_flies_at_up_to_its_speeds_and_no_faster():
     assert 0.495 <= down <= 0.5 + 1e-9
 
 
-def _climbing_at_six_metres_per_second() -> tuple[Pipeline, int, Reference]:
-    """A mission flying straight up from 2 m at up to 12 m/s (RTL_RETURN_ALT 5 m), sampled
-    until its reference climbs at 6 m/s, still speeding up: the pipeline, the time, the
-    reference then."""
+def _climbing_at_six_metres_per_second(
+        east_m: float = 4.0, up_m: float = 60.0) -> tuple[Pipeline, int, Reference]:
+    """A mission flying from (4, 3, 2) m ENU to (east_m, 3, up_m) m (default: straight up
+    to 60 m) at up to 12 m/s (RTL_RETURN_ALT 5 m), sampled until its reference moves at
+    6 m/s, still speeding up: the pipeline, the time, the reference then."""
     vehicle = load_vehicle(ROOT / "config/vehicles/hexa_tilted.toml")
     pipe = Pipeline(vehicle, load_gains(ROOT / "config/gains/pid_eq30.toml"), 500,
                     limits=MissionLimits(vehicle=vehicle, cruise_speed_m_s=12.0))
@@ -320,14 +322,14 @@ def _climbing_at_six_metres_per_second() -> tuple[Pipeline, int, Reference]:
     assert pipe.arm()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
     c.set_mission((MissionItem(0, MAV_FRAME.MAV_FRAME_LOCAL_NED,
                                MAV_CMD.MAV_CMD_NAV_WAYPOINT, 1, 1, 0.0, 0.0, 0.0, math.nan,
-                               30_000, 40_000, -60.0),))  # straight up to 60 m
+                               30_000, round(east_m * 1e4), -up_m),))
     assert c.set_mode(Mode.MISSION, 0.0)[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
     t = 0
-    while c.fly(t).v_enu_m_s[2] < 6.0:
+    while math.hypot(*c.fly(t).v_enu_m_s) < 6.0:
         t += 2000
         assert t < 20_000_000
     entry = c.fly(t)
-    assert entry.a_enu_m_s2[2] > 0.5  # still speeding up
+    assert math.hypot(*entry.a_enu_m_s2) > 0.5  # still speeding up
     return pipe, t, entry
 
 
@@ -343,6 +345,28 @@ def test_takeoff_asked_in_a_fast_climb_climbs_no_more_where_its_brake_stops_abov
     assert path[rest].p_enu_m[2] > entry.p_enu_m[2] + 2.5 + 5.0
     assert all(r.p_enu_m == path[rest].p_enu_m for r in path[rest:])
     assert c.mode == Mode.HOLD and "takeoff complete: mode HOLD" in [e.text for e in pipe.events]
+
+
+def test_takeoff_asked_in_fast_flight_holds_where_its_brake_stops_if_the_climb_leaves_the_fence():
+    """Given a mission flying east at 2 m at 6 m/s and speeding up, and GF_MAX_DIST set to
+    15 m, when TAKEOFF comes (2.5 m up: its target 10.2 m from home where it is asked,
+    inside), then HOLD's brake stops 20.8 m east; TAKEOFF checks its climb again there,
+    refuses it with a warning and holds where the brake stopped: the reference never
+    climbs (checked only where TAKEOFF came, it climbed to 4.5 m there, 21.5 m from home)."""
+    pipe, t, entry = _climbing_at_six_metres_per_second(east_m=60.0, up_m=2.0)
+    c = pipe.commander
+    c.configure(replace(c.limits, max_distance_m=15.0), c.offboard_timeout_s, None)
+    assert math.hypot(entry.p_enu_m[0], entry.p_enu_m[1], entry.p_enu_m[2] + 2.5) < 15.0
+    assert c.takeoff()[0] == MAV_RESULT.MAV_RESULT_ACCEPTED
+    path = [c.fly(t + 2000 * k) for k in range(1, 10 * 500)]
+    rest = next(k for k, r in enumerate(path) if r.v_enu_m_s == (0.0, 0.0, 0.0))
+    stop = path[rest].p_enu_m
+    assert math.hypot(stop[0], stop[1], stop[2] + 2.5) > 15.0  # its climb: beyond
+    assert max(r.p_enu_m[2] for r in path) == pytest.approx(2.0, abs=1e-9)
+    assert all(r.p_enu_m == stop for r in path[rest:])
+    said = [e.text for e in pipe.events]
+    assert "takeoff: climb beyond GF_MAX_DIST: holding" in said
+    assert c.mode == Mode.HOLD and "takeoff complete: mode HOLD" in said
 
 
 def test_rtl_asked_in_a_fast_climb_returns_from_where_its_brake_stops():
