@@ -33,6 +33,7 @@ FRESH_HEARTBEAT_S = 1.5  # a HEARTBEAT this recent tells the armed state without
 _GROUND = (M.MAV_LANDED_STATE_ON_GROUND,)
 HEIGHTS = ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT")  # what an observer is shown
 SETTLE_S = 0.5  # after a confirmation, how long an observer's judgement may still take
+LOCAL_FALLBACK_S = 3.0  # without GLOBAL_POSITION_INT this long, a takeoff's height is -z
 
 
 class Observer(Protocol):
@@ -189,6 +190,9 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
             raise fail("the vehicle sent no HOME_POSITION (its takeoff altitude is AMSL)")
         home_alt = home.alt_m
     result = s.command(M.MAV_CMD_NAV_TAKEOFF, *takeoff_params(ap, height_m, home_alt))
+    if result != M.MAV_RESULT_ACCEPTED and getattr(s, "command_sends", 1) > 1 and \
+            _left_the_ground(s):
+        result = M.MAV_RESULT_ACCEPTED  # the first send was taken, its answer lost
     if result != M.MAV_RESULT_ACCEPTED:
         return result, None
     if ap.takeoff_mode is None:  # PX4: NAV_TAKEOFF engages its TAKEOFF mode
@@ -201,14 +205,30 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
     return result, reached
 
 
+def _left_the_ground(session: Session) -> bool:
+    """Whether the vehicle is armed and leaving or off the ground (EXTENDED_SYS_STATE, else
+    more than 0.2 m above home): a takeoff sent again after its answer was lost is refused
+    by ArduCopter once it climbs ("can't takeoff again": MAV_RESULT_FAILED), and PX4 acts
+    on each copy; the refusal of the copy does not mean the first was not taken."""
+    armed, landed, height = flight_state(session)
+    if landed is not None and landed != M.MAV_LANDED_STATE_UNDEFINED:
+        return armed and landed in (M.MAV_LANDED_STATE_TAKEOFF, M.MAV_LANDED_STATE_IN_AIR)
+    return armed and height is not None and height > 0.2
+
+
 def wait_height(session: Session, at_least_m: float, timeout_s: float,
                 report: Callable[[float], None] | None = None,
                 observe: Observer | None = None) -> float | None:
-    """Wait until the vehicle is at least `at_least_m` above home (GLOBAL_POSITION_INT's
-    relative altitude, else LOCAL_POSITION_NED's -z); the height then, None on timeout or
-    when it disarms."""
+    """Wait until the vehicle is at least `at_least_m` above home; the height then, None
+    on timeout or when it disarms. The height above home is GLOBAL_POSITION_INT's relative
+    altitude. LOCAL_POSITION_NED's -z is above the local origin, which is not home
+    (ArduPilot sets its origin at the first fix and home at arming; PX4 gives home's local
+    z apart): it is judged only from a vehicle that has sent no GLOBAL_POSITION_INT for
+    LOCAL_FALLBACK_S since the wait began, and never once one came."""
     s = session
-    end = time.monotonic() + timeout_s
+    start = time.monotonic()
+    end = start + timeout_s
+    global_heard = False
     while (left := end - time.monotonic()) > 0:
         msg = s.recv(["GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "HEARTBEAT"], timeout=left)
         if not s.from_autopilot(msg):
@@ -220,7 +240,13 @@ def wait_height(session: Session, at_least_m: float, timeout_s: float,
             continue
         if observe is not None:
             observe(msg)
-        height = msg.relative_alt * 1e-3 if kind == "GLOBAL_POSITION_INT" else -msg.z
+        if kind == "GLOBAL_POSITION_INT":
+            global_heard = True
+            height = msg.relative_alt * 1e-3
+        elif global_heard or time.monotonic() - start < LOCAL_FALLBACK_S:
+            continue
+        else:
+            height = -msg.z
         if report is not None:
             report(height)
         if height >= at_least_m:

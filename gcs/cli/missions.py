@@ -76,6 +76,26 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
         result = clear(session.conn, t, c, send=send)
         say(f"clear: {result_name(result)}")
         return 0 if result == MAV.MAV_MISSION_ACCEPTED else 1
+    return _start(args, session)
+
+
+def _start(args: argparse.Namespace, session: Session) -> int:
+    """`gcs mission start`: MISSION_START to an armed vehicle, or with `--arm` armed first.
+    A disarmed vehicle without `--arm` is refused before anything is sent (exit 1): PX4 arms
+    on MISSION_START and takes off (Commander's VEHICLE_CMD_MISSION_START), where ArduCopter
+    and this FCU wait to be armed, so the same command would do two different things."""
+    from common.wire.mavlink import MAV
+    from gcs.autopilot.commands import flight_state
+    from gcs.vehicle_link.actions import arm
+
+    if not flight_state(session)[0]:
+        if not args.arm:
+            log.error("gcs mission start: the vehicle is disarmed: arm it first (gcs arm) or "
+                      "give --arm; nothing sent")
+            return 1
+        if (armed := arm(session, True)) != MAV.MAV_RESULT_ACCEPTED:
+            return print_result("arm", armed, session)
+        say("arm: MAV_RESULT_ACCEPTED")
     return print_result("mission start", session.command(MAV.MAV_CMD_MISSION_START), session)
 
 
@@ -91,7 +111,14 @@ def _upload(args: argparse.Namespace, session: Session) -> int:
         result_name,
         upload_detailed,
     )
-    from gcs.vehicle_link.mission_home import HomeError, WireMission, for_ardupilot, plan_conversion
+    from gcs.vehicle_link.mission_home import (
+        HomeError,
+        WireMission,
+        for_ardupilot,
+        is_home_item,
+        plan_conversion,
+        split_home,
+    )
 
     t, c, send = session.target_system, session.target_component, session.send
     pilot = autopilot_of(session.heartbeat_msg)
@@ -105,6 +132,13 @@ def _upload(args: argparse.Namespace, session: Session) -> int:
     if conversion is not None:
         say(conversion.notice)
     wire = WireMission(list(items))
+    if not at_seq0 and doc.fmt == "wpl" and items and is_home_item(items[0]):
+        home, rest = split_home(items)  # line 0 is home, as QGC and MAVProxy read WPL 110
+        assert home is not None
+        say(f"line 0 is a home (lat {home.lat_deg:.7f}, lon {home.lon_deg:.7f} deg, alt "
+            f"{home.alt_m:.2f} m AMSL), as QGC reads a QGC WPL 110 file: not sent (it would "
+            f"fly as a waypoint at that altitude)")
+        wire = WireMission(rest)
     if at_seq0:
         need_home = doc.home is None or any(it.frame == MAV.MAV_FRAME_LOCAL_NED for it in items)
         vehicle_home = home_position(session.conn, t, c, send=send) if need_home else None

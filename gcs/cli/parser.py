@@ -242,7 +242,10 @@ def build_parser() -> argparse.ArgumentParser:
                            "MAV_FRAME_LOCAL_NED, through the vehicle's home (default: as "
                            "uploaded; global for .plan)")
     msub.add_parser("clear", parents=[link], help="clear the vehicle's mission")
-    msub.add_parser("start", parents=[link], help="MISSION_START (arm first)")
+    ms = msub.add_parser("start", parents=[link],
+                         help="MISSION_START to an armed vehicle (a disarmed one: refused)")
+    ms.add_argument("--arm", action="store_true",
+                    help="arm a disarmed vehicle first (without it, nothing is sent to one)")
 
     par = sub.add_parser("param", help="list, get, set parameters")
     psub = par.add_subparsers(dest="action", required=True)

@@ -24,6 +24,7 @@ from common.wire.mission_items import (
     GLOBAL_SCALE,
     MAV_FRAME_GLOBAL,
     MAV_FRAME_LOCAL_NED,
+    XY_COMMANDS,
     HomePosition,
     MissionItem,
     to_global,
@@ -96,6 +97,17 @@ class WireMission(NamedTuple):
     home_source: str = ""
 
 
+def _local_for_ardupilot(item: MissionItem, home: HomePosition) -> MissionItem:
+    """A local item in MAV_FRAME_GLOBAL_RELATIVE_ALT through `home`; where its command does
+    not use x, y (NAV_TAKEOFF, NAV_LAND: climb or land where the vehicle is), lat = lon = 0,
+    ArduPilot's "where the vehicle is": a NAV_LAND at home's latitude and longitude would
+    fly there first (ArduCopter's ModeAuto::do_land)."""
+    converted = to_global(item, home)
+    if converted is item or item.command in XY_COMMANDS:
+        return converted
+    return converted._replace(x=0, y=0)
+
+
 def for_ardupilot(items: Sequence[MissionItem], fmt: str, file_home: HomePosition | None,
                   vehicle_home: HomePosition | None) -> WireMission:
     """The wire mission for ArduPilot of a file's items (`fmt` plan, wpl, toml) and its
@@ -104,13 +116,13 @@ def for_ardupilot(items: Sequence[MissionItem], fmt: str, file_home: HomePositio
     A WPL file whose line 0 is a home item (`is_home_item`) goes as it is (MAVProxy's
     convention); any other file gets a home item at seq 0 and its items from seq 1, so that
     none is lost. Items in MAV_FRAME_LOCAL_NED, which ArduPilot refuses, are sent in
-    MAV_FRAME_GLOBAL_RELATIVE_ALT through the vehicle's home. HomeError when a home is
-    needed and none is known."""
+    MAV_FRAME_GLOBAL_RELATIVE_ALT through the vehicle's home (`_local_for_ardupilot`).
+    HomeError when a home is needed and none is known."""
     if any(it.frame == MAV_FRAME_LOCAL_NED for it in items):
         if vehicle_home is None:
             raise HomeError("local-frame items need the vehicle's home position to go to "
                             "ArduPilot (in a global frame), and it sent no HOME_POSITION")
-        items = [to_global(it, vehicle_home) for it in items]
+        items = [_local_for_ardupilot(it, vehicle_home) for it in items]
     if fmt == "wpl" and items and is_home_item(items[0]):
         return WireMission([it._replace(seq=i) for i, it in enumerate(items)],
                            home_of(items[0]), "the file's line 0")

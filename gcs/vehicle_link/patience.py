@@ -12,10 +12,11 @@ while it checks a mission or stores a parameter. So a wait for an answer ends on
 
 and while it lasts, the request is re-sent each `resend_s` without an answer, as the
 protocol says (the mission protocol's 1500 ms and 250 ms, a command's with its
-confirmation incremented). Re-sending never makes an autopilot act twice: a repeated last
-MISSION_ITEM is answered with the MISSION_ACK again (ArduPilot, PX4, this FCU), a repeated
-PARAM_SET sets the same value, a repeated COMMAND_LONG carries an incremented confirmation
-and is answered from the vehicle's record of the command (this FCU, PX4) or is idempotent.
+confirmation incremented). Re-sending is harmless: a repeated last MISSION_ITEM is answered
+with the MISSION_ACK again (ArduPilot, PX4, this FCU), a repeated PARAM_SET sets the same
+value, a repeated COMMAND_LONG carries an incremented confirmation and is answered from the
+vehicle's record of the command (this FCU) or acted on again (PX4, ArduPilot: the same state
+asked again; a takeoff's refused copy is judged by `gcs.autopilot.commands.takeoff`).
 
 The error names the reason: "vehicle silent for 3.0 s" or "within the 30 s ceiling".
 Wall-clock time is right here: the station faces links and people, not the flight.

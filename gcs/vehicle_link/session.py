@@ -263,6 +263,7 @@ class Session:
         self.heartbeat_at = 0.0  # and when (monotonic seconds)
         self.last_heard = 0.0  # the latest message of the target (monotonic s)
         self.commanded_at = 0.0  # the latest command sent (wall clock, as pymavlink stamps)
+        self.command_sends = 0  # how often the latest `command` was sent (2 and more: re-sent)
         self.autopilot: Autopilot | None = None  # which autopilot that heartbeat came from
         self._streams = _streams.Streams()  # what request_streams changed on the link
         self._stop = threading.Event()
@@ -334,6 +335,7 @@ class Session:
         self.last_texts = []
         budget = COMMAND.but(resend_s=timeout, ceiling_s=ceiling_s, silence_s=silence_s)
         wait, confirmation, in_progress = Wait(budget), 0, False
+        self.command_sends = 1
         self.send(M.MAVLink_command_long_message(self.target_system, self.target_component,
                                                  command, confirmation, *p))
         while not (why := wait.expired()):
@@ -356,6 +358,7 @@ class Session:
                     why = ""  # the tries asked for are spent
                     break
                 confirmation += 1
+                self.command_sends += 1
                 self.send(M.MAVLink_command_long_message(
                     self.target_system, self.target_component, command,
                     min(confirmation, 255), *p))

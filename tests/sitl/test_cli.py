@@ -205,17 +205,26 @@ def test_mission_the_vehicle_cannot_fly_is_refused_with_the_reason(ground_vehicl
     assert ok.returncode == 0 and "MAV_MISSION_ACCEPTED" in ok.stdout, ok.stdout
 
 
-def test_mission_start_flies_the_mission(vehicle, tmp_path):
-    """mission start then arm (or arm then start) runs the mission."""
+def test_mission_start_refuses_a_disarmed_vehicle_and_arms_only_with_arm(vehicle, tmp_path):
+    """Given an uploaded mission and the vehicle disarmed, `mission start` is refused before
+    anything is sent (PX4 would arm on MISSION_START and take off): exit 1, the mode
+    unchanged; `mission start --arm` arms, then starts, and the mission flies."""
     src = tmp_path / "case1.toml"
     src.write_text(format_toml(scenario_mission(load_scenario(SCENARIOS /
                                                               "case1_figure8.toml"))))
     assert vehicle.gcs("mission", "upload", str(src)).returncode == 0
-    assert vehicle.gcs("mission", "start").returncode == 0  # MISSION mode, waiting to arm
-    assert "MISSION_STATE_NOT_STARTED" in vehicle.gcs("status").stdout
-    assert vehicle.gcs("arm").returncode == 0
+    refused = vehicle.gcs("mission", "start")
+    assert refused.returncode == 1
+    assert "the vehicle is disarmed: arm it first (gcs arm) or give --arm; nothing sent" \
+        in refused.stderr, refused.stderr
+    status = vehicle.gcs("status").stdout
+    assert "mode: MISSION" not in status and "armed: no" in status, status
+    started = vehicle.gcs("mission", "start", "--arm")
+    assert started.returncode == 0, started.stdout + started.stderr
+    assert "arm: MAV_RESULT_ACCEPTED" in started.stdout
+    assert "mission start: MAV_RESULT_ACCEPTED" in started.stdout
     until(lambda: "MISSION_STATE_ACTIVE" in vehicle.gcs("status").stdout,
-          "the mission active after arming")
+          "the mission active after mission start --arm")
     status = vehicle.gcs("status").stdout
     assert "mode: MISSION" in status and "MISSION_STATE_ACTIVE" in status
 

@@ -250,13 +250,24 @@ def test_a_refusal_is_returned_unconfirmed():
 
 def _flying(armed: bool, landed: int, relative_alt_mm: int = 0, mode: int = 0,
             home_alt_mm: int = 584_000,
-            takeoff_mode: int = px4_modes.Mode.TAKEOFF.custom_mode):
-    """A vehicle that answers REQUEST_MESSAGE and engages each DO_SET_MODE."""
+            takeoff_mode: int = px4_modes.Mode.TAKEOFF.custom_mode,
+            copy_refused: int | None = None):
+    """A vehicle that answers REQUEST_MESSAGE and engages each DO_SET_MODE. `copy_refused`:
+    NAV_TAKEOFF's answer to a copy (the first send's answer lost: `command_sends` 2), the
+    vehicle then in the landed state `copy_refused` says (none: TAKEOFF)."""
+    state = {"landed": landed}
+
     def on_command(msg):
         replies = [Vehicle().ack(msg)]
+        if msg.command == M.MAV_CMD_NAV_TAKEOFF and copy_refused is not None:
+            v.command_sends = 2
+            if copy_refused != M.MAV_LANDED_STATE_UNDEFINED:
+                state["landed"] = copy_refused
+            return [Vehicle().ack(msg, M.MAV_RESULT_FAILED)]
         if msg.command == M.MAV_CMD_REQUEST_MESSAGE:
             if int(msg.param1) == M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
-                replies.append(_decoded(M.MAVLink_extended_sys_state_message(0, landed)))
+                replies.append(_decoded(M.MAVLink_extended_sys_state_message(
+                    0, state["landed"])))
             elif int(msg.param1) == M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
                 replies += [_decoded(M.MAVLink_global_position_int_message(
                     0, 0, 0, home_alt_mm + relative_alt_mm, relative_alt_mm, 0, 0, 0, 0)),
@@ -305,6 +316,19 @@ def test_px4_takes_off_to_an_amsl_altitude():
         commands.takeoff(held, 10.0, confirm_s=0.2)
 
 
+@pytest.mark.parametrize(("landed_then", "result"), [
+    (M.MAV_LANDED_STATE_TAKEOFF, M.MAV_RESULT_ACCEPTED),
+    (M.MAV_LANDED_STATE_IN_AIR, M.MAV_RESULT_ACCEPTED),
+    (M.MAV_LANDED_STATE_UNDEFINED, M.MAV_RESULT_FAILED),  # still on the ground
+])
+def test_a_refused_copy_of_a_takeoff_that_was_taken_is_no_refusal(landed_then, result):
+    """The first NAV_TAKEOFF's answer is lost and the copy is refused (ArduCopter, once
+    climbing: "can't takeoff again"): when the vehicle then leaves or is off the ground,
+    the takeoff was taken; on the ground the refusal stands."""
+    v = _flying(armed=True, landed=M.MAV_LANDED_STATE_ON_GROUND, copy_refused=landed_then)
+    assert commands.takeoff(v, 10.0, confirm_s=0.2)[0] == result
+
+
 @pytest.mark.parametrize(("armed", "landed", "rel_mm", "why"), [
     (False, M.MAV_LANDED_STATE_ON_GROUND, 0, "not armed"),
     (True, M.MAV_LANDED_STATE_IN_AIR, 10_000, "in the air"),
@@ -315,6 +339,29 @@ def test_takeoff_refused_disarmed_or_in_the_air(armed, landed, rel_mm, why):
     with pytest.raises(GcsError, match=why):
         commands.takeoff(v, 10.0, confirm_s=0.2, fail=GcsError)
     assert not v.commands(M.MAV_CMD_NAV_TAKEOFF)
+
+
+def test_takeoff_judges_the_height_above_home_not_above_the_local_origin(monkeypatch):
+    """ArduPilot sets its local origin at its first fix and home at arming: with the
+    origin 3 m below home, LOCAL_POSITION_NED's -z reads 3 m more than the height above
+    home. The wait for a takeoff's height takes GLOBAL_POSITION_INT's relative altitude:
+    -z 10.0 m at 7.0 m above home is not 9.5 m reached (it was), 9.6 m above home is; a
+    vehicle that sends no GLOBAL_POSITION_INT is judged on -z after LOCAL_FALLBACK_S."""
+    def local(up_m: float):
+        return _decoded(M.MAVLink_local_position_ned_message(0, 0.0, 0.0, -up_m, 0.0, 0.0, 0.0))
+
+    def above_home(up_m: float):
+        return _decoded(M.MAVLink_global_position_int_message(0, 0, 0, 0, round(up_m * 1e3),
+                                                              0, 0, 0, 0))
+
+    v = Vehicle()
+    v.queue.extend([local(10.0), above_home(7.0), local(10.3)])
+    assert commands.wait_height(v, 9.5, 0.3) is None
+    v.queue.extend([local(12.6), above_home(9.6)])
+    assert commands.wait_height(v, 9.5, 0.3) == pytest.approx(9.6)
+    monkeypatch.setattr(commands, "LOCAL_FALLBACK_S", 0.0)
+    v.queue.extend([local(9.7)])
+    assert commands.wait_height(v, 9.5, 0.3) == pytest.approx(9.7)
 
 
 # ------------------------------------------------------------------ goto set-points

@@ -163,7 +163,8 @@ def test_plan_round_trip_through_ardupilot_is_the_same_plan(vehicles, capsys, tm
 def test_wpl_and_toml_with_ardupilot(vehicles, capsys, tmp_path):
     """A WPL download from ArduPilot has home as line 0 and the items after it; uploaded
     again it goes as it is (no second home). A local TOML mission goes up after the vehicle's
-    home in GLOBAL_RELATIVE_ALT and downloads (--frame local) with [home] and the items."""
+    home in GLOBAL_RELATIVE_ALT (its takeoff and landing at lat = lon = 0, where the vehicle
+    is) and downloads (--frame local) with [home] and the items."""
     v = vehicles("ardupilot")
     assert gcs(capsys, v, "mission", "upload", str(PLAN))[0] == 0
     wpl = tmp_path / "m.waypoints"
@@ -185,6 +186,10 @@ def test_wpl_and_toml_with_ardupilot(vehicles, capsys, tmp_path):
     assert code == 0 and "upload of 3 items" in out, out + err
     assert "from the vehicle's HOME_POSITION" in out and len(v.mission) == 4
     assert [it.frame for it in v.mission[1:]] == [3, 3, 3]
+    # the takeoff and the landing where the vehicle is (ArduPilot's lat = lon = 0): at
+    # home's lat, lon ArduCopter's NAV_LAND would fly back home first
+    assert [(it.x, it.y) for it in (v.mission[1], v.mission[3])] == [(0, 0), (0, 0)]
+    assert (v.mission[2].x, v.mission[2].y) != (0, 0)
     back = tmp_path / "back.toml"
     assert gcs(capsys, v, "mission", "download", "--frame", "local", str(back))[0] == 0
     doc = parse_toml_doc(back.read_text())
@@ -242,6 +247,18 @@ def test_px4_gets_the_items_as_they_are(vehicles, capsys, tmp_path):
     toml = tmp_path / "back.toml"
     assert gcs(capsys, v, "mission", "download", str(toml))[0] == 0
     assert "[home]" not in toml.read_text()
+
+
+def test_a_wpl_home_line_is_not_flown_by_px4(vehicles, capsys, tmp_path):
+    """A QGC WPL 110 file whose line 0 is a home (MAVProxy's, Mission Planner's, ArduPilot's
+    download: a NAV_WAYPOINT at home's AMSL altitude) goes to a PX4-like vehicle without it,
+    as QGC reads such a file: sent as item 0, PX4 would fly to home at ground level first."""
+    v = vehicles("px4")
+    wpl = tmp_path / "mavproxy.waypoints"
+    wpl.write_text(format_wpl(with_home(read_mission(PLAN), VEHICLE_HOME)))
+    code, out, _ = gcs(capsys, v, "mission", "upload", str(wpl))
+    assert code == 0 and "line 0 is a home" in out and "not sent" in out, out
+    assert key(v.mission) == key(renumbered(read_mission(PLAN)))
 
 
 def test_an_upload_never_asked_for_says_what_the_vehicle_said(vehicles):
