@@ -66,10 +66,14 @@ class ScriptedPX4Vehicle:
     """PX4 on `udpout:127.0.0.1:port` (the station listens with udpin); starts landed and
     disarmed at home, or `airborne_m` up in AUTO.LOITER, armed."""
 
-    def __init__(self, port: int, *, airborne_m: float = 0.0) -> None:
+    def __init__(self, port: int, *, airborne_m: float = 0.0,
+                 origin_below_home_m: float = 0.0) -> None:
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1,
                                                source_component=1, dialect="common")
         self.p = [0.0, 0.0, -airborne_m]  # NED, m
+        # the local origin this far below home (ArduPilot's is where its first fix was):
+        # GLOBAL_POSITION_INT's height above home, sent before each LOCAL_POSITION_NED
+        self.origin_below_home_m = origin_below_home_m
         self.v = [0.0, 0.0, 0.0]
         self.yaw = 0.0
         self.armed = airborne_m > 0.0
@@ -258,11 +262,14 @@ class ScriptedPX4Vehicle:
         self.conn.mav.global_position_int_send(
             0, round((lat + self.p[0] / 111_111.0) * 1e7),
             round((lon + self.p[1] / (111_111.0 * math.cos(math.radians(lat)))) * 1e7),
-            round((alt - self.p[2]) * 1e3), round(-self.p[2] * 1e3), round(self.v[0] * 100),
+            round((alt - self.p[2]) * 1e3),
+            round((-self.p[2] - self.origin_below_home_m) * 1e3), round(self.v[0] * 100),
             round(self.v[1] * 100), round(self.v[2] * 100), 0)
 
     def _telemetry(self, ticks: int) -> None:
         mav = self.conn.mav
+        if self.origin_below_home_m:
+            self._global()
         mav.local_position_ned_send(0, *self.p, *self.v)
         half = self.yaw / 2.0
         mav.attitude_quaternion_send(0, math.cos(half), 0.0, 0.0, math.sin(half), 0, 0, 0)

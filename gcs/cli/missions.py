@@ -118,6 +118,7 @@ def _upload(args: argparse.Namespace, session: Session) -> int:
         is_home_item,
         plan_conversion,
         split_home,
+        yaw_ignored,
     )
 
     t, c, send = session.target_system, session.target_component, session.send
@@ -151,6 +152,10 @@ def _upload(args: argparse.Namespace, session: Session) -> int:
         assert h is not None
         say(f"home (seq 0): lat {h.lat_deg:.7f}, lon {h.lon_deg:.7f} deg, alt "
             f"{h.alt_m:.2f} m AMSL, from {wire.home_source}")
+        if pilot.vehicle == "copter" and (yawed := yaw_ignored(wire.items[1:])):
+            say(f"note: ArduCopter does not fly a waypoint's yaw (param4): item"
+                f"{'s' if len(yawed) > 1 else ''} {', '.join(str(i + 1) for i in yawed)} of "
+                f"{len(wire.items) - 1} point as its WP_YAW_BEHAVIOR says")
     progress = Progress()
     old: list[MissionItem] | None = None
     if pilot.kind == ARDUPILOT:  # not atomic: keep what it holds, to put it back

@@ -5,7 +5,8 @@ figures; exit 1).
 
 - The height comes from LOCAL_POSITION_NED (-z, vz) or, where the vehicle sends none,
   GLOBAL_POSITION_INT (relative_alt, vz): whichever is heard first, that one alone, so that
-  two origins never mix.
+  two origins never mix. `goto` takes LOCAL_POSITION_NED alone: its target's height, the
+  floor's cap, is in that frame (the local origin is not home on ArduPilot).
 - A descent is too fast when the vehicle sinks faster than 1.5 x its limit + 0.5 m/s for
   0.2 s. The limit is the vehicle's own descent-speed parameter (PX4 and this FCU:
   MPC_Z_VEL_MAX_DN in m/s; ArduCopter: WPNAV_SPEED_DN in cm/s), DEFAULT_LIMIT_M_S where it
@@ -137,12 +138,14 @@ def descent_limit(session: Session, ap: Autopilot) -> tuple[float, str]:
 
 
 def watch_for(session: Session, ap: Autopilot, *, floor: str,
-              floor_cap_m: float | None = None) -> DescentWatch:
+              floor_cap_m: float | None = None, heights: str | None = None) -> DescentWatch:
     """A watch for a command: `floor` "start" (the height at its first sample, at most
     `floor_cap_m`: goto's target), "peak" (the highest seen: takeoff) or "none" (the speed
-    alone)."""
+    alone). `heights`: the one message the heights come from (goto: LOCAL_POSITION_NED,
+    the frame of its target's height), else whichever of HEIGHT_MESSAGES comes first."""
     limit, source = descent_limit(session, ap)
     return DescentWatch(limit, source, floor_from_start=floor == "start",
                         floor_cap_m=floor_cap_m, rising_floor=floor == "peak",
                         floor_what={"start": "the floor of the command",
-                                    "peak": "after reaching"}.get(floor, ""))
+                                    "peak": "after reaching"}.get(floor, ""),
+                        source=heights)

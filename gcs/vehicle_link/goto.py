@@ -105,7 +105,8 @@ def goto(session: Session, target: PoseTarget, *, arm_first: bool, tolerance_m: 
     mode = ap.resolve_mode(ap.guided_mode)
     snap = Snapshot()
     listen = _Listener(s, ap, mode, snap,
-                       watch_for(s, ap, floor="start", floor_cap_m=-target.p_ned_m[2]))
+                       watch_for(s, ap, floor="start", floor_cap_m=-target.p_ned_m[2],
+                                  heights="LOCAL_POSITION_NED"))
     stream = SetpointStream(s, target, rate_hz, attitude=full)
     try:
         with stream:

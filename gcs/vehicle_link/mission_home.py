@@ -137,6 +137,14 @@ def for_ardupilot(items: Sequence[MissionItem], fmt: str, file_home: HomePositio
                        "the vehicle's HOME_POSITION")
 
 
+def yaw_ignored(items: Sequence[MissionItem]) -> list[int]:
+    """The seq of each NAV_WAYPOINT with a yaw (param4 finite, not 0) among the items of a
+    plan (seq 0 its first item): ArduCopter keeps only a waypoint's param1, the delay
+    (AP_Mission's mavlink_int_to_mission_cmd), so it flies none of these yaws."""
+    return [i for i, it in enumerate(items) if it.command == MAV_CMD_NAV_WAYPOINT and
+            math.isfinite(it.param4) and it.param4 != 0.0]
+
+
 # ------------------------------------------------------------------ another firmware's plan
 
 FIRMWARE_NAMES = {0: "a generic autopilot", 3: "ArduPilot", 12: "PX4"}

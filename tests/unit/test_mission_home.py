@@ -249,6 +249,24 @@ def test_px4_gets_the_items_as_they_are(vehicles, capsys, tmp_path):
     assert "[home]" not in toml.read_text()
 
 
+def test_a_waypoint_yaw_uploaded_to_arducopter_is_said_to_be_ignored(vehicles, capsys,
+                                                                      tmp_path):
+    """ArduCopter keeps only a waypoint's delay (param1): an upload whose waypoints carry a
+    yaw says that ArduCopter does not fly it, naming the items; none without a yaw."""
+    v = vehicles("ardupilot")
+    items = [MissionItem(0, 3, 22, 1, 1, 0.0, 0.0, 0.0, NAN, 0, 0, 10.0),
+             MissionItem(1, 3, 16, 0, 1, 0.0, 0.0, 0.0, 90.0, 473978000, 85456000, 10.0),
+             MissionItem(2, 3, 16, 0, 1, 0.0, 0.0, 0.0, NAN, 473979000, 85456000, 10.0)]
+    wpl = tmp_path / "yaw.waypoints"
+    wpl.write_text(format_wpl(items))
+    code, out, _ = gcs(capsys, v, "mission", "upload", str(wpl))
+    assert code == 0 and "ArduCopter does not fly a waypoint's yaw (param4): item 2 of 3" \
+        in out, out
+    wpl.write_text(format_wpl([it._replace(param4=NAN) for it in items]))
+    code, out, _ = gcs(capsys, v, "mission", "upload", str(wpl))
+    assert code == 0 and "yaw" not in out, out
+
+
 def test_a_wpl_home_line_is_not_flown_by_px4(vehicles, capsys, tmp_path):
     """A QGC WPL 110 file whose line 0 is a home (MAVProxy's, Mission Planner's, ArduPilot's
     download: a NAV_WAYPOINT at home's AMSL altitude) goes to a PX4-like vehicle without it,

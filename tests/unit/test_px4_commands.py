@@ -204,6 +204,20 @@ def test_mode_offboard_on_px4_is_refused_before_anything_is_sent(px4, capsys):
     assert vehicle.got.count("COMMAND_LONG") <= 2  # AUTOPILOT_VERSION asked, nothing else
 
 
+def test_goto_judges_its_floor_in_its_targets_frame(px4, capsys):
+    """The local origin 3 m below home (ArduPilot sets it at its first fix), the vehicle
+    sending GLOBAL_POSITION_INT before each LOCAL_POSITION_NED: goto from 6 m down to 4.5 m
+    above the origin (1.5 m above home) arrives. Its floor is capped by the target's local
+    height, so the heights it watches are the local ones: judged on the height above home,
+    the floor of 3 m (6 m local) would be crossed 1.5 m below, an UNSAFE that never was."""
+    vehicle, link = px4(airborne_m=6.0, origin_below_home_m=3.0)
+    code = main(["goto", "0", "0", "-4.5", "--timeout", "20", "--tolerance", "0.1", *link])
+    out = capsys.readouterr()
+    assert code == 0, out.out + out.err
+    assert "UNSAFE" not in out.out + out.err and "reached: position error" in out.out
+    assert vehicle.p[2] == pytest.approx(-4.5, abs=0.15)
+
+
 def test_the_sustain_is_judged_on_the_vehicles_clock():
     """Messages that arrive together are as far apart as their time_boot_ms says: 0.1 s of
     the vehicle's flight past the limit is no fall, whatever the receiving clock; 0.3 s is."""
