@@ -123,11 +123,15 @@ def request(session: SessionLink, wanted: dict[str, float]) -> Streams:
     results, before = _commands(session, M.MAV_CMD_GET_MESSAGE_INTERVAL,
                                 [(float(i),) for i in ids])
     to_set: dict[int, int | None] = {}
+    # ArduPilot's 0 is "not available" (the spec's); PX4 answers 0 for any stream it is not
+    # sending on this link, which SET_MESSAGE_INTERVAL starts (its MavlinkReceiver's
+    # get_message_interval and set_message_interval)
+    zero_is_off = session.autopilot is not None and session.autopilot.kind != ARDUPILOT
     for msg_id, hz in ids.items():
         now = before.get(msg_id, UNKNOWN)
-        if now == 0:  # "not available": the vehicle has no such stream
+        if now == 0 and not zero_is_off:  # "not available": the vehicle has no such stream
             continue
-        if now is None or now < 0 or now > SLOWER * 1e6 / hz:
+        if now is None or now <= 0 or now > SLOWER * 1e6 / hz:
             to_set[msg_id] = now
     if not to_set:
         return streams
@@ -156,9 +160,9 @@ def request(session: SessionLink, wanted: dict[str, float]) -> Streams:
 def restore(session: SessionLink, streams: Streams) -> None:
     """Put back what `request` changed: each interval as it was read (the default rate
     where it was not read), and stop the stream groups it started."""
-    if streams.changed:
+    if streams.changed:  # (a 0 read is PX4's stream not sent: stopped again, -1)
         _commands(session, M.MAV_CMD_SET_MESSAGE_INTERVAL,
-                  [(float(i), float(-1 if old is not None and old < 0 else
+                  [(float(i), float(-1 if old is not None and old <= 0 else
                                     0 if old is None else old))
                    for i, old in streams.changed.items()])
     for group in streams.groups:

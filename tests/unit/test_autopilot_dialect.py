@@ -444,6 +444,18 @@ def test_a_stream_the_vehicle_lacks_is_not_asked_for():
     assert not v.commands(M.MAV_CMD_SET_MESSAGE_INTERVAL)
 
 
+def test_a_px4_stream_read_as_0_is_asked_for_and_stopped_again():
+    """PX4 answers GET_MESSAGE_INTERVAL with 0 for any stream it is not sending on the link
+    (its MavlinkReceiver::get_message_interval), and SET_MESSAGE_INTERVAL starts it: a PX4
+    vehicle's 0 is asked for, and stopped again (-1) on leaving; ArduPilot's 0 is "not
+    available" (the test above)."""
+    v = Streaming({POS: 0}, autopilot=PX4)
+    changed = streams.request(v, {"LOCAL_POSITION_NED": 10.0})
+    assert v.table == {POS: 100_000} and changed.changed == {POS: 0}
+    streams.restore(v, changed)
+    assert v.table == {POS: -1}
+
+
 def test_ardupilot_without_set_message_interval_gets_data_streams():
     v = Streaming({POS: -1, SYS: -1}, set_ok=False)
     changed = streams.request(v, {"LOCAL_POSITION_NED": 10.0, "SYS_STATUS": 2.0})
