@@ -35,6 +35,7 @@ G = 9.81
 HOME = (47.397742, 8.545594, 488.0)  # PX4's SITL home
 GIT_HASH = bytes.fromhex("f2471861a0b1c2d3")
 MPC_Z_VEL_MAX_DN, MPC_Z_VEL_MAX_UP, MPC_LAND_SPEED, XY_SPEED = 1.0, 3.0, 0.7, 3.0
+PARAMS = {"MPC_Z_VEL_MAX_DN": MPC_Z_VEL_MAX_DN, "MIS_TAKEOFF_ALT": 2.5}  # PX4's defaults: 1, 2.5
 OFFBOARD_LOSS_S = 1.0
 IGNORE_THROTTLE = 1 << 6
 DT = 0.02
@@ -202,9 +203,10 @@ class ScriptedPX4Vehicle:
         elif kind == "COMMAND_LONG":
             self._command(msg)
         elif kind == "PARAM_REQUEST_READ":
-            if msg.param_id == "MPC_Z_VEL_MAX_DN":
-                self.conn.mav.param_value_send(b"MPC_Z_VEL_MAX_DN", MPC_Z_VEL_MAX_DN,
-                                               M.MAV_PARAM_TYPE_REAL32, 1, 0)
+            if msg.param_id in PARAMS:
+                self.conn.mav.param_value_send(msg.param_id.encode(), PARAMS[msg.param_id],
+                                               M.MAV_PARAM_TYPE_REAL32, len(PARAMS),
+                                               list(PARAMS).index(msg.param_id))
 
     def _command(self, msg) -> None:
         cmd = msg.command
@@ -228,7 +230,8 @@ class ScriptedPX4Vehicle:
                 self._ack(msg, M.MAV_RESULT_TEMPORARILY_REJECTED)
                 return
             self._ack(msg)
-            self.takeoff_z = -(msg.param7 - HOME[2])
+            # below home + MIS_TAKEOFF_ALT raised to it, as PX4's navigator does
+            self.takeoff_z = -max(msg.param7 - HOME[2], PARAMS["MIS_TAKEOFF_ALT"])
             self._set_mode(TAKEOFF)
         elif cmd == M.MAV_CMD_REQUEST_MESSAGE:
             self._ack(msg)

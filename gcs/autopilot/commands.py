@@ -161,12 +161,14 @@ def takeoff_params(ap: Autopilot, height_m: float, home_alt_m: float | None
 def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
             reach_s: float | None = None, tolerance_m: float = 0.5,
             confirm_s: float = CONFIRM_S, report: Callable[[float], None] | None = None,
-            fail: type[Exception] = RuntimeError, observe: Observer | None = None
-            ) -> tuple[int, float | None]:
+            fail: type[Exception] = RuntimeError, observe: Observer | None = None,
+            notice: Callable[[str], None] | None = None) -> tuple[int, float | None]:
     """Take off to `height_m` above home; (the vehicle's answer, the height reached when
     `reach_s` is given: waited for until within `tolerance_m`). `fail` (the caller's error
     type) for a vehicle that is disarmed, in the air, without home, or does not climb.
-    `observe` sees the heights while it waits (and raises to end the wait)."""
+    `observe` sees the heights while it waits (and raises to end the wait). PX4 (and this
+    FCU) take off to at least MIS_TAKEOFF_ALT above home: a lower height is raised to it,
+    sent and waited for so, and `notice` is told."""
     from gcs.vehicle_link.mission_client import home_position
 
     s = session
@@ -189,6 +191,12 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
         if home is None:
             raise fail("the vehicle sent no HOME_POSITION (its takeoff altitude is AMSL)")
         home_alt = home.alt_m
+        least = least_takeoff_m(s)
+        if least is not None and height_m < least:
+            if notice is not None:
+                notice(f"{ap.label} takes off to at least MIS_TAKEOFF_ALT above home: "
+                       f"{least:g} m, not {height_m:g} m")
+            height_m = least
     result = s.command(M.MAV_CMD_NAV_TAKEOFF, *takeoff_params(ap, height_m, home_alt))
     if result != M.MAV_RESULT_ACCEPTED and getattr(s, "command_sends", 1) > 1 and \
             _left_the_ground(s):
@@ -203,6 +211,19 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
     if reached is None:
         raise fail(f"{height_m:g} m not reached within {reach_s:g} s")
     return result, reached
+
+
+def least_takeoff_m(session: Session) -> float | None:
+    """MIS_TAKEOFF_ALT (m): PX4 raises a takeoff below home + it to it ("Using minimum
+    takeoff altitude", its navigator's Takeoff::set_takeoff_position); None unread."""
+    from gcs.vehicle_link.params import param_get
+    from gcs.vehicle_link.session import GcsError
+
+    try:
+        value = param_get(session, "MIS_TAKEOFF_ALT", timeout=1.0)
+    except (GcsError, KeyError, ValueError):
+        return None
+    return value if math.isfinite(value) and value > 0.0 else None
 
 
 def _left_the_ground(session: Session) -> bool:

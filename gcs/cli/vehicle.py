@@ -124,7 +124,8 @@ def _takeoff(args: argparse.Namespace, session: Session) -> int:
     confirm = CONFIRM_S if args.wait is None else args.wait
     result, height = takeoff(session, args.alt, reach_s=None if args.no_wait else
                                 args.timeout, tolerance_m=args.tolerance, confirm_s=confirm,
-                                report=lambda h: progress(f"takeoff: {h:.2f} m above home"))
+                                report=lambda h: progress(f"takeoff: {h:.2f} m above home"),
+                                notice=say)
     progress.done()
     code = print_result(f"takeoff to {args.alt:g} m", result, session)
     if code == 0 and height is not None:

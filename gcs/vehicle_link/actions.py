@@ -68,7 +68,8 @@ def set_mode(session: Session, name: str, confirm_s: float = _commands.CONFIRM_S
 
 def takeoff(session: Session, height_m: float, *, reach_s: float | None = None,
             tolerance_m: float = 0.5, confirm_s: float = _commands.CONFIRM_S,
-            report: Callable[[float], None] | None = None) -> tuple[int, float | None]:
+            report: Callable[[float], None] | None = None,
+            notice: Callable[[str], None] | None = None) -> tuple[int, float | None]:
     """Take off to `height_m` above home, the autopilot's way (`gcs.autopilot.commands`);
     (the vehicle's answer, the height reached when waited for `reach_s`). GcsError for a
     vehicle disarmed or in the air, or one that does not climb; Unsafe when it loses height
@@ -76,7 +77,7 @@ def takeoff(session: Session, height_m: float, *, reach_s: float | None = None,
     try:
         return _commands.takeoff(session, height_m, reach_s=reach_s, tolerance_m=tolerance_m,
                                  confirm_s=confirm_s, report=report, fail=GcsError,
-                                 observe=_observer(session, "peak"))
+                                 observe=_observer(session, "peak"), notice=notice)
     except _commands.NotConfirmed as exc:
         raise GcsError(str(exc)) from None
 

@@ -139,6 +139,20 @@ def test_takeoff_and_goto_on_px4_arrive(px4, capsys):
     capsys.readouterr()
 
 
+def test_a_takeoff_below_mis_takeoff_alt_is_waited_for_at_it(px4, capsys):
+    """PX4 raises a takeoff below home + MIS_TAKEOFF_ALT (2.5 m) to it: `takeoff --alt 1`
+    says so, asks for 2.5 m and reports it reached there, not at 0.5 m while still
+    climbing."""
+    vehicle, link = px4()
+    assert main(["arm", *link]) == 0
+    capsys.readouterr()
+    assert main(["takeoff", "--alt", "1", "--timeout", "30", *link]) == 0
+    out = capsys.readouterr().out
+    assert "takes off to at least MIS_TAKEOFF_ALT above home: 2.5 m, not 1 m" in out, out
+    reached = float(out.split("reached: ")[1].split(" m")[0])
+    assert reached >= 2.0 and vehicle.takeoff_z == pytest.approx(-2.5)  # within 0.5 m
+
+
 def test_status_on_px4_reads_readiness_from_health_and_no_mission(px4, capsys):
     _vehicle, link = px4()
     assert main(["status", "--json", *link]) == 0
