@@ -169,8 +169,6 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
     `observe` sees the heights while it waits (and raises to end the wait). PX4 (and this
     FCU) take off to at least MIS_TAKEOFF_ALT above home: a lower height is raised to it,
     sent and waited for so, and `notice` is told."""
-    from gcs.vehicle_link.mission_client import home_position
-
     s = session
     ap = autopilot(s)
     armed, landed, height = flight_state(s)
@@ -187,16 +185,7 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
             raise fail(f"{mode.name} refused: {s.describe(result)}")
     home_alt = None
     if ap.takeoff_alt_amsl:
-        home = home_position(s.conn, s.target_system, s.target_component, send=s.send)
-        if home is None:
-            raise fail("the vehicle sent no HOME_POSITION (its takeoff altitude is AMSL)")
-        home_alt = home.alt_m
-        least = least_takeoff_m(s)
-        if least is not None and height_m < least:
-            if notice is not None:
-                notice(f"{ap.label} takes off to at least MIS_TAKEOFF_ALT above home: "
-                       f"{least:g} m, not {height_m:g} m")
-            height_m = least
+        home_alt, height_m = _amsl_takeoff(s, ap, height_m, fail, notice)
     result = s.command(M.MAV_CMD_NAV_TAKEOFF, *takeoff_params(ap, height_m, home_alt))
     if result != M.MAV_RESULT_ACCEPTED and getattr(s, "command_sends", 1) > 1 and \
             _left_the_ground(s):
@@ -211,6 +200,25 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
     if reached is None:
         raise fail(f"{height_m:g} m not reached within {reach_s:g} s")
     return result, reached
+
+
+def _amsl_takeoff(session: Session, ap: Autopilot, height_m: float, fail: type[Exception],
+                  notice: Callable[[str], None] | None) -> tuple[float, float]:
+    """(home's altitude AMSL, the height above home the vehicle will climb to) for an
+    autopilot whose takeoff altitude is AMSL: PX4 raises one below MIS_TAKEOFF_ALT to it."""
+    from gcs.vehicle_link.mission_client import home_position
+
+    s = session
+    home = home_position(s.conn, s.target_system, s.target_component, send=s.send)
+    if home is None:
+        raise fail("the vehicle sent no HOME_POSITION (its takeoff altitude is AMSL)")
+    least = least_takeoff_m(s)
+    if least is not None and height_m < least:
+        if notice is not None:
+            notice(f"{ap.label} takes off to at least MIS_TAKEOFF_ALT above home: "
+                   f"{least:g} m, not {height_m:g} m")
+        height_m = least
+    return home.alt_m, height_m
 
 
 def least_takeoff_m(session: Session) -> float | None:
