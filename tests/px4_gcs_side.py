@@ -68,13 +68,16 @@ class ScriptedPX4Vehicle:
     disarmed at home, or `airborne_m` up in AUTO.LOITER, armed."""
 
     def __init__(self, port: int, *, airborne_m: float = 0.0,
-                 origin_below_home_m: float = 0.0) -> None:
+                 origin_below_home_m: float = 0.0, raises_takeoff: bool = False) -> None:
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1,
                                                source_component=1, dialect="common")
         self.p = [0.0, 0.0, -airborne_m]  # NED, m
         # the local origin this far below home (ArduPilot's is where its first fix was):
         # GLOBAL_POSITION_INT's height above home, sent before each LOCAL_POSITION_NED
         self.origin_below_home_m = origin_below_home_m
+        # PX4 up to 1.14: a takeoff below home + MIS_TAKEOFF_ALT raised to it, and said so
+        # after the answer (1.15 and later take the altitude as given)
+        self.raises_takeoff = raises_takeoff
         self.v = [0.0, 0.0, 0.0]
         self.yaw = 0.0
         self.armed = airborne_m > 0.0
@@ -85,6 +88,7 @@ class ScriptedPX4Vehicle:
         self.attitude_thrust: float | None = None  # OFFBOARD attitude control (thrust)
         self.offboard_at = -math.inf  # the latest set-point (monotonic s)
         self.takeoff_z = 0.0
+        self.takeoff_asked_m: float | None = None  # NAV_TAKEOFF's p7 above home
         self.cut_thrust_below_m: float | None = None  # a fault: motors off above this
         self.motors_dead = False  # a fault: no thrust, whatever the mode
         self.got = Received()
@@ -230,8 +234,14 @@ class ScriptedPX4Vehicle:
                 self._ack(msg, M.MAV_RESULT_TEMPORARILY_REJECTED)
                 return
             self._ack(msg)
-            # below home + MIS_TAKEOFF_ALT raised to it, as PX4's navigator does
-            self.takeoff_z = -max(msg.param7 - HOME[2], PARAMS["MIS_TAKEOFF_ALT"])
+            self.takeoff_asked_m = msg.param7 - HOME[2]
+            self.takeoff_z = -self.takeoff_asked_m
+            least = PARAMS["MIS_TAKEOFF_ALT"]
+            if self.raises_takeoff and -self.takeoff_z < least:
+                self.takeoff_z = -least
+                self.conn.mav.statustext_send(M.MAV_SEVERITY_CRITICAL,
+                                              f"Using minimum takeoff altitude: {least:.2f} m"
+                                              .encode())
             self._set_mode(TAKEOFF)
         elif cmd == M.MAV_CMD_REQUEST_MESSAGE:
             self._ack(msg)

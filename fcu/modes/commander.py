@@ -319,9 +319,9 @@ class Commander:
 
     def takeoff(self, target_up_m: float | None = None) -> Answer:
         """MAV_CMD_NAV_TAKEOFF: TAKEOFF, climbing straight up to `target_up_m` above home
-        (None: MIS_TAKEOFF_ALT above where the vehicle should be), then HOLD. As PX4 does, a
-        target less than MIS_TAKEOFF_ALT above the vehicle is raised to that, with a
-        warning."""
+        (None: MIS_TAKEOFF_ALT above where the vehicle should be), then HOLD. As PX4 did up to
+        1.14 (1.15 and later take the altitude as given), a target less than
+        MIS_TAKEOFF_ALT above the vehicle is raised to that, with a warning."""
         if not self.armed:
             return Answer(MAV_RESULT.MAV_RESULT_DENIED, "takeoff: not armed")
         climb = self.flight.takeoff_alt_m

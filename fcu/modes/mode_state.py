@@ -225,14 +225,15 @@ class ModeState:
         voice = self.known.voice
 
         def at_rest(p_enu_m: Vec3) -> tuple[MissionItem, ...]:
-            here_z = -p_enu_m[2]
-            z = items[0].z if here_z >= items[0].z else here_z
-            again = auto_plans.takeoff_to(p_enu_m, z, limits.max_distance_m)
-            if isinstance(again, str):
+            here_z = -p_enu_m[2]  # NED: down
+            if here_z <= items[0].z:  # at or above the target: no climb left
+                return (items[0]._replace(z=here_z),)
+            if isinstance(auto_plans.takeoff_to(p_enu_m, items[0].z, limits.max_distance_m),
+                          str):
                 voice.say(MAV_SEVERITY.MAV_SEVERITY_WARNING,
                           "takeoff: climb beyond GF_MAX_DIST: holding")
                 return (items[0]._replace(z=here_z),)
-            return items if z == items[0].z else again
+            return items
 
         self._fly_auto(items, limits, at_rest)
         return ""

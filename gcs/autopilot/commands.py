@@ -12,6 +12,7 @@ takes off.
 from __future__ import annotations
 
 import math
+import re
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
@@ -169,6 +170,8 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
     `observe` sees the heights while it waits (and raises to end the wait). PX4 (and this
     FCU) take off to at least MIS_TAKEOFF_ALT above home: a lower height is raised to it,
     sent and waited for so, and `notice` is told."""
+    from gcs.vehicle_link.mission_client import home_position
+
     s = session
     ap = autopilot(s)
     armed, landed, height = flight_state(s)
@@ -185,7 +188,11 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
             raise fail(f"{mode.name} refused: {s.describe(result)}")
     home_alt = None
     if ap.takeoff_alt_amsl:
-        home_alt, height_m = _amsl_takeoff(s, ap, height_m, fail, notice)
+        home = home_position(s.conn, s.target_system, s.target_component, send=s.send)
+        if home is None:
+            raise fail("the vehicle sent no HOME_POSITION (its takeoff altitude is AMSL)")
+        home_alt = home.alt_m
+    sent_at = time.monotonic()
     result = s.command(M.MAV_CMD_NAV_TAKEOFF, *takeoff_params(ap, height_m, home_alt))
     if result != M.MAV_RESULT_ACCEPTED and getattr(s, "command_sends", 1) > 1 and \
             _left_the_ground(s):
@@ -196,42 +203,45 @@ def takeoff(session: Session, height_m: float = DEFAULT_TAKEOFF_M, *,
         confirm_mode(s, ap.resolve_mode("TAKEOFF"), confirm_s, observe)
     if reach_s is None:
         return result, None
-    reached = wait_height(s, height_m - tolerance_m, reach_s, report, observe)
+    climb = _RaisedClimb(s, height_m, sent_at, notice)
+    reached = wait_height(s, lambda: climb.height_m() - tolerance_m, reach_s, report, observe)
     if reached is None:
-        raise fail(f"{height_m:g} m not reached within {reach_s:g} s")
+        raise fail(f"{climb.height_m():g} m not reached within {reach_s:g} s")
     return result, reached
 
 
-def _amsl_takeoff(session: Session, ap: Autopilot, height_m: float, fail: type[Exception],
-                  notice: Callable[[str], None] | None) -> tuple[float, float]:
-    """(home's altitude AMSL, the height above home the vehicle will climb to) for an
-    autopilot whose takeoff altitude is AMSL: PX4 raises one below MIS_TAKEOFF_ALT to it."""
-    from gcs.vehicle_link.mission_client import home_position
-
-    s = session
-    home = home_position(s.conn, s.target_system, s.target_component, send=s.send)
-    if home is None:
-        raise fail("the vehicle sent no HOME_POSITION (its takeoff altitude is AMSL)")
-    least = least_takeoff_m(s)
-    if least is not None and height_m < least:
-        if notice is not None:
-            notice(f"{ap.label} takes off to at least MIS_TAKEOFF_ALT above home: "
-                   f"{least:g} m, not {height_m:g} m")
-        height_m = least
-    return home.alt_m, height_m
+# What a vehicle says when it raises a takeoff to its least height (m above home): PX4 up
+# to 1.14 ("Using minimum takeoff altitude: 2.50 m", its navigator's Takeoff; 1.15 and later
+# take the altitude as given) and this FCU ("takeoff: using the minimum climb 2.5 m").
+RAISED_TAKEOFF = re.compile(r"(?:minimum takeoff altitude|using the minimum climb):? "
+                            r"([0-9]+(?:\.[0-9]+)?) ?m")
 
 
-def least_takeoff_m(session: Session) -> float | None:
-    """MIS_TAKEOFF_ALT (m): PX4 raises a takeoff below home + it to it ("Using minimum
-    takeoff altitude", its navigator's Takeoff::set_takeoff_position); None unread."""
-    from gcs.vehicle_link.params import param_get
-    from gcs.vehicle_link.session import GcsError
+def raised_takeoff_m(text: str) -> float | None:
+    """The height a vehicle says it raised a takeoff to (`RAISED_TAKEOFF`), else None."""
+    found = RAISED_TAKEOFF.search(text)
+    return float(found.group(1)) if found else None
 
-    try:
-        value = param_get(session, "MIS_TAKEOFF_ALT", timeout=1.0)
-    except (GcsError, KeyError, ValueError):
-        return None
-    return value if math.isfinite(value) and value > 0.0 else None
+
+class _RaisedClimb:
+    """The height a takeoff climbs to: the one asked for, or higher where the vehicle said
+    since `since` (monotonic s) that it raised it (`RAISED_TAKEOFF`; with the answer, or
+    after it); `notice` is told once."""
+
+    def __init__(self, session: Session, height_m: float, since: float,
+                 notice: Callable[[str], None] | None) -> None:
+        self.session, self.height, self.since, self.notice = session, height_m, since, notice
+
+    def height_m(self) -> float:
+        heard = getattr(self.session, "texts_since", None)
+        for text in heard(self.since) if heard is not None else ():
+            up = raised_takeoff_m(text)
+            if up is not None and up > self.height:
+                self.height = up
+                if self.notice is not None:
+                    self.notice(f"the vehicle raised the takeoff to {up:g} m above home: "
+                                f"{text.strip()}")
+        return self.height
 
 
 def _left_the_ground(session: Session) -> bool:
@@ -245,7 +255,7 @@ def _left_the_ground(session: Session) -> bool:
     return armed and height is not None and height > 0.2
 
 
-def wait_height(session: Session, at_least_m: float, timeout_s: float,
+def wait_height(session: Session, at_least_m: Callable[[], float], timeout_s: float,
                 report: Callable[[float], None] | None = None,
                 observe: Observer | None = None) -> float | None:
     """Wait until the vehicle is at least `at_least_m` above home; the height then, None
@@ -253,7 +263,8 @@ def wait_height(session: Session, at_least_m: float, timeout_s: float,
     altitude. LOCAL_POSITION_NED's -z is above the local origin, which is not home
     (ArduPilot sets its origin at the first fix and home at arming; PX4 gives home's local
     z apart): it is judged only from a vehicle that has sent no GLOBAL_POSITION_INT for
-    LOCAL_FALLBACK_S since the wait began, and never once one came."""
+    LOCAL_FALLBACK_S since the wait began, and never once one came. `at_least_m()` is asked
+    at each height (it may rise meanwhile)."""
     s = session
     start = time.monotonic()
     end = start + timeout_s
@@ -278,6 +289,6 @@ def wait_height(session: Session, at_least_m: float, timeout_s: float,
             height = -msg.z
         if report is not None:
             report(height)
-        if height >= at_least_m:
+        if height >= at_least_m():
             return float(height)
     return None

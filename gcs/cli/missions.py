@@ -31,7 +31,7 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
     from gcs.mission_files import file_format, format_mission
     from gcs.mission_files.frames import to_frame
     from gcs.vehicle_link.mission_client import clear, download, home_position, result_name
-    from gcs.vehicle_link.mission_home import split_home
+    from gcs.vehicle_link.mission_home import is_home_item, split_home
 
     t, c, send = session.target_system, session.target_component, session.send
     progress = Progress()
@@ -62,15 +62,28 @@ def mission_command(args: argparse.Namespace, session: Session) -> int:
                 return 1
             frame = None  # a plan of global items needs no conversion
         hb = session.heartbeat_msg
-        text = format_mission(to_frame(items, frame, home), fmt, home,
-                              home_at_seq0=at_seq0, firmware_type=pilot.firmware_type,
-                              vehicle_type=hb.type)
+        written = to_frame(items, frame, home)
+        home_line = at_seq0
+        if fmt == "wpl" and not at_seq0 and written and is_home_item(written[0]):
+            # a first item that reads as a home line (an AMSL NAV_WAYPOINT) goes after the
+            # vehicle's home, so that QGC and `gcs mission upload` take it for an item
+            home = home or home_position(session.conn, t, c, send=send)
+            if home is None:
+                log.error("gcs mission: the first item is a NAV_WAYPOINT at an AMSL position, "
+                          "which a QGC WPL 110 reader takes for home, and the vehicle sent no "
+                          "HOME_POSITION to write before it: use --format plan or toml")
+                return 1
+            home_line = True
+        text = format_mission(written, fmt, home, home_at_seq0=home_line,
+                              firmware_type=pilot.firmware_type, vehicle_type=hb.type)
         if args.file is None:
             say(text, end="")
         else:
             args.file.write_text(text)
             say(f"downloaded {len(items)} items to {args.file}"
-                + (" (and home, seq 0)" if at_seq0 and home is not None else ""))
+                + (" (and home, seq 0)" if at_seq0 and home is not None else "")
+                + (" after the vehicle's home as line 0" if home_line and not at_seq0
+                   else ""))
         return 0
     if args.action == "clear":
         result = clear(session.conn, t, c, send=send)

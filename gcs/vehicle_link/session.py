@@ -392,15 +392,17 @@ class Session:
                 self.last_texts.append(msg.text)
                 end = time.monotonic() + quiet_s
 
+    def texts_since(self, t_monotonic: float) -> list[str]:
+        """The target's STATUSTEXTs heard at or after `t_monotonic`, oldest first, whichever
+        call read them from the link."""
+        return [text for at, system, component, text in list(self.texts)
+                if at >= t_monotonic and system == self.target_system and
+                (not self.target_component or component == self.target_component)]
+
     def text_since(self, t_monotonic: float, prefix: str) -> str | None:
         """The first STATUSTEXT of the target starting with `prefix` heard at or after
-        `t_monotonic`, whichever call read it from the link; None if none."""
-        for at, system, component, text in list(self.texts):
-            if at >= t_monotonic and system == self.target_system and \
-                    (not self.target_component or component == self.target_component) and \
-                    text.startswith(prefix):
-                return text
-        return None
+        `t_monotonic`; None if none."""
+        return next((t for t in self.texts_since(t_monotonic) if t.startswith(prefix)), None)
 
     def describe(self, result: int) -> str:
         """'MAV_RESULT_DENIED: <the vehicle's reason>' for the last command's answer."""

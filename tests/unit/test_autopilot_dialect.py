@@ -356,12 +356,12 @@ def test_takeoff_judges_the_height_above_home_not_above_the_local_origin(monkeyp
 
     v = Vehicle()
     v.queue.extend([local(10.0), above_home(7.0), local(10.3)])
-    assert commands.wait_height(v, 9.5, 0.3) is None
+    assert commands.wait_height(v, lambda: 9.5, 0.3) is None
     v.queue.extend([local(12.6), above_home(9.6)])
-    assert commands.wait_height(v, 9.5, 0.3) == pytest.approx(9.6)
+    assert commands.wait_height(v, lambda: 9.5, 0.3) == pytest.approx(9.6)
     monkeypatch.setattr(commands, "LOCAL_FALLBACK_S", 0.0)
     v.queue.extend([local(9.7)])
-    assert commands.wait_height(v, 9.5, 0.3) == pytest.approx(9.7)
+    assert commands.wait_height(v, lambda: 9.5, 0.3) == pytest.approx(9.7)
 
 
 # ------------------------------------------------------------------ goto set-points

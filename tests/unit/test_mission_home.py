@@ -249,6 +249,27 @@ def test_px4_gets_the_items_as_they_are(vehicles, capsys, tmp_path):
     assert "[home]" not in toml.read_text()
 
 
+def test_a_px4_mission_whose_first_item_reads_as_home_round_trips_through_wpl(
+        vehicles, capsys, tmp_path):
+    """A PX4 mission whose first item is a NAV_WAYPOINT at an AMSL position (what a WPL
+    reader takes for a home line 0) downloads to WPL after the vehicle's home as line 0, and
+    uploads back whole: the same items, none taken for home."""
+    v = vehicles("px4")
+    items = [MissionItem(0, 0, 16, 1, 1, 0.0, 0.0, 0.0, NAN, 473978000, 85456000, 500.0),
+             MissionItem(1, 3, 16, 0, 1, 0.0, 0.0, 0.0, NAN, 473979000, 85456000, 10.0),
+             MissionItem(2, 3, 21, 0, 1, 0.0, 0.0, 0.0, NAN, 0, 0, 0.0)]
+    v.mission = list(items)
+    wpl = tmp_path / "px4.waypoints"
+    code, out, _ = gcs(capsys, v, "mission", "download", str(wpl))
+    assert code == 0 and "after the vehicle's home as line 0" in out, out
+    lines = parse_wpl(wpl.read_text())
+    assert split_home(lines)[0] == VEHICLE_HOME and key(lines[1:]) == key(renumbered(items, 1))
+    v.mission = []
+    code, out, _ = gcs(capsys, v, "mission", "upload", str(wpl))
+    assert code == 0 and "not sent" in out, out
+    assert key(v.mission) == key(items)
+
+
 def test_a_waypoint_yaw_uploaded_to_arducopter_is_said_to_be_ignored(vehicles, capsys,
                                                                       tmp_path):
     """ArduCopter keeps only a waypoint's delay (param1): an upload whose waypoints carry a

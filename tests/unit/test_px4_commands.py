@@ -139,18 +139,26 @@ def test_takeoff_and_goto_on_px4_arrive(px4, capsys):
     capsys.readouterr()
 
 
-def test_a_takeoff_below_mis_takeoff_alt_is_waited_for_at_it(px4, capsys):
-    """PX4 raises a takeoff below home + MIS_TAKEOFF_ALT (2.5 m) to it: `takeoff --alt 1`
-    says so, asks for 2.5 m and reports it reached there, not at 0.5 m while still
-    climbing."""
-    vehicle, link = px4()
+@pytest.mark.parametrize("raises", [False, True])
+def test_a_takeoff_below_mis_takeoff_alt(px4, capsys, raises):
+    """`takeoff --alt 1` sends home + 1 m whatever MIS_TAKEOFF_ALT (2.5 m) is: PX4 1.15 and
+    later take the altitude as given, and it is reached at 1 m. PX4 up to 1.14 raised it to
+    MIS_TAKEOFF_ALT and said so after its answer ("Using minimum takeoff altitude: 2.50 m"):
+    then `gcs` says so too and waits for 2.5 m, rather than calling 0.5 m reached while the
+    vehicle climbs on."""
+    vehicle, link = px4(raises_takeoff=raises)
     assert main(["arm", *link]) == 0
     capsys.readouterr()
     assert main(["takeoff", "--alt", "1", "--timeout", "30", *link]) == 0
     out = capsys.readouterr().out
-    assert "takes off to at least MIS_TAKEOFF_ALT above home: 2.5 m, not 1 m" in out, out
+    assert vehicle.takeoff_asked_m == pytest.approx(1.0, abs=1e-3)  # p7 AMSL, float32
     reached = float(out.split("reached: ")[1].split(" m")[0])
-    assert reached >= 2.0 and vehicle.takeoff_z == pytest.approx(-2.5)  # within 0.5 m
+    if raises:
+        assert "the vehicle raised the takeoff to 2.5 m above home" in out, out
+        assert reached >= 2.0 and vehicle.takeoff_z == pytest.approx(-2.5)
+    else:
+        assert "raised" not in out and 0.5 <= reached < 1.5, out
+        assert vehicle.takeoff_z == pytest.approx(-1.0)
 
 
 def test_status_on_px4_reads_readiness_from_health_and_no_mission(px4, capsys):
