@@ -38,6 +38,7 @@ M = MAV
 ACCEPTED, DENIED = MAV_RESULT.MAV_RESULT_ACCEPTED, MAV_RESULT.MAV_RESULT_DENIED
 IN_PROGRESS = MAV_RESULT.MAV_RESULT_IN_PROGRESS
 UNSUPPORTED = MAV_RESULT.MAV_RESULT_UNSUPPORTED
+FAILED = MAV_RESULT.MAV_RESULT_FAILED
 WARNING = MAV_SEVERITY.MAV_SEVERITY_WARNING
 FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM p2 that forces a disarm
 MAX_PEERS = 64  # senders remembered for their retries (as parsers: one per link and peer)
@@ -186,10 +187,11 @@ class CommandService:
             first = as_int(p[0], 0, 0xFFFF) if p[0] != 0 else 0
             return Answer(DENIED, f"no mission item {p[0]:g}") if first is None else \
                 c.mission_start(first)
-        if cmd == MAV_CMD.MAV_CMD_DO_SET_MISSION_CURRENT:
-            seq = as_int(p[0], 0, 0xFFFF)
-            return Answer(DENIED if seq is None else self.server.set_mission_current(seq),
-                          f"no mission item {p[0]:g}")
+        if cmd == MAV_CMD.MAV_CMD_DO_SET_MISSION_CURRENT:  # p1 -1: the current item
+            seq = c.mission_current if p[0] == -1 else as_int(p[0], 0, 0xFFFF)
+            if seq is None or not 0 <= seq < len(c.mission):  # the spec's answer: FAILED
+                return Answer(FAILED, f"no mission item {p[0]:g}")
+            return Answer(self.server.set_mission_current(seq), f"mission item {seq}")
         if cmd == MAV_CMD.MAV_CMD_NAV_LAND:
             return c.set_mode(Mode.LAND, now_s)
         if cmd == MAV_CMD.MAV_CMD_NAV_TAKEOFF:

@@ -234,8 +234,11 @@ class GcsServer:
         if kind == "MANUAL_CONTROL":  # its target field is `target`
             self._manual(msg, now_s)
             return
+        # for this system and its autopilot (0: all), as PX4's receiver judges a target: a
+        # command or set-point for a camera or a companion computer is not the vehicle's
         target = getattr(msg, "target_system", 0)
-        if target not in (0, self.system_id):
+        component = getattr(msg, "target_component", 0)
+        if target not in (0, self.system_id) or component not in (0, COMPONENT):
             self.ignored_messages += 1
             return
         if kind == "COMMAND_LONG":
@@ -320,7 +323,8 @@ class GcsServer:
                 pos = as_message(msg, SetPositionTargetLocalNed)
                 ok, why = cmd.offboard_position(now_s, position_target(
                     pos.coordinate_frame, pos.type_mask, (pos.x, pos.y, pos.z),
-                    (pos.vx, pos.vy, pos.vz), (pos.afx, pos.afy, pos.afz), pos.yaw))
+                    (pos.vx, pos.vy, pos.vz), (pos.afx, pos.afy, pos.afz), pos.yaw,
+                    pos.yaw_rate))
             else:
                 att = as_message(msg, SetAttitudeTarget)
                 ok, why = cmd.offboard_attitude(now_s, attitude_target(

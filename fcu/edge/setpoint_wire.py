@@ -51,11 +51,20 @@ class SetpointRefused(ValueError):
 
 
 def position_target(frame: int, type_mask: int, p_ned_m: Vec3, v_ned_m_s: Vec3,
-                    a_ned_m_s2: Vec3, yaw_ned_rad: float) -> PositionTarget:
+                    a_ned_m_s2: Vec3, yaw_ned_rad: float,
+                    yaw_rate_ned_rad_s: float = 0.0) -> PositionTarget:
     """SET_POSITION_TARGET_LOCAL_NED's fields as a `PositionTarget` (ENU); a yaw that is not
-    finite is no heading."""
+    finite is no heading. Refused rather than flown otherwise: forces (FORCE_SET: afx..afz
+    are newtons, not accelerations) and a finite yaw rate other than 0 (not flown here: the
+    heading follows `yaw`, or is held)."""
     if frame != MAV_FRAME.MAV_FRAME_LOCAL_NED:
         raise SetpointRefused("position target frame must be LOCAL_NED")
+    if type_mask & POS.POSITION_TARGET_TYPEMASK_FORCE_SET and \
+            (type_mask & ACCELERATION_IGNORE) != ACCELERATION_IGNORE:
+        raise SetpointRefused("position target: force set-points (FORCE_SET) not taken")
+    if not type_mask & POS.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE and \
+            math.isfinite(yaw_rate_ned_rad_s) and yaw_rate_ned_rad_s != 0.0:
+        raise SetpointRefused("position target: yaw rate not taken (give yaw)")
     yaw_given = not type_mask & POS.POSITION_TARGET_TYPEMASK_YAW_IGNORE and \
         math.isfinite(yaw_ned_rad)
     return PositionTarget(

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from common.config.scenario import load_gains, load_vehicle
 from common.links import Link, LinkUrl
 from common.wire.mavlink import MAV, encoder, pack, parser
-from common.wire.mission_items import PX4_SITL_HOME
+from common.wire.mission_items import PX4_SITL_HOME, MissionItem
 from fcu.edge.gcs_server import COMPONENT, HANDLED, GcsServer
 from fcu.edge.mission_protocol import MissionServer
 from fcu.edge.telemetry import LINK_BUDGET_MSG_S, MAX_INTERVAL_US
@@ -468,6 +468,42 @@ def test_manual_control_for_another_system_is_ignored():
     assert c.modes.posctl.sticks == (0.0, 0.0, 0.0, 0.0) and server.ignored_messages == 1
     server.handle(0, M.MAVLink_manual_control_message(1, 1000, 0, 500, 0, 0), now_s=1.0)
     assert c.modes.posctl.sticks.forward == 1.0
+
+
+def test_commands_and_setpoints_for_another_component_are_not_the_vehicles():
+    """An ARM and an OFFBOARD position target addressed to another component of this system
+    (a camera, 100; a companion computer, 191) are ignored, as PX4's receiver ignores
+    them: not armed, no ACK, no set-point; to the autopilot (1) or to all (0) they act."""
+    server, links = make_server()
+    c = server.pipeline.commander
+    server.handle(0, M.MAVLink_command_long_message(1, 100, M.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+                                                    1, 0, 0, 0, 0, 0, 0), now_s=1.0)
+    server.handle(0, M.MAVLink_set_position_target_local_ned_message(
+        0, 1, 191, M.MAV_FRAME_LOCAL_NED, 0b1111_1111_1000, 1.0, 2.0, -3.0, 0, 0, 0, 0, 0, 0,
+        0, 0), now_s=1.0)
+    assert not c.armed and c.offboard.p_enu_m is None and server.ignored_messages == 2
+    assert _acks_and_texts(links[0])[0] == []
+    server.handle(0, M.MAVLink_command_long_message(1, 0, M.MAV_CMD_COMPONENT_ARM_DISARM, 0,
+                                                    1, 0, 0, 0, 0, 0, 0), now_s=1.0)
+    assert c.armed and _acks_and_texts(links[0])[0] == [M.MAV_RESULT_ACCEPTED]
+
+
+def test_set_mission_current_out_of_range_fails_and_minus_one_is_the_current_item():
+    """DO_SET_MISSION_CURRENT as common.xml says: a seq out of range is MAV_RESULT_FAILED;
+    p1 -1 is the current item (accepted, nothing changes)."""
+    server, links = make_server()
+    c = server.pipeline.commander
+    _command(server, 0, M.MAV_CMD_DO_SET_MISSION_CURRENT, 99)
+    assert _acks_and_texts(links[0])[0] == [M.MAV_RESULT_FAILED]
+    c.set_mission(tuple(MissionItem(i, M.MAV_FRAME_LOCAL_NED, M.MAV_CMD_NAV_WAYPOINT,
+                                    int(i == 0), 1, 0.0, 0.0, 0.0, math.nan, 10_000 * i, 0,
+                                    -2.0) for i in range(3)))
+    _command(server, 0, M.MAV_CMD_DO_SET_MISSION_CURRENT, 1)
+    assert _acks_and_texts(links[0])[0] == [M.MAV_RESULT_ACCEPTED] and c.mission_current == 1
+    _command(server, 0, M.MAV_CMD_DO_SET_MISSION_CURRENT, -1)
+    assert _acks_and_texts(links[0])[0] == [M.MAV_RESULT_ACCEPTED] and c.mission_current == 1
+    _command(server, 0, M.MAV_CMD_DO_SET_MISSION_CURRENT, 3)
+    assert _acks_and_texts(links[0])[0] == [M.MAV_RESULT_FAILED] and c.mission_current == 1
 
 
 def test_takeoff_and_rtl_commands():

@@ -41,6 +41,25 @@ def test_a_yaw_not_finite_is_no_heading_and_other_frames_are_refused():
         position_target(M.MAV_FRAME_BODY_NED, 0, Z3, Z3, Z3, 0.0)
 
 
+def test_forces_and_a_yaw_rate_are_refused_not_flown_as_something_else():
+    """FORCE_SET makes afx..afz newtons: refused, not flown as accelerations (PX4 drops
+    force set-points too); ignored accelerations with the bit set pass. A yaw rate given (bit
+    clear, finite, not 0) is refused with the reason, where it was dropped and the heading
+    held; 0, not finite, or ignored pass."""
+    force = M.POSITION_TARGET_TYPEMASK_FORCE_SET | M.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+    with pytest.raises(SetpointRefused, match="FORCE_SET"):
+        position_target(M.MAV_FRAME_LOCAL_NED, force, Z3, Z3, (2.0, 0.0, 0.0), 0.0)
+    no_accel = force | M.POSITION_TARGET_TYPEMASK_AX_IGNORE | \
+        M.POSITION_TARGET_TYPEMASK_AY_IGNORE | M.POSITION_TARGET_TYPEMASK_AZ_IGNORE
+    assert position_target(M.MAV_FRAME_LOCAL_NED, no_accel, Z3, Z3, Z3, 0.0).a_enu_m_s2 is None
+    with pytest.raises(SetpointRefused, match="yaw rate not taken"):
+        position_target(M.MAV_FRAME_LOCAL_NED, 0, Z3, Z3, Z3, 0.0, 0.5)
+    for rate in (0.0, math.nan):
+        position_target(M.MAV_FRAME_LOCAL_NED, 0, Z3, Z3, Z3, 0.0, rate)
+    position_target(M.MAV_FRAME_LOCAL_NED, M.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE, Z3, Z3,
+                    Z3, 0.0, 0.5)
+
+
 def test_attitude_normalised_in_enu_flu_and_rates_in_flu():
     q_enu_flu = q_exp((0.1, -0.2, 0.3))
     q_wire = tuple(2.0 * c for c in q_enu_flu_to_ned_frd(q_enu_flu))
