@@ -241,16 +241,18 @@ def test_offboard_stream_loss_falls_back_to_hold(stack):
 
 
 def test_commands_with_bad_parameters_are_denied_with_a_reason(stack):
-    """NaN, infinities and out-of-range values: DENIED (never silence) and a STATUSTEXT."""
+    """NaN, infinities and out-of-range values: DENIED (never silence) and a STATUSTEXT; a
+    mission item out of range is MAV_RESULT_FAILED, as the MAVLink spec says."""
     s = stack.session
     nan, inf = float("nan"), float("inf")
-    for command, params, reason in (
-            (M.MAV_CMD_DO_SET_MODE, (nan, 4, 3), "unsupported mode"),
-            (M.MAV_CMD_COMPONENT_ARM_DISARM, (inf,), "p1 must be 0 or 1"),
-            (M.MAV_CMD_SET_MESSAGE_INTERVAL, (nan, 1000), "no message id"),
-            (M.MAV_CMD_DO_SET_MISSION_CURRENT, (1e12,), "no mission item"),
-            (M.MAV_CMD_NAV_TAKEOFF, (nan,) * 7, "takeoff: not armed")):
-        assert s.command(command, *params) == M.MAV_RESULT_DENIED
+    denied, failed = M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED
+    for command, params, result, reason in (
+            (M.MAV_CMD_DO_SET_MODE, (nan, 4, 3), denied, "unsupported mode"),
+            (M.MAV_CMD_COMPONENT_ARM_DISARM, (inf,), denied, "p1 must be 0 or 1"),
+            (M.MAV_CMD_SET_MESSAGE_INTERVAL, (nan, 1000), denied, "no message id"),
+            (M.MAV_CMD_DO_SET_MISSION_CURRENT, (1e12,), failed, "no mission item"),
+            (M.MAV_CMD_NAV_TAKEOFF, (nan,) * 7, denied, "takeoff: not armed")):
+        assert s.command(command, *params) == result
         # the Session keeps the STATUSTEXTs that came with and after the refusal
         assert any(reason in text for text in s.last_texts), (command, s.last_texts)
     assert stack.procs["fcu"].poll() is None
